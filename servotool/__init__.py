@@ -1,0 +1,3 @@
+"""servotool: commission and tune AC servo drives over Modbus RTU."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,5 @@
+"""Allow `python -m servotool`."""
+
+from servotool.cli.main import run
+
+run()

@@ -1,0 +1,46 @@
+"""Glue between typer's context and the library: connection options, opening drives."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import typer
+
+from servotool.cli.render import Verbosity, info, trace_frame
+from servotool.connection import ConnectOptions, Resolved, open_drives, resolve
+from servotool.drive import Drive
+
+
+@dataclass
+class State:
+    options: ConnectOptions = field(default_factory=ConnectOptions)
+
+
+def state(ctx: typer.Context) -> State:
+    root = ctx.find_root()
+    if root.obj is None:
+        root.obj = State()
+    return root.obj
+
+
+def resolved(ctx: typer.Context) -> Resolved:
+    return resolve(state(ctx).options)
+
+
+@contextmanager
+def drive(ctx: typer.Context) -> Iterator[Drive]:
+    """The one drive the global options point at."""
+    with open_drives(resolved(ctx), trace=trace_frame if Verbosity.level > 0 else None, notice=info) as drives:
+        yield drives[0]
+
+
+@contextmanager
+def drives(ctx: typer.Context, units: list[int]) -> Iterator[list[Drive]]:
+    with open_drives(resolved(ctx), units, trace=trace_frame if Verbosity.level > 0 else None,
+                     notice=info) as found:
+        yield found
+
+
+JSON_OPT = typer.Option(False, "--json", help="Machine-readable output with stable keys.")

@@ -1,0 +1,72 @@
+"""The `servotool` command: global options, sub-command groups, error handling."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+import typer
+
+from servotool import __version__
+from servotool.cli import param, profiles, sim
+from servotool.cli.common import state
+from servotool.cli.render import Verbosity, err
+from servotool.connection import ConnectOptions
+from servotool.errors import ServoError
+
+app = typer.Typer(
+    name="servotool", no_args_is_help=True, add_completion=True, pretty_exceptions_enable=False,
+    help="Commission and tune AC servo drives over Modbus RTU (real or simulated).",
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+app.add_typer(param.app, name="param")
+app.add_typer(profiles.app, name="profiles")
+app.add_typer(sim.app, name="sim")
+
+
+def _version(value: bool) -> None:
+    if value:
+        print(f"servotool {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    ctx: typer.Context,
+    port: str = typer.Option(None, "--port", "-p", help="Serial port (/dev/ttyUSB0, COM3), tcp://HOST:PORT "
+                             "(RTU over TCP) or 'sim'. Env: SERVOTOOL_PORT."),
+    baud: int = typer.Option(None, "--baud", "-b", help="Baud rate (default: the profile's). Env: SERVOTOOL_BAUD."),
+    parity: str = typer.Option(None, "--parity", help="N, E or O (default: the profile's). Env: SERVOTOOL_PARITY."),
+    stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's). Env: SERVOTOOL_STOPBITS."),
+    unit: int = typer.Option(None, "--unit", "-u", help="Modbus unit id 1..247 (default: the profile's). "
+                             "Env: SERVOTOOL_UNIT."),
+    timeout: float = typer.Option(None, "--timeout", help="Response timeout in seconds. Env: SERVOTOOL_TIMEOUT."),
+    retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
+    profile: str = typer.Option(None, "--profile", "-P", help="Drive profile id or YAML file (default for sim: "
+                                "dsx7e). Env: SERVOTOOL_PROFILE."),
+    verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Show the version."),
+) -> None:
+    """Commission and tune AC servo drives over Modbus RTU (real or simulated).
+
+    Options also come from SERVOTOOL_* environment variables and ~/.config/servotool/config.yaml
+    (override with SERVOTOOL_CONFIG); the command line wins.
+    """
+    state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
+                                        timeout=timeout, retries=retries, profile=profile)
+    Verbosity.level = -1 if quiet else verbose
+
+
+def run() -> None:
+    """Console-script entry point: one clear line and an exit code for every failure."""
+    try:
+        app(prog_name="servotool")
+    except ServoError as exc:
+        err.print(f"servotool: error: {exc}", markup=False)
+        sys.exit(exc.exit_code)
+    except KeyboardInterrupt:
+        err.print("servotool: interrupted", markup=False)
+        sys.exit(130)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)

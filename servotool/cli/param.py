@@ -1,0 +1,90 @@
+"""`servotool param ...`: read, set and list parameters."""
+
+from __future__ import annotations
+
+import typer
+
+from servotool import params
+from servotool.cli.common import JSON_OPT, drive
+from servotool.cli.render import emit_json, info, out, table
+from servotool.codec import format_value
+
+app = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and restore drive parameters.")
+
+
+@app.command("get")
+def get(
+    ctx: typer.Context,
+    codes: list[str] = typer.Argument(..., help="Vendor codes (e.g. Pn004, Po109, H09-06) or role names."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Read entries (any class) from the drive."""
+    with drive(ctx) as d:
+        entries = [d.profile.entry(c) for c in codes]
+        readings = d.read_entries(entries)
+    if as_json:
+        emit_json([r.as_json() for r in readings])
+        return
+    t = table("Code", "Name", "Value", "Unit")
+    for r in readings:
+        t.add_row(r.entry.code, r.entry.name, r.text, r.entry.unit)
+    out.print(t)
+
+
+@app.command("set")
+def set_(
+    ctx: typer.Context,
+    assignments: list[str] = typer.Argument(..., help="CODE=VALUE in engineering units (e.g. Pn100=40.0)."),
+    raw: bool = typer.Option(False, "--raw", help="Values are raw register integers, not engineering units."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Validate and show what would change; write nothing."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Validate every value against the profile, write the ones that differ, read back to verify."""
+    with drive(ctx) as d:
+        plan = params.plan_set(d, assignments, raw=raw)
+        results = [] if dry_run else params.apply_set(d, plan)
+    if as_json:
+        emit_json({
+            "dry_run": dry_run,
+            "changed": [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
+                         "effect": e.effect} for e, old, new in plan.changes],
+            "unchanged": [{"code": e.code, "value": format_value(e, v)} for e, v in plan.unchanged],
+        })
+        return
+    for e, v in plan.unchanged:
+        info(f"{e.code} already {format_value(e, v)} {e.unit}".rstrip())
+    if dry_run:
+        for e, old, new in plan.changes:
+            out.print(f"would set {e.code} ({e.name}): {format_value(e, old)} -> {format_value(e, new)} {e.unit}",
+                      markup=False)
+        return
+    for r in results:
+        note = f"  [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
+        out.print(f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "
+                  f"{format_value(r.entry, r.new)} {r.entry.unit}{note}".replace("  [", " [").rstrip(), markup=False)
+
+
+@app.command("list")
+def list_(
+    ctx: typer.Context,
+    group: str = typer.Option(None, "--group", "-g", help="Only this group (see 'profiles show')."),
+    changed: bool = typer.Option(False, "--changed", help="Only entries that differ from the factory default."),
+    cls: str = typer.Option("Pn", "--class", help="Entry class to list: Pn, Un or Sn."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Read and show a whole group of entries, with defaults and a changed mark."""
+    if cls not in ("Pn", "Un", "Sn"):
+        raise typer.BadParameter("use Pn, Un or Sn", param_hint="--class")
+    with drive(ctx) as d:
+        readings = d.read_entries(params.select(d.profile, group=group, classes=(cls,)))
+    if changed:
+        readings = [r for r in readings if r.changed]
+    if as_json:
+        emit_json([r.as_json() for r in readings])
+        return
+    t = table("Code", "Name", "Value", "Unit", "Default", "", title=f"{d.profile.model} unit {d.unit}")
+    for r in readings:
+        e = r.entry
+        default = format_value(e, e.default) if e.default is not None else ""
+        t.add_row(e.code, e.name, r.text, e.unit, default, "*" if r.changed else "")
+    out.print(t)

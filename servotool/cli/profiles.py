@@ -1,0 +1,98 @@
+"""`servotool profiles ...`: list, show and check drive profiles."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from servotool.cli.common import JSON_OPT
+from servotool.cli.render import emit_json, out, table
+from servotool.codec import format_value
+from servotool.errors import UsageError
+from servotool.profile import builtin_dir, builtin_ids, load_profile, read_profile
+
+app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
+
+
+@app.command("list")
+def list_(as_json: bool = JSON_OPT) -> None:
+    """The built-in profiles."""
+    rows = []
+    for pid in builtin_ids():
+        p = load_profile(pid)
+        rows.append({"id": p.id, "model": p.model, "vendor": p.vendor, "version": p.version,
+                     "entries": len(p.entries), "unverified": sum(1 for e in p.entries if e.unverified),
+                     "description": p.description})
+    if as_json:
+        emit_json(rows)
+        return
+    t = table("Id", "Model", "Vendor", "Version", "Entries", "Unverified", "Description",
+              title=f"Profiles in {builtin_dir()}")
+    for r in rows:
+        t.add_row(*(str(r[k]) for k in ("id", "model", "vendor", "version", "entries", "unverified", "description")))
+    out.print(t)
+
+
+@app.command("show")
+def show(
+    profile: str = typer.Argument(..., help="Profile id or YAML file."),
+    unverified: bool = typer.Option(False, "--unverified", help="Only entries the manual leaves open, with why."),
+    group: str = typer.Option(None, "--group", "-g", help="Only this group."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """A profile's settings, roles and entries."""
+    p = load_profile(profile)
+    entries = [e for e in p.entries if (not unverified or e.unverified) and (group is None or e.group == group)]
+    if group is not None and group not in {e.group for e in p.entries}:
+        raise UsageError(f"unknown group '{group}' for profile {p.id}")
+    if as_json:
+        emit_json({
+            "id": p.id, "model": p.model, "vendor": p.vendor, "version": p.version, "source": p.source,
+            "address_rule": p.address_rule, "unverified_note": p.unverified_note,
+            "serial": vars(p.serial), "limits": vars(p.limits), "word_order": p.word_order,
+            "persistence": vars(p.persistence), "roles": p.roles,
+            "entries": [{"code": e.code, "class": e.cls, "name": e.name, "address": e.address, "type": e.type,
+                         "unit": e.unit, "scale": e.scale, "min": e.min, "max": e.max, "default": e.default,
+                         "access": e.access, "effect": e.effect, "group": e.group, "source": e.source,
+                         "unverified": e.unverified} for e in entries],
+        })
+        return
+    s = p.serial
+    out.print(f"[bold]{p.model}[/bold] ({p.vendor}) profile '{p.id}' v{p.version}: {p.description}")
+    out.print(f"source: {p.source}", markup=False)
+    out.print(f"addresses: {p.address_rule}", markup=False)
+    lim = p.limits
+    out.print(f"serial: {s.baud} {s.bytesize}{s.parity}{s.stopbits}, unit {s.unit}; max {lim.max_read} regs/read, "
+              f"{lim.max_write}/write; 32-bit word order {p.word_order}; EEPROM: {p.persistence.mode}", markup=False)
+    if p.unverified_note:
+        out.print(f"[yellow]note:[/yellow] {p.unverified_note}")
+    if unverified:
+        t = table("Code", "Name", "Why unverified", title=f"{len(entries)} unverified entries")
+        for e in entries:
+            t.add_row(e.code, e.name, e.unverified)
+        out.print(t)
+        return
+    t = table("Code", "Class", "Name", "Address", "Type", "Min", "Max", "Default", "Unit", "Effect", "")
+    for e in entries:
+        t.add_row(e.code, e.cls, e.name, f"{e.address} (0x{e.address:04X})", e.type, format_value(e, e.min),
+                  format_value(e, e.max), format_value(e, e.default) if e.default is not None else "", e.unit,
+                  e.effect if e.cls == "Pn" else e.access, "?" if e.unverified else "")
+    out.print(t)
+    out.print("roles: " + ", ".join(f"{k}={v}" for k, v in sorted(p.roles.items())), markup=False)
+
+
+@app.command("check")
+def check(files: list[Path] = typer.Argument(..., help="Profile YAML files to validate.")) -> None:
+    """Validate profiles; print every problem with its location (exit 2 if any)."""
+    bad = 0
+    for path in files:
+        profile, problems = read_profile(path)
+        for line in problems:
+            out.print(line, markup=False)
+        if profile is None:
+            bad += 1
+        else:
+            out.print(f"{path}: ok ({len(profile.entries)} entries, {len(profile.roles)} roles)", markup=False)
+    if bad:
+        raise typer.Exit(2)

@@ -1,0 +1,83 @@
+"""`servotool sim ...`: serve the simulated drive to other masters, reset it."""
+
+from __future__ import annotations
+
+import typer
+
+from servotool.cli.common import state
+from servotool.cli.render import Verbosity, info, out, trace_frame
+from servotool.connection import PARITIES, SIM_DEFAULT_PROFILE, ConnectOptions, merge
+from servotool.errors import UsageError
+from servotool.profile import load_profile
+from servotool.sim.device import SimulatedDrive
+from servotool.sim.registers import state_path
+
+app = typer.Typer(no_args_is_help=True, help="The simulated drive: serve it, reset it.")
+
+
+def _profile(ctx: typer.Context, profile: str | None):
+    return load_profile(profile or state(ctx).options.profile or SIM_DEFAULT_PROFILE)
+
+
+@app.command("serve")
+def serve(
+    ctx: typer.Context,
+    port: str = typer.Option(..., "--port", "-p", help="Serial device (/dev/ttyS1, a socat pty) or "
+                             "tcp://127.0.0.1:N (RTU framing over TCP; N=0 picks a free port)."),
+    profile: str = typer.Option(None, "--profile", "-P", help="Profile to simulate (default: dsx7e)."),
+    units: list[int] = typer.Option(None, "--unit", "-u", help="Unit id to answer; repeat for several drives on "
+                                    "one line (default: the profile's)."),
+    baud: int = typer.Option(None, "--baud", "-b", help="Serial baud rate (default: the profile's)."),
+    parity: str = typer.Option(None, "--parity", help="N, E or O (default: the profile's)."),
+    stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's)."),
+) -> None:
+    """Serve simulated drives in the foreground (Ctrl-C stops) for any Modbus RTU master."""
+    from servotool.sim.server import LineSettings, serve_forever
+
+    p = _profile(ctx, profile)
+    ids = units or [p.serial.unit]
+    for u in ids:
+        if not 1 <= u <= 247:
+            raise UsageError(f"bad unit id {u}: must be 1..247")
+    par = PARITIES.get((parity or p.serial.parity).upper())
+    if par is None:
+        raise UsageError(f"bad parity '{parity}': use N, E or O")
+    line = LineSettings(baud=baud or p.serial.baud, parity=par, stopbits=stopbits or p.serial.stopbits,
+                        bytesize=p.serial.bytesize)
+    drives = [SimulatedDrive(p, u) for u in ids]
+
+    def ready(where: str) -> None:
+        info(f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "
+             f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); Ctrl-C stops")
+
+    try:
+        serve_forever(port, drives, line, trace=trace_frame if Verbosity.level > 0 else None, ready=ready)
+    except KeyboardInterrupt:
+        info("servotool: simulator stopped")
+
+
+@app.command("reset")
+def reset(
+    ctx: typer.Context,
+    profile: str = typer.Option(None, "--profile", "-P", help="Profile of the simulated drive."),
+    unit: int = typer.Option(None, "--unit", "-u", help="Unit id (default: the profile's)."),
+    power_cycle: bool = typer.Option(False, "--power-cycle", help="Power-cycle: parameters stored in EEPROM "
+                                     "reload and pending power-cycle changes take effect."),
+    factory: bool = typer.Option(False, "--factory", help="Erase the simulated drive's state: factory defaults."),
+) -> None:
+    """Power-cycle or wipe a simulated drive (its state file)."""
+    opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
+    p = _profile(ctx, opts.profile)
+    u = opts.unit or p.serial.unit
+    if power_cycle == factory:
+        raise UsageError("give exactly one of --power-cycle or --factory")
+    if factory:
+        path = state_path(p.id, u)
+        path.unlink(missing_ok=True)
+        out.print(f"simulated {p.model} unit {u}: factory state ({path} removed)", markup=False)
+        return
+    drive = SimulatedDrive(p, u)
+    pending = drive.bank.pending_power_cycle()
+    drive.power_cycle()
+    out.print(f"simulated {p.model} unit {u}: power-cycled"
+              + (f"; now in effect: {', '.join(pending)}" if pending else ""), markup=False)

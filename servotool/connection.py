@@ -1,0 +1,176 @@
+"""Connection options (CLI > environment > config file > profile defaults) and opening a session."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from servotool.drive import Drive
+from servotool.errors import UsageError
+from servotool.profile import Profile, load_profile
+from servotool.transport import LinkSettings, ModbusLink, Trace, parse_tcp
+
+SIM_PORT = "sim"
+SIM_DEFAULT_PROFILE = "dsx7e"
+PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
+
+
+@dataclass(frozen=True)
+class ConnectOptions:
+    """What the user asked for; None means 'not given here'."""
+
+    port: str | None = None
+    baud: int | None = None
+    parity: str | None = None
+    stopbits: int | None = None
+    unit: int | None = None
+    timeout: float | None = None
+    retries: int | None = None
+    profile: str | None = None
+
+
+ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
+
+
+def config_path() -> Path:
+    if env := os.environ.get("SERVOTOOL_CONFIG"):
+        return Path(env)
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    return Path(base) / "servotool" / "config.yaml"
+
+
+def _convert(name: str, value: Any, where: str) -> Any:
+    if value is None or value == "":
+        return None
+    try:
+        if name in ("baud", "stopbits", "unit", "retries"):
+            return int(value)
+        if name == "timeout":
+            return float(value)
+    except (TypeError, ValueError):
+        raise UsageError(f"{where}: {name} must be a number, got {value!r}") from None
+    return str(value)
+
+
+def _from_env() -> ConnectOptions:
+    values = {name: _convert(name, os.environ.get(var), var) for name, var in ENV.items()}
+    return ConnectOptions(**values)
+
+
+def _from_config() -> ConnectOptions:
+    path = config_path()
+    if not path.exists():
+        return ConnectOptions()
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise UsageError(f"config file {path}: {exc}") from None
+    if not isinstance(data, dict):
+        raise UsageError(f"config file {path}: expected a mapping of option: value")
+    unknown = set(data) - set(ENV)
+    if unknown:
+        raise UsageError(f"config file {path}: unknown option(s) {', '.join(sorted(unknown))}")
+    return ConnectOptions(**{k: _convert(k, v, str(path)) for k, v in data.items()})
+
+
+def merge(*layers: ConnectOptions) -> ConnectOptions:
+    """First non-None value of each option, layers in priority order."""
+    out: dict[str, Any] = {}
+    for f in fields(ConnectOptions):
+        out[f.name] = next((getattr(layer, f.name) for layer in layers if getattr(layer, f.name) is not None), None)
+    return ConnectOptions(**out)
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """Everything needed to open a link to one drive."""
+
+    profile: Profile
+    settings: LinkSettings
+    unit: int
+
+    @property
+    def simulated(self) -> bool:
+        return self.settings.port == SIM_PORT
+
+
+def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
+    """Apply CLI > environment > config file > profile defaults, and check every value."""
+    opts = merge(cli, _from_env(), _from_config())
+    port = opts.port
+    if port is None:
+        if need_port:
+            raise UsageError("no port given: use --port /dev/ttyUSB0|COM3|tcp://HOST:PORT|sim, or set SERVOTOOL_PORT")
+        port = SIM_PORT
+    if port != SIM_PORT:
+        parse_tcp(port)
+    name = opts.profile or (SIM_DEFAULT_PROFILE if port == SIM_PORT else None)
+    if name is None:
+        raise UsageError("no drive profile given: use --profile (see 'servotool profiles list') or SERVOTOOL_PROFILE")
+    profile = load_profile(name)
+    parity = PARITIES.get((opts.parity or profile.serial.parity).upper())
+    if parity is None:
+        raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
+    settings = LinkSettings(
+        port=port, baud=opts.baud or profile.serial.baud, parity=parity,
+        stopbits=opts.stopbits or profile.serial.stopbits, bytesize=profile.serial.bytesize,
+        timeout=opts.timeout if opts.timeout is not None else (0.5 if port == SIM_PORT else 1.0),
+        retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else 2),
+    )
+    unit = opts.unit if opts.unit is not None else profile.serial.unit
+    if not 1 <= unit <= 247:
+        raise UsageError(f"bad unit id {unit}: must be 1..247")
+    if settings.baud <= 0:
+        raise UsageError(f"bad baud rate {settings.baud}")
+    if settings.stopbits not in (1, 2):
+        raise UsageError(f"bad stop bits {settings.stopbits}: must be 1 or 2")
+    if settings.timeout <= 0:
+        raise UsageError("timeout must be > 0")
+    if settings.retries < 0:
+        raise UsageError("retries must be >= 0")
+    return Resolved(profile, settings, unit)
+
+
+def sim_notice(resolved: Resolved, units: list[int]) -> str:
+    ids = ",".join(str(u) for u in units)
+    return (f"servotool: SIMULATED drive ({resolved.profile.model} profile '{resolved.profile.id}', unit {ids}); "
+            f"no real hardware is involved")
+
+
+@contextmanager
+def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace | None = None,
+                notice: Callable[[str], None] | None = None) -> Iterator[list[Drive]]:
+    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit."""
+    units = units or [resolved.unit]
+    sim = None
+    settings = resolved.settings
+    if resolved.simulated:
+        from servotool.sim.device import SimulatedDrive
+        from servotool.sim.server import EmbeddedSim
+
+        sim = EmbeddedSim([SimulatedDrive(resolved.profile, u) for u in units])
+        settings = replace(settings, port=sim.port)
+        (notice or _stderr)(sim_notice(resolved, units))
+    try:
+        link = ModbusLink(settings, trace=trace)
+    except Exception:
+        if sim:
+            sim.close()
+        raise
+    try:
+        yield [Drive(link, resolved.profile, u) for u in units]
+    finally:
+        link.close()
+        if sim:
+            sim.close()
+
+
+def _stderr(text: str) -> None:
+    print(text, file=sys.stderr)

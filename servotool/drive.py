@@ -1,0 +1,168 @@
+"""Drive operations over a link: coalesced reads, validated and verified writes, Fn triggers, roles."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+from servotool.codec import format_value, json_value, parse_value, raw_to_eng, raw_to_words, words_to_raw
+from servotool.errors import DeviceError, UsageError, VerifyError
+from servotool.profile import Entry, Profile
+from servotool.transport import Link
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One entry's value as read from the drive."""
+
+    entry: Entry
+    raw: int
+
+    @property
+    def eng(self) -> float | int:
+        return raw_to_eng(self.entry, self.raw)
+
+    @property
+    def text(self) -> str:
+        return format_value(self.entry, self.raw)
+
+    @property
+    def changed(self) -> bool:
+        return self.entry.default is not None and self.raw != self.entry.default
+
+    def as_json(self) -> dict[str, object]:
+        e = self.entry
+        out: dict[str, object] = {"code": e.code, "name": e.name, "value": json_value(e, self.raw), "raw": self.raw,
+                                  "unit": e.unit}
+        if e.default is not None:
+            out["default"] = json_value(e, e.default)
+            out["changed"] = self.changed
+        return out
+
+
+@dataclass(frozen=True)
+class WriteResult:
+    """Outcome of one verified parameter write."""
+
+    entry: Entry
+    old: int | None
+    new: int
+
+    @property
+    def note(self) -> str:
+        return {"servo_off": "takes effect with the servo off", "power_cycle": "takes effect after a power cycle",
+                "unknown": "the manual does not say when it takes effect"}.get(self.entry.effect, "")
+
+
+def _prefixed(exc: DeviceError, prefix: str) -> DeviceError:
+    """Name the entry in a link error, keeping its type (and exit code)."""
+    exc.args = (f"{prefix}: {exc.args[0] if exc.args else exc}",)
+    return exc
+
+
+def plan_reads(profile: Profile, entries: Iterable[Entry]) -> list[tuple[int, int, list[Entry]]]:
+    """Group entries into as few FC03 requests as the profile allows: (address, count, entries).
+
+    A request may span a gap only when every address in the gap belongs to a readable entry, since a real
+    drive answers exception 02 for unmapped addresses.
+    """
+    readable = {a for e in profile.entries if e.readable for a in e.addresses}
+    wanted = sorted({e.code: e for e in entries}.values(), key=lambda e: e.address)
+    plans: list[tuple[int, int, list[Entry]]] = []
+    limit = profile.limits.max_read
+    for e in wanted:
+        if plans:
+            start, count, group = plans[-1]
+            end = start + count
+            gap_ok = all(a in readable for a in range(end, e.address))
+            new_count = e.address + e.words - start
+            if e.address >= end and gap_ok and new_count <= limit:
+                plans[-1] = (start, new_count, [*group, e])
+                continue
+            if e.address < end:  # overlapping or repeated: already covered
+                if e.address + e.words <= end:
+                    plans[-1] = (start, count, [*group, e])
+                    continue
+        plans.append((e.address, e.words, [e]))
+    return plans
+
+
+class Drive:
+    """One drive (unit) on a link, described by a profile."""
+
+    def __init__(self, link: Link, profile: Profile, unit: int) -> None:
+        self.link = link
+        self.profile = profile
+        self.unit = unit
+
+    # ----- reading -------------------------------------------------------------------------------------------
+    def read_entries(self, entries: Iterable[Entry], progress: Callable[[int], None] | None = None) -> list[Reading]:
+        """Read entries in coalesced requests; results in the order asked."""
+        entries = list(entries)
+        for e in entries:
+            if not e.readable:
+                raise UsageError(f"{e.code} ({e.name}) is write-only and cannot be read")
+        values: dict[str, int] = {}
+        for start, count, group in plan_reads(self.profile, entries):
+            try:
+                words = self.link.read(self.unit, start, count)
+            except DeviceError as exc:
+                names = ", ".join(e.code for e in group[:4]) + (" ..." if len(group) > 4 else "")
+                raise _prefixed(exc, f"reading {names}") from None
+            for e in group:
+                off = e.address - start
+                values[e.code] = words_to_raw(e, words[off: off + e.words])
+            if progress:
+                progress(len(group))
+        return [Reading(e, values[e.code]) for e in entries]
+
+    def read(self, *codes: str) -> list[Reading]:
+        return self.read_entries(self.profile.entry(c) for c in codes)
+
+    def read_one(self, code_or_role: str) -> Reading:
+        return self.read_entries([self.profile.entry(code_or_role)])[0]
+
+    def read_role(self, role: str, feature: str) -> Reading:
+        return self.read_entries([self.profile.need_role(role, feature)])[0]
+
+    # ----- writing -------------------------------------------------------------------------------------------
+    def parse_assignment(self, text: str, *, raw: bool = False, current: int | None = None) -> tuple[Entry, int]:
+        """'CODE=VALUE' -> (entry, raw value), validated against the profile (nothing is sent)."""
+        if "=" not in text:
+            raise UsageError(f"'{text}' is not CODE=VALUE")
+        code, _, value = text.partition("=")
+        entry = self.profile.entry(code.strip())
+        if entry.cls != "Pn":
+            raise UsageError(f"{entry.code} ({entry.name}) is a {entry.cls} entry, not a settable parameter")
+        if not entry.writable:
+            raise UsageError(f"{entry.code} ({entry.name}) is read-only")
+        return entry, parse_value(entry, value, raw=raw, current=current)
+
+    def write_raw(self, entry: Entry, raw: int) -> None:
+        """Send one entry's value (FC06 for one register, FC16 for several, as the profile allows)."""
+        words = raw_to_words(entry, raw)
+        if len(words) == 1:
+            self.link.write(self.unit, entry.address, words, multiple=False)
+        elif self.profile.limits.write_multiple:
+            self.link.write(self.unit, entry.address, words, multiple=True)
+        else:
+            for i, w in enumerate(words):
+                self.link.write(self.unit, entry.address + i, [w], multiple=False)
+
+    def write_verified(self, entry: Entry, raw: int, old: int | None = None) -> WriteResult:
+        """Write, read back, and raise VerifyError when the drive holds something else."""
+        try:
+            self.write_raw(entry, raw)
+        except DeviceError as exc:
+            raise _prefixed(exc, f"writing {entry.code}") from None
+        if entry.readable:
+            back = self.read_entries([entry])[0].raw
+            if back != raw:
+                raise VerifyError(f"{entry.code}: wrote {format_value(entry, raw)} but the drive reads back "
+                                  f"{format_value(entry, back)}")
+        return WriteResult(entry, old, raw)
+
+    def trigger(self, role: str, feature: str, value: int | None = None) -> None:
+        """Run an Fn function by role (writes its trigger value unless one is given)."""
+        entry = self.profile.need_role(role, feature)
+        self.write_raw(entry, entry.trigger if value is None else value)

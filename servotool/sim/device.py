@@ -1,0 +1,102 @@
+"""Behaviour of one simulated drive: answers register requests, runs Fn functions, keeps its state file."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from servotool.profile import Entry, Profile
+from servotool.sim.registers import ILLEGAL_VALUE, RegisterBank, SimRefusal
+
+FnHandler = Callable[["SimulatedDrive", Entry, int], None]
+
+
+class SimulatedDrive:
+    """A drive generated from a profile: registers + Fn functions (+ the plant, when attached)."""
+
+    def __init__(self, profile: Profile, unit: int, state_file: Path | None = None, *, persist: bool = True) -> None:
+        self.profile = profile
+        self.unit = unit
+        self.bank = RegisterBank.open(profile, unit, state_file)
+        if not persist:
+            self.bank.path = None
+        self.fault_injection: dict[str, int] = dict(self.bank.extra.get("inject", {}))
+        self.handlers: dict[str, FnHandler] = {
+            "factory_reset": _factory_reset,
+            "soft_reset": _soft_reset,
+            "eeprom_save": _eeprom_save,
+        }
+        self.on_read: list[Callable[[SimulatedDrive], None]] = []
+        self.on_param_change: list[Callable[[SimulatedDrive, Entry, int], None]] = []
+
+    def role_of(self, entry: Entry) -> str | None:
+        for role, code in self.profile.roles.items():
+            if code.upper() == entry.code.upper():
+                return role
+        return None
+
+    def read(self, address: int, count: int) -> list[int]:
+        """Registers for a read request; raises SimRefusal for a Modbus exception."""
+        for hook in self.on_read:
+            hook(self)
+        return self.bank.read(address, count)
+
+    def write(self, address: int, values: list[int]) -> None:
+        """Apply a write request atomically: every entry is checked before any is changed."""
+        changes = self.bank.decode_write(address, values)
+        for entry, _raw in changes:
+            if (code := self.fault_injection.get(entry.code.upper())) is not None:
+                raise SimRefusal(code or ILLEGAL_VALUE, f"injected fault on {entry.code}")
+        changed = False
+        for entry, raw in changes:
+            if entry.cls == "Fn":
+                self._run_function(entry, raw)
+                changed = True
+            elif entry.cls == "Pn":
+                self.bank.apply_parameter(entry, raw)
+                for hook in self.on_param_change:
+                    hook(self, entry, raw)
+                changed = True
+            else:
+                self.bank.set_live(entry.code, raw)
+        if changed:
+            self.bank.save()
+
+    def _run_function(self, entry: Entry, raw: int) -> None:
+        role = self.role_of(entry)
+        handler = self.handlers.get(role or "")
+        if handler is None:
+            # A function the simulator does not model still answers like a drive that accepted it.
+            return
+        handler(self, entry, raw)
+
+    def power_cycle(self) -> None:
+        self.bank.power_cycle()
+        self.bank.save()
+
+    def inject_fault(self, code: str, exception: int = ILLEGAL_VALUE) -> None:
+        """Make writes to one entry fail with a Modbus exception (tests of rollback paths)."""
+        entry = self.profile.entry(code)
+        self.fault_injection[entry.code.upper()] = exception
+        self.bank.extra["inject"] = self.fault_injection
+        self.bank.save()
+
+    def clear_faults(self) -> None:
+        self.fault_injection.clear()
+        self.bank.extra.pop("inject", None)
+        self.bank.save()
+
+
+def _factory_reset(drive: SimulatedDrive, entry: Entry, raw: int) -> None:
+    if raw == entry.trigger:
+        drive.bank.factory_reset()
+
+
+def _soft_reset(drive: SimulatedDrive, entry: Entry, raw: int) -> None:
+    if raw == entry.trigger:
+        drive.bank.power_cycle()
+
+
+def _eeprom_save(drive: SimulatedDrive, entry: Entry, raw: int) -> None:
+    if raw == entry.trigger:
+        drive.bank.save_eeprom()

@@ -1,0 +1,208 @@
+"""Register bank of a simulated drive: every entry's value, access/range checks, EEPROM vs RAM, state file.
+
+Three layers model a real drive's memory: `eeprom` survives power cycles, `ram` is what reads return (the
+drive stays powered between CLI invocations, so RAM is kept in the state file too), and `effective` is what
+the control loops use; a power-cycle parameter changes `ram` at once but `effective` only after a power cycle.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from servotool.codec import raw_to_words, words_to_raw
+from servotool.profile import Entry, Profile
+
+ILLEGAL_FUNCTION = 1
+ILLEGAL_ADDRESS = 2
+ILLEGAL_VALUE = 3
+DEVICE_FAILURE = 4
+
+
+class SimRefusal(Exception):
+    """A request the simulated drive answers with a Modbus exception."""
+
+    def __init__(self, code: int, reason: str) -> None:
+        super().__init__(reason)
+        self.code = code
+
+
+def sim_dir() -> Path:
+    """Where simulated drives keep their state (XDG state dir, overridable by SERVOTOOL_SIM_DIR)."""
+    if env := os.environ.get("SERVOTOOL_SIM_DIR"):
+        return Path(env)
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "servotool" / "sim"
+
+
+def state_path(profile_id: str, unit: int) -> Path:
+    return sim_dir() / f"{profile_id}-unit{unit}.json"
+
+
+@dataclass
+class RegisterBank:
+    """Values of one simulated drive's entries, addressed like the real drive."""
+
+    profile: Profile
+    unit: int
+    eeprom: dict[str, int] = field(default_factory=dict)
+    ram: dict[str, int] = field(default_factory=dict)
+    effective: dict[str, int] = field(default_factory=dict)
+    live: dict[str, int] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+    eeprom_writes: int = 0
+    path: Path | None = None
+    _by_address: dict[int, Entry] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        for e in self.profile.entries:
+            for a in e.addresses:
+                self._by_address[a] = e
+        defaults = {e.code: e.default if e.default is not None else max(e.min, min(0, e.max))
+                    for e in self.profile.entries if e.cls == "Pn"}
+        for layer in (self.eeprom, self.ram, self.effective):
+            for code, value in defaults.items():
+                layer.setdefault(code, value)
+
+    # ----- persistence -------------------------------------------------------------------------------------
+    @classmethod
+    def open(cls, profile: Profile, unit: int, path: Path | None = None) -> RegisterBank:
+        """Load the drive's state file, or start from factory defaults."""
+        path = path or state_path(profile.id, unit)
+        bank = cls(profile, unit, path=path)
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            return bank
+        if data.get("profile") != profile.id:
+            return bank
+        known = {e.code for e in profile.entries if e.cls == "Pn"}
+        for name in ("eeprom", "ram", "effective"):
+            layer = getattr(bank, name)
+            for code, value in (data.get(name) or {}).items():
+                entry = profile.find(code)
+                if code in known and entry and isinstance(value, int) and entry.min <= value <= entry.max:
+                    layer[code] = value
+        bank.extra = data.get("extra") or {}
+        bank.eeprom_writes = int(data.get("eeprom_writes", 0))
+        return bank
+
+    def save(self) -> None:
+        """Write the state file atomically, so a killed process never leaves half a file."""
+        if self.path is None:
+            return
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        data = {"profile": self.profile.id, "version": self.profile.version, "unit": self.unit,
+                "eeprom": self.eeprom, "ram": self.ram, "effective": self.effective,
+                "eeprom_writes": self.eeprom_writes, "extra": self.extra}
+        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=self.path.name, suffix=".tmp")
+        with os.fdopen(fd, "w") as fh:
+            json.dump(data, fh, indent=1, sort_keys=True)
+        os.replace(tmp, self.path)
+
+    def power_cycle(self) -> None:
+        """What a real power cycle does: RAM reloads from EEPROM and everything takes effect."""
+        self.ram = dict(self.eeprom)
+        self.effective = dict(self.eeprom)
+
+    def factory_reset(self) -> None:
+        """Factory defaults into EEPROM and RAM; power-cycle parameters wait for the next power cycle."""
+        for e in self.profile.of_class("Pn"):
+            if e.default is None:
+                continue
+            self.eeprom[e.code] = e.default
+            self.ram[e.code] = e.default
+            if e.effect != "power_cycle":
+                self.effective[e.code] = e.default
+        self.eeprom_writes += 1
+
+    def save_eeprom(self) -> None:
+        """An explicit 'store parameters' function: RAM into EEPROM."""
+        self.eeprom = dict(self.ram)
+        self.eeprom_writes += 1
+
+    # ----- values ------------------------------------------------------------------------------------------
+    def value(self, code: str) -> int:
+        """Current raw value as a read would return it."""
+        entry = self.profile.entry(code)
+        if entry.cls == "Pn":
+            return self.ram[entry.code]
+        return self.live.get(entry.code, 0)
+
+    def effective_value(self, code: str) -> int:
+        entry = self.profile.entry(code)
+        return self.effective[entry.code] if entry.cls == "Pn" else self.live.get(entry.code, 0)
+
+    def set_live(self, code: str, raw: int) -> None:
+        """Set a monitor/status value (clamped to the entry's range)."""
+        entry = self.profile.entry(code)
+        self.live[entry.code] = max(entry.min, min(entry.max, int(raw)))
+
+    def persists_writes(self) -> bool:
+        """Whether a Modbus write of a parameter goes to EEPROM right now (per the profile's rule)."""
+        p = self.profile.persistence
+        if p.mode == "immediate":
+            return True
+        if p.mode == "ram":
+            return False
+        switch = self.profile.entry(p.switch_code)
+        raw = self.ram[switch.code]
+        if p.switch_digit and switch.format == "digits":
+            idx = [f.upper() for f in switch.fields].index(p.switch_digit.upper())
+            raw = (raw >> (switch.field_width * idx)) & ((1 << switch.field_width) - 1)
+        return raw == p.switch_eeprom
+
+    # ----- register access -----------------------------------------------------------------------------------
+    def entries_in(self, address: int, count: int) -> list[Entry]:
+        """Entries touched by a request; SimRefusal(02) when any address is unmapped."""
+        out: list[Entry] = []
+        for a in range(address, address + count):
+            entry = self._by_address.get(a)
+            if entry is None:
+                raise SimRefusal(ILLEGAL_ADDRESS, f"address {a} is not mapped")
+            if not out or out[-1] is not entry:
+                out.append(entry)
+        return out
+
+    def read(self, address: int, count: int) -> list[int]:
+        if count < 1 or count > self.profile.limits.max_read:
+            raise SimRefusal(ILLEGAL_VALUE, f"count {count} exceeds the drive's limit {self.profile.limits.max_read}")
+        words: dict[int, int] = {}
+        for entry in self.entries_in(address, count):
+            raw = self.value(entry.code) if entry.readable else 0
+            words.update(zip(entry.addresses, raw_to_words(entry, raw), strict=True))
+        return [words[a] for a in range(address, address + count)]
+
+    def decode_write(self, address: int, values: list[int]) -> list[tuple[Entry, int]]:
+        """Validate a write and return (entry, new raw value) pairs without applying anything."""
+        if len(values) > self.profile.limits.max_write:
+            raise SimRefusal(ILLEGAL_VALUE, f"{len(values)} registers exceed the write limit")
+        incoming = dict(zip(range(address, address + len(values)), values, strict=True))
+        changes: list[tuple[Entry, int]] = []
+        for entry in self.entries_in(address, len(values)):
+            if not entry.writable:
+                raise SimRefusal(ILLEGAL_ADDRESS, f"{entry.code} is read-only")
+            current = raw_to_words(entry, self.value(entry.code) if entry.cls == "Pn" else 0)
+            words = [incoming.get(a, current[i]) for i, a in enumerate(entry.addresses)]
+            raw = words_to_raw(entry, words)
+            if not entry.min <= raw <= entry.max:
+                raise SimRefusal(ILLEGAL_VALUE, f"{entry.code}={raw} outside {entry.min}..{entry.max}")
+            changes.append((entry, raw))
+        return changes
+
+    def apply_parameter(self, entry: Entry, raw: int) -> None:
+        """Store an accepted parameter write in RAM (and EEPROM when the drive persists writes)."""
+        self.ram[entry.code] = raw
+        if entry.effect != "power_cycle":
+            self.effective[entry.code] = raw
+        if self.persists_writes() and self.eeprom.get(entry.code) != raw:
+            self.eeprom[entry.code] = raw
+            self.eeprom_writes += 1
+
+    def pending_power_cycle(self) -> list[str]:
+        """Codes whose RAM value differs from the value in effect."""
+        return [c for c, v in self.ram.items() if self.effective.get(c) != v]

@@ -1,0 +1,135 @@
+"""Serve simulated drives as Modbus RTU slaves with pymodbus' server (serial line or RTU-over-TCP).
+
+The only module of the simulator that touches pymodbus.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from pymodbus import FramerType
+from pymodbus.constants import ExcCodes
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+
+from servotool.errors import DeviceError
+from servotool.sim.device import SimulatedDrive
+from servotool.sim.registers import SimRefusal
+from servotool.transport import parse_tcp
+
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+READ_CODES = (3, 4)
+WRITE_CODES = (6, 16)
+
+
+def _sim_device(drive: SimulatedDrive, lock: threading.Lock) -> SimDevice:
+    """A pymodbus SimDevice whose every access goes through the simulated drive."""
+    blocks: list[SimData] = []
+    for entry in sorted(drive.profile.entries, key=lambda e: e.address):
+        blocks.append(SimData(address=entry.address, count=entry.words, values=0, datatype=DataType.UINT16))
+
+    async def action(fc: int, start: int, address: int, count: int, regs: list[int], values: object) -> ExcCodes | None:
+        try:
+            with lock:
+                if fc not in READ_CODES + WRITE_CODES:
+                    return ExcCodes.ILLEGAL_FUNCTION
+                if values is not None:
+                    drive.write(address, [int(v) for v in values])  # type: ignore[union-attr]
+                elif fc in READ_CODES:
+                    regs[address - start: address - start + count] = drive.read(address, count)
+                # pymodbus also reads the block while serving a write; nothing to refresh then.
+                return None
+        except SimRefusal as exc:
+            return ExcCodes(exc.code)
+        except Exception:  # a simulator bug must answer like a faulty slave, not kill the server
+            logging.getLogger("servotool.sim").exception("simulator failure")
+            return ExcCodes.DEVICE_FAILURE
+
+    return SimDevice(id=drive.unit, simdata=blocks, action=action)
+
+
+@dataclass
+class LineSettings:
+    baud: int = 9600
+    parity: str = "N"
+    stopbits: int = 1
+    bytesize: int = 8
+
+
+async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lock: threading.Lock,
+                 trace: Callable[[bool, bytes], None] | None):
+    devices = [_sim_device(d, lock) for d in drives]
+
+    def hook(sending: bool, data: bytes) -> bytes:
+        if trace:
+            trace(sending, data)
+        return data
+
+    tcp = parse_tcp(port)
+    server: ModbusTcpServer | ModbusSerialServer
+    if tcp:
+        server = ModbusTcpServer(devices, framer=FramerType.RTU, address=tcp, trace_packet=hook if trace else None)
+    else:
+        server = ModbusSerialServer(
+            devices, framer=FramerType.RTU, port=port, baudrate=line.baud, parity=line.parity,
+            stopbits=line.stopbits, bytesize=line.bytesize, trace_packet=hook if trace else None,
+        )
+    try:
+        await server.serve_forever(background=True)
+    except (RuntimeError, OSError) as exc:
+        raise DeviceError(f"cannot serve on {port}: {exc}") from None
+    return server
+
+
+def bound_port(server: ModbusTcpServer) -> int:
+    """The TCP port a server listens on (useful after binding port 0)."""
+    return int(server.transport.sockets[0].getsockname()[1])  # type: ignore[union-attr]
+
+
+def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | None = None,
+                  trace: Callable[[bool, bytes], None] | None = None,
+                  ready: Callable[[str], None] | None = None) -> None:
+    """Serve in the foreground until interrupted."""
+    lock = threading.Lock()
+
+    async def main() -> None:
+        server = await _start(port, drives, line or LineSettings(), lock, trace)
+        where = port
+        if parse_tcp(port) and port.endswith(":0"):
+            where = f"{port[:-2]}:{bound_port(server)}"
+        if ready:
+            ready(where)
+        try:
+            await server.serving
+        finally:
+            await server.shutdown()
+
+    asyncio.run(main())
+
+
+class EmbeddedSim:
+    """Simulated drives served on a loopback TCP port from a background thread (`--port sim`)."""
+
+    def __init__(self, drives: list[SimulatedDrive]) -> None:
+        self.drives = drives
+        self.lock = threading.Lock()
+        self._loop = asyncio.new_event_loop()
+        self._server: ModbusTcpServer | None = None
+        self._thread = threading.Thread(target=self._loop.run_forever, name="servotool-sim", daemon=True)
+        self._thread.start()
+        future = asyncio.run_coroutine_threadsafe(
+            _start("tcp://127.0.0.1:0", drives, LineSettings(), self.lock, None), self._loop)
+        self._server = future.result(timeout=10)
+        self.port = f"tcp://127.0.0.1:{bound_port(self._server)}"
+
+    def close(self) -> None:
+        if self._server is not None:
+            asyncio.run_coroutine_threadsafe(self._server.shutdown(), self._loop).result(timeout=5)
+            self._server = None
+        self._loop.call_soon_threadsafe(self._loop.stop)
+        self._thread.join(timeout=5)

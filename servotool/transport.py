@@ -1,0 +1,168 @@
+"""The one adapter over pymodbus' client side: open a port, read/write registers, build/parse RTU frames.
+
+Everything else in servotool talks to `Link`, never to pymodbus directly, because pymodbus' API churns.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+from pymodbus import FramerType
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+from pymodbus.framer import FramerRTU
+from pymodbus.pdu import DecodePDU, ExceptionResponse
+from pymodbus.pdu.register_message import (
+    ReadHoldingRegistersRequest,
+    WriteMultipleRegistersRequest,
+    WriteSingleRegisterRequest,
+)
+
+from servotool.errors import DeviceError, UsageError
+from servotool.errors import ModbusException as DriveException
+
+# pymodbus logs every dropped frame at error level; our own errors say what happened.
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+Trace = Callable[[bool, bytes], None]
+
+
+@dataclass(frozen=True)
+class LinkSettings:
+    """Where and how to talk to a drive."""
+
+    port: str
+    baud: int = 9600
+    parity: str = "N"
+    stopbits: int = 1
+    bytesize: int = 8
+    timeout: float = 1.0
+    retries: int = 2
+
+
+class Link(Protocol):
+    """What drive operations need from a Modbus master."""
+
+    def read(self, unit: int, address: int, count: int) -> list[int]: ...
+    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None: ...
+    def close(self) -> None: ...
+
+
+_TCP_RE = re.compile(r"^tcp://(?P<host>\[[^\]]+\]|[^:/]+):(?P<port>\d+)$")
+
+
+def parse_tcp(port: str) -> tuple[str, int] | None:
+    """(host, port) of a tcp://host:port spec, None for other specs; UsageError when malformed."""
+    if not port.startswith("tcp://"):
+        return None
+    m = _TCP_RE.match(port)
+    if not m or not 0 <= int(m["port"]) < 65536:
+        raise UsageError(f"bad port '{port}': expected tcp://HOST:PORT")
+    return m["host"].strip("[]"), int(m["port"])
+
+
+class ModbusLink:
+    """A pymodbus sync client speaking RTU frames over a serial line or a TCP socket."""
+
+    def __init__(self, settings: LinkSettings, trace: Trace | None = None) -> None:
+        self.settings = settings
+        self.trace = trace
+        self.requests = 0
+        hook = self._trace_packet if trace else None
+        tcp = parse_tcp(settings.port)
+        self._client: ModbusTcpClient | ModbusSerialClient
+        if tcp:
+            self._client = ModbusTcpClient(
+                tcp[0], port=tcp[1], framer=FramerType.RTU, timeout=settings.timeout, retries=settings.retries,
+                trace_packet=hook, reconnect_delay=0,
+            )
+        else:
+            self._client = ModbusSerialClient(
+                settings.port, framer=FramerType.RTU, baudrate=settings.baud, parity=settings.parity,
+                stopbits=settings.stopbits, bytesize=settings.bytesize, timeout=settings.timeout,
+                retries=settings.retries, trace_packet=hook, reconnect_delay=0,
+            )
+        if not self._client.connect():
+            self._client.close()
+            raise DeviceError(f"cannot open port {settings.port}: {self._why_not_open()}")
+
+    def _why_not_open(self) -> str:
+        if parse_tcp(self.settings.port):
+            return "connection refused or host unreachable"
+        return "no such device, busy, or permission denied"
+
+    def _trace_packet(self, sending: bool, data: bytes) -> bytes:
+        if self.trace:
+            self.trace(sending, data)
+        return data
+
+    def _call(self, what: str, fn: Callable[[], object]) -> object:
+        self.requests += 1
+        try:
+            response = fn()
+        except ConnectionException as exc:
+            raise DeviceError(f"{what}: link lost ({_short(exc)})") from None
+        except ModbusIOException:
+            raise DeviceError(
+                f"{what}: no valid response within {self.settings.timeout:g} s after "
+                f"{self.settings.retries + 1} tries (wrong unit id, baud/parity, wiring, or CRC errors)"
+            ) from None
+        except ModbusException as exc:
+            raise DeviceError(f"{what}: {_short(exc)}") from None
+        if isinstance(response, ExceptionResponse):
+            raise DriveException(response.exception_code, what)
+        if getattr(response, "isError", lambda: False)():
+            raise DeviceError(f"{what}: invalid response")
+        return response
+
+    def read(self, unit: int, address: int, count: int) -> list[int]:
+        what = f"read {count} register(s) at {address} (0x{address:04X}) from unit {unit}"
+        response = self._call(what, lambda: self._client.read_holding_registers(address, count=count, device_id=unit))
+        regs = list(getattr(response, "registers", []))
+        if len(regs) != count:
+            raise DeviceError(f"{what}: drive returned {len(regs)} registers")
+        return regs
+
+    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None:
+        what = f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}"
+        if len(values) == 1 and not multiple:
+            self._call(what, lambda: self._client.write_register(address, values[0], device_id=unit))
+        else:
+            self._call(what, lambda: self._client.write_registers(address, values, device_id=unit))
+
+    def close(self) -> None:
+        self._client.close()
+
+
+def _short(exc: Exception) -> str:
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return re.sub(r"^Modbus Error: \[[^\]]*\]\s*", "", text)
+
+
+_FRAMER = FramerRTU(DecodePDU(is_server=False))
+
+
+def read_request_frame(unit: int, address: int, count: int) -> bytes:
+    """The RTU frame (with CRC) of an FC03 request, as this tool sends it."""
+    return _FRAMER.buildFrame(ReadHoldingRegistersRequest(address=address, count=count, dev_id=unit))
+
+
+def write_request_frame(unit: int, address: int, values: list[int], *, multiple: bool = True) -> bytes:
+    """The RTU frame of an FC06 (single, multiple=False) or FC16 write request."""
+    if len(values) == 1 and not multiple:
+        return _FRAMER.buildFrame(WriteSingleRegisterRequest(address=address, registers=values, dev_id=unit))
+    return _FRAMER.buildFrame(WriteMultipleRegistersRequest(address=address, registers=values, dev_id=unit))
+
+
+def parse_response_frame(frame: bytes) -> tuple[int, int, list[int]]:
+    """(unit, function code, registers) of a response frame; DeviceError on a bad CRC or an exception reply."""
+    _used, pdu = FramerRTU(DecodePDU(is_server=False)).handleFrame(frame, 0, 0)
+    if pdu is None:
+        raise DeviceError(f"not a valid RTU response frame (CRC or length): {frame.hex(' ')}")
+    if isinstance(pdu, ExceptionResponse):
+        raise DriveException(pdu.exception_code, f"unit {pdu.dev_id}")
+    return pdu.dev_id, pdu.function_code, list(getattr(pdu, "registers", []))
