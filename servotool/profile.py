@@ -558,7 +558,7 @@ def read_profile(path: Path) -> tuple[Profile | None, list[str]]:
     except OSError as exc:
         return None, [f"{path}: cannot read: {exc.strerror or exc}"]
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_SAFE_LOADER)  # safe loader (C-accelerated when available)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark else "?"
@@ -572,6 +572,7 @@ def read_profile(path: Path) -> tuple[Profile | None, list[str]]:
 
 
 _CACHE: dict[str, Profile] = {}
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 def load_profile(name_or_path: str | Path) -> Profile:
@@ -580,7 +581,8 @@ def load_profile(name_or_path: str | Path) -> Profile:
     if key in _CACHE:
         return _CACHE[key]
     path = Path(key)
-    if not (path.suffix in (".yaml", ".yml") or path.exists()):
+    # A bare name is a built-in profile id; a path names a file (even a missing one, for a clear error).
+    if path.suffix not in (".yaml", ".yml") and "/" not in key and "\\" not in key:
         path = builtin_dir() / f"{key.lower()}.yaml"
         if not path.exists():
             known = ", ".join(builtin_ids())

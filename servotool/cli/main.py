@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sys
 
-import click
 import typer
 
 from servotool import __version__
@@ -68,5 +67,3 @@ def run() -> None:
     except KeyboardInterrupt:
         err.print("servotool: interrupted", markup=False)
         sys.exit(130)
-    except click.exceptions.Exit as exc:
-        sys.exit(exc.exit_code)

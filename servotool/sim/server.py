@@ -13,8 +13,10 @@ from dataclasses import dataclass
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
+from pymodbus.exceptions import NoSuchIdException
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
+from pymodbus.simulator.simcore import SimCore
 
 from servotool.errors import DeviceError
 from servotool.sim.device import SimulatedDrive
@@ -53,6 +55,25 @@ def _sim_device(drive: SimulatedDrive, lock: threading.Lock) -> SimDevice:
     return SimDevice(id=drive.unit, simdata=blocks, action=action)
 
 
+class _Line(SimCore):
+    """The drives on one line; a unit nobody serves stays silent, as on a real RS485 bus.
+
+    pymodbus 3.16's SimCore answers unknown ids with exception 04 instead; this restores silence.
+    """
+
+    def _known(self, device_id: int) -> None:
+        if device_id not in self.devices:
+            raise NoSuchIdException(f"unit {device_id}")
+
+    async def async_getValues(self, device_id: int, func_code: int, address: int, count: int = 1):  # type: ignore[override]
+        self._known(device_id)
+        return await super().async_getValues(device_id, func_code, address, count)
+
+    async def async_setValues(self, device_id: int, func_code: int, address: int, values):  # type: ignore[override]
+        self._known(device_id)
+        return await super().async_setValues(device_id, func_code, address, values)
+
+
 @dataclass
 class LineSettings:
     baud: int = 9600
@@ -73,12 +94,16 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
     tcp = parse_tcp(port)
     server: ModbusTcpServer | ModbusSerialServer
     if tcp:
-        server = ModbusTcpServer(devices, framer=FramerType.RTU, address=tcp, trace_packet=hook if trace else None)
+        # A real RS485 slave stays silent for other unit ids, so missing devices get no answer.
+        server = ModbusTcpServer(devices, framer=FramerType.RTU, address=tcp, trace_packet=hook if trace else None,
+                                 ignore_missing_devices=True)
     else:
         server = ModbusSerialServer(
             devices, framer=FramerType.RTU, port=port, baudrate=line.baud, parity=line.parity,
             stopbits=line.stopbits, bytesize=line.bytesize, trace_packet=hook if trace else None,
+            ignore_missing_devices=True,
         )
+    server.context = _Line(devices)
     try:
         await server.serve_forever(background=True)
     except (RuntimeError, OSError) as exc:

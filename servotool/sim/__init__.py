@@ -1,0 +1,1 @@
+"""The simulated drive: register bank, drive behaviour, plant physics, Modbus server."""

@@ -1,0 +1,1 @@
+"""Inertia identification and gain suggestions."""

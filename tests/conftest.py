@@ -1,0 +1,48 @@
+"""Shared fixtures: an isolated simulated-drive state dir and a CLI runner that uses the real entry point."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclass
+class Result:
+    code: int
+    out: str
+    err: str
+
+    def json(self):
+        return json.loads(self.out)
+
+
+@pytest.fixture
+def sim_dir(tmp_path, monkeypatch) -> Path:
+    """Each test gets its own simulated drives (state files) and no user config."""
+    d = tmp_path / "sim"
+    monkeypatch.setenv("SERVOTOOL_SIM_DIR", str(d))
+    monkeypatch.setenv("SERVOTOOL_CONFIG", str(tmp_path / "no-config.yaml"))
+    for var in ("SERVOTOOL_PORT", "SERVOTOOL_PROFILE", "SERVOTOOL_UNIT", "SERVOTOOL_BAUD"):
+        monkeypatch.delenv(var, raising=False)
+    return d
+
+
+@pytest.fixture
+def cli(sim_dir):
+    """Run `python -m servotool ARGS` as a user would; returns exit code, stdout, stderr."""
+
+    def run(*args: str, input: str | None = None, env: dict[str, str] | None = None, timeout: float = 120) -> Result:
+        full_env = {**os.environ, "COLUMNS": "200", **(env or {})}
+        proc = subprocess.run([sys.executable, "-m", "servotool", *args], capture_output=True, text=True,
+                              input=input, env=full_env, timeout=timeout, cwd=ROOT)
+        return Result(proc.returncode, proc.stdout, proc.stderr)
+
+    return run

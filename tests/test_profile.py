@@ -1,0 +1,112 @@
+"""Profile schema: good files load, broken files report each problem with its location."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from servotool.errors import ProfileError
+from servotool.profile import builtin_ids, load_profile, read_profile
+
+GOOD = {
+    "schema": 1, "id": "mini", "model": "MINI", "vendor": "test", "version": "1", "description": "test drive",
+    "source": "test", "address_rule": "address = n", "serial": {"baud": 9600, "parity": "N", "stopbits": 1, "unit": 1},
+    "limits": {"max_read": 10, "max_write": 10}, "word_order": "low_first", "persistence": {"mode": "immediate"},
+    "roles": {"speed_feedback": "U1"},
+    "entries": [
+        {"code": "P1", "class": "Pn", "name": "gain", "address": 1, "min": 0, "max": 100, "default": 10,
+         "effect": "immediate", "source": "t"},
+        {"code": "P2", "class": "Pn", "name": "big", "address": 2, "type": "s32", "min": -100000, "max": 100000,
+         "default": 0, "effect": "power_cycle", "source": "t"},
+        {"code": "U1", "class": "Un", "name": "speed", "address": 100, "type": "s16", "source": "t"},
+    ],
+}
+
+
+def write(tmp_path: Path, data: dict, name: str = "mini") -> Path:
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_good_profile_loads(tmp_path):
+    profile = load_profile(write(tmp_path, GOOD))
+    assert [e.code for e in profile.entries] == ["P1", "P2", "U1"]
+    assert profile.entry("p2").words == 2
+    assert profile.role("speed_feedback").code == "U1"
+    assert profile.entry("speed_feedback").code == "U1"
+
+
+@pytest.mark.parametrize(("mutate", "expected"), [
+    (lambda d: d["entries"][0].update(default=200), "entries[0] (P1).default: 200 outside min..max 0..100"),
+    (lambda d: d["entries"][1].update(address=1), "address 1 (0x0001) overlaps P1"),
+    (lambda d: d["entries"][2].update(code="p1"), "duplicate code"),
+    (lambda d: d["entries"][0].update(type="u17"), "'u17' is not one of"),
+    (lambda d: d["entries"][0].pop("effect"), "Pn entry needs 'effect'"),
+    (lambda d: d["entries"][0].update(min=-5), "outside the u16 range"),
+    (lambda d: d["roles"].update(jog="F9"), "roles.jog: names unknown entry 'F9'"),
+    (lambda d: d.update(word_order="middle"), "word_order: 'middle' is not one of"),
+    (lambda d: d["limits"].update(max_read=500), "limits.max_read: must be 1..125"),
+    (lambda d: d["entries"][0].update(colour="red"), "unknown key 'colour'"),
+    (lambda d: d["entries"][0].update(format="digits"), "format: digits needs 'fields'"),
+    (lambda d: d.pop("model"), "missing required key 'model'"),
+])
+def test_broken_profile_reports_location(tmp_path, mutate, expected):
+    import copy
+
+    data = copy.deepcopy(GOOD)
+    mutate(data)
+    profile, problems = read_profile(write(tmp_path, data))
+    assert profile is None
+    assert any(expected in p for p in problems), problems
+    assert all(p.startswith(str(tmp_path)) for p in problems)
+    with pytest.raises(ProfileError, match="broken profile"):
+        load_profile(tmp_path / "mini.yaml")
+
+
+def test_all_problems_are_reported_not_just_the_first(tmp_path):
+    import copy
+
+    data = copy.deepcopy(GOOD)
+    data["entries"][0]["default"] = 999
+    data["entries"][2]["address"] = 2
+    _, problems = read_profile(write(tmp_path, data))
+    assert len(problems) >= 2
+
+
+def test_invalid_yaml_names_the_line(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("schema: 1\nentries: [\n  {code: P1\n")
+    profile, problems = read_profile(path)
+    assert profile is None and "invalid YAML" in problems[0] and "line" in problems[0]
+
+
+def test_unknown_profile_is_a_clear_error():
+    with pytest.raises(ProfileError, match="unknown profile 'nosuch'"):
+        load_profile("nosuch")
+
+
+def test_builtin_profiles_are_valid():
+    assert "dsx7e" in builtin_ids()
+    for pid in builtin_ids():
+        profile, problems = read_profile(load_profile(pid).path)
+        assert problems == [] and profile is not None
+
+
+def test_dsx7e_addresses_follow_the_documented_rule():
+    p = load_profile("dsx7e")
+    for e in p.of_class("Pn"):
+        n = int(e.code[2:])
+        if e.source.startswith("DSX7E manual"):
+            assert e.address == 0x2000 + 0x100 * (n // 100) + n % 100, e.code
+    assert p.entry("Pn410").address == 0x240A  # the manual misprints 2410h
+    assert p.entry("Un027").address == 0x401B
+    assert p.entry("Pn008").words == 2
+
+
+def test_inertia_ratio_convention_roundtrip():
+    p = load_profile("dsx7e")
+    assert p.load_ratio_from_param(250) == pytest.approx(1.5)
+    assert p.param_from_load_ratio(0.0) == pytest.approx(100)
