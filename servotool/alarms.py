@@ -1,0 +1,66 @@
+"""Alarms: read the current alarm and its history, clear it, through the profile's roles."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from servotool.drive import Drive
+from servotool.errors import VerifyError
+from servotool.profile import Profile
+
+FEATURE = "alarm"
+
+
+@dataclass(frozen=True)
+class AlarmState:
+    code: int
+    display: str
+    name: str
+    clearable: bool | None
+
+    @property
+    def active(self) -> bool:
+        return self.code != 0
+
+    def as_json(self) -> dict[str, object]:
+        return {"code": self.code, "display": self.display, "name": self.name, "active": self.active,
+                "clearable": self.clearable}
+
+
+def describe(profile: Profile, code: int) -> AlarmState:
+    if code == 0:
+        return AlarmState(0, "-", "no alarm", None)
+    known = profile.alarm(code)
+    if known is None:
+        return AlarmState(code, f"{code} (0x{code:X})", "not listed in the profile", None)
+    return AlarmState(code, known.display, known.name, known.clearable)
+
+
+def current(drive: Drive) -> AlarmState:
+    return describe(drive.profile, drive.read_role("alarm_code", FEATURE).raw)
+
+
+def history_roles(profile: Profile) -> list[str]:
+    roles = [r for r in profile.roles if re.fullmatch(r"alarm_history_\d+", r)]
+    return sorted(roles, key=lambda r: int(r.rsplit("_", 1)[1]))
+
+
+def history(drive: Drive) -> list[AlarmState]:
+    """Alarm history, most recent first, from the profile's alarm_history_N roles."""
+    roles = history_roles(drive.profile)
+    if not roles:
+        drive.profile.need_role("alarm_history_1", "alarm history")
+    readings = drive.read_entries([drive.profile.need_role(r, "alarm history") for r in roles])
+    return [describe(drive.profile, r.raw) for r in readings]
+
+
+def clear(drive: Drive) -> AlarmState:
+    """Reset the alarm and read it again; VerifyError when it is still active (cause not gone)."""
+    drive.trigger("alarm_reset", "alarm clear")
+    after = current(drive)
+    if after.active:
+        why = " (not clearable: needs a power cycle or repair)" if after.clearable is False else \
+            " (its cause is still present)"
+        raise VerifyError(f"alarm {after.display} {after.name} is still active after reset{why}")
+    return after

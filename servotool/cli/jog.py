@@ -1,0 +1,91 @@
+"""`servotool jog`: timed or interactive JOG with a dead-man."""
+
+from __future__ import annotations
+
+import os
+import select
+import sys
+import termios
+import tty
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+import typer
+
+from servotool.cli.common import drive
+from servotool.cli.render import Verbosity, emit_json, err, info
+from servotool.errors import UsageError
+from servotool.motion import Jogger
+
+KEYS = "→/d forward  ←/a reverse  space stop  q quit"
+
+
+@contextmanager
+def _raw_keys() -> Iterator[Callable[[], str | None]]:
+    """Non-blocking single-key reader on the terminal; restores the terminal however we leave."""
+    fd = sys.stdin.fileno()
+    saved = termios.tcgetattr(fd)
+    tty.setcbreak(fd)
+
+    def key() -> str | None:
+        if not select.select([fd], [], [], 0)[0]:
+            return None
+        data = os.read(fd, 8).decode(errors="ignore")
+        return {"\x1b[C": "fwd", "\x1b[D": "rev", "d": "fwd", "a": "rev", " ": "stop", "q": "quit",
+                "\x1b": "quit"}.get(data, "")
+
+    try:
+        yield key
+    finally:
+        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+
+def jog(
+    ctx: typer.Context,
+    speed: float = typer.Option(..., "--speed", "-s", help="JOG speed in rpm; negative runs in reverse."),
+    seconds: float = typer.Option(None, "--time", "-t", help="Run this long, then ramp down and stop."),
+    interactive: bool = typer.Option(False, "--interactive", "-i", help=f"Keyboard control: {KEYS}."),
+    max_travel: float = typer.Option(None, "--max-travel", help="Refuse a timed JOG longer than this (revolutions)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the plan and the result as JSON."),
+) -> None:
+    """JOG the motor; the drive stops by itself if this program goes quiet. Ctrl-C stops at once."""
+    if (seconds is None) == (not interactive):
+        raise UsageError("give exactly one of --time SECONDS or --interactive")
+    if interactive and not sys.stdin.isatty():
+        raise UsageError("--interactive needs a terminal")
+    with drive(ctx) as d:
+        jogger = Jogger(d)
+        plan = jogger.plan(speed, seconds, max_travel)
+        info(plan.describe() + ("" if not interactive else f"  [{KEYS}]"))
+        peak = 0.0
+
+        def show(t: float, rpm: float | None) -> None:
+            nonlocal peak
+            if rpm is not None:
+                peak = max(peak, abs(rpm))
+            if Verbosity.level >= 0 and err.is_terminal:
+                err.print(f"\r t={t:5.1f} s  speed={rpm if rpm is not None else float('nan'):8.1f} rpm ", end="",
+                          markup=False)
+
+        try:
+            if interactive:
+                with _raw_keys() as key:
+                    def command() -> int | None:
+                        k = key()
+                        if k == "quit":
+                            return None
+                        return {"fwd": 1, "rev": -1, "stop": 0}.get(k or "", jogger.direction)
+                    jogger.run(plan, show, command)
+            else:
+                jogger.run(plan, show)
+        except KeyboardInterrupt:
+            err.print("\nservotool: JOG stopped by Ctrl-C", markup=False)
+            raise typer.Exit(130) from None
+        if err.is_terminal:
+            err.print("")
+        final = jogger.speed()
+    if as_json:
+        emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds, "peak_speed_rpm": round(peak, 1),
+                   "final_speed_rpm": final})
+    else:
+        info(f"JOG done: peak {peak:.1f} rpm, now {final if final is not None else '?'} rpm")
