@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 import typer
@@ -70,3 +71,9 @@ def run() -> None:
     except KeyboardInterrupt:
         err.print("servotool: interrupted", markup=False)
         sys.exit(130)
+    except Exception as exc:  # a bug: still one line for the user, the traceback on request
+        if os.environ.get("SERVOTOOL_DEBUG"):
+            raise
+        err.print(f"servotool: internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the traceback)",
+                  markup=False)
+        sys.exit(1)

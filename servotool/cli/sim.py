@@ -5,14 +5,14 @@ from __future__ import annotations
 import typer
 
 from servotool.cli.common import state
-from servotool.cli.render import Verbosity, info, out, trace_frame
+from servotool.cli.render import Verbosity, emit_json, info, out, table, trace_frame
 from servotool.connection import PARITIES, SIM_DEFAULT_PROFILE, ConnectOptions, merge
 from servotool.errors import UsageError
 from servotool.profile import load_profile
-from servotool.sim.device import SimulatedDrive
+from servotool.sim.device import SIM_SETTINGS, SimulatedDrive
 from servotool.sim.registers import state_path
 
-app = typer.Typer(no_args_is_help=True, help="The simulated drive: serve it, reset it.")
+app = typer.Typer(no_args_is_help=True, help="The simulated drive: serve it, configure its machine, reset it.")
 
 
 def _profile(ctx: typer.Context, profile: str | None):
@@ -81,3 +81,57 @@ def reset(
     drive.power_cycle()
     out.print(f"simulated {p.model} unit {u}: power-cycled"
               + (f"; now in effect: {', '.join(pending)}" if pending else ""), markup=False)
+
+
+def _target(ctx: typer.Context, profile: str | None, unit: int | None) -> SimulatedDrive:
+    opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
+    p = _profile(ctx, opts.profile)
+    return SimulatedDrive(p, opts.unit or p.serial.unit)
+
+
+@app.command("config")
+def config(
+    ctx: typer.Context,
+    profile: str = typer.Option(None, "--profile", "-P", help="Profile of the simulated drive."),
+    unit: int = typer.Option(None, "--unit", "-u", help="Unit id (default: the profile's)."),
+    load_ratio: float = typer.Option(None, "--load-ratio", help=SIM_SETTINGS["load_ratio"][4]),
+    friction: float = typer.Option(None, "--friction", help=SIM_SETTINGS["friction"][4]),
+    viscous: float = typer.Option(None, "--viscous", help=SIM_SETTINGS["viscous"][4]),
+    load_torque: float = typer.Option(None, "--load-torque", help=SIM_SETTINGS["load_torque"][4]),
+    noise: float = typer.Option(None, "--noise", help=SIM_SETTINGS["noise"][4]),
+    seed: int = typer.Option(None, "--seed", help=SIM_SETTINGS["seed"][4]),
+    line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
+) -> None:
+    """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
+    drive = _target(ctx, profile, unit)
+    drive.configure(load_ratio=load_ratio, friction=friction, viscous=viscous, load_torque=load_torque, noise=noise,
+                    seed=seed, line_baud=line_baud)
+    _print_settings(drive)
+
+
+@app.command("show")
+def show(
+    ctx: typer.Context,
+    profile: str = typer.Option(None, "--profile", "-P", help="Profile of the simulated drive."),
+    unit: int = typer.Option(None, "--unit", "-u", help="Unit id (default: the profile's)."),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
+) -> None:
+    """The simulated machine's settings and the drive's state file."""
+    drive = _target(ctx, profile, unit)
+    if as_json:
+        emit_json({"profile": drive.profile.id, "unit": drive.unit, "state_file": str(drive.bank.path),
+                   "settings": drive.settings, "pending_power_cycle": drive.bank.pending_power_cycle(),
+                   "eeprom_writes": drive.bank.eeprom_writes})
+        return
+    _print_settings(drive)
+
+
+def _print_settings(drive: SimulatedDrive) -> None:
+    t = table("Setting", "Value", "Meaning", title=f"simulated {drive.profile.model} unit {drive.unit} "
+              f"({drive.bank.path})")
+    for name, value in drive.settings.items():
+        t.add_row(name, f"{value:g}", SIM_SETTINGS[name][4])
+    out.print(t)
+    pending = drive.bank.pending_power_cycle()
+    if pending:
+        out.print(f"waiting for a power cycle: {', '.join(pending)}", markup=False)

@@ -10,6 +10,18 @@ from servotool.sim.registers import ILLEGAL_VALUE, RegisterBank, SimRefusal
 
 FnHandler = Callable[["SimulatedDrive", Entry, int], None]
 
+# The simulated machine's true properties (never readable over Modbus), persisted with the drive's state.
+SIM_SETTINGS: dict[str, tuple[type, float | int, float, float, str]] = {
+    # name: (type, default, min, max, help)
+    "load_ratio": (float, 2.0, 0.0, 200.0, "true load inertia / motor inertia"),
+    "friction": (float, 0.02, 0.0, 1.0, "Coulomb friction, fraction of rated torque"),
+    "viscous": (float, 0.0005, 0.0, 1.0, "viscous friction, fraction of rated torque per rad/s"),
+    "load_torque": (float, 0.0, -2.0, 2.0, "constant load (gravity) torque, fraction of rated torque"),
+    "noise": (float, 0.002, 0.0, 0.2, "relative measurement noise on speed and torque readings"),
+    "seed": (int, 1, 0, 2**31 - 1, "random seed of the measurement noise"),
+    "line_baud": (int, 0, 0, 10_000_000, "emulate an RS485 line at this baud (delay answers by wire time); 0 = off"),
+}
+
 
 class SimulatedDrive:
     """A drive generated from a profile: registers + Fn functions (+ the plant, when attached)."""
@@ -26,8 +38,20 @@ class SimulatedDrive:
             "soft_reset": _soft_reset,
             "eeprom_save": _eeprom_save,
         }
+        self.settings = sim_settings(self.bank.extra.get("settings"))
         self.on_read: list[Callable[[SimulatedDrive], None]] = []
         self.on_param_change: list[Callable[[SimulatedDrive, Entry, int], None]] = []
+
+    @property
+    def line_baud(self) -> int:
+        return int(self.settings["line_baud"])
+
+    def configure(self, **changes: float | int) -> None:
+        """Change and persist simulated-machine settings (validated)."""
+        merged = {**self.settings, **{k: v for k, v in changes.items() if v is not None}}
+        self.settings = sim_settings(merged, strict=True)
+        self.bank.extra["settings"] = self.settings
+        self.bank.save()
 
     def role_of(self, entry: Entry) -> str | None:
         for role, code in self.profile.roles.items():
@@ -100,3 +124,24 @@ def _soft_reset(drive: SimulatedDrive, entry: Entry, raw: int) -> None:
 def _eeprom_save(drive: SimulatedDrive, entry: Entry, raw: int) -> None:
     if raw == entry.trigger:
         drive.bank.save_eeprom()
+
+
+def sim_settings(raw: object, *, strict: bool = False) -> dict[str, float | int]:
+    """Settings with defaults filled in; strict=True raises UsageError for bad values instead of ignoring them."""
+    from servotool.errors import UsageError
+
+    given = raw if isinstance(raw, dict) else {}
+    out: dict[str, float | int] = {}
+    for name, (kind, default, lo, hi, _help) in SIM_SETTINGS.items():
+        value = given.get(name, default)
+        try:
+            value = kind(value)
+            ok = lo <= value <= hi
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            if strict:
+                raise UsageError(f"sim setting {name}={given.get(name)!r} is outside {lo}..{hi}")
+            value = default
+        out[name] = value
+    return out

@@ -29,6 +29,17 @@ READ_CODES = (3, 4)
 WRITE_CODES = (6, 16)
 
 
+def wire_time(fc: int, count: int, baud: int) -> float:
+    """Seconds a request and its response occupy an RS485 line (11 bits/char, 3.5-char gaps)."""
+    if fc in READ_CODES:
+        chars = 8 + 5 + 2 * count
+    elif fc == 16:
+        chars = 9 + 2 * count + 8
+    else:
+        chars = 16
+    return (chars + 7) * 11.0 / baud
+
+
 def _sim_device(drive: SimulatedDrive, lock: threading.Lock) -> SimDevice:
     """A pymodbus SimDevice whose every access goes through the simulated drive."""
     blocks: list[SimData] = []
@@ -45,7 +56,9 @@ def _sim_device(drive: SimulatedDrive, lock: threading.Lock) -> SimDevice:
                 elif fc in READ_CODES:
                     regs[address - start: address - start + count] = drive.read(address, count)
                 # pymodbus also reads the block while serving a write; nothing to refresh then.
-                return None
+            if drive.line_baud and (values is not None or fc in READ_CODES):
+                await asyncio.sleep(wire_time(fc, count, drive.line_baud))
+            return None
         except SimRefusal as exc:
             return ExcCodes(exc.code)
         except Exception:  # a simulator bug must answer like a faulty slave, not kill the server
