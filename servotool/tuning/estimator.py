@@ -1,0 +1,370 @@
+"""Host-side inertia identification from logged speed and torque (integral least squares).
+
+Model (SI units, omega in rad/s, T in N*m):
+
+    J * domega/dt = T - Tc * sign(omega) - B * omega - Tg
+
+Tc is Coulomb friction, B viscous friction and Tg a constant load torque (gravity; positive Tg opposes positive
+speed). Differentiating sparsely sampled, jittery speed is hopeless, so the equation is integrated over windows
+[t_a, t_b] of consecutive samples instead:
+
+    J * (omega_b - omega_a) + Tc * int(sign omega) + B * int(omega) + Tg * (t_b - t_a) = int(T)
+
+with trapezoidal integrals over the actual timestamps. Windows never contain a sample inside the zero-speed band,
+so sign(omega) is constant within a window (stiction and the noisy sign near standstill stay out of the fit).
+The windows are disjoint, so only neighbours sharing an end sample have correlated errors; the covariance accounts
+for that correlation (MA(1)), which keeps the reported uncertainty honest (overlapping "all pairs" windows would
+report a smaller, dishonest one).
+
+Tc and Tg are only separable when the log has motion in both directions: in one direction both act as the same
+constant torque.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+RPM_TO_RAD_S = math.pi / 30.0
+KGCM2_TO_KGM2 = 1e-4
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    """Acceptance thresholds and fit options; the defaults suit a 20-40 samples/s Modbus log."""
+
+    min_samples: int = 20
+    """Fewer samples than this are refused outright."""
+    min_windows: int = 12
+    """Fewer usable windows (outside the zero-speed band) than this are refused."""
+    window_intervals: int | None = None
+    """Sampling intervals per window. None: the smallest of 1..max_window_intervals that reaches min_excitation
+    (the errors-in-variables bias on J shrinks with the square of the window length, but longer windows are fewer
+    and lose the intervals left over at the end of each run)."""
+    max_window_intervals: int = 6
+    max_rel_uncertainty: float = 0.02
+    """Refuse when the 1-sigma uncertainty of J_total exceeds this fraction of J_total. Equivalently the ratio's
+    standard uncertainty may be at most 0.02 * (1 + ratio): +-0.02 at ratio 0, +-0.08 at ratio 3. Gain tuning
+    tolerates ~10 % inertia error, so 2 % (1 sigma) leaves margin."""
+    min_excitation: float = 10.0
+    """Refuse when the speed changes within windows (RMS) are less than this many times the speed noise of a
+    window (sqrt(2) * noise). The least-squares J is biased low by about 1/excitation^2 (1 % at 10)."""
+    max_rel_residual: float = 0.3
+    """Refuse when RMS(equation error) / RMS(integrated torque) exceeds this: the model does not fit (backlash,
+    compliance, a torque reading that is not the shaft torque)."""
+    saturation_fraction: float = 0.98
+    """A torque sample with |T| >= this * torque limit counts as saturated."""
+    max_saturated_samples: int = 0
+    """Refuse when more samples than this are saturated (a saturated drive no longer follows the test motion)."""
+    kink_sigma: float = 5.0
+    """A torque or speed sample further than this many noise sigmas off the line through its neighbours marks a
+    torque step (start/end of an acceleration: a kink in speed); the intervals on both sides are left out. The
+    trapezoid rule cannot integrate a step that falls somewhere between two slow samples, and its error is
+    correlated with the window's speed change, which biases J low by about 2 % at 25-40 samples/s. Speed shows
+    the kink even when the torque step is buried in torque noise."""
+    torque_noise_floor_pct: float = 0.05
+    """Floor of the estimated torque noise (% of rated) used for the kink test, so clean data is not all kinks."""
+    zero_band_rpm: float | None = None
+    """Samples with |speed| below this are left out. None: max(2 % of the peak speed, 3 * speed noise)."""
+    speed_noise_rpm: float | None = None
+    """Speed measurement noise (1 sigma). None: estimated from the log (floored at 0.1 rpm)."""
+    fit_viscous: bool = True
+    """Fit B; with False, B is held at 0."""
+    fit_load_torque: bool = True
+    """Fit Tg; with False, Tg is held at 0 (horizontal axis) and one-direction logs become acceptable."""
+    max_condition: float = 1e8
+    """Refuse when the column-scaled regression matrix is worse conditioned than this."""
+
+
+@dataclass(frozen=True)
+class InertiaEstimate:
+    """Result of `estimate_inertia`. Values are NaN where the fit did not get far enough to compute them."""
+
+    ok: bool
+    reason: str
+    """Empty when ok; otherwise why the result must not be used, in words for the operator."""
+    j_total_kgm2: float
+    j_std_kgm2: float
+    load_ratio: float
+    """J_load / J_motor = J_total / J_motor - 1."""
+    ratio_std: float
+    """Standard uncertainty (1 sigma, from the least-squares covariance) of load_ratio."""
+    coulomb_nm: float
+    coulomb_std_nm: float
+    viscous_nm_per_rad_s: float
+    viscous_std_nm_per_rad_s: float
+    load_torque_nm: float
+    """Constant load torque (gravity); positive opposes positive speed."""
+    load_torque_std_nm: float
+    residual_rms_nms: float
+    """RMS equation error per window, in N*m*s."""
+    residual_rel: float
+    """residual_rms_nms / RMS of the windows' torque integrals."""
+    excitation: float
+    """RMS speed change per window / (sqrt(2) * speed noise); see EstimatorSettings.min_excitation."""
+    speed_noise_rpm: float
+    n_samples: int
+    n_windows: int
+    n_saturated: int
+    window_intervals: int
+    """Sampling intervals per window actually used (0 if no windows were formed)."""
+    n_kinks: int
+    """Samples recognised as torque steps (kinks) and left out with their neighbouring intervals."""
+    condition: float
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+
+def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list[float],
+                     torque_pct: np.ndarray | list[float], *, rated_torque_nm: float, rotor_inertia_kgcm2: float,
+                     torque_limit_pct: float | None = None,
+                     settings: EstimatorSettings | None = None) -> InertiaEstimate:
+    """Fit J, Coulomb, viscous and load torque to a logged motion; refuse (ok=False) rather than guess.
+
+    t_s: sample times in s (strictly increasing, any spacing); speed_rpm: motor speed; torque_pct: torque in % of
+    rated torque (same sign convention as speed). torque_limit_pct: the drive's active torque limit, used to detect
+    saturation (None: not checked). Raises ValueError only for malformed input (shapes, non-finite values,
+    non-increasing time, non-positive motor data).
+    """
+    cfg = settings or EstimatorSettings()
+    t = np.asarray(t_s, dtype=float)
+    rpm = np.asarray(speed_rpm, dtype=float)
+    pct = np.asarray(torque_pct, dtype=float)
+    _validate(t, rpm, pct, rated_torque_nm, rotor_inertia_kgcm2, torque_limit_pct)
+    jm = rotor_inertia_kgcm2 * KGCM2_TO_KGM2
+    n = int(t.size)
+    r = _Partial(n_samples=n)
+
+    if n < cfg.min_samples:
+        return r.refuse(f"too few samples ({n} < {cfg.min_samples}); log a longer motion or sample faster")
+
+    if torque_limit_pct is not None:
+        r.n_saturated = int(np.count_nonzero(np.abs(pct) >= cfg.saturation_fraction * torque_limit_pct))
+        if r.n_saturated > cfg.max_saturated_samples:
+            return r.refuse(f"torque saturated: {r.n_saturated} samples at the {torque_limit_pct:g} % torque limit; "
+                            "use gentler acceleration or a lower test speed")
+
+    noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else _speed_noise_rpm(t, rpm)
+    r.speed_noise_rpm = noise_rpm
+    peak = float(np.max(np.abs(rpm)))
+    band = cfg.zero_band_rpm if cfg.zero_band_rpm is not None else max(0.02 * peak, 3.0 * noise_rpm)
+
+    w = rpm * RPM_TO_RAD_S
+    torque = pct / 100.0 * rated_torque_nm
+    dev, ref = _line_deviation(t, pct)
+    torque_noise = max(float(1.4826 * np.median(np.abs(dev) / ref)), cfg.torque_noise_floor_pct) if dev.size else 0.0
+    dev_w, ref_w = _line_deviation(t, rpm)
+    kink = np.zeros(pct.size, dtype=bool)
+    kink[1:-1] = (np.abs(dev) > cfg.kink_sigma * torque_noise * ref) | (
+        np.abs(dev_w) > cfg.kink_sigma * noise_rpm * ref_w)
+    r.n_kinks = int(np.count_nonzero(kink))
+
+    cum_t = _cumtrapz(t, torque)
+    cum_w = _cumtrapz(t, w)
+    noise_w = noise_rpm * RPM_TO_RAD_S
+    # Longer windows raise the speed change per window against the (fixed) noise of its two end samples.
+    ks = [cfg.window_intervals] if cfg.window_intervals is not None else list(range(1, cfg.max_window_intervals + 1))
+    best = (np.zeros(0, dtype=int), np.zeros(0, dtype=int))
+    for k in ks:
+        starts, ends = _windows(rpm, band, kink, max(1, k))
+        r.n_windows = int(starts.size)
+        if r.n_windows < cfg.min_windows:
+            break
+        dw = w[ends] - w[starts]
+        excitation = float(np.sqrt(np.mean(dw**2)) / (math.sqrt(2.0) * noise_w))
+        if k == ks[0] or excitation > r.excitation:
+            r.excitation, r.window_intervals, best = excitation, k, (starts, ends)
+        if excitation >= cfg.min_excitation:
+            break
+    if r.window_intervals == 0:
+        return r.refuse(f"too few usable windows ({r.n_windows} < {cfg.min_windows}) outside the zero-speed band "
+                        f"of {band:.3g} rpm and away from torque steps; log a longer motion at higher speed")
+    starts, ends = best
+    r.n_windows = int(starts.size)
+    if r.excitation < cfg.min_excitation:
+        return r.refuse(f"too little acceleration: speed changes are only {r.excitation:.1f}x the speed noise "
+                        f"(need {cfg.min_excitation:g}x); use faster accelerations or a higher test speed")
+    dw = w[ends] - w[starts]
+    dt = t[ends] - t[starts]
+    sgn = np.sign(w[starts])
+    y = cum_t[ends] - cum_t[starts]
+
+    both = bool(np.count_nonzero(sgn > 0) >= 3 and np.count_nonzero(sgn < 0) >= 3)
+    if cfg.fit_load_torque and not both:
+        return r.refuse("motion in one direction only: Coulomb friction and load (gravity) torque cannot be "
+                        "separated; run the test with --direction both")
+
+    names = ["J", "Tc"]
+    cols = [dw, sgn * dt]
+    if cfg.fit_viscous:
+        names.append("B")
+        cols.append(cum_w[ends] - cum_w[starts])
+    if cfg.fit_load_torque:
+        names.append("Tg")
+        cols.append(dt)
+    x = np.column_stack(cols)
+    p = x.shape[1]
+    if r.n_windows <= p + 2:
+        return r.refuse(f"too few usable windows ({r.n_windows}) for {p} unknowns")
+
+    scale = np.linalg.norm(x, axis=0)
+    scale[scale == 0] = 1.0
+    xs = x / scale
+    sv = np.linalg.svd(xs, compute_uv=False)
+    r.condition = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+    if r.condition > cfg.max_condition:
+        return r.refuse(f"regression ill-conditioned (condition {r.condition:.3g}): the motion does not separate "
+                        "inertia from friction and load torque; vary speed and acceleration in both directions")
+
+    theta_s, *_ = np.linalg.lstsq(xs, y, rcond=None)
+    theta = theta_s / scale
+    resid = y - x @ theta
+    dof = r.n_windows - p
+    s2 = float(resid @ resid) / dof
+    # Windows that share an end sample have correlated errors (the shared torque sample enters both integrals,
+    # the shared speed sample both speed changes with opposite signs): an MA(1) error, covariance s2*(I + rho*A).
+    adj = np.flatnonzero(ends[:-1] == starts[1:])
+    rho = float(np.sum(resid[adj] * resid[adj + 1]) / (s2 * dof)) if adj.size else 0.0
+    rho = min(max(rho, -0.5), 0.5)
+    xtx_inv = np.linalg.inv(xs.T @ xs)
+    meat = xs.T @ xs + rho * (xs[adj].T @ xs[adj + 1] + xs[adj + 1].T @ xs[adj])
+    cov = s2 * (xtx_inv @ meat @ xtx_inv) / np.outer(scale, scale)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    est = dict(zip(names, theta, strict=True))
+    err = dict(zip(names, std, strict=True))
+
+    j = float(est["J"])
+    r.j, r.j_std = j, float(err["J"])
+    r.ratio, r.ratio_std = j / jm - 1.0, r.j_std / jm
+    r.tc, r.tc_std = float(est["Tc"]), float(err["Tc"])
+    r.b, r.b_std = float(est.get("B", 0.0)), float(err.get("B", 0.0))
+    r.tg, r.tg_std = float(est.get("Tg", 0.0)), float(err.get("Tg", 0.0))
+    r.res_rms = float(np.sqrt(np.mean(resid**2)))
+    y_rms = float(np.sqrt(np.mean(y**2)))
+    r.res_rel = r.res_rms / y_rms if y_rms > 0 else math.inf
+    if not both:
+        r.notes.append("one direction only: load torque held at 0, so 'coulomb' is Coulomb + load torque")
+    if r.tc < -3 * r.tc_std:
+        r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
+
+    if j <= 0:
+        return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")
+    if r.res_rel > cfg.max_rel_residual:
+        return r.refuse(f"model does not fit the data (relative residual {r.res_rel:.2f} > {cfg.max_rel_residual:g}): "
+                        "backlash, compliance or a torque reading that is not shaft torque")
+    rel = r.j_std / j
+    if rel > cfg.max_rel_uncertainty:
+        return r.refuse(f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %); "
+                        "repeat the motion more times or use stronger accelerations")
+    return r.result(ok=True, reason="")
+
+
+# ----- helpers ---------------------------------------------------------------------------------------------------
+@dataclass
+class _Partial:
+    """Accumulates result fields so refusals at any stage report what is known so far."""
+
+    n_samples: int
+    n_windows: int = 0
+    n_saturated: int = 0
+    n_kinks: int = 0
+    window_intervals: int = 0
+    speed_noise_rpm: float = math.nan
+    excitation: float = math.nan
+    condition: float = math.nan
+    j: float = math.nan
+    j_std: float = math.nan
+    ratio: float = math.nan
+    ratio_std: float = math.nan
+    tc: float = math.nan
+    tc_std: float = math.nan
+    b: float = math.nan
+    b_std: float = math.nan
+    tg: float = math.nan
+    tg_std: float = math.nan
+    res_rms: float = math.nan
+    res_rel: float = math.nan
+    notes: list[str] = field(default_factory=list)
+
+    def refuse(self, reason: str) -> InertiaEstimate:
+        return self.result(ok=False, reason=reason)
+
+    def result(self, *, ok: bool, reason: str) -> InertiaEstimate:
+        return InertiaEstimate(
+            ok=ok, reason=reason, j_total_kgm2=self.j, j_std_kgm2=self.j_std, load_ratio=self.ratio,
+            ratio_std=self.ratio_std, coulomb_nm=self.tc, coulomb_std_nm=self.tc_std, viscous_nm_per_rad_s=self.b,
+            viscous_std_nm_per_rad_s=self.b_std, load_torque_nm=self.tg, load_torque_std_nm=self.tg_std,
+            residual_rms_nms=self.res_rms, residual_rel=self.res_rel, excitation=self.excitation,
+            speed_noise_rpm=self.speed_noise_rpm, n_samples=self.n_samples, n_windows=self.n_windows,
+            n_saturated=self.n_saturated, n_kinks=self.n_kinks, window_intervals=self.window_intervals,
+            condition=self.condition, notes=tuple(self.notes))
+
+
+def _validate(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated: float, rotor: float,
+              limit: float | None) -> None:
+    if t.ndim != 1 or t.shape != rpm.shape or t.shape != pct.shape:
+        raise ValueError(f"t, speed and torque must be 1-D arrays of equal length (got {t.shape}, {rpm.shape}, "
+                         f"{pct.shape})")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(rpm)) and np.all(np.isfinite(pct))):
+        raise ValueError("t, speed and torque must be finite (drop samples with failed reads instead of NaN)")
+    if t.size > 1 and np.any(np.diff(t) <= 0):
+        raise ValueError("sample times must be strictly increasing")
+    if not (math.isfinite(rated) and rated > 0):
+        raise ValueError(f"rated torque must be a positive number of N*m, got {rated!r}")
+    if not (math.isfinite(rotor) and rotor > 0):
+        raise ValueError(f"rotor inertia must be a positive number of kg*cm^2, got {rotor!r}")
+    if limit is not None and not (math.isfinite(limit) and limit > 0):
+        raise ValueError(f"torque limit must be a positive % of rated torque, got {limit!r}")
+
+
+def _line_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far each interior sample sits off the line through its two neighbours, and that deviation's standard
+    deviation per unit of white measurement noise (sqrt(1 + a^2 + b^2), a + b = 1)."""
+    if v.size < 3:
+        return np.zeros(0), np.ones(0)
+    t0, t1, t2 = t[:-2], t[1:-1], t[2:]
+    a = (t2 - t1) / (t2 - t0)
+    b = 1.0 - a
+    return v[1:-1] - (a * v[:-2] + b * v[2:]), np.sqrt(1.0 + a**2 + b**2)
+
+
+def _speed_noise_rpm(t: np.ndarray, rpm: np.ndarray) -> float:
+    """Robust speed-noise estimate from the line deviations (floored at 0.1 rpm).
+
+    Smooth motion (constant acceleration) gives no deviation; the median ignores the few corners of the profile.
+    """
+    dev, ref = _line_deviation(t, rpm)
+    if dev.size == 0:
+        return 0.1
+    return max(float(1.4826 * np.median(np.abs(dev) / ref)), 0.1)
+
+
+def _windows(rpm: np.ndarray, band: float, kink: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Disjoint windows of k sampling intervals whose samples all lie outside the zero band with one sign.
+
+    A torque kink sample gets sign 0 too, which cuts the intervals on both sides of it out of every window.
+    """
+    sign = np.where(rpm >= band, 1, np.where(rpm <= -band, -1, 0))
+    sign[kink] = 0
+    starts: list[int] = []
+    i, n = 0, rpm.size
+    while i < n - 1:
+        if sign[i] == 0:
+            i += 1
+            continue
+        j = i
+        while j + 1 < n and sign[j + 1] == sign[i]:
+            j += 1
+        # samples i..j form one run of constant sign
+        for s in range(i, j - k + 1, k):
+            starts.append(s)
+        i = j + 1
+    st = np.asarray(starts, dtype=int)
+    return st, st + k
+
+
+def _cumtrapz(t: np.ndarray, v: np.ndarray) -> np.ndarray:
+    out = np.zeros_like(v)
+    out[1:] = np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))
+    return out
