@@ -11,7 +11,9 @@ speed). Differentiating sparsely sampled, jittery speed is hopeless, so the equa
     J * (omega_b - omega_a) + Tc * int(sign omega) + B * int(omega) + Tg * (t_b - t_a) = int(T)
 
 with trapezoidal integrals over the actual timestamps. Windows never contain a sample inside the zero-speed band,
-so sign(omega) is constant within a window (stiction and the noisy sign near standstill stay out of the fit).
+so sign(omega) is constant within a window (stiction and the noisy sign near standstill stay out of the fit), and
+no window touches a torque step (a kink in speed or torque), which the trapezoid rule cannot integrate between
+slow samples.
 The windows are disjoint, so only neighbours sharing an end sample have correlated errors; the covariance accounts
 for that correlation (MA(1)), which keeps the reported uncertainty honest (overlapping "all pairs" windows would
 report a smaller, dishonest one).
