@@ -152,10 +152,10 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
     sim = None
     settings = resolved.settings
     if resolved.simulated:
-        from servotool.sim.device import SimulatedDrive
+        from servotool.sim.firmware import build_drive
         from servotool.sim.server import EmbeddedSim
 
-        sim = EmbeddedSim([SimulatedDrive(resolved.profile, u) for u in units])
+        sim = EmbeddedSim([build_drive(resolved.profile, u) for u in units])
         settings = replace(settings, port=sim.port)
         (notice or _stderr)(sim_notice(resolved, units))
     try:

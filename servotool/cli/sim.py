@@ -32,6 +32,7 @@ def serve(
     stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's)."),
 ) -> None:
     """Serve simulated drives in the foreground (Ctrl-C stops) for any Modbus RTU master."""
+    from servotool.sim.firmware import build_drive
     from servotool.sim.server import LineSettings, serve_forever
 
     p = _profile(ctx, profile)
@@ -44,7 +45,7 @@ def serve(
         raise UsageError(f"bad parity '{parity}': use N, E or O")
     line = LineSettings(baud=baud or p.serial.baud, parity=par, stopbits=stopbits or p.serial.stopbits,
                         bytesize=p.serial.bytesize)
-    drives = [SimulatedDrive(p, u) for u in ids]
+    drives = [build_drive(p, u) for u in ids]
 
     def ready(where: str) -> None:
         info(f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "

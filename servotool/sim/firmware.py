@@ -1,0 +1,312 @@
+"""The simulated drive's firmware: connects register writes/reads to the plant.
+
+It runs only when a request arrives: the plant is integrated up to "now", with scheduled events (watchdog expiry,
+identification phases) applied at their exact simulated times on the way. Roles, not vendor codes, say which
+entry does what, so any profile with the roles gets the behaviour.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from servotool.codec import raw_to_eng
+from servotool.profile import Entry, Motor, Profile
+from servotool.sim.device import SimulatedDrive
+from servotool.sim.plant import Clock, DriveGains, MotorData, Plant, PlantSettings, RealClock
+
+DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
+HOST_MOTION_ROLES = ("jog", "speed_reference", "servo_on", "keepalive")
+STATUS_BITS = {"servo_on": 0, "fault": 1, "warning": 2, "moving": 3, "jog": 4, "identifying": 5}
+
+
+@dataclass
+class Identification:
+    """Drive-side offline inertia identification in progress (a torque-driven back-and-forth move)."""
+
+    torque_pct: float
+    max_rev: float
+    top_rpm: float
+    start_pos: float
+    phase: int = 0          # 0 accel fwd, 1 decel fwd, 2 accel rev, 3 decel rev
+    phase_t0: float = 0.0
+    phase_w0: float = 0.0
+    estimates: list[float] | None = None
+
+
+class Firmware:
+    """Drive behaviour of one SimulatedDrive: JOG, speed command, servo on, watchdog, alarms, identification."""
+
+    def __init__(self, drive: SimulatedDrive, clock: Clock | None = None) -> None:
+        self.drive = drive
+        self.profile: Profile = drive.profile
+        self.clock = clock or RealClock()
+        motor = self.profile.motor or DEFAULT_MOTOR
+        self.motor = MotorData(rated_torque_nm=motor.rated_torque_nm, rated_speed_rpm=motor.rated_speed_rpm,
+                               max_speed_rpm=motor.max_speed_rpm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
+                               counts_per_rev=motor.counts_per_rev)
+        self.plant = Plant(self.motor, self._plant_settings(), self._gains(), start_time=self.clock.now())
+        self.mode = "off"        # off | jog | speed | servo | ident
+        self.jog_dir = 0
+        self.last_host = self.clock.now()
+        self.ident: Identification | None = None
+        self.alarm_history: list[int] = list(drive.bank.extra.get("alarm_history", []))
+        drive.on_read.append(lambda _d: self.update())
+        drive.on_param_change.append(self._param_changed)
+        drive.handlers.update({
+            "jog": self._fn_jog, "speed_reference": self._fn_speed, "servo_on": self._fn_servo,
+            "keepalive": self._fn_keepalive, "alarm_reset": self._fn_alarm_reset, "inertia_id": self._fn_inertia_id,
+        })
+        self.update()
+
+    # ----- settings ------------------------------------------------------------------------------------------
+    def _plant_settings(self) -> PlantSettings:
+        s = self.drive.settings
+        rated = self.motor.rated_torque_nm
+        return PlantSettings(
+            load_ratio=float(s["load_ratio"]), coulomb_nm=float(s["friction"]) * rated,
+            viscous_nm_per_rad_s=float(s["viscous"]) * rated, load_torque_nm=float(s["load_torque"]) * rated,
+            noise=float(s["noise"]), seed=int(s["seed"]))
+
+    def _eng(self, role: str, default: float) -> float:
+        entry = self.profile.role(role)
+        if entry is None:
+            return default
+        return float(raw_to_eng(entry, self.drive.bank.effective_value(entry.code)))
+
+    def _gains(self) -> DriveGains:
+        ratio_entry = self.profile.role("inertia_ratio")
+        ratio = self.profile.load_ratio_from_param(self._eng("inertia_ratio", 0.0)) if ratio_entry else 0.0
+        integral = self.profile.role("speed_loop_integral")
+        return DriveGains(
+            inertia_ratio_configured=max(0.0, ratio),
+            speed_gain_hz=self._eng("speed_loop_gain", 40.0),
+            speed_integral_ms=self._eng("speed_loop_integral", 20.0) if integral else 20.0,
+            position_gain_per_s=self._eng("position_loop_gain", 40.0),
+            torque_filter_ms=self._eng("torque_filter", 0.5),
+            torque_limit_pct=min(self._eng("torque_limit_fwd", 300.0), self._eng("torque_limit_rev", 300.0)),
+            max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
+            jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
+        )
+
+    def _param_changed(self, _drive: SimulatedDrive, _entry: Entry, _raw: int) -> None:
+        self.update()
+        self.plant.set_gains(self._gains())
+
+    def reconfigure(self) -> None:
+        """Apply changed simulated-machine settings (sim config)."""
+        self.plant.set_settings(self._plant_settings())
+
+    # ----- time ----------------------------------------------------------------------------------------------
+    def _timeout_s(self) -> float:
+        return self._eng("comm_timeout", 500.0) / 1000.0
+
+    def update(self) -> None:
+        """Integrate the plant up to now, applying the watchdog and identification on the way; refresh monitors."""
+        now = self.clock.now()
+        if self.mode in ("jog", "speed", "servo") and self.profile.role("keepalive") is not None:
+            expiry = self.last_host + self._timeout_s()
+            if expiry < now:
+                self.plant.advance_to(expiry)
+                self._trip("comm_timeout")
+        if self.ident is not None:
+            self._advance_identification(now)
+        self.plant.advance_to(now)
+        if self.plant.alarm is not None and self.mode != "off":
+            self.mode = "off"
+            self.ident = None
+            self._record_alarm()
+        self._refresh_monitors()
+
+    def _trip(self, kind: str) -> None:
+        self.plant.raise_alarm(kind)
+        self.mode = "off"
+        self.ident = None
+        self._record_alarm()
+
+    def _alarm_code(self) -> int:
+        name = self.plant.alarm
+        if name is None:
+            return 0
+        alarm = self.profile.alarm_of_kind(name) or self.profile.alarm_of_kind("other")
+        return alarm.code if alarm is not None else 0xFF
+
+    def _record_alarm(self) -> None:
+        code = self._alarm_code()
+        if code and (not self.alarm_history or self.alarm_history[0] != code or not self._history_fresh):
+            self.alarm_history.insert(0, code)
+            del self.alarm_history[8:]
+            self.drive.bank.extra["alarm_history"] = self.alarm_history
+            self.drive.bank.save()
+        self._history_fresh = True
+
+    _history_fresh = False
+
+    # ----- functions (Fn writes) -----------------------------------------------------------------------------
+    def _host_alive(self) -> None:
+        self.last_host = self.clock.now()
+
+    def _motion_allowed(self) -> bool:
+        return self.plant.alarm is None
+
+    def _fn_keepalive(self, _d: SimulatedDrive, _e: Entry, _raw: int) -> None:
+        self.update()
+        self._host_alive()
+
+    def _fn_jog(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+        self.update()
+        self._host_alive()
+        direction = (raw > 0) - (raw < 0)
+        if direction == 0:
+            if self.mode == "jog":
+                self.plant.set_speed_command(0.0)
+                self.jog_dir = 0
+                self._stop_when_still = True
+            return
+        if not self._motion_allowed() or self.mode not in ("off", "jog"):
+            return
+        if self.mode == "off":
+            self.plant.set_mode("speed")
+        self.mode = "jog"
+        self.jog_dir = direction
+        self._stop_when_still = False
+        self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))
+
+    _stop_when_still = False
+
+    def _fn_speed(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+        self.update()
+        self._host_alive()
+        if self.mode in ("servo", "speed"):
+            self.mode = "speed"
+            self.plant.set_speed_command(float(raw))
+
+    def _fn_servo(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+        self.update()
+        self._host_alive()
+        if raw and self._motion_allowed() and self.mode == "off":
+            self.plant.set_mode("speed")
+            self.plant.set_speed_command(0.0)
+            self.mode = "servo"
+        elif not raw and self.mode in ("servo", "speed"):
+            self.plant.set_mode("off")
+            self.mode = "off"
+
+    def _fn_alarm_reset(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+        self.update()
+        if raw:
+            self.plant.clear_alarms()
+            self._history_fresh = False
+        self._refresh_monitors()
+
+    def _fn_inertia_id(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+        self.update()
+        if not raw:
+            if self.ident is not None:
+                self.ident = None
+                self.plant.set_mode("off")
+                self.mode = "off"
+            return
+        if not self._motion_allowed() or self.mode != "off":
+            return
+        torque = self._eng("inertia_id_torque", 50.0)
+        max_rev = self._eng("inertia_id_travel", 2.0)
+        top = min(600.0, self.motor.rated_speed_rpm / 3)
+        self.ident = Identification(torque, max_rev, top, self.plant.position_rev, phase_t0=self.clock.now(),
+                                    estimates=[])
+        self.plant.set_mode("torque")
+        self.plant.set_torque_command(torque)
+        self.mode = "ident"
+
+    # ----- identification ------------------------------------------------------------------------------------
+    def _advance_identification(self, now: float) -> None:
+        """Step in small slices so phase switches happen when the speed crosses its targets."""
+        ident = self.ident
+        assert ident is not None
+        t = self.plant.time
+        while ident is self.ident and t < now:
+            t = min(now, t + 0.002)
+            self.plant.advance_to(t)
+            w = self.plant.true_speed_rpm
+            travel = abs(self.plant.position_rev - ident.start_pos)
+            if travel > ident.max_rev or self.plant.alarm is not None:
+                self._trip("inertia_id_failed")
+                return
+            if ident.phase in (0, 2) and abs(w) >= ident.top_rpm:
+                self._phase_done(ident, t, w, next_torque=-ident.torque_pct if ident.phase == 0 else ident.torque_pct)
+            elif ident.phase in (1, 3) and (w <= 0 if ident.phase == 1 else w >= 0):
+                self._phase_done(ident, t, w, next_torque=-ident.torque_pct if ident.phase == 1 else 0.0)
+                if ident.phase == 4:
+                    self._finish_identification(ident)
+                    return
+
+    def _phase_done(self, ident: Identification, t: float, w: float, next_torque: float) -> None:
+        dt = t - ident.phase_t0
+        dw = abs(w - ident.phase_w0) * 2 * math.pi / 60
+        if dt > 0 and dw > 0:
+            torque_nm = ident.torque_pct / 100 * self.motor.rated_torque_nm
+            assert ident.estimates is not None
+            ident.estimates.append(torque_nm * dt / dw)
+        ident.phase += 1
+        ident.phase_t0 = t
+        ident.phase_w0 = w
+        self.plant.set_torque_command(next_torque)
+
+    def _finish_identification(self, ident: Identification) -> None:
+        """Accel and decel estimates average out Coulomb friction; the result goes into the inertia ratio."""
+        self.plant.set_mode("off")
+        self.mode = "off"
+        self.ident = None
+        est = ident.estimates or []
+        jm = self.motor.rotor_inertia_kgcm2 * 1e-4
+        if len(est) < 4:
+            self._trip("inertia_id_failed")
+            return
+        ratio = sum(est) / len(est) / jm - 1.0
+        entry = self.profile.role("inertia_ratio")
+        if entry is None:
+            return
+        raw = round(self.profile.param_from_load_ratio(max(0.0, ratio)) / entry.scale)
+        raw = max(entry.min, min(entry.max, raw))
+        self.drive.bank.apply_parameter(entry, raw)
+        self.plant.set_gains(self._gains())
+        self.drive.bank.save()
+
+    # ----- monitors ------------------------------------------------------------------------------------------
+    def _set(self, role: str, eng: float) -> None:
+        entry = self.profile.role(role)
+        if entry is None or entry.cls == "Pn" or entry.cls == "Fn":
+            return
+        self.drive.bank.set_live(entry.code, round(eng / entry.scale))
+
+    def _refresh_monitors(self) -> None:
+        p = self.plant
+        if self._stop_when_still and abs(p.true_speed_rpm) < 0.5 and self.mode == "jog":
+            p.set_mode("off")
+            self.mode = "off"
+            self._stop_when_still = False
+        self._set("speed_feedback", p.speed_rpm)
+        self._set("speed_command", p.speed_command_rpm)
+        self._set("torque_feedback", p.torque_pct)
+        self._set("position_feedback", p.position_counts)
+        self._set("following_error", p.following_error_counts)
+        self._set("load_rate", p.load_rate_pct)
+        self._set("current_rms", abs(p.torque_pct) / 100 * 2.8)
+        self._set("bus_voltage", 311.0)
+        self._set("alarm_code", self._alarm_code())
+        for n, code in enumerate(self.alarm_history[:8], start=1):
+            self._set(f"alarm_history_{n}", code)
+        status = self.profile.role("servo_status")
+        if status is not None:
+            bits = {"servo_on": p.servo_on, "fault": p.alarm is not None, "moving": abs(p.true_speed_rpm) > 1,
+                    "jog": self.mode == "jog", "identifying": self.mode == "ident"}
+            names = {name: bit for bit, name in status.bits.items()} if status.bits else STATUS_BITS
+            word = sum(1 << names[k] for k, on in bits.items() if on and k in names)
+            self.drive.bank.set_live(status.code, word)
+
+
+def build_drive(profile: Profile, unit: int, clock: Clock | None = None, *, persist: bool = True) -> SimulatedDrive:
+    """A simulated drive with its firmware and plant attached."""
+    drive = SimulatedDrive(profile, unit, persist=persist)
+    drive.firmware = Firmware(drive, clock)  # type: ignore[attr-defined]
+    return drive
