@@ -1,0 +1,105 @@
+"""JOG, dead-man, monitor and alarms over the real RTU path against `servotool sim serve`."""
+
+from __future__ import annotations
+
+import csv
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from servotool.connection import ConnectOptions, open_drives, resolve
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture
+def served(sim_dir):
+    """`servotool sim serve` on a free loopback port; yields its tcp:// address."""
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
+                            cwd=ROOT, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    line = proc.stderr.readline()
+    m = re.search(r"(tcp://127\.0\.0\.1:\d+)", line)
+    assert m, line
+    yield m.group(1)
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+def read(port: str, *codes: str) -> list[float]:
+    with open_drives(resolve(ConnectOptions(port=port, profile="dsx7e")), notice=lambda _m: None) as (d,):
+        return [r.eng for r in d.read(*codes)]
+
+
+def test_jog_reaches_the_commanded_speed_and_stops(cli, served):
+    r = cli("--port", served, "--profile", "dsx7e", "jog", "--speed", "600", "--time", "1.5", "--json")
+    assert r.code == 0, r.err
+    result = r.json()
+    assert result["peak_speed_rpm"] == pytest.approx(600, abs=25)
+    assert abs(result["final_speed_rpm"]) < 10
+    speed, alarm = read(served, "Un000", "Un100")
+    assert abs(speed) < 10 and alarm == 0
+
+
+def test_reverse_jog_and_refusals(cli, served):
+    base = ("--port", served, "--profile", "dsx7e")
+    r = cli(*base, "jog", "--speed", "-300", "--time", "0.8", "--json")
+    assert r.code == 0 and r.json()["peak_speed_rpm"] > 250
+    r = cli(*base, "jog", "--speed", "9000", "--time", "1")
+    assert r.code == 2 and "over the limit" in r.err
+    r = cli(*base, "jog", "--speed", "600", "--time", "10", "--max-travel", "5")
+    assert r.code == 2 and "--max-travel" in r.err
+    r = cli(*base, "jog", "--speed", "100")
+    assert r.code == 2 and "exactly one of --time" in r.err
+
+
+def test_killed_client_leaves_the_motor_stopped_with_a_comm_alarm(cli, served):
+    jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", served, "--profile", "dsx7e", "jog",
+                            "--speed", "800", "--time", "30"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and read(served, "Un000")[0] < 700:
+        time.sleep(0.1)
+    assert read(served, "Un000")[0] > 700
+    jog.send_signal(signal.SIGKILL)
+    jog.wait()
+    time.sleep(0.5 + 0.4)                      # Pn620 watchdog 500 ms + the stop itself
+    speed, alarm = read(served, "Un000", "Un100")
+    assert abs(speed) < 10
+    assert alarm == 0x25                       # E25 communication with master lost
+    r = cli("--port", served, "--profile", "dsx7e", "jog", "--speed", "100", "--time", "1")
+    assert r.code == 2 and "alarm E25" in r.err
+    r = cli("--port", served, "--profile", "dsx7e", "alarm", "clear")
+    assert r.code == 0 and "cleared E25" in r.out
+    r = cli("--port", served, "--profile", "dsx7e", "alarm", "history", "--json")
+    assert r.json()[0]["display"] == "E25"
+
+
+def test_monitor_csv_while_jogging(cli, served, tmp_path):
+    jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", served, "--profile", "dsx7e", "jog",
+                            "--speed", "500", "--time", "3"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL)
+    try:
+        out = tmp_path / "log.csv"
+        r = cli("--port", served, "--profile", "dsx7e", "monitor", "Un000", "Un002", "Un027", "--rate", "20",
+                "--duration", "2", "--csv", str(out))
+        assert r.code == 0, r.err
+        assert "samples/s achieved" in r.err
+    finally:
+        jog.wait(timeout=30)
+    rows = list(csv.reader(out.open()))
+    assert rows[0] == ["timestamp", "elapsed_s", "Un000 [rpm]", "Un002 [%]", "Un027 [%]"]
+    data = rows[1:]
+    assert len(data) >= 25
+    elapsed = [float(r[1]) for r in data]
+    assert elapsed == sorted(elapsed) and elapsed[-1] > 1.5
+    speeds = [float(r[2]) for r in data]
+    running = sorted(v for v in speeds if v > 400)
+    assert len(running) > 10
+    assert running[len(running) // 2] == pytest.approx(500, abs=15)   # it was jogging at 500 rpm
+    assert all(-350 < float(r[3]) < 350 for r in data)     # torque within the torque limit
