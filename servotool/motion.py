@@ -121,9 +121,12 @@ class Jogger:
         end = time.monotonic() + wait_s
         while self.speed_fb is not None and time.monotonic() < end:
             speed = self.speed()
-            if speed is not None and abs(speed) < 1.0:
-                return
+            if speed is not None and abs(speed) < 3.0:
+                break
             time.sleep(0.05)
+        servo = self.profile.role("servo_on")
+        if servo is not None:
+            self.drive.write_raw(servo, 0)   # leave JOG: the drive stops holding the axis
 
     def run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
             command: Callable[[], int | None] | None = None) -> None:

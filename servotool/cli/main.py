@@ -8,7 +8,7 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, jog, monitor, param, profiles, sim
+from servotool.cli import alarm, jog, monitor, param, profiles, sim, tune
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, err
 from servotool.connection import ConnectOptions
@@ -23,6 +23,7 @@ app.add_typer(param.app, name="param")
 app.add_typer(profiles.app, name="profiles")
 app.add_typer(sim.app, name="sim")
 app.add_typer(alarm.app, name="alarm")
+app.add_typer(tune.app, name="tune")
 app.command("monitor")(monitor.monitor)
 app.command("jog")(jog.jog)
 

@@ -158,10 +158,9 @@ class Firmware:
         self._host_alive()
         direction = (raw > 0) - (raw < 0)
         if direction == 0:
-            if self.mode == "jog":
+            if self.mode == "jog":       # stop, but stay excited (holding) until JOG is left with servo off
                 self.plant.set_speed_command(0.0)
                 self.jog_dir = 0
-                self._stop_when_still = True
             return
         if not self._motion_allowed() or self.mode not in ("off", "jog"):
             return
@@ -169,10 +168,7 @@ class Firmware:
             self.plant.set_mode("speed")
         self.mode = "jog"
         self.jog_dir = direction
-        self._stop_when_still = False
         self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))
-
-    _stop_when_still = False
 
     def _fn_speed(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
         self.update()
@@ -188,7 +184,7 @@ class Firmware:
             self.plant.set_mode("speed")
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
-        elif not raw and self.mode in ("servo", "speed"):
+        elif not raw and self.mode in ("servo", "speed", "jog"):
             self.plant.set_mode("off")
             self.mode = "off"
 
@@ -281,10 +277,6 @@ class Firmware:
 
     def _refresh_monitors(self) -> None:
         p = self.plant
-        if self._stop_when_still and abs(p.true_speed_rpm) < 0.5 and self.mode == "jog":
-            p.set_mode("off")
-            self.mode = "off"
-            self._stop_when_still = False
         self._set("speed_feedback", p.speed_rpm)
         self._set("speed_command", p.speed_command_rpm)
         self._set("torque_feedback", p.torque_pct)

@@ -229,12 +229,10 @@ class Plant:
             self._t_applied = self._t_filtered = self._t_cmd = self._t_delayed = 0.0
             self._load = 0.0
             return
-        steps = int((t - self.time) / TS)
+        steps = int((t - self.time) / TS + 1e-9)
         for _ in range(steps):
             self._step()
-        self.time += steps * TS
-        if t - self.time > 0:
-            self.time = t              # the remainder (< one period) is carried to the next call
+        self.time += steps * TS        # the remainder (< one period) is integrated by the next call
 
     def _controller(self) -> float:
         """Torque command of this control period (before the filter)."""
