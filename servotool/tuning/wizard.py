@@ -67,8 +67,8 @@ class MotionPlan:
 
     @property
     def excursion_rev(self) -> float:
-        """Largest distance from the start: moves go out and come back, so one or two moves (one direction)."""
-        return self.move_travel_rev * (1 if len(self.directions) > 1 else self.repeats)
+        """Range of positions covered: one move each way (both directions), or all moves (one direction)."""
+        return self.move_travel_rev * (len(self.directions) if len(self.directions) > 1 else self.repeats)
 
     @property
     def duration_s(self) -> float:
@@ -78,7 +78,7 @@ class MotionPlan:
         names = {1: "forward", -1: "reverse"}
         seq = " then ".join(names[d] for d in self.directions)
         return (f"{self.repeats} x ({seq}) moves to {self.speed_rpm:.0f} rpm, {self.ramp_s * 1000:.0f} ms ramps, "
-                f"{self.move_travel_rev:.2f} rev per move, at most {self.excursion_rev:.2f} rev from the start "
+                f"{self.move_travel_rev:.2f} rev per move, {self.excursion_rev:.2f} rev of travel in all "
                 f"(limit {self.travel_limit_rev:g} rev), about {self.duration_s:.1f} s")
 
 
@@ -95,7 +95,8 @@ def plan_motion(drive: Drive, *, max_speed: float | None, accel_time_ms: float |
     ramp = (accel_time_ms or 200.0) / 1000.0
     if not 0.02 <= ramp <= 5.0:
         raise UsageError("--accel-time must be 20..5000 ms")
-    budget = 0.75 * travel_rev / (1 if len(dirs) > 1 else repeats)   # keep a margin for overshoot
+    # Moves go out and back, so the range covered is one move per direction; keep a margin for overshoot.
+    budget = 0.9 * travel_rev / (len(dirs) if len(dirs) > 1 else repeats)
     speed = budget / ramp * 60.0
     motor = drive.profile.motor
     limit = motor.rated_speed_rpm if motor else 3000.0
@@ -201,7 +202,7 @@ class Identifier:
             trace.speed.append(float(raw_to_eng(speed_e, readings[0].raw)))
             trace.torque.append(float(raw_to_eng(torque_e, readings[1].raw)))
             trace.position.append(readings[2].raw / counts if pos_e else math.nan)
-            if pos_e and abs(trace.position[-1] - trace.position[0]) > plan.travel_limit_rev:
+            if pos_e and max(trace.position) - min(trace.position) > plan.travel_limit_rev:
                 raise TravelExceeded(f"travel limit {plan.travel_limit_rev:g} rev reached: motion stopped; the "
                                      "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel")
             if self.timing.now() - beat[1] >= self.keepalive_s:
@@ -225,8 +226,8 @@ class Identifier:
             d.write_raw(jog, 0)
             wait_until(lambda: abs(trace.speed[-1]) < 2.0, plan.ramp_s * 3 + 0.5)
             wait_until(lambda: False, 0.1)
-            pos = [x - trace.position[0] for x in trace.position if not math.isnan(x)]
-            return max((abs(x) for x in pos), default=0.0)
+            pos = [x for x in trace.position if not math.isnan(x)]
+            return max(pos) - min(pos) if pos else 0.0
 
         try:
             # Pilot moves at half speed: a badly matched speed loop overshoots, so measure how far the axis
@@ -237,7 +238,7 @@ class Identifier:
                 if progress:
                     progress(f"pilot moves at {pilot:.0f} rpm")
                 excursion = max(move(direction, pilot) for direction in plan.directions)
-                nominal = pilot / 60.0 * plan.ramp_s
+                nominal = pilot / 60.0 * plan.ramp_s * len(plan.directions)
                 factor = max(1.0, excursion / nominal) if nominal > 0 else 1.0
                 speed = min(speed, plan.speed_rpm / factor)
             for rep in range(plan.repeats):
