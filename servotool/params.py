@@ -52,9 +52,14 @@ def plan_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> SetP
     return SetPlan(changes, unchanged)
 
 
+def write_one(drive: Drive, entry: Entry, raw: int, old: int | None = None) -> WriteResult:
+    """The one path every parameter write takes (set, restore, plans): write, then verify by read-back."""
+    return drive.write_verified(entry, raw, old)
+
+
 def apply_set(drive: Drive, plan: SetPlan) -> list[WriteResult]:
     """Write the planned changes in order, each verified by read-back."""
-    return [drive.write_verified(entry, new, old) for entry, old, new in plan.changes]
+    return [write_one(drive, entry, new, old) for entry, old, new in plan.changes]
 
 
 def read_all(drive: Drive, entries: list[Entry]) -> list[Reading]:

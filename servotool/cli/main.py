@@ -8,7 +8,7 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, jog, monitor, param, profiles, sim, tune
+from servotool.cli import alarm, backup, jog, monitor, param, profiles, sim, tune
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, err
 from servotool.connection import ConnectOptions
@@ -20,6 +20,7 @@ app = typer.Typer(
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 app.add_typer(param.app, name="param")
+del backup  # imported for its commands on the param group
 app.add_typer(profiles.app, name="profiles")
 app.add_typer(sim.app, name="sim")
 app.add_typer(alarm.app, name="alarm")

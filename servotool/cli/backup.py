@@ -1,0 +1,170 @@
+"""`servotool param backup|diff|restore|reset`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+from rich.progress import Progress
+
+from servotool import backup as bk
+from servotool.cli.common import JSON_OPT, drive, state
+from servotool.cli.param import app
+from servotool.cli.render import emit_json, err, info, out, table, warn
+from servotool.codec import format_value
+from servotool.connection import resolve
+from servotool.errors import UsageError
+from servotool.params import select
+from servotool.profile import load_profile
+
+MARK = {"power_cycle": "power cycle", "servo_off": "servo off"}
+
+
+def _confirm(question: str, yes: bool) -> bool:
+    if yes:
+        return True
+    if not sys.stdin.isatty():
+        raise UsageError("confirmation needed: run in a terminal or pass --yes")
+    return typer.confirm(question, default=False)
+
+
+@app.command("backup")
+def backup_cmd(
+    ctx: typer.Context,
+    output: Path = typer.Option(None, "--output", "-o", help="Backup file (default: MODEL-unitN-DATE.yaml here)."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing file."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Save every readable parameter (and the drive's identity) to a checksummed YAML file."""
+    with drive(ctx) as d:
+        entries = select(d.profile)
+        with Progress(console=err, transient=True, disable=as_json) as progress:
+            task = progress.add_task("reading parameters", total=len(entries))
+            b = bk.take(d, progress=lambda n: progress.advance(task, n))
+        path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.yaml")
+        bk.save(b, d.profile, path, force=force)
+    if as_json:
+        emit_json({"file": str(path), "entries": len(b.values), "checksum": b.checksum(), "identity": b.identity})
+    else:
+        out.print(f"{len(b.values)} parameters saved to {path}", markup=False)
+
+
+@app.command("diff")
+def diff_cmd(
+    ctx: typer.Context,
+    file: Path = typer.Argument(..., help="Backup file (compared with the drive, or with FILE2)."),
+    file2: Path = typer.Argument(None, help="Second backup file: compare the two files, no drive needed."),
+    from_default: bool = typer.Option(False, "--changed-from-default", help="Compare with the factory defaults."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Differences between the drive and a file, two files, or a file and the factory defaults."""
+    opts = state(ctx).options
+    if file2 is not None or from_default:
+        profile = load_profile(opts.profile) if opts.profile else None
+        if profile is None:
+            import yaml
+
+            try:
+                head = yaml.safe_load(file.read_text(encoding="utf-8"))
+                profile = load_profile(head["profile"])
+            except Exception:
+                raise UsageError(f"{file}: cannot tell its profile; give --profile") from None
+        a = bk.load(file, profile)
+        b_values = bk.defaults(profile) if from_default else bk.load(file2, profile).values
+        labels = (str(file), "factory default" if from_default else str(file2))
+        diffs = bk.diff(profile, a.values, b_values)
+    else:
+        with drive(ctx) as d:
+            profile = d.profile
+            a = bk.load(file, profile)
+            current = {r.entry.code: r.raw for r in d.read_entries(select(profile))}
+        labels = ("drive", str(file))
+        diffs = bk.diff(profile, current, a.values)
+    if as_json:
+        emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs]})
+        return
+    if not diffs:
+        out.print(f"no differences between {labels[0]} and {labels[1]}", markup=False)
+        return
+    t = table("Code", "Name", labels[0], labels[1], "Unit", "Needs")
+    for x in diffs:
+        e = x.entry
+        t.add_row(e.code, e.name, "" if x.a is None else format_value(e, x.a),
+                  "" if x.b is None else format_value(e, x.b), e.unit, MARK.get(e.effect, ""))
+    out.print(t)
+
+
+@app.command("restore")
+def restore_cmd(
+    ctx: typer.Context,
+    file: Path = typer.Argument(..., help="Backup file to restore."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Show the plan; write nothing."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation."),
+    force: bool = typer.Option(False, "--force", help="Accept a file of another model or with a bad checksum."),
+    only: str = typer.Option(None, "--only", help="Restore only this group (a portable subset)."),
+    include: list[str] = typer.Option(None, "--include", help="Also restore this axis-specific entry (repeatable)."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Write only the differing entries, verified, after an automatic backup; roll back on failure."""
+    profile = resolve(state(ctx).options).profile
+    b = bk.load(file, profile, force=force)       # every file problem is refused before connecting
+    for w in b.warnings:
+        warn(w)
+    with drive(ctx) as d:
+        current = {r.entry.code: r.raw for r in d.read_entries(select(d.profile))}
+        plan = bk.plan_restore(d.profile, b, current, only=only, include=include or [])
+        if not as_json:
+            _show_plan(plan)
+        if dry_run or not plan.changes:
+            if as_json:
+                emit_json({"dry_run": dry_run, "changes": _changes_json(plan), "written": [],
+                           "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
+            elif not plan.changes:
+                out.print("nothing to restore: the drive already matches", markup=False)
+            return
+        if not _confirm(f"Write {len(plan.changes)} parameters?", yes):
+            raise typer.Exit(1)
+        report = bk.restore(d, b, plan)
+    if as_json:
+        emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
+                   "auto_backup": str(report.auto_backup),
+                   "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
+        return
+    info(f"automatic backup of the previous state: {report.auto_backup}")
+    out.print(f"{len(report.written)} parameters restored and verified", markup=False)
+    if plan.needs_power_cycle:
+        out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
+
+
+def _changes_json(plan: bk.RestorePlan) -> list[dict[str, object]]:
+    return [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
+             "effect": e.effect} for e, old, new in plan.changes]
+
+
+def _show_plan(plan: bk.RestorePlan) -> None:
+    if plan.changes:
+        t = table("Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{len(plan.changes)} changes, in order")
+        for e, old, new in plan.changes:
+            t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
+        out.print(t)
+    for e, why in plan.skipped:
+        info(f"skipped {e.code}: {why}")
+
+
+@app.command("reset")
+def reset_cmd(
+    ctx: typer.Context,
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Factory defaults through the drive's own function, after an automatic backup."""
+    with drive(ctx) as d:
+        d.profile.need_role("factory_reset", "param reset")
+        if not _confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):
+            raise typer.Exit(1)
+        auto = bk.factory_reset(d)
+    if as_json:
+        emit_json({"auto_backup": str(auto)})
+    else:
+        out.print(f"factory defaults restored; previous settings saved in {auto}", markup=False)
