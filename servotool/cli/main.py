@@ -8,7 +8,7 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, backup, jog, monitor, param, profiles, sim, tune
+from servotool.cli import alarm, backup, jog, monitor, param, profiles, run, sim, tune
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, err
 from servotool.connection import ConnectOptions
@@ -27,6 +27,7 @@ app.add_typer(alarm.app, name="alarm")
 app.add_typer(tune.app, name="tune")
 app.command("monitor")(monitor.monitor)
 app.command("jog")(jog.jog)
+app.command("run")(run.run)
 
 
 def _version(value: bool) -> None:

@@ -1,0 +1,82 @@
+"""servotool run: commissioning plans on two simulated axes, dry runs, and refusals of broken plans."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+PLAN = """\
+port: sim
+profile: dsx7e
+units: [1, 2]
+steps:
+  - set: {Pn101: 25.0, Pn512: 150}
+  - expect: {Pn101: 25.0, Un100: 0}
+  - set: {Pn102: 30.0}
+    unit: 2
+  - tune inertia: {rigidity: 12}
+  - expect: {Un000: {value: 0, tol: 10}}
+  - backup: axis-{unit}.yaml
+  - prompt: Is the machine clear?
+"""
+
+
+def test_plan_commissions_two_axes_end_to_end(cli, tmp_path):
+    cli("sim", "config", "--unit", "2", "--load-ratio", "6")
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(PLAN)
+    r = cli("run", str(plan), "--yes", "--json")
+    assert r.code == 0, r.err
+    report = r.json()
+    assert report["ok"] and len(report["steps"]) == 13          # 7 steps x 2 units, one step on unit 2 only
+    tuned = {s["unit"]: s["ratio"] for s in report["steps"] if s["name"] == "tune inertia"}
+    assert tuned[1] == pytest.approx(2.0, abs=0.15) and tuned[2] == pytest.approx(6.0, rel=0.05)
+    assert json.loads((tmp_path / "plan.report.json").read_text())["ok"]
+    for unit in (1, 2):
+        assert (tmp_path / f"axis-{unit}.yaml").exists()
+    assert [s["unit"] for s in report["steps"] if s["line"] == 7] == [2]      # `unit: 2` step
+    r = cli("--port", "sim", "--unit", "2", "param", "get", "Pn004", "--json")
+    assert r.json()[0]["value"] == pytest.approx(700, rel=0.05)            # (1 + 6) x 100 %
+
+
+def test_dry_run_touches_nothing(cli, tmp_path):
+    before, after = tmp_path / "before.yaml", tmp_path / "after.yaml"
+    assert cli("--port", "sim", "param", "backup", "-o", str(before)).code == 0
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(PLAN)
+    r = cli("run", str(plan), "--dry-run")
+    assert r.code == 0 and "valid" in r.out and "tune inertia" in r.out
+    assert cli("--port", "sim", "param", "backup", "-o", str(after)).code == 0
+    assert cli("param", "diff", str(before), str(after), "--json").json()["differences"] == []
+    assert not (tmp_path / "axis-1.yaml").exists() and not (tmp_path / "plan.report.json").exists()
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("port: sim\nsteps:\n  - set: {Pn101: 25\n", "invalid YAML"),
+    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - reboot: now\n", ":4: step 2: unknown step"),
+    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - set: {Pn999: 1}\n", "line 4): unknown code 'Pn999'"),
+    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - set: {Pn100: 99999}\n", "line 4): Pn100 (Position loop gain): value"
+     " 99999 is out of range"),
+    ("port: sim\nsteps:\n  - expect: {Pn101: {value: 1, within: 2}}\n", "unknown expect key"),
+    ("port: sim\ncolour: red\nsteps:\n  - wait: 1\n", "unknown key(s) colour"),
+    ("port: sim\nsteps:\n  - wait: -1\n", "wait takes seconds"),
+    ("port: sim\nsteps: []\n", "non-empty list"),
+])
+def test_broken_plans_are_refused_before_any_write(cli, tmp_path, text, message):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(text)
+    r = cli("-v", "run", str(plan), "--yes")
+    assert r.code == 2, r.err
+    assert message in r.err, r.err
+    assert ">> 01 06" not in r.err and ">> 01 10" not in r.err
+    assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
+
+
+def test_failed_expectation_stops_the_plan_with_exit_3(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nsteps:\n  - expect: {Pn101: 99.0}\n  - set: {Pn101: 25.0}\n")
+    r = cli("run", str(plan), "--json")
+    assert r.code == 3
+    assert [s["ok"] for s in r.json()["steps"]] == [False]
+    assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
