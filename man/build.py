@@ -1,0 +1,147 @@
+"""Write man/servotool.1 from the CLI itself, so every command and option is documented as it really is.
+
+Run after changing the CLI: python man/build.py   (tests fail when the page is out of date)
+"""
+
+from __future__ import annotations
+
+import sys
+from datetime import date
+from pathlib import Path
+
+import typer
+
+from servotool import __version__
+from servotool.cli.main import app
+
+PAGE = Path(__file__).with_name("servotool.1")
+
+HEAD = r""".TH SERVOTOOL 1 "{date}" "servotool {version}" "User Commands"
+.SH NAME
+servotool \- commission and tune AC servo drives over Modbus RTU
+.SH SYNOPSIS
+.B servotool
+.RI [ global-options ]
+.I command
+.RI [ options ]
+.RI [ arguments ]
+.SH DESCRIPTION
+.B servotool
+reads, writes, backs up and restores drive parameters, watches live values, jogs the motor, identifies the load
+inertia and sets gains, and runs whole commissioning plans, over Modbus RTU (RS485, CRC\-16), against a real
+drive or a built\-in simulated one.
+Each drive family is described by a YAML profile that keeps the vendor's own parameter codes
+(for example SD25 \fBPo109\fR, IS620P \fBH09\-06\fR, SDC \fBPN22\fR, DSX7E \fBPn004\fR).
+.PP
+The port is a serial device (\fB/dev/ttyUSB0\fR, \fBCOM3\fR), \fBtcp://\fIHOST\fB:\fIPORT\fR (RTU framing over a
+TCP serial gateway) or \fBsim\fR (a simulated drive served in\-process on a loopback socket; the client still
+speaks real RTU frames with CRC).
+Output that comes from a simulated drive says so once on standard error.
+.PP
+Anything that moves the motor has a dead\-man: the host refreshes a keep\-alive, the drive stops the motor and
+raises a communication alarm when it goes quiet, Ctrl\-C stops at once, and speed and travel limits are checked
+before any motion.
+"""
+
+TAIL = r""".SH ENVIRONMENT
+.TP
+.BR SERVOTOOL_PORT ", " SERVOTOOL_PROFILE ", " SERVOTOOL_UNIT ", " SERVOTOOL_BAUD ", " SERVOTOOL_PARITY ,
+.BR SERVOTOOL_STOPBITS ", " SERVOTOOL_TIMEOUT ", " SERVOTOOL_RETRIES
+Defaults for the global options of the same names; the command line wins.
+.TP
+.B SERVOTOOL_CONFIG
+Configuration file (default \fI~/.config/servotool/config.yaml\fR) with the keys \fBport\fR, \fBprofile\fR,
+\fBunit\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR, \fBretries\fR; used after the environment.
+.TP
+.B SERVOTOOL_SIM_DIR
+Where simulated drives keep their parameters and machine settings (default
+\fI$XDG_STATE_HOME/servotool/sim\fR).
+.TP
+.B SERVOTOOL_BACKUP_DIR
+Where automatic backups are written before a restore or a factory reset (default
+\fI$XDG_DATA_HOME/servotool/backups\fR).
+.TP
+.B SERVOTOOL_DEBUG
+Show the Python traceback of an internal error.
+.SH EXIT STATUS
+.TP
+.B 0
+Success.
+.TP
+.B 1
+Device or I/O error: port, timeout, CRC, Modbus exception, a motion or identification that failed.
+.TP
+.B 2
+Usage or validation error: unknown code, value out of range, bad file or plan, missing confirmation.
+Nothing is written to a drive before all values of a command are validated.
+.TP
+.B 3
+Verification mismatch: a value read back differs, or an expectation or alarm clear failed.
+.TP
+.B 130
+Interrupted (Ctrl\-C); any motion was stopped first.
+.SH EXAMPLES
+.nf
+servotool \-\-port sim param list \-\-group gain
+servotool \-\-port /dev/ttyUSB0 \-\-profile sd25 param get Po109
+servotool \-\-port sim param set Pn100=40.0 Pn101=25.0
+servotool \-\-port sim param backup \-o axis1.yaml
+servotool \-\-port sim param restore axis1.yaml \-\-dry\-run
+servotool \-\-port sim monitor \-\-rate 20 \-\-csv log.csv
+servotool \-\-port sim jog \-\-speed 300 \-\-time 2
+servotool sim config \-\-load\-ratio 5 \-\-friction 0.03
+servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13
+servotool run examples/commission.yaml \-\-yes
+servotool sim serve \-\-port tcp://127.0.0.1:5020 \-\-unit 1 \-\-unit 2
+.fi
+.SH SEE ALSO
+.BR mbpoll (1),
+.BR socat (1)
+"""
+
+
+def esc(text: str) -> str:
+    """Escape text for roff: backslashes, hyphens, and a leading dot or quote."""
+    text = " ".join(text.split()).replace("\\", "\\e").replace("-", "\\-")
+    text = "".join(c if ord(c) < 128 else f"\\[u{ord(c):04X}]" for c in text)
+    return "\\&" + text if text[:1] in (".", "'") else text
+
+
+def option_lines(cmd) -> list[str]:
+    lines = []
+    for p in cmd.params:
+        if getattr(p, "hidden", False) or p.name in ("help", "install_completion", "show_completion"):
+            continue
+        if p.param_type_name == "argument":
+            lines += [".TP", f".I {p.name.upper()}" + (" ..." if p.nargs == -1 else "")]
+        else:
+            names = ", ".join(f"\\fB{esc(o)}\\fR" for o in [*p.opts, *p.secondary_opts])
+            meta = "" if p.is_flag or p.count else f" \\fI{esc(p.name.upper())}\\fR"
+            lines += [".TP", names + meta]
+        lines.append(esc(p.help or ""))
+    return lines
+
+
+def command_sections(group, prefix: str) -> list[str]:
+    out = []
+    for name, cmd in sorted(group.commands.items()):
+        full = f"{prefix} {name}"
+        if hasattr(cmd, "commands"):
+            if any(p.name != "help" for p in cmd.params):
+                out += [".SS " + esc(full), esc(cmd.help or ""), *option_lines(cmd)]
+            out += command_sections(cmd, full)
+            continue
+        out += [".SS " + esc(full), esc((cmd.help or "").split("\n\n")[0]), *option_lines(cmd)]
+    return out
+
+
+def render() -> str:
+    root = typer.main.get_command(app)
+    body = [".SH GLOBAL OPTIONS", *option_lines(root), ".SH COMMANDS", *command_sections(root, "servotool")]
+    head = HEAD.replace("{date}", date.today().strftime("%Y-%m")).replace("{version}", __version__)
+    return head + "\n".join(body) + "\n" + TAIL
+
+
+if __name__ == "__main__":
+    PAGE.write_text(render())
+    sys.stdout.write(f"wrote {PAGE}\n")
