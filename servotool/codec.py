@@ -42,6 +42,7 @@ def raw_to_words(entry: Entry, raw: int) -> list[int]:
             parts.append(rest % base)
             rest //= base
         parts.append((sign * rest) & 0xFFFF)
+        parts = [p & 0xFFFF for p in parts]  # a 5-digit half can exceed 16 bits (the SDC manual's own puzzle)
         ordered = parts
     else:
         bits = 16 * entry.words
