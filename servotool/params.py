@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 from servotool.drive import Drive, Reading, WriteResult
@@ -64,3 +66,43 @@ def apply_set(drive: Drive, plan: SetPlan) -> list[WriteResult]:
 
 def read_all(drive: Drive, entries: list[Entry]) -> list[Reading]:
     return drive.read_entries(entries)
+
+
+def _switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
+    """(switch entry, its raw value, raw value meaning EEPROM, raw value meaning RAM) for switchable drives."""
+    p = drive.profile.persistence
+    entry = drive.profile.entry(p.switch_code)
+    raw = drive.read_entries([entry])[0].raw
+    if p.switch_digit and entry.format == "digits":
+        idx = [f.upper() for f in entry.fields].index(p.switch_digit.upper())
+        shift, mask = entry.field_width * idx, (1 << entry.field_width) - 1
+        base = raw & ~(mask << shift)
+        return entry, raw, base | (p.switch_eeprom << shift), base | (p.switch_ram << shift)
+    return entry, raw, p.switch_eeprom, p.switch_ram
+
+
+@contextmanager
+def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
+    """Apply the drive's EEPROM rule around a batch of writes; yields {'persisted': bool} once the batch is done.
+
+    save=None leaves the drive as it is (a RAM-only drive stays RAM-only); save=True makes the writes permanent
+    with as few EEPROM writes as the drive allows; save=False keeps them out of EEPROM where the drive lets us.
+    """
+    p = drive.profile.persistence
+    state = {"persisted": p.mode == "immediate"}
+    if p.mode == "switchable":
+        entry, current, eeprom, ram = _switch_state(drive)
+        wanted = current if save is None else (eeprom if save else ram)
+        if wanted != current:
+            drive.write_raw(entry, wanted)
+        try:
+            yield state
+        finally:
+            state["persisted"] = wanted == eeprom
+            if wanted != current:
+                drive.write_raw(entry, current)   # leave the switch as the user had it
+        return
+    yield state
+    if p.mode == "ram" and save:
+        drive.trigger("eeprom_save", "--save")
+        state["persisted"] = True

@@ -6,7 +6,7 @@ import typer
 
 from servotool import params
 from servotool.cli.common import JSON_OPT, drive
-from servotool.cli.render import emit_json, info, out, table
+from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.codec import format_value
 
 app = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and restore drive parameters.")
@@ -37,18 +37,26 @@ def set_(
     assignments: list[str] = typer.Argument(..., help="CODE=VALUE in engineering units (e.g. Pn100=40.0)."),
     raw: bool = typer.Option(False, "--raw", help="Values are raw register integers, not engineering units."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and show what would change; write nothing."),
+    save: bool = typer.Option(None, "--save/--no-save", help="Store in EEPROM (or keep out of it) as the drive "
+                              "allows; default: the drive's current setting."),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Validate every value against the profile, write the ones that differ, read back to verify."""
+    persisted = None
     with drive(ctx) as d:
         plan = params.plan_set(d, assignments, raw=raw)
-        results = [] if dry_run else params.apply_set(d, plan)
+        results = []
+        if not dry_run and plan.changes:
+            with params.persistence(d, save) as outcome:
+                results = params.apply_set(d, plan)
+            persisted = outcome["persisted"]
     if as_json:
         emit_json({
             "dry_run": dry_run,
             "changed": [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
                          "effect": e.effect} for e, old, new in plan.changes],
             "unchanged": [{"code": e.code, "value": format_value(e, v)} for e, v in plan.unchanged],
+            "persisted": persisted,
         })
         return
     for e, v in plan.unchanged:
@@ -58,6 +66,8 @@ def set_(
             out.print(f"would set {e.code} ({e.name}): {format_value(e, old)} -> {format_value(e, new)} {e.unit}",
                       markup=False)
         return
+    if persisted is False:
+        warn("not saved to EEPROM: the drive keeps these values only until power-off (use --save)")
     for r in results:
         note = f"  [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
         out.print(f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "

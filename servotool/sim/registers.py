@@ -196,10 +196,12 @@ class RegisterBank:
 
     def apply_parameter(self, entry: Entry, raw: int) -> None:
         """Store an accepted parameter write in RAM (and EEPROM when the drive persists writes)."""
+        # The EEPROM switch itself is modelled as always stored (the manuals do not say); other writes follow it.
+        persist = self.persists_writes() or entry.code.upper() == self.profile.persistence.switch_code.upper()
         self.ram[entry.code] = raw
         if entry.effect != "power_cycle":
             self.effective[entry.code] = raw
-        if self.persists_writes() and self.eeprom.get(entry.code) != raw:
+        if persist and self.eeprom.get(entry.code) != raw:
             self.eeprom[entry.code] = raw
             self.eeprom_writes += 1
 

@@ -1,0 +1,36 @@
+"""EEPROM rules of switchable drives (SD25 Po505.X, IS620P H0C-13): RAM-only unless --save, no needless writes."""
+
+from __future__ import annotations
+
+
+def get(cli, profile, *codes):
+    r = cli("--port", "sim", "--profile", profile, "param", "get", *codes, "--json")
+    assert r.code == 0, r.err
+    return {d["code"]: d["value"] for d in r.json()}
+
+
+def test_sd25_writes_are_ram_only_by_default_and_saved_with_save(cli):
+    r = cli("--port", "sim", "--profile", "sd25", "param", "set", "Po109=5", "--json")
+    assert r.code == 0 and r.json()["persisted"] is False
+    assert "not saved to EEPROM" in cli("--port", "sim", "--profile", "sd25", "param", "set", "Po110=30").err
+    r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po111=40", "--save", "--json")
+    assert r.code == 0 and r.json()["persisted"] is True
+    assert ">> 01 06 01 f9 01 00" in r.err and ">> 01 06 01 f9 01 01" in r.err   # Po505.X 1 -> 0 -> 1
+    assert cli("sim", "reset", "--profile", "sd25", "--power-cycle").code == 0
+    after = get(cli, "sd25", "Po109", "Po110", "Po111", "Po505")
+    assert after["Po109"] == 200 and after["Po110"] == 200          # RAM-only writes lost at power-off
+    assert after["Po111"] == 40 and after["Po505"] == "01 01"        # saved, switch back as the user had it
+
+
+def test_is620p_stores_by_default_and_no_save_keeps_it_out(cli):
+    r = cli("--port", "sim", "--profile", "is620p", "param", "set", "H08-00=30.0", "--json")
+    assert r.json()["persisted"] is True
+    r = cli("--port", "sim", "--profile", "is620p", "param", "set", "H08-02=50.0", "--no-save", "--json")
+    assert r.json()["persisted"] is False
+    cli("sim", "reset", "--profile", "is620p", "--power-cycle")
+    assert get(cli, "is620p", "H08-00", "H08-02", "H0C-13") == {"H08-00": 30.0, "H08-02": 40.0, "H0C-13": 1}
+
+
+def test_unchanged_value_touches_neither_parameter_nor_switch(cli):
+    r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po109=200", "--save")
+    assert r.code == 0 and ">> 01 06" not in r.err
