@@ -21,7 +21,7 @@ import yaml
 from servotool import __version__
 from servotool.codec import format_value
 from servotool.drive import Drive
-from servotool.errors import DeviceError, ServoError, UsageError
+from servotool.errors import DeviceError, ModbusException, ServoError, UsageError
 from servotool.params import select
 from servotool.profile import Entry, Profile
 
@@ -81,18 +81,30 @@ def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
 
 
 def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False) -> Path:
-    """Write atomically; never replace an existing file unless forced."""
+    """Write atomically (temp file + rename); never replace an existing file unless forced."""
     if path.exists() and not force:
         raise UsageError(f"{path} exists; choose another name or pass --force to replace it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}", suffix=".tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}", suffix=".tmp")
+    except OSError as exc:
+        raise ServoError(f"cannot write {path}: {exc.strerror or exc}") from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(backup.to_yaml(profile))
-        os.replace(tmp, path)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if force:
+            os.replace(tmp, path)
+        else:
+            # link() fails if the name appeared since the check above, so nothing on disk is ever replaced.
+            os.link(tmp, path)
+    except FileExistsError:
+        raise UsageError(f"{path} exists; choose another name or pass --force to replace it") from None
     except OSError as exc:
+        raise ServoError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
         Path(tmp).unlink(missing_ok=True)
-        raise UsageError(f"cannot write {path}: {exc.strerror}") from None
     backup.path = path
     return path
 
@@ -102,10 +114,14 @@ def write_backup(drive: Drive, path: Path, *, force: bool = False,
     return save(take(drive, progress), drive.profile, path, force=force)
 
 
-def auto_backup(drive: Drive, reason: str) -> Path:
+def _auto_path(drive: Drive, reason: str) -> Path:
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S%fZ")
-    path = backup_dir() / f"{drive.profile.id}-unit{drive.unit}-{stamp}-{reason}.yaml"
-    return write_backup(drive, path)
+    return backup_dir() / f"{drive.profile.id}-unit{drive.unit}-{stamp}-{reason}.yaml"
+
+
+def auto_backup(drive: Drive, reason: str) -> Path:
+    """Save the drive's current state under backup_dir() (never replacing a file)."""
+    return write_backup(drive, _auto_path(drive, reason))
 
 
 def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
@@ -225,53 +241,107 @@ class RestoreReport:
 
 
 class RestoreFailed(ServoError):
-    """A write failed midway; the message says exactly what state the drive is in."""
+    """A write failed midway; the message says exactly what state the drive is in.
 
-    exit_code = 1
+    The exit code is the cause's: 1 when the drive or link refused, 3 when a value did not read back.
+    """
+
+    def __init__(self, message: str, exit_code: int) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
+
+
+Notice = Callable[[str], None]
+
+
+def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
+    """Refuse before any write when entries that may only change with the servo off meet a running servo."""
+    from servotool.motion import servo_is_on
+
+    if entries and servo_is_on(drive):
+        codes = ", ".join(e.code for e in entries[:6]) + (" ..." if len(entries) > 6 else "")
+        raise UsageError(f"{what} changes {codes}, which the drive accepts only with the servo off: "
+                         f"switch the servo off first")
 
 
 def restore(drive: Drive, backup: Backup, plan: RestorePlan,
-            progress: Callable[[Entry], None] | None = None) -> RestoreReport:
+            progress: Callable[[Entry], None] | None = None, notice: Notice | None = None) -> RestoreReport:
     """Automatic backup first, then write and verify each change; on failure, roll back what was changed."""
     from servotool.params import write_one
 
-    auto = auto_backup(drive, "before-restore")
-    done: list[tuple[Entry, int, int]] = []
+    check_servo_off(drive, plan.needs_servo_off, "the restore")
+    before = take(drive)
+    auto = save(before, drive.profile, _auto_path(drive, "before-restore"))
+    if notice:
+        notice(f"automatic backup of the drive's current state: {auto}")
+    done: list[Entry] = []
     for entry, old, new in plan.changes:
         try:
-            write_one(drive, entry, new, old)
+            write_one(drive, entry, new, before.values.get(entry.code, old))
         except ServoError as exc:
-            failures = []
-            for e, was, _ in reversed(done):
-                try:
-                    write_one(drive, e, was, None)
-                except ServoError as again:
-                    failures.append(f"{e.code} ({again})")
-            state = (f"rolled back the {len(done)} entries already written: the drive is as in the automatic "
-                     f"backup {auto}" if not failures else
-                     f"could NOT roll back {', '.join(failures)}; other changed entries were rolled back; "
-                     f"compare with 'servotool param diff {auto}'")
-            if isinstance(exc, DeviceError) and "no valid response" in str(exc):
-                state += " (the drive stopped answering: check it before continuing)"
-            raise RestoreFailed(f"restore stopped at {entry.code}: {exc}; {state}") from None
-        done.append((entry, old, new))
+            # The failed entry too: a write that did not read back may still have changed it.
+            state = _roll_back(drive, [*done, entry], before.values, auto)
+            raise RestoreFailed(f"restore stopped at {entry.code}: {exc}; {state}", exc.exit_code) from None
+        done.append(entry)
         if progress:
             progress(entry)
-    return RestoreReport(auto, [e for e, _, _ in done], plan)
+    return RestoreReport(auto, done, plan)
 
 
-def restore_file(drive: Drive, path: Path) -> str:
+def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int], auto: Path) -> str:
+    """Put touched entries back to the snapshot, newest first, then say how the whole drive compares to it."""
+    from servotool.params import write_one
+
+    undo_failed: list[str] = []
+    for e in reversed(touched):
+        try:
+            now = drive.read_entries([e])[0].raw
+            if now != snapshot[e.code]:
+                write_one(drive, e, snapshot[e.code], now)
+        except ServoError as again:
+            undo_failed.append(f"{e.code} ({again})")
+            if isinstance(again, DeviceError) and not isinstance(again, ModbusException):
+                break                        # no answer at all: every further attempt would time out too
+    try:
+        after = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile))}
+    except ServoError as exc:
+        return (f"the drive no longer answers ({exc}), so its state is unknown: when it does, compare it with "
+                f"'servotool param diff {auto}' and restore that file if needed")
+    differ = [code for code, raw in snapshot.items() if after.get(code) != raw]
+    if not differ:
+        return (f"rolled back {len(touched) - 1} written entries; read back, the drive equals the automatic "
+                f"backup {auto}")
+    shown = ", ".join(f"{c} is {format_value(drive.profile.entry(c), after[c])}, was "
+                      f"{format_value(drive.profile.entry(c), snapshot[c])}" for c in differ[:6])
+    more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
+    why = f" (could not undo {'; '.join(undo_failed)})" if undo_failed else ""
+    return (f"rollback incomplete{why}: {len(differ)} entries differ from the automatic backup {auto}: {shown}{more}; "
+            f"run 'servotool param restore {auto}' once the cause is fixed")
+
+
+def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
     """Plan step: restore a backup file completely (no prompts)."""
     b = load(path, drive.profile)
     current = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile))}
     rplan = plan_restore(drive.profile, b, current)
-    report = restore(drive, b, rplan)
+    if not rplan.changes:
+        return "nothing to restore: the drive already matches"
+    report = restore(drive, b, rplan, notice=notice)
     return f"{len(report.written)} entries restored (automatic backup {report.auto_backup})"
 
 
-def factory_reset(drive: Drive) -> Path:
+def factory_reset(drive: Drive, notice: Notice | None = None) -> Path:
     """Automatic backup, then the profile's factory-reset function."""
     drive.profile.need_role("factory_reset", "param reset")
+    check_servo_off(drive, [e for e in drive.profile.of_class("Pn") if e.effect == "servo_off"], "a factory reset")
     auto = auto_backup(drive, "before-reset")
+    if notice:
+        notice(f"automatic backup of the drive's current state: {auto}")
     drive.trigger("factory_reset", "param reset")
     return auto
+
+
+def not_at_default(drive: Drive) -> list[tuple[Entry, int]]:
+    """Readable parameters whose value differs from the profile's factory default (entry, raw)."""
+    return [(r.entry, r.raw) for r in drive.read_entries(select(drive.profile))
+            if r.entry.default is not None and r.raw != r.entry.default]

@@ -1,10 +1,20 @@
-"""Backup, diff, restore and factory reset on the simulated drive."""
+"""Backup, diff, restore and factory reset: library tests on an in-process simulated drive, plus real CLI runs."""
 
 from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 import yaml
 
+from servotool import backup as bk
+from servotool import params
+from servotool.connection import ConnectOptions, open_drives, resolve
+from servotool.drive import Drive
+from servotool.errors import UsageError
 from servotool.profile import load_profile
 from servotool.sim.device import SimulatedDrive
 
@@ -12,110 +22,275 @@ CHANGES = {"Pn003": "20", "Pn004": "600", "Pn025": "250.0", "Pn026": "260.0", "P
            "Pn043": "400", "Pn044": "30", "Pn047": "150", "Pn100": "45.0", "Pn101": "30.0", "Pn102": "25.0",
            "Pn106": "50.0", "Pn120": "-5.0", "Pn128": "1.00", "Pn417": "5", "Pn512": "300", "Pn513": "150",
            "Pn514": "80", "Pn008": "20000"}
+WRITE_FRAME = re.compile(r">> 01 (06|10) ")
 
 
 @pytest.fixture
-def env(cli, tmp_path, monkeypatch):
-    monkeypatch.setenv("SERVOTOOL_BACKUP_DIR", str(tmp_path / "auto"))
-    return cli
+def auto_dir(sim_dir, tmp_path, monkeypatch) -> Path:
+    """Automatic backups of this test go here, never to the user's data dir."""
+    d = tmp_path / "auto"
+    monkeypatch.setenv("SERVOTOOL_BACKUP_DIR", str(d))
+    return d
 
 
-def values(cli, *codes: str) -> dict[str, object]:
-    r = cli("--port", "sim", "param", "get", *codes, "--json")
-    assert r.code == 0, r.err
-    return {d["code"]: d["raw"] for d in r.json()}
+@contextmanager
+def sim() -> Iterator[Drive]:
+    with open_drives(resolve(ConnectOptions(port="sim", profile="dsx7e")), notice=lambda _m: None) as (d,):
+        yield d
 
 
-def test_round_trip_and_second_restore_writes_nothing(env, tmp_path):
-    cli = env
-    assert cli("--port", "sim", "param", "set", *[f"{k}={v}" for k, v in CHANGES.items()]).code == 0
-    changed = values(cli, *CHANGES)
+def count_writes(d: Drive) -> list[int]:
+    """Count every write request the drive receives from now on."""
+    sent: list[int] = []
+    real = d.link.write
+
+    def counting(*args, **kwargs):
+        sent.append(1)
+        return real(*args, **kwargs)
+
+    d.link.write = counting  # type: ignore[method-assign]
+    return sent
+
+
+def changed_drive_backup(path: Path) -> dict[str, int]:
+    """Set CHANGES on the simulated drive, back it up to path; return the values written."""
+    with sim() as d:
+        params.apply_set(d, params.plan_set(d, [f"{k}={v}" for k, v in CHANGES.items()]))
+        bk.write_backup(d, path)
+        return bk.take(d).values
+
+
+def test_round_trip_restores_every_value_and_a_second_restore_writes_nothing(auto_dir, tmp_path):
     f = tmp_path / "drive.yaml"
-    r = cli("--port", "sim", "param", "backup", "-o", str(f), "--json")
-    assert r.code == 0, r.err
-    assert r.json()["entries"] >= 100
-    assert cli("--port", "sim", "param", "reset", "--yes").code == 0
-    assert values(cli, "Pn004")["Pn004"] == 250
-    r = cli("--port", "sim", "param", "diff", str(f), "--json")
-    assert {d["code"] for d in r.json()["differences"]} == set(CHANGES)
-    r = cli("--port", "sim", "param", "restore", str(f), "--yes", "--json")
-    assert r.code == 0, r.err
-    assert set(r.json()["written"]) == set(CHANGES)
-    assert (tmp_path / "auto").exists() and r.json()["auto_backup"].startswith(str(tmp_path / "auto"))
-    assert values(cli, *CHANGES) == changed
-    r = cli("--port", "sim", "-v", "param", "restore", str(f), "--yes", "--json")
-    assert r.json()["written"] == [] and ">> 01 06" not in r.err and ">> 01 10" not in r.err
+    wanted = changed_drive_backup(f)
+    with sim() as d:
+        auto = bk.factory_reset(d)
+        assert bk.not_at_default(d) == []
+        assert bk.load(auto, d.profile).values == wanted       # the automatic backup holds the pre-reset state
+        b = bk.load(f, d.profile)
+        current = bk.take(d).values
+        plan = bk.plan_restore(d.profile, b, current)
+        assert {e.code for e, _, _ in plan.changes} == set(CHANGES)
+        effects = [e.effect for e, _, _ in plan.changes]
+        assert effects == sorted(effects, key=bk.EFFECT_ORDER.__getitem__)   # power-cycle entries last
+        notes: list[str] = []
+        report = bk.restore(d, b, plan, notice=notes.append)
+        assert notes == [f"automatic backup of the drive's current state: {report.auto_backup}"]
+        assert report.auto_backup.parent == auto_dir
+        assert bk.take(d).values == wanted
+        writes = count_writes(d)
+        assert bk.restore_file(d, f) == "nothing to restore: the drive already matches"
+        assert writes == []
 
 
-def test_fault_midway_rolls_back_to_the_automatic_backup(env, tmp_path, sim_dir):
-    cli = env
+def test_fault_midway_rolls_back_to_the_automatic_backup(auto_dir, tmp_path, cli):
     f = tmp_path / "target.yaml"
-    cli("--port", "sim", "param", "set", "Pn100=45", "Pn101=30", "Pn512=300")
-    assert cli("--port", "sim", "param", "backup", "-o", str(f)).code == 0
-    cli("--port", "sim", "param", "reset", "--yes")
-    before = values(cli, "Pn100", "Pn101", "Pn512")
-    SimulatedDrive(load_profile("dsx7e"), 1).inject_fault("Pn101")
+    changed_drive_backup(f)
+    with sim() as d:
+        bk.factory_reset(d)
+        before = bk.take(d).values
+        order = [e.code for e, _, _ in bk.plan_restore(d.profile, bk.load(f, d.profile), before).changes]
+    victim = order[len(order) // 2]                 # half of the plan is written before the refusal
+    SimulatedDrive(load_profile("dsx7e"), 1).inject_fault(victim)
     r = cli("--port", "sim", "param", "restore", str(f), "--yes")
-    assert r.code == 1
-    assert "restore stopped at Pn101" in r.err and "rolled back" in r.err
-    assert values(cli, "Pn100", "Pn101", "Pn512") == before
-    auto = sorted((tmp_path / "auto").glob("*before-restore.yaml"))[-1]
-    r = cli("--port", "sim", "param", "diff", str(auto), "--json")
-    assert r.json()["differences"] == []
+    assert r.code == 1, r.err
+    where = r.err.index("automatic backup of the drive's current state:")
+    assert where < r.err.index(f"restore stopped at {victim}")
+    assert f"rolled back {len(order) // 2} written entries; read back, the drive equals the automatic" in r.err
+    (auto,) = auto_dir.glob("*before-restore.yaml")
+    with sim() as d:
+        assert bk.take(d).values == bk.load(auto, d.profile).values == before
 
 
-@pytest.mark.parametrize(("edit", "message"), [
-    (lambda t: t[: len(t) // 2], "not a valid backup|incomplete"),
-    (lambda t: t.replace("Pn004: 250", "Pn004: fast"), "is not an integer"),
-    (lambda t: t.replace("Pn004: 250", "Pn004: 250\n  Pn999: 1").replace("display:", "display:\n  Pn999: x"),
-     "unknown parameter Pn999"),
-    (lambda t: t.replace("Pn004: 250", "Pn004: 99"), "outside 100..12000"),
-    (lambda t: t.replace("model: DSX7E", "model: OTHER"), "not of this DSX7E"),
-    (lambda t: t.replace("Pn004: 250", "Pn004: 260"), "checksum mismatch"),
-    (lambda t: "[1, 2", "not a valid backup"),
-])
-def test_bad_files_are_refused_before_any_write(env, tmp_path, edit, message):
-    import re
+def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
+    f = tmp_path / "target.yaml"
+    changed_drive_backup(f)
+    with sim() as d:
+        bk.factory_reset(d)
+        before = bk.take(d).values
+        plan = bk.plan_restore(d.profile, bk.load(f, d.profile), before)
+        victim = plan.changes[3][0]
+        real = d.write_raw
+        misbehave = [1]
 
-    cli = env
+        def off_by_one(entry, raw):                 # the drive stores something else than asked
+            wrong = entry is victim and bool(misbehave)
+            real(entry, raw + 1 if wrong else raw)
+            if wrong:
+                misbehave.pop()
+
+        d.write_raw = off_by_one  # type: ignore[method-assign]
+        with pytest.raises(bk.RestoreFailed, match=f"restore stopped at {victim.code}: .*reads back") as exc:
+            bk.restore(d, bk.load(f, d.profile), plan)
+        assert exc.value.exit_code == 3
+        assert "rolled back 3 written entries; read back, the drive equals the automatic backup" in str(exc.value)
+        assert bk.take(d).values == before
+
+        misbehave[:] = [1] * 10                     # now it keeps storing the wrong value: say so, exactly
+        with pytest.raises(bk.RestoreFailed) as exc:
+            bk.restore(d, bk.load(f, d.profile), plan)
+        now = d.read_one(victim.code)
+        assert now.raw == before[victim.code] + 1
+        assert (f"rollback incomplete (could not undo {victim.code} ({victim.code}: wrote" in str(exc.value))
+        assert f"1 entries differ from the automatic backup {auto_dir}" in str(exc.value)
+        assert f"{victim.code} is {now.text}, was " in str(exc.value)
+
+
+def _edits() -> list[tuple[str, object, str]]:
+    return [
+        ("truncated", lambda t: t[: len(t) // 2], "not a valid backup|incomplete"),
+        ("cut mid-values", lambda t: t[: t.index("Pn512:")], "incomplete"),
+        ("broken yaml", lambda t: "[1, 2", "not a valid backup"),
+        ("empty", lambda t: "", "not a servotool backup"),
+        ("wrong type", lambda t: t.replace("Pn004: 250", "Pn004: fast"), "Pn004: value 'fast' is not an integer"),
+        ("float", lambda t: t.replace("Pn004: 250", "Pn004: 250.5"), "is not an integer"),
+        ("bool", lambda t: t.replace("Pn004: 250", "Pn004: true"), "is not an integer"),
+        ("unit type", lambda t: t.replace("unit: 1", "unit: one"), "'unit' is missing or of the wrong type"),
+        ("unknown code", lambda t: t.replace("Pn004: 250", "Pn004: 250\n  Pn999: 1")
+         .replace("display:", "display:\n  Pn999: x"), "unknown parameter Pn999"),
+        ("monitor code", lambda t: t.replace("Pn004: 250", "Pn004: 250\n  Un000: 1")
+         .replace("display:", "display:\n  Un000: x"), "unknown parameter Un000"),
+        ("out of range", lambda t: t.replace("Pn004: 250", "Pn004: 99"), "outside 100..12000"),
+        ("other model", lambda t: t.replace("model: DSX7E", "model: OTHER"), "not of this DSX7E"),
+        ("other profile", lambda t: t.replace("profile: dsx7e", "profile: sd25"), "not of this DSX7E"),
+        ("bad checksum", lambda t: t.replace("Pn004: 250", "Pn004: 260"), "checksum mismatch"),
+    ]
+
+
+@pytest.fixture(scope="module")
+def good_backup_text(tmp_path_factory) -> str:
+    mp = pytest.MonkeyPatch()
+    mp.setenv("SERVOTOOL_SIM_DIR", str(tmp_path_factory.mktemp("sim")))
+    try:
+        path = tmp_path_factory.mktemp("b") / "good.yaml"
+        with sim() as d:
+            bk.write_backup(d, path)
+        return path.read_text()
+    finally:
+        mp.undo()
+
+
+@pytest.mark.parametrize(("case", "edit", "message"), _edits(), ids=[c for c, _, _ in _edits()])
+def test_every_bad_file_is_refused_with_one_clear_line(good_backup_text, tmp_path, case, edit, message):
+    f = tmp_path / "bad.yaml"
+    f.write_text(edit(good_backup_text))
+    with pytest.raises(UsageError) as exc:
+        bk.load(f, load_profile("dsx7e"))
+    text = str(exc.value)
+    assert re.search(message, text), text
+    assert "\n" not in text and text.startswith(str(f))
+
+
+def test_force_accepts_an_edited_checksum_with_a_warning_but_never_a_bad_value(good_backup_text, tmp_path):
+    f = tmp_path / "edited.yaml"
+    f.write_text(good_backup_text.replace("Pn004: 250", "Pn004: 260"))
+    b = bk.load(f, load_profile("dsx7e"), force=True)
+    assert b.values["Pn004"] == 260 and "checksum mismatch" in b.warnings[0]
+    f.write_text(good_backup_text.replace("Pn004: 250", "Pn004: 99"))
+    with pytest.raises(UsageError, match="outside"):
+        bk.load(f, load_profile("dsx7e"), force=True)
+
+
+def test_cli_refuses_bad_files_before_connecting_or_writing(auto_dir, tmp_path, cli, good_backup_text):
+    edited = tmp_path / "edited.yaml"
+    edited.write_text(good_backup_text.replace("Pn100: 320", "Pn100: 330"))
+    truncated = tmp_path / "truncated.yaml"
+    truncated.write_text(good_backup_text[: len(good_backup_text) // 3])
+    for f, why in ((edited, "checksum mismatch"), (truncated, "incomplete|not a valid backup")):
+        r = cli("--port", "sim", "-v", "param", "restore", str(f), "--yes")
+        assert r.code == 2 and re.search(why, r.err), r.err
+        assert not WRITE_FRAME.search(r.err) and not auto_dir.exists()
+    r = cli("--port", "sim", "param", "restore", str(edited), "--yes", "--force")
+    assert r.code == 0, r.err
+    assert "warning:" in r.err and "checksum mismatch" in r.err and "1 parameters restored" in r.out
+    with sim() as d:
+        assert d.read_one("Pn100").raw == 330
+
+
+def test_backups_are_atomic_and_never_overwrite(auto_dir, tmp_path):
+    f = tmp_path / "a.yaml"
+    f.write_text("precious\n")
+    with sim() as d:
+        with pytest.raises(UsageError, match=r"exists; .* --force"):
+            bk.write_backup(d, f)
+        assert f.read_text() == "precious\n"
+        assert not list(tmp_path.glob(".*.tmp"))
+        bk.write_backup(d, f, force=True)
+        assert yaml.safe_load(f.read_text())["model"] == "DSX7E"
+        a1, a2 = bk.auto_backup(d, "x"), bk.auto_backup(d, "x")
+    assert a1 != a2 and a1.exists() and a2.exists()
+    assert not list(tmp_path.rglob("*.tmp"))
+
+
+def test_backup_file_has_the_metadata_and_a_checksum_of_the_values(auto_dir, tmp_path):
     f = tmp_path / "b.yaml"
-    assert cli("--port", "sim", "param", "backup", "-o", str(f)).code == 0
-    cli("--port", "sim", "param", "set", "Pn100=45")
-    f.write_text(edit(f.read_text()))
-    r = cli("--port", "sim", "-v", "param", "restore", str(f), "--yes")
-    assert r.code == 2, r.err
-    assert re.search(message, r.err), r.err
-    assert ">> 01 06" not in r.err and ">> 01 10" not in r.err        # not a single write frame
-    assert values(cli, "Pn100")["Pn100"] == 450
+    with sim() as d:
+        bk.write_backup(d, f)
+    data = yaml.safe_load(f.read_text())
+    assert data["profile"] == "dsx7e" and data["profile_version"] == "1.0" and data["model"] == "DSX7E"
+    assert data["unit"] == 1 and data["tool_version"] and data["created"].endswith("+00:00")
+    assert set(data["identity"]) == {"Un200", "Un202"}            # the drive_type and firmware roles
+    assert len(data["values"]) == 108 and data["display"]["Pn100"] == "32.0 1/s"
+    assert re.fullmatch(r"[0-9a-f]{64}", data["checksum"])
 
 
-def test_backup_never_overwrites_and_diff_two_files(env, tmp_path):
-    cli = env
+def test_axis_specific_entries_groups_and_include(auto_dir, tmp_path):
+    f = tmp_path / "b.yaml"
+    with sim() as d:
+        params.apply_set(d, params.plan_set(d, ["Pn610=5", "Pn100=45"]))
+        bk.write_backup(d, f)
+        bk.factory_reset(d)
+        b, current = bk.load(f, d.profile), bk.take(d).values
+        plan = bk.plan_restore(d.profile, b, current)
+        assert [e.code for e, _, _ in plan.changes] == ["Pn100"] and plan.skipped[0][0].code == "Pn610"
+        plan = bk.plan_restore(d.profile, b, current, include=["Pn610"])
+        assert {e.code for e, _, _ in plan.changes} == {"Pn100", "Pn610"}
+        assert bk.plan_restore(d.profile, b, current, only="io").changes == []
+        assert [e.code for e, _, _ in bk.plan_restore(d.profile, b, current, only="gain").changes] == ["Pn100"]
+        with pytest.raises(UsageError, match="unknown group"):
+            bk.plan_restore(d.profile, b, current, only="nope")
+
+
+def test_servo_on_blocks_changes_that_need_the_servo_off(auto_dir):
+    with sim() as d:
+        d.trigger("servo_on", "test", 1)
+        with pytest.raises(UsageError, match="switch the servo off first"):
+            bk.check_servo_off(d, [d.profile.entry("Pn100")], "the restore")
+        d.trigger("servo_on", "test", 0)
+        bk.check_servo_off(d, [d.profile.entry("Pn100")], "the restore")
+
+
+def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
-    assert cli("--port", "sim", "param", "backup", "-o", str(a)).code == 0
-    r = cli("--port", "sim", "param", "backup", "-o", str(a))
+    with sim() as d:
+        bk.write_backup(d, a)
+        params.apply_set(d, params.plan_set(d, ["Pn100=45", "Pn008=20000"]))
+    r = cli("--port", "sim", "param", "backup", "-o", str(b))
+    assert r.code == 0 and f"saved to {b}" in r.out, r.err
+    r = cli("--port", "sim", "param", "backup", "-o", str(b))
     assert r.code == 2 and "exists" in r.err
-    cli("--port", "sim", "param", "set", "Pn100=45", "Pn008=20000")
-    cli("--port", "sim", "param", "backup", "-o", str(b))
     r = cli("param", "diff", str(a), str(b), "--json")
     assert r.code == 0, r.err
-    rows = {d["code"]: d for d in r.json()["differences"]}
+    rows = {x["code"]: x for x in r.json()["differences"]}
     assert set(rows) == {"Pn100", "Pn008"} and rows["Pn008"]["effect"] == "power_cycle"
+    assert rows["Pn100"]["a"] == "32.0" and rows["Pn100"]["b"] == "45.0"
     r = cli("param", "diff", str(b), "--changed-from-default", "--json")
-    assert {d["code"] for d in r.json()["differences"]} == {"Pn100", "Pn008"}
-
-
-def test_axis_specific_entries_are_skipped_unless_named(env, tmp_path):
-    cli = env
-    cli("--port", "sim", "param", "set", "Pn610=5")
-    f = tmp_path / "b.yaml"
-    cli("--port", "sim", "param", "backup", "-o", str(f))
-    cli("--port", "sim", "param", "set", "Pn610=1")
-    r = cli("--port", "sim", "param", "restore", str(f), "--yes", "--json")
-    assert r.json()["written"] == [] and r.json()["skipped"][0]["code"] == "Pn610"
-    r = cli("--port", "sim", "param", "restore", str(f), "--yes", "--json", "--include", "Pn610")
-    assert r.json()["written"] == ["Pn610"]
-    r = cli("--port", "sim", "param", "restore", str(f), "--json", "--only", "gain", "--dry-run")
-    assert r.code == 0 and r.json()["changes"] == []
-    data = yaml.safe_load(f.read_text())
-    assert data["values"]["Pn610"] == 5 and data["display"]["Pn100"].startswith("32.0")
+    assert {x["code"] for x in r.json()["differences"]} == {"Pn100", "Pn008"}
+    r = cli("--port", "sim", "param", "reset")                    # no --yes and stdin is not a terminal
+    assert r.code == 2 and "pass --yes" in r.err
+    r = cli("--port", "sim", "param", "reset", "--yes")
+    assert r.code == 0 and "automatic backup of the drive's current state:" in r.err, r.err
+    assert "power-cycle the drive for the defaults of: Pn008" in r.out
+    r = cli("--port", "sim", "param", "diff", str(b))
+    assert r.code == 0 and re.search(r"Pn100 .* 32\.0 .* 45\.0 .* 1/s", r.out), r.out
+    assert re.search(r"Pn008 .* power cycle", r.out), r.out
+    r = cli("--port", "sim", "param", "restore", str(b))
+    assert r.code == 2 and "pass --yes" in r.err
+    r = cli("--port", "sim", "param", "restore", str(b), "--dry-run", "--json")
+    assert [x["code"] for x in r.json()["changes"]] == ["Pn100", "Pn008"] and r.json()["written"] == []
+    r = cli("--port", "sim", "-q", "param", "restore", str(b), "--yes")
+    assert r.code == 0 and "2 parameters restored" in r.out, r.err
+    assert "automatic backup of the drive's current state:" in r.err          # even with --quiet
+    assert "power-cycle the drive for: Pn008" in r.out
+    r = cli("--port", "sim", "-v", "param", "restore", str(b), "--yes", "--json")
+    assert r.code == 0 and r.json()["written"] == [] and not WRITE_FRAME.search(r.err)

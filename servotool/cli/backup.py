@@ -21,6 +21,11 @@ from servotool.profile import load_profile
 MARK = {"power_cycle": "power cycle", "servo_off": "servo off"}
 
 
+def _where(text: str) -> None:
+    """Where the automatic backup went: shown even with --quiet, since it is the way back."""
+    err.print(text, markup=False)
+
+
 def _confirm(question: str, yes: bool) -> bool:
     if yes:
         return True
@@ -125,14 +130,13 @@ def restore_cmd(
             return
         if not _confirm(f"Write {len(plan.changes)} parameters?", yes):
             raise typer.Exit(1)
-        report = bk.restore(d, b, plan)
+        report = bk.restore(d, b, plan, notice=_where)
     if as_json:
         emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
                    "auto_backup": str(report.auto_backup),
                    "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
         return
-    info(f"automatic backup of the previous state: {report.auto_backup}")
-    out.print(f"{len(report.written)} parameters restored and verified", markup=False)
+    out.print(f"{len(report.written)} parameters restored and verified by read-back", markup=False)
     if plan.needs_power_cycle:
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 
@@ -163,8 +167,16 @@ def reset_cmd(
         d.profile.need_role("factory_reset", "param reset")
         if not _confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):
             raise typer.Exit(1)
-        auto = bk.factory_reset(d)
+        auto = bk.factory_reset(d, notice=_where)
+        left = bk.not_at_default(d)
+        before = bk.load(auto, d.profile).values
+    cycle = [e.code for e in d.profile.of_class("Pn")
+             if e.effect == "power_cycle" and before.get(e.code, e.default) != e.default]
     if as_json:
-        emit_json({"auto_backup": str(auto)})
-    else:
-        out.print(f"factory defaults restored; previous settings saved in {auto}", markup=False)
+        emit_json({"auto_backup": str(auto), "not_at_default": [e.code for e, _ in left], "power_cycle": cycle})
+        return
+    out.print(f"factory defaults restored; previous settings saved in {auto}", markup=False)
+    if left:
+        warn("still not at the factory default: " + ", ".join(f"{e.code}={format_value(e, raw)}" for e, raw in left))
+    if cycle:
+        out.print("power-cycle the drive for the defaults of: " + ", ".join(cycle), markup=False)
