@@ -1,0 +1,45 @@
+"""All four profiles: valid, usable on the simulated drive, and honest about what is unverified."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.profile import builtin_ids, load_profile
+
+PROFILES = ["dsx7e", "sd25", "is620p", "sdc"]
+
+
+def test_all_four_ship():
+    assert set(PROFILES) <= set(builtin_ids())
+
+
+@pytest.mark.parametrize("pid", PROFILES)
+def test_param_list_on_the_simulated_drive(cli, pid):
+    r = cli("--port", "sim", "--profile", pid, "param", "list", "--json")
+    assert r.code == 0, r.err
+    rows = r.json()
+    assert len(rows) == len([e for e in load_profile(pid).of_class("Pn") if e.readable])
+    assert all(not row["changed"] for row in rows)            # a fresh simulated drive holds factory defaults
+    r = cli("profiles", "show", pid, "--unverified", "--json")
+    listed = r.json()["entries"]
+    assert listed and all(e["unverified"] for e in listed)
+
+
+@pytest.mark.parametrize("pid", PROFILES)
+def test_key_roles_point_at_the_right_class(pid):
+    p = load_profile(pid)
+    for role, cls in (("speed_feedback", "Un"), ("torque_feedback", "Un"), ("jog_speed", "Pn"),
+                      ("comm_address", "Pn")):
+        entry = p.role(role)
+        assert entry is not None and entry.cls == cls, (pid, role)
+    for e in p.entries:
+        assert e.source, e.code
+
+
+def test_display_encoded_sd25_values_read_and_write_in_the_manuals_form(cli):
+    r = cli("--port", "sim", "--profile", "sd25", "param", "get", "Po001", "Po505")
+    assert "01 21" in r.out and "01 01" in r.out
+    r = cli("--port", "sim", "--profile", "sd25", "param", "set", "Po001=X=20", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["changed"][0]["new"] == "01 20"
+    assert cli("--port", "sim", "--profile", "sd25", "param", "set", "Po001=X=100").code == 2
