@@ -238,6 +238,7 @@ class RestoreReport:
     auto_backup: Path
     written: list[Entry]
     plan: RestorePlan
+    persisted: bool = True      # False: the drive keeps the values in RAM only (lost at power-off)
 
 
 class RestoreFailed(ServoError):
@@ -267,7 +268,7 @@ def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
 def restore(drive: Drive, backup: Backup, plan: RestorePlan,
             progress: Callable[[Entry], None] | None = None, notice: Notice | None = None) -> RestoreReport:
     """Automatic backup first, then write and verify each change; on failure, roll back what was changed."""
-    from servotool.params import write_one
+    from servotool.params import persistence, write_one
 
     check_servo_off(drive, plan.needs_servo_off, "the restore")
     before = take(drive)
@@ -275,17 +276,20 @@ def restore(drive: Drive, backup: Backup, plan: RestorePlan,
     if notice:
         notice(f"automatic backup of the drive's current state: {auto}")
     done: list[Entry] = []
-    for entry, old, new in plan.changes:
-        try:
-            write_one(drive, entry, new, before.values.get(entry.code, old))
-        except ServoError as exc:
-            # The failed entry too: a write that did not read back may still have changed it.
-            state = _roll_back(drive, [*done, entry], before.values, auto)
-            raise RestoreFailed(f"restore stopped at {entry.code}: {exc}; {state}", exc.exit_code) from None
-        done.append(entry)
-        if progress:
-            progress(entry)
-    return RestoreReport(auto, done, plan)
+    # A backup holds the drive's stored settings, so the restored values (and any rollback) go to EEPROM the
+    # way the profile says: at once, by flipping a RAM/EEPROM switch for the batch, or by one save at the end.
+    with persistence(drive, save=True) as kept:
+        for entry, old, new in plan.changes:
+            try:
+                write_one(drive, entry, new, before.values.get(entry.code, old))
+            except ServoError as exc:
+                # The failed entry too: a write that did not read back may still have changed it.
+                state = _roll_back(drive, [*done, entry], before.values, auto)
+                raise RestoreFailed(f"restore stopped at {entry.code}: {exc}; {state}", exc.exit_code) from None
+            done.append(entry)
+            if progress:
+                progress(entry)
+    return RestoreReport(auto, done, plan, kept["persisted"])
 
 
 def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int], auto: Path) -> str:

@@ -136,6 +136,24 @@ def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
         assert f"{victim.code} is {now.text}, was " in str(exc.value)
 
 
+def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back(auto_dir, tmp_path):
+    f = tmp_path / "sd25.yaml"
+    opts = resolve(ConnectOptions(port="sim", profile="sd25"))
+    with open_drives(opts, notice=lambda _m: None) as (d,):
+        switch = d.read_one("Po505").raw                  # factory: writes stay in RAM
+        params.apply_set(d, params.plan_set(d, ["Po301=50"]))
+        bk.write_backup(d, f)
+        bk.factory_reset(d)
+        b = bk.load(f, d.profile)
+        report = bk.restore(d, b, bk.plan_restore(d.profile, b, bk.take(d).values))
+        assert [e.code for e in report.written] == ["Po301"] and report.persisted
+        assert d.read_one("Po505").raw == switch
+    drive = SimulatedDrive(load_profile("sd25"), 1)
+    assert drive.bank.eeprom["Po301"] == 50                 # survives a power cycle
+    drive.power_cycle()
+    assert drive.bank.value("Po301") == 50
+
+
 def _edits() -> list[tuple[str, object, str]]:
     return [
         ("truncated", lambda t: t[: len(t) // 2], "not a valid backup|incomplete"),

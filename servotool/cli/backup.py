@@ -133,10 +133,12 @@ def restore_cmd(
         report = bk.restore(d, b, plan, notice=_where)
     if as_json:
         emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
-                   "auto_backup": str(report.auto_backup),
+                   "auto_backup": str(report.auto_backup), "persisted": report.persisted,
                    "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
         return
     out.print(f"{len(report.written)} parameters restored and verified by read-back", markup=False)
+    if not report.persisted:
+        warn("the drive keeps these values in RAM only: they are lost at power-off")
     if plan.needs_power_cycle:
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 
