@@ -83,16 +83,25 @@ def show(
 
 
 @app.command("check")
-def check(files: list[Path] = typer.Argument(..., help="Profile YAML files to validate.")) -> None:
+def check(files: list[Path] = typer.Argument(..., help="Profile YAML files to validate."),
+          as_json: bool = JSON_OPT) -> None:
     """Validate profiles; print every problem with its location (exit 2 if any)."""
     bad = 0
+    report = []
     for path in files:
         profile, problems = read_profile(path)
+        report.append({"file": str(path), "ok": profile is not None, "problems": problems,
+                       "entries": len(profile.entries) if profile else 0})
+        if as_json:
+            bad += profile is None
+            continue
         for line in problems:
             out.print(line, markup=False)
         if profile is None:
             bad += 1
         else:
             out.print(f"{path}: ok ({len(profile.entries)} entries, {len(profile.roles)} roles)", markup=False)
+    if as_json:
+        emit_json(report)
     if bad:
         raise typer.Exit(2)

@@ -65,6 +65,7 @@ def reset(
     power_cycle: bool = typer.Option(False, "--power-cycle", help="Power-cycle: parameters stored in EEPROM "
                                      "reload and pending power-cycle changes take effect."),
     factory: bool = typer.Option(False, "--factory", help="Erase the simulated drive's state: factory defaults."),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Power-cycle or wipe a simulated drive (its state file)."""
     opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
@@ -75,11 +76,17 @@ def reset(
     if factory:
         path = state_path(p.id, u)
         path.unlink(missing_ok=True)
+        if as_json:
+            emit_json({"profile": p.id, "unit": u, "reset": "factory", "state_file": str(path)})
+            return
         out.print(f"simulated {p.model} unit {u}: factory state ({path} removed)", markup=False)
         return
     drive = SimulatedDrive(p, u)
     pending = drive.bank.pending_power_cycle()
     drive.power_cycle()
+    if as_json:
+        emit_json({"profile": p.id, "unit": u, "reset": "power_cycle", "took_effect": pending})
+        return
     out.print(f"simulated {p.model} unit {u}: power-cycled"
               + (f"; now in effect: {', '.join(pending)}" if pending else ""), markup=False)
 
@@ -102,11 +109,15 @@ def config(
     noise: float = typer.Option(None, "--noise", help=SIM_SETTINGS["noise"][4]),
     seed: int = typer.Option(None, "--seed", help=SIM_SETTINGS["seed"][4]),
     line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     drive = _target(ctx, profile, unit)
     drive.configure(load_ratio=load_ratio, friction=friction, viscous=viscous, load_torque=load_torque, noise=noise,
                     seed=seed, line_baud=line_baud)
+    if as_json:
+        emit_json({"profile": drive.profile.id, "unit": drive.unit, "settings": drive.settings})
+        return
     _print_settings(drive)
 
 
