@@ -123,6 +123,11 @@ class Motor:
     counts_per_rev: int = 131072
     source: str = ""
 
+    @property
+    def jm(self) -> float:
+        """Rotor inertia in kg*m^2."""
+        return self.rotor_inertia_kgcm2 * 1e-4
+
 
 @dataclass(frozen=True)
 class Alarm:

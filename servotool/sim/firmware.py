@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from servotool.codec import raw_to_eng
 from servotool.profile import Entry, Motor, Profile
 from servotool.sim.device import SimulatedDrive
-from servotool.sim.plant import Clock, DriveGains, MotorData, Plant, PlantSettings, RealClock
+from servotool.sim.plant import Clock, DriveGains, Plant, PlantSettings, RealClock
 
 DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 HOST_MOTION_ROLES = ("jog", "speed_reference", "servo_on", "keepalive")
@@ -41,10 +41,7 @@ class Firmware:
         self.drive = drive
         self.profile: Profile = drive.profile
         self.clock = clock or RealClock()
-        motor = self.profile.motor or DEFAULT_MOTOR
-        self.motor = MotorData(rated_torque_nm=motor.rated_torque_nm, rated_speed_rpm=motor.rated_speed_rpm,
-                               max_speed_rpm=motor.max_speed_rpm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
-                               counts_per_rev=motor.counts_per_rev)
+        self.motor = self.profile.motor or DEFAULT_MOTOR
         self.plant = Plant(self.motor, self._plant_settings(), self._gains(), start_time=self.clock.now())
         self.mode = "off"        # off | jog | speed | servo | ident
         self.jog_dir = 0

@@ -17,6 +17,8 @@ import time
 from dataclasses import asdict, dataclass
 from typing import Protocol
 
+from servotool.profile import Motor as MotorData  # the profile's motor data drives the plant directly
+
 TS = 125e-6                 # control period, s
 SPEED_FILTER_S = 0.25e-3    # speed feedback low-pass
 CURRENT_LOOP_S = 0.2e-3     # the current loop's lag between torque command and torque (about 800 Hz)
@@ -49,20 +51,6 @@ class VirtualClock:
     def advance(self, dt: float) -> float:
         self.t += dt
         return self.t
-
-
-@dataclass(frozen=True)
-class MotorData:
-    rated_torque_nm: float = 1.27
-    rated_speed_rpm: float = 3000.0
-    max_speed_rpm: float = 6000.0
-    rotor_inertia_kgcm2: float = 0.62
-    counts_per_rev: int = 8388608
-
-    @property
-    def jm(self) -> float:
-        """Rotor inertia in kg*m^2."""
-        return self.rotor_inertia_kgcm2 * 1e-4
 
 
 @dataclass(frozen=True)
