@@ -30,6 +30,8 @@ def serve(
     baud: int = typer.Option(None, "--baud", "-b", help="Serial baud rate (default: the profile's)."),
     parity: str = typer.Option(None, "--parity", help="N, E or O (default: the profile's)."),
     stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's)."),
+    line_baud: int = typer.Option(None, "--line-baud", help="Delay each answer by its wire time at this baud "
+                                  "(overrides 'sim config --line-baud'; 0 = off)."),
 ) -> None:
     """Serve simulated drives in the foreground (Ctrl-C stops) for any Modbus RTU master."""
     from servotool.sim.firmware import build_drive
@@ -46,6 +48,11 @@ def serve(
     line = LineSettings(baud=baud or p.serial.baud, parity=par, stopbits=stopbits or p.serial.stopbits,
                         bytesize=p.serial.bytesize)
     drives = [build_drive(p, u) for u in ids]
+    if line_baud is not None:
+        if line_baud < 0:
+            raise UsageError("--line-baud must be >= 0")
+        for d in drives:
+            d.settings["line_baud"] = line_baud
 
     def ready(where: str) -> None:
         info(f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "
