@@ -77,3 +77,12 @@ def test_active_alarm_refuses_before_any_motion(sim_dir):
         link.close()
     finally:
         sim.close()
+
+
+def test_step_check_shows_the_better_response_after_tuning(cli):
+    cli("sim", "config", "--load-ratio", "10")
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--step-check", "--rigidity", "15")
+    assert r.code == 0, r.err
+    before, after = r.json()["step_before"], r.json()["step_after"]
+    assert before["samples"] > 20 and after["samples"] > 20
+    assert after["overshoot_pct"] < before["overshoot_pct"]       # default ratio 1.5 vs true 10: under-damped

@@ -39,6 +39,8 @@ def inertia(
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask: move, then write the results."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Identify and show results; write nothing."),
     save_trace: Path = typer.Option(None, "--save-trace", help="Save the sampled speed/torque to this CSV."),
+    step_check: bool = typer.Option(False, "--step-check", help="Measure a speed step (overshoot, settling) "
+                                    "before and after; moves the axis about 1 more revolution each time."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
     """Identify the load inertia ratio (with friction and gravity), write it, and set matching gains."""
@@ -49,6 +51,9 @@ def inertia(
     with drive(ctx) as d:
         wizard.preflight(d, method)
         ident = wizard.Identifier(d)
+        step_speed = 200.0
+        before = wizard.step_response(d, step_speed) if step_check and _confirm("Run the step check?", yes) \
+            else None
         if method == "host":
             plan = wizard.plan_motion(d, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
                                       direction=direction, repeats=repeats)
@@ -75,6 +80,7 @@ def inertia(
                 d.write_verified(c.entry, c.raw)
         elif method == "drive" and not dry_run:
             write = True  # the drive stored its result itself
+        after = wizard.step_response(d, step_speed) if before is not None and write else None
     est = result.estimate
     if as_json:
         emit_json({
@@ -89,6 +95,7 @@ def inertia(
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
                       for c in changes],
             "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
+            "step_before": vars(before) if before else None, "step_after": vars(after) if after else None,
         })
         return
     out.print(f"load inertia ratio (J_load/J_motor): {result.old_ratio:.2f} -> {result.new_ratio:.2f}"
@@ -107,3 +114,7 @@ def inertia(
         for c in changes:
             t.add_row(c.role, c.entry.code, f"{c.old:g}", f"{c.new:g}", c.entry.unit)
         out.print(t)
+    if before is not None:
+        out.print(f"step before: {before.describe()}", markup=False)
+    if after is not None:
+        out.print(f"step after:  {after.describe()}", markup=False)

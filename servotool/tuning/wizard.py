@@ -348,3 +348,56 @@ def ratio_raw(drive: Drive, load_ratio: float) -> tuple[Entry, int]:
     if not entry.min <= raw <= entry.max:
         raise IdentificationFailed(f"identified ratio {load_ratio:.2f} does not fit {entry.code}'s range")
     return entry, raw
+
+
+@dataclass(frozen=True)
+class StepResponse:
+    """Speed step through JOG with the shortest ramp the drive allows."""
+
+    target_rpm: float
+    overshoot_pct: float
+    settling_ms: float | None     # within 5 % of the target for good; None when it never settles
+    samples: int
+
+    def describe(self) -> str:
+        settle = f"{self.settling_ms:.0f} ms" if self.settling_ms is not None else "does not settle"
+        return f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}"
+
+
+def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Timing | None = None
+                  ) -> StepResponse:
+    """Command a JOG speed step, sample the speed, stop; JOG parameters are put back afterwards."""
+    p, timing = drive.profile, timing or RealTiming()
+    jog, jog_speed, jog_accel = (p.need_role(r, FEATURE) for r in ("jog", "jog_speed", "jog_accel"))
+    speed_e, keepalive = p.need_role("speed_feedback", FEATURE), p.role("keepalive")
+    saved = {e.code: r.raw for e, r in zip((jog_speed, jog_accel), drive.read_entries([jog_speed, jog_accel]),
+                                              strict=True)}
+    t: list[float] = []
+    v: list[float] = []
+    try:
+        drive.write_raw(jog_speed, max(jog_speed.min, min(jog_speed.max, round(speed_rpm / jog_speed.scale))))
+        drive.write_raw(jog_accel, jog_accel.min)
+        t0 = timing.now()
+        drive.write_raw(jog, 1)
+        last_beat = t0
+        while timing.now() - t0 < duration_s:
+            t.append(timing.now() - t0)
+            v.append(float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw)))
+            if keepalive is not None and timing.now() - last_beat > 0.1:
+                drive.write_raw(keepalive, 1)
+                last_beat = timing.now()
+        drive.write_raw(jog, 0)
+        end = timing.now() + 2.0
+        while timing.now() < end and abs(float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))) > 3:
+            timing.sleep(0.02)
+    finally:
+        servo = p.role("servo_on")
+        if servo is not None:
+            drive.write_raw(servo, 0)
+        for e in (jog_speed, jog_accel):
+            drive.write_raw(e, saved[e.code])
+    band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
+    outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
+    settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
+        (t[outside[-1] + 1] if outside else t[0]) * 1000
+    return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v))
