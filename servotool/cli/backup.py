@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import typer
 from rich.progress import Progress
 
 from servotool import backup as bk
-from servotool.cli.common import JSON_OPT, drive, state
+from servotool.cli.common import JSON_OPT, confirm, drive, state
 from servotool.cli.param import app
 from servotool.cli.render import emit_json, err, info, out, table, warn
 from servotool.codec import format_value
@@ -24,14 +23,6 @@ MARK = {"power_cycle": "power cycle", "servo_off": "servo off"}
 def _where(text: str) -> None:
     """Where the automatic backup went: shown even with --quiet, since it is the way back."""
     err.print(text, markup=False)
-
-
-def _confirm(question: str, yes: bool) -> bool:
-    if yes:
-        return True
-    if not sys.stdin.isatty():
-        raise UsageError("confirmation needed: run in a terminal or pass --yes")
-    return typer.confirm(question, default=False)
 
 
 @app.command("backup")
@@ -128,7 +119,7 @@ def restore_cmd(
             elif not plan.changes:
                 out.print("nothing to restore: the drive already matches", markup=False)
             return
-        if not _confirm(f"Write {len(plan.changes)} parameters?", yes):
+        if not confirm(f"Write {len(plan.changes)} parameters?", yes):
             raise typer.Exit(1)
         report = bk.restore(d, b, plan, notice=_where)
     if as_json:
@@ -167,7 +158,7 @@ def reset_cmd(
     """Factory defaults through the drive's own function, after an automatic backup."""
     with drive(ctx) as d:
         d.profile.need_role("factory_reset", "param reset")
-        if not _confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):
+        if not confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):
             raise typer.Exit(1)
         auto = bk.factory_reset(d, notice=_where)
         left = bk.not_at_default(d)

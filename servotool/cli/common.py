@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -11,6 +12,7 @@ import typer
 from servotool.cli.render import Verbosity, info, trace_frame
 from servotool.connection import ConnectOptions, Resolved, open_drives, resolve
 from servotool.drive import Drive
+from servotool.errors import UsageError
 
 
 @dataclass
@@ -41,6 +43,15 @@ def drives(ctx: typer.Context, units: list[int]) -> Iterator[list[Drive]]:
     with open_drives(resolved(ctx), units, trace=trace_frame if Verbosity.level > 0 else None,
                      notice=info) as found:
         yield found
+
+
+def confirm(question: str, yes: bool) -> bool:
+    """Ask before something irreversible; without a terminal, refuse (exit 2) rather than hang."""
+    if yes:
+        return True
+    if not sys.stdin.isatty():
+        raise UsageError(f"'{question}' needs confirmation: run in a terminal or pass --yes")
+    return typer.confirm(question, default=False)
 
 
 JSON_OPT = typer.Option(False, "--json", help="Machine-readable output with stable keys.")

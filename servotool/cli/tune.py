@@ -2,25 +2,16 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import typer
 
-from servotool.cli.common import drive
+from servotool.cli.common import confirm, drive
 from servotool.cli.render import emit_json, info, out, table
 from servotool.errors import UsageError
 from servotool.tuning import wizard
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
-
-
-def _confirm(question: str, yes: bool) -> bool:
-    if yes:
-        return True
-    if not sys.stdin.isatty():
-        raise UsageError(f"{question} needs confirmation: run in a terminal or pass --yes")
-    return typer.confirm(question, default=False)
 
 
 @app.command("inertia")
@@ -52,18 +43,18 @@ def inertia(
         wizard.preflight(d, method)
         ident = wizard.Identifier(d)
         step_speed = 200.0
-        before = wizard.step_response(d, step_speed) if step_check and _confirm("Run the step check?", yes) \
+        before = wizard.step_response(d, step_speed) if step_check and confirm("Run the step check?", yes) \
             else None
         if method == "host":
             plan = wizard.plan_motion(d, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
                                       direction=direction, repeats=repeats)
             info(f"motion: {plan.describe()}")
-            if not _confirm("Move the axis now?", yes):
+            if not confirm("Move the axis now?", yes):
                 raise typer.Exit(1)
             result = ident.run_host(plan, progress=info)
         else:
             info("motion: the drive's own identification (its parameters set torque and travel)")
-            if not _confirm("Start the drive's identification now?", yes):
+            if not confirm("Start the drive's identification now?", yes):
                 raise typer.Exit(1)
             result = ident.run_drive()
         if save_trace:
@@ -71,7 +62,7 @@ def inertia(
         entry, raw = wizard.ratio_raw(d, result.new_ratio)
         sugg, changes = (None, []) if no_gains else wizard.gain_changes(d, result.new_ratio, rigidity=rigidity,
                                                                         bandwidth_hz=bandwidth)
-        write = not dry_run and (method == "host") and _confirm(
+        write = not dry_run and (method == "host") and confirm(
             f"Write {entry.code} = {raw * entry.scale:g} {entry.unit}"
             + (" and the gains" if changes else "") + "?", yes)
         if write:
