@@ -137,7 +137,7 @@ class Jogger:
         self.set_speed(plan.speed_rpm)
         t0 = time.monotonic()
         try:
-            self.command(plan.direction)
+            self.command(plan.direction if command is None else 0)   # interactive: wait for the first key
             while True:
                 elapsed = time.monotonic() - t0
                 if plan.seconds is not None and elapsed >= plan.seconds:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import os
 import re
 import signal
@@ -103,3 +104,30 @@ def test_monitor_csv_while_jogging(cli, served, tmp_path):
     assert len(running) > 10
     assert running[len(running) // 2] == pytest.approx(500, abs=15)   # it was jogging at 500 rpm
     assert all(-350 < float(r[3]) < 350 for r in data)     # torque within the torque limit
+
+
+def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
+    """Keys in a real terminal (tmux): nothing moves before a key, ← runs reverse, q stops and exits."""
+    import shutil
+
+    if not shutil.which("tmux"):
+        pytest.skip("needs tmux (installed by .ci/run)")
+    out = tmp_path / "out.txt"
+    session = f"servotool-jog-{os.getpid()}"
+    cmd = (f"cd {ROOT} && SERVOTOOL_SIM_DIR={sim_dir} {sys.executable} -m servotool --port sim jog --speed 300 "
+           f"--interactive --json > {out} 2>/dev/null; echo $? >> {out}")
+    subprocess.run(["tmux", "new-session", "-d", "-s", session, "-x", "120", "-y", "20", cmd], check=True)
+    try:
+        time.sleep(2.5)
+        subprocess.run(["tmux", "send-keys", "-t", session, "Left"], check=True)
+        time.sleep(1.5)
+        subprocess.run(["tmux", "send-keys", "-t", session, "q"], check=True)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline and not out.read_text().strip().endswith("0"):
+            time.sleep(0.2)
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True)
+    text = out.read_text()
+    assert text.strip().endswith("0"), text
+    result = json.loads(text[: text.rindex("}") + 1])
+    assert result["peak_speed_rpm"] > 250 and abs(result["final_speed_rpm"]) < 10

@@ -64,8 +64,8 @@ def jog(
             if rpm is not None:
                 peak = max(peak, abs(rpm))
             if Verbosity.level >= 0 and err.is_terminal:
-                err.print(f"\r t={t:5.1f} s  speed={rpm if rpm is not None else float('nan'):8.1f} rpm ", end="",
-                          markup=False)
+                sys.stderr.write(f"\r t={t:5.1f} s  speed={rpm if rpm is not None else float('nan'):8.1f} rpm ")
+                sys.stderr.flush()
 
         try:
             if interactive:
