@@ -48,6 +48,7 @@ class Firmware:
         self.last_host = self.clock.now()
         self.ident: Identification | None = None
         self.alarm_history: list[int] = list(drive.bank.extra.get("alarm_history", []))
+        self._recorded = False  # whether the alarm latched now is already in the history
         drive.on_read.append(lambda _d: self.update())
         drive.on_param_change.append(self._param_changed)
         drive.handlers.update({
@@ -129,15 +130,14 @@ class Firmware:
         return alarm.code if alarm is not None else 0xFF
 
     def _record_alarm(self) -> None:
+        """Enter the latched alarm in the history once (it stays latched until a reset clears it)."""
         code = self._alarm_code()
-        if code and (not self.alarm_history or self.alarm_history[0] != code or not self._history_fresh):
+        if code and not self._recorded:
             self.alarm_history.insert(0, code)
             del self.alarm_history[8:]
             self.drive.bank.extra["alarm_history"] = self.alarm_history
             self.drive.bank.save()
-        self._history_fresh = True
-
-    _history_fresh = False
+            self._recorded = True
 
     # ----- functions (Fn writes) -----------------------------------------------------------------------------
     def _host_alive(self) -> None:
@@ -189,7 +189,7 @@ class Firmware:
         self.update()
         if raw:
             self.plant.clear_alarms()
-            self._history_fresh = False
+            self._recorded = self.plant.alarm is not None
         self._refresh_monitors()
 
     def _fn_inertia_id(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
