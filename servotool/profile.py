@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.resources
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -542,14 +541,10 @@ def _parse_motor(chk: _Checker, raw: Any) -> Motor | None:
 
 
 def builtin_dir() -> Path:
-    """Folder of the profiles shipped with the package (or the checkout's profiles/)."""
-    try:
-        path = Path(str(importlib.resources.files("servotool.profiles")))
-        if path.is_dir():
-            return path
-    except ModuleNotFoundError:
-        pass
-    return Path(__file__).resolve().parent.parent / "profiles"
+    """Folder of the profiles shipped with the package (or, in a source checkout, the top-level profiles/)."""
+    here = Path(__file__).resolve().parent
+    installed = here / "profiles"
+    return installed if installed.is_dir() else here.parent / "profiles"
 
 
 def builtin_ids() -> list[str]:
