@@ -48,6 +48,9 @@ def serve(
     line = LineSettings(baud=baud or p.serial.baud, parity=par, stopbits=stopbits or p.serial.stopbits,
                         bytesize=p.serial.bytesize)
     drives = [build_drive(p, u) for u in ids]
+    for d in drives:  # starting the server switches the drive on: pending power-cycle changes take effect
+        if took := d.power_cycle():
+            info(f"servotool: unit {d.unit} powered on; now in effect: {', '.join(took)}")
     if line_baud is not None:
         if line_baud < 0:
             raise UsageError("--line-baud must be >= 0")
@@ -89,8 +92,7 @@ def reset(
         out.print(f"simulated {p.model} unit {u}: factory state ({path} removed)", markup=False)
         return
     drive = SimulatedDrive(p, u)
-    pending = drive.bank.pending_power_cycle()
-    drive.power_cycle()
+    pending = drive.power_cycle()
     if as_json:
         emit_json({"profile": p.id, "unit": u, "reset": "power_cycle", "took_effect": pending})
         return

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from servotool.profile import Entry, Profile
@@ -32,15 +33,29 @@ class SimulatedDrive:
         self.bank = RegisterBank.open(profile, unit, state_file)
         if not persist:
             self.bank.path = None
-        self.fault_injection: dict[str, int] = dict(self.bank.extra.get("inject", {}))
         self.handlers: dict[str, FnHandler] = {
             "factory_reset": _factory_reset,
             "soft_reset": _soft_reset,
             "eeprom_save": _eeprom_save,
         }
-        self.settings = sim_settings(self.bank.extra.get("settings"))
         self.on_read: list[Callable[[SimulatedDrive], None]] = []
         self.on_param_change: list[Callable[[SimulatedDrive, Entry, int], None]] = []
+        self.on_reload: list[Callable[[SimulatedDrive], None]] = []
+        self._take_extra()
+
+    def _take_extra(self) -> None:
+        self.settings = sim_settings(self.bank.extra.get("settings"))
+        self.fault_injection: dict[str, int] = dict(self.bank.extra.get("inject", {}))
+
+    @contextmanager
+    def session(self) -> Iterator[None]:
+        """One request or command on the drive: under its state-file lock, with what other processes saved."""
+        with self.bank.locked() as reloaded:
+            if reloaded:
+                self._take_extra()
+                for hook in self.on_reload:
+                    hook(self)
+            yield
 
     @property
     def line_baud(self) -> int:
@@ -48,10 +63,11 @@ class SimulatedDrive:
 
     def configure(self, **changes: float | int) -> None:
         """Change and persist simulated-machine settings (validated)."""
-        merged = {**self.settings, **{k: v for k, v in changes.items() if v is not None}}
-        self.settings = sim_settings(merged, strict=True)
-        self.bank.extra["settings"] = self.settings
-        self.bank.save()
+        with self.session():
+            merged = {**self.settings, **{k: v for k, v in changes.items() if v is not None}}
+            self.settings = sim_settings(merged, strict=True)
+            self.bank.extra["settings"] = self.settings
+            self.bank.save()
 
     def role_of(self, entry: Entry) -> str | None:
         for role, code in self.profile.roles.items():
@@ -61,12 +77,17 @@ class SimulatedDrive:
 
     def read(self, address: int, count: int) -> list[int]:
         """Registers for a read request; raises SimRefusal for a Modbus exception."""
-        for hook in self.on_read:
-            hook(self)
-        return self.bank.read(address, count)
+        with self.session():
+            for hook in self.on_read:
+                hook(self)
+            return self.bank.read(address, count)
 
     def write(self, address: int, values: list[int]) -> None:
         """Apply a write request atomically: every entry is checked before any is changed."""
+        with self.session():
+            self._write(address, values)
+
+    def _write(self, address: int, values: list[int]) -> None:
         changes = self.bank.decode_write(address, values)
         for entry, _raw in changes:
             if (code := self.fault_injection.get(entry.code.upper())) is not None:
@@ -94,21 +115,29 @@ class SimulatedDrive:
             return
         handler(self, entry, raw)
 
-    def power_cycle(self) -> None:
-        self.bank.power_cycle()
-        self.bank.save()
+    def power_cycle(self) -> list[str]:
+        """Switch the drive off and on; returns the codes whose pending change took effect."""
+        with self.session():
+            pending = self.bank.pending_power_cycle()
+            self.bank.power_cycle()
+            self.bank.save()
+            for hook in self.on_reload:
+                hook(self)
+            return pending
 
     def inject_fault(self, code: str, exception: int = ILLEGAL_VALUE) -> None:
         """Make writes to one entry fail with a Modbus exception (tests of rollback paths)."""
         entry = self.profile.entry(code)
-        self.fault_injection[entry.code.upper()] = exception
-        self.bank.extra["inject"] = self.fault_injection
-        self.bank.save()
+        with self.session():
+            self.fault_injection[entry.code.upper()] = exception
+            self.bank.extra["inject"] = self.fault_injection
+            self.bank.save()
 
     def clear_faults(self) -> None:
-        self.fault_injection.clear()
-        self.bank.extra.pop("inject", None)
-        self.bank.save()
+        with self.session():
+            self.fault_injection.clear()
+            self.bank.extra.pop("inject", None)
+            self.bank.save()
 
 
 def _factory_reset(drive: SimulatedDrive, entry: Entry, raw: int) -> None:

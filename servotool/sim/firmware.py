@@ -47,10 +47,10 @@ class Firmware:
         self.jog_dir = 0
         self.last_host = self.clock.now()
         self.ident: Identification | None = None
-        self.alarm_history: list[int] = list(drive.bank.extra.get("alarm_history", []))
         self._recorded = False  # whether the alarm latched now is already in the history
         drive.on_read.append(lambda _d: self.update())
         drive.on_param_change.append(self._param_changed)
+        drive.on_reload.append(self._reloaded)
         drive.handlers.update({
             "jog": self._fn_jog, "speed_reference": self._fn_speed, "servo_on": self._fn_servo,
             "keepalive": self._fn_keepalive, "alarm_reset": self._fn_alarm_reset, "inertia_id": self._fn_inertia_id,
@@ -95,6 +95,16 @@ class Firmware:
         """Apply changed simulated-machine settings (sim config)."""
         self.plant.set_settings(self._plant_settings())
 
+    def _reloaded(self, _drive: SimulatedDrive) -> None:
+        """Another process changed the drive's state (sim config, sim reset, another server): take it over."""
+        self.plant.set_settings(self._plant_settings())
+        self.plant.set_gains(self._gains())
+
+    @property
+    def alarm_history(self) -> list[int]:
+        """Latest first; kept in the state file like a drive's fault log."""
+        return self.drive.bank.extra.setdefault("alarm_history", [])
+
     # ----- time ----------------------------------------------------------------------------------------------
     def _timeout_s(self) -> float:
         return self._eng("comm_timeout", 500.0) / 1000.0
@@ -135,7 +145,6 @@ class Firmware:
         if code and not self._recorded:
             self.alarm_history.insert(0, code)
             del self.alarm_history[8:]
-            self.drive.bank.extra["alarm_history"] = self.alarm_history
             self.drive.bank.save()
             self._recorded = True
 

@@ -10,12 +10,20 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from servotool.codec import raw_to_words, words_to_raw
+from servotool.errors import DeviceError
 from servotool.profile import Entry, Profile
+
+try:
+    import fcntl
+except ImportError:  # Windows: one process per simulated drive is then up to the user
+    fcntl = None  # type: ignore[assignment]
 
 ILLEGAL_FUNCTION = 1
 ILLEGAL_ADDRESS = 2
@@ -43,6 +51,29 @@ def state_path(profile_id: str, unit: int) -> Path:
     return sim_dir() / f"{profile_id}-unit{unit}.json"
 
 
+class _FileLock:
+    """An exclusive lock on a file kept open for the bank's lifetime (opening it per request costs a third of the
+    simulator's request rate)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._fh: Any = None
+
+    @contextmanager
+    def held(self) -> Iterator[None]:
+        if self._fh is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = self.path.open("a")
+        if fcntl is None:
+            yield
+            return
+        fcntl.flock(self._fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(self._fh, fcntl.LOCK_UN)
+
+
 @dataclass
 class RegisterBank:
     """Values of one simulated drive's entries, addressed like the real drive."""
@@ -57,6 +88,10 @@ class RegisterBank:
     eeprom_writes: int = 0
     path: Path | None = None
     _by_address: dict[int, Entry] = field(default_factory=dict, repr=False)
+    _stamp: tuple[int, int, int] | None = field(default=None, repr=False)   # the state file as last read/written
+    _held: bool = field(default=False, repr=False)
+    _dirty: bool = field(default=False, repr=False)
+    _file_lock: _FileLock | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         for e in self.profile.entries:
@@ -69,40 +104,115 @@ class RegisterBank:
                 layer.setdefault(code, value)
 
     # ----- persistence -------------------------------------------------------------------------------------
+    # The state file is the drive: every process that serves or configures it (sim serve, --port sim, sim config)
+    # changes it under a file lock after reloading what the others saved, so no process undoes another's write.
+
     @classmethod
     def open(cls, profile: Profile, unit: int, path: Path | None = None) -> RegisterBank:
-        """Load the drive's state file, or start from factory defaults."""
-        path = path or state_path(profile.id, unit)
-        bank = cls(profile, unit, path=path)
-        try:
-            data = json.loads(path.read_text())
-        except (OSError, ValueError):
-            return bank
-        if data.get("profile") != profile.id:
-            return bank
-        known = {e.code for e in profile.entries if e.cls == "Pn"}
-        for name in ("eeprom", "ram", "effective"):
-            layer = getattr(bank, name)
-            for code, value in (data.get(name) or {}).items():
-                entry = profile.find(code)
-                if code in known and entry and isinstance(value, int) and entry.min <= value <= entry.max:
-                    layer[code] = value
-        bank.extra = data.get("extra") or {}
-        bank.eeprom_writes = int(data.get("eeprom_writes", 0))
+        """Load the drive's state file, or start from factory defaults when there is none."""
+        bank = cls(profile, unit, path=path or state_path(profile.id, unit))
+        bank.reload()
         return bank
 
+    def _lock(self) -> _FileLock:
+        assert self.path is not None
+        if self._file_lock is None or self._file_lock.path.parent != self.path.parent:
+            self._file_lock = _FileLock(self.path.with_name(self.path.name + ".lock"))
+        return self._file_lock
+
+    def reload(self) -> bool:
+        """Take over the state file when another process changed it since; True when anything was (re)loaded."""
+        if self.path is None:
+            return False
+        try:
+            st = os.stat(self.path)
+            if (st.st_ino, st.st_mtime_ns, st.st_size) == self._stamp:
+                return False
+            with self.path.open("rb") as fh:
+                st = os.fstat(fh.fileno())
+                stamp = (st.st_ino, st.st_mtime_ns, st.st_size)
+                text = fh.read().decode("utf-8")
+        except FileNotFoundError:
+            if self._stamp is None:
+                return False
+            self._stamp = None        # removed (sim reset --factory): factory state
+            self._load({})
+            return True
+        except (OSError, UnicodeDecodeError) as exc:
+            raise self._corrupt(str(exc)) from None
+        try:
+            data = json.loads(text)
+        except ValueError as exc:
+            raise self._corrupt(f"not JSON ({exc})") from None
+        self._load(data)
+        self._stamp = stamp
+        return True
+
+    def _corrupt(self, why: str) -> DeviceError:
+        return DeviceError(f"simulated drive state file {self.path} is unreadable: {why}; move it away or run "
+                           f"'servotool sim reset --factory --profile {self.profile.id} --unit {self.unit}'")
+
+    def _load(self, data: Any) -> None:
+        if not isinstance(data, dict):
+            raise self._corrupt("not a mapping")
+        if data and data.get("profile") != self.profile.id:
+            raise self._corrupt(f"it belongs to profile {data.get('profile')!r}, not {self.profile.id!r}")
+        layers = {name: data.get(name) or {} for name in ("eeprom", "ram", "effective")}
+        extra, writes = data.get("extra") or {}, data.get("eeprom_writes", 0)
+        if not all(isinstance(v, dict) for v in layers.values()) or not isinstance(extra, dict) \
+                or not isinstance(writes, int):
+            raise self._corrupt("unexpected layout")
+        fresh = RegisterBank(self.profile, self.unit)
+        for name, stored in layers.items():
+            layer = getattr(fresh, name)
+            for code, value in stored.items():
+                entry = self.profile.find(code)
+                # Values a newer profile no longer allows fall back to the default instead of failing the drive.
+                if code in layer and entry and isinstance(value, int) and entry.min <= value <= entry.max:
+                    layer[code] = value
+            setattr(self, name, layer)
+        self.extra = extra
+        self.eeprom_writes = writes
+
+    @contextmanager
+    def locked(self) -> Iterator[bool]:
+        """Hold the drive's lock: reload what other processes saved (yields whether anything was), save at the end."""
+        if self.path is None or self._held:
+            yield False
+            return
+        with self._lock().held():
+            self._held, self._dirty = True, False
+            try:
+                yield self.reload()
+            finally:
+                self._held = False
+                if self._dirty:
+                    self._write()
+
     def save(self) -> None:
-        """Write the state file atomically, so a killed process never leaves half a file."""
+        """Persist the state (at the end of the current locked() block, or now under the lock)."""
         if self.path is None:
             return
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self._held:
+            self._dirty = True
+            return
+        with self._lock().held():
+            self._write()
+
+    def _write(self) -> None:
+        """Write the state file atomically, so a killed process never leaves half a file."""
+        assert self.path is not None
         data = {"profile": self.profile.id, "version": self.profile.version, "unit": self.unit,
                 "eeprom": self.eeprom, "ram": self.ram, "effective": self.effective,
                 "eeprom_writes": self.eeprom_writes, "extra": self.extra}
         fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=self.path.name, suffix=".tmp")
         with os.fdopen(fd, "w") as fh:
             json.dump(data, fh, indent=1, sort_keys=True)
+            fh.flush()
+            st = os.fstat(fh.fileno())
         os.replace(tmp, self.path)
+        self._stamp = (st.st_ino, st.st_mtime_ns, st.st_size)
+        self._dirty = False
 
     def power_cycle(self) -> None:
         """What a real power cycle does: RAM reloads from EEPROM and everything takes effect."""
