@@ -131,6 +131,8 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise UsageError(f"cannot read {what}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise UsageError(f"{what}: not a servotool backup file (not UTF-8 text)") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         raise UsageError(f"{what}: not a valid backup (broken YAML{f' at line {mark.line + 1}' if mark else ''})") \

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 from collections.abc import Callable, Iterator
@@ -49,14 +50,16 @@ def config_path() -> Path:
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
+    if name not in ("baud", "stopbits", "unit", "retries", "timeout"):
+        return str(value)
     try:
-        if name in ("baud", "stopbits", "unit", "retries"):
-            return int(value)
-        if name == "timeout":
-            return float(value)
+        if isinstance(value, bool):       # YAML's 'yes'/'true' is no number
+            raise ValueError
+        number = float(value) if name == "timeout" else int(value)
     except (TypeError, ValueError):
-        raise UsageError(f"{where}: {name} must be a number, got {value!r}") from None
-    return str(value)
+        kind = "a number" if name == "timeout" else "a whole number"
+        raise UsageError(f"{where}: {name} must be {kind}, got {value!r}") from None
+    return number
 
 
 def _from_env() -> ConnectOptions:
@@ -69,9 +72,15 @@ def _from_config() -> ConnectOptions:
     if not path.exists():
         return ConnectOptions()
     try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise UsageError(f"config file {path}: {exc}") from None
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except OSError as exc:
+        raise UsageError(f"config file {path}: cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise UsageError(f"config file {path}: not UTF-8 text (byte {exc.start})") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}: " if mark else ""
+        raise UsageError(f"config file {path}: {where}invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
     if not isinstance(data, dict):
         raise UsageError(f"config file {path}: expected a mapping of option: value")
     unknown = set(data) - set(ENV)
@@ -115,27 +124,38 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
     if name is None:
         raise UsageError("no drive profile given: use --profile (see 'servotool profiles list') or SERVOTOOL_PROFILE")
     profile = load_profile(name)
-    parity = PARITIES.get((opts.parity or profile.serial.parity).upper())
-    if parity is None:
-        raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
+    baud, parity, stopbits = line_format(opts, profile)
     settings = LinkSettings(
-        port=port, baud=opts.baud or profile.serial.baud, parity=parity,
-        stopbits=opts.stopbits or profile.serial.stopbits, bytesize=profile.serial.bytesize,
+        port=port, baud=baud, parity=parity, stopbits=stopbits, bytesize=profile.serial.bytesize,
         timeout=opts.timeout if opts.timeout is not None else (0.5 if port == SIM_PORT else 1.0),
         retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else 2),
     )
-    unit = opts.unit if opts.unit is not None else profile.serial.unit
-    if not 1 <= unit <= 247:
-        raise UsageError(f"bad unit id {unit}: must be 1..247")
-    if settings.baud <= 0:
-        raise UsageError(f"bad baud rate {settings.baud}")
-    if settings.stopbits not in (1, 2):
-        raise UsageError(f"bad stop bits {settings.stopbits}: must be 1 or 2")
-    if settings.timeout <= 0:
-        raise UsageError("timeout must be > 0")
+    if not (math.isfinite(settings.timeout) and 0 < settings.timeout <= 3600):
+        raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
     if settings.retries < 0:
         raise UsageError("retries must be >= 0")
-    return Resolved(profile, settings, unit)
+    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.serial.unit))
+
+
+def check_unit(unit: int) -> int:
+    """A Modbus RTU slave address, or UsageError."""
+    if not 1 <= unit <= 247:
+        raise UsageError(f"bad unit id {unit}: must be 1..247")
+    return unit
+
+
+def line_format(opts: ConnectOptions, profile: Profile) -> tuple[int, str, int]:
+    """(baud, parity, stop bits) from the options, defaulting to the profile's factory settings; checked."""
+    baud = opts.baud if opts.baud is not None else profile.serial.baud
+    stopbits = opts.stopbits if opts.stopbits is not None else profile.serial.stopbits
+    parity = PARITIES.get((opts.parity or profile.serial.parity).upper())
+    if parity is None:
+        raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
+    if not 300 <= baud <= 4_000_000:
+        raise UsageError(f"bad baud rate {baud}: must be 300..4000000")
+    if stopbits not in (1, 2):
+        raise UsageError(f"bad stop bits {stopbits}: must be 1 or 2")
+    return baud, parity, stopbits
 
 
 def sim_notice(resolved: Resolved, units: list[int]) -> str:

@@ -360,10 +360,11 @@ def _parse_entry(chk: _Checker, raw: Any, index: int, word_order: str) -> Entry 
     )
 
 
-def _check_overlaps(chk: _Checker, entries: list[Entry]) -> None:
+def _check_overlaps(chk: _Checker, entries: list[tuple[int, Entry]]) -> None:
+    """Duplicate codes and shared addresses; i is the entry's position in the file's list."""
     seen_codes: dict[str, int] = {}
     owner: dict[int, str] = {}
-    for i, e in enumerate(entries):
+    for i, e in entries:
         key = e.code.upper()
         if key in seen_codes:
             chk.bad(f"entries[{i}] ({e.code})", f"duplicate code (first at entries[{seen_codes[key]}])")
@@ -404,9 +405,12 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     if not isinstance(raw_entries, list) or not raw_entries:
         chk.bad("entries", "expected a non-empty list")
         raw_entries = []
-    entries = [e for i, raw in enumerate(raw_entries) if (e := _parse_entry(chk, raw, i, word_order))]
-    _check_overlaps(chk, entries)
+    parsed = [(i, e) for i, raw in enumerate(raw_entries) if (e := _parse_entry(chk, raw, i, word_order))]
+    _check_overlaps(chk, parsed)
+    entries = [e for _, e in parsed]
     codes = {e.code.upper() for e in entries}
+    # Codes of entries that are present but broken: references to them are not 'unknown'.
+    broken = {str(raw["code"]).upper() for raw in raw_entries if isinstance(raw, dict) and "code" in raw} - codes
     if groups:
         for e in entries:
             if e.group and e.group not in groups:
@@ -416,7 +420,9 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         chk.bad("roles", "expected a mapping of role -> code")
         roles = {}
     for role, code in roles.items():
-        if not isinstance(code, str) or code.upper() not in codes:
+        if isinstance(code, str) and code.upper() in broken:
+            chk.bad(f"roles.{role}", f"names broken entry {code!r} (see its own problem)")
+        elif not isinstance(code, str) or code.upper() not in codes:
             chk.bad(f"roles.{role}", f"names unknown entry {code!r}")
     if persistence.mode == "switchable" and persistence.switch_code.upper() not in codes:
         chk.bad("persistence.switch.code", f"names unknown entry {persistence.switch_code!r}")
@@ -557,6 +563,8 @@ def read_profile(path: Path) -> tuple[Profile | None, list[str]]:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         return None, [f"{path}: cannot read: {exc.strerror or exc}"]
+    except UnicodeDecodeError as exc:
+        return None, [f"{path}: not UTF-8 text (byte {exc.start})"]
     try:
         data = yaml.load(text, Loader=_SAFE_LOADER)  # safe loader (C-accelerated when available)
     except yaml.YAMLError as exc:

@@ -72,7 +72,8 @@ class ModbusLink:
         self.settings = settings
         self.trace = trace
         self.requests = 0
-        hook = self._trace_packet if trace else None
+        self._received = b""   # bytes that came back during the current request, valid frame or not
+        hook = self._trace_packet
         tcp = parse_tcp(settings.port)
         self._client: ModbusTcpClient | ModbusSerialClient
         if tcp:
@@ -96,21 +97,28 @@ class ModbusLink:
         return "no such device, busy, or permission denied"
 
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
+        if not sending:
+            self._received += data
         if self.trace:
             self.trace(sending, data)
         return data
 
     def _call(self, what: str, fn: Callable[[], object]) -> object:
         self.requests += 1
+        self._received = b""
         try:
             response = fn()
         except ConnectionException as exc:
             raise DeviceError(f"{what}: link lost ({_short(exc)})") from None
         except ModbusIOException:
+            tries = f"{self.settings.retries + 1} tr{'y' if self.settings.retries == 0 else 'ies'}"
+            if self._received:
+                raise DeviceError(
+                    f"{what}: garbled response after {tries}, {len(self._received)} bytes with a bad CRC or "
+                    f"framing (noise, termination, baud/parity mismatch, or two masters on the line)") from None
             raise DeviceError(
-                f"{what}: no valid response within {self.settings.timeout:g} s after "
-                f"{self.settings.retries + 1} tries (wrong unit id, baud/parity, wiring, or CRC errors)"
-            ) from None
+                f"{what}: no response within {self.settings.timeout:g} s after {tries} "
+                f"(wrong unit id, baud/parity, wiring, or the drive is off)") from None
         except ModbusException as exc:
             raise DeviceError(f"{what}: {_short(exc)}") from None
         if isinstance(response, ExceptionResponse):

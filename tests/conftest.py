@@ -26,9 +26,10 @@ class Result:
 
 @pytest.fixture
 def sim_dir(tmp_path, monkeypatch) -> Path:
-    """Each test gets its own simulated drives (state files) and no user config."""
+    """Each test gets its own simulated drives (state files), automatic-backup folder and no user config."""
     d = tmp_path / "sim"
     monkeypatch.setenv("SERVOTOOL_SIM_DIR", str(d))
+    monkeypatch.setenv("SERVOTOOL_BACKUP_DIR", str(tmp_path / "auto-backups"))
     monkeypatch.setenv("SERVOTOOL_CONFIG", str(tmp_path / "no-config.yaml"))
     for var in ("SERVOTOOL_PORT", "SERVOTOOL_PROFILE", "SERVOTOOL_UNIT", "SERVOTOOL_BAUD"):
         monkeypatch.delenv(var, raising=False)

@@ -66,6 +66,14 @@ def test_bad_input_is_one_line_and_writes_nothing(cli, sim_dir):
         (("param", "set", "Pn100"), 2, "is not CODE=VALUE"),
         (("param", "get", "Pn999"), 2, "unknown code"),
         (("param", "list", "--group", "nosuch"), 2, "unknown group"),
+        (("param", "list", "--class", "Xn"), 2, "Invalid value for --class"),
+        (("--unit", "abc", "param", "list"), 2, "Invalid value for '--unit'"),
+        (("--unit", "0", "param", "list"), 2, "bad unit id 0"),
+        (("--timeout", "nan", "param", "list"), 2, "bad timeout nan"),
+        (("--baud", "0", "param", "list"), 2, "bad baud rate 0"),
+        (("param", "nosuch"), 2, "No such command 'nosuch'"),
+        (("sim", "reset", "--power-cycle", "--unit", "999"), 2, "bad unit id 999"),
+        (("sim", "serve", "--port", "tcp://127.0.0.1:0", "--stopbits", "5"), 2, "bad stop bits 5"),
     ]
     for args, code, text in cases:
         r = cli("--port", "sim", *args)
@@ -73,6 +81,7 @@ def test_bad_input_is_one_line_and_writes_nothing(cli, sim_dir):
         assert text in r.err, (args, r.err)
         assert "Traceback" not in r.err
         assert len([ln for ln in r.err.splitlines() if ln.startswith("servotool: error")]) == 1
+    assert not list(sim_dir.glob("*.json"))    # no simulated drive was even created
     # one bad value among good ones: nothing at all is written
     r = cli("--port", "sim", "param", "set", "Pn101=20", "Pn100=99999")
     assert r.code == 2
@@ -100,6 +109,16 @@ def test_options_from_environment_and_config_file(cli, tmp_path):
     cfg.write_text("colour: red\n")
     r = cli("param", "get", "Pn004", env={"SERVOTOOL_CONFIG": str(cfg)})
     assert r.code == 2 and "unknown option(s) colour" in r.err
+    for text, why in (("timeout: true\n", "timeout must be a number"), ("port: [\n", "line 2: invalid YAML"),
+                      ("port: s\xefm\n", "not UTF-8")):
+        cfg.write_bytes(text.encode("latin-1"))
+        r = cli("param", "get", "Pn004", env={"SERVOTOOL_CONFIG": str(cfg)})
+        assert r.code == 2 and why in r.err and len(r.err.splitlines()) == 1, r.err
+
+
+def test_quiet_still_says_the_drive_is_simulated(cli):
+    r = cli("-q", "--port", "sim", "param", "get", "Pn004", "--json")
+    assert r.code == 0 and r.err.strip().startswith("servotool: SIMULATED drive")
 
 
 def test_profiles_list_show_check(cli, tmp_path):

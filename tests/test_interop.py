@@ -97,4 +97,4 @@ def test_servotool_client_over_the_same_line(pty_line, cli):
     r = cli(*base, "--unit", "2", "param", "get", "Pn101", "--json")
     assert r.code == 0 and r.json()[0]["value"] == 18.0
     r = cli(*base, "--unit", "7", "--timeout", "0.2", "--retries", "0", "param", "get", "Pn101")
-    assert r.code == 1 and "no valid response" in r.err
+    assert r.code == 1 and "no response within" in r.err

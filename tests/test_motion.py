@@ -37,6 +37,28 @@ def read(port: str, *codes: str) -> list[float]:
         return [r.eng for r in d.read(*codes)]
 
 
+def test_a_served_drive_and_port_sim_are_one_drive(cli, served):
+    assert cli("--port", "sim", "param", "set", "Pn102=40").code == 0
+    assert read(served, "Pn102") == [40.0]
+    assert cli("--port", served, "-P", "dsx7e", "param", "set", "Pn100=50").code == 0
+    r = cli("--port", "sim", "param", "get", "Pn100", "Pn102", "--json")
+    assert [v["value"] for v in r.json()] == [50.0, 40.0]
+
+
+def test_restarting_sim_serve_is_a_power_on(cli, sim_dir):
+    assert cli("--port", "sim", "param", "set", "Pn008=20000").code == 0
+    assert cli("sim", "show", "--json").json()["pending_power_cycle"] == ["Pn008"]
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
+                            cwd=ROOT, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    try:
+        assert "serving on" in proc.stderr.readline()
+        assert "unit 1 powered on; now in effect: Pn008" in proc.stderr.readline()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    assert cli("sim", "show", "--json").json()["pending_power_cycle"] == []
+
+
 def test_jog_reaches_the_commanded_speed_and_stops(cli, served):
     r = cli("--port", served, "--profile", "dsx7e", "jog", "--speed", "600", "--time", "1.5", "--json")
     assert r.code == 0, r.err

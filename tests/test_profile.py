@@ -76,6 +76,19 @@ def test_all_problems_are_reported_not_just_the_first(tmp_path):
     assert len(problems) >= 2
 
 
+def test_locations_count_broken_entries_and_references_to_them_are_not_unknown(tmp_path):
+    import copy
+
+    data = copy.deepcopy(GOOD)
+    data["entries"][0]["default"] = "ten"           # P1 broken
+    data["entries"][2]["address"] = 2               # U1 (entries[2]) overlaps P2
+    data["roles"]["inertia_ratio"] = "P1"
+    _, problems = read_profile(write(tmp_path, data))
+    assert any("entries[2] (U1): address 2 (0x0002) overlaps P2" in p for p in problems), problems
+    assert any("roles.inertia_ratio: names broken entry 'P1'" in p for p in problems), problems
+    assert not any("unknown entry" in p for p in problems), problems
+
+
 def test_invalid_yaml_names_the_line(tmp_path):
     path = tmp_path / "bad.yaml"
     path.write_text("schema: 1\nentries: [\n  {code: P1\n")

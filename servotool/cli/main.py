@@ -67,16 +67,36 @@ def main(
 def run() -> None:
     """Console-script entry point: one clear line and an exit code for every failure."""
     try:
-        app(prog_name="servotool")
+        result = app(prog_name="servotool", standalone_mode=False)
     except ServoError as exc:
         err.print(f"servotool: error: {exc}", markup=False)
         sys.exit(exc.exit_code)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, typer.Abort):
         err.print("servotool: interrupted", markup=False)
         sys.exit(130)
-    except Exception as exc:  # a bug: still one line for the user, the traceback on request
-        if os.environ.get("SERVOTOOL_DEBUG"):
+    except Exception as exc:
+        if (code := _usage_error(exc)) is not None:
+            sys.exit(code)
+        if os.environ.get("SERVOTOOL_DEBUG"):  # a bug: still one line for the user, the traceback on request
             raise
         err.print(f"servotool: internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the traceback)",
                   markup=False)
         sys.exit(1)
+    sys.exit(result if isinstance(result, int) else 0)
+
+
+def _usage_error(exc: Exception) -> int | None:
+    """Report typer's own usage errors (bad option value, unknown option) in one line; None for other exceptions.
+
+    Matched by shape: typer vendors click privately, so its exception classes are not importable API.
+    """
+    message, code = getattr(exc, "format_message", None), getattr(exc, "exit_code", None)
+    if not callable(message) or not isinstance(code, int):
+        return None
+    ctx = getattr(exc, "ctx", None)
+    if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:
+        print(ctx.get_help())
+        return code
+    where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+    err.print(f"servotool: error: {' '.join(str(message()).split())}{where}", markup=False)
+    return code

@@ -26,6 +26,11 @@ def info(text: str) -> None:
         err.print(text, markup=False)
 
 
+def notice(text: str) -> None:
+    """A line on stderr that --quiet does not hide (that the drive is simulated, for one)."""
+    err.print(text, markup=False)
+
+
 def warn(text: str) -> None:
     err.print(f"servotool: warning: {text}", markup=False)
 

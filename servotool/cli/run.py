@@ -10,7 +10,7 @@ import typer
 
 from servotool import plan as plans
 from servotool.cli.common import state
-from servotool.cli.render import Verbosity, emit_json, info, out, trace_frame
+from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame
 from servotool.connection import ConnectOptions, merge, open_drives, resolve
 from servotool.errors import ServoError
 
@@ -51,7 +51,7 @@ def run(
             raise ServoError(f"prompt '{question}' needs an operator: run in a terminal or pass --yes")
         return typer.confirm(question, default=False)
 
-    with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=info) as drives:
+    with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice) as drives:
         runner = plans.Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info)
         ok = runner.run()
     report_path = report or plan_file.with_suffix(".report.json")

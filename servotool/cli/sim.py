@@ -6,7 +6,7 @@ import typer
 
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, emit_json, info, out, table, trace_frame
-from servotool.connection import PARITIES, SIM_DEFAULT_PROFILE, ConnectOptions, merge
+from servotool.connection import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit, line_format, merge
 from servotool.errors import UsageError
 from servotool.profile import load_profile
 from servotool.sim.device import SIM_SETTINGS, SimulatedDrive
@@ -38,19 +38,14 @@ def serve(
     from servotool.sim.server import LineSettings, serve_forever
 
     p = _profile(ctx, profile)
-    ids = units or [p.serial.unit]
-    for u in ids:
-        if not 1 <= u <= 247:
-            raise UsageError(f"bad unit id {u}: must be 1..247")
-    par = PARITIES.get((parity or p.serial.parity).upper())
-    if par is None:
-        raise UsageError(f"bad parity '{parity}': use N, E or O")
-    line = LineSettings(baud=baud or p.serial.baud, parity=par, stopbits=stopbits or p.serial.stopbits,
-                        bytesize=p.serial.bytesize)
+    ids = [check_unit(u) for u in units or [p.serial.unit]]
+    if len(set(ids)) != len(ids):
+        raise UsageError("each --unit may be given once")
+    bps, par, stop = line_format(ConnectOptions(baud=baud, parity=parity, stopbits=stopbits), p)
+    line = LineSettings(baud=bps, parity=par, stopbits=stop, bytesize=p.serial.bytesize)
     drives = [build_drive(p, u) for u in ids]
-    for d in drives:  # starting the server switches the drive on: pending power-cycle changes take effect
-        if took := d.power_cycle():
-            info(f"servotool: unit {d.unit} powered on; now in effect: {', '.join(took)}")
+    # Starting the server switches the drives on: pending power-cycle changes take effect.
+    took = {d.unit: d.power_cycle() for d in drives}
     if line_baud is not None:
         if line_baud < 0:
             raise UsageError("--line-baud must be >= 0")
@@ -60,6 +55,9 @@ def serve(
     def ready(where: str) -> None:
         info(f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "
              f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); Ctrl-C stops")
+        for u, codes in took.items():
+            if codes:
+                info(f"servotool: unit {u} powered on; now in effect: {', '.join(codes)}")
 
     try:
         serve_forever(port, drives, line, trace=trace_frame if Verbosity.level > 0 else None, ready=ready)
@@ -80,7 +78,7 @@ def reset(
     """Power-cycle or wipe a simulated drive (its state file)."""
     opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
     p = _profile(ctx, opts.profile)
-    u = opts.unit or p.serial.unit
+    u = check_unit(opts.unit if opts.unit is not None else p.serial.unit)
     if power_cycle == factory:
         raise UsageError("give exactly one of --power-cycle or --factory")
     if factory:
@@ -103,7 +101,7 @@ def reset(
 def _target(ctx: typer.Context, profile: str | None, unit: int | None) -> SimulatedDrive:
     opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
     p = _profile(ctx, opts.profile)
-    return SimulatedDrive(p, opts.unit or p.serial.unit)
+    return SimulatedDrive(p, check_unit(opts.unit if opts.unit is not None else p.serial.unit))
 
 
 @app.command("config")
