@@ -154,6 +154,36 @@ def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back
     assert drive.bank.value("Po301") == 50
 
 
+def test_the_eeprom_switch_in_a_backup_never_redirects_the_restore(auto_dir, tmp_path):
+    f = tmp_path / "is620p.yaml"
+    with open_drives(resolve(ConnectOptions(port="sim", profile="is620p")), notice=lambda _m: None) as (d,):
+        params.apply_set(d, params.plan_set(d, ["H08-00=30.0", "H08-02=50.0"]))
+        d.write_raw(d.profile.entry("H0C-13"), 0)        # this axis kept Modbus writes in RAM when backed up
+        bk.write_backup(d, f)
+        bk.factory_reset(d)                              # H0C-13 back to 1 (store in EEPROM)
+        b = bk.load(f, d.profile)
+        plan = bk.plan_restore(d.profile, b, bk.take(d).values)
+        assert [e.code for e, _ in plan.skipped] == ["H0C-13"]
+        report = bk.restore(d, b, plan)
+        assert sorted(e.code for e in report.written) == ["H08-00", "H08-02"] and report.persisted
+        assert d.read_one("H0C-13").raw == 1
+    drive = SimulatedDrive(load_profile("is620p"), 1)
+    drive.power_cycle()
+    assert [drive.bank.value(c) for c in ("H08-00", "H08-02")] == [300, 500]
+
+
+def test_rollback_on_a_switchable_drive_is_judged_without_the_switch_it_flipped(auto_dir, tmp_path, cli):
+    f = tmp_path / "sd25.yaml"
+    changes = ["Po301=50", "Po109=5", "Po110=30", "Po111=40"]
+    assert cli("--port", "sim", "-P", "sd25", "param", "set", *changes).code == 0
+    assert cli("--port", "sim", "-P", "sd25", "param", "backup", "-o", str(f)).code == 0
+    assert cli("--port", "sim", "-P", "sd25", "param", "reset", "--yes").code == 0
+    SimulatedDrive(load_profile("sd25"), 1).inject_fault("Po110")
+    r = cli("--port", "sim", "-P", "sd25", "param", "restore", str(f), "--yes")
+    assert r.code == 1 and "restore stopped at Po110" in r.err
+    assert "read back, the drive equals the automatic backup" in r.err, r.err
+
+
 def _edits() -> list[tuple[str, object, str]]:
     return [
         ("truncated", lambda t: t[: len(t) // 2], "not a valid backup|incomplete"),
