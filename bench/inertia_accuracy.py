@@ -64,7 +64,7 @@ def identify(ratio: float, friction: float, gravity: float, noise: float, baud: 
     sim.settings.update(load_ratio=ratio, friction=friction, load_torque=gravity, noise=noise, seed=seed)
     sim.firmware.reconfigure()
     drive = Drive(WireLink(sim, clock, baud), profile, 1)
-    plan = wizard.plan_motion(drive, max_speed=None, accel_time_ms=200, travel_rev=2.0, direction="both",
+    plan = wizard.plan_motion(profile, max_speed=None, accel_time_ms=200, travel_rev=2.0, direction="both",
                               repeats=3)
     return wizard.Identifier(drive, VirtualTiming(clock)).run_host(plan)
 

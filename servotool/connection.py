@@ -86,7 +86,12 @@ def _from_config() -> ConnectOptions:
     unknown = set(data) - set(ENV)
     if unknown:
         raise UsageError(f"config file {path}: unknown option(s) {', '.join(sorted(unknown))}")
-    return ConnectOptions(**{k: _convert(k, v, str(path)) for k, v in data.items()})
+    return options_from(data, str(path))
+
+
+def options_from(data: dict[str, Any], where: str) -> ConnectOptions:
+    """ConnectOptions from a mapping read from a file (config, plan); wrong types are a UsageError naming where."""
+    return ConnectOptions(**{k: _convert(k, v, where) for k, v in data.items() if k in ENV})
 
 
 def merge(*layers: ConnectOptions) -> ConnectOptions:

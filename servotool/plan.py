@@ -34,8 +34,9 @@ import yaml
 
 from servotool import alarms
 from servotool.codec import format_value, parse_value, raw_to_eng
+from servotool.connection import options_from
 from servotool.drive import Drive
-from servotool.errors import ServoError, UsageError, VerifyError
+from servotool.errors import DeviceError, ServoError, UsageError, VerifyError
 from servotool.profile import Entry, Profile
 
 STEP_NAMES = ("set", "expect", "backup", "restore", "jog", "tune inertia", "wait", "alarm clear", "save", "prompt")
@@ -97,16 +98,26 @@ def load_plan(path: Path) -> Plan:
         mark = getattr(exc, "problem_mark", None)
         line = mark.line + 1 if mark else 1
         raise _fail(path, line, f"invalid YAML: {getattr(exc, 'problem', exc)}") from None
-    if not isinstance(data, dict) or root is None:
+    if not isinstance(data, dict) or not isinstance(root, yaml.MappingNode):
         raise _fail(path, 1, "a plan is a mapping with 'steps:'")
-    unknown = set(data) - TOP_KEYS
-    if unknown:
-        raise _fail(path, 1, f"unknown key(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(TOP_KEYS))})")
-    units = data.get("units", data.get("unit"))
-    units = [units] if isinstance(units, int) else units
-    if units is not None and (not isinstance(units, list) or not units
-                              or not all(isinstance(u, int) and 1 <= u <= 247 for u in units)):
-        raise _fail(path, 1, "units must be a list of unit ids 1..247")
+    key_lines: dict[str, int] = {}
+    for k, _v in root.value:
+        if k.value in key_lines:
+            raise _fail(path, k.start_mark.line + 1, f"'{k.value}' is given twice")
+        key_lines[k.value] = k.start_mark.line + 1
+    for key in data:
+        if key not in TOP_KEYS:
+            raise _fail(path, key_lines.get(str(key), 1),
+                        f"unknown key '{key}' (known: {', '.join(sorted(TOP_KEYS))})")
+    try:
+        options_from({k: v for k, v in data.items() if k not in ("steps", "units", "unit")}, "plan")
+    except UsageError as exc:
+        bad = next((k for k in data if f" {k} must" in str(exc)), "")
+        raise _fail(path, key_lines.get(bad, 1), str(exc).removeprefix("plan: ")) from None
+    units = _unit_list(data.get("units", data.get("unit")))
+    if units is False:
+        raise _fail(path, key_lines.get("units", key_lines.get("unit", 1)),
+                    "units must be a list of different unit ids 1..247")
     steps_node = next((v for k, v in root.value if k.value == "steps"), None)
     raw_steps = data.get("steps")
     if not isinstance(raw_steps, list) or not raw_steps or steps_node is None:
@@ -120,14 +131,36 @@ def load_plan(path: Path) -> Plan:
         if len(names) != 1 or names[0] not in STEP_NAMES:
             raise _fail(path, line, f"step {i + 1}: unknown step {names or raw!r} "
                                     f"(steps: {', '.join(STEP_NAMES)})")
-        step_units = raw.get("unit")
-        step_units = [step_units] if isinstance(step_units, int) else step_units
-        if step_units is not None and not (isinstance(step_units, list) and all(isinstance(u, int)
-                                                                                 for u in step_units)):
-            raise _fail(path, line, f"step {i + 1}: unit must be an id or a list of ids")
+        step_units = _unit_list(raw.get("unit"))
+        if step_units is False:
+            raise _fail(path, line, f"step {i + 1}: unit must be an id or a list of different ids 1..247")
+        if step_units and not units:
+            raise _fail(path, line, f"step {i + 1}: 'unit:' on a step needs the plan's 'units:' list")
         steps.append(Step(i, line, names[0], raw[names[0]], step_units))
     options = {k: v for k, v in data.items() if k not in ("steps", "units", "unit")}
     return Plan(path, options, units or [], steps)
+
+
+def _unit_list(value: Any) -> list[int] | bool | None:
+    """A unit id or list of them as a list; None when absent; False when malformed."""
+    if value is None:
+        return None
+    ids = [value] if isinstance(value, int) else value
+    ok = (isinstance(ids, list) and ids and len(set(ids)) == len(ids)
+          and all(isinstance(u, int) and not isinstance(u, bool) and 1 <= u <= 247 for u in ids))
+    return ids if ok else False
+
+
+def _number(value: Any, what: str, low: float, high: float) -> float:
+    """A number from a plan (YAML true/false are not numbers), within [low, high]."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
+        raise UsageError(f"{what} must be a number {low:g}..{high:g}, got {value!r}")
+    return float(value)
+
+
+def _no_argument(step: Step) -> None:
+    if step.arg is not None:
+        raise UsageError(f"'{step.name}' takes no argument (got {step.arg!r})")
 
 
 def _assignments(step: Step, profile: Profile) -> list[tuple[Entry, int]]:
@@ -166,11 +199,19 @@ def _expectations(step: Step, profile: Profile) -> list[Expectation]:
                 extra = set(spec) - {"value", "tol", "min", "max"}
                 if extra:
                     raise UsageError(f"{step.where()}: unknown expect key(s) {', '.join(map(str, extra))}")
+                if "value" in spec and ("min" in spec or "max" in spec):
+                    raise UsageError(f"{step.where()}: {entry.code}: give value (and tol) or min/max, not both")
                 if "value" in spec:
                     tol = float(spec.get("tol", half))
+                    if tol < 0:
+                        raise UsageError(f"{step.where()}: {entry.code}: tol must be >= 0")
                     low, high = float(spec["value"]) - tol, float(spec["value"]) + tol
-                else:
+                elif "min" in spec or "max" in spec:
                     low, high = float(spec.get("min", "-inf")), float(spec.get("max", "inf"))
+                    if low > high:
+                        raise UsageError(f"{step.where()}: {entry.code}: min {low:g} is above max {high:g}")
+                else:
+                    raise UsageError(f"{step.where()}: {entry.code}: give value (and tol) or min and/or max")
             else:
                 v = raw_to_eng(entry, parse_value(entry, str(spec)))
                 low, high = float(v) - half, float(v) + half
@@ -208,35 +249,88 @@ def _describe(step: Step, profile: Profile, plan: Plan) -> str:
         if not isinstance(arg, dict) or set(arg) - JOG_KEYS or "speed" not in arg or "time" not in arg:
             raise UsageError("jog needs {speed: RPM, time: S} (optional max_travel)")
         profile.need_role("jog", "jog")
-        speed, secs = float(arg["speed"]), float(arg["time"])
-        if speed == 0 or secs <= 0 or secs > 600:
+        speed, secs = _number(arg["speed"], "jog speed", -100_000, 100_000), _number(arg["time"], "jog time", 0, 600)
+        if speed == 0 or secs == 0:
             raise UsageError("jog speed must be non-zero and time 0..600 s")
         parse_value(profile.need_role("jog_speed", "jog"), f"{abs(speed):g}")
+        if "max_travel" in arg:
+            limit = _number(arg["max_travel"], "jog max_travel", 0, 10_000)
+            if abs(speed) / 60 * secs > limit:
+                raise UsageError(f"a {secs:g} s JOG at {abs(speed):g} rpm travels about {abs(speed) / 60 * secs:.2f} "
+                                 f"rev, over its max_travel {limit:g} rev")
         return f"jog {speed:g} rpm for {secs:g} s"
     if name == "tune inertia":
-        opts = arg or {}
-        if not isinstance(opts, dict) or set(opts) - TUNE_KEYS:
-            raise UsageError(f"tune inertia options are {', '.join(sorted(TUNE_KEYS))}")
         for role in ("jog", "jog_speed", "jog_accel", "speed_feedback", "torque_feedback", "inertia_ratio"):
             profile.need_role(role, "tune inertia")
-        return "tune inertia" + (f" {opts}" if opts else "")
+        opts = tune_options(arg, profile)
+        return f"tune inertia: {opts.motion.describe()}" + ("" if opts.gains else "; gains left as they are")
     if name == "wait":
         if not isinstance(arg, int | float) or isinstance(arg, bool) or not 0 <= arg <= 3600:
             raise UsageError("wait takes seconds 0..3600")
         return f"wait {arg:g} s"
     if name == "alarm clear":
+        _no_argument(step)
         profile.need_role("alarm_reset", "alarm clear")
         return "clear the alarm"
     if name == "save":
-        if profile.persistence.mode == "ram":
+        _no_argument(step)
+        mode = profile.persistence.mode
+        if mode == "ram":
             profile.need_role("eeprom_save", "save")
-        return "store parameters in EEPROM" if profile.persistence.mode == "ram" else \
-            f"save (the drive's writes are already persistent: {profile.persistence.mode})"
+            return "store parameters in EEPROM"
+        if mode == "switchable":
+            return (f"store the values this plan wrote in EEPROM (rewritten with {profile.persistence.switch_code} "
+                    "set to EEPROM, then put back)")
+        return "save (the drive stores every write already)"
     if name == "prompt":
         if not isinstance(arg, str) or not arg:
             raise UsageError("prompt takes the question to ask")
         return f"ask: {arg}"
     raise UsageError(f"unknown step {name}")
+
+
+@dataclass(frozen=True)
+class TuneOptions:
+    motion: Any                  # wizard.MotionPlan
+    rigidity: int | None
+    bandwidth: float | None
+    gains: bool
+
+
+def tune_options(arg: Any, profile: Profile) -> TuneOptions:
+    """A 'tune inertia' step's options, checked as the wizard checks them (before anything moves)."""
+    from servotool.tuning import wizard
+    from servotool.tuning.gains import suggest_gains
+
+    opts = arg or {}
+    if not isinstance(opts, dict) or set(opts) - TUNE_KEYS:
+        raise UsageError(f"tune inertia options are {', '.join(sorted(TUNE_KEYS))}")
+    direction = opts.get("direction", "both")
+    if not isinstance(direction, str):
+        raise UsageError("tune inertia direction must be both, forward or reverse")
+    repeats = _number(opts.get("repeats", 3), "tune inertia repeats", 1, 20)
+    if repeats != int(repeats):
+        raise UsageError("tune inertia repeats must be a whole number 1..20")
+    motion = wizard.plan_motion(
+        profile, max_speed=_number(opts["max_speed"], "tune inertia max_speed", 0, 100_000) if "max_speed" in opts
+        else None, accel_time_ms=_number(opts.get("accel_time", 200), "tune inertia accel_time", 20, 5000),
+        travel_rev=_number(opts.get("travel", 2.0), "tune inertia travel", 0, 10_000), direction=direction,
+        repeats=int(repeats))
+    gains = opts.get("gains", True)
+    if not isinstance(gains, bool):
+        raise UsageError("tune inertia gains must be true or false")
+    rigidity, bandwidth = opts.get("rigidity"), opts.get("bandwidth")
+    if rigidity is not None and (isinstance(rigidity, bool) or not isinstance(rigidity, int)):
+        raise UsageError(f"tune inertia rigidity must be a whole number, got {rigidity!r}")
+    if bandwidth is not None:
+        bandwidth = _number(bandwidth, "tune inertia bandwidth", 0, 10_000)
+    if gains and profile.motor is not None and (rigidity is not None or bandwidth is not None):
+        try:  # the same rules the gains will be computed with, on a nominal load
+            suggest_gains(rotor_inertia_kgcm2=profile.motor.rotor_inertia_kgcm2, load_ratio=1.0,
+                          rigidity=rigidity, bandwidth_hz=bandwidth)
+        except ValueError as exc:
+            raise UsageError(f"tune inertia: {exc}") from None
+    return TuneOptions(motion, rigidity, bandwidth, gains)
 
 
 def _path(plan: Plan, text: str, unit: int, several: bool) -> Path:
@@ -252,10 +346,23 @@ class Runner:
     """Runs a validated plan on open drives."""
 
     def __init__(self, plan: Plan, drives: list[Drive], *, yes: bool, continue_on_error: bool,
-                 ask: Callable[[str], bool], log: Callable[[str], None]) -> None:
+                 ask: Callable[[int, str], bool], log: Callable[[str], None]) -> None:
         self.plan, self.drives, self.yes = plan, drives, yes
         self.continue_on_error, self.ask, self.log = continue_on_error, ask, log
         self.results: list[StepResult] = []
+        self.written: dict[int, dict[str, tuple[Entry, int]]] = {d.unit: {} for d in drives}   # for 'save'
+
+    def _wrote(self, d: Drive, entry: Entry, raw: int) -> None:
+        self.written[d.unit][entry.code] = (entry, raw)
+
+    def check_units(self) -> None:
+        """Every axis answers before the first step writes anything."""
+        for d in self.drives:
+            probe = d.profile.role("alarm_code") or next(e for e in d.profile.entries if e.readable)
+            try:
+                d.read_entries([probe])
+            except DeviceError as exc:
+                raise DeviceError(f"unit {d.unit} does not answer, so nothing was run: {exc}") from None
 
     def run(self) -> bool:
         several = len(self.drives) > 1
@@ -284,6 +391,8 @@ class Runner:
             texts = [f"{e.code}={raw}" for e, raw in _assignments(step, d.profile)]
             plan = params.plan_set(d, texts, raw=True)
             done = params.apply_set(d, plan)
+            for r in done:
+                self._wrote(d, r.entry, r.new)
             return (f"{len(done)} written, {len(plan.unchanged)} already set",
                     {"written": {r.entry.code: format_value(r.entry, r.new) for r in done}})
         if name == "expect":
@@ -324,40 +433,56 @@ class Runner:
             alarms.clear(d)
             return (f"cleared {before.display} {before.name}" if before.active else "no alarm was active"), {}
         if name == "save":
-            if d.profile.persistence.mode == "ram":
-                d.trigger("eeprom_save", "save")
-                return "parameters stored in EEPROM", {}
-            return f"nothing to do: writes are {d.profile.persistence.mode}", {}
+            return self._save(d)
         if name == "prompt":
             if self.yes:
                 return f"skipped (--yes): {arg}", {}
-            if not self.ask(str(arg)):
+            if not self.ask(d.unit, str(arg)):
                 raise UsageError(f"operator declined: {arg}")
             return f"confirmed: {arg}", {}
         raise UsageError(f"unknown step {name}")
 
-    def _tune(self, d: Drive, opts: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    def _save(self, d: Drive) -> tuple[str, dict[str, Any]]:
+        """Make what the plan wrote survive a power cycle, the way this drive does it."""
+        mode = d.profile.persistence.mode
+        if mode == "ram":
+            d.trigger("eeprom_save", "save")
+            return "parameters stored in EEPROM", {}
+        if mode == "immediate":
+            return "nothing to do: the drive stores every write", {}
+        from servotool.params import persistence
+
+        written = list(self.written[d.unit].values())
+        with persistence(d, save=True):
+            for entry, raw in written:     # the same value again, now with the switch set to EEPROM
+                d.write_raw(entry, raw)
+        return (f"{len(written)} values stored in EEPROM", {"stored": [e.code for e, _ in written]})
+
+    def _tune(self, d: Drive, arg: Any) -> tuple[str, dict[str, Any]]:
         from servotool.tuning import wizard
 
+        opts = tune_options(arg, d.profile)
         wizard.preflight(d, "host")
-        mplan = wizard.plan_motion(d, max_speed=opts.get("max_speed"), accel_time_ms=opts.get("accel_time", 200),
-                                   travel_rev=float(opts.get("travel", 2.0)),
-                                   direction=str(opts.get("direction", "both")), repeats=int(opts.get("repeats", 3)))
-        result = wizard.Identifier(d).run_host(mplan)
+        result = wizard.Identifier(d).run_host(opts.motion)
         entry, raw = wizard.ratio_raw(d, result.new_ratio)
         d.write_verified(entry, raw)
+        self._wrote(d, entry, raw)
         data: dict[str, Any] = {"ratio": round(result.new_ratio, 4), entry.code: raw * entry.scale}
-        if opts.get("gains", True) is not False:
-            _, changes = wizard.gain_changes(d, result.new_ratio, rigidity=opts.get("rigidity"),
-                                             bandwidth_hz=opts.get("bandwidth"))
+        if opts.gains:
+            _, changes = wizard.gain_changes(d, result.new_ratio, rigidity=opts.rigidity, bandwidth_hz=opts.bandwidth)
             for c in changes:
                 d.write_verified(c.entry, c.raw)
+                self._wrote(d, c.entry, c.raw)
             data["gains"] = {c.entry.code: c.new for c in changes}
         return f"load ratio {result.new_ratio:.2f} -> {entry.code}={raw * entry.scale:g}", data
 
 
-def write_report(path: Path, plan: Plan, results: list[StepResult], ok: bool, seconds: float) -> dict[str, Any]:
-    report = {"plan": str(plan.path), "ok": ok, "seconds": round(seconds, 2),
+def write_report(path: Path, plan: Plan, results: list[StepResult], ok: bool, seconds: float, *,
+                 profile: str, port: str, units: list[int]) -> dict[str, Any]:
+    from servotool import __version__
+
+    report = {"plan": str(plan.path), "ok": ok, "profile": profile, "port": port, "units": units,
+              "tool_version": __version__, "seconds": round(seconds, 2),
               "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "steps": [r.as_json() for r in results]}
     try:
         path.write_text(json.dumps(report, indent=2, default=str) + "\n")

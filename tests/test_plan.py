@@ -59,15 +59,32 @@ def test_dry_run_touches_nothing(cli, tmp_path):
     ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - set: {Pn100: 99999}\n", "line 4): Pn100 (Position loop gain): value"
      " 99999 is out of range"),
     ("port: sim\nsteps:\n  - expect: {Pn101: {value: 1, within: 2}}\n", "unknown expect key"),
-    ("port: sim\ncolour: red\nsteps:\n  - wait: 1\n", "unknown key(s) colour"),
+    ("port: sim\ncolour: red\nsteps:\n  - wait: 1\n", ":2: unknown key 'colour'"),
+    ("port: sim\nsteps:\n  - wait: 1\nsteps:\n  - wait: 2\n", ":4: 'steps' is given twice"),
+    ("port: sim\nbaud: fast\nsteps:\n  - wait: 1\n", ":2: baud must be a whole number"),
+    ("port: sim\nunits: [1, 1]\nsteps:\n  - wait: 1\n", "units must be a list of different unit ids"),
+    ("port: sim\nunits: [true]\nsteps:\n  - wait: 1\n", "units must be a list"),
+    ("port: sim\nsteps:\n  - wait: 1\n    unit: 9\n", "needs the plan's 'units:' list"),
+    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - jog: {speed: fast, time: 1}\n", "jog speed must be a number"),
+    ("port: sim\nsteps:\n  - jog: {speed: 600, time: 10, max_travel: 5}\n", "over its max_travel 5 rev"),
+    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - tune inertia: {rigidity: 99}\n", "rigidity must be 1..31"),
+    ("port: sim\nsteps:\n  - tune inertia: {rigidity: 12, bandwidth: 20}\n", "exactly one of rigidity"),
+    ("port: sim\nsteps:\n  - tune inertia: {repeats: many}\n", "repeats must be a number"),
+    ("port: sim\nsteps:\n  - tune inertia: {travel: 0.05}\n", "too small for an identification"),
+    ("port: sim\nsteps:\n  - expect: {Un000: {}}\n", "give value (and tol) or min and/or max"),
+    ("port: sim\nsteps:\n  - expect: {Un000: {value: 0, tol: -1}}\n", "tol must be >= 0"),
+    ("port: sim\nsteps:\n  - expect: {Un000: {min: 5, max: 1}}\n", "min 5 is above max 1"),
+    ("port: sim\nsteps:\n  - alarm clear: now\n", "takes no argument"),
+    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - prompt: Ready?\n", "operator prompts: run it in a terminal"),
     ("port: sim\nsteps:\n  - wait: -1\n", "wait takes seconds"),
     ("port: sim\nsteps: []\n", "non-empty list"),
 ])
 def test_broken_plans_are_refused_before_any_write(cli, tmp_path, text, message):
     plan = tmp_path / "plan.yaml"
     plan.write_text(text)
-    r = cli("-v", "run", str(plan), "--yes")
+    r = cli("-v", "run", str(plan), *(() if "prompt" in text else ("--yes",)))
     assert r.code == 2, r.err
+    assert len(r.err.strip().splitlines()) <= 2, r.err       # the error (and the SIMULATED notice)
     assert message in r.err, r.err
     assert ">> 01 06" not in r.err and ">> 01 10" not in r.err
     assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
@@ -80,3 +97,38 @@ def test_failed_expectation_stops_the_plan_with_exit_3(cli, tmp_path):
     assert r.code == 3
     assert [s["ok"] for s in r.json()["steps"]] == [False]
     assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
+
+
+def test_save_on_a_drive_that_keeps_writes_in_ram_stores_what_the_plan_wrote(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - set: {Po101: 45, Po102: 30}\n  - save:\n")
+    r = cli("run", str(plan), "--json")
+    assert r.code == 0, r.err
+    assert r.json()["steps"][1]["stored"] == ["Po101", "Po102"]
+    assert cli("sim", "reset", "-P", "sd25", "--power-cycle").code == 0
+    r = cli("--port", "sim", "-P", "sd25", "param", "get", "Po101", "Po102", "Po505", "--json")
+    assert [v["value"] for v in r.json()[:2]] == [45.0, 30.0]
+    assert r.json()[2]["raw"] == 0x0101                       # the switch is left as it was (RAM only)
+
+
+def test_unit_option_selects_one_of_the_plan_axes_and_a_silent_unit_stops_before_any_write(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nunits: [1, 2]\nsteps:\n  - set: {Pn101: 25}\n")
+    r = cli("--unit", "3", "run", str(plan))
+    assert r.code == 2 and "--unit 3 is not among the plan's units [1, 2]" in r.err
+    r = cli("--unit", "2", "run", str(plan), "--json")
+    assert r.code == 0 and [s["unit"] for s in r.json()["steps"]] == [2]
+    assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
+    r = cli("run", str(plan), "--report", str(tmp_path / "no" / "such" / "dir.json"))
+    assert r.code == 2 and "cannot write the report" in r.err
+
+
+def test_dry_run_json_has_the_run_report_keys(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(PLAN)
+    r = cli("run", str(plan), "--dry-run", "--json")
+    assert r.code == 0, r.err
+    data = r.json()
+    assert data["ok"] and data["dry_run"] and data["units"] == [1, 2]
+    assert [s["name"] for s in data["steps"]][:2] == ["set", "expect"] and data["steps"][0]["line"] == 5
+    assert "moves to" in next(s["would"] for s in data["steps"] if s["name"] == "tune inertia")

@@ -51,7 +51,7 @@ def confirm(question: str, yes: bool) -> bool:
         return True
     if not sys.stdin.isatty():
         raise UsageError(f"'{question}' needs confirmation: run in a terminal or pass --yes")
-    return typer.confirm(question, default=False)
+    return typer.confirm(question, default=False, err=True)   # stdout stays clean for --json
 
 
 JSON_OPT = typer.Option(False, "--json", help="Machine-readable output with stable keys.")

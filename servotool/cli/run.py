@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -11,8 +12,8 @@ import typer
 from servotool import plan as plans
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame
-from servotool.connection import ConnectOptions, merge, open_drives, resolve
-from servotool.errors import ServoError
+from servotool.connection import merge, open_drives, options_from, resolve
+from servotool.errors import UsageError
 
 
 def run(
@@ -28,34 +29,47 @@ def run(
 ) -> None:
     """Validate a commissioning plan completely, then run its steps on one or more axes."""
     plan = plans.load_plan(plan_file)
-    given = {k: v for k, v in plan.options.items() if k in ConnectOptions.__dataclass_fields__}
-    opts = merge(state(ctx).options, ConnectOptions(**{k: (str(v) if k in ("port", "profile", "parity") else v)
-                                                        for k, v in given.items()}))
-    resolved = resolve(opts, need_port=not dry_run)
+    cli_opts = state(ctx).options
+    resolved = resolve(merge(cli_opts, options_from(plan.options, str(plan_file))))
     units = plan.units or [resolved.unit]
+    if cli_opts.unit is not None and plan.units:
+        if cli_opts.unit not in plan.units:
+            raise UsageError(f"--unit {cli_opts.unit} is not among the plan's units {plan.units}")
+        units = [cli_opts.unit]
     lines = plans.validate(plan, resolved.profile)
     if dry_run:
         if as_json:
-            emit_json({"plan": str(plan_file), "dry_run": True, "units": units, "profile": resolved.profile.id,
-                       "steps": lines})
+            emit_json({"plan": str(plan_file), "dry_run": True, "ok": True, "profile": resolved.profile.id,
+                       "units": units, "steps": [{"step": st.index + 1, "line": st.line, "name": st.name,
+                                                  "would": line.split(": ", 1)[1]}
+                                                 for st, line in zip(plan.steps, lines, strict=True)]})
         else:
             out.print(f"plan {plan_file}: {len(plan.steps)} steps on {resolved.profile.model} unit(s) "
                       f"{', '.join(map(str, units))}; valid. Would run:", markup=False)
             for line in lines:
                 out.print("  " + line, markup=False)
         return
+    # Everything that can be known before the first write is checked now.
+    if not yes and any(st.name == "prompt" for st in plan.steps) and not sys.stdin.isatty():
+        raise UsageError("the plan has operator prompts: run it in a terminal or pass --yes")
+    report_path = report or plan_file.with_suffix(".report.json")
+    if not report_path.parent.is_dir() or not os.access(report_path.parent, os.W_OK):
+        raise UsageError(f"cannot write the report into {report_path.parent}: no such folder or not writable")
+    several = len(units) > 1
+
+    def ask(unit: int, question: str) -> bool:
+        return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
+
     t0 = time.monotonic()
-
-    def ask(question: str) -> bool:
-        if not sys.stdin.isatty():
-            raise ServoError(f"prompt '{question}' needs an operator: run in a terminal or pass --yes")
-        return typer.confirm(question, default=False)
-
     with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice) as drives:
         runner = plans.Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info)
-        ok = runner.run()
-    report_path = report or plan_file.with_suffix(".report.json")
-    data = plans.write_report(report_path, plan, runner.results, ok, time.monotonic() - t0)
+        runner.check_units()
+        ok = False
+        try:
+            ok = runner.run()
+        finally:  # also when interrupted: the report says what was written
+            data = plans.write_report(report_path, plan, runner.results, ok, time.monotonic() - t0,
+                                      profile=resolved.profile.id, port=resolved.settings.port, units=units)
     if as_json:
         emit_json(data)
     else:

@@ -46,7 +46,7 @@ def inertia(
         before = wizard.step_response(d, step_speed) if step_check and confirm("Run the step check?", yes) \
             else None
         if method == "host":
-            plan = wizard.plan_motion(d, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
+            plan = wizard.plan_motion(d.profile, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
                                       direction=direction, repeats=repeats)
             info(f"motion: {plan.describe()}")
             if not confirm("Move the axis now?", yes):

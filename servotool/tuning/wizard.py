@@ -20,7 +20,7 @@ from servotool.codec import raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.motion import servo_is_on
-from servotool.profile import Entry
+from servotool.profile import Entry, Profile
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.gains import GainSuggestion, suggest_gains
 
@@ -82,7 +82,7 @@ class MotionPlan:
                 f"(limit {self.travel_limit_rev:g} rev), about {self.duration_s:.1f} s")
 
 
-def plan_motion(drive: Drive, *, max_speed: float | None, accel_time_ms: float | None, travel_rev: float,
+def plan_motion(profile: Profile, *, max_speed: float | None, accel_time_ms: float | None, travel_rev: float,
                 direction: str, repeats: int) -> MotionPlan:
     """Choose speed and ramp so each move stays inside the travel limit; refuse what cannot."""
     if travel_rev <= 0:
@@ -98,7 +98,7 @@ def plan_motion(drive: Drive, *, max_speed: float | None, accel_time_ms: float |
     # Moves go out and back, so the range covered is one move per direction; keep a margin for overshoot.
     budget = 0.9 * travel_rev / (len(dirs) if len(dirs) > 1 else repeats)
     speed = budget / ramp * 60.0
-    motor = drive.profile.motor
+    motor = profile.motor
     limit = motor.rated_speed_rpm if motor else 3000.0
     if max_speed is not None:
         if max_speed <= 0:
