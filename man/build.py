@@ -43,10 +43,48 @@ raises a communication alarm when it goes quiet, Ctrl\-C stops at once, and spee
 before any motion.
 """
 
-TAIL = r""".SH ENVIRONMENT
+TAIL = r""".SH PLAN FILES
+A plan for \fBservotool run\fR is YAML (loaded safely: values are data, nothing but these steps can run).
+Optional top keys \fBport\fR, \fBprofile\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR,
+\fBretries\fR (the command line wins) and \fBunits\fR (a list of unit ids: several axes on one line; each step
+runs on every axis in turn, \fB\-\-unit\fR picks one of them); then \fBsteps\fR, a list run in order:
 .TP
-.BR SERVOTOOL_PORT ", " SERVOTOOL_PROFILE ", " SERVOTOOL_UNIT ", " SERVOTOOL_BAUD ", " SERVOTOOL_PARITY ,
-.BR SERVOTOOL_STOPBITS ", " SERVOTOOL_TIMEOUT ", " SERVOTOOL_RETRIES
+.B "set: {CODE: VALUE, ...}"
+Write parameters in engineering units, verified by read\-back; unchanged values are not rewritten.
+.TP
+.B "expect: {CODE: VALUE | {value: V, tol: T} | {min: A, max: B}, ...}"
+Read parameters or monitors and fail (exit 3) unless each is within the bounds (a bare VALUE allows half a
+resolution step).
+.TP
+.BR "backup: FILE" ", " "restore: FILE"
+Back up to or restore from FILE, relative to the plan; \fB{unit}\fR in the name is replaced by the unit id, and
+with several units a name without it gets \fB\-unit\fIN\fR before its suffix.
+.TP
+.B "jog: {speed: RPM, time: S, max_travel: REV}"
+A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBservotool jog\fR.
+.TP
+.B "tune inertia: {rigidity: N | bandwidth: HZ, travel: REV, max_speed: RPM, \
+accel_time: MS, direction: D, repeats: N, gains: BOOL}"
+Identify the load inertia and write it, then (unless \fBgains: false\fR) the matching gains.
+.TP
+.BR "wait: S" ", " "alarm clear:" ", " "prompt: QUESTION"
+Pause; reset the alarm; ask the operator (answered yes by \fB\-\-yes\fR; refused without a terminal).
+.TP
+.B save:
+Make the plan's writes survive a power cycle the way the drive does it: its save function, or rewriting them
+with its EEPROM switch set (nothing to do on drives that store every write).
+.PP
+Any step may carry \fBunit: N\fR or a list to run on some axes only.
+The whole plan is checked against the profile before the first step runs; an error names the plan's line.
+A run writes a JSON report (steps, values written, results, timing) next to the plan as
+\fIPLAN\fB.report.json\fR or to \fB\-\-report\fR, also when it fails or is interrupted.
+.SH SHELL COMPLETION
+\fBservotool \-\-install\-completion\fR installs completion for the current shell;
+\fBservotool \-\-show\-completion\fR prints the script instead.
+.SH ENVIRONMENT
+.TP
+.B "SERVOTOOL_PORT, SERVOTOOL_PROFILE, SERVOTOOL_UNIT, SERVOTOOL_BAUD, SERVOTOOL_PARITY, \
+SERVOTOOL_STOPBITS, SERVOTOOL_TIMEOUT, SERVOTOOL_RETRIES"
 Defaults for the global options of the same names; the command line wins.
 .TP
 .B SERVOTOOL_CONFIG
@@ -107,6 +145,18 @@ def esc(text: str) -> str:
     return "\\&" + text if text[:1] in (".", "'") else text
 
 
+def placeholder(p) -> str:
+    """What an option's value is called on the page: its metavar, FILE for paths, else the option's own name."""
+    if p.metavar:
+        return p.metavar
+    # typer 0.29 keeps the annotation in type_descriptor, older releases a click type in .type
+    annotation = getattr(getattr(p, "type_descriptor", None), "annotation", None)
+    if annotation is Path or type(getattr(p, "type", None)).__name__ == "Path":
+        return "FILE"
+    longest = max(p.opts, key=len).lstrip("-")
+    return longest.upper().replace("-", "_")
+
+
 def option_lines(cmd) -> list[str]:
     lines = []
     for p in cmd.params:
@@ -116,7 +166,7 @@ def option_lines(cmd) -> list[str]:
             lines += [".TP", f".I {p.name.upper()}" + (" ..." if p.nargs == -1 else "")]
         else:
             names = ", ".join(f"\\fB{esc(o)}\\fR" for o in [*p.opts, *p.secondary_opts])
-            meta = "" if p.is_flag or p.count else f" \\fI{esc(p.name.upper())}\\fR"
+            meta = "" if p.is_flag or p.count else f" \\fI{esc(placeholder(p))}\\fR"
             lines += [".TP", names + meta]
         lines.append(esc(p.help or ""))
     return lines

@@ -52,3 +52,12 @@ def test_man_page_is_generated_from_the_current_cli():
 def test_groff_reports_no_warnings():
     proc = subprocess.run(["groff", "-man", "-ww", "-z", str(PAGE)], capture_output=True, text=True)
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+def test_every_plan_step_is_documented():
+    from servotool.plan import STEP_NAMES, TUNE_KEYS
+
+    text = _plain(PAGE.read_text())
+    section = text[text.index(".SH PLAN FILES"):text.index(".SH SHELL COMPLETION")]
+    assert all(f"{name}:" in section for name in STEP_NAMES), section
+    assert all(f"{key}:" in section for key in TUNE_KEYS), section
