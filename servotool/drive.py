@@ -141,20 +141,20 @@ class Drive:
     def write_raw(self, entry: Entry, raw: int) -> None:
         """Send one entry's value (FC06 for one register, FC16 for several, as the profile allows)."""
         words = raw_to_words(entry, raw)
-        if len(words) == 1:
-            self.link.write(self.unit, entry.address, words, multiple=False)
-        elif self.profile.limits.write_multiple:
-            self.link.write(self.unit, entry.address, words, multiple=True)
-        else:
-            for i, w in enumerate(words):
-                self.link.write(self.unit, entry.address + i, [w], multiple=False)
+        try:
+            if len(words) == 1:
+                self.link.write(self.unit, entry.address, words, multiple=False)
+            elif self.profile.limits.write_multiple:
+                self.link.write(self.unit, entry.address, words, multiple=True)
+            else:
+                for i, w in enumerate(words):
+                    self.link.write(self.unit, entry.address + i, [w], multiple=False)
+        except DeviceError as exc:
+            raise _prefixed(exc, f"writing {entry.code}") from None
 
     def write_verified(self, entry: Entry, raw: int, old: int | None = None) -> WriteResult:
         """Write, read back, and raise VerifyError when the drive holds something else."""
-        try:
-            self.write_raw(entry, raw)
-        except DeviceError as exc:
-            raise _prefixed(exc, f"writing {entry.code}") from None
+        self.write_raw(entry, raw)
         if entry.readable:
             back = self.read_entries([entry])[0].raw
             if back != raw:

@@ -13,9 +13,9 @@ from servotool.cli.param import app
 from servotool.cli.render import emit_json, err, info, out, table, warn
 from servotool.codec import format_value
 from servotool.connection import resolve
-from servotool.errors import UsageError
+from servotool.errors import ServoError, UsageError
 from servotool.params import select
-from servotool.profile import load_profile
+from servotool.profile import Profile, load_profile
 
 MARK = {"power_cycle": "power cycle", "servo_off": "servo off"}
 
@@ -54,8 +54,20 @@ def diff_cmd(
     from_default: bool = typer.Option(False, "--changed-from-default", help="Compare with the factory defaults."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Differences between the drive and a file, two files, or a file and the factory defaults."""
+    """Differences between the drive and a file, two files, or a file and the factory defaults.
+
+    A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning.
+    """
     opts = state(ctx).options
+    if file2 is not None and from_default:
+        raise UsageError("give FILE2 or --changed-from-default, not both")
+
+    def load(path: Path, profile: Profile) -> bk.Backup:
+        b = bk.load(path, profile, force=True)
+        for w in b.warnings:
+            warn(w)
+        return b
+
     if file2 is not None or from_default:
         profile = load_profile(opts.profile) if opts.profile else None
         if profile is None:
@@ -63,17 +75,21 @@ def diff_cmd(
 
             try:
                 head = yaml.safe_load(file.read_text(encoding="utf-8"))
-                profile = load_profile(head["profile"])
-            except Exception:
+            except OSError as exc:
+                raise UsageError(f"cannot read {file}: {exc.strerror}") from None
+            except (ValueError, yaml.YAMLError):
+                head = None
+            if not isinstance(head, dict) or not isinstance(head.get("profile"), str):
                 raise UsageError(f"{file}: cannot tell its profile; give --profile") from None
-        a = bk.load(file, profile)
-        b_values = bk.defaults(profile) if from_default else bk.load(file2, profile).values
+            profile = load_profile(head["profile"])
+        a = load(file, profile)
+        b_values = bk.defaults(profile) if from_default else load(file2, profile).values
         labels = (str(file), "factory default" if from_default else str(file2))
         diffs = bk.diff(profile, a.values, b_values)
     else:
         with drive(ctx) as d:
             profile = d.profile
-            a = bk.load(file, profile)
+            a = load(file, profile)
             current = {r.entry.code: r.raw for r in d.read_entries(select(profile))}
         labels = ("drive", str(file))
         diffs = bk.diff(profile, current, a.values)
@@ -120,7 +136,7 @@ def restore_cmd(
                 out.print("nothing to restore: the drive already matches", markup=False)
             return
         if not confirm(f"Write {len(plan.changes)} parameters?", yes):
-            raise typer.Exit(1)
+            raise ServoError("restore cancelled: nothing was written")
         report = bk.restore(d, b, plan, notice=_where)
     if as_json:
         emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
@@ -159,7 +175,7 @@ def reset_cmd(
     with drive(ctx) as d:
         d.profile.need_role("factory_reset", "param reset")
         if not confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):
-            raise typer.Exit(1)
+            raise ServoError("factory reset cancelled: nothing was written")
         auto = bk.factory_reset(d, notice=_where)
         left = bk.not_at_default(d)
         before = bk.load(auto, d.profile).values
