@@ -43,3 +43,12 @@ def test_display_encoded_sd25_values_read_and_write_in_the_manuals_form(cli):
     assert r.code == 0, r.err
     assert r.json()["changed"][0]["new"] == "01 20"
     assert cli("--port", "sim", "--profile", "sd25", "param", "set", "Po001=X=100").code == 2
+
+
+def test_is620p_signed_and_32_bit_entries_follow_the_printed_ranges_and_types():
+    p = load_profile("is620p")
+    assert (p.entry("H12-20").type, p.entry("H12-20").min, p.entry("H12-20").max) == ("s16", -9000, 9000)
+    assert p.entry("H12-47").min <= p.entry("H12-47").default == -100        # printed default now fits
+    assert (p.entry("H11-12").type, p.entry("H11-12").min) == ("s32", -1073741824)
+    assert p.entry("H0B-58").words == 2 and p.entry("H05-46").type == "s32"   # 'int32' printed in lower case
+    assert p.entry("H05-17").unverified                                       # 35~327567 cannot be 16-bit
