@@ -81,6 +81,23 @@ def _switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
     return entry, raw, p.switch_eeprom, p.switch_ram
 
 
+def can_save(profile: Profile) -> bool:
+    """Whether values written over Modbus can be made permanent over Modbus."""
+    p = profile.persistence
+    return p.mode != "ram" or profile.role("eeprom_save") is not None
+
+
+def save_hint(profile: Profile) -> str:
+    """How the user makes written values survive a power cycle on this drive."""
+    return "use --save" if can_save(profile) else profile.persistence.note
+
+
+def check_save_request(profile: Profile, save: bool | None) -> None:
+    """Refuse an explicit --save, before any write, on a drive that cannot store over Modbus."""
+    if save and not can_save(profile):
+        raise UsageError(f"{profile.model} cannot store parameters over Modbus: {profile.persistence.note}")
+
+
 @contextmanager
 def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
     """Apply the drive's EEPROM rule around a batch of writes; yields {'persisted': bool} once the batch is done.
@@ -103,6 +120,6 @@ def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
                 drive.write_raw(entry, current)   # leave the switch as the user had it
         return
     yield state
-    if p.mode == "ram" and save:
+    if p.mode == "ram" and save and can_save(drive.profile):
         drive.trigger("eeprom_save", "--save")
         state["persisted"] = True

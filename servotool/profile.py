@@ -426,8 +426,8 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
             chk.bad(f"roles.{role}", f"names unknown entry {code!r}")
     if persistence.mode == "switchable" and persistence.switch_code.upper() not in codes:
         chk.bad("persistence.switch.code", f"names unknown entry {persistence.switch_code!r}")
-    if persistence.mode == "ram" and "eeprom_save" not in roles:
-        chk.bad("persistence.mode", "mode 'ram' needs role 'eeprom_save'")
+    if persistence.mode == "ram" and "eeprom_save" not in roles and not persistence.note:
+        chk.bad("persistence.note", "mode 'ram' without role 'eeprom_save' must say how the drive stores values")
     alarms = _parse_alarms(chk, data.get("alarms"))
     conventions = data.get("conventions") or {}
     if not isinstance(conventions, dict):

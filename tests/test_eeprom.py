@@ -1,4 +1,4 @@
-"""EEPROM rules of switchable drives (SD25 Po505.X, IS620P H0C-13): RAM-only unless --save, no needless writes."""
+"""EEPROM rules (SD25 Po505.X, IS620P H0C-13 switches; SDC RAM-only): never a needless write, never a false "saved"."""
 
 from __future__ import annotations
 
@@ -34,3 +34,14 @@ def test_is620p_stores_by_default_and_no_save_keeps_it_out(cli):
 def test_unchanged_value_touches_neither_parameter_nor_switch(cli):
     r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po109=200", "--save")
     assert r.code == 0 and ">> 01 06" not in r.err
+
+
+def test_sdc_keeps_modbus_writes_in_ram_and_says_how_to_store_them(cli):
+    r = cli("--port", "sim", "--profile", "sdc", "param", "set", "PN17=330", "--json")
+    assert r.code == 0 and r.json()["persisted"] is False
+    assert "Sn-SEt" in cli("--port", "sim", "--profile", "sdc", "param", "set", "PN18=40").err
+    r = cli("--port", "sim", "--profile", "sdc", "param", "set", "PN17=340", "--save")
+    assert r.code == 2 and "cannot store parameters over Modbus" in r.err
+    assert get(cli, "sdc", "PN17") == {"PN17": 330}                # refused before any write
+    assert cli("sim", "reset", "--profile", "sdc", "--power-cycle").code == 0
+    assert get(cli, "sdc", "PN17") == {"PN17": 200}                # RAM only, as the manual says (L417)

@@ -145,7 +145,8 @@ def restore_cmd(
         return
     out.print(f"{len(report.written)} parameters restored and verified by read-back", markup=False)
     if not report.persisted:
-        warn("the drive keeps these values in RAM only: they are lost at power-off")
+        # restore asks for EEPROM, so this is a drive that cannot store over Modbus
+        warn(f"the drive keeps these values in RAM only, lost at power-off: {d.profile.persistence.note}")
     if plan.needs_power_cycle:
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 

@@ -44,6 +44,7 @@ def set_(
     """Validate every value against the profile, write the ones that differ, read back to verify."""
     persisted = None
     with drive(ctx) as d:
+        params.check_save_request(d.profile, save)
         plan = params.plan_set(d, assignments, raw=raw)
         results = []
         if not dry_run and plan.changes:
@@ -67,7 +68,7 @@ def set_(
                       markup=False)
         return
     if persisted is False:
-        warn("not saved to EEPROM: the drive keeps these values only until power-off (use --save)")
+        warn(f"not saved to EEPROM: the drive keeps these values only until power-off ({params.save_hint(d.profile)})")
     for r in results:
         note = f"  [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
         out.print(f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "
