@@ -52,3 +52,16 @@ def test_is620p_signed_and_32_bit_entries_follow_the_printed_ranges_and_types():
     assert (p.entry("H11-12").type, p.entry("H11-12").min) == ("s32", -1073741824)
     assert p.entry("H0B-58").words == 2 and p.entry("H05-46").type == "s32"   # 'int32' printed in lower case
     assert p.entry("H05-17").unverified                                       # 35~327567 cannot be 16-bit
+
+
+def test_the_readme_table_states_each_profiles_real_counts():
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parent.parent / "profiles" / "README.md").read_text()
+    for pid in PROFILES:
+        p = load_profile(pid)
+        row = re.search(rf"^\| {pid} \| [^|]+ \| (\d+) / (\d+) / (\d+) / (\d+) \| (\d+) \| (\d+) \|", text, re.M)
+        assert row, pid
+        counts = [len(p.of_class(c)) for c in ("Pn", "Un", "Sn", "Fn")]
+        assert [int(x) for x in row.groups()] == [*counts, sum(1 for e in p.entries if e.unverified), len(p.roles)]
