@@ -105,6 +105,32 @@ def test_overload_latches_and_needs_cooling():
     assert not p.clear_alarms()
 
 
+def tripped_then_unloaded() -> Plant:
+    """An overload trip, with the load taken off at that moment so the stopped axis rests (no brake is modelled)."""
+    p = plant(load_ratio=0.0, load_torque_nm=3.5)
+    p.set_mode("speed")
+    p.set_speed_command(0)
+    while p.alarm is None:
+        run(p, 0.01)
+    p.set_settings(PlantSettings(load_ratio=0.0, coulomb_nm=0.5))
+    run(p, 0.5)
+    assert p.alarm == "overload" and p.w == 0.0 and not p.clear_alarms()
+    return p
+
+
+def test_overload_clears_after_cooling():
+    p = tripped_then_unloaded()
+    run(p, 6.0)                                     # no current: about 1 unit of I^2t per second
+    assert p.clear_alarms() and p.alarm is None
+
+
+def test_an_idle_gap_cools_the_motor_too():
+    p = tripped_then_unloaded()
+    for _ in range(12):                             # requests every 10 s: each gap is skipped as 'at rest'
+        p.advance_to(p.time + 10.0)
+    assert p.clear_alarms()
+
+
 def test_same_seed_same_readouts():
     def readings(seed: int) -> list[float]:
         p = plant(load_ratio=1.0, noise=0.01, seed=seed)

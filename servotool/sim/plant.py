@@ -210,8 +210,10 @@ class Plant:
         if dt_total <= 0:
             return
         if dt_total > MAX_GAP_S:
+            self._cool(dt_total - MAX_GAP_S)
             self.time = t - MAX_GAP_S  # an idle gap: the state carries over, only the recent part is integrated
         if self.mode == "off" and self.w == 0.0 and abs(self.settings.load_torque_nm) <= self.settings.coulomb_nm:
+            self._cool(t - self.time)
             self.time = t              # at rest, nothing acting: nothing to integrate
             self._w_meas = 0.0
             self._t_applied = self._t_filtered = self._t_cmd = self._t_delayed = 0.0
@@ -221,6 +223,10 @@ class Plant:
         for _ in range(steps):
             self._step()
         self.time += steps * TS        # the remainder (< one period) is integrated by the next call
+
+    def _cool(self, seconds: float) -> None:
+        """The motor's I^2t heat over time not integrated step by step (no current: it falls by 1 per second)."""
+        self._heat = max(0.0, self._heat - seconds)
 
     def _controller(self) -> float:
         """Torque command of this control period (before the filter)."""
