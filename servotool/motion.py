@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -53,6 +54,7 @@ class Jogger:
         self.keepalive_s = keepalive_s
         self.direction = 0
         self._beat = 0
+        self._stop_wait_s = 3.0
 
     def speed_limit(self) -> float:
         """The lowest of: the drive's max-speed parameter, the JOG speed range, the motor's max speed."""
@@ -66,10 +68,10 @@ class Jogger:
 
     def plan(self, speed_rpm: float, seconds: float | None, max_travel_rev: float | None = None) -> JogPlan:
         """Check everything before any motion: alarm, servo state, speed and travel limits."""
-        if speed_rpm == 0:
-            raise UsageError("--speed must not be 0 (its sign gives the direction)")
-        if seconds is not None and seconds <= 0:
-            raise UsageError("--time must be > 0")
+        if speed_rpm == 0 or not math.isfinite(speed_rpm):
+            raise UsageError("--speed must be a non-zero number (its sign gives the direction)")
+        if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
+            raise UsageError("--time must be a number > 0")
         limit = self.speed_limit()
         if abs(speed_rpm) > limit:
             raise UsageError(f"speed {abs(speed_rpm):g} rpm is over the limit {limit:g} rpm "
@@ -86,8 +88,19 @@ class Jogger:
         if max_travel_rev is not None and travel is not None and travel > max_travel_rev:
             raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {travel:.2f} rev, over the "
                              f"--max-travel limit {max_travel_rev:g} rev")
+        timeout = self.profile.role("comm_timeout")
+        if timeout is not None:
+            # Beat at least three times per watchdog period, or the drive stops the JOG with a comm alarm.
+            timeout_s = float(raw_to_eng(timeout, self.drive.read_entries([timeout])[0].raw)) / 1000.0
+            if timeout_s > 0:
+                if timeout_s < 0.06:
+                    raise UsageError(f"the drive's host watchdog {timeout.code} = {timeout_s * 1000:g} ms is too short "
+                                     "to keep a JOG alive over this link (at least 60 ms)")
+                self.keepalive_s = min(self.keepalive_s, timeout_s / 3)
         accel = self.profile.role("jog_accel")
         accel_ms = raw_to_eng(accel, self.drive.read_entries([accel])[0].raw) if accel is not None else None
+        self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * \
+            abs(speed_rpm) / (self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0)
         return JogPlan(abs(speed_rpm), 1 if speed_rpm > 0 else -1, seconds, limit,
                        float(accel_ms) if accel_ms is not None else None, travel)
 
@@ -115,15 +128,16 @@ class Jogger:
             return None
         return float(raw_to_eng(self.speed_fb, self.drive.read_entries([self.speed_fb])[0].raw))
 
-    def stop(self, wait_s: float = 3.0) -> None:
-        """Command stop and wait (bounded) until the motor is at rest."""
+    def stop(self, wait_s: float | None = None) -> None:
+        """Command stop and wait (bounded by the ramp) until the motor is at rest, keeping the host alive."""
         self.command(0)
-        end = time.monotonic() + wait_s
+        end = time.monotonic() + (wait_s if wait_s is not None else self._stop_wait_s)
         while self.speed_fb is not None and time.monotonic() < end:
             speed = self.speed()
             if speed is not None and abs(speed) < 3.0:
                 break
-            time.sleep(0.05)
+            self.beat()           # the watchdog keeps running while the drive ramps down
+            time.sleep(min(0.05, self.keepalive_s))
         servo = self.profile.role("servo_on")
         if servo is not None:
             self.drive.write_raw(servo, 0)   # leave JOG: the drive stops holding the axis
@@ -149,6 +163,7 @@ class Jogger:
                     if new != self.direction:
                         self.command(new)
                 self.beat()
+                self.check_tripped()
                 if on_sample is not None:
                     on_sample(elapsed, self.speed())
                 time.sleep(self.keepalive_s)
@@ -156,6 +171,16 @@ class Jogger:
             self._emergency_stop()
             raise
         self.stop()
+        self.check_tripped()
+
+    def check_tripped(self) -> None:
+        """A JOG the drive ended with an alarm is a failure, not a finished JOG."""
+        if self.profile.role("alarm_code") is None:
+            return
+        state = alarms.current(self.drive)
+        if state.active:
+            raise DeviceError(f"the drive stopped the JOG with alarm {state.display} {state.name} "
+                              "(see 'servotool alarm')")
 
     def _emergency_stop(self) -> None:
         try:

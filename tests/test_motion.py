@@ -153,3 +153,14 @@ def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
     assert text.strip().endswith("0"), text
     result = json.loads(text[: text.rindex("}") + 1])
     assert result["peak_speed_rpm"] > 250 and abs(result["final_speed_rpm"]) < 10
+
+
+def test_a_long_stop_ramp_keeps_the_host_alive_and_a_trip_fails_the_jog(cli):
+    assert cli("--port", "sim", "param", "set", "Pn513=3000").code == 0      # 3 s ramp, watchdog 500 ms
+    r = cli("--port", "sim", "jog", "--speed", "1000", "--time", "1")
+    assert r.code == 0 and "JOG done" in r.err, r.err                        # no self-inflicted E25
+    assert cli("sim", "config", "--viscous", "0.05").code == 0              # a heavy load: the drive overloads
+    r = cli("--port", "sim", "jog", "--speed", "500", "--time", "4")
+    assert r.code == 1 and "stopped the JOG with alarm E09" in r.err
+    r = cli("--port", "sim", "jog", "--speed", "100", "--time", "nan")
+    assert r.code == 2 and "--time must be a number" in r.err
