@@ -178,7 +178,7 @@ class Jogger:
         if self.profile.role("alarm_code") is None:
             return
         state = alarms.current(self.drive)
-        if state.active:
+        if state.active and alarms.current(self.drive).code == state.code:   # seen twice, not one stray reply
             raise DeviceError(f"the drive stopped the JOG with alarm {state.display} {state.name} "
                               "(see 'servotool alarm')")
 

@@ -96,6 +96,28 @@ class ModbusLink:
             return "connection refused or host unreachable"
         return "no such device, busy, or permission denied"
 
+    def _drain(self) -> None:
+        """Drop bytes nobody asked for: RTU has no transaction id, so a reply that came after its timeout (and a
+        retry) would otherwise be taken for the answer to the next request."""
+        sock = getattr(self._client, "socket", None)
+        if sock is None:
+            return
+        try:
+            if hasattr(sock, "reset_input_buffer"):      # pyserial
+                sock.reset_input_buffer()
+                return
+            timeout = sock.gettimeout()
+            sock.setblocking(False)
+            try:
+                while sock.recv(4096):
+                    pass
+            except (BlockingIOError, InterruptedError):
+                pass
+            finally:
+                sock.settimeout(timeout)
+        except OSError:
+            pass    # a broken link shows up on the request itself
+
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
         if not sending:
             self._received += data
@@ -105,6 +127,7 @@ class ModbusLink:
 
     def _call(self, what: str, fn: Callable[[], object]) -> object:
         self.requests += 1
+        self._drain()
         self._received = b""
         try:
             response = fn()
