@@ -216,7 +216,6 @@ def plan_restore(profile: Profile, backup: Backup, current: dict[str, int], *, o
                  include: list[str] | None = None) -> RestorePlan:
     """Only entries that differ; axis-specific (copy: false) ones only when named; immediate ones first."""
     named = {profile.entry(c).code for c in include or []}
-    switch = profile.persistence.switch_code.upper()
     if only is not None and only not in {e.group for e in profile.entries}:
         raise UsageError(f"unknown group '{only}' for profile {profile.id}")
     changes, skipped = [], []
@@ -226,7 +225,7 @@ def plan_restore(profile: Profile, backup: Backup, current: dict[str, int], *, o
             continue
         if not e.writable:
             continue
-        if e.code.upper() == switch:
+        if profile.persistence.is_switch(e.code):
             # Writing it would change where every later value goes; the restore sets it for its own writes.
             if current.get(code) != target:
                 skipped.append((e, "EEPROM write switch: the restore sets it for its writes and leaves it as it was"))
@@ -320,8 +319,8 @@ def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int], aut
         return (f"the drive no longer answers ({exc}), so its state is unknown: when it does, compare it with "
                 f"'servotool param diff {auto}' and restore that file if needed")
     # The EEPROM switch is flipped for the batch on purpose (and put back when it ends): not a difference.
-    switch = drive.profile.persistence.switch_code.upper()
-    differ = [code for code, raw in snapshot.items() if after.get(code) != raw and code.upper() != switch]
+    differ = [code for code, raw in snapshot.items()
+              if after.get(code) != raw and not drive.profile.persistence.is_switch(code)]
     if not differ:
         return (f"rolled back {len(touched) - 1} written entries; read back, the drive equals the automatic "
                 f"backup {auto}")

@@ -112,6 +112,10 @@ class Persistence:
     write_limit: int | None = None
     note: str = ""
 
+    def is_switch(self, code: str) -> bool:
+        """Whether code is the RAM/EEPROM switch of a switchable drive."""
+        return bool(self.switch_code) and code.upper() == self.switch_code.upper()
+
 
 @dataclass(frozen=True)
 class Motor:

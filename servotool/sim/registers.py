@@ -307,7 +307,7 @@ class RegisterBank:
     def apply_parameter(self, entry: Entry, raw: int) -> None:
         """Store an accepted parameter write in RAM (and EEPROM when the drive persists writes)."""
         # The EEPROM switch itself is modelled as always stored (the manuals do not say); other writes follow it.
-        persist = self.persists_writes() or entry.code.upper() == self.profile.persistence.switch_code.upper()
+        persist = self.persists_writes() or self.profile.persistence.is_switch(entry.code)
         self.ram[entry.code] = raw
         if entry.effect != "power_cycle":
             self.effective[entry.code] = raw
