@@ -14,27 +14,33 @@ FEATURE = "alarm"
 
 @dataclass(frozen=True)
 class AlarmState:
+    """One alarm code as the profile explains it; `active` is true only for the drive's current alarm."""
+
     code: int
     display: str
     name: str
     clearable: bool | None
-
-    @property
-    def active(self) -> bool:
-        return self.code != 0
+    active: bool
+    known: bool = True
 
     def as_json(self) -> dict[str, object]:
         return {"code": self.code, "display": self.display, "name": self.name, "active": self.active,
-                "clearable": self.clearable}
+                "clearable": self.clearable, "known": self.known}
 
 
-def describe(profile: Profile, code: int) -> AlarmState:
+def describe(profile: Profile, code: int, *, active: bool | None = None) -> AlarmState:
+    """The profile's name for an alarm code; a code the profile does not list is shown as unknown, not guessed.
+
+    `active` defaults to "the code is not zero", which is right for the current-alarm register only.
+    """
+    is_active = code != 0 if active is None else active
     if code == 0:
-        return AlarmState(0, "-", "no alarm", None)
+        return AlarmState(0, "-", "no alarm", None, False)
     known = profile.alarm(code)
     if known is None:
-        return AlarmState(code, f"{code} (0x{code:X})", "not listed in the profile", None)
-    return AlarmState(code, known.display, known.name, known.clearable)
+        return AlarmState(code, f"0x{code:04X}", f"unknown alarm (not in the {profile.id} profile)", None, is_active,
+                          known=False)
+    return AlarmState(code, known.display, known.name, known.clearable, is_active)
 
 
 def current(drive: Drive) -> AlarmState:
@@ -47,12 +53,17 @@ def history_roles(profile: Profile) -> list[str]:
 
 
 def history(drive: Drive) -> list[AlarmState]:
-    """Alarm history, most recent first, from the profile's alarm_history_N roles."""
+    """Alarm history, most recent first, from the profile's alarm_history_N roles.
+
+    Past alarms are not active; the most recent entry is, when it is the alarm the drive reports now.
+    """
     roles = history_roles(drive.profile)
     if not roles:
         drive.profile.need_role("alarm_history_1", "alarm history")
     readings = drive.read_entries([drive.profile.need_role(r, "alarm history") for r in roles])
-    return [describe(drive.profile, r.raw) for r in readings]
+    now = current(drive).code if drive.profile.role("alarm_code") is not None else 0
+    return [describe(drive.profile, r.raw, active=(n == 0 and r.raw != 0 and r.raw == now))
+            for n, r in enumerate(readings)]
 
 
 def clear(drive: Drive) -> AlarmState:

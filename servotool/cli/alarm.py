@@ -52,13 +52,13 @@ def clear(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
 
 @app.command("history")
 def history(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
-    """Previous alarms, most recent first."""
+    """Previous alarms, most recent first; the first is marked active while it is the drive's current alarm."""
     with drive(ctx) as d:
         items = alarms.history(d)
     if as_json:
         emit_json([i.as_json() for i in items])
         return
-    t = table("#", "Code", "Name")
+    t = table("#", "Code", "Name", "Now")
     for n, item in enumerate(items, start=1):
-        t.add_row(str(n), item.display, item.name)
+        t.add_row(str(n), item.display, item.name, "active" if item.active else "")
     out.print(t)
