@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import csv
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO
+from typing import IO, Literal
 
 from servotool.codec import raw_to_eng
 from servotool.drive import Drive
@@ -34,7 +35,23 @@ def default_entries(profile: Profile) -> list[Entry]:
     return found
 
 
+def check_rate(rate_hz: float) -> float:
+    """A sampling rate must be a finite number of samples per second above zero."""
+    if not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise UsageError(f"bad --rate {rate_hz:g}: must be a number of samples per second > 0 "
+                         "(a rate above what the link can do polls as fast as it can)")
+    return rate_hz
+
+
+def check_duration(duration_s: float | None) -> float | None:
+    """A duration, when given, must be a finite number of seconds above zero."""
+    if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
+        raise UsageError(f"bad --duration {duration_s:g}: must be a number of seconds > 0")
+    return duration_s
+
+
 def resolve_entries(profile: Profile, codes: list[str]) -> list[Entry]:
+    """The entries to monitor (default: the key monitors); UsageError for unknown or unreadable codes."""
     if not codes:
         return default_entries(profile)
     entries = [profile.entry(c) for c in codes]
@@ -60,13 +77,15 @@ class Series:
         self.high = max(self.high, value)
         self.trend.append(value)
 
-    def sparkline(self) -> str:
+    def sparkline(self, width: int | None = None) -> str:
+        """The trend as block characters, at most `width` of the latest values, scaled to their own range."""
         bars = "▁▂▃▄▅▆▇█"
-        if not self.trend:
+        values = list(self.trend)[-width:] if width is not None else list(self.trend)
+        if not values or width == 0:
             return ""
-        lo, hi = min(self.trend), max(self.trend)
+        lo, hi = min(values), max(values)
         span = hi - lo or 1.0
-        return "".join(bars[min(7, int((v - lo) / span * 7.999))] for v in self.trend)
+        return "".join(bars[min(7, int((v - lo) / span * 7.999))] for v in values)
 
 
 @dataclass
@@ -100,15 +119,16 @@ class Monitor:
         return Sample(self.elapsed, datetime.now(UTC), values)
 
     @property
-    def achieved_rate(self) -> float:
-        return (self.samples - 1) / self.elapsed if self.samples > 1 and self.elapsed > 0 else 0.0
+    def achieved_rate(self) -> float | None:
+        """Samples per second over the intervals measured so far; None until there are two samples."""
+        return (self.samples - 1) / self.elapsed if self.samples > 1 and self.elapsed > 0 else None
 
     def run(self, rate_hz: float, duration_s: float | None, samples: int | None = None,
             stop: Callable[[], bool] | None = None) -> Iterator[Sample]:
-        """Yield samples at up to rate_hz (0 = as fast as the link allows) until duration/samples/stop."""
-        if rate_hz < 0:
-            raise UsageError("--rate must be >= 0")
-        period = 1.0 / rate_hz if rate_hz > 0 else 0.0
+        """Yield samples at up to rate_hz (a rate the link cannot keep up with: as fast as it can) until
+        duration/samples/stop."""
+        period = 1.0 / check_rate(rate_hz)
+        check_duration(duration_s)
         start = time.monotonic()
         n = 0
         while True:
@@ -126,23 +146,62 @@ class Monitor:
                 time.sleep(next_at - now)
 
 
-class CsvLog:
-    """Timestamped samples for a spreadsheet: timestamp, elapsed_s, then one column per entry ('CODE [unit]')."""
+CsvMode = Literal["new", "replace", "append"]
 
-    def __init__(self, path: Path, entries: list[Entry]) -> None:
+
+class CsvLog:
+    """Timestamped samples for a spreadsheet: timestamp, elapsed_s, then one column per entry ('CODE [unit]').
+
+    Opened (and so checked) before the drive is: an existing file is refused in mode "new", replaced only once
+    the first sample arrives in mode "replace", and extended in mode "append" only when its columns are the same.
+    A file this log created but never wrote a sample to is removed again on close.
+    """
+
+    def __init__(self, path: Path, entries: list[Entry], mode: CsvMode = "new") -> None:
         self.path = path
-        try:
-            self._fh: IO[str] = path.open("w", newline="", encoding="utf-8")
-        except OSError as exc:
-            raise UsageError(f"cannot write {path}: {exc.strerror}") from None
-        self._writer = csv.writer(self._fh)
         self._codes = [e.code for e in entries]
-        self._writer.writerow(["timestamp", "elapsed_s", *[f"{e.code} [{e.unit}]" if e.unit else e.code
-                                                              for e in entries]])
+        self.header = ["timestamp", "elapsed_s", *[f"{e.code} [{e.unit}]" if e.unit else e.code for e in entries]]
+        self.rows = 0
+        existed = path.exists()
+        if path.is_dir():
+            raise UsageError(f"cannot write {path}: it is a directory")
+        if mode == "append" and existed:
+            self._check_columns()
+        try:
+            # "x" never replaces a file; "a" never truncates one before we have a sample to put in its place.
+            self._fh: IO[str] = path.open("x" if mode == "new" else "a", newline="", encoding="utf-8",
+                                          buffering=1)
+        except FileExistsError:
+            raise UsageError(f"{path} exists; pass --force to replace it or --append to add to it") from None
+        except OSError as exc:
+            raise UsageError(f"cannot write {path}: {exc.strerror or exc}") from None
+        self._created = not existed
+        self._truncate = mode == "replace" and existed
+        self._header_due = not (mode == "append" and existed and path.stat().st_size > 0)
+        self._writer = csv.writer(self._fh)
+
+    def _check_columns(self) -> None:
+        try:
+            with self.path.open(newline="", encoding="utf-8") as fh:
+                first = next(csv.reader(fh), None)
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise UsageError(f"cannot append to {self.path}: {getattr(exc, 'strerror', None) or exc}") from None
+        if first is not None and first != self.header:
+            raise UsageError(f"cannot append to {self.path}: its columns ({', '.join(first[2:]) or 'none'}) "
+                             f"differ from these ({', '.join(self.header[2:])})")
 
     def write(self, sample: Sample) -> None:
+        if self._truncate:
+            self._fh.truncate(0)
+            self._truncate = False
+        if self._header_due:
+            self._writer.writerow(self.header)
+            self._header_due = False
         self._writer.writerow([sample.wall.isoformat(timespec="milliseconds"), f"{sample.t:.4f}",
                                *[sample.values[c] for c in self._codes]])
+        self.rows += 1
 
     def close(self) -> None:
         self._fh.close()
+        if self._created and self.rows == 0:
+            self.path.unlink(missing_ok=True)

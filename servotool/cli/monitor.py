@@ -8,72 +8,107 @@ from pathlib import Path
 
 import typer
 from rich.live import Live
+from rich.table import Table
 
-from servotool.cli.common import drive
+from servotool.cli.common import drive, resolved
 from servotool.cli.render import info, out, table
-from servotool.monitor import CsvLog, Monitor, resolve_entries
+from servotool.codec import decimals
+from servotool.errors import UsageError
+from servotool.monitor import CsvLog, CsvMode, Monitor, check_duration, check_rate, resolve_entries
+
+TREND_MIN = 8       # a trend narrower than this says nothing: drop the column instead
+NAME_FLOOR = 16     # the name keeps at least this much room (or its full length) before the trend gets any
 
 
 def _fmt(value: float, decimals: int) -> str:
     return f"{value:.{decimals}f}" if value not in (float("inf"), float("-inf")) else ""
 
 
-def _view(mon: Monitor):
-    from servotool.codec import decimals
+def _title(mon: Monitor) -> str:
+    rate = mon.achieved_rate
+    count = f"{mon.samples} sample{'' if mon.samples == 1 else 's'}"
+    return (f"{mon.drive.profile.model} unit {mon.drive.unit}: {count}"
+            + (f", {rate:.1f} Hz" if rate is not None else ""))
 
-    t = table("Code", "Name", "Value", "Unit", "Min", "Max", "Trend",
-              title=f"{mon.drive.profile.model} unit {mon.drive.unit}: {mon.samples} samples, "
-                    f"{mon.achieved_rate:.1f} Hz")
+
+def _view(mon: Monitor, width: int) -> Table:
+    """The monitor table, fitted to `width` columns: long names are cut with '…', the trend shrinks or goes."""
+    rows = []
     for s in mon.series.values():
         d = decimals(s.entry)
-        t.add_row(s.entry.code, s.entry.name, _fmt(s.last, d), s.entry.unit, _fmt(s.low, d), _fmt(s.high, d),
-                  s.sparkline())
+        rows.append([s.entry.code, s.entry.name, _fmt(s.last, d), s.entry.unit, _fmt(s.low, d), _fmt(s.high, d)])
+    heads = ["Code", "Name", "Value", "Unit", "Min", "Max"]
+    natural = [max([len(h)] + [len(r[i]) for r in rows]) for i, h in enumerate(heads)]
+    fixed = sum(natural) - natural[1]
+    name_floor = min(natural[1], NAME_FLOOR)
+    longest_trend = max((len(s.trend) for s in mon.series.values()), default=0)
+    # Each column costs its text plus one padding space either side and one rule; the table one more rule.
+    trend = min(longest_trend, width - fixed - name_floor - (3 * 7 + 1))
+    show_trend = longest_trend >= 2 and (trend >= TREND_MIN or trend >= longest_trend)
+    ncols = 7 if show_trend else 6
+    t = table(*heads, *(["Trend"] if show_trend else []), title=_title(mon))
+    name_col = t.columns[1]
+    name_col.no_wrap, name_col.overflow = True, "ellipsis"
+    name_col.max_width = max(4, width - fixed - (max(trend, len("Trend")) if show_trend else 0) - (3 * ncols + 1))
+    for c in t.columns[2:]:
+        c.no_wrap = True
+    for r, s in zip(rows, mon.series.values(), strict=True):
+        t.add_row(*r, *([s.sparkline(trend)] if show_trend else []))
     return t
 
 
 def monitor(
     ctx: typer.Context,
     codes: list[str] = typer.Argument(None, help="Entries to watch (default: the profile's key monitors)."),
-    rate: float = typer.Option(10.0, "--rate", "-r", help="Samples per second (0 = as fast as the link allows)."),
+    rate: float = typer.Option(10.0, "--rate", "-r", help="Samples per second, > 0 (a rate the link cannot keep up "
+                                                          "with polls as fast as it can; the rate achieved is shown)."),
     duration: float = typer.Option(None, "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C)."),
-    csv_file: Path = typer.Option(None, "--csv", help="Also log timestamped samples to this CSV file."),
+    csv_file: Path = typer.Option(None, "--csv", help="Also log timestamped samples to this CSV file (a new file "
+                                                      "unless --force or --append)."),
+    force: bool = typer.Option(False, "--force", help="With --csv: replace an existing file."),
+    append: bool = typer.Option(False, "--append", help="With --csv: add rows to an existing file with the same "
+                                                        "columns."),
     as_json: bool = typer.Option(False, "--json", help="One JSON object per sample, one per line."),
     once: bool = typer.Option(False, "--once", help="Print one sample and exit."),
 ) -> None:
     """Watch live values with units, min/max and a trend; report the sample rate achieved."""
-    if rate < 0:
-        raise typer.BadParameter("must be >= 0", param_hint="--rate")
-    if duration is not None and duration <= 0:
-        raise typer.BadParameter("must be > 0", param_hint="--duration")
-    with drive(ctx) as d:
-        entries = resolve_entries(d.profile, codes or [])
-        mon = Monitor(d, entries)
-        log = CsvLog(csv_file, entries) if csv_file else None
-        live_view = not (as_json or once) and sys.stdout.isatty()
-        try:
+    check_rate(rate)
+    check_duration(duration)
+    if force and append:
+        raise UsageError("--force and --append exclude each other")
+    if (force or append) and csv_file is None:
+        raise UsageError(f"{'--force' if force else '--append'} only applies to --csv FILE")
+    # Everything the user typed is checked before the port is opened: codes against the profile, the CSV path.
+    entries = resolve_entries(resolved(ctx).profile, codes or [])
+    mode: CsvMode = "replace" if force else "append" if append else "new"
+    log = CsvLog(csv_file, entries, mode) if csv_file else None
+    try:
+        with drive(ctx) as d:
+            mon = Monitor(d, resolve_entries(d.profile, codes or []))
+            live_view = not (as_json or once) and sys.stdout.isatty()
             samples = mon.run(rate, duration, samples=1 if once else None)
-            if live_view:
-                with Live(_view(mon), console=out, refresh_per_second=8, transient=False) as live:
+            try:
+                if live_view:
+                    with Live(_view(mon, out.width), console=out, refresh_per_second=8, transient=False) as live:
+                        for s in samples:
+                            if log:
+                                log.write(s)
+                            live.update(_view(mon, out.width))
+                else:
                     for s in samples:
                         if log:
                             log.write(s)
-                        live.update(_view(mon))
-            else:
-                for s in samples:
-                    if log:
-                        log.write(s)
-                    if as_json:
-                        print(json.dumps({"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"),
-                                          "values": s.values}), flush=True)
-                if once and not as_json:
-                    out.print(_view(mon))
-                elif not as_json:
-                    out.print(_view(mon))
-        except KeyboardInterrupt:
-            pass
-        finally:
-            if log:
-                log.close()
+                        if as_json:
+                            print(json.dumps({"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"),
+                                              "values": s.values}), flush=True)
+                    if not as_json:
+                        out.print(_view(mon, out.width))
+            except KeyboardInterrupt:
+                pass
+    finally:
+        if log:
+            log.close()
     if not once:
-        info(f"{mon.samples} samples in {mon.elapsed:.2f} s: {mon.achieved_rate:.1f} samples/s achieved")
-
+        rate_text = f"{mon.achieved_rate:.1f} samples/s achieved" if mon.achieved_rate is not None else \
+            "too few samples to measure a rate"
+        info(f"{mon.samples} sample{'' if mon.samples == 1 else 's'} in {mon.elapsed:.2f} s: {rate_text}")
