@@ -65,3 +65,36 @@ def test_the_readme_table_states_each_profiles_real_counts():
         assert row, pid
         counts = [len(p.of_class(c)) for c in ("Pn", "Un", "Sn", "Fn")]
         assert [int(x) for x in row.groups()] == [*counts, sum(1 for e in p.entries if e.unverified), len(p.roles)]
+
+
+def test_sd25_alarms_are_the_manuals_list_and_the_simulator_reports_them_by_kind(sim_dir):
+    from servotool import alarms
+    from servotool.drive import Drive
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.server import EmbeddedSim
+    from servotool.transport import LinkSettings, ModbusLink
+
+    p = load_profile("sd25")
+    shown = {a.display for a in p.alarms}
+    assert len(p.alarms) == 41 and {"AL-01", "AL-31", "AL-35", "AL-59"} <= shown          # section 10.2, L8066-8113
+    assert not {"AL-15", "AL-21", "AL-32", "AL-33", "AL-34"} & shown                      # printed as '——'
+    kinds = {k: p.alarm_of_kind(k).display for k in ("overspeed", "overload", "following_error", "inertia_id_failed")}
+    assert kinds == {"overspeed": "AL-07", "overload": "AL-06", "following_error": "AL-09",
+                     "inertia_id_failed": "AL-18"}
+    sim_drive = build_drive(p, 1)
+    sim = EmbeddedSim([sim_drive])
+    try:
+        sim_drive.firmware._trip("overspeed")
+        link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
+        state = alarms.current(Drive(link, p, 1))                 # register 926 holds the AL number
+        assert (state.code, state.display, state.name) == (7, "AL-07", "Overspeed")
+        link.close()
+    finally:
+        sim.close()
+
+
+def test_sd25_lo_monitors_outside_the_900_block_use_the_20000_plus_2n_rule():
+    p = load_profile("sd25")
+    for n in (18, 19, 20, 21, 22, 33, 34, 36):                    # L5578-5598; rule L2790
+        e = p.entry(f"Lo-{n}")
+        assert (e.cls, e.address, e.words) == ("Un", 20000 + 2 * n, 2) and e.unverified
