@@ -98,3 +98,31 @@ def test_sd25_lo_monitors_outside_the_900_block_use_the_20000_plus_2n_rule():
     for n in (18, 19, 20, 21, 22, 33, 34, 36):                    # L5578-5598; rule L2790
         e = p.entry(f"Lo-{n}")
         assert (e.cls, e.address, e.words) == ("Un", 20000 + 2 * n, 2) and e.unverified
+
+
+@pytest.mark.parametrize("pid", PROFILES)
+def test_no_boilerplate_unverified_reasons(pid):
+    for e in load_profile(pid).entries:
+        assert "extraction marks this entry uncertain" not in e.unverified, (pid, e.code)
+
+
+def test_is620p_chapter_conflicts_are_marked_with_both_readings():
+    p = load_profile("is620p")
+    for code, cited in (("H0C-00", "L701"), ("H0C-13", "L4365"), ("H0C-25", "L3398"), ("H05-35", "L1852"),
+                        ("H05-61", "L4295"), ("H09-24", "L3306"), ("H0C-02", "L3388"), ("H0C-03", "L3389"),
+                        ("H0C-26", "L3399")):
+        assert cited in p.entry(code).unverified, code
+    assert p.entry("H0C-03").enum[0] == "8N2" and p.entry("H0C-26").enum[1] == "low_word_first"
+    assert (p.entry("H05-61").words, p.entry("H05-61").max) == (1, 1)        # 6.5.2: position-window unit, L4295-4302
+
+
+def test_sdc_serial_entries_claim_no_effect_the_manual_does_not_state_and_the_gaps_are_filled():
+    p = load_profile("sdc")
+    for code in ("PN117", "PN118", "PN119"):                                 # L571-573 say nothing about when
+        assert p.entry(code).effect == "unknown" and p.entry(code).unverified
+    assert p.entry("PN119").enum == {0: "8O1", 1: "8E1", 2: "8N2", 3: "8N1"}   # L573
+    for code in ("PN1", "PN4", "PN95", "PN142"):
+        assert p.entry(code).unverified, code
+    assert p.entry("PN130").access == "ro" and p.entry("PN131").access == "ro"   # "modification prohibited", L583
+    assert p.entry("PN41").address == 41 and p.entry("PN59").address == 59 and p.entry("PN28").address == 28
+    assert p.entry("UN-29").address == 0x012C + 29
