@@ -65,3 +65,64 @@ def test_the_readme_table_states_each_profiles_real_counts():
         assert row, pid
         counts = [len(p.of_class(c)) for c in ("Pn", "Un", "Sn", "Fn")]
         assert [int(x) for x in row.groups()] == [*counts, sum(1 for e in p.entries if e.unverified), len(p.roles)]
+
+
+def test_sd25_alarms_are_the_manuals_list_and_the_simulator_reports_them_by_kind(sim_dir):
+    from servotool import alarms
+    from servotool.drive import Drive
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.server import EmbeddedSim
+    from servotool.transport import LinkSettings, ModbusLink
+
+    p = load_profile("sd25")
+    shown = {a.display for a in p.alarms}
+    assert len(p.alarms) == 41 and {"AL-01", "AL-31", "AL-35", "AL-59"} <= shown          # section 10.2, L8066-8113
+    assert not {"AL-15", "AL-21", "AL-32", "AL-33", "AL-34"} & shown                      # printed as '——'
+    kinds = {k: p.alarm_of_kind(k).display for k in ("overspeed", "overload", "following_error", "inertia_id_failed")}
+    assert kinds == {"overspeed": "AL-07", "overload": "AL-06", "following_error": "AL-09",
+                     "inertia_id_failed": "AL-18"}
+    sim_drive = build_drive(p, 1)
+    sim = EmbeddedSim([sim_drive])
+    try:
+        sim_drive.firmware._trip("overspeed")
+        link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
+        state = alarms.current(Drive(link, p, 1))                 # register 926 holds the AL number
+        assert (state.code, state.display, state.name) == (7, "AL-07", "Overspeed")
+        link.close()
+    finally:
+        sim.close()
+
+
+def test_sd25_lo_monitors_outside_the_900_block_use_the_20000_plus_2n_rule():
+    p = load_profile("sd25")
+    for n in (18, 19, 20, 21, 22, 33, 34, 36):                    # L5578-5598; rule L2790
+        e = p.entry(f"Lo-{n}")
+        assert (e.cls, e.address, e.words) == ("Un", 20000 + 2 * n, 2) and e.unverified
+
+
+@pytest.mark.parametrize("pid", PROFILES)
+def test_no_boilerplate_unverified_reasons(pid):
+    for e in load_profile(pid).entries:
+        assert "extraction marks this entry uncertain" not in e.unverified, (pid, e.code)
+
+
+def test_is620p_chapter_conflicts_are_marked_with_both_readings():
+    p = load_profile("is620p")
+    for code, cited in (("H0C-00", "L701"), ("H0C-13", "L4365"), ("H0C-25", "L3398"), ("H05-35", "L1852"),
+                        ("H05-61", "L4295"), ("H09-24", "L3306"), ("H0C-02", "L3388"), ("H0C-03", "L3389"),
+                        ("H0C-26", "L3399")):
+        assert cited in p.entry(code).unverified, code
+    assert p.entry("H0C-03").enum[0] == "8N2" and p.entry("H0C-26").enum[1] == "low_word_first"
+    assert (p.entry("H05-61").words, p.entry("H05-61").max) == (1, 1)        # 6.5.2: position-window unit, L4295-4302
+
+
+def test_sdc_serial_entries_claim_no_effect_the_manual_does_not_state_and_the_gaps_are_filled():
+    p = load_profile("sdc")
+    for code in ("PN117", "PN118", "PN119"):                                 # L571-573 say nothing about when
+        assert p.entry(code).effect == "unknown" and p.entry(code).unverified
+    assert p.entry("PN119").enum == {0: "8O1", 1: "8E1", 2: "8N2", 3: "8N1"}   # L573
+    for code in ("PN1", "PN4", "PN95", "PN142"):
+        assert p.entry(code).unverified, code
+    assert p.entry("PN130").access == "ro" and p.entry("PN131").access == "ro"   # "modification prohibited", L583
+    assert p.entry("PN41").address == 41 and p.entry("PN59").address == 59 and p.entry("PN28").address == 28
+    assert p.entry("UN-29").address == 0x012C + 29
