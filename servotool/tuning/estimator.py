@@ -252,8 +252,9 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     r.res_rms = float(np.sqrt(np.mean(resid**2)))
     y_rms = float(np.sqrt(np.mean(y**2)))
     r.res_rel = r.res_rms / y_rms if y_rms > 0 else math.inf
-    if not both:
-        r.notes.append("one direction only: load torque held at 0, so 'coulomb' is Coulomb + load torque")
+    if not cfg.fit_load_torque:
+        r.notes.append("load torque not fitted (one direction only, or told there is none): 'coulomb' is "
+                       "Coulomb + load torque")
     if r.tc < -3 * r.tc_std:
         r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
 

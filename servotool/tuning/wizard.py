@@ -58,7 +58,7 @@ DEFAULT_SAMPLES_PER_S = 40.0
 SAMPLES_PER_RAMP = 10.0
 """Automatic ramps last this many sampling intervals: fewer leave too few windows between torque steps, more
 lower the acceleration (it falls with the square of the ramp time at a fixed travel)."""
-TIME_BUDGET_S = 8.0
+TIME_BUDGET_S = 8.8
 """Automatic repeats stop before the motion (with its pilot) would take longer than this."""
 TORQUE_SHARE = 0.6
 """The test acceleration is scaled so the pilot's peak torque, extrapolated, stays below this share of the limit."""
