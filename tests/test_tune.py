@@ -164,3 +164,31 @@ def test_step_check_shows_the_better_response_after_tuning(cli):
     before, after = r.json()["step_before"], r.json()["step_after"]
     assert before["samples"] > 20 and after["samples"] > 20
     assert after["overshoot_pct"] < before["overshoot_pct"]       # default ratio 1.5 vs true 10: under-damped
+
+
+def _embedded(profile):
+    sim_drive = build_drive(profile, 1)
+    sim = EmbeddedSim([sim_drive])
+    link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
+    return sim, link, Drive(link, profile, 1)
+
+
+def test_keepalive_follows_the_drive_watchdog(sim_dir):
+    profile = load_profile("dsx7e")
+    sim, link, d = _embedded(profile)
+    try:
+        from servotool.motion import keepalive_interval_s
+        d.write_raw(profile.role("comm_timeout"), 150)
+        assert keepalive_interval_s(d) == pytest.approx(0.05)
+        d.write_raw(profile.role("comm_timeout"), 50)
+        with pytest.raises(UsageError, match="too short"):
+            keepalive_interval_s(d)
+    finally:
+        link.close()
+        sim.close()
+
+
+def test_motion_stays_inside_a_small_travel_limit(cli):
+    cli("sim", "config", "--load-ratio", "30")       # far from the configured 1.5: the loop overshoots
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--travel", "1", "--no-gains")
+    assert r.json()["travel_rev"] <= 1.0
