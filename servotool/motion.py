@@ -25,6 +25,23 @@ def servo_is_on(drive: Drive) -> bool | None:
     return bool(raw >> bit & 1) if bit is not None else raw != 0
 
 
+def keepalive_interval_s(drive: Drive, default_s: float = 0.1) -> float:
+    """How often host motion must beat: three times per watchdog period (role comm_timeout), else default_s.
+
+    Raises UsageError when the watchdog is too short to keep any motion alive over a serial link.
+    """
+    timeout = drive.profile.role("comm_timeout")
+    if timeout is None:
+        return default_s
+    timeout_s = float(raw_to_eng(timeout, drive.read_entries([timeout])[0].raw)) / 1000.0
+    if timeout_s <= 0:          # watchdog disabled
+        return default_s
+    if timeout_s < 0.06:
+        raise UsageError(f"the drive's host watchdog {timeout.code} = {timeout_s * 1000:g} ms is too short "
+                         "to keep a motion alive over this link (at least 60 ms)")
+    return timeout_s / 3
+
+
 @dataclass(frozen=True)
 class JogPlan:
     speed_rpm: float
@@ -88,15 +105,7 @@ class Jogger:
         if max_travel_rev is not None and travel is not None and travel > max_travel_rev:
             raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {travel:.2f} rev, over the "
                              f"--max-travel limit {max_travel_rev:g} rev")
-        timeout = self.profile.role("comm_timeout")
-        if timeout is not None:
-            # Beat at least three times per watchdog period, or the drive stops the JOG with a comm alarm.
-            timeout_s = float(raw_to_eng(timeout, self.drive.read_entries([timeout])[0].raw)) / 1000.0
-            if timeout_s > 0:
-                if timeout_s < 0.06:
-                    raise UsageError(f"the drive's host watchdog {timeout.code} = {timeout_s * 1000:g} ms is too short "
-                                     "to keep a JOG alive over this link (at least 60 ms)")
-                self.keepalive_s = min(self.keepalive_s, timeout_s / 3)
+        self.keepalive_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
         accel = self.profile.role("jog_accel")
         accel_ms = raw_to_eng(accel, self.drive.read_entries([accel])[0].raw) if accel is not None else None
         self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * \

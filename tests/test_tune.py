@@ -15,7 +15,8 @@ from servotool.tuning import wizard
 
 @pytest.mark.parametrize("ratio", [0.0, 6.0, 30.0])
 def test_tune_identifies_the_configured_load_and_writes_it(cli, ratio):
-    assert cli("sim", "config", "--load-ratio", str(ratio), "--friction", "0.03", "--load-torque", "0.05").code == 0
+    # friction above the load torque: the axis stays put with the servo off (no brake in this machine)
+    assert cli("sim", "config", "--load-ratio", str(ratio), "--friction", "0.06", "--load-torque", "0.05").code == 0
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--no-gains")
     assert r.code == 0, r.err
     res = r.json()
@@ -40,11 +41,88 @@ def test_tune_sets_gains_for_a_rigidity_and_saves_the_trace(cli, tmp_path):
     assert lines[0] == "t_s,speed_rpm,torque_pct,position_rev" and len(lines) > 100
 
 
+def _params(cli, *codes):
+    return {p["code"]: p["value"] for p in cli("--port", "sim", "param", "get", *codes, "--json").json()}
+
+
 def test_dry_run_writes_nothing(cli):
     cli("sim", "config", "--load-ratio", "3")
-    r = cli("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--json")
-    assert r.code == 0 and r.json()["written"] is False
-    assert cli("--port", "sim", "param", "get", "Pn004", "--json").json()[0]["value"] == 250
+    before = _params(cli, "Pn004", "Pn100", "Pn101", "Pn102", "Pn128")
+    # A log that is refused still writes nothing; --repeats 2 and ramps of 100 ms keep the run short and its
+    # outcome (identified or refused) is not what this test is about.
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--json", "--rigidity", "12")
+    data = r.json()
+    assert data["written"] is False and data.get("gains_written", False) is False
+    assert _params(cli, "Pn004", "Pn100", "Pn101", "Pn102", "Pn128") == before
+
+
+def test_gains_are_left_alone_unless_asked_for(cli):
+    cli("sim", "config", "--load-ratio", "4")
+    before = _params(cli, "Pn100", "Pn101", "Pn102", "Pn128")
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["gains"] == [] and r.json()["written"] is True
+    assert _params(cli, "Pn100", "Pn101", "Pn102", "Pn128") == before
+
+
+def test_result_is_shown_before_the_write_is_confirmed(cli):
+    cli("sim", "config", "--load-ratio", "4")
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--rigidity", "14")
+    assert r.code == 0, r.err
+    assert r.out.index("1.50 ->") < r.out.index("Suggested") < r.out.index("Pn004 written")
+
+
+def test_drive_method_dry_run_puts_the_old_ratio_back(cli):
+    cli("sim", "config", "--load-ratio", "5")
+    r = cli("--port", "sim", "tune", "inertia", "--method", "drive", "--yes", "--json", "--dry-run")
+    assert r.code == 0, r.err
+    data = r.json()
+    assert data["written"] is False and data["ratio"] == pytest.approx(5.0, rel=0.08)
+    assert data["travel_rev"] is None       # JSON null, not NaN
+    assert _params(cli, "Pn004")["Pn004"] == 250
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--travel", "nan"), "--travel must be a number"),
+    (("--rigidity", "40"), "rigidity must be 1..31"),
+    (("--bandwidth", "5000"), "bandwidth must be"),
+    (("--save-trace", "/nonexistent-dir/t.csv"), "cannot write the trace"),
+    (("--step-check", "--travel", "0.5"), "--step-check needs"),
+    (("--direction", "sideways"), "--direction must be"),
+    (("--accel-time", "nan"), "--accel-time must be"),
+])
+def test_bad_options_are_refused_before_anything_moves(cli, args, message):
+    cli("sim", "config", "--load-ratio", "3")
+    r = cli("--port", "sim", "tune", "inertia", "--yes", *args)
+    assert r.code == 2 and message in r.err and "Traceback" not in r.err
+    assert len(r.err.strip().splitlines()) <= 2         # the sim banner and one error line
+    assert "pilot" not in r.err
+
+
+def test_one_direction_identifies_with_friction_and_load_torque_combined(cli):
+    cli("sim", "config", "--load-ratio", "6", "--friction", "0.03")
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--direction", "forward", "--travel", "4")
+    assert r.code == 0, r.err
+    assert r.json()["ratio"] == pytest.approx(6.0, rel=0.05) and r.json()["travel_rev"] <= 4.0
+    assert any("one direction" in n for n in r.json()["notes"])
+
+
+def test_falling_axis_is_refused_before_any_motion(cli):
+    cli("sim", "config", "--load-ratio", "3", "--friction", "0.01", "--load-torque", "0.1")
+    r = cli("--port", "sim", "tune", "inertia", "--yes")
+    assert r.code == 2 and "moving with the servo off" in r.err and "pilot" not in r.err
+
+
+def test_refusal_writes_the_trace_and_a_json_reason(cli, tmp_path):
+    cli("sim", "config", "--load-ratio", "3", "--noise", "0.05")
+    trace = tmp_path / "t.csv"
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--repeats", "1", "--save-trace", str(trace))
+    assert r.code == 1
+    data = r.json()
+    assert data["ok"] is False and "refused" in data["reason"] and data["written"] is False
+    assert "NaN" not in r.out
+    assert len(trace.read_text().splitlines()) > 20
+    assert _params(cli, "Pn004")["Pn004"] == 250
 
 
 def test_drive_method_uses_the_drive_identification(cli):
@@ -86,3 +164,31 @@ def test_step_check_shows_the_better_response_after_tuning(cli):
     before, after = r.json()["step_before"], r.json()["step_after"]
     assert before["samples"] > 20 and after["samples"] > 20
     assert after["overshoot_pct"] < before["overshoot_pct"]       # default ratio 1.5 vs true 10: under-damped
+
+
+def _embedded(profile):
+    sim_drive = build_drive(profile, 1)
+    sim = EmbeddedSim([sim_drive])
+    link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
+    return sim, link, Drive(link, profile, 1)
+
+
+def test_keepalive_follows_the_drive_watchdog(sim_dir):
+    profile = load_profile("dsx7e")
+    sim, link, d = _embedded(profile)
+    try:
+        from servotool.motion import keepalive_interval_s
+        d.write_raw(profile.role("comm_timeout"), 150)
+        assert keepalive_interval_s(d) == pytest.approx(0.05)
+        d.write_raw(profile.role("comm_timeout"), 50)
+        with pytest.raises(UsageError, match="too short"):
+            keepalive_interval_s(d)
+    finally:
+        link.close()
+        sim.close()
+
+
+def test_motion_stays_inside_a_small_travel_limit(cli):
+    cli("sim", "config", "--load-ratio", "30")       # far from the configured 1.5: the loop overshoots
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--travel", "1", "--no-gains")
+    assert r.json()["travel_rev"] <= 1.0

@@ -2,16 +2,67 @@
 
 from __future__ import annotations
 
+import math
+import os
 from pathlib import Path
+from typing import Any
 
 import typer
 
 from servotool.cli.common import confirm, drive
 from servotool.cli.render import emit_json, info, out, table
-from servotool.errors import UsageError
+from servotool.errors import ServoError, UsageError
 from servotool.tuning import wizard
+from servotool.tuning.gains import suggest_gains
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
+
+
+def _clean(value: Any) -> Any:
+    """JSON has no NaN/Infinity: unknown numbers become null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    return value
+
+
+def _check_options(method: str, rigidity: int | None, bandwidth: float | None, no_gains: bool,
+                   save_trace: Path | None) -> None:
+    """Everything that can be checked without the drive, before anything moves."""
+    if method not in ("host", "drive"):
+        raise UsageError("--method must be host or drive")
+    if rigidity is not None and bandwidth is not None:
+        raise UsageError("give --rigidity or --bandwidth, not both")
+    if no_gains and (rigidity is not None or bandwidth is not None):
+        raise UsageError("--no-gains contradicts --rigidity/--bandwidth")
+    if rigidity is not None or bandwidth is not None:
+        try:   # the rules the gains will be computed with, on a nominal load
+            suggest_gains(rotor_inertia_kgcm2=1.0, load_ratio=1.0, rigidity=rigidity, bandwidth_hz=bandwidth)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    if save_trace is not None:
+        parent = save_trace.parent if str(save_trace.parent) else Path(".")
+        if save_trace.is_dir() or not parent.is_dir() or not os.access(parent, os.W_OK) or \
+                (save_trace.exists() and not os.access(save_trace, os.W_OK)):
+            raise UsageError(f"cannot write the trace to {save_trace}")
+
+
+def _estimate_json(result: wizard.Result) -> dict[str, Any]:
+    est = result.estimate
+    return {
+        "method": result.method, "old_ratio": round(result.old_ratio, 4),
+        "ratio_std": est.ratio_std if est else None,
+        "coulomb_nm": est.coulomb_nm if est else None,
+        "viscous_nm_per_rad_s": est.viscous_nm_per_rad_s if est else None,
+        "load_torque_nm": est.load_torque_nm if est else None,
+        "residual_rel": est.residual_rel if est else None, "notes": list(est.notes) if est else [],
+        "samples": len(result.trace.t), "samples_per_s": round(result.samples_per_s, 1),
+        "travel_rev": round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None,
+        "time_s": round(result.time_used_s, 2), "cycles": result.cycles,
+    }
 
 
 @app.command("inertia")
@@ -20,84 +71,119 @@ def inertia(
     method: str = typer.Option("host", "--method", help="host: servotool moves and fits; drive: the drive's own "
                                "identification function."),
     max_speed: float = typer.Option(None, "--max-speed", help="Highest test speed in rpm (default: from --travel)."),
-    accel_time: float = typer.Option(200.0, "--accel-time", help="Ramp time of each move in ms."),
-    travel: float = typer.Option(2.0, "--travel", help="Travel limit: revolutions of axis movement in all."),
-    direction: str = typer.Option("both", "--direction", help="both, forward or reverse."),
-    repeats: int = typer.Option(3, "--repeats", help="Number of move cycles."),
-    rigidity: int = typer.Option(None, "--rigidity", help="Suggest gains for this rigidity level 1..31."),
-    bandwidth: float = typer.Option(None, "--bandwidth", help="Suggest gains for this speed-loop bandwidth in Hz."),
-    no_gains: bool = typer.Option(False, "--no-gains", help="Only identify and set the inertia ratio."),
+    accel_time: float = typer.Option(None, "--accel-time", help="Ramp time of each move in ms (default: from the "
+                                     "link's sampling rate, 100..500 ms)."),
+    travel: float = typer.Option(2.0, "--travel", help="Travel limit: range of axis positions in revolutions."),
+    direction: str = typer.Option("both", "--direction", help="both (out and back, load torque separated from "
+                                  "friction), forward or reverse (only; friction and load torque fitted as one)."),
+    repeats: int = typer.Option(None, "--repeats", help="Number of move cycles (default: repeat until the "
+                                "estimate is precise, within about 9 s)."),
+    rigidity: int = typer.Option(None, "--rigidity", help="Set gains for this rigidity level 1..31."),
+    bandwidth: float = typer.Option(None, "--bandwidth", help="Set gains for this speed-loop bandwidth in Hz."),
+    no_gains: bool = typer.Option(False, "--no-gains", help="Leave the gains alone (the default unless --rigidity "
+                                  "or --bandwidth is given)."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask: move, then write the results."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Identify and show results; write nothing."),
-    save_trace: Path = typer.Option(None, "--save-trace", help="Save the sampled speed/torque to this CSV."),
+    save_trace: Path = typer.Option(None, "--save-trace", help="Save the sampled speed/torque to this CSV "
+                                    "(also when the identification is refused)."),
     step_check: bool = typer.Option(False, "--step-check", help="Measure a speed step (overshoot, settling) "
-                                    "before and after; moves the axis about 1 more revolution each time."),
+                                    "before and after; moves out and back inside --travel each time."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
-    """Identify the load inertia ratio (with friction and gravity), write it, and set matching gains."""
-    if method not in ("host", "drive"):
-        raise UsageError("--method must be host or drive")
-    if rigidity is not None and bandwidth is not None:
-        raise UsageError("give --rigidity or --bandwidth, not both")
+    """Identify the load inertia ratio (with friction and gravity), write it, and set matching gains.
+
+    Gains are changed only with --rigidity or --bandwidth.
+    """
+    _check_options(method, rigidity, bandwidth, no_gains, save_trace)
+    step_s = wizard.step_duration_s(travel) if step_check else None
     with drive(ctx) as d:
         wizard.preflight(d, method)
         ident = wizard.Identifier(d)
-        step_speed = 200.0
-        before = wizard.step_response(d, step_speed) if step_check and confirm("Run the step check?", yes) \
-            else None
+        plan, rest = None, None
         if method == "host":
             plan = wizard.plan_motion(d.profile, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
-                                      direction=direction, repeats=repeats)
+                                      direction=direction, repeats=repeats)   # option errors before reading
+            rest = wizard.check_at_rest(d)
+            plan = wizard.plan_motion(d.profile, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
+                                      direction=direction, repeats=repeats, samples_per_s=0.8 * rest.samples_per_s)
             info(f"motion: {plan.describe()}")
-            if not confirm("Move the axis now?", yes):
-                raise typer.Exit(1)
-            result = ident.run_host(plan, progress=info)
         else:
             info("motion: the drive's own identification (its parameters set torque and travel)")
-            if not confirm("Start the drive's identification now?", yes):
-                raise typer.Exit(1)
-            result = ident.run_drive()
+        if step_s is not None:
+            info(f"step check: {wizard.STEP_SPEED_RPM:g} rpm for {step_s:.2f} s forward and back, before and after")
+        if not confirm("Move the axis now?", yes):
+            raise typer.Exit(1)
+        before = wizard.step_response(d, wizard.STEP_SPEED_RPM, step_s) if step_s is not None else None
+        try:
+            if plan is not None:
+                result = ident.run_host(plan, progress=info, rest=rest)
+            else:
+                result = ident.run_drive(keep=not dry_run)
+        except ServoError as exc:   # refused, tripped, travel exceeded, link lost: keep what was measured
+            if save_trace:
+                ident.trace.save(save_trace)
+            if as_json:
+                partial = _estimate_json(exc.result) if isinstance(exc, wizard.IdentificationRefused) else {}
+                emit_json(_clean({"ok": False, "reason": str(exc), **partial,
+                                  "ratio": exc.result.new_ratio if isinstance(exc, wizard.IdentificationRefused)
+                                  else None, "written": False}))
+            raise
         if save_trace:
             result.trace.save(save_trace)
         entry, raw = wizard.ratio_raw(d, result.new_ratio)
-        sugg, changes = (None, []) if no_gains else wizard.gain_changes(d, result.new_ratio, rigidity=rigidity,
-                                                                        bandwidth_hz=bandwidth)
-        write = not dry_run and (method == "host") and confirm(
-            f"Write {entry.code} = {raw * entry.scale:g} {entry.unit}"
-            + (" and the gains" if changes else "") + "?", yes)
+        want_gains = rigidity is not None or bandwidth is not None
+        sugg, changes = wizard.gain_changes(d, result.new_ratio, rigidity=rigidity, bandwidth_hz=bandwidth) \
+            if want_gains else (None, [])
+        est = result.estimate
+        if not as_json:
+            _show(result, entry.code, raw * entry.scale, entry.unit, sugg, changes)
+        if method == "drive":
+            write = False   # the drive stored its own result (or, dry run, it was put back)
+            stored = not dry_run
+        else:
+            stored = write = not dry_run and confirm(
+                f"Write {entry.code} = {raw * entry.scale:g} {entry.unit}" + (" and the gains" if changes else "")
+                + "?", yes)
         if write:
             d.write_verified(entry, raw)
-            for c in changes:
-                d.write_verified(c.entry, c.raw)
-        elif method == "drive" and not dry_run:
-            write = True  # the drive stored its result itself
-        after = wizard.step_response(d, step_speed) if before is not None and write else None
-    est = result.estimate
+        gains_written = bool(changes) and not dry_run and (write if method == "host" else
+                                                            confirm("Write the gains?", yes))
+        for c in changes if gains_written else []:
+            d.write_verified(c.entry, c.raw)
+        after = wizard.step_response(d, wizard.STEP_SPEED_RPM, step_s) if before is not None and stored else None
     if as_json:
-        emit_json({
-            "method": result.method, "old_ratio": round(result.old_ratio, 4), "ratio": round(result.new_ratio, 4),
-            "ratio_std": round(est.ratio_std, 4) if est else None,
-            "coulomb_nm": est.coulomb_nm if est else None, "viscous_nm_per_rad_s": est.viscous_nm_per_rad_s if est
-            else None, "load_torque_nm": est.load_torque_nm if est else None,
-            "residual_rel": est.residual_rel if est else None, "samples": len(result.trace.t),
-            "samples_per_s": round(result.samples_per_s, 1), "travel_rev": round(result.travel_used_rev, 3),
-            "time_s": round(result.time_used_s, 2), "parameter": entry.code, "parameter_value": raw * entry.scale,
-            "written": write,
+        emit_json(_clean({
+            "ok": True, **_estimate_json(result), "ratio": round(result.new_ratio, 4),
+            "parameter": entry.code, "parameter_value": raw * entry.scale, "written": stored,
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
                       for c in changes],
-            "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
+            "gains_written": gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
             "step_before": vars(before) if before else None, "step_after": vars(after) if after else None,
-        })
+        }))
         return
+    out.print(f"{entry.code} {'written' if stored else 'not written'}"
+              + (f", gains {'written' if gains_written else 'not written'}" if changes else
+                 " (gains unchanged: give --rigidity N or --bandwidth HZ to set them)"), markup=False)
+    if est and est.notes:
+        for note in est.notes:
+            info(note)
+    if before is not None:
+        out.print(f"step before: {before.describe()}", markup=False)
+    if after is not None:
+        out.print(f"step after:  {after.describe()}", markup=False)
+
+
+def _show(result: wizard.Result, code: str, value: float, unit: str, sugg: Any, changes: list[Any]) -> None:
+    """The result, shown before asking to write it."""
+    est = result.estimate
     out.print(f"load inertia ratio (J_load/J_motor): {result.old_ratio:.2f} -> {result.new_ratio:.2f}"
-              + (f" ± {est.ratio_std:.2f}" if est else ""), markup=False)
+              + (f" ± {est.ratio_std:.2f}" if est else "") + f"  ({code} = {value:g} {unit})", markup=False)
     if est:
+        travel = f"{result.travel_used_rev:.2f} rev, " if result.travel_used_rev is not None else ""
         out.print(f"friction {est.coulomb_nm:.4f} N·m, viscous {est.viscous_nm_per_rad_s:.2e} N·m·s/rad, "
                   f"load torque {est.load_torque_nm:.4f} N·m, fit residual {est.residual_rel:.1%}; "
-                  f"{len(result.trace.t)} samples ({result.samples_per_s:.0f}/s), {result.travel_used_rev:.2f} rev, "
+                  f"{len(result.trace.t)} samples ({result.samples_per_s:.0f}/s), {travel}"
                   f"{result.time_used_s:.1f} s", markup=False)
-    out.print(f"{entry.code} = {raw * entry.scale:g} {entry.unit} {'written' if write else 'not written'}",
-              markup=False)
     if changes and sugg is not None:
         t = table("Role", "Code", "Current", "Suggested", "Unit",
                   title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop bandwidth"
@@ -105,7 +191,3 @@ def inertia(
         for c in changes:
             t.add_row(c.role, c.entry.code, f"{c.old:g}", f"{c.new:g}", c.entry.unit)
         out.print(t)
-    if before is not None:
-        out.print(f"step before: {before.describe()}", markup=False)
-    if after is not None:
-        out.print(f"step after:  {after.describe()}", markup=False)

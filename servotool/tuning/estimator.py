@@ -78,6 +78,9 @@ class EstimatorSettings:
     """Fit Tg; with False, Tg is held at 0 (horizontal axis) and one-direction logs become acceptable."""
     max_condition: float = 1e8
     """Refuse when the column-scaled regression matrix is worse conditioned than this."""
+    min_jackknife_moves: int = 4
+    """With at least this many separate moves in the log, the uncertainty is at least the delete-one-move
+    jackknife's (honest when errors are correlated within a move); below it only the least-squares formula."""
 
 
 @dataclass(frozen=True)
@@ -233,6 +236,10 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     meat = xs.T @ xs + rho * (xs[adj].T @ xs[adj + 1] + xs[adj + 1].T @ xs[adj])
     cov = s2 * (xtx_inv @ meat @ xtx_inv) / np.outer(scale, scale)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    # Errors the noise model misses (trapezoid error at a torque step, loop transients at slow sampling) repeat
+    # within a move but differ between moves: a delete-one-move jackknife sees them, the formula above does not.
+    jk = _jackknife_std(xs, y, _move_ids(rpm, band)[starts], cfg.min_jackknife_moves) / scale
+    std = np.maximum(std, jk)
     est = dict(zip(names, theta, strict=True))
     err = dict(zip(names, std, strict=True))
 
@@ -245,8 +252,9 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     r.res_rms = float(np.sqrt(np.mean(resid**2)))
     y_rms = float(np.sqrt(np.mean(y**2)))
     r.res_rel = r.res_rms / y_rms if y_rms > 0 else math.inf
-    if not both:
-        r.notes.append("one direction only: load torque held at 0, so 'coulomb' is Coulomb + load torque")
+    if not cfg.fit_load_torque:
+        r.notes.append("load torque not fitted (one direction only, or told there is none): 'coulomb' is "
+                       "Coulomb + load torque")
     if r.tc < -3 * r.tc_std:
         r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
 
@@ -364,6 +372,31 @@ def _windows(rpm: np.ndarray, band: float, kink: np.ndarray, k: int) -> tuple[np
         i = j + 1
     st = np.asarray(starts, dtype=int)
     return st, st + k
+
+
+def _move_ids(rpm: np.ndarray, band: float) -> np.ndarray:
+    """Number of each sample's move: a new move starts wherever the speed enters, leaves or crosses the zero band."""
+    sign = np.where(rpm >= band, 1, np.where(rpm <= -band, -1, 0))
+    ids = np.zeros(rpm.size, dtype=int)
+    ids[1:] = np.cumsum(sign[1:] != sign[:-1])
+    return ids
+
+
+def _jackknife_std(xs: np.ndarray, y: np.ndarray, groups: np.ndarray, min_groups: int) -> np.ndarray:
+    """Delete-one-group jackknife standard deviation of the (column-scaled) least-squares parameters."""
+    labels = np.unique(groups)
+    g = labels.size
+    if g < max(min_groups, 2):
+        return np.zeros(xs.shape[1])
+    thetas = []
+    for label in labels:
+        keep = groups != label
+        if np.count_nonzero(keep) <= xs.shape[1]:
+            return np.zeros(xs.shape[1])
+        theta, *_ = np.linalg.lstsq(xs[keep], y[keep], rcond=None)
+        thetas.append(theta)
+    th = np.asarray(thetas)
+    return np.sqrt((g - 1) / g * np.sum((th - th.mean(axis=0)) ** 2, axis=0))
 
 
 def _cumtrapz(t: np.ndarray, v: np.ndarray) -> np.ndarray:

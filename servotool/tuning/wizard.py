@@ -8,10 +8,11 @@ Drive method: triggers the profile's drive-side identification (role inertia_id)
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Protocol
 
@@ -19,7 +20,7 @@ from servotool import alarms
 from servotool.codec import raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.motion import servo_is_on
+from servotool.motion import keepalive_interval_s, servo_is_on
 from servotool.profile import Entry, Profile
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.gains import GainSuggestion, suggest_gains
@@ -52,13 +53,28 @@ class RealTiming:
         time.sleep(max(0.0, seconds))
 
 
+DEFAULT_SAMPLES_PER_S = 40.0
+"""Sampling rate assumed when planning without a measured one (a 38400-baud link)."""
+SAMPLES_PER_RAMP = 10.0
+"""Automatic ramps last this many sampling intervals: fewer leave too few windows between torque steps, more
+lower the acceleration (it falls with the square of the ramp time at a fixed travel)."""
+TIME_BUDGET_S = 8.8
+"""Automatic repeats stop before the motion (with its pilot) would take longer than this."""
+TORQUE_SHARE = 0.6
+"""The test acceleration is scaled so the pilot's peak torque, extrapolated, stays below this share of the limit."""
+PILOT_SHARE = 0.25
+"""The pilot moves at this share of the planned speed: a badly matched speed loop can overshoot its travel
+several times over, and the pilot must stay inside the limit even then."""
+
+
 @dataclass(frozen=True)
 class MotionPlan:
     speed_rpm: float
     ramp_s: float            # time to reach speed (and to stop)
     directions: tuple[int, ...]
-    repeats: int
+    repeats: int             # move cycles; with `adaptive` the most that will run
     travel_limit_rev: float
+    adaptive: bool = False   # stop repeating once the estimate is precise enough (and within TIME_BUDGET_S)
 
     @property
     def move_travel_rev(self) -> float:
@@ -67,49 +83,67 @@ class MotionPlan:
 
     @property
     def excursion_rev(self) -> float:
-        """Range of positions covered: one move each way (both directions), or all moves (one direction)."""
-        return self.move_travel_rev * (len(self.directions) if len(self.directions) > 1 else self.repeats)
+        """Range of positions covered. Both directions: one move out and back (the slower pilot stays inside).
+        One direction: every move adds up, and so does the pilot."""
+        if len(self.directions) > 1:
+            return self.move_travel_rev
+        return self.move_travel_rev * (self.repeats + PILOT_SHARE)
 
     @property
     def duration_s(self) -> float:
-        return len(self.directions) * self.repeats * (2 * self.ramp_s + 0.15)
+        moves = len(self.directions) * (self.repeats + 1)   # + the pilot
+        return min(moves * (2 * self.ramp_s + 0.1), TIME_BUDGET_S if self.adaptive else math.inf)
 
     def describe(self) -> str:
         names = {1: "forward", -1: "reverse"}
         seq = " then ".join(names[d] for d in self.directions)
-        return (f"{self.repeats} x ({seq}) moves to {self.speed_rpm:.0f} rpm, {self.ramp_s * 1000:.0f} ms ramps, "
-                f"{self.move_travel_rev:.2f} rev per move, {self.excursion_rev:.2f} rev of travel in all "
-                f"(limit {self.travel_limit_rev:g} rev), about {self.duration_s:.1f} s")
+        count = f"up to {self.repeats}" if self.adaptive else f"{self.repeats}"
+        return (f"{count} x ({seq}) moves to {self.speed_rpm:.0f} rpm, {self.ramp_s * 1000:.0f} ms ramps "
+                f"({self.speed_rpm / self.ramp_s:.0f} rpm/s), {self.move_travel_rev:.2f} rev per move, "
+                f"{self.excursion_rev:.2f} rev of travel in all (limit {self.travel_limit_rev:g} rev), about "
+                f"{self.duration_s:.1f} s; a pilot move at a quarter of that speed first")
 
 
 def plan_motion(profile: Profile, *, max_speed: float | None, accel_time_ms: float | None, travel_rev: float,
-                direction: str, repeats: int) -> MotionPlan:
-    """Choose speed and ramp so each move stays inside the travel limit; refuse what cannot."""
-    if travel_rev <= 0:
-        raise UsageError("--travel must be > 0 revolutions")
-    if repeats < 1 or repeats > 20:
+                direction: str, repeats: int | None, samples_per_s: float | None = None) -> MotionPlan:
+    """Choose speed and ramp so the motion stays inside the travel limit; refuse what cannot.
+
+    accel_time_ms None: ramps of SAMPLES_PER_RAMP sampling intervals at samples_per_s (the measured link rate).
+    repeats None: cycles are repeated until the estimate is precise enough, within TIME_BUDGET_S.
+    """
+    if not (math.isfinite(travel_rev) and travel_rev > 0):
+        raise UsageError("--travel must be a number > 0 revolutions")
+    if repeats is not None and not 1 <= repeats <= 20:
         raise UsageError("--repeats must be 1..20")
     dirs = {"both": (1, -1), "forward": (1,), "reverse": (-1,)}.get(direction)
     if dirs is None:
         raise UsageError("--direction must be both, forward or reverse")
-    ramp = (accel_time_ms or 200.0) / 1000.0
-    if not 0.02 <= ramp <= 5.0:
-        raise UsageError("--accel-time must be 20..5000 ms")
-    # Moves go out and back, so the range covered is one move per direction; keep a margin for overshoot.
-    budget = 0.9 * travel_rev / (len(dirs) if len(dirs) > 1 else repeats)
+    if accel_time_ms is None:
+        rate = samples_per_s if samples_per_s and math.isfinite(samples_per_s) else DEFAULT_SAMPLES_PER_S
+        ramp = min(0.5, max(0.1, SAMPLES_PER_RAMP / rate))
+    else:
+        if not (math.isfinite(accel_time_ms) and 20 <= accel_time_ms <= 5000):
+            raise UsageError("--accel-time must be 20..5000 ms")
+        ramp = accel_time_ms / 1000.0
+    adaptive = repeats is None and len(dirs) > 1
+    # One direction cannot stop early: the travel of every move is reserved up front.
+    cycles = repeats if repeats is not None else (20 if adaptive else 6)
+    # Keep a margin of 10 % for overshoot.
+    budget = 0.9 * travel_rev / (1.0 if len(dirs) > 1 else cycles + PILOT_SHARE)
     speed = budget / ramp * 60.0
     motor = profile.motor
     limit = motor.rated_speed_rpm if motor else 3000.0
     if max_speed is not None:
-        if max_speed <= 0:
-            raise UsageError("--max-speed must be > 0")
+        if not (math.isfinite(max_speed) and max_speed > 0):
+            raise UsageError("--max-speed must be a number > 0")
         limit = min(limit, max_speed)
     speed = min(speed, limit)
-    plan = MotionPlan(speed, ramp, dirs, repeats, travel_rev)
+    plan = MotionPlan(speed, ramp, dirs, cycles, travel_rev, adaptive)
     if speed < 30.0:
         raise UsageError(f"travel limit {travel_rev:g} rev is too small for an identification with "
-                         f"{ramp * 1000:.0f} ms ramps (needs at least {30 / 60 * ramp / 0.75:.2f} rev per move); "
-                         "raise --travel or shorten --accel-time")
+                         f"{ramp * 1000:.0f} ms ramps (needs at least {30 / 60 * ramp / 0.9:.2f} rev per move); "
+                         "raise --travel, shorten --accel-time" + (" or use --direction both" if len(dirs) == 1
+                                                                    else ""))
     if plan.excursion_rev > travel_rev:
         raise UsageError(f"the motion needs {plan.excursion_rev:.2f} rev, over the --travel limit {travel_rev:g}")
     return plan
@@ -124,12 +158,61 @@ def preflight(drive: Drive, method: str) -> None:
         p.need_role(role, f"{FEATURE} --method {method}")
     if p.motor is None:
         raise UsageError(f"{FEATURE} needs the motor data (rated torque, rotor inertia) in profile {p.id}")
-    if p.role("alarm_code") is not None:
-        state = alarms.current(drive)
-        if state.active:
-            raise UsageError(f"refusing to move: alarm {state.display} {state.name} is active (clear it first)")
+    active = active_alarm(drive)
+    if active:
+        raise UsageError(f"refusing to move: alarm {active} is active (clear it first)")
     if servo_is_on(drive):
         raise UsageError("refusing to move: the servo is on (enabled from elsewhere); switch it off first")
+
+
+def active_alarm(drive: Drive) -> str | None:
+    """'CODE name' of an alarm seen active on two reads in a row (one stray reply is no alarm), else None."""
+    if drive.profile.role("alarm_code") is None:
+        return None
+    state = alarms.current(drive)
+    if state.active and alarms.current(drive).code == state.code:
+        return f"{state.display} {state.name}"
+    return None
+
+
+@dataclass(frozen=True)
+class RestCheck:
+    """The axis observed with the servo off, before any motion."""
+
+    samples_per_s: float
+    speed_noise_rpm: float
+    mean_speed_rpm: float
+    drift_rev: float | None   # position change over the check (None: no position feedback)
+
+
+def check_at_rest(drive: Drive, timing: Timing | None = None, duration_s: float = 0.3) -> RestCheck:
+    """Sample the idle axis: it must stand still (a load torque with no brake drops it as soon as nothing holds it).
+
+    Also measures what the motion plan needs: the link's sampling rate and the speed reading's noise.
+    """
+    p, timing = drive.profile, timing or RealTiming()
+    speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
+    pos_e = p.role("position_feedback")
+    counts = p.motor.counts_per_rev if p.motor else 1
+    pos0 = drive.read_entries([pos_e])[0].raw / counts if pos_e else None
+    t0 = timing.now()
+    speeds: list[float] = []
+    while timing.now() - t0 < duration_s or len(speeds) < 5:
+        readings = drive.read_entries([speed_e, torque_e])
+        speeds.append(float(raw_to_eng(speed_e, readings[0].raw)))
+    elapsed = timing.now() - t0
+    drift = abs(drive.read_entries([pos_e])[0].raw / counts - pos0) if pos_e and pos0 is not None else None
+    mean = sum(speeds) / len(speeds)
+    # Speed noise from successive differences: insensitive to a slow drift.
+    diffs = [b - a for a, b in itertools.pairwise(speeds)]
+    noise = math.sqrt(sum(d * d for d in diffs) / (2 * len(diffs))) if diffs else 0.0
+    rest = RestCheck(len(speeds) / elapsed if elapsed > 0 else DEFAULT_SAMPLES_PER_S, noise, mean, drift)
+    moving = (drift is not None and drift > 0.01) or abs(mean) > max(5.0, 4 * noise / math.sqrt(len(speeds)))
+    if moving:
+        what = f"{drift:.3f} rev in {elapsed:.1f} s" if drift is not None else f"{mean:.0f} rpm"
+        raise UsageError(f"refusing to move: the axis is moving with the servo off ({what}); a load torque "
+                         "(gravity?) turns it and no brake holds it: secure the axis first")
+    return rest
 
 
 @dataclass
@@ -137,15 +220,15 @@ class Trace:
     t: list[float] = field(default_factory=list)
     speed: list[float] = field(default_factory=list)
     torque: list[float] = field(default_factory=list)
-    position: list[float] = field(default_factory=list)
+    position: list[float | None] = field(default_factory=list)   # None where position was not read
 
     def save(self, path: Path) -> None:
         try:
             with path.open("w", newline="") as fh:
                 w = csv.writer(fh)
                 w.writerow(["t_s", "speed_rpm", "torque_pct", "position_rev"])
-                for row in zip(self.t, self.speed, self.torque, self.position, strict=True):
-                    w.writerow([f"{row[0]:.5f}", f"{row[1]:.2f}", f"{row[2]:.2f}", f"{row[3]:.4f}"])
+                for t, v, q, x in zip(self.t, self.speed, self.torque, self.position, strict=True):
+                    w.writerow([f"{t:.5f}", f"{v:.2f}", f"{q:.2f}", "" if x is None else f"{x:.4f}"])
         except OSError as exc:
             raise UsageError(f"cannot write {path}: {exc.strerror}") from None
 
@@ -158,19 +241,29 @@ class Result:
     estimate: InertiaEstimate | None
     trace: Trace
     plan: MotionPlan | None
-    travel_used_rev: float
+    travel_used_rev: float | None
     time_used_s: float
     samples_per_s: float
+    cycles: int = 0
+
+
+class IdentificationRefused(IdentificationFailed):
+    """The motion ran, but the estimate is not trustworthy; the result (with its trace) is attached."""
+
+    def __init__(self, message: str, result: Result) -> None:
+        super().__init__(message)
+        self.result = result
 
 
 class Identifier:
     """Runs the identification motion on one drive."""
 
-    def __init__(self, drive: Drive, timing: Timing | None = None, keepalive_s: float = 0.1) -> None:
+    def __init__(self, drive: Drive, timing: Timing | None = None, keepalive_s: float | None = None) -> None:
         self.drive = drive
         self.p = drive.profile
         self.timing = timing or RealTiming()
         self.keepalive_s = keepalive_s
+        self.trace = Trace()    # filled while the motion runs; kept when it fails
 
     def _eng(self, entry: Entry) -> float:
         return float(raw_to_eng(entry, self.drive.read_entries([entry])[0].raw))
@@ -179,74 +272,156 @@ class Identifier:
         return self.p.load_ratio_from_param(self._eng(self.p.need_role("inertia_ratio", FEATURE)))
 
     # ----- host method ---------------------------------------------------------------------------------------
-    def run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None = None) -> Result:
+    def run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None = None,
+                 rest: RestCheck | None = None) -> Result:
+        """Pilot cycle, then the planned cycles; fit; raise IdentificationRefused when the fit is refused."""
         p, d = self.p, self.drive
         jog, jog_speed, jog_accel = (p.need_role(r, FEATURE) for r in ("jog", "jog_speed", "jog_accel"))
         keepalive = p.role("keepalive")
         speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
         pos_e = p.role("position_feedback")
-        sampled = [speed_e, torque_e] + ([pos_e] if pos_e else [])
-        saved = {e.code: r.raw for e, r in zip((jog_speed, jog_accel), d.read_entries([jog_speed, jog_accel]),
-                                                  strict=True)}
-        old_ratio = self.current_ratio()
         motor = p.motor
         assert motor is not None
-        trace = Trace()
+        beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
+        limit_e = p.role("torque_limit_fwd")
+        torque_limit = self._eng(limit_e) if limit_e is not None else None
+        saved = {e.code: r.raw for e, r in zip((jog_speed, jog_accel), d.read_entries([jog_speed, jog_accel]),
+                                                  strict=True)}
+        written = dict(saved)
+        old_ratio = self.current_ratio()
+        noise = rest.speed_noise_rpm if rest is not None else 0.0
+        stop_band = max(3.0, 4.0 * noise)
+        trace = self.trace = Trace()
         t0 = self.timing.now()
         counts = motor.counts_per_rev
-        beat = [0, t0]
+        state = {"beat": 0, "last_beat": t0, "dir": 0, "pos": None, "pos_t": t0, "lo": 0.0, "hi": 0.0,
+                 "pred": 0.0}
+        guard: dict[str, float | None] = {"lo": None, "hi": None, "stretch": 1.0}
+        pos_every = 0.05   # position costs a request of its own: read it at 20 Hz, predict from speed between
+
+        def set_param(entry: Entry, eng: float) -> None:
+            raw = max(entry.min, min(entry.max, round(eng / entry.scale)))
+            if written[entry.code] != raw:
+                d.write_raw(entry, raw)
+                written[entry.code] = raw
+
+        def command(direction: int) -> None:
+            state["dir"] = direction
+            d.write_raw(jog, direction)
+            state["last_beat"] = self.timing.now()
 
         def sample() -> None:
-            readings = d.read_entries(sampled)
-            trace.t.append(self.timing.now() - t0)
-            trace.speed.append(float(raw_to_eng(speed_e, readings[0].raw)))
+            readings = d.read_entries([speed_e, torque_e])
+            now = self.timing.now()
+            speed = float(raw_to_eng(speed_e, readings[0].raw))
+            if trace.t:   # travel between position reads, from the speed (checked before it is reached)
+                state["pred"] += 0.5 * (speed + trace.speed[-1]) / 60.0 * (now - t0 - trace.t[-1])
+            trace.t.append(now - t0)
+            trace.speed.append(speed)
             trace.torque.append(float(raw_to_eng(torque_e, readings[1].raw)))
-            trace.position.append(readings[2].raw / counts if pos_e else math.nan)
-            if pos_e and max(trace.position) - min(trace.position) > plan.travel_limit_rev:
-                raise TravelExceeded(f"travel limit {plan.travel_limit_rev:g} rev reached: motion stopped; the "
-                                     "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel")
-            if self.timing.now() - beat[1] >= self.keepalive_s:
-                beat[0] = (beat[0] + 1) & 0xFFFF
-                d.write_raw(keepalive, beat[0]) if keepalive is not None else None
-                beat[1] = self.timing.now()
-
-        def wait_until(cond: Callable[[], bool], limit_s: float) -> None:
-            end = self.timing.now() + limit_s
-            while self.timing.now() < end:
-                sample()
-                if cond():
-                    return
-
-        def move(direction: int, speed: float) -> float:
-            """One accelerate-then-stop move; returns the largest excursion seen so far (rev)."""
-            self._set(jog_speed, speed)
-            self._set(jog_accel, plan.ramp_s * 1000.0 * motor.rated_speed_rpm / speed)
-            d.write_raw(jog, direction)
-            wait_until(lambda: False, plan.ramp_s)   # the drive's ramp reaches the speed in ramp_s
-            d.write_raw(jog, 0)
-            wait_until(lambda: abs(trace.speed[-1]) < 2.0, plan.ramp_s * 3 + 0.5)
-            wait_until(lambda: False, 0.1)
-            pos = [x for x in trace.position if not math.isnan(x)]
-            return max(pos) - min(pos) if pos else 0.0
-
-        try:
-            # Pilot moves at half speed: a badly matched speed loop overshoots, so measure how far the axis
-            # really goes per nominal revolution before committing to the full speed.
-            speed = plan.speed_rpm
+            trace.position.append(None)
+            if pos_e is not None and (state["pos"] is None or now - state["pos_t"] >= pos_every):
+                x = d.read_entries([pos_e])[0].raw / counts
+                trace.position[-1] = x
+                state["pos"], state["pos_t"], state["pred"] = x, self.timing.now(), x
+                state["lo"] = min(state["lo"], x) if len(trace.t) > 1 else x
+                state["hi"] = max(state["hi"], x) if len(trace.t) > 1 else x
             if pos_e is not None:
-                pilot = plan.speed_rpm / 2
-                if progress:
-                    progress(f"pilot moves at {pilot:.0f} rpm")
-                excursion = max(move(direction, pilot) for direction in plan.directions)
-                nominal = pilot / 60.0 * plan.ramp_s * len(plan.directions)
-                factor = max(1.0, excursion / nominal) if nominal > 0 else 1.0
-                speed = min(speed, plan.speed_rpm / factor)
+                x = state["pred"]
+                state["lo"], state["hi"] = min(state["lo"], x), max(state["hi"], x)
+                if state["hi"] - state["lo"] > plan.travel_limit_rev:
+                    raise TravelExceeded(f"travel limit {plan.travel_limit_rev:g} rev reached: motion stopped; the "
+                                         "loop overshoots (inertia ratio far off?): lower --max-speed or raise "
+                                         "--travel")
+            if self.timing.now() - state["last_beat"] >= beat_s:
+                state["beat"] = (state["beat"] + 1) & 0xFFFF
+                if keepalive is not None:
+                    d.write_raw(keepalive, state["beat"] if keepalive.max >= 0xFFFF else 1)
+                else:
+                    d.write_raw(jog, state["dir"])   # re-sending the command is the keep-alive
+                state["last_beat"] = self.timing.now()
+
+        ramp = plan.ramp_s
+
+        def move(direction: int, speed: float) -> tuple[float, float]:
+            """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
+            first = len(trace.t)
+            set_param(jog_speed, speed)
+            set_param(jog_accel, ramp * 1000.0 * motor.rated_speed_rpm / speed)
+            command(direction)
+            start = self.timing.now()
+            while self.timing.now() - start < ramp:   # the drive's ramp reaches the speed in ramp_s
+                sample()
+                if guard["lo"] is not None:
+                    # Stop early where the stopping distance (the ramp's, stretched as the pilot showed) would
+                    # carry the axis out of its band: drift (gravity, overshoot) must not add up to the limit.
+                    v = abs(trace.speed[-1])
+                    stop_rev = guard["stretch"] * v * v * ramp / (2 * speed) / 60.0
+                    if (state["pred"] + stop_rev > guard["hi"]) if direction > 0 else \
+                            (state["pred"] - stop_rev < guard["lo"]):
+                        break
+            command(0)
+            stop = self.timing.now()
+            while self.timing.now() - stop < 3 * ramp + 0.5:
+                sample()
+                if self.timing.now() - stop >= ramp and abs(trace.speed[-1]) < stop_band:
+                    break
+            sample()
+            sample()                      # two samples at rest separate this move from the next
+            active = active_alarm(d)
+            if active:
+                raise IdentificationFailed(f"the drive stopped the identification with alarm {active}")
+            peak = max((abs(q) for q in trace.torque[first:]), default=0.0)
+            return state["hi"] - state["lo"], peak
+
+        both = len(plan.directions) > 1
+        settings = EstimatorSettings(fit_load_torque=both)
+        est: InertiaEstimate | None = None
+        cycles = 0
+        try:
+            # Pilot cycle at reduced speed: how far the axis really goes per nominal revolution (a badly matched
+            # speed loop overshoots) and how much torque the acceleration takes, before the full test.
+            pilot = plan.speed_rpm * PILOT_SHARE
+            if progress:
+                progress(f"pilot move at {pilot:.0f} rpm")
+            excursion, peak = 0.0, 0.0
+            origin = state["pred"]
+            for direction in plan.directions:
+                excursion, pk = move(direction, pilot)
+                peak = max(peak, pk)
+            if pos_e is not None:
+                nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
+                limit_rev = plan.travel_limit_rev
+                lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.95 * limit_rev
+                guard.update(lo=lo, hi=lo + 0.95 * limit_rev, stretch=max(1.0, excursion / nominal))
+            # Excursion and torque grow in proportion to the speed at a fixed ramp time.
+            speed = plan.speed_rpm
+            stretch = float(guard["stretch"] or 1.0)
+            if stretch > 1.5:
+                # The loop cannot follow the ramps (far-off inertia ratio: an under-damped loop): slower ramps at
+                # a lower speed (the same travel) keep its swing inside the travel band.
+                factor = min(2.0, stretch / 1.5, 0.5 / ramp)
+                ramp, speed = ramp * factor, speed / factor
+                guard["stretch"] = stretch / factor
+            if pos_e is not None and excursion > 0:
+                room = 0.9 * plan.travel_limit_rev - (excursion if not both else 0.0)
+                speed = min(speed, pilot * plan.ramp_s / ramp * room / (excursion * (plan.repeats if not both else 1)))
+            if torque_limit is not None and peak > 0:
+                speed = min(speed, pilot * TORQUE_SHARE * torque_limit / peak)
+            cycle_s = (self.timing.now() - t0) * 1.1
             for rep in range(plan.repeats):
+                if plan.adaptive and rep >= 2:
+                    if self.timing.now() - t0 + cycle_s > TIME_BUDGET_S:
+                        break
+                    est = self._estimate(settings, torque_limit, rate=len(trace.t) / (self.timing.now() - t0))
+                    if est.ok and est.j_std_kgm2 <= 0.5 * settings.max_rel_uncertainty * est.j_total_kgm2:
+                        break
                 for direction in plan.directions:
                     if progress:
                         progress(f"move {rep + 1}/{plan.repeats} {'forward' if direction > 0 else 'reverse'} "
                                  f"at {speed:.0f} rpm")
                     move(direction, speed)
+                cycles += 1
         except BaseException:
             try:
                 d.write_raw(jog, 0)
@@ -254,57 +429,74 @@ class Identifier:
                 pass  # the drive's watchdog stops it
             raise
         finally:
-            servo = p.role("servo_on")
-            if servo is not None:
-                d.write_raw(servo, 0)
-            for e in (jog_speed, jog_accel):
-                if d.read_entries([e])[0].raw != saved[e.code]:
-                    d.write_raw(e, saved[e.code])
+            try:
+                servo = p.role("servo_on")
+                if servo is not None:
+                    d.write_raw(servo, 0)
+                for e in (jog_speed, jog_accel):
+                    if written[e.code] != saved[e.code]:
+                        d.write_raw(e, saved[e.code])
+            except ServoError:
+                pass  # already failing: the first error is the one to report
         elapsed = self.timing.now() - t0
-        limit = p.role("torque_limit_fwd")
         rate = (len(trace.t) - 1) / elapsed if elapsed > 0 else 0.0
-        # Fast links give many samples per ramp: allow windows long enough to span ~1/5 s.
-        settings = EstimatorSettings(max_window_intervals=max(6, int(rate / 5)))
-        est = estimate_inertia(trace.t, trace.speed, trace.torque, rated_torque_nm=motor.rated_torque_nm,
-                               rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
-                               torque_limit_pct=self._eng(limit) if limit is not None else None, settings=settings)
-        pos = [x for x in trace.position if not math.isnan(x)]
-        travel = (max(pos) - min(pos)) if pos else plan.excursion_rev
-        result = Result("host", old_ratio, est.load_ratio, est, trace, plan, travel, elapsed, rate)
+        est = self._estimate(settings, torque_limit, rate)
+        result = Result("host", old_ratio, est.load_ratio, est, trace, plan, state["hi"] - state["lo"]
+                        if pos_e is not None else None, elapsed, rate, cycles)
         if not est.ok:
-            raise IdentificationFailed(f"identification refused: {est.reason}", ) from None
+            raise IdentificationRefused(f"identification refused: {est.reason}", result)
         return result
 
-    def _set(self, entry: Entry, eng: float) -> None:
-        raw = max(entry.min, min(entry.max, round(eng / entry.scale)))
-        if self.drive.read_entries([entry])[0].raw != raw:
-            self.drive.write_raw(entry, raw)
+    def _estimate(self, settings: EstimatorSettings, torque_limit: float | None, rate: float) -> InertiaEstimate:
+        motor = self.p.motor
+        assert motor is not None
+        # Fast links give many samples per ramp: allow windows long enough to span ~1/5 s.
+        cfg = replace(settings, max_window_intervals=max(6, int(rate / 5)))
+        return estimate_inertia(self.trace.t, self.trace.speed, self.trace.torque,
+                                rated_torque_nm=motor.rated_torque_nm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
+                                torque_limit_pct=torque_limit, settings=cfg)
 
     # ----- drive method --------------------------------------------------------------------------------------
-    def run_drive(self, timeout_s: float = 30.0) -> Result:
-        """Trigger the drive's own identification, wait for it, read the inertia ratio it stored."""
-        old = self.current_ratio()
+    def run_drive(self, timeout_s: float = 30.0, keep: bool = True) -> Result:
+        """Trigger the drive's own identification, wait for it, read the inertia ratio it stored.
+
+        The drive stores its result itself; keep=False (dry run) puts the previous value back afterwards.
+        """
+        p, d = self.p, self.drive
+        ratio_e = p.need_role("inertia_ratio", FEATURE)
+        old_raw = d.read_entries([ratio_e])[0].raw
+        old = p.load_ratio_from_param(float(raw_to_eng(ratio_e, old_raw)))
+        beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
+        keepalive = p.role("keepalive")
         t0 = self.timing.now()
-        self.drive.trigger("inertia_id", FEATURE)
-        status = self.p.role("servo_status")
+        d.trigger("inertia_id", FEATURE)
+        status = p.role("servo_status")
         ident_bit = next((b for b, n in (status.bits.items() if status else []) if n == "identifying"), None)
-        while self.timing.now() - t0 < timeout_s:
-            self.timing.sleep(0.1)
-            if self.p.role("keepalive") is not None:
-                self.drive.write_raw(self.p.role("keepalive"), 1)  # type: ignore[arg-type]
-            if status is None or ident_bit is None:
-                continue
-            if not self.drive.read_entries([status])[0].raw >> ident_bit & 1:
-                break
-        else:
-            self.drive.trigger("inertia_id", FEATURE, 0)
-            raise IdentificationFailed(f"the drive's identification did not finish within {timeout_s:g} s")
-        if self.p.role("alarm_code") is not None:
-            state = alarms.current(self.drive)
-            if state.active:
-                raise IdentificationFailed(f"the drive reports {state.display} {state.name}")
-        new = self.current_ratio()
-        return Result("drive", old, new, None, Trace(), None, math.nan, self.timing.now() - t0, 0.0)
+        try:
+            while self.timing.now() - t0 < timeout_s:
+                self.timing.sleep(min(0.1, beat_s))
+                if keepalive is not None:
+                    d.write_raw(keepalive, 1)
+                if status is None or ident_bit is None:
+                    continue
+                if not d.read_entries([status])[0].raw >> ident_bit & 1:
+                    break
+            else:
+                raise IdentificationFailed(f"the drive's identification did not finish within {timeout_s:g} s")
+        except BaseException:
+            try:
+                d.trigger("inertia_id", FEATURE, 0)
+            except ServoError:
+                pass  # the drive's watchdog stops it
+            raise
+        active = active_alarm(d)
+        if active:
+            raise IdentificationFailed(f"the drive stopped its identification with alarm {active}")
+        new_raw = d.read_entries([ratio_e])[0].raw
+        new = p.load_ratio_from_param(float(raw_to_eng(ratio_e, new_raw)))
+        if not keep and new_raw != old_raw:
+            d.write_verified(ratio_e, old_raw)
+        return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -364,38 +556,83 @@ class StepResponse:
         return f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}"
 
 
+STEP_SPEED_RPM = 200.0
+
+
+def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> float:
+    """How long the step check may run at speed_rpm inside the travel limit (it returns to where it started)."""
+    duration = min(0.6, 0.9 * travel_rev / (1.3 * speed_rpm / 60.0))   # 30 % for overshoot and the stop
+    if duration < 0.2:
+        raise UsageError(f"--step-check needs at least {1.3 * speed_rpm / 60.0 * 0.2 / 0.9:.2f} rev of --travel "
+                         f"for a {speed_rpm:g} rpm step")
+    return duration
+
+
 def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Timing | None = None
                   ) -> StepResponse:
-    """Command a JOG speed step, sample the speed, stop; JOG parameters are put back afterwards."""
+    """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
+
+    JOG parameters are put back afterwards; the keep-alive beats at the drive's watchdog rate.
+    """
     p, timing = drive.profile, timing or RealTiming()
     jog, jog_speed, jog_accel = (p.need_role(r, FEATURE) for r in ("jog", "jog_speed", "jog_accel"))
     speed_e, keepalive = p.need_role("speed_feedback", FEATURE), p.role("keepalive")
+    beat_s = keepalive_interval_s(drive)
     saved = {e.code: r.raw for e, r in zip((jog_speed, jog_accel), drive.read_entries([jog_speed, jog_accel]),
                                               strict=True)}
     t: list[float] = []
     v: list[float] = []
+    last_beat = timing.now()
+
+    def speed() -> float:
+        nonlocal last_beat
+        value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
+        if timing.now() - last_beat >= beat_s:
+            drive.write_raw(keepalive, 1) if keepalive is not None else drive.write_raw(jog, direction)
+            last_beat = timing.now()
+        return value
+
+    def stop() -> None:
+        nonlocal direction
+        direction = 0
+        drive.write_raw(jog, 0)
+        end = timing.now() + 2.0
+        while timing.now() < end and abs(speed()) > 3:
+            timing.sleep(0.02)
+
+    direction = 0
     try:
         drive.write_raw(jog_speed, max(jog_speed.min, min(jog_speed.max, round(speed_rpm / jog_speed.scale))))
         drive.write_raw(jog_accel, jog_accel.min)
-        t0 = timing.now()
-        drive.write_raw(jog, 1)
-        last_beat = t0
-        while timing.now() - t0 < duration_s:
-            t.append(timing.now() - t0)
-            v.append(float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw)))
-            if keepalive is not None and timing.now() - last_beat > 0.1:
-                drive.write_raw(keepalive, 1)
-                last_beat = timing.now()
-        drive.write_raw(jog, 0)
-        end = timing.now() + 2.0
-        while timing.now() < end and abs(float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))) > 3:
-            timing.sleep(0.02)
+        for direction in (1, -1):
+            t0 = timing.now()
+            drive.write_raw(jog, direction)
+            last_beat = t0
+            while timing.now() - t0 < duration_s:
+                now = timing.now() - t0
+                value = speed()
+                if direction > 0:
+                    t.append(now)
+                    v.append(value)
+            stop()
+        active = active_alarm(drive)
+        if active:
+            raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
+    except BaseException:
+        try:
+            drive.write_raw(jog, 0)
+        except ServoError:
+            pass  # the drive's watchdog stops it
+        raise
     finally:
-        servo = p.role("servo_on")
-        if servo is not None:
-            drive.write_raw(servo, 0)
-        for e in (jog_speed, jog_accel):
-            drive.write_raw(e, saved[e.code])
+        try:
+            servo = p.role("servo_on")
+            if servo is not None:
+                drive.write_raw(servo, 0)
+            for e in (jog_speed, jog_accel):
+                drive.write_raw(e, saved[e.code])
+        except ServoError:
+            pass  # already failing: report the first error
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
