@@ -6,7 +6,7 @@ import math
 import re
 
 from servotool.errors import UsageError
-from servotool.profile import Entry
+from servotool.profile import Entry, Profile
 
 
 def words_to_raw(entry: Entry, words: list[int]) -> int:
@@ -71,13 +71,75 @@ def _digit_fields(entry: Entry, raw: int) -> list[int]:
     return [(raw >> (entry.field_width * i)) & mask for i in range(len(entry.fields))]
 
 
+def field_limit(entry: Entry) -> int:
+    """Largest value a field can show on the panel: two decimal digits (two-param) or one digit (four-param)."""
+    return 99 if entry.field_width == 8 else 15
+
+
+def field_range(entry: Entry, name: str) -> tuple[int, int]:
+    """(lo, hi) of a field: the profile's field_ranges, else everything the panel can show."""
+    return entry.field_ranges.get(name.upper(), (0, field_limit(entry)))
+
+
+def field_index(entry: Entry, name: str) -> int:
+    """Position of a field (0 = lowest), case-insensitive; UsageError naming the valid fields."""
+    names = [f.upper() for f in entry.fields]
+    if entry.format != "digits":
+        raise UsageError(f"{entry.code} ({entry.name}) has no fields: CODE.FIELD works only for two-/four-parameter "
+                         f"(d/b) entries")
+    if name.strip().upper() not in names:
+        raise UsageError(f"{entry.code}: unknown field '{name.strip()}' (fields: {', '.join(reversed(entry.fields))})")
+    return names.index(name.strip().upper())
+
+
+def split_field(profile: Profile, text: str) -> tuple[Entry, str | None]:
+    """'Po001' -> (entry, None); 'Po001.Y' -> (entry, 'Y') for a digit entry; UsageError for a bad field."""
+    text = text.strip()
+    if profile.find(text) is not None or "." not in text:
+        return profile.entry(text), None
+    code, _, name = text.rpartition(".")
+    entry = profile.entry(code)
+    return entry, entry.fields[field_index(entry, name)]
+
+
+def fields_json(entry: Entry, raw: int) -> dict[str, int] | None:
+    """{field: value}, highest field first, for a displayable digit value; None otherwise."""
+    if entry.format != "digits" or not _displayable(entry, raw):
+        return None
+    return {f: v for f, v in reversed(list(zip(entry.fields, _digit_fields(entry, raw), strict=True)))}
+
+
+def get_field(entry: Entry, raw: int, name: str) -> int:
+    """Value of one field of a digit-encoded raw value."""
+    return _digit_fields(entry, raw)[field_index(entry, name)]
+
+
+def format_field(entry: Entry, raw: int, name: str) -> str:
+    """Text of one field, with its meaning when the profile names it (e.g. '2 (ball screw / linear motor)')."""
+    field = entry.fields[field_index(entry, name)]
+    value = get_field(entry, raw, name)
+    meaning = entry.field_enums.get(field.upper(), {}).get(value)
+    return f"{value} ({meaning})" if meaning else str(value)
+
+
+def _displayable(entry: Entry, raw: int) -> bool:
+    """Whether a raw value is a valid panel display (fields within the panel's digits, nothing above them)."""
+    vals = _digit_fields(entry, raw)
+    return raw >> (entry.field_width * len(entry.fields)) == 0 and all(v <= field_limit(entry) for v in vals)
+
+
 def format_value(entry: Entry, raw: int) -> str:
     """Text of a raw value in the form the manual shows."""
     if entry.format == "digits":
-        vals = _digit_fields(entry, raw)
-        width = 2 if entry.field_width == 8 else 1
-        # Fields are listed from the lowest up; the panel shows the highest first.
-        return " ".join(f"{v:0{width}d}" if entry.field_width == 8 else f"{v:X}" for v in reversed(vals))
+        if not _displayable(entry, raw):
+            return f"0x{raw & 0xFFFF:04X}"     # not a panel value (a drive fault or a foreign write): show it exactly
+        # Fields are listed from the lowest up; the panel shows the highest first, after its mode flag:
+        # two-param 'd Y X' with blank leading zeros (the manual's 'd 1 21', example 5 'd_1_10'),
+        # four-param 'b' and one digit per field ('b1200', example 6 'b1234').
+        vals = list(reversed(_digit_fields(entry, raw)))
+        if entry.field_width == 8:
+            return "d " + " ".join(str(v) for v in vals)
+        return "b" + "".join(f"{v:X}" for v in vals)
     if entry.format == "hex":
         return f"0x{raw & ((1 << (16 * entry.words)) - 1):0{4 * entry.words}X}"
     if entry.format == "bits":
@@ -95,9 +157,6 @@ def json_value(entry: Entry, raw: int) -> int | float | str:
     if entry.format in ("digits", "hex"):
         return format_value(entry, raw)
     return raw_to_eng(entry, raw)
-
-
-_FIELD_RE = re.compile(r"^[A-Za-z]$")
 
 
 def parse_value(entry: Entry, text: str, *, raw: bool = False, current: int | None = None) -> int:
@@ -144,36 +203,66 @@ def _parse_number(entry: Entry, text: str, *, raw: bool) -> int:
     return int(nearest)
 
 
+_FLAG_RE = re.compile(r"^([dDbB])(?=[\s_0-9A-Fa-f]|$)[\s_]*")
+
+
 def _parse_encoded(entry: Entry, text: str, current: int | None) -> int | None:
-    """Digit-field input: '1 21' (all fields, highest first) or 'X=21' / 'Y=1,X=21' (some fields)."""
+    """Digit-field input, None when the text is not in a digit form (then it is read as a plain number).
+
+    Forms: the manual's 'd 1 21' / 'd1 21' / 'd_1_21' (two-param) and 'b1200' / 'b 1 2 0 0' (four-param), the
+    bare fields '1 21' / '01 21' / '1200' / '1 2 0 0' (older servotool output), and 'X=21' / 'Y=1,X=21' (some
+    fields, the rest kept from `current`).
+    """
     if entry.format != "digits":
         return None
     width = entry.field_width
-    limit = 99 if width == 8 else 15
-    names = [f.upper() for f in entry.fields]
+    n = len(entry.fields)
+    flag = "d" if width == 8 else "b"
+    example = format_value(entry, entry.default or 0)
     parts = [p for p in re.split(r"[\s,]+", text) if p]
     if parts and all("=" in p for p in parts):
         vals = _digit_fields(entry, current if current is not None else entry.default or 0)
         for part in parts:
             name, _, val = part.partition("=")
-            if name.upper() not in names:
-                raise UsageError(f"{entry.code}: unknown field '{name}' (fields: {', '.join(reversed(entry.fields))})")
-            vals[names.index(name.upper())] = _field_int(entry, val, limit)
-    elif len(parts) == len(names) and len(parts) > 1:
-        vals = [_field_int(entry, p, limit) for p in reversed(parts)]
-    elif width == 4 and len(parts) == 1 and len(parts[0]) == len(names) and parts[0].isalnum() \
+            idx = field_index(entry, name)
+            vals[idx] = _field_int(entry, idx, val)
+        return _pack(entry, vals)
+    m = _FLAG_RE.match(text)
+    if m and not text.lower().startswith(("0x", "0b")):
+        if m.group(1).lower() != flag:
+            kind = "two-parameter (d Y X)" if width == 8 else "four-parameter (b D C B A)"
+            raise UsageError(f"{entry.code}: '{text}' has the wrong mode flag: it is a {kind} value, e.g. {example}")
+        body = [p for p in re.split(r"[\s_,]+", text[m.end():]) if p]
+        if width == 4 and len(body) == 1 and len(body[0]) == n:
+            body = list(body[0])
+        if len(body) != n:
+            raise UsageError(f"{entry.code}: '{text}' needs {n} fields ({' '.join(reversed(entry.fields))}), "
+                             f"e.g. {example}")
+        return _pack(entry, [_field_int(entry, i, p) for i, p in enumerate(reversed(body))])
+    if len(parts) == n and n > 1:
+        return _pack(entry, [_field_int(entry, i, p) for i, p in enumerate(reversed(parts))])
+    if width == 4 and len(parts) == 1 and len(parts[0]) == n and parts[0].isalnum() \
             and not parts[0].lower().startswith("0x"):
-        vals = [_field_int(entry, c, limit) for c in reversed(parts[0])]
-    else:
-        return None
-    return sum(v << (width * i) for i, v in enumerate(vals))
+        return _pack(entry, [_field_int(entry, i, c) for i, c in enumerate(reversed(parts[0]))])
+    return None
 
 
-def _field_int(entry: Entry, text: str, limit: int) -> int:
+def _pack(entry: Entry, vals: list[int]) -> int:
+    return sum(v << (entry.field_width * i) for i, v in enumerate(vals))
+
+
+def _field_int(entry: Entry, idx: int, text: str) -> int:
+    """One field's value (index from the lowest), checked against the panel's digits and the field's range."""
+    name = entry.fields[idx]
+    text = text.strip()
     try:
-        v = int(text, 16) if entry.field_width == 4 else int(text)
+        # A four-param digit may be a hex letter on the panel; a two-param field is two decimal digits.
+        v = int(text) if text.isdigit() else (int(text, 16) if entry.field_width == 4 and len(text) == 1 else None)
     except ValueError:
-        raise UsageError(f"{entry.code}: field value '{text}' is not a digit") from None
-    if not 0 <= v <= limit:
-        raise UsageError(f"{entry.code}: field value {text} is outside 0..{limit}")
+        v = None
+    if v is None:
+        raise UsageError(f"{entry.code}: field {name} value '{text}' is not a digit")
+    lo, hi = field_range(entry, name)
+    if not lo <= v <= hi:
+        raise UsageError(f"{entry.code}: field {name}={v} is out of range {lo}..{hi}")
     return v

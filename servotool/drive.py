@@ -4,8 +4,18 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from itertools import pairwise
 
-from servotool.codec import format_value, json_value, parse_value, raw_to_eng, raw_to_words, words_to_raw
+from servotool.codec import (
+    fields_json,
+    format_value,
+    json_value,
+    parse_value,
+    raw_to_eng,
+    raw_to_words,
+    split_field,
+    words_to_raw,
+)
 from servotool.errors import DeviceError, UsageError, VerifyError
 from servotool.profile import Entry, Profile
 from servotool.transport import Link
@@ -34,6 +44,8 @@ class Reading:
         e = self.entry
         out: dict[str, object] = {"code": e.code, "name": e.name, "value": json_value(e, self.raw), "raw": self.raw,
                                   "unit": e.unit}
+        if (fields := fields_json(e, self.raw)) is not None:
+            out["fields"] = fields
         if e.default is not None:
             out["default"] = json_value(e, e.default)
             out["changed"] = self.changed
@@ -127,11 +139,18 @@ class Drive:
 
     # ----- writing -------------------------------------------------------------------------------------------
     def parse_assignment(self, text: str, *, raw: bool = False, current: int | None = None) -> tuple[Entry, int]:
-        """'CODE=VALUE' -> (entry, raw value), validated against the profile (nothing is sent)."""
+        """'CODE=VALUE' or 'CODE.FIELD=VALUE' -> (entry, raw value), validated against the profile (nothing is
+        sent). A field assignment changes that field of `current` (else of the default) and keeps the others."""
         if "=" not in text:
             raise UsageError(f"'{text}' is not CODE=VALUE")
         code, _, value = text.partition("=")
-        entry = self.profile.entry(code.strip())
+        entry, field = split_field(self.profile, code)
+        if field is not None:
+            if raw:
+                raise UsageError(f"{entry.code}.{field}: --raw takes whole register values, not fields")
+            if not value.strip() or any(c in value.strip() for c in " \t,=_"):
+                raise UsageError(f"{entry.code}.{field}: '{value.strip()}' is not a single field value")
+            value = f"{field}={value.strip()}"
         if entry.cls != "Pn":
             raise UsageError(f"{entry.code} ({entry.name}) is a {entry.cls} entry, not a settable parameter")
         if not entry.writable:
@@ -161,6 +180,29 @@ class Drive:
                 raise VerifyError(f"{entry.code}: wrote {format_value(entry, raw)} but the drive reads back "
                                   f"{format_value(entry, back)}")
         return WriteResult(entry, old, raw)
+
+    def write_block_verified(self, items: list[tuple[Entry, int, int | None]]) -> list[WriteResult]:
+        """Write entries at adjacent addresses in one FC16 request, then verify each by one coalesced read-back.
+
+        items are (entry, new raw, old raw) in address order; the caller keeps the request within the profile's
+        max_write and only uses this when the profile allows FC16.
+        """
+        first = items[0][0]
+        words = [w for e, raw, _ in items for w in raw_to_words(e, raw)]
+        for (a, _, _), (b, _, _) in pairwise(items):
+            if b.address != a.address + a.words:
+                raise ValueError(f"{a.code} and {b.code} are not adjacent")
+        try:
+            self.link.write(self.unit, first.address, words, multiple=True)
+        except DeviceError as exc:
+            raise _prefixed(exc, f"writing {', '.join(e.code for e, _, _ in items)}") from None
+        readable = [e for e, _, _ in items if e.readable]
+        back = {r.entry.code: r.raw for r in self.read_entries(readable)} if readable else {}
+        for e, raw, _ in items:
+            if e.code in back and back[e.code] != raw:
+                raise VerifyError(f"{e.code}: wrote {format_value(e, raw)} but the drive reads back "
+                                  f"{format_value(e, back[e.code])}")
+        return [WriteResult(e, old, raw) for e, raw, old in items]
 
     def trigger(self, role: str, feature: str, value: int | None = None) -> None:
         """Run an Fn function by role (writes its trigger value unless one is given)."""

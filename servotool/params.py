@@ -6,6 +6,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+from servotool.codec import split_field
 from servotool.drive import Drive, Reading, WriteResult
 from servotool.errors import UsageError
 from servotool.profile import Entry, Profile
@@ -32,21 +33,34 @@ def plan_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> SetP
     """Parse and range-check every CODE=VALUE, then read current values; nothing is written."""
     if not assignments:
         raise UsageError("nothing to set: give CODE=VALUE ...")
-    parsed: list[tuple[Entry, str]] = []
-    seen: set[str] = set()
+    parsed: dict[str, tuple[Entry, list[str]]] = {}
+    fields_given: dict[str, set[str]] = {}
     for text in assignments:
         entry, _ = drive.parse_assignment(text, raw=raw)  # validates code/access/type/range before any I/O
-        if entry.code in seen:
-            raise UsageError(f"{entry.code} is given twice")
-        seen.add(entry.code)
-        parsed.append((entry, text.partition("=")[2]))
-    current = {r.entry.code: r.raw for r in drive.read_entries([e for e, _ in parsed if e.readable])}
+        field = split_field(drive.profile, text.partition("=")[0])[1]
+        if entry.code in parsed:
+            # Several fields of one entry (Po175.C=2 Po175.D=3) make one write; anything else twice is a mistake.
+            done = fields_given.get(entry.code)
+            if field is None or done is None:
+                raise UsageError(f"{entry.code} is given twice")
+            if field in done:
+                raise UsageError(f"{entry.code}.{field} is given twice")
+            done.add(field)
+        else:
+            parsed[entry.code] = (entry, [])
+            if field is not None:
+                fields_given[entry.code] = {field}
+        parsed[entry.code][1].append(text)
+    current = {r.entry.code: r.raw
+               for r in drive.read_entries([e for e, _ in parsed.values() if e.readable])}
     changes: list[tuple[Entry, int, int]] = []
     unchanged: list[tuple[Entry, int]] = []
-    for entry, value in parsed:
+    for entry, texts in parsed.values():
         old = current.get(entry.code)
-        # Digit-field input like 'X=0' is relative to the current value, so parse again with it.
-        new = drive.parse_assignment(f"{entry.code}={value}", raw=raw, current=old)[1]
+        # Field input (Po001.Y=1, X=0) is relative to the drive's current value, so parse again with it.
+        new = drive.parse_assignment(texts[0], raw=raw, current=old)[1]
+        for text in texts[1:]:
+            new = drive.parse_assignment(text, raw=raw, current=new)[1]
         if old == new:
             unchanged.append((entry, new))
         else:
@@ -59,9 +73,35 @@ def write_one(drive: Drive, entry: Entry, raw: int, old: int | None = None) -> W
     return drive.write_verified(entry, raw, old)
 
 
+def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list[tuple[Entry, int, int]]]:
+    """Split changes (in the order given) into runs one request can carry: consecutive entries at adjacent
+    addresses, when the drive takes FC16, up to its max_write registers. A single entry is a run of one."""
+    limits = drive.profile.limits
+    runs: list[list[tuple[Entry, int, int]]] = []
+    for change in changes:
+        entry = change[0]
+        if runs and limits.write_multiple:
+            run = runs[-1]
+            last = run[-1][0]
+            if entry.address == last.address + last.words and \
+                    sum(e.words for e, _, _ in run) + entry.words <= limits.max_write:
+                run.append(change)
+                continue
+        runs.append([change])
+    return runs
+
+
 def apply_set(drive: Drive, plan: SetPlan) -> list[WriteResult]:
-    """Write the planned changes in order, each verified by read-back."""
-    return [write_one(drive, entry, new, old) for entry, old, new in plan.changes]
+    """Write the planned changes in order, adjacent ones in one FC16 request (as the manuals' multi-register
+    examples do), each verified by read-back."""
+    results: list[WriteResult] = []
+    for run in write_runs(drive, plan.changes):
+        if len(run) == 1:
+            entry, old, new = run[0]
+            results.append(write_one(drive, entry, new, old))
+        else:
+            results.extend(drive.write_block_verified([(e, new, old) for e, old, new in run]))
+    return results
 
 
 def read_all(drive: Drive, entries: list[Entry]) -> list[Reading]:

@@ -23,7 +23,7 @@ DEFAULT_ACCESS = {"Pn": "rw", "Un": "ro", "Sn": "ro", "Fn": "wo"}
 ENTRY_KEYS = {
     "code", "class", "name", "address", "type", "word_order", "combine", "digits", "scale", "unit", "min",
     "max", "default", "access", "effect", "group", "description", "source", "unverified", "format", "fields",
-    "field_width", "bits", "enum", "trigger", "copy",
+    "field_width", "field_ranges", "field_enums", "bits", "enum", "trigger", "copy",
 }
 TOP_KEYS = {
     "schema", "id", "model", "vendor", "version", "description", "source", "address_rule", "serial", "limits",
@@ -59,6 +59,8 @@ class Entry:
     format: str = "dec"
     fields: tuple[str, ...] = ()
     field_width: int = 4
+    field_ranges: dict[str, tuple[int, int]] = field(default_factory=dict)   # upper-case field name -> (lo, hi)
+    field_enums: dict[str, dict[int, str]] = field(default_factory=dict)     # upper-case field name -> meanings
     bits: dict[int, str] = field(default_factory=dict)
     enum: dict[int, str] = field(default_factory=dict)
     trigger: int = 1
@@ -288,6 +290,60 @@ def _int_map(chk: _Checker, raw: Any, loc: str) -> dict[int, str]:
     return out
 
 
+def _parse_fields(chk: _Checker, raw: dict[str, Any], loc: str, fmt: str, fields: list[str], width: int,
+                  default: int | None) -> tuple[dict[str, tuple[int, int]], dict[str, dict[int, str]]]:
+    """field_ranges / field_enums of a digit entry: known field names, ranges within the panel's digits, the
+    default's fields inside their ranges."""
+    ranges: dict[str, tuple[int, int]] = {}
+    enums: dict[str, dict[int, str]] = {}
+    given = [k for k in ("field_ranges", "field_enums") if raw.get(k) is not None]
+    if not given:
+        return ranges, enums
+    if fmt != "digits":
+        chk.bad(loc, f"{', '.join(given)} needs format: digits")
+        return ranges, enums
+    names = {f.upper(): f for f in fields}
+    limit = 99 if width == 8 else 15
+    for key in given:
+        if not isinstance(raw[key], dict):
+            chk.bad(f"{loc}.{key}", "expected a mapping of field name -> value")
+            continue
+        for name, value in raw[key].items():
+            where = f"{loc}.{key}.{name}"
+            if str(name).upper() not in names:
+                chk.bad(where, f"unknown field (fields: {', '.join(fields)})")
+                continue
+            if key == "field_enums":
+                enums[str(name).upper()] = _int_map(chk, value, where)
+                continue
+            ok = isinstance(value, list) and len(value) == 2 and all(
+                isinstance(v, int) and not isinstance(v, bool) for v in value)
+            if not ok or not 0 <= value[0] <= value[1] <= limit:
+                chk.bad(where, f"expected [lo, hi] with 0 <= lo <= hi <= {limit}")
+                continue
+            ranges[str(name).upper()] = (value[0], value[1])
+    if default is not None and width in (4, 8):
+        mask = (1 << width) - 1
+        for i, f in enumerate(fields):
+            v = default >> (width * i) & mask
+            lo, hi = ranges.get(f.upper(), (0, limit))
+            if not lo <= v <= hi:
+                chk.bad(f"{loc}.default", f"field {f}={v} outside its range {lo}..{hi}")
+    return ranges, enums
+
+
+def _check_packed_range(chk: _Checker, loc: str, fields: list[str], width: int,
+                        ranges: dict[str, tuple[int, int]], vmin: int, vmax: int) -> None:
+    """min/max must admit every value the field ranges allow, or a valid field value fails with a packed-range
+    message nobody can read."""
+    limit = 99 if width == 8 else 15
+    lows = sum(ranges.get(f.upper(), (0, limit))[0] << (width * i) for i, f in enumerate(fields))
+    highs = sum(ranges.get(f.upper(), (0, limit))[1] << (width * i) for i, f in enumerate(fields))
+    if vmin > lows or vmax < highs:
+        chk.bad(loc, f"min/max 0x{vmin:04X}..0x{vmax:04X} exclude field values the field ranges allow "
+                     f"(need min <= 0x{lows:04X}, max >= 0x{highs:04X})")
+
+
 def _parse_entry(chk: _Checker, raw: Any, index: int, word_order: str) -> Entry | None:
     loc = f"entries[{index}]"
     if not isinstance(raw, dict):
@@ -347,6 +403,9 @@ def _parse_entry(chk: _Checker, raw: Any, index: int, word_order: str) -> Entry 
         chk.bad(f"{loc}.field_width", "must be 4 or 8")
     if fmt == "bits" and not bits:
         chk.bad(loc, "format: bits needs 'bits'")
+    field_ranges, field_enums = _parse_fields(chk, raw, loc, fmt, [str(f) for f in fields], field_width, default)
+    if fmt == "digits" and field_width in (4, 8) and fields:
+        _check_packed_range(chk, loc, [str(f) for f in fields], field_width, field_ranges, vmin, vmax)
     if enum and default is not None and default not in enum:
         chk.bad(f"{loc}.default", f"{default} is not one of the enum values {sorted(enum)}")
     if combine == "decimal" and TYPES[type_name][0] == 1:
@@ -359,7 +418,8 @@ def _parse_entry(chk: _Checker, raw: Any, index: int, word_order: str) -> Entry 
         digits=int(raw.get("digits", 5)), scale=float(scale), unit=str(raw.get("unit", "") or ""),
         min=vmin, max=vmax, default=default, access=access, effect=effect, group=str(raw.get("group", "") or ""),
         description=str(raw.get("description", "") or ""), source=source, unverified=str(unverified or ""),
-        format=fmt, fields=tuple(str(f) for f in fields), field_width=field_width, bits=bits, enum=enum,
+        format=fmt, fields=tuple(str(f) for f in fields), field_width=field_width, field_ranges=field_ranges,
+        field_enums=field_enums, bits=bits, enum=enum,
         trigger=int(raw.get("trigger", 1)), copy=bool(raw.get("copy", True)),
     )
 

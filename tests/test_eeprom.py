@@ -19,7 +19,7 @@ def test_sd25_writes_are_ram_only_by_default_and_saved_with_save(cli):
     assert cli("sim", "reset", "--profile", "sd25", "--power-cycle").code == 0
     after = get(cli, "sd25", "Po109", "Po110", "Po111", "Po505")
     assert after["Po109"] == 200 and after["Po110"] == 200          # RAM-only writes lost at power-off
-    assert after["Po111"] == 40 and after["Po505"] == "01 01"        # saved, switch back as the user had it
+    assert after["Po111"] == 40 and after["Po505"] == "d 1 1"       # saved, switch back as the user had it
 
 
 def test_is620p_stores_by_default_and_no_save_keeps_it_out(cli):

@@ -38,10 +38,10 @@ def test_key_roles_point_at_the_right_class(pid):
 
 def test_display_encoded_sd25_values_read_and_write_in_the_manuals_form(cli):
     r = cli("--port", "sim", "--profile", "sd25", "param", "get", "Po001", "Po505")
-    assert "01 21" in r.out and "01 01" in r.out
+    assert "d 1 21" in r.out and "d 1 1" in r.out
     r = cli("--port", "sim", "--profile", "sd25", "param", "set", "Po001=X=20", "--json")
     assert r.code == 0, r.err
-    assert r.json()["changed"][0]["new"] == "01 20"
+    assert r.json()["changed"][0]["new"] == "d 1 20"
     assert cli("--port", "sim", "--profile", "sd25", "param", "set", "Po001=X=100").code == 2
 
 

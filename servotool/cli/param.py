@@ -7,7 +7,8 @@ import typer
 from servotool import params
 from servotool.cli.common import JSON_OPT, drive
 from servotool.cli.render import emit_json, info, out, table, warn
-from servotool.codec import format_value
+from servotool.codec import format_field, format_value, get_field, split_field
+from servotool.drive import Reading
 
 app = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and restore drive parameters.")
 
@@ -15,26 +16,43 @@ app = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and resto
 @app.command("get")
 def get(
     ctx: typer.Context,
-    codes: list[str] = typer.Argument(..., help="Vendor codes (e.g. Pn004, Po109, H09-06) or role names."),
+    codes: list[str] = typer.Argument(..., help="Vendor codes (e.g. Pn004, Po109, H09-06), role names, or "
+                                      "CODE.FIELD for one field of a two-/four-parameter value (e.g. Po001.Y)."),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Read entries (any class) from the drive."""
     with drive(ctx) as d:
-        entries = [d.profile.entry(c) for c in codes]
-        readings = d.read_entries(entries)
+        targets = [split_field(d.profile, c) for c in codes]
+        readings = d.read_entries([e for e, _ in targets])
     if as_json:
-        emit_json([r.as_json() for r in readings])
+        emit_json([r.as_json() if f is None else _field_json(r, f) for r, (_, f) in zip(readings, targets,
+                                                                                          strict=True)])
         return
     t = table("Code", "Name", "Value", "Unit")
-    for r in readings:
-        t.add_row(r.entry.code, r.entry.name, r.text, r.entry.unit)
+    for r, (e, f) in zip(readings, targets, strict=True):
+        if f is None:
+            t.add_row(e.code, e.name, r.text, e.unit)
+        else:
+            t.add_row(f"{e.code}.{f}", e.name, format_field(e, r.raw, f), "")
     out.print(t)
+
+
+def _field_json(r: Reading, field: str) -> dict[str, object]:
+    e = r.entry
+    value = get_field(e, r.raw, field)
+    data: dict[str, object] = {"code": f"{e.code}.{field}", "name": e.name, "field": field, "value": value,
+                               "entry_value": format_value(e, r.raw), "raw": r.raw}
+    if (meaning := e.field_enums.get(field.upper(), {}).get(value)) is not None:
+        data["meaning"] = meaning
+    return data
 
 
 @app.command("set")
 def set_(
     ctx: typer.Context,
-    assignments: list[str] = typer.Argument(..., help="CODE=VALUE in engineering units (e.g. Pn100=40.0)."),
+    assignments: list[str] = typer.Argument(..., help="CODE=VALUE in engineering units (e.g. Pn100=40.0); "
+                                            "two-/four-parameter values as the manual shows them (Po001='d 1 21', "
+                                            "Po175=b1200) or one field at a time (Po001.Y=1)."),
     raw: bool = typer.Option(False, "--raw", help="Values are raw register integers, not engineering units."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and show what would change; write nothing."),
     save: bool = typer.Option(None, "--save/--no-save", help="Store in EEPROM (or keep out of it) as the drive "
