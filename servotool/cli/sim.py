@@ -116,12 +116,15 @@ def config(
     noise: float = typer.Option(None, "--noise", help=SIM_SETTINGS["noise"][4]),
     seed: int = typer.Option(None, "--seed", help=SIM_SETTINGS["seed"][4]),
     line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
+    brake: str = typer.Option(None, "--brake", help="on|off: holding brake, closed while the servo is off "
+                              "(default on; off lets a gravity load fall, held back only by friction)."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
+    brake_on = None if brake is None else _on_off(brake, "--brake")
     drive = _target(ctx, profile, unit)
     drive.configure(load_ratio=load_ratio, friction=friction, viscous=viscous, load_torque=load_torque, noise=noise,
-                    seed=seed, line_baud=line_baud)
+                    seed=seed, line_baud=line_baud, brake=brake_on)
     if as_json:
         emit_json({"profile": drive.profile.id, "unit": drive.unit, "settings": drive.settings})
         return
@@ -145,11 +148,19 @@ def show(
     _print_settings(drive)
 
 
+def _on_off(value: str, option: str) -> int:
+    choices = {"on": 1, "off": 0}
+    if value.lower() not in choices:
+        raise UsageError(f"{option} must be on or off, not {value!r}")
+    return choices[value.lower()]
+
+
 def _print_settings(drive: SimulatedDrive) -> None:
     t = table("Setting", "Value", "Meaning", title=f"simulated {drive.profile.model} unit {drive.unit} "
               f"({drive.bank.path})")
     for name, value in drive.settings.items():
-        t.add_row(name, f"{value:g}", SIM_SETTINGS[name][4])
+        shown = ("on" if value else "off") if name == "brake" else f"{value:g}"
+        t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
     pending = drive.bank.pending_power_cycle()
     if pending:
