@@ -184,9 +184,13 @@ def test_an_alarm_latched_by_one_sim_process_is_seen_by_the_next(sim_dir, cli):
     assert r.code == 1 and "E17" in r.err
     r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
     assert [v["value"] for v in r.json()] == [23, 23]
+    running = cli("sim", "show", "--json").json()["running"]
+    assert running["alarm"] == "overspeed" and not running["servo_on"] and running["position_rev"] > 1
+    assert "alarm overspeed" in cli("sim", "show").out
     assert cli("sim", "reset", "--power-cycle").code == 0
     r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
     assert [v["value"] for v in r.json()] == [0, 23]            # power on clears the alarm, not the history
+    assert cli("sim", "show", "--json").json()["running"] is None             # fresh from power on
 
 
 def test_sim_config_sets_the_brake_and_sim_show_displays_it(cli):

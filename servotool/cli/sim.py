@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import typer
 
 from servotool.cli.common import state
@@ -10,7 +12,7 @@ from servotool.connection import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit
 from servotool.errors import UsageError
 from servotool.profile import load_profile
 from servotool.sim.device import SIM_SETTINGS, SimulatedDrive
-from servotool.sim.registers import state_path
+from servotool.sim.registers import MACHINE_STATE_KEY, state_path
 
 app = typer.Typer(no_args_is_help=True, help="The simulated drive: serve it, configure its machine, reset it.")
 
@@ -143,9 +145,26 @@ def show(
     if as_json:
         emit_json({"profile": drive.profile.id, "unit": drive.unit, "state_file": str(drive.bank.path),
                    "settings": drive.settings, "pending_power_cycle": drive.bank.pending_power_cycle(),
-                   "eeprom_writes": drive.bank.eeprom_writes})
+                   "eeprom_writes": drive.bank.eeprom_writes, "running": _running(drive)})
         return
     _print_settings(drive)
+    run = _running(drive)
+    if run is not None:
+        out.print(f"running state as last saved (a powered drive keeps it until a power cycle): servo "
+                  f"{'on' if run['servo_on'] else 'off'}, alarm {run['alarm'] or 'none'}, "
+                  f"position {run['position_rev']:.3f} rev", markup=False)
+
+
+def _running(drive: SimulatedDrive) -> dict[str, object] | None:
+    """The stored running state (servo, latched alarm, position), None when the drive was just powered on."""
+    stored = drive.bank.extra.get(MACHINE_STATE_KEY)
+    plant = stored.get("plant") if isinstance(stored, dict) else None
+    if not isinstance(plant, dict):
+        return None
+    theta = plant.get("theta")
+    alarm = plant.get("alarm")
+    return {"servo_on": plant.get("mode") not in ("off", None), "alarm": alarm if isinstance(alarm, str) else None,
+            "position_rev": theta / (2 * math.pi) if isinstance(theta, (int, float)) else 0.0}
 
 
 def _on_off(value: str, option: str) -> int:
