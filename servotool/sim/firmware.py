@@ -4,8 +4,9 @@ It runs only when a request arrives: the plant is integrated up to "now", with s
 identification phases) applied at their exact simulated times on the way. Roles, not vendor codes, say which
 entry does what, so any profile with the roles gets the behaviour.
 
-Servo on (by command or for a JOG) runs the position loop: standing still holds position, host motion moves the
-position reference along its speed profile, so a load the motor cannot follow ends in the following-error alarm.
+Servo on (by command or for a JOG) puts the plant in position mode: host motion (JOG, speed reference) runs under
+speed control as on real drives, and standing still holds position through the position loop, so a load the motor
+cannot hold ends in the following-error alarm.
 The drive stays powered between CLI invocations: the running state (latched alarm, servo and motion state, position,
 I^2t) is kept in the state file with the parameters; a power cycle (`sim serve` start, `sim reset --power-cycle`, a
 soft reset) starts it afresh.
