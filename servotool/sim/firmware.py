@@ -4,9 +4,11 @@ It runs only when a request arrives: the plant is integrated up to "now", with s
 identification phases) applied at their exact simulated times on the way. Roles, not vendor codes, say which
 entry does what, so any profile with the roles gets the behaviour.
 
-Servo on (by command or for a JOG) puts the plant in position mode: host motion (JOG, speed reference) runs under
-speed control as on real drives, and standing still holds position through the position loop, so a load the motor
-cannot hold ends in the following-error alarm.
+Servo on by command puts the drive in its control mode (the plant's position mode): standing still holds position
+through the position loop, so a load the motor cannot hold ends in the following-error alarm; a host speed reference
+runs under speed control and the hold resumes where it returns to zero. JOG, a test function, runs under speed
+control throughout, its stop included, as real drives' JOG does (a position hold there would also make a badly
+mis-tuned speed loop oscillate at every JOG stop of the inertia identification).
 The drive stays powered between CLI invocations: the running state (latched alarm, servo and motion state, position,
 I^2t) is kept in the state file with the parameters; a power cycle (`sim serve` start, `sim reset --power-cycle`, a
 soft reset) starts it afresh.
@@ -255,7 +257,7 @@ class Firmware:
         if not self._motion_allowed() or self.mode not in ("off", "jog"):
             return
         if self.mode == "off":
-            self.plant.set_mode("position")
+            self.plant.set_mode("speed")
         self.mode = "jog"
         self.jog_dir = direction
         self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))

@@ -5,10 +5,10 @@ constant load torque (gravity axis). Sign convention: J dw/dt = T - Tc*sign(w) -
 An optional holding brake adds BRAKE_HOLD_X_RATED x rated torque of friction while it is closed: the drive closes it
 after servo off once the motor is below BRAKE_ENGAGE_RPM or BRAKE_DELAY_S after servo off (IS620P H02-11/H02-12
 defaults), and opens it at servo on. Without a brake a gravity load falls with servo off, limited only by friction.
-Position mode is the drive's servo-on state under host motion: while the (ramped) speed profile moves, the speed loop
-follows it, as real drives run JOG and speed references under speed control; once the profile is at rest the position
-loop (P) holds the position where it stopped, and a following error beyond the drive's limit (FOLLOWING_LIMIT_REV when
-the drive has no parameter for it) latches the following-error alarm instead of letting a load drift the axis away.
+Position mode is a servo-on drive in its control mode: while a (ramped) host speed profile moves, the speed loop
+follows it under speed control; once the profile is at rest the position loop (P) holds the position where it
+stopped, and a following error beyond the drive's limit (FOLLOWING_LIMIT_REV when the drive has no parameter for it)
+latches the following-error alarm instead of letting a load drift the axis away.
 The drive's speed PI computes its gain from the *configured* inertia ratio, as real drives do, so a wrong ratio shows
 as a sluggish, overshooting or oscillating loop. The loop runs at a 125 us control period with a one-sample delay,
 a speed-feedback filter and the torque-command filter from the drive's parameters.
@@ -286,7 +286,7 @@ class Plant:
         step = self._ramp * TS if mode in ("speed", "position") else math.inf
         self._ref += max(-step, min(step, self._target - self._ref))
         if mode == "position" and self._profile_moving:
-            self._pos_ref = self.theta     # host motion (JOG, speed reference) runs under speed control ...
+            self._pos_ref = self.theta     # a host speed reference runs under speed control ...
             self._loop_ref = self._ref
         elif mode == "position":           # ... and at rest the position loop holds where the profile stopped
             limit = self.gains.max_speed_rpm * RAD_S_PER_RPM
