@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 from servotool.profile import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import VirtualClock
@@ -58,3 +61,142 @@ def test_a_corrupt_state_file_is_an_error_not_silent_factory_defaults(sim_dir, c
         assert r.code == 1 and state.read_text(encoding="latin-1") == broken     # nothing overwritten
     state.write_text(good)
     assert cli("--port", "sim", "param", "get", "Pn004", "--json").json()[0]["value"] == 400
+
+
+def read(sim, code: str) -> int:
+    """A monitor read through the drive (integrates the plant up to now), as a signed raw value."""
+    entry = sim.profile.entry(code)
+    sim.read(entry.address, entry.words)
+    return sim.bank.value(entry.code)
+
+
+def run_for(sim, clock: VirtualClock, seconds: float, every: float = 0.05) -> None:
+    for _ in range(round(seconds / every)):
+        clock.advance(every)
+        read(sim, "Un000")
+
+
+def holding_drive(load_torque: float, *, brake: bool = True, torque_limit: float = 300.0):
+    """A DSX7E with a gravity load whose Un014 stands in for a following-error monitor (DSX7E has none)."""
+    profile = load_profile("dsx7e")
+    profile = replace(profile, roles={**profile.roles, "following_error": "Un014"})
+    clock = VirtualClock(50.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    sim.configure(load_torque=load_torque, brake=int(brake), noise=0.0)
+    sim.firmware.reconfigure()
+    for code in ("Pn025", "Pn026"):
+        write(sim, code, round(torque_limit / sim.profile.entry(code).scale))
+    return sim, clock
+
+
+def test_servo_on_holds_position_against_gravity_through_the_position_loop(sim_dir):
+    sim, clock = holding_drive(0.5)
+    write(sim, "Pn620", 60000)                           # a 60 s watchdog: nobody sends keep-alives here
+    write(sim, "Fn033", 1)                               # servo on, standing still
+    run_for(sim, clock, 0.02, every=0.002)
+    sag = abs(read(sim, "Un014"))
+    assert sim.firmware.plant.mode == "position" and read(sim, "Un100") == 0
+    run_for(sim, clock, 1.0)
+    counts_per_rev = sim.profile.motor.counts_per_rev
+    assert abs(read(sim, "Un012")) < 0.002 * counts_per_rev     # the position loop pulled the sag back
+    assert abs(read(sim, "Un014")) < 0.002 * counts_per_rev
+    assert sag != 0                                     # the following error was published while the load sagged
+
+
+def test_gravity_beyond_the_torque_limit_while_holding_ends_in_the_following_error_alarm(sim_dir):
+    sim, clock = holding_drive(1.5, torque_limit=100)   # a load the motor cannot hold at 100 %
+    write(sim, "Pn620", 60000)
+    write(sim, "Fn033", 1)
+    run_for(sim, clock, 0.02, every=0.01)
+    assert read(sim, "Un100") == 0
+    worst = 0
+    for _ in range(100):
+        clock.advance(0.005)
+        worst = max(worst, abs(read(sim, "Un014")))
+        if read(sim, "Un100"):
+            break
+    code = sim.profile.alarm_of_kind("following_error").code
+    assert read(sim, "Un100") == code and history(sim)[0] == code
+    assert worst > 2.5 * sim.profile.motor.counts_per_rev        # the error grew to the 3 rev default limit
+    run_for(sim, clock, 1.0)                            # alarm stop, servo off, the brake closes and holds
+    at_rest = read(sim, "Un012")
+    run_for(sim, clock, 1.0)
+    assert read(sim, "Un012") == at_rest and not sim.firmware.plant.servo_on
+
+
+def test_the_brake_holds_a_gravity_load_with_servo_off_and_without_it_the_axis_falls(sim_dir):
+    sim, clock = holding_drive(0.5, brake=True)
+    run_for(sim, clock, 1.0)
+    assert read(sim, "Un012") == 0
+    sim, clock = holding_drive(0.5, brake=False)
+    run_for(sim, clock, 0.2)
+    assert read(sim, "Un012") < -sim.profile.motor.counts_per_rev   # falling, only friction against it
+    assert read(sim, "Un100") == 0
+
+
+def test_an_alarm_raised_with_the_servo_off_enters_the_history(sim_dir):
+    sim, clock = holding_drive(2.0, brake=False)        # no brake: the load falls until it is over speed
+    run_for(sim, clock, 1.0)
+    code = sim.profile.alarm_of_kind("overspeed").code
+    assert not sim.firmware.plant.servo_on
+    assert read(sim, "Un100") == code and history(sim)[0] == code
+
+
+def test_the_position_counter_wraps_like_a_multi_turn_counter(sim_dir):
+    sim, _clock = holding_drive(0.0)
+    counts = sim.profile.motor.counts_per_rev
+    sim.firmware.plant.theta = 2 * math.pi * (2**31 + counts // 2) / counts    # half a turn past the top
+    assert read(sim, "Un012") == -(2**31) + counts // 2
+
+
+def test_the_following_error_limit_comes_from_the_drive_parameter_where_it_has_one(sim_dir):
+    profile = load_profile("is620p")
+    sim = build_drive(profile, 1, VirtualClock(), persist=False)
+    assert sim.firmware.plant.gains.following_limit_rev == 3.0      # H0A-10's default: 3 rev of a 20-bit encoder
+    entry = profile.entry("H0A-10")
+    sim.write(entry.address, [0, 8] if entry.word_order == "low_first" else [8, 0])
+    assert sim.firmware.plant.gains.following_limit_rev == 0.5
+
+
+def test_a_latched_alarm_and_the_motion_state_survive_into_another_process(sim_dir):
+    profile = load_profile("dsx7e")
+    clock = VirtualClock(100.0)
+    first = build_drive(profile, 1, clock)
+    write(first, "Fn001", 1)                   # JOG forward, then the host goes quiet: comm timeout
+    clock.advance(2.0)
+    read(first, "Un100")
+    second = build_drive(profile, 1, clock)    # e.g. the next `--port sim` command
+    assert read(second, "Un100") == 0x25 and history(second)[0] == 0x25
+    write(second, "Fn030", 1)                  # reset in the second, running JOG there, seen by the first
+    write(second, "Fn001", 1)
+    clock.advance(0.1)
+    assert read(first, "Un100") == 0 and first.firmware.mode == "jog" and read(first, "Un000") > 0
+    position = read(first, "Un012")
+    assert position > 0 and read(build_drive(profile, 1, clock), "Un012") == position
+    second.power_cycle()                       # power off and on: the running state starts afresh
+    assert read(first, "Un012") == 0 and first.firmware.mode == "off" and history(first)[0] == 0x25
+
+
+def test_an_alarm_latched_by_one_sim_process_is_seen_by_the_next(sim_dir, cli):
+    assert cli("sim", "config", "--load-torque", "-1.5", "--brake", "on").code == 0     # pushes forward
+    assert cli("--port", "sim", "param", "set", "Pn025=20", "Pn026=20").code == 0      # too weak to hold it
+    r = cli("--port", "sim", "jog", "--speed", "100", "--time", "0.5")
+    assert r.code == 1 and "E17" in r.err
+    r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
+    assert [v["value"] for v in r.json()] == [23, 23]
+    running = cli("sim", "show", "--json").json()["running"]
+    assert running["alarm"] == "overspeed" and not running["servo_on"] and running["position_rev"] > 1
+    assert "alarm overspeed" in cli("sim", "show").out
+    assert cli("sim", "reset", "--power-cycle").code == 0
+    r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
+    assert [v["value"] for v in r.json()] == [0, 23]            # power on clears the alarm, not the history
+    assert cli("sim", "show", "--json").json()["running"] is None             # fresh from power on
+
+
+def test_sim_config_sets_the_brake_and_sim_show_displays_it(cli):
+    assert cli("sim", "config", "--brake", "off").code == 0
+    r = cli("sim", "show")
+    assert r.code == 0 and any("brake" in line and " off " in line for line in r.out.splitlines())
+    assert cli("sim", "show", "--json").json()["settings"]["brake"] == 0
+    r = cli("sim", "config", "--brake", "maybe")
+    assert r.code != 0 and "--brake" in r.err and len(r.err.strip().splitlines()) == 1

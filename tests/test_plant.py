@@ -106,7 +106,7 @@ def test_overload_latches_and_needs_cooling():
 
 
 def tripped_then_unloaded() -> Plant:
-    """An overload trip, with the load taken off at that moment so the stopped axis rests (no brake is modelled)."""
+    """An overload trip, with the load taken off at that moment so the stopped axis rests (this plant has no brake)."""
     p = plant(load_ratio=0.0, load_torque_nm=3.5)
     p.set_mode("speed")
     p.set_speed_command(0)
@@ -153,3 +153,44 @@ def test_idle_gap_is_cheap():
     p.advance_to(3600.0)
     assert time.process_time() - t0 < 0.5 and p.time == 3600.0
     assert math.isclose(p.true_speed_rpm, 0.0)
+
+
+def test_position_mode_moves_under_speed_control_then_holds_where_the_profile_stopped():
+    p = plant(load_ratio=2.0, coulomb_nm=0.01, load_torque_nm=0.5,
+              gains=DriveGains(inertia_ratio_configured=2.0, speed_gain_hz=40))
+    p.set_mode("position")
+    p.set_speed_command(300)
+    run(p, 0.5)
+    assert p.true_speed_rpm == pytest.approx(300, abs=5) and p.following_error_counts == 0
+    p.set_speed_command(0)
+    run(p, 0.3)
+    stopped = p.position_rev
+    run(p, 1.0)
+    assert abs(p.position_rev - stopped) < 0.01 and abs(p.following_error_counts) < 0.001 * MOTOR.counts_per_rev
+    assert p.true_torque_pct == pytest.approx(0.5 / 1.27 * 100, abs=2)     # holding the gravity load
+
+
+def test_a_closed_brake_holds_and_an_alarm_stop_ends_in_it():
+    p = plant(load_ratio=2.0, load_torque_nm=2.5, brake_nm=3.0,      # twice the rated torque: more than the drive
+              gains=DriveGains(torque_limit_pct=150))
+    run(p, 1.0)
+    assert p.w == 0.0 and p.theta == 0.0                             # servo off: the brake holds
+    p.set_mode("position")
+    run(p, 2.0)
+    assert p.alarm == "following_error" and not p.servo_on and p.brake_closed
+    at_rest = p.theta
+    run(p, 1.0)
+    assert p.w == 0.0 and p.theta == at_rest
+
+
+def test_a_restored_state_continues_the_same_motion():
+    p = plant(load_ratio=2.0, coulomb_nm=0.02)
+    p.set_mode("position")
+    p.set_speed_command(500)
+    run(p, 0.1)
+    q = plant(load_ratio=2.0, coulomb_nm=0.02)
+    q.restore(p.state(), shift=10.0)
+    assert q.time == p.time + 10.0 and q.mode == "position"
+    run(p, 0.2)
+    run(q, 0.2)
+    assert q.theta == pytest.approx(p.theta) and q.true_speed_rpm == pytest.approx(p.true_speed_rpm)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import typer
 
 from servotool.cli.common import state
@@ -10,7 +12,7 @@ from servotool.connection import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit
 from servotool.errors import UsageError
 from servotool.profile import load_profile
 from servotool.sim.device import SIM_SETTINGS, SimulatedDrive
-from servotool.sim.registers import state_path
+from servotool.sim.registers import MACHINE_STATE_KEY, state_path
 
 app = typer.Typer(no_args_is_help=True, help="The simulated drive: serve it, configure its machine, reset it.")
 
@@ -116,12 +118,15 @@ def config(
     noise: float = typer.Option(None, "--noise", help=SIM_SETTINGS["noise"][4]),
     seed: int = typer.Option(None, "--seed", help=SIM_SETTINGS["seed"][4]),
     line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
+    brake: str = typer.Option(None, "--brake", help="on|off: holding brake, closed while the servo is off "
+                              "(default on; off lets a gravity load fall, held back only by friction)."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
+    brake_on = None if brake is None else _on_off(brake, "--brake")
     drive = _target(ctx, profile, unit)
     drive.configure(load_ratio=load_ratio, friction=friction, viscous=viscous, load_torque=load_torque, noise=noise,
-                    seed=seed, line_baud=line_baud)
+                    seed=seed, line_baud=line_baud, brake=brake_on)
     if as_json:
         emit_json({"profile": drive.profile.id, "unit": drive.unit, "settings": drive.settings})
         return
@@ -140,16 +145,41 @@ def show(
     if as_json:
         emit_json({"profile": drive.profile.id, "unit": drive.unit, "state_file": str(drive.bank.path),
                    "settings": drive.settings, "pending_power_cycle": drive.bank.pending_power_cycle(),
-                   "eeprom_writes": drive.bank.eeprom_writes})
+                   "eeprom_writes": drive.bank.eeprom_writes, "running": _running(drive)})
         return
     _print_settings(drive)
+    run = _running(drive)
+    if run is not None:
+        out.print(f"running state as last saved (a powered drive keeps it until a power cycle): servo "
+                  f"{'on' if run['servo_on'] else 'off'}, alarm {run['alarm'] or 'none'}, "
+                  f"position {run['position_rev']:.3f} rev", markup=False)
+
+
+def _running(drive: SimulatedDrive) -> dict[str, object] | None:
+    """The stored running state (servo, latched alarm, position), None when the drive was just powered on."""
+    stored = drive.bank.extra.get(MACHINE_STATE_KEY)
+    plant = stored.get("plant") if isinstance(stored, dict) else None
+    if not isinstance(plant, dict):
+        return None
+    theta = plant.get("theta")
+    alarm = plant.get("alarm")
+    return {"servo_on": plant.get("mode") not in ("off", None), "alarm": alarm if isinstance(alarm, str) else None,
+            "position_rev": theta / (2 * math.pi) if isinstance(theta, (int, float)) else 0.0}
+
+
+def _on_off(value: str, option: str) -> int:
+    choices = {"on": 1, "off": 0}
+    if value.lower() not in choices:
+        raise UsageError(f"{option} must be on or off, not {value!r}")
+    return choices[value.lower()]
 
 
 def _print_settings(drive: SimulatedDrive) -> None:
     t = table("Setting", "Value", "Meaning", title=f"simulated {drive.profile.model} unit {drive.unit} "
               f"({drive.bank.path})")
     for name, value in drive.settings.items():
-        t.add_row(name, f"{value:g}", SIM_SETTINGS[name][4])
+        shown = ("on" if value else "off") if name == "brake" else f"{value:g}"
+        t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
     pending = drive.bank.pending_power_cycle()
     if pending:

@@ -20,6 +20,7 @@ SIM_SETTINGS: dict[str, tuple[type, float | int, float, float, str]] = {
     "load_torque": (float, 0.0, -2.0, 2.0, "constant load (gravity) torque, fraction of rated torque"),
     "noise": (float, 0.002, 0.0, 0.2, "relative measurement noise on speed and torque readings"),
     "seed": (int, 1, 0, 2**31 - 1, "random seed of the measurement noise"),
+    "brake": (int, 1, 0, 1, "holding brake (on/off): closed while the servo is off; holds any load_torque"),
     "line_baud": (int, 0, 0, 10_000_000, "emulate an RS485 line at this baud (delay answers by wire time); 0 = off"),
 }
 

@@ -3,21 +3,42 @@
 It runs only when a request arrives: the plant is integrated up to "now", with scheduled events (watchdog expiry,
 identification phases) applied at their exact simulated times on the way. Roles, not vendor codes, say which
 entry does what, so any profile with the roles gets the behaviour.
+
+Servo on by command puts the drive in its control mode (the plant's position mode): standing still holds position
+through the position loop, so a load the motor cannot hold ends in the following-error alarm; a host speed reference
+runs under speed control and the hold resumes where it returns to zero. JOG, a test function, runs under speed
+control throughout, its stop included, as real drives' JOG does (a position hold there would also make a badly
+mis-tuned speed loop oscillate at every JOG stop of the inertia identification).
+The drive stays powered between CLI invocations: the running state (latched alarm, servo and motion state, position,
+I^2t) is kept in the state file with the parameters; a power cycle (`sim serve` start, `sim reset --power-cycle`, a
+soft reset) starts it afresh.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 from servotool.codec import raw_to_eng
 from servotool.profile import Entry, Motor, Profile
 from servotool.sim.device import SimulatedDrive
-from servotool.sim.plant import Clock, DriveGains, Plant, PlantSettings, RealClock
+from servotool.sim.plant import (
+    BRAKE_HOLD_X_RATED,
+    FOLLOWING_LIMIT_REV,
+    Clock,
+    DriveGains,
+    Plant,
+    PlantSettings,
+    RealClock,
+)
+from servotool.sim.registers import MACHINE_STATE_KEY
 
 DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 HOST_MOTION_ROLES = ("jog", "speed_reference", "servo_on", "keepalive")
 STATUS_BITS = {"servo_on": 0, "fault": 1, "warning": 2, "moving": 3, "jog": 4, "identifying": 5}
+FIRMWARE_MODES = ("off", "jog", "speed", "servo", "ident")
+COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
 
 
 @dataclass
@@ -42,20 +63,71 @@ class Firmware:
         self.profile: Profile = drive.profile
         self.clock = clock or RealClock()
         self.motor = self.profile.motor or DEFAULT_MOTOR
+        self._power_on()
+        self._seq: int | None = None  # which stored machine state this process's state is (None: not stored)
+        self._take_machine_state()
+        drive.on_read.append(lambda _d: self.update())
+        drive.on_param_change.append(self._param_changed)
+        drive.on_reload.append(self._reloaded)
+        drive.bank.before_write.append(self._store_machine_state)
+        soft_reset = drive.handlers.get("soft_reset")
+        drive.handlers.update({
+            "jog": self._fn_jog, "speed_reference": self._fn_speed, "servo_on": self._fn_servo,
+            "keepalive": self._fn_keepalive, "alarm_reset": self._fn_alarm_reset, "inertia_id": self._fn_inertia_id,
+            "soft_reset": lambda d, e, raw: self._fn_soft_reset(soft_reset, d, e, raw),
+        })
+        self.update()
+
+    def _power_on(self) -> None:
+        """The state right after power on: servo off, no alarm, position counter at zero, motor cold."""
         self.plant = Plant(self.motor, self._plant_settings(), self._gains(), start_time=self.clock.now())
         self.mode = "off"        # off | jog | speed | servo | ident
         self.jog_dir = 0
         self.last_host = self.clock.now()
         self.ident: Identification | None = None
         self._recorded = False  # whether the alarm latched now is already in the history
-        drive.on_read.append(lambda _d: self.update())
-        drive.on_param_change.append(self._param_changed)
-        drive.on_reload.append(self._reloaded)
-        drive.handlers.update({
-            "jog": self._fn_jog, "speed_reference": self._fn_speed, "servo_on": self._fn_servo,
-            "keepalive": self._fn_keepalive, "alarm_reset": self._fn_alarm_reset, "inertia_id": self._fn_inertia_id,
-        })
-        self.update()
+
+    # ----- the running state, shared with other processes through the state file -----------------------------
+    def _store_machine_state(self) -> None:
+        """Put this process's running state into the state file about to be written."""
+        stored = self.drive.bank.extra.get(MACHINE_STATE_KEY)
+        seq = stored.get("seq", 0) if isinstance(stored, dict) else 0
+        self._seq = (seq if isinstance(seq, int) else 0) + 1
+        self.drive.bank.extra[MACHINE_STATE_KEY] = {
+            "seq": self._seq, "wall_offset": self.clock.wall() - self.clock.now(), "plant": self.plant.state(),
+            "mode": self.mode, "jog_dir": self.jog_dir, "last_host": self.last_host, "recorded": self._recorded,
+            "ident": asdict(self.ident) if self.ident is not None else None,
+        }
+
+    def _take_machine_state(self) -> None:
+        """Continue from the running state another process stored (or start afresh after a power cycle)."""
+        stored = self.drive.bank.extra.get(MACHINE_STATE_KEY)
+        if not isinstance(stored, dict):
+            if self._seq is not None:          # stored before, gone now: the drive was power-cycled
+                self._power_on()
+                self._seq = None
+            return
+        if stored.get("seq") == self._seq:
+            return                             # our own state (the file changed for another reason)
+        self._power_on()
+        offset = stored.get("wall_offset")
+        shift = float(offset) - (self.clock.wall() - self.clock.now()) if isinstance(offset, (int, float)) else 0.0
+        plant = stored.get("plant")
+        if isinstance(plant, dict):
+            self.plant.restore(plant, shift)
+        if stored.get("mode") in FIRMWARE_MODES:
+            self.mode = str(stored["mode"])
+        self.jog_dir = _int(stored.get("jog_dir"), 0)
+        last_host = stored.get("last_host")
+        if isinstance(last_host, (int, float)):
+            self.last_host = float(last_host) + shift
+        self._recorded = stored.get("recorded") is True
+        self.ident = _identification(stored.get("ident"), shift)
+        if self.mode == "ident" and self.ident is None:
+            self.mode = "off"
+            self.plant.set_mode("off")
+        seq = stored.get("seq")
+        self._seq = seq if isinstance(seq, int) else None
 
     # ----- settings ------------------------------------------------------------------------------------------
     def _plant_settings(self) -> PlantSettings:
@@ -64,7 +136,8 @@ class Firmware:
         return PlantSettings(
             load_ratio=float(s["load_ratio"]), coulomb_nm=float(s["friction"]) * rated,
             viscous_nm_per_rad_s=float(s["viscous"]) * rated, load_torque_nm=float(s["load_torque"]) * rated,
-            noise=float(s["noise"]), seed=int(s["seed"]))
+            noise=float(s["noise"]), seed=int(s["seed"]),
+            brake_nm=BRAKE_HOLD_X_RATED * rated if s["brake"] else 0.0)
 
     def _eng(self, role: str, default: float) -> float:
         entry = self.profile.role(role)
@@ -85,7 +158,18 @@ class Firmware:
             torque_limit_pct=min(self._eng("torque_limit_fwd", 300.0), self._eng("torque_limit_rev", 300.0)),
             max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
             jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
+            following_limit_rev=self._following_limit_rev(),
         )
+
+    def _following_limit_rev(self) -> float:
+        """The drive's following-error alarm limit in motor revolutions (simulator default without a parameter)."""
+        entry = self.profile.role("following_error_limit")
+        if entry is None or entry.unit.lower() not in (*COUNT_UNITS, "rev"):
+            return FOLLOWING_LIMIT_REV
+        limit = self._eng("following_error_limit", 0.0)
+        if entry.unit.lower() != "rev":
+            limit /= self.motor.counts_per_rev
+        return limit if limit > 0 else FOLLOWING_LIMIT_REV
 
     def _param_changed(self, _drive: SimulatedDrive, _entry: Entry, _raw: int) -> None:
         self.update()
@@ -97,6 +181,7 @@ class Firmware:
 
     def _reloaded(self, _drive: SimulatedDrive) -> None:
         """Another process changed the drive's state (sim config, sim reset, another server): take it over."""
+        self._take_machine_state()
         self.plant.set_settings(self._plant_settings())
         self.plant.set_gains(self._gains())
 
@@ -120,10 +205,11 @@ class Firmware:
         if self.ident is not None:
             self._advance_identification(now)
         self.plant.advance_to(now)
-        if self.plant.alarm is not None and self.mode != "off":
-            self.mode = "off"
-            self.ident = None
-            self._record_alarm()
+        if self.plant.alarm is not None:
+            if self.mode != "off":
+                self.mode = "off"
+                self.ident = None
+            self._record_alarm()       # also alarms raised with the servo off
         self._refresh_monitors()
 
     def _trip(self, kind: str) -> None:
@@ -187,7 +273,7 @@ class Firmware:
         self.update()
         self._host_alive()
         if raw and self._motion_allowed() and self.mode == "off":
-            self.plant.set_mode("speed")
+            self.plant.set_mode("position")
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
         elif not raw and self.mode in ("servo", "speed", "jog"):
@@ -200,6 +286,14 @@ class Firmware:
             self.plant.clear_alarms()
             self._recorded = self.plant.alarm is not None
         self._refresh_monitors()
+
+    def _fn_soft_reset(self, original: Any, drive: SimulatedDrive, entry: Entry, raw: int) -> None:
+        """A soft reset reboots the drive: parameters take effect and the running state starts afresh."""
+        if original is not None:
+            original(drive, entry, raw)
+        if raw == entry.trigger:
+            self._power_on()
+            self.plant.set_gains(self._gains())
 
     def _fn_inertia_id(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
         self.update()
@@ -286,7 +380,9 @@ class Firmware:
         self._set("speed_feedback", p.speed_rpm)
         self._set("speed_command", p.speed_command_rpm)
         self._set("torque_feedback", p.torque_pct)
-        self._set("position_feedback", p.position_counts)
+        entry = self.profile.role("position_feedback")
+        if entry is not None and entry.cls not in ("Pn", "Fn"):
+            self.drive.bank.set_live(entry.code, p.position_counts, wrap=True)   # a multi-turn counter wraps
         self._set("following_error", p.following_error_counts)
         self._set("load_rate", p.load_rate_pct)
         self._set("current_rms", abs(p.torque_pct) / 100 * 2.8)
@@ -301,6 +397,23 @@ class Firmware:
             names = {name: bit for bit, name in status.bits.items()} if status.bits else STATUS_BITS
             word = sum(1 << names[k] for k, on in bits.items() if on and k in names)
             self.drive.bank.set_live(status.code, word)
+
+
+def _int(value: object, default: int) -> int:
+    return value if isinstance(value, int) and not isinstance(value, bool) else default
+
+
+def _identification(raw: object, shift: float) -> Identification | None:
+    """An Identification from its stored form, times moved into this process's clock; None when unusable."""
+    if not isinstance(raw, dict):
+        return None
+    try:
+        ident = Identification(**{f.name: raw[f.name] for f in fields(Identification) if f.name in raw})
+        ident.phase_t0 = float(ident.phase_t0) + shift
+        ident.estimates = [float(x) for x in ident.estimates or []]
+    except (TypeError, ValueError):
+        return None
+    return ident
 
 
 def build_drive(profile: Profile, unit: int, clock: Clock | None = None, *, persist: bool = True) -> SimulatedDrive:

@@ -2,6 +2,13 @@
 
 Rigid motor + load: J = Jm * (1 + load_ratio), with Coulomb friction (and stiction at rest), viscous friction and a
 constant load torque (gravity axis). Sign convention: J dw/dt = T - Tc*sign(w) - B*w - Tg.
+An optional holding brake adds BRAKE_HOLD_X_RATED x rated torque of friction while it is closed: the drive closes it
+after servo off once the motor is below BRAKE_ENGAGE_RPM or BRAKE_DELAY_S after servo off (IS620P H02-11/H02-12
+defaults), and opens it at servo on. Without a brake a gravity load falls with servo off, limited only by friction.
+Position mode is a servo-on drive in its control mode: while a (ramped) host speed profile moves, the speed loop
+follows it under speed control; once the profile is at rest the position loop (P) holds the position where it
+stopped, and a following error beyond the drive's limit (FOLLOWING_LIMIT_REV when the drive has no parameter for it)
+latches the following-error alarm instead of letting a load drift the axis away.
 The drive's speed PI computes its gain from the *configured* inertia ratio, as real drives do, so a wrong ratio shows
 as a sluggish, overshooting or oscillating loop. The loop runs at a 125 us control period with a one-sample delay,
 a speed-feedback filter and the torque-command filter from the drive's parameters.
@@ -25,18 +32,31 @@ CURRENT_LOOP_S = 0.2e-3     # the current loop's lag between torque command and 
 MAX_GAP_S = 20.0            # integrate at most this much at once; beyond it the state is carried over
 RAD_S_PER_RPM = 2 * math.pi / 60
 OVERLOAD_LIMIT = 8.0        # I^2t budget: 300 % torque trips after 1 s, 200 % after 2.7 s
-FOLLOWING_LIMIT_REV = 3.0
+FOLLOWING_LIMIT_REV = 3.0   # simulator default following-error limit (IS620P H0A-10's default is 3 rev of its encoder)
+BRAKE_HOLD_X_RATED = 2.5    # brake holding torque: above the largest configurable load torque, so a brake always holds
+BRAKE_ENGAGE_RPM = 30.0     # brake closes after servo off below this speed (IS620P H02-11 default) ...
+BRAKE_DELAY_S = 0.5         # ... or this long after servo off at speed (IS620P H02-12 default)
+ESTOP_MAX_S = 0.5           # an alarm stop at the torque limit lasts at most this long, then the motor is switched off
+# The plant's dynamic state, as persisted between processes serving one simulated drive (the drive stays powered).
+STATE_FIELDS = ("time", "w", "theta", "mode", "alarm", "_w_meas", "_theta_prev_counts", "_integral", "_t_cmd",
+                "_t_filtered", "_t_applied", "_t_delayed", "_ref", "_loop_ref", "_target", "_torque_target",
+                "_pos_ref", "_heat", "_load", "_off_s", "_estop_s")
 
 
 class Clock(Protocol):
     def now(self) -> float: ...
 
+    def wall(self) -> float: ...
+
 
 class RealClock:
-    """Monotonic wall clock."""
+    """Monotonic clock for integration; wall time to hand the state over to another process."""
 
     def now(self) -> float:
         return time.monotonic()
+
+    def wall(self) -> float:
+        return time.time()
 
 
 class VirtualClock:
@@ -47,6 +67,9 @@ class VirtualClock:
 
     def now(self) -> float:
         return self.t
+
+    def wall(self) -> float:
+        return self.t            # drives sharing one virtual clock share its time
 
     def advance(self, dt: float) -> float:
         self.t += dt
@@ -63,6 +86,7 @@ class PlantSettings:
     load_torque_nm: float = 0.0
     noise: float = 0.0       # speed std = noise * 1000 rpm, torque std = noise * 100 % of rated
     seed: int = 1
+    brake_nm: float = 0.0    # holding brake torque; 0 = no brake
 
 
 @dataclass(frozen=True)
@@ -77,6 +101,7 @@ class DriveGains:
     torque_limit_pct: float = 300.0
     max_speed_rpm: float = 6000.0
     jog_accel_ms: float = 200.0     # time from 0 to rated speed
+    following_limit_rev: float = FOLLOWING_LIMIT_REV
 
 
 class Plant:
@@ -96,12 +121,15 @@ class Plant:
         self._t_filtered = 0.0     # after the torque-command filter
         self._t_applied = 0.0      # produced by the current loop
         self._t_delayed = 0.0
-        self._ref = 0.0            # ramped speed reference, rad/s
+        self._ref = 0.0            # ramped speed reference (the speed profile), rad/s
+        self._loop_ref = 0.0       # the speed loop's reference (position mode: profile + position loop output)
         self._target = 0.0         # speed command, rad/s
         self._torque_target = 0.0  # N*m (torque mode)
         self._pos_ref = 0.0
         self._heat = 0.0
         self._load = 0.0
+        self._off_s = math.inf     # time since servo off (brake timing)
+        self._estop_s = 0.0        # time in the alarm stop
         self.set_settings(settings)
         self.set_gains(gains)
 
@@ -131,6 +159,8 @@ class Plant:
             self._target = 0.0
             self._torque_target = 0.0
             self._pos_ref = self.theta
+            if mode == "off":
+                self._off_s = 0.0
         self.mode = mode
 
     def set_speed_command(self, rpm: float) -> None:
@@ -148,6 +178,7 @@ class Plant:
                 self.mode = "estop"
                 self._ref = self.w
                 self._target = 0.0
+                self._estop_s = 0.0
 
     def clear_alarms(self) -> bool:
         """Clear only when the cause is gone (overload must have cooled down, motor not over speed)."""
@@ -183,6 +214,8 @@ class Plant:
 
     @property
     def speed_command_rpm(self) -> float:
+        if self.mode == "position":
+            return self._loop_ref / RAD_S_PER_RPM
         return self._ref / RAD_S_PER_RPM if self.mode in ("speed", "estop") else 0.0
 
     @property
@@ -194,14 +227,27 @@ class Plant:
         return math.floor(self.position_rev * self.motor.counts_per_rev)
 
     @property
+    def _profile_moving(self) -> bool:
+        return self._ref != 0.0 or self._target != 0.0
+
+    @property
     def following_error_counts(self) -> int:
-        if self.mode != "position":
+        if self.mode != "position" or self._profile_moving:     # no position loop under host motion
             return 0
         return round((self._pos_ref - self.theta) / (2 * math.pi) * self.motor.counts_per_rev)
 
     @property
     def load_rate_pct(self) -> float:
         return self._load
+
+    @property
+    def brake_closed(self) -> bool:
+        """Whether the holding brake (if any) holds the shaft: servo off and slow enough or long enough."""
+        return self.settings.brake_nm > 0 and self.mode == "off" and (
+            self._off_s >= BRAKE_DELAY_S or abs(self.w) < BRAKE_ENGAGE_RPM * RAD_S_PER_RPM)
+
+    def _friction_nm(self) -> float:
+        return self.settings.coulomb_nm + (self.settings.brake_nm if self.brake_closed else 0.0)
 
     # ----- integration ---------------------------------------------------------------------------------------
     def advance_to(self, t: float) -> None:
@@ -212,8 +258,9 @@ class Plant:
         if dt_total > MAX_GAP_S:
             self._cool(dt_total - MAX_GAP_S)
             self.time = t - MAX_GAP_S  # an idle gap: the state carries over, only the recent part is integrated
-        if self.mode == "off" and self.w == 0.0 and abs(self.settings.load_torque_nm) <= self.settings.coulomb_nm:
+        if self.mode == "off" and self.w == 0.0 and abs(self.settings.load_torque_nm) <= self._friction_nm():
             self._cool(t - self.time)
+            self._off_s += t - self.time
             self.time = t              # at rest, nothing acting: nothing to integrate
             self._w_meas = 0.0
             self._t_applied = self._t_filtered = self._t_cmd = self._t_delayed = 0.0
@@ -236,14 +283,18 @@ class Plant:
             return 0.0
         if mode == "torque":
             return self._torque_target
-        if mode == "position":
-            self._target = self.gains.position_gain_per_s * (self._pos_ref - self.theta)
-            self._ref = self._target
+        step = self._ramp * TS if mode in ("speed", "position") else math.inf
+        self._ref += max(-step, min(step, self._target - self._ref))
+        if mode == "position" and self._profile_moving:
+            self._pos_ref = self.theta     # a host speed reference runs under speed control ...
+            self._loop_ref = self._ref
+        elif mode == "position":           # ... and at rest the position loop holds where the profile stopped
+            limit = self.gains.max_speed_rpm * RAD_S_PER_RPM
+            correction = self.gains.position_gain_per_s * (self._pos_ref - self.theta)
+            self._loop_ref = max(-limit, min(limit, correction))
         else:
-            step = self._ramp * TS if mode == "speed" else math.inf
-            diff = self._target - self._ref
-            self._ref += max(-step, min(step, diff))
-        err = self._ref - self._w_meas
+            self._loop_ref = self._ref
+        err = self._loop_ref - self._w_meas
         unclamped = self._kp * (err + self._integral / self._ti)
         if abs(unclamped) < self._t_lim:  # anti-windup: integrate only while not saturated
             self._integral += err * TS
@@ -261,17 +312,18 @@ class Plant:
         self._t_applied += (self._t_filtered - self._t_applied) * (TS / (CURRENT_LOOP_S + TS))
         s = self.settings
         torque = self._t_applied - s.load_torque_nm - s.viscous_nm_per_rad_s * self.w
+        coulomb = self._friction_nm()
         w = self.w
         if w == 0.0:
-            if abs(torque) <= s.coulomb_nm:
-                torque = 0.0                               # stiction holds
+            if abs(torque) <= coulomb:
+                torque = 0.0                               # stiction (or the brake) holds
             else:
-                torque -= math.copysign(s.coulomb_nm, torque)
+                torque -= math.copysign(coulomb, torque)
             w_new = w + torque / self.j * TS
         else:
-            w_new = w + (torque - math.copysign(s.coulomb_nm, w)) / self.j * TS
+            w_new = w + (torque - math.copysign(coulomb, w)) / self.j * TS
             if (w_new > 0) != (w > 0):                     # friction stops the motor, it does not reverse it
-                w_new = 0.0 if abs(torque) <= s.coulomb_nm else w_new
+                w_new = 0.0 if abs(torque) <= coulomb else w_new
         self.w = w_new
         self.theta += w_new * TS
         counts = math.floor(self.theta / (2 * math.pi) * self.motor.counts_per_rev)
@@ -285,19 +337,49 @@ class Plant:
         ratio = abs(self._t_applied) / rated
         self._load += (ratio * 100.0 - self._load) * (TS / 0.05)
         self._heat = max(0.0, self._heat + (ratio * ratio - 1.0) * TS)
-        if self.mode == "estop" and abs(self.w) < 0.5 * RAD_S_PER_RPM:
-            self.mode = "off"
-            self._integral = 0.0
+        if self.mode == "off":
+            self._off_s += TS
+        elif self.mode == "estop":
+            self._estop_s += TS
+            if abs(self.w) < 0.5 * RAD_S_PER_RPM or self._estop_s >= ESTOP_MAX_S:
+                self.mode = "off"
+                self._integral = 0.0
+                self._off_s = self._estop_s    # the brake delay runs from the alarm: at most 0.5 s to the brake
         if self.alarm is not None:
             return
         if abs(self.w) > 1.1 * self.gains.max_speed_rpm * RAD_S_PER_RPM:
             self.raise_alarm("overspeed")
         elif self._heat > OVERLOAD_LIMIT:
             self.raise_alarm("overload")
-        elif self.mode == "position" and abs(self._pos_ref - self.theta) > FOLLOWING_LIMIT_REV * 2 * math.pi:
+        elif self.mode == "position" and abs(self._pos_ref - self.theta) > self.gains.following_limit_rev * 2 * math.pi:
             self.raise_alarm("following_error")
 
     # ----- persistence ---------------------------------------------------------------------------------------
     def snapshot(self) -> dict[str, object]:
         return {"time": self.time, "w": self.w, "theta": self.theta, "mode": self.mode, "alarm": self.alarm,
                 "settings": asdict(self.settings), "gains": asdict(self.gains)}
+
+    def state(self) -> dict[str, object]:
+        """The dynamic state (JSON-safe), to carry the running machine over to another process."""
+        out: dict[str, object] = {}
+        for name in STATE_FIELDS:
+            value = getattr(self, name)
+            out[name] = None if isinstance(value, float) and math.isinf(value) else value
+        return out
+
+    def restore(self, state: dict[str, object], shift: float = 0.0) -> None:
+        """Take over a state(); shift moves its time into this process's clock. Malformed fields are ignored."""
+        for name in STATE_FIELDS:
+            value = state.get(name)
+            if name == "mode":
+                if value in ("off", "speed", "torque", "position", "estop"):
+                    self.mode = str(value)
+            elif name == "alarm":
+                if value is None or isinstance(value, str):
+                    self.alarm = value
+            elif name == "_off_s" and value is None:
+                self._off_s = math.inf
+            elif isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+                setattr(self, name, int(value) if name == "_theta_prev_counts" else float(value))
+                if name == "time":
+                    self.time += shift

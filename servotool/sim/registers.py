@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +29,7 @@ ILLEGAL_FUNCTION = 1
 ILLEGAL_ADDRESS = 2
 ILLEGAL_VALUE = 3
 DEVICE_FAILURE = 4
+MACHINE_STATE_KEY = "machine"   # extra[...]: the firmware's and plant's running state, kept while the drive is on
 
 
 class SimRefusal(Exception):
@@ -92,6 +93,7 @@ class RegisterBank:
     _held: bool = field(default=False, repr=False)
     _dirty: bool = field(default=False, repr=False)
     _file_lock: _FileLock | None = field(default=None, repr=False)
+    before_write: list[Callable[[], None]] = field(default_factory=list, repr=False)  # e.g. store the plant state
 
     def __post_init__(self) -> None:
         for e in self.profile.entries:
@@ -202,6 +204,8 @@ class RegisterBank:
     def _write(self) -> None:
         """Write the state file atomically, so a killed process never leaves half a file."""
         assert self.path is not None
+        for hook in self.before_write:
+            hook()
         data = {"profile": self.profile.id, "version": self.profile.version, "unit": self.unit,
                 "eeprom": self.eeprom, "ram": self.ram, "effective": self.effective,
                 "eeprom_writes": self.eeprom_writes, "extra": self.extra}
@@ -215,9 +219,11 @@ class RegisterBank:
         self._dirty = False
 
     def power_cycle(self) -> None:
-        """What a real power cycle does: RAM reloads from EEPROM and everything takes effect."""
+        """What a real power cycle does: RAM reloads from EEPROM and everything takes effect; the running machine's
+        state (latched alarm, servo state, position counter, I^2t) starts afresh. The alarm history stays."""
         self.ram = dict(self.eeprom)
         self.effective = dict(self.eeprom)
+        self.extra.pop(MACHINE_STATE_KEY, None)
 
     def factory_reset(self) -> None:
         """Factory defaults into EEPROM and RAM; power-cycle parameters wait for the next power cycle."""
@@ -247,10 +253,13 @@ class RegisterBank:
         entry = self.profile.entry(code)
         return self.effective[entry.code] if entry.cls == "Pn" else self.live.get(entry.code, 0)
 
-    def set_live(self, code: str, raw: int) -> None:
-        """Set a monitor/status value (clamped to the entry's range)."""
+    def set_live(self, code: str, raw: int, *, wrap: bool = False) -> None:
+        """Set a monitor/status value: clamped to the entry's range, or wrapped into it like a multi-turn counter."""
         entry = self.profile.entry(code)
-        self.live[entry.code] = max(entry.min, min(entry.max, int(raw)))
+        if wrap:
+            self.live[entry.code] = (int(raw) - entry.min) % (entry.max - entry.min + 1) + entry.min
+        else:
+            self.live[entry.code] = max(entry.min, min(entry.max, int(raw)))
 
     def persists_writes(self) -> bool:
         """Whether a Modbus write of a parameter goes to EEPROM right now (per the profile's rule)."""
