@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from servotool.alarms import describe
 from servotool.profile import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import VirtualClock
@@ -76,10 +77,11 @@ def run_for(sim, clock: VirtualClock, seconds: float, every: float = 0.05) -> No
         read(sim, "Un000")
 
 
-def holding_drive(load_torque: float, *, brake: bool = True, torque_limit: float = 300.0):
+def holding_drive(load_torque: float, *, brake: bool = True, torque_limit: float = 300.0, without_kind: str = ""):
     """A DSX7E with a gravity load whose Un014 stands in for a following-error monitor (DSX7E has none)."""
     profile = load_profile("dsx7e")
-    profile = replace(profile, roles={**profile.roles, "following_error": "Un014"})
+    profile = replace(profile, roles={**profile.roles, "following_error": "Un014"},
+                      alarms=[a for a in profile.alarms if a.kind != without_kind])
     clock = VirtualClock(50.0)
     sim = build_drive(profile, 1, clock, persist=False)
     sim.configure(load_torque=load_torque, brake=int(brake), noise=0.0)
@@ -140,6 +142,14 @@ def test_an_alarm_raised_with_the_servo_off_enters_the_history(sim_dir):
     code = sim.profile.alarm_of_kind("overspeed").code
     assert not sim.firmware.plant.servo_on
     assert read(sim, "Un100") == code and history(sim)[0] == code
+
+
+def test_a_trip_the_profile_lists_no_alarm_for_shows_as_unknown_not_as_another_alarm(sim_dir):
+    sim, clock = holding_drive(2.0, brake=False, without_kind="overspeed")
+    run_for(sim, clock, 1.0)
+    code = read(sim, "Un100")
+    state = describe(sim.profile, code)
+    assert code and not state.known and code not in {a.code for a in sim.profile.alarms}
 
 
 def test_the_position_counter_wraps_like_a_multi_turn_counter(sim_dir):

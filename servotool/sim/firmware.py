@@ -222,7 +222,9 @@ class Firmware:
         name = self.plant.alarm
         if name is None:
             return 0
-        alarm = self.profile.alarm_of_kind(name) or self.profile.alarm_of_kind("other")
+        # A trip the profile lists no alarm for reports a code outside its list, so it shows as unknown
+        # rather than borrowing some unrelated alarm's name.
+        alarm = self.profile.alarm_of_kind(name)
         return alarm.code if alarm is not None else 0xFF
 
     def _record_alarm(self) -> None:
