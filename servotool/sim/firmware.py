@@ -8,15 +8,21 @@ entry does what, so any profile with the roles gets the behaviour.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from servotool.codec import raw_to_eng
+from servotool.motion import jog_direction
 from servotool.profile import Entry, Motor, Profile
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.plant import Clock, DriveGains, Plant, PlantSettings, RealClock
 
 DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 HOST_MOTION_ROLES = ("jog", "speed_reference", "servo_on", "keepalive")
+# Simulator assumption for drives whose manual documents no communication timeout (no comm_timeout role): host
+# motion stops (ramped, no alarm) when no motion-role write arrives for this long. A real drive of that kind keeps
+# running; servotool says so before moving it.
+DEFAULT_HOST_TIMEOUT_MS = 500.0
 STATUS_BITS = {"servo_on": 0, "fault": 1, "warning": 2, "moving": 3, "jog": 4, "identifying": 5}
 
 
@@ -43,7 +49,7 @@ class Firmware:
         self.clock = clock or RealClock()
         self.motor = self.profile.motor or DEFAULT_MOTOR
         self.plant = Plant(self.motor, self._plant_settings(), self._gains(), start_time=self.clock.now())
-        self.mode = "off"        # off | jog | speed | servo | ident
+        self.mode = "off"        # off | jog | speed | servo | ident | stopping (host lost, no alarm kind)
         self.jog_dir = 0
         self.last_host = self.clock.now()
         self.ident: Identification | None = None
@@ -51,10 +57,15 @@ class Firmware:
         drive.on_read.append(lambda _d: self.update())
         drive.on_param_change.append(self._param_changed)
         drive.on_reload.append(self._reloaded)
-        drive.handlers.update({
-            "jog": self._fn_jog, "speed_reference": self._fn_speed, "servo_on": self._fn_servo,
-            "keepalive": self._fn_keepalive, "alarm_reset": self._fn_alarm_reset, "inertia_id": self._fn_inertia_id,
-        })
+        motion = {"jog": self._fn_jog, "speed_reference": self._fn_speed, "servo_on": self._fn_servo,
+                  "keepalive": self._fn_keepalive}
+        drive.handlers.update({**motion, "alarm_reset": self._fn_alarm_reset, "inertia_id": self._fn_inertia_id})
+        # Motion roles may sit on parameters (a signed JOG speed, a forced-DI word): their writes act too.
+        self._param_motion: dict[str, list[Callable[[SimulatedDrive, Entry, int], None]]] = {}
+        for role, code in self.profile.roles.items():
+            entry = self.profile.entry(code)
+            if role in motion and entry is not None and entry.cls != "Fn":
+                self._param_motion.setdefault(entry.code.upper(), []).append(motion[role])
         self.update()
 
     # ----- settings ------------------------------------------------------------------------------------------
@@ -87,9 +98,11 @@ class Firmware:
             jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
         )
 
-    def _param_changed(self, _drive: SimulatedDrive, _entry: Entry, _raw: int) -> None:
+    def _param_changed(self, drive: SimulatedDrive, entry: Entry, raw: int) -> None:
         self.update()
         self.plant.set_gains(self._gains())
+        for handler in self._param_motion.get(entry.code.upper(), []):
+            handler(drive, entry, raw)
 
     def reconfigure(self) -> None:
         """Apply changed simulated-machine settings (sim config)."""
@@ -107,24 +120,48 @@ class Firmware:
 
     # ----- time ----------------------------------------------------------------------------------------------
     def _timeout_s(self) -> float:
-        return self._eng("comm_timeout", 500.0) / 1000.0
+        return self._eng("comm_timeout", DEFAULT_HOST_TIMEOUT_MS) / 1000.0
 
     def update(self) -> None:
         """Integrate the plant up to now, applying the watchdog and identification on the way; refresh monitors."""
         now = self.clock.now()
-        if self.mode in ("jog", "speed", "servo") and self.profile.role("keepalive") is not None:
+        if self.mode in ("jog", "speed", "servo"):
             expiry = self.last_host + self._timeout_s()
             if expiry < now:
                 self.plant.advance_to(expiry)
-                self._trip("comm_timeout")
+                self._host_lost()
         if self.ident is not None:
             self._advance_identification(now)
+        if self.mode == "stopping":
+            self._advance_stop(now)
         self.plant.advance_to(now)
         if self.plant.alarm is not None and self.mode != "off":
             self.mode = "off"
             self.ident = None
             self._record_alarm()
         self._refresh_monitors()
+
+    def _host_lost(self) -> None:
+        """The watchdog expired: trip with the drive's comm alarm, or (no such alarm) ramp down and switch off."""
+        servo = self.profile.role("servo_on")
+        if servo is not None and servo.cls == "Pn":
+            self.drive.bank.apply_parameter(servo, 0)   # a servo-on held in a parameter drops with the servo
+            self.drive.bank.save()
+        if self.profile.alarm_of_kind("comm_timeout") is not None:
+            self._trip("comm_timeout")
+            return
+        self.plant.set_speed_command(0.0)
+        self.jog_dir = 0
+        self.mode = "stopping"
+
+    def _advance_stop(self, now: float) -> None:
+        t = self.plant.time
+        while self.mode == "stopping" and t < now:
+            t = min(now, t + 0.01)
+            self.plant.advance_to(t)
+            if abs(self.plant.true_speed_rpm) < 1.0:
+                self.plant.set_mode("off")
+                self.mode = "off"
 
     def _trip(self, kind: str) -> None:
         self.plant.raise_alarm(kind)
@@ -159,16 +196,18 @@ class Firmware:
         self.update()
         self._host_alive()
 
-    def _fn_jog(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+    def _fn_jog(self, _d: SimulatedDrive, entry: Entry, raw: int) -> None:
         self.update()
         self._host_alive()
-        direction = (raw > 0) - (raw < 0)
+        direction = jog_direction(entry, raw)
         if direction == 0:
             if self.mode == "jog":       # stop, but stay excited (holding) until JOG is left with servo off
                 self.plant.set_speed_command(0.0)
                 self.jog_dir = 0
+                if self.profile.role("servo_on") is None:
+                    self.mode = "stopping"   # nothing to leave JOG with: the drive switches off once at rest
             return
-        if not self._motion_allowed() or self.mode not in ("off", "jog"):
+        if not self._motion_allowed() or self.mode not in ("off", "jog", "stopping"):
             return
         if self.mode == "off":
             self.plant.set_mode("speed")
@@ -176,12 +215,12 @@ class Firmware:
         self.jog_dir = direction
         self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))
 
-    def _fn_speed(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+    def _fn_speed(self, _d: SimulatedDrive, entry: Entry, raw: int) -> None:
         self.update()
         self._host_alive()
         if self.mode in ("servo", "speed"):
             self.mode = "speed"
-            self.plant.set_speed_command(float(raw))
+            self.plant.set_speed_command(float(raw_to_eng(entry, raw)))
 
     def _fn_servo(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
         self.update()
@@ -190,7 +229,7 @@ class Firmware:
             self.plant.set_mode("speed")
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
-        elif not raw and self.mode in ("servo", "speed", "jog"):
+        elif not raw and self.mode in ("servo", "speed", "jog", "stopping"):
             self.plant.set_mode("off")
             self.mode = "off"
 

@@ -19,7 +19,7 @@ from servotool import alarms
 from servotool.codec import raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.motion import servo_is_on
+from servotool.motion import Jogger, motion_route, servo_is_on
 from servotool.profile import Entry, Profile
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.gains import GainSuggestion, suggest_gains
@@ -119,9 +119,11 @@ def preflight(drive: Drive, method: str) -> None:
     """Link, roles, alarm and servo state; raises with one clear line."""
     p = drive.profile
     need = ["speed_feedback", "torque_feedback", "inertia_ratio"]
-    need += ["jog", "jog_speed", "jog_accel"] if method == "host" else ["inertia_id"]
+    need += ["jog_accel"] if method == "host" else ["inertia_id"]
     for role in need:
         p.need_role(role, f"{FEATURE} --method {method}")
+    if method == "host":
+        motion_route(p, f"{FEATURE} --method {method}")   # a JOG trigger or speed reference + servo-on
     if p.motor is None:
         raise UsageError(f"{FEATURE} needs the motor data (rated torque, rotor inertia) in profile {p.id}")
     if p.role("alarm_code") is not None:
@@ -181,8 +183,8 @@ class Identifier:
     # ----- host method ---------------------------------------------------------------------------------------
     def run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None = None) -> Result:
         p, d = self.p, self.drive
-        jog, jog_speed, jog_accel = (p.need_role(r, FEATURE) for r in ("jog", "jog_speed", "jog_accel"))
-        keepalive = p.role("keepalive")
+        jogger = Jogger(d, self.keepalive_s, FEATURE)
+        jog_speed, jog_accel = jogger.speed_entry, p.need_role("jog_accel", FEATURE)
         speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
         pos_e = p.role("position_feedback")
         sampled = [speed_e, torque_e] + ([pos_e] if pos_e else [])
@@ -206,8 +208,7 @@ class Identifier:
                 raise TravelExceeded(f"travel limit {plan.travel_limit_rev:g} rev reached: motion stopped; the "
                                      "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel")
             if self.timing.now() - beat[1] >= self.keepalive_s:
-                beat[0] = (beat[0] + 1) & 0xFFFF
-                d.write_raw(keepalive, beat[0]) if keepalive is not None else None
+                jogger.beat()
                 beat[1] = self.timing.now()
 
         def wait_until(cond: Callable[[], bool], limit_s: float) -> None:
@@ -219,11 +220,11 @@ class Identifier:
 
         def move(direction: int, speed: float) -> float:
             """One accelerate-then-stop move; returns the largest excursion seen so far (rev)."""
-            self._set(jog_speed, speed)
+            jogger.set_speed(speed)
             self._set(jog_accel, plan.ramp_s * 1000.0 * motor.rated_speed_rpm / speed)
-            d.write_raw(jog, direction)
+            jogger.command(direction)
             wait_until(lambda: False, plan.ramp_s)   # the drive's ramp reaches the speed in ramp_s
-            d.write_raw(jog, 0)
+            jogger.command(0)
             wait_until(lambda: abs(trace.speed[-1]) < 2.0, plan.ramp_s * 3 + 0.5)
             wait_until(lambda: False, 0.1)
             pos = [x for x in trace.position if not math.isnan(x)]
@@ -249,14 +250,12 @@ class Identifier:
                     move(direction, speed)
         except BaseException:
             try:
-                d.write_raw(jog, 0)
+                jogger.command(0)
             except ServoError:
                 pass  # the drive's watchdog stops it
             raise
         finally:
-            servo = p.role("servo_on")
-            if servo is not None:
-                d.write_raw(servo, 0)
+            jogger.leave()
             for e in (jog_speed, jog_accel):
                 if d.read_entries([e])[0].raw != saved[e.code]:
                     d.write_raw(e, saved[e.code])
@@ -368,32 +367,32 @@ def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timin
                   ) -> StepResponse:
     """Command a JOG speed step, sample the speed, stop; JOG parameters are put back afterwards."""
     p, timing = drive.profile, timing or RealTiming()
-    jog, jog_speed, jog_accel = (p.need_role(r, FEATURE) for r in ("jog", "jog_speed", "jog_accel"))
-    speed_e, keepalive = p.need_role("speed_feedback", FEATURE), p.role("keepalive")
+    jogger = Jogger(drive, feature=FEATURE)
+    jog_speed, jog_accel = jogger.speed_entry, p.need_role("jog_accel", FEATURE)
+    speed_e = p.need_role("speed_feedback", FEATURE)
     saved = {e.code: r.raw for e, r in zip((jog_speed, jog_accel), drive.read_entries([jog_speed, jog_accel]),
                                               strict=True)}
     t: list[float] = []
     v: list[float] = []
     try:
-        drive.write_raw(jog_speed, max(jog_speed.min, min(jog_speed.max, round(speed_rpm / jog_speed.scale))))
+        jogger.set_speed(speed_rpm)
         drive.write_raw(jog_accel, jog_accel.min)
         t0 = timing.now()
-        drive.write_raw(jog, 1)
+        jogger.command(1)
         last_beat = t0
         while timing.now() - t0 < duration_s:
             t.append(timing.now() - t0)
             v.append(float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw)))
-            if keepalive is not None and timing.now() - last_beat > 0.1:
-                drive.write_raw(keepalive, 1)
+            if timing.now() - last_beat > 0.1:
+                jogger.beat()
                 last_beat = timing.now()
-        drive.write_raw(jog, 0)
+        jogger.command(0)
         end = timing.now() + 2.0
         while timing.now() < end and abs(float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))) > 3:
             timing.sleep(0.02)
+            jogger.beat()
     finally:
-        servo = p.role("servo_on")
-        if servo is not None:
-            drive.write_raw(servo, 0)
+        jogger.leave()
         for e in (jog_speed, jog_accel):
             drive.write_raw(e, saved[e.code])
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
