@@ -61,8 +61,8 @@ def test_refusals(cli):
     assert r.code == 2 and "--yes" in r.err                    # no TTY, no --yes: nothing moves
     r = cli("--port", "tcp://127.0.0.1:9", "--profile", "dsx7e", "tune", "inertia", "--yes")
     assert r.code == 1 and "cannot open port" in r.err
-    r = cli("--port", "sim", "--profile", "sd25", "tune", "inertia", "--yes")
-    assert r.code == 2 and "needs role" in r.err
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes")    # PN60 semantics unknown
+    assert r.code == 2 and "needs role 'inertia_ratio'" in r.err
 
 
 def test_active_alarm_refuses_before_any_motion(sim_dir):
