@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from servotool.cli.common import confirm, drive
+from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table
 from servotool.errors import UsageError
 from servotool.tuning import wizard
@@ -41,6 +42,8 @@ def inertia(
         raise UsageError("give --rigidity or --bandwidth, not both")
     with drive(ctx) as d:
         wizard.preflight(d, method)
+        if method == "host" or step_check:
+            confirm_motion(ctx, d, yes, wizard.FEATURE)
         ident = wizard.Identifier(d)
         step_speed = 200.0
         before = wizard.step_response(d, step_speed) if step_check and confirm("Run the step check?", yes) \
