@@ -1,4 +1,9 @@
-"""Host-commanded motion with a dead-man: JOG through the profile's roles, keep-alive, limits, safe stop."""
+"""Host-commanded motion with a dead-man: JOG through the profile's roles, keep-alive, limits, safe stop.
+
+Two routes, chosen by role: a JOG trigger (role jog, speed from jog_speed; its raw values come from the entry's
+enum names forward/reverse/stop, else +1/-1/0), or a signed speed reference with servo-on over communication
+(roles speed_reference + servo_on).
+"""
 
 from __future__ import annotations
 
@@ -11,8 +16,88 @@ from servotool import alarms
 from servotool.codec import parse_value, raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import DeviceError, UsageError
+from servotool.profile import Entry, Profile
 
 FEATURE = "jog"
+DIRECTION_NAMES = {1: "forward", -1: "reverse", 0: "stop"}
+
+
+def is_sim_extension(entry: Entry) -> bool:
+    """An entry servotool added for its simulator (source "servotool ..."): not on the real drive."""
+    return entry.source.strip().lower().startswith("servotool")
+
+
+def jog_codes(entry: Entry) -> dict[int, int]:
+    """Direction (+1/-1/0) -> raw value of a JOG trigger entry."""
+    names = {name.split()[0].lower(): raw for raw, name in entry.enum.items() if name.strip()}
+    if all(n in names for n in DIRECTION_NAMES.values()):
+        return {d: names[n] for d, n in DIRECTION_NAMES.items()}
+    return {1: 1, -1: -1, 0: 0}
+
+
+def jog_direction(entry: Entry, raw: int) -> int:
+    """The direction a raw value written to a JOG trigger entry commands (unknown values stop)."""
+    codes = jog_codes(entry)
+    if codes == {1: 1, -1: -1, 0: 0}:
+        return (raw > 0) - (raw < 0)
+    return next((d for d, r in codes.items() if r == raw), 0)
+
+
+@dataclass(frozen=True)
+class MotionRoute:
+    """How this profile moves the motor over communication: kind 'trigger' or 'speed', and the entries by role."""
+
+    kind: str
+    entries: dict[str, Entry]
+
+    @property
+    def speed_entry(self) -> Entry:
+        return self.entries["jog_speed" if self.kind == "trigger" else "speed_reference"]
+
+
+ROUTE_ROLES = ("jog", "jog_speed", "speed_reference", "servo_on", "jog_accel", "keepalive", "comm_timeout")
+
+
+def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
+    """The profile's motion route; one clear line when it has none."""
+    found = {r: e for r in ROUTE_ROLES if (e := profile.role(r)) is not None}
+    if "jog" in found and "jog_speed" in found:
+        kind = "trigger"
+        found.pop("speed_reference", None)
+    elif "speed_reference" in found and "servo_on" in found:
+        kind = "speed"
+        found.pop("jog", None)
+    else:
+        raise UsageError(f"{feature} needs role 'jog' with 'jog_speed', or 'speed_reference' with 'servo_on', "
+                         f"which profile {profile.id} does not map")
+    return MotionRoute(kind, found)
+
+
+@dataclass(frozen=True)
+class MotionCaveats:
+    """What is not known to work on a real drive: unverified route entries, and a missing drive-side watchdog."""
+
+    unverified: tuple[tuple[str, Entry, str], ...]   # (role, entry, reason)
+    drive_timeout: Entry | None                       # None: nothing on the drive stops the motor if the host dies
+
+    def lines(self) -> list[str]:
+        out = [f"{e.code} ({role}): {reason}" for role, e, reason in self.unverified]
+        if self.drive_timeout is None:
+            out.append("this drive has no communication timeout: if this program dies (kill, crash, cable), the "
+                       "motor keeps running until stopped at the drive; Ctrl-C still stops it")
+        return out
+
+
+def motion_caveats(profile: Profile, feature: str = FEATURE) -> MotionCaveats:
+    """Unverified entries of the motion route (with their reasons) and the drive-side watchdog, if real."""
+    route = motion_route(profile, feature)
+    unverified = []
+    for role, e in route.entries.items():
+        reason = e.unverified or ("a servotool simulator extension, not in the manual" if is_sim_extension(e) else "")
+        if reason:
+            unverified.append((role, e, reason))
+    timeout = route.entries.get("comm_timeout")
+    return MotionCaveats(tuple(unverified), timeout if timeout is not None and not is_sim_extension(timeout) else None)
 
 
 def servo_is_on(drive: Drive) -> bool | None:
@@ -61,21 +146,26 @@ class JogPlan:
 class Jogger:
     """JOG one drive with a keep-alive; always leaves the motor stopped."""
 
-    def __init__(self, drive: Drive, keepalive_s: float = 0.1) -> None:
+    def __init__(self, drive: Drive, keepalive_s: float = 0.1, feature: str = FEATURE) -> None:
         self.drive = drive
         self.profile = drive.profile
-        self.jog = self.profile.need_role("jog", FEATURE)
-        self.jog_speed = self.profile.need_role("jog_speed", FEATURE)
-        self.keepalive = self.profile.role("keepalive")
+        self.route = motion_route(self.profile, feature)
+        self.speed_entry = self.route.speed_entry
+        self.jog = self.route.entries.get("jog")
+        self.servo = self.route.entries.get("servo_on")
+        self.keepalive = self.route.entries.get("keepalive")
         self.speed_fb = self.profile.role("speed_feedback")
         self.keepalive_s = keepalive_s
         self.direction = 0
+        self.speed_rpm = 0.0
+        self._enabled = False          # speed route: servo switched on by us
+        self._saved_reference: int | None = None
         self._beat = 0
         self._stop_wait_s = 3.0
 
     def speed_limit(self) -> float:
         """The lowest of: the drive's max-speed parameter, the JOG speed range, the motor's max speed."""
-        limits = [raw_to_eng(self.jog_speed, self.jog_speed.max)]
+        limits = [raw_to_eng(self.speed_entry, self.speed_entry.max)]
         max_speed = self.profile.role("max_speed")
         if max_speed is not None:
             limits.append(raw_to_eng(max_speed, self.drive.read_entries([max_speed])[0].raw))
@@ -93,13 +183,14 @@ class Jogger:
         if abs(speed_rpm) > limit:
             raise UsageError(f"speed {abs(speed_rpm):g} rpm is over the limit {limit:g} rpm "
                              "(drive max-speed parameter, JOG range, motor)")
-        parse_value(self.jog_speed, f"{abs(speed_rpm):g}")  # resolution and range of the JOG speed entry
+        parse_value(self.speed_entry, f"{abs(speed_rpm):g}")  # resolution and range of the speed entry
         if self.profile.role("alarm_code") is not None:
             state = alarms.current(self.drive)
             if state.active:
                 raise UsageError(f"refusing to move: alarm {state.display} {state.name} is active "
                                  "(see 'servotool alarm', clear it first)")
-        if servo_is_on(self.drive):
+        if servo_is_on(self.drive) or (self.servo is not None and self.servo.readable and self.servo.cls == "Pn"
+                                       and self.drive.read_entries([self.servo])[0].raw != 0):
             raise UsageError("refusing to JOG: the servo is already on (enabled from elsewhere); switch it off first")
         travel = abs(speed_rpm) / 60.0 * seconds if seconds is not None else None
         if max_travel_rev is not None and travel is not None and travel > max_travel_rev:
@@ -113,24 +204,56 @@ class Jogger:
         return JogPlan(abs(speed_rpm), 1 if speed_rpm > 0 else -1, seconds, limit,
                        float(accel_ms) if accel_ms is not None else None, travel)
 
+    def _speed_raw(self, signed_rpm: float) -> int:
+        e = self.speed_entry
+        return max(e.min, min(e.max, round(signed_rpm / e.scale)))
+
     def set_speed(self, speed_rpm: float) -> None:
-        raw = parse_value(self.jog_speed, f"{abs(speed_rpm):g}")
-        current = self.drive.read_entries([self.jog_speed])[0].raw
-        if current != raw:  # no needless EEPROM write
-            self.drive.write_raw(self.jog_speed, raw)
+        """The speed of the following moves (rpm, sign ignored); a running speed-route move changes at once."""
+        self.speed_rpm = abs(speed_rpm)
+        if self.route.kind == "trigger":
+            raw = self._speed_raw(self.speed_rpm)
+            if self.drive.read_entries([self.speed_entry])[0].raw != raw:  # no needless EEPROM write
+                self.drive.write_raw(self.speed_entry, raw)
+        elif self._enabled and self.direction:
+            self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
 
     def command(self, direction: int) -> None:
-        """+1 forward, -1 reverse, 0 stop (ramped by the drive's JOG accel time)."""
+        """+1 forward, -1 reverse, 0 stop (ramped by the drive's JOG/speed accel time)."""
         self.direction = (direction > 0) - (direction < 0)
-        self.drive.write_raw(self.jog, self.direction)
+        if self.jog is not None:
+            self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
+            return
+        assert self.servo is not None
+        if self.direction and not self._enabled:
+            # A reference held in a parameter (e.g. a signed JOG speed) would run at once on enable: zero it first.
+            if self._saved_reference is None and self.speed_entry.readable:
+                self._saved_reference = self.drive.read_entries([self.speed_entry])[0].raw
+            self.drive.write_raw(self.speed_entry, self._speed_raw(0))
+            self.drive.write_raw(self.servo, 1)
+            self._enabled = True
+        if self._enabled:
+            self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
 
     def beat(self) -> None:
         """The dead-man keep-alive: without it the drive stops the motor after its timeout."""
         self._beat = (self._beat + 1) & 0xFFFF
         if self.keepalive is not None:
             self.drive.write_raw(self.keepalive, self._beat if self.keepalive.max >= 0xFFFF else 1)
-        else:
-            self.drive.write_raw(self.jog, self.direction)  # re-sending the command is the keep-alive
+        elif self.jog is not None:
+            self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])  # re-sending the command
+        elif self._enabled and self.servo is not None:
+            self.drive.write_raw(self.servo, 1)      # re-sending servo-on (no EEPROM write of the reference)
+
+    def leave(self) -> None:
+        """Servo off (the drive stops holding the axis) and put back a parameter-held speed reference."""
+        if self.servo is not None:
+            self.drive.write_raw(self.servo, 0)
+        self._enabled = False
+        if self._saved_reference is not None:
+            if self.drive.read_entries([self.speed_entry])[0].raw != self._saved_reference:
+                self.drive.write_raw(self.speed_entry, self._saved_reference)
+            self._saved_reference = None
 
     def speed(self) -> float | None:
         if self.speed_fb is None:
@@ -147,9 +270,7 @@ class Jogger:
                 break
             self.beat()           # the watchdog keeps running while the drive ramps down
             time.sleep(min(0.05, self.keepalive_s))
-        servo = self.profile.role("servo_on")
-        if servo is not None:
-            self.drive.write_raw(servo, 0)   # leave JOG: the drive stops holding the axis
+        self.leave()
 
     def run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
             command: Callable[[], int | None] | None = None) -> None:

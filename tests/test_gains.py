@@ -108,3 +108,16 @@ def test_rejects_bad_inertia_and_missing_choices(kwargs: dict[str, float], messa
 def test_rejects_bad_rotor_inertia(rotor: float) -> None:
     with pytest.raises(ValueError, match="rotor inertia"):
         suggest_gains(rotor_inertia_kgcm2=rotor, load_ratio=1.0, rigidity=5)
+
+
+def test_gain_units_follow_what_each_drive_prints():
+    from servotool.gain_units import from_canonical, to_canonical
+    from servotool.profile import load_profile
+
+    sdc, dsx = load_profile("sdc"), load_profile("dsx7e")
+    cutoff = sdc.role("torque_filter")                   # PN50: a cutoff in Hz, smaller = slower
+    assert to_canonical("torque_filter", cutoff, 100.0) == pytest.approx(1.59, abs=0.01)
+    assert from_canonical("torque_filter", cutoff, to_canonical("torque_filter", cutoff, 100.0)) == pytest.approx(100)
+    assert to_canonical("position_loop_gain", sdc.role("position_loop_gain"), 300.0) == 30.0   # no unit: 0.1/s
+    assert to_canonical("position_loop_gain", dsx.role("position_loop_gain"), 32.0) == 32.0    # printed 1/s
+    assert to_canonical("torque_filter", dsx.role("torque_filter"), 0.5) == 0.5

@@ -15,25 +15,51 @@ from pathlib import Path
 import pytest
 
 from servotool.connection import ConnectOptions, open_drives, resolve
+from servotool.errors import UsageError
+from servotool.motion import jog_codes, motion_caveats, motion_route
+from servotool.profile import load_profile
 
 ROOT = Path(__file__).resolve().parent.parent
+PROFILES = ("dsx7e", "sd25", "is620p", "sdc")
+
+
+def _serve(profile: str):
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0",
+                             "--profile", profile], cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ))
+    line = proc.stderr.readline()
+    m = re.search(r"(tcp://127\.0\.0\.1:\d+)", line)
+    assert m, line
+    return proc, m.group(1)
 
 
 @pytest.fixture
 def served(sim_dir):
-    """`servotool sim serve` on a free loopback port; yields its tcp:// address."""
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
-                            cwd=ROOT, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
-    line = proc.stderr.readline()
-    m = re.search(r"(tcp://127\.0\.0\.1:\d+)", line)
-    assert m, line
-    yield m.group(1)
+    """`servotool sim serve` (DSX7E) on a free loopback port; yields its tcp:// address."""
+    proc, port = _serve("dsx7e")
+    yield port
     proc.terminate()
     proc.wait(timeout=10)
 
 
-def read(port: str, *codes: str) -> list[float]:
-    with open_drives(resolve(ConnectOptions(port=port, profile="dsx7e")), notice=lambda _m: None) as (d,):
+@pytest.fixture
+def served_as(sim_dir):
+    """Start `servotool sim serve --profile P`; returns its tcp:// address."""
+    procs = []
+
+    def start(profile: str) -> str:
+        proc, port = _serve(profile)
+        procs.append(proc)
+        return port
+
+    yield start
+    for proc in procs:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def read(port: str, *codes: str, profile: str = "dsx7e") -> list[float]:
+    with open_drives(resolve(ConnectOptions(port=port, profile=profile)), notice=lambda _m: None) as (d,):
         return [r.eng for r in d.read(*codes)]
 
 
@@ -60,7 +86,7 @@ def test_restarting_sim_serve_is_a_power_on(cli, sim_dir):
 
 
 def test_jog_reaches_the_commanded_speed_and_stops(cli, served):
-    r = cli("--port", served, "--profile", "dsx7e", "jog", "--speed", "600", "--time", "1.5", "--json")
+    r = cli("--port", served, "--profile", "dsx7e", "jog", "--speed", "600", "--time", "1.5", "--json", "--yes")
     assert r.code == 0, r.err
     result = r.json()
     assert result["peak_speed_rpm"] == pytest.approx(600, abs=25)
@@ -71,7 +97,7 @@ def test_jog_reaches_the_commanded_speed_and_stops(cli, served):
 
 def test_reverse_jog_and_refusals(cli, served):
     base = ("--port", served, "--profile", "dsx7e")
-    r = cli(*base, "jog", "--speed", "-300", "--time", "0.8", "--json")
+    r = cli(*base, "jog", "--speed", "-300", "--time", "0.8", "--json", "--yes")
     assert r.code == 0 and r.json()["peak_speed_rpm"] > 250
     r = cli(*base, "jog", "--speed", "9000", "--time", "1")
     assert r.code == 2 and "over the limit" in r.err
@@ -83,7 +109,7 @@ def test_reverse_jog_and_refusals(cli, served):
 
 def test_killed_client_leaves_the_motor_stopped_with_a_comm_alarm(cli, served):
     jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", served, "--profile", "dsx7e", "jog",
-                            "--speed", "800", "--time", "30"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            "--speed", "800", "--time", "30", "--yes"], cwd=ROOT, stdout=subprocess.DEVNULL,
                            stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline and read(served, "Un000")[0] < 700:
@@ -95,7 +121,7 @@ def test_killed_client_leaves_the_motor_stopped_with_a_comm_alarm(cli, served):
     speed, alarm = read(served, "Un000", "Un100")
     assert abs(speed) < 10
     assert alarm == 0x25                       # E25 communication with master lost
-    r = cli("--port", served, "--profile", "dsx7e", "jog", "--speed", "100", "--time", "1")
+    r = cli("--port", served, "--profile", "dsx7e", "jog", "--speed", "100", "--time", "1", "--yes")
     assert r.code == 2 and "alarm E25" in r.err
     r = cli("--port", served, "--profile", "dsx7e", "alarm", "clear")
     assert r.code == 0 and "cleared E25" in r.out
@@ -105,7 +131,7 @@ def test_killed_client_leaves_the_motor_stopped_with_a_comm_alarm(cli, served):
 
 def test_monitor_csv_while_jogging(cli, served, tmp_path):
     jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", served, "--profile", "dsx7e", "jog",
-                            "--speed", "500", "--time", "3"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            "--speed", "500", "--time", "3", "--yes"], cwd=ROOT, stdout=subprocess.DEVNULL,
                            stderr=subprocess.DEVNULL)
     try:
         out = tmp_path / "log.csv"
@@ -164,3 +190,78 @@ def test_a_long_stop_ramp_keeps_the_host_alive_and_a_trip_fails_the_jog(cli):
     assert r.code == 1 and "stopped the JOG with alarm E09" in r.err
     r = cli("--port", "sim", "jog", "--speed", "100", "--time", "nan")
     assert r.code == 2 and "--time must be a number" in r.err
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+def test_jog_reaches_the_speed_on_every_profile(cli, profile):
+    r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "1", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
+    assert r.json()["peak_speed_rpm"] < 160              # SDC/IS620P ramps default to 0: the step overshoots
+    assert abs(r.json()["final_speed_rpm"]) < 10
+    assert "unverified" not in r.err and "caution" not in r.err          # the simulator never asks
+
+
+@pytest.mark.parametrize("profile", ["sd25", "is620p", "sdc"])
+def test_killed_client_stops_a_drive_without_watchdog_in_the_simulator(cli, served_as, profile):
+    """No documented comm timeout: the simulator's assumed 500 ms watchdog ramps the motor down, no alarm."""
+    port = served_as(profile)
+    jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", port, "--profile", profile, "jog",
+                            "--speed", "800", "--time", "30", "--yes"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and read(port, "speed_feedback", profile=profile)[0] < 700:
+        time.sleep(0.1)
+    assert read(port, "speed_feedback", profile=profile)[0] > 700
+    jog.send_signal(signal.SIGKILL)
+    jog.wait()
+    time.sleep(0.5 + 0.4)                      # assumed watchdog 500 ms + the ramp down
+    speed, alarm = read(port, "speed_feedback", "alarm_code", profile=profile)
+    assert abs(speed) < 10 and alarm == 0
+    r = cli("--port", port, "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--yes")
+    assert r.code == 0, r.err                  # nothing latched: the next JOG runs
+
+
+def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
+    """tcp:// could be a real drive: without --yes (and no terminal) nothing moves and the caveats are named."""
+    port = served_as("sd25")
+    r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1")
+    assert r.code == 2 and "--yes" in r.err
+    assert "So-57 (jog)" in r.err and "Po407.X = 26" in r.err
+    assert "no communication timeout" in r.err
+    assert abs(read(port, "speed_feedback", profile="sd25")[0]) < 10
+
+
+def test_motion_routes_and_their_unverified_entries():
+    routes = {p: motion_route(load_profile(p)) for p in PROFILES}
+    assert {p: r.kind for p, r in routes.items()} == {"dsx7e": "trigger", "sd25": "trigger", "is620p": "speed",
+                                                       "sdc": "speed"}
+    assert routes["sd25"].speed_entry.code == "So-13" and routes["sdc"].speed_entry.code == "PN22"
+    assert jog_codes(routes["sd25"].entries["jog"]) == {1: 1, -1: 2, 0: 0}       # forced DI1 = JOGU, DI2 = JOGD
+    assert jog_codes(routes["dsx7e"].entries["jog"]) == {1: 1, -1: -1, 0: 0}
+    listed = {p: {e.code for _, e, _ in motion_caveats(load_profile(p)).unverified} for p in PROFILES}
+    assert {"So-57", "Po109"} <= listed["sd25"]
+    assert {"H06-03", "H31-00", "H06-05"} <= listed["is620p"]
+    assert {"PN22", "PN95", "PN29"} <= listed["sdc"]
+    assert {"Fn001", "Fn032", "Pn620"} <= listed["dsx7e"]                    # simulator extensions count too
+    assert "So-13" not in listed["sd25"]                                     # documented entries are not listed
+    for p in PROFILES:                                                        # no drive documents a Modbus watchdog
+        assert motion_caveats(load_profile(p)).drive_timeout is None
+
+
+def test_a_profile_without_a_route_says_which_roles(tmp_path):
+    import yaml
+
+    raw = yaml.safe_load((ROOT / "profiles" / "sdc.yaml").read_text())
+    for role in ("servo_on", "speed_reference"):
+        raw["roles"].pop(role)
+    with pytest.raises(UsageError, match="'jog' with 'jog_speed', or 'speed_reference' with 'servo_on'"):
+        motion_route(load_profile_from(raw, tmp_path))
+
+
+def load_profile_from(raw: dict, tmp_path: Path):
+    import yaml
+
+    path = tmp_path / f"{raw['id']}.yaml"
+    path.write_text(yaml.safe_dump(raw, allow_unicode=True))
+    return load_profile(str(path))

@@ -107,10 +107,15 @@ def test_one_direction_identifies_with_friction_and_load_torque_combined(cli):
     assert any("one direction" in n for n in r.json()["notes"])
 
 
-def test_falling_axis_is_refused_before_any_motion(cli):
-    cli("sim", "config", "--load-ratio", "3", "--friction", "0.01", "--load-torque", "0.1")
+def test_falling_axis_is_refused_before_any_motion_and_identified_once_a_brake_holds_it(cli):
+    cli("sim", "config", "--load-ratio", "3", "--friction", "0.01", "--load-torque", "0.1", "--brake", "off")
     r = cli("--port", "sim", "tune", "inertia", "--yes")
     assert r.code == 2 and "moving with the servo off" in r.err and "pilot" not in r.err
+    cli("sim", "reset", "--power-cycle")                 # the fallen axis at rest again
+    cli("sim", "config", "--brake", "on")
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["ratio"] == pytest.approx(3.0, rel=0.05)
 
 
 def test_refusal_writes_the_trace_and_a_json_reason(cli, tmp_path):
@@ -139,8 +144,8 @@ def test_refusals(cli):
     assert r.code == 2 and "--yes" in r.err                    # no TTY, no --yes: nothing moves
     r = cli("--port", "tcp://127.0.0.1:9", "--profile", "dsx7e", "tune", "inertia", "--yes")
     assert r.code == 1 and "cannot open port" in r.err
-    r = cli("--port", "sim", "--profile", "sd25", "tune", "inertia", "--yes")
-    assert r.code == 2 and "needs role" in r.err
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes")    # PN60 semantics unknown
+    assert r.code == 2 and "needs role 'inertia_ratio'" in r.err
 
 
 def test_active_alarm_refuses_before_any_motion(sim_dir):

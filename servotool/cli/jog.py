@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import select
+import statistics
 import sys
 import termios
 import tty
@@ -12,10 +13,11 @@ from contextlib import contextmanager
 
 import typer
 
-from servotool.cli.common import drive
+from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.render import Verbosity, emit_json, err, info
-from servotool.errors import UsageError
-from servotool.motion import Jogger
+from servotool.drive import Drive
+from servotool.errors import ServoError, UsageError
+from servotool.motion import FEATURE, Jogger, motion_caveats
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
 
@@ -40,6 +42,19 @@ def _raw_keys() -> Iterator[Callable[[], str | None]]:
         termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 
 
+def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
+    """On a real port: name the unverified motion entries (ask before moving) and a missing drive-side watchdog."""
+    if resolved(ctx).simulated:
+        return
+    caveats = motion_caveats(d.profile, feature)
+    for line in caveats.lines():
+        err.print(f"servotool: caution: {line}", markup=False)
+    if caveats.unverified:
+        codes = ", ".join(e.code for _, e, _ in caveats.unverified)
+        if not confirm(f"Move the motor through unverified entries ({codes})?", yes):
+            raise ServoError("cancelled: nothing moved")
+
+
 def jog(
     ctx: typer.Context,
     speed: float = typer.Option(..., "--speed", "-s", help="JOG speed in rpm; negative runs in reverse."),
@@ -47,6 +62,8 @@ def jog(
     interactive: bool = typer.Option(False, "--interactive", "-i", help=f"Keyboard control: {KEYS}."),
     max_travel: float = typer.Option(None, "--max-travel", help="Refuse a timed JOG longer than this (revolutions)."),
     as_json: bool = typer.Option(False, "--json", help="Print the plan and the result as JSON."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving through unverified entries "
+                             "(real drives only; the simulator never asks)."),
 ) -> None:
     """JOG the motor; the drive stops by itself if this program goes quiet. Ctrl-C stops at once."""
     if (seconds is None) == (not interactive):
@@ -56,13 +73,17 @@ def jog(
     with drive(ctx) as d:
         jogger = Jogger(d)
         plan = jogger.plan(speed, seconds, max_travel)
+        confirm_motion(ctx, d, yes)
         info(plan.describe() + ("" if not interactive else f"  [{KEYS}]"))
         peak = 0.0
+        late: list[float] = []    # speeds over the second half of a timed JOG: the speed it settled at
 
         def show(t: float, rpm: float | None) -> None:
             nonlocal peak
             if rpm is not None:
                 peak = max(peak, abs(rpm))
+                if seconds is None or t >= seconds / 2:
+                    late.append(abs(rpm))
             if Verbosity.level >= 0 and err.is_terminal:
                 sys.stderr.write(f"\r t={t:5.1f} s  speed={rpm if rpm is not None else float('nan'):8.1f} rpm ")
                 sys.stderr.flush()
@@ -86,6 +107,7 @@ def jog(
         final = jogger.speed()
     if as_json:
         emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds, "peak_speed_rpm": round(peak, 1),
+                   "median_speed_rpm": round(statistics.median(late), 1) if late else None,
                    "final_speed_rpm": final})
     else:
         info(f"JOG done: peak {peak:.1f} rpm, now {final if final is not None else '?'} rpm")

@@ -10,6 +10,7 @@ from typing import Any
 import typer
 
 from servotool.cli.common import confirm, drive
+from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table
 from servotool.errors import ServoError, UsageError
 from servotool.tuning import wizard
@@ -98,6 +99,8 @@ def inertia(
     step_s = wizard.step_duration_s(travel) if step_check else None
     with drive(ctx) as d:
         wizard.preflight(d, method)
+        if method == "host" or step_check:
+            confirm_motion(ctx, d, yes, wizard.FEATURE)
         ident = wizard.Identifier(d)
         plan, rest = None, None
         if method == "host":

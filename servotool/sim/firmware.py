@@ -17,10 +17,13 @@ soft reset) starts it afresh.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from servotool.codec import raw_to_eng
+from servotool.gain_units import to_canonical
+from servotool.motion import jog_direction
 from servotool.profile import Entry, Motor, Profile
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.plant import (
@@ -36,8 +39,12 @@ from servotool.sim.registers import MACHINE_STATE_KEY
 
 DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 HOST_MOTION_ROLES = ("jog", "speed_reference", "servo_on", "keepalive")
+# Simulator assumption for drives whose manual documents no communication timeout (no comm_timeout role): host
+# motion stops (ramped, no alarm) when no motion-role write arrives for this long. A real drive of that kind keeps
+# running; servotool says so before moving it.
+DEFAULT_HOST_TIMEOUT_MS = 500.0
 STATUS_BITS = {"servo_on": 0, "fault": 1, "warning": 2, "moving": 3, "jog": 4, "identifying": 5}
-FIRMWARE_MODES = ("off", "jog", "speed", "servo", "ident")
+FIRMWARE_MODES = ("off", "jog", "speed", "servo", "ident", "stopping")
 COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
 
 
@@ -71,17 +78,24 @@ class Firmware:
         drive.on_reload.append(self._reloaded)
         drive.bank.before_write.append(self._store_machine_state)
         soft_reset = drive.handlers.get("soft_reset")
+        motion = {"jog": self._fn_jog, "speed_reference": self._fn_speed, "servo_on": self._fn_servo,
+                  "keepalive": self._fn_keepalive}
         drive.handlers.update({
-            "jog": self._fn_jog, "speed_reference": self._fn_speed, "servo_on": self._fn_servo,
-            "keepalive": self._fn_keepalive, "alarm_reset": self._fn_alarm_reset, "inertia_id": self._fn_inertia_id,
+            **motion, "alarm_reset": self._fn_alarm_reset, "inertia_id": self._fn_inertia_id,
             "soft_reset": lambda d, e, raw: self._fn_soft_reset(soft_reset, d, e, raw),
         })
+        # Motion roles may sit on parameters (a signed JOG speed, a forced-DI word): their writes act too.
+        self._param_motion: dict[str, list[Callable[[SimulatedDrive, Entry, int], None]]] = {}
+        for role, code in self.profile.roles.items():
+            entry = self.profile.entry(code)
+            if role in motion and entry is not None and entry.cls != "Fn":
+                self._param_motion.setdefault(entry.code.upper(), []).append(motion[role])
         self.update()
 
     def _power_on(self) -> None:
         """The state right after power on: servo off, no alarm, position counter at zero, motor cold."""
         self.plant = Plant(self.motor, self._plant_settings(), self._gains(), start_time=self.clock.now())
-        self.mode = "off"        # off | jog | speed | servo | ident
+        self.mode = "off"        # off | jog | speed | servo | ident | stopping (host lost, no alarm kind)
         self.jog_dir = 0
         self.last_host = self.clock.now()
         self.ident: Identification | None = None
@@ -145,16 +159,20 @@ class Firmware:
             return default
         return float(raw_to_eng(entry, self.drive.bank.effective_value(entry.code)))
 
+    def _gain(self, role: str, default: float) -> float:
+        entry = self.profile.role(role)
+        return default if entry is None else to_canonical(role, entry, self._eng(role, default))
+
     def _gains(self) -> DriveGains:
         ratio_entry = self.profile.role("inertia_ratio")
         ratio = self.profile.load_ratio_from_param(self._eng("inertia_ratio", 0.0)) if ratio_entry else 0.0
         integral = self.profile.role("speed_loop_integral")
         return DriveGains(
             inertia_ratio_configured=max(0.0, ratio),
-            speed_gain_hz=self._eng("speed_loop_gain", 40.0),
+            speed_gain_hz=self._gain("speed_loop_gain", 40.0),
             speed_integral_ms=self._eng("speed_loop_integral", 20.0) if integral else 20.0,
-            position_gain_per_s=self._eng("position_loop_gain", 40.0),
-            torque_filter_ms=self._eng("torque_filter", 0.5),
+            position_gain_per_s=self._gain("position_loop_gain", 40.0),
+            torque_filter_ms=self._gain("torque_filter", 0.5),
             torque_limit_pct=min(self._eng("torque_limit_fwd", 300.0), self._eng("torque_limit_rev", 300.0)),
             max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
             jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
@@ -171,9 +189,11 @@ class Firmware:
             limit /= self.motor.counts_per_rev
         return limit if limit > 0 else FOLLOWING_LIMIT_REV
 
-    def _param_changed(self, _drive: SimulatedDrive, _entry: Entry, _raw: int) -> None:
+    def _param_changed(self, drive: SimulatedDrive, entry: Entry, raw: int) -> None:
         self.update()
         self.plant.set_gains(self._gains())
+        for handler in self._param_motion.get(entry.code.upper(), []):
+            handler(drive, entry, raw)
 
     def reconfigure(self) -> None:
         """Apply changed simulated-machine settings (sim config)."""
@@ -192,18 +212,20 @@ class Firmware:
 
     # ----- time ----------------------------------------------------------------------------------------------
     def _timeout_s(self) -> float:
-        return self._eng("comm_timeout", 500.0) / 1000.0
+        return self._eng("comm_timeout", DEFAULT_HOST_TIMEOUT_MS) / 1000.0
 
     def update(self) -> None:
         """Integrate the plant up to now, applying the watchdog and identification on the way; refresh monitors."""
         now = self.clock.now()
-        if self.mode in ("jog", "speed", "servo") and self.profile.role("keepalive") is not None:
+        if self.mode in ("jog", "speed", "servo"):
             expiry = self.last_host + self._timeout_s()
             if expiry < now:
                 self.plant.advance_to(expiry)
-                self._trip("comm_timeout")
+                self._host_lost()
         if self.ident is not None:
             self._advance_identification(now)
+        if self.mode == "stopping":
+            self._advance_stop(now)
         self.plant.advance_to(now)
         if self.plant.alarm is not None:
             if self.mode != "off":
@@ -211,6 +233,30 @@ class Firmware:
                 self.ident = None
             self._record_alarm()       # also alarms raised with the servo off
         self._refresh_monitors()
+
+    def _host_lost(self) -> None:
+        """The watchdog expired: trip with the drive's comm alarm, or (no such alarm) ramp down and switch off."""
+        servo = self.profile.role("servo_on")
+        if servo is not None and servo.cls == "Pn":
+            self.drive.bank.apply_parameter(servo, 0)   # a servo-on held in a parameter drops with the servo
+            self.drive.bank.save()
+        # Only a drive with a documented host watchdog (comm_timeout role) trips; elsewhere the stop is the
+        # simulator's own assumption and latches nothing (SD25's AL-38 is an EtherCAT alarm, not a Modbus one).
+        if self.profile.role("comm_timeout") is not None and self.profile.alarm_of_kind("comm_timeout") is not None:
+            self._trip("comm_timeout")
+            return
+        self.plant.set_speed_command(0.0)
+        self.jog_dir = 0
+        self.mode = "stopping"
+
+    def _advance_stop(self, now: float) -> None:
+        t = self.plant.time
+        while self.mode == "stopping" and t < now:
+            t = min(now, t + 0.01)
+            self.plant.advance_to(t)
+            if abs(self.plant.true_speed_rpm) < 1.0:
+                self.plant.set_mode("off")
+                self.mode = "off"
 
     def _trip(self, kind: str) -> None:
         self.plant.raise_alarm(kind)
@@ -247,16 +293,18 @@ class Firmware:
         self.update()
         self._host_alive()
 
-    def _fn_jog(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+    def _fn_jog(self, _d: SimulatedDrive, entry: Entry, raw: int) -> None:
         self.update()
         self._host_alive()
-        direction = (raw > 0) - (raw < 0)
+        direction = jog_direction(entry, raw)
         if direction == 0:
             if self.mode == "jog":       # stop, but stay excited (holding) until JOG is left with servo off
                 self.plant.set_speed_command(0.0)
                 self.jog_dir = 0
+                if self.profile.role("servo_on") is None:
+                    self.mode = "stopping"   # nothing to leave JOG with: the drive switches off once at rest
             return
-        if not self._motion_allowed() or self.mode not in ("off", "jog"):
+        if not self._motion_allowed() or self.mode not in ("off", "jog", "stopping"):
             return
         if self.mode == "off":
             self.plant.set_mode("speed")
@@ -264,12 +312,12 @@ class Firmware:
         self.jog_dir = direction
         self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))
 
-    def _fn_speed(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
+    def _fn_speed(self, _d: SimulatedDrive, entry: Entry, raw: int) -> None:
         self.update()
         self._host_alive()
         if self.mode in ("servo", "speed"):
             self.mode = "speed"
-            self.plant.set_speed_command(float(raw))
+            self.plant.set_speed_command(float(raw_to_eng(entry, raw)))
 
     def _fn_servo(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
         self.update()
@@ -278,7 +326,7 @@ class Firmware:
             self.plant.set_mode("position")
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
-        elif not raw and self.mode in ("servo", "speed", "jog"):
+        elif not raw and self.mode in ("servo", "speed", "jog", "stopping"):
             self.plant.set_mode("off")
             self.mode = "off"
 

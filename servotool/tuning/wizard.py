@@ -20,7 +20,8 @@ from servotool import alarms
 from servotool.codec import raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.motion import keepalive_interval_s, servo_is_on
+from servotool.gain_units import from_canonical
+from servotool.motion import Jogger, keepalive_interval_s, motion_route, servo_is_on
 from servotool.profile import Entry, Profile
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.gains import GainSuggestion, suggest_gains
@@ -153,9 +154,11 @@ def preflight(drive: Drive, method: str) -> None:
     """Link, roles, alarm and servo state; raises with one clear line."""
     p = drive.profile
     need = ["speed_feedback", "torque_feedback", "inertia_ratio"]
-    need += ["jog", "jog_speed", "jog_accel"] if method == "host" else ["inertia_id"]
+    need += ["jog_accel"] if method == "host" else ["inertia_id"]
     for role in need:
         p.need_role(role, f"{FEATURE} --method {method}")
+    if method == "host":
+        motion_route(p, f"{FEATURE} --method {method}")   # a JOG trigger or speed reference + servo-on
     if p.motor is None:
         raise UsageError(f"{FEATURE} needs the motor data (rated torque, rotor inertia) in profile {p.id}")
     active = active_alarm(drive)
@@ -276,17 +279,18 @@ class Identifier:
                  rest: RestCheck | None = None) -> Result:
         """Pilot cycle, then the planned cycles; fit; raise IdentificationRefused when the fit is refused."""
         p, d = self.p, self.drive
-        jog, jog_speed, jog_accel = (p.need_role(r, FEATURE) for r in ("jog", "jog_speed", "jog_accel"))
-        keepalive = p.role("keepalive")
+        beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
+        jogger = Jogger(d, beat_s, FEATURE)
+        jog_accel = p.need_role("jog_accel", FEATURE)
+        # A trigger route's JOG speed is a setting to put back; a speed reference is put back by the jogger.
+        restore = [jogger.speed_entry, jog_accel] if jogger.route.kind == "trigger" else [jog_accel]
         speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
         pos_e = p.role("position_feedback")
         motor = p.motor
         assert motor is not None
-        beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
         limit_e = p.role("torque_limit_fwd")
         torque_limit = self._eng(limit_e) if limit_e is not None else None
-        saved = {e.code: r.raw for e, r in zip((jog_speed, jog_accel), d.read_entries([jog_speed, jog_accel]),
-                                                  strict=True)}
+        saved = {e.code: r.raw for e, r in zip(restore, d.read_entries(restore), strict=True)}
         written = dict(saved)
         old_ratio = self.current_ratio()
         noise = rest.speed_noise_rpm if rest is not None else 0.0
@@ -307,7 +311,7 @@ class Identifier:
 
         def command(direction: int) -> None:
             state["dir"] = direction
-            d.write_raw(jog, direction)
+            jogger.command(direction)
             state["last_beat"] = self.timing.now()
 
         def sample() -> None:
@@ -334,11 +338,7 @@ class Identifier:
                                          "loop overshoots (inertia ratio far off?): lower --max-speed or raise "
                                          "--travel")
             if self.timing.now() - state["last_beat"] >= beat_s:
-                state["beat"] = (state["beat"] + 1) & 0xFFFF
-                if keepalive is not None:
-                    d.write_raw(keepalive, state["beat"] if keepalive.max >= 0xFFFF else 1)
-                else:
-                    d.write_raw(jog, state["dir"])   # re-sending the command is the keep-alive
+                jogger.beat()
                 state["last_beat"] = self.timing.now()
 
         ramp = plan.ramp_s
@@ -346,7 +346,7 @@ class Identifier:
         def move(direction: int, speed: float) -> tuple[float, float]:
             """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
             first = len(trace.t)
-            set_param(jog_speed, speed)
+            jogger.set_speed(speed)
             set_param(jog_accel, ramp * 1000.0 * motor.rated_speed_rpm / speed)
             command(direction)
             start = self.timing.now()
@@ -424,17 +424,15 @@ class Identifier:
                 cycles += 1
         except BaseException:
             try:
-                d.write_raw(jog, 0)
+                jogger.command(0)
             except ServoError:
                 pass  # the drive's watchdog stops it
             raise
         finally:
             try:
-                servo = p.role("servo_on")
-                if servo is not None:
-                    d.write_raw(servo, 0)
-                for e in (jog_speed, jog_accel):
-                    if written[e.code] != saved[e.code]:
+                jogger.leave()
+                for e in restore:
+                    if d.read_entries([e])[0].raw != saved[e.code]:
                         d.write_raw(e, saved[e.code])
             except ServoError:
                 pass  # already failing: the first error is the one to report
@@ -528,7 +526,7 @@ def gain_changes(drive: Drive, load_ratio: float, *, rigidity: int | None, bandw
     current = drive.read_entries([e for _, e in present])
     changes = []
     for (role, e), reading in zip(present, current, strict=True):
-        target = getattr(sugg, GAIN_ROLES[role])
+        target = from_canonical(role, e, getattr(sugg, GAIN_ROLES[role]))
         raw = max(e.min, min(e.max, round(target / e.scale)))
         changes.append(GainChange(role, e, float(raw_to_eng(e, reading.raw)), float(raw_to_eng(e, raw)), raw))
     return sugg, changes
@@ -575,11 +573,12 @@ def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timin
     JOG parameters are put back afterwards; the keep-alive beats at the drive's watchdog rate.
     """
     p, timing = drive.profile, timing or RealTiming()
-    jog, jog_speed, jog_accel = (p.need_role(r, FEATURE) for r in ("jog", "jog_speed", "jog_accel"))
-    speed_e, keepalive = p.need_role("speed_feedback", FEATURE), p.role("keepalive")
     beat_s = keepalive_interval_s(drive)
-    saved = {e.code: r.raw for e, r in zip((jog_speed, jog_accel), drive.read_entries([jog_speed, jog_accel]),
-                                              strict=True)}
+    jogger = Jogger(drive, beat_s, FEATURE)
+    jog_accel = p.need_role("jog_accel", FEATURE)
+    restore = [jogger.speed_entry, jog_accel] if jogger.route.kind == "trigger" else [jog_accel]
+    speed_e = p.need_role("speed_feedback", FEATURE)
+    saved = {e.code: r.raw for e, r in zip(restore, drive.read_entries(restore), strict=True)}
     t: list[float] = []
     v: list[float] = []
     last_beat = timing.now()
@@ -588,25 +587,25 @@ def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timin
         nonlocal last_beat
         value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
         if timing.now() - last_beat >= beat_s:
-            drive.write_raw(keepalive, 1) if keepalive is not None else drive.write_raw(jog, direction)
+            jogger.beat()
             last_beat = timing.now()
         return value
 
     def stop() -> None:
         nonlocal direction
         direction = 0
-        drive.write_raw(jog, 0)
+        jogger.command(0)
         end = timing.now() + 2.0
         while timing.now() < end and abs(speed()) > 3:
             timing.sleep(0.02)
 
     direction = 0
     try:
-        drive.write_raw(jog_speed, max(jog_speed.min, min(jog_speed.max, round(speed_rpm / jog_speed.scale))))
+        jogger.set_speed(speed_rpm)
         drive.write_raw(jog_accel, jog_accel.min)
         for direction in (1, -1):
             t0 = timing.now()
-            drive.write_raw(jog, direction)
+            jogger.command(direction)
             last_beat = t0
             while timing.now() - t0 < duration_s:
                 now = timing.now() - t0
@@ -620,17 +619,16 @@ def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timin
             raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
     except BaseException:
         try:
-            drive.write_raw(jog, 0)
+            jogger.command(0)
         except ServoError:
             pass  # the drive's watchdog stops it
         raise
     finally:
         try:
-            servo = p.role("servo_on")
-            if servo is not None:
-                drive.write_raw(servo, 0)
-            for e in (jog_speed, jog_accel):
-                drive.write_raw(e, saved[e.code])
+            jogger.leave()
+            for e in restore:
+                if drive.read_entries([e])[0].raw != saved[e.code]:
+                    drive.write_raw(e, saved[e.code])
         except ServoError:
             pass  # already failing: report the first error
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
