@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from servotool.profile import builtin_ids, load_profile
@@ -9,8 +11,13 @@ from servotool.profile import builtin_ids, load_profile
 PROFILES = ["dsx7e", "sd25", "is620p", "sdc"]
 
 
-def test_all_four_ship():
+def test_all_four_ship_and_pass_profiles_check_by_default_or_by_id(cli):
     assert set(PROFILES) <= set(builtin_ids())
+    r = cli("profiles", "check", "--json")                  # no argument: every built-in profile
+    assert r.code == 0, r.err
+    assert {Path(row["file"]).stem for row in r.json()} == set(builtin_ids())
+    r = cli("profiles", "check", "sd25", "no-such-profile.yaml")
+    assert r.code == 2 and "sd25.yaml: ok" in r.out and "no-such-profile.yaml: cannot read" in r.out
 
 
 @pytest.mark.parametrize("pid", PROFILES)

@@ -83,12 +83,13 @@ def show(
 
 
 @app.command("check")
-def check(files: list[Path] = typer.Argument(..., help="Profile YAML files to validate."),
+def check(files: list[str] = typer.Argument(None, help="Profile YAML files or built-in profile ids "
+                                                       "(default: every built-in profile)."),
           as_json: bool = JSON_OPT) -> None:
     """Validate profiles; print every problem with its location (exit 2 if any)."""
     bad = 0
     report = []
-    for path in files:
+    for path in _profile_paths(files or builtin_ids()):
         profile, problems = read_profile(path)
         report.append({"file": str(path), "ok": profile is not None, "problems": problems,
                        "entries": len(profile.entries) if profile else 0})
@@ -105,3 +106,10 @@ def check(files: list[Path] = typer.Argument(..., help="Profile YAML files to va
         emit_json(report)
     if bad:
         raise typer.Exit(2)
+
+
+def _profile_paths(names: list[str]) -> list[Path]:
+    """A name that is no existing file but a built-in id stands for that built-in profile's file."""
+    ids = {i.lower(): i for i in builtin_ids()}
+    return [builtin_dir() / f"{ids[n.lower()]}.yaml" if not Path(n).exists() and n.lower() in ids else Path(n)
+            for n in names]
