@@ -210,3 +210,22 @@ def test_sim_config_sets_the_brake_and_sim_show_displays_it(cli):
     assert cli("sim", "show", "--json").json()["settings"]["brake"] == 0
     r = cli("sim", "config", "--brake", "maybe")
     assert r.code != 0 and "--brake" in r.err and len(r.err.strip().splitlines()) == 1
+
+
+def test_a_servo_on_by_parameter_stays_on_and_only_commanded_motion_is_watched(sim_dir):
+    """SDC documents no comm timeout: the simulator's assumed watchdog stops host-commanded motion only."""
+    profile = load_profile("sdc")
+    clock = VirtualClock()
+    sim = build_drive(profile, 1, clock, persist=False)
+    write(sim, "PN4", 3)                                 # speed mode (the JOG route's setup)
+    write(sim, "PN95", 1)                                # servo on, nothing commanded
+    for _ in range(20):                                  # far beyond the assumed 500 ms, no host traffic
+        clock.advance(0.1)
+        read(sim, "UN-1")
+    assert sim.firmware.plant.servo_on and read(sim, "UN-21") == 0
+    write(sim, "PN22", 300)                              # commanded motion ...
+    for _ in range(10):                                  # ... and then silence
+        clock.advance(0.1)
+        read(sim, "UN-1")
+    code = profile.alarm_of_kind("comm_timeout").code
+    assert read(sim, "UN-21") == code and not sim.firmware.plant.servo_on

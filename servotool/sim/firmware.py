@@ -217,7 +217,7 @@ class Firmware:
     def update(self) -> None:
         """Integrate the plant up to now, applying the watchdog and identification on the way; refresh monitors."""
         now = self.clock.now()
-        if self.mode in ("jog", "speed", "servo"):
+        if self._watched():
             expiry = self.last_host + self._timeout_s()
             if expiry < now:
                 self.plant.advance_to(expiry)
@@ -234,15 +234,21 @@ class Firmware:
             self._record_alarm()       # also alarms raised with the servo off
         self._refresh_monitors()
 
+    def _watched(self) -> bool:
+        """Whether the host watchdog runs: a documented one (comm_timeout role) whenever the host holds the servo;
+        the simulator's assumed one (drives that document none) only while the host commands motion, so a servo
+        switched on by a plain parameter write stays on, as it would on the real drive."""
+        if self.profile.role("comm_timeout") is not None:
+            return self.mode in ("jog", "speed", "servo")
+        return self.mode in ("jog", "speed") and (self.jog_dir != 0 or self.plant.target_rpm != 0.0)
+
     def _host_lost(self) -> None:
-        """The watchdog expired: trip with the drive's comm alarm, or (no such alarm) ramp down and switch off."""
+        """The watchdog expired: stop with the profile's communication alarm (ramp down quietly if it has none)."""
         servo = self.profile.role("servo_on")
         if servo is not None and servo.cls == "Pn":
             self.drive.bank.apply_parameter(servo, 0)   # a servo-on held in a parameter drops with the servo
             self.drive.bank.save()
-        # Only a drive with a documented host watchdog (comm_timeout role) trips; elsewhere the stop is the
-        # simulator's own assumption and latches nothing (SD25's AL-38 is an EtherCAT alarm, not a Modbus one).
-        if self.profile.role("comm_timeout") is not None and self.profile.alarm_of_kind("comm_timeout") is not None:
+        if self.profile.alarm_of_kind("comm_timeout") is not None:
             self._trip("comm_timeout")
             return
         self.plant.set_speed_command(0.0)

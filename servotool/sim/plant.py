@@ -213,6 +213,11 @@ class Plant:
         return self._t_applied / self.motor.rated_torque_nm * 100.0
 
     @property
+    def target_rpm(self) -> float:
+        """The host's speed command (before the ramp)."""
+        return self._target / RAD_S_PER_RPM
+
+    @property
     def speed_command_rpm(self) -> float:
         if self.mode == "position":
             return self._loop_ref / RAD_S_PER_RPM
