@@ -16,7 +16,7 @@ from servotool import alarms
 from servotool.codec import parse_value, raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import DeviceError, UsageError
-from servotool.profile import Entry, Profile
+from servotool.profile import Entry, Profile, status_bit
 
 FEATURE = "jog"
 DIRECTION_NAMES = {1: "forward", -1: "reverse", 0: "stop"}
@@ -106,7 +106,7 @@ def servo_is_on(drive: Drive) -> bool | None:
     if entry is None:
         return None
     raw = drive.read_entries([entry])[0].raw
-    bit = next((b for b, name in entry.bits.items() if name.lower() in ("servo_on", "son", "run")), None)
+    bit = status_bit(entry, "servo_on")
     return bool(raw >> bit & 1) if bit is not None else raw != 0
 
 

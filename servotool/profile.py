@@ -223,6 +223,18 @@ class Profile:
         return ratio * 100.0 if entry.unit == "%" else ratio
 
 
+# Status-word bit names by meaning: servotool's own names and the vendors' DO-function mnemonics (SD25 SON-O,
+# ALM, TGON), so one status role works whatever the drive calls its bits.
+STATUS_ALIASES = {"servo_on": ("servo_on", "son", "son-o", "run"), "fault": ("fault", "alm"),
+                  "moving": ("moving", "tgon"), "jog": ("jog",), "identifying": ("identifying",)}
+
+
+def status_bit(entry: Entry, meaning: str) -> int | None:
+    """The bit of a status entry (format: bits) that carries a meaning (see STATUS_ALIASES), or None."""
+    names = STATUS_ALIASES.get(meaning, (meaning,))
+    return next((bit for bit, name in sorted(entry.bits.items()) if name.lower() in names), None)
+
+
 def _typed_range(type_name: str) -> tuple[int, int]:
     words, signed = TYPES[type_name]
     bits = 16 * words

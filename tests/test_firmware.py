@@ -229,3 +229,19 @@ def test_a_servo_on_by_parameter_stays_on_and_only_commanded_motion_is_watched(s
         read(sim, "UN-1")
     code = profile.alarm_of_kind("comm_timeout").code
     assert read(sim, "UN-21") == code and not sim.firmware.plant.servo_on
+
+
+def test_sd25_reports_servo_on_and_motion_in_its_do_function_state_word(sim_dir):
+    """SD25 has no status word: its DO-function state (944: SON-O, TGON, ALM) serves as one, by bit name."""
+    profile = load_profile("sd25")
+    clock = VirtualClock()
+    sim = build_drive(profile, 1, clock, persist=False)
+    status = profile.role("servo_status")
+    assert read(sim, status.code) == 0
+    sim.firmware.plant.set_mode("speed")                 # servo on (as JOG does), turning
+    sim.firmware.plant.set_speed_command(300)
+    for _ in range(5):
+        clock.advance(0.05)
+        read(sim, "L904")
+    word = read(sim, status.code)
+    assert word & 0b110 == 0b110 and not word & (1 << 6)     # SON-O and TGON set, ALM clear

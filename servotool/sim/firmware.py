@@ -24,7 +24,7 @@ from typing import Any
 from servotool.codec import raw_to_eng
 from servotool.gain_units import to_canonical
 from servotool.motion import jog_direction
-from servotool.profile import Entry, Motor, Profile
+from servotool.profile import Entry, Motor, Profile, status_bit
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.plant import (
     BRAKE_HOLD_X_RATED,
@@ -450,8 +450,8 @@ class Firmware:
         if status is not None:
             bits = {"servo_on": p.servo_on, "fault": p.alarm is not None, "moving": abs(p.true_speed_rpm) > 1,
                     "jog": self.mode == "jog", "identifying": self.mode == "ident"}
-            names = {name: bit for bit, name in status.bits.items()} if status.bits else STATUS_BITS
-            word = sum(1 << names[k] for k, on in bits.items() if on and k in names)
+            where = {k: status_bit(status, k) for k in bits} if status.bits else STATUS_BITS
+            word = sum(1 << b for k, on in bits.items() if on and (b := where.get(k)) is not None)
             self.drive.bank.set_live(status.code, word)
 
 

@@ -22,7 +22,7 @@ from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.gain_units import from_canonical
 from servotool.motion import Jogger, keepalive_interval_s, motion_route, servo_is_on
-from servotool.profile import Entry, Profile
+from servotool.profile import Entry, Profile, status_bit
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.gains import GainSuggestion, suggest_gains
 
@@ -469,7 +469,7 @@ class Identifier:
         t0 = self.timing.now()
         d.trigger("inertia_id", FEATURE)
         status = p.role("servo_status")
-        ident_bit = next((b for b, n in (status.bits.items() if status else []) if n == "identifying"), None)
+        ident_bit = status_bit(status, "identifying") if status is not None else None
         try:
             while self.timing.now() - t0 < timeout_s:
                 self.timing.sleep(min(0.1, beat_s))
