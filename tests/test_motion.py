@@ -243,6 +243,8 @@ def test_killed_client_stops_a_drive_without_watchdog_in_the_simulator(cli, serv
 def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
     """tcp:// could be a real drive: without --yes (and no terminal) nothing moves and the caveats are named."""
     port = served_as("sd25")
+    r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1", "--yes")
+    assert r.code == 2 and "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.err    # --yes skips no setup
     set_up(cli, "sd25", port)
     r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1")
     assert r.code == 2 and "--yes" in r.err
