@@ -41,6 +41,9 @@ Output that comes from a simulated drive says so once on standard error.
 Anything that moves the motor has a dead\-man: the host refreshes a keep\-alive, the drive stops the motor and
 raises a communication alarm when it goes quiet, Ctrl\-C stops at once, and speed and travel limits are checked
 before any motion.
+On drives whose Modbus motion route needs the drive set up for it (the profile's \fBmotion_setup\fR: SD25,
+IS620P, SDC) those settings are read first; when any differs nothing moves and the error names each one with the
+\fBservotool param set\fR command that fixes it (servotool never writes them itself).
 """
 
 TAIL = r""".SH PLAN FILES
@@ -127,6 +130,7 @@ servotool \-\-port sim param backup \-o axis1.yaml
 servotool \-\-port sim param restore axis1.yaml \-\-dry\-run
 servotool \-\-port sim monitor \-\-rate 20 \-\-csv log.csv
 servotool \-\-port sim jog \-\-speed 300 \-\-time 2
+servotool \-\-port sim \-P sdc param set PN4=3 && servotool \-\-port sim \-P sdc jog \-s 100 \-t 1
 servotool sim config \-\-load\-ratio 5 \-\-friction 0.03
 servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13
 servotool run examples/commission.yaml \-\-yes

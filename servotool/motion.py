@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from servotool import alarms
+from servotool import alarms, prereq
 from servotool.codec import parse_value, raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import DeviceError, UsageError
@@ -77,11 +77,16 @@ def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
 class MotionCaveats:
     """What is not known to work on a real drive: unverified route entries, and a missing drive-side watchdog."""
 
-    unverified: tuple[tuple[str, Entry, str], ...]   # (role, entry, reason)
+    unverified: tuple[tuple[str, Entry, str], ...]   # (role, entry, reason); role "setup" for motion_setup items
     drive_timeout: Entry | None                       # None: nothing on the drive stops the motor if the host dies
+    power_cycle: tuple[Entry, ...] = ()               # motion_setup entries that take effect after a power cycle
 
     def lines(self) -> list[str]:
         out = [f"{e.code} ({role}): {reason}" for role, e, reason in self.unverified]
+        if self.power_cycle:
+            codes = ", ".join(e.code for e in self.power_cycle)
+            out.append(f"{codes} take effect only after a power cycle: if they were changed since the drive was "
+                       "switched on, it will not move")
         if self.drive_timeout is None:
             out.append("this drive has no communication timeout: if this program dies (kill, crash, cable), the "
                        "motor keeps running until stopped at the drive; Ctrl-C still stops it")
@@ -96,8 +101,20 @@ def motion_caveats(profile: Profile, feature: str = FEATURE) -> MotionCaveats:
         reason = e.unverified or ("a servotool simulator extension, not in the manual" if is_sim_extension(e) else "")
         if reason:
             unverified.append((role, e, reason))
+    setup = prereq.requirements(profile)
+    unverified += [("setup", r.entry, r.item.unverified) for r in setup if r.item.unverified]
     timeout = route.entries.get("comm_timeout")
-    return MotionCaveats(tuple(unverified), timeout if timeout is not None and not is_sim_extension(timeout) else None)
+    return MotionCaveats(tuple(unverified), timeout if timeout is not None and not is_sim_extension(timeout) else None,
+                         tuple(r.entry for r in setup if r.entry.effect == "power_cycle"))
+
+
+def check_setup(drive: Drive, feature: str = FEATURE,
+                effective_of: Callable[[list[Entry]], list[int]] | None = None) -> None:
+    """Refuse host motion while the drive lacks the profile's motion_setup settings (one line naming each)."""
+    def value_of(entries: list[Entry]) -> list[int]:
+        return [r.raw for r in drive.read_entries(entries)]
+
+    prereq.check(drive.profile, "JOG" if feature == FEATURE else feature, value_of, effective_of)
 
 
 def servo_is_on(drive: Drive) -> bool | None:
@@ -150,6 +167,7 @@ class Jogger:
         self.drive = drive
         self.profile = drive.profile
         self.route = motion_route(self.profile, feature)
+        check_setup(drive, feature)    # before anything is written: a drive not set up would ignore or misread us
         self.speed_entry = self.route.speed_entry
         self.jog = self.route.entries.get("jog")
         self.servo = self.route.entries.get("servo_on")

@@ -28,7 +28,9 @@ ENTRY_KEYS = {
 TOP_KEYS = {
     "schema", "id", "model", "vendor", "version", "description", "source", "address_rule", "serial", "limits",
     "word_order", "persistence", "motor", "unverified_note", "groups", "roles", "entries", "alarms", "conventions",
+    "motion_setup",
 }
+SETUP_KEYS = {"code", "value", "reason", "source", "unverified"}
 ALARM_KINDS = ("overspeed", "overload", "following_error", "comm_timeout", "inertia_id_failed", "other")
 CONVENTIONS = {"inertia_ratio": ("load_over_motor", "total_over_motor")}
 
@@ -146,6 +148,17 @@ class Alarm:
     source: str = ""
 
 
+@dataclass(frozen=True)
+class SetupItem:
+    """A setting the drive needs before host motion works (motion_setup): value as users type it."""
+
+    code: str
+    value: str
+    reason: str
+    source: str
+    unverified: str = ""
+
+
 @dataclass
 class Profile:
     """A loaded, validated drive profile."""
@@ -167,6 +180,7 @@ class Profile:
     groups: dict[str, str]
     alarms: list[Alarm] = field(default_factory=list)
     conventions: dict[str, str] = field(default_factory=dict)
+    motion_setup: list[SetupItem] = field(default_factory=list)
     unverified_note: str = ""
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
@@ -512,6 +526,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     for key, value in conventions.items():
         if key not in CONVENTIONS or value not in CONVENTIONS[key]:
             chk.bad(f"conventions.{key}", f"unknown convention {key}: {value!r}")
+    motion_setup = _parse_motion_setup(chk, data.get("motion_setup"), {e.code.upper(): e for e in entries}, broken)
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
     profile = Profile(
@@ -520,10 +535,60 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         serial=serial, limits=limits, word_order=word_order, persistence=persistence, motor=motor,
         entries=entries, roles={str(k): str(v) for k, v in roles.items()},
         groups={str(k): str(v) for k, v in groups.items()}, alarms=alarms,
-        conventions={str(k): str(v) for k, v in conventions.items()},
+        conventions={str(k): str(v) for k, v in conventions.items()}, motion_setup=motion_setup,
         unverified_note=str(data.get("unverified_note", "")),
     )
     return profile, []
+
+
+def _parse_motion_setup(chk: _Checker, raw: Any, entries: dict[str, Entry], broken: set[str]) -> list[SetupItem]:
+    """motion_setup: known writable Pn codes, each value valid for its entry (parsed as `param set` would)."""
+    from servotool.errors import ServoError
+    from servotool.prereq import requirement
+
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        chk.bad("motion_setup", "expected a list")
+        return []
+    out: list[SetupItem] = []
+    seen: set[str] = set()
+    for i, item in enumerate(raw):
+        loc = f"motion_setup[{i}]"
+        if not isinstance(item, dict):
+            chk.bad(loc, "expected a mapping {code, value, reason, source}")
+            continue
+        for key in item:
+            if key not in SETUP_KEYS:
+                chk.bad(loc, f"unknown key '{key}'")
+        code = chk.need(item, "code", loc, str)
+        value = chk.need(item, "value", loc, (str, int, float))
+        reason = chk.need(item, "reason", loc, str)
+        source = chk.need(item, "source", loc, str)
+        unverified = chk.opt(item, "unverified", loc, str, "")
+        if code is None or value is None or reason is None or source is None:
+            continue
+        loc = f"{loc} ({code})"
+        entry = entries.get(code.upper())
+        if entry is None:
+            if code.upper() not in broken:
+                chk.bad(f"{loc}.code", f"names unknown entry {code!r}")
+            continue
+        if entry.cls != "Pn" or not entry.writable:
+            chk.bad(f"{loc}.code", f"{entry.code} is not a settable parameter (class {entry.cls}, "
+                                   f"access {entry.access})")
+            continue
+        if entry.code.upper() in seen:
+            chk.bad(f"{loc}.code", f"{entry.code} is listed twice")
+        seen.add(entry.code.upper())
+        text = str(value)
+        try:
+            requirement(entry, text)
+        except ServoError as exc:
+            chk.bad(f"{loc}.value", str(exc))
+            continue
+        out.append(SetupItem(entry.code, text, reason, source, unverified))
+    return out
 
 
 def _parse_alarms(chk: _Checker, raw: Any) -> list[Alarm]:

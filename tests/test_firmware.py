@@ -245,3 +245,36 @@ def test_sd25_reports_servo_on_and_motion_in_its_do_function_state_word(sim_dir)
         read(sim, "L904")
     word = read(sim, status.code)
     assert word & 0b110 == 0b110 and not word & (1 << 6)     # SON-O and TGON set, ALM clear
+
+
+def _jog_forward(sim, clock: VirtualClock) -> float:
+    """Command forward host motion by the profile's route (JOG trigger, or servo-on + speed reference); speed after."""
+    p = sim.profile
+    if p.role("jog") is not None:
+        write(sim, p.roles["jog"], 1)
+    else:
+        write(sim, p.roles["servo_on"], 1)
+        write(sim, p.roles["speed_reference"], 300)
+    for _ in range(10):                              # the keep-alive a host would send
+        clock.advance(0.05)
+        write(sim, p.roles.get("jog") or p.roles["servo_on"], 1)
+    return read(sim, p.roles["speed_feedback"]) * p.role("speed_feedback").scale
+
+
+def test_host_motion_writes_move_nothing_until_the_drive_is_set_up(sim_dir):
+    """A third-party master writing the motion registers of a drive not set up sees it stand still, as a real
+    drive would; after the setup (and, for SD25, the power cycle) the same writes move it."""
+    setups = {"is620p": {"H02-00": 0, "H0C-09": 1, "H17-00": 1}, "sdc": {"PN4": 3},
+              "sd25": {"Po407": 26, "Po408": 27, "So-58": 1}}
+    for pid, setup in setups.items():
+        clock = VirtualClock(10.0)
+        sim = build_drive(load_profile(pid), 1, clock, persist=False)
+        assert abs(_jog_forward(sim, clock)) < 1 and sim.firmware.mode == "off", pid
+        for code, raw in setup.items():
+            write(sim, code, raw)
+        if pid == "sd25":
+            assert abs(_jog_forward(sim, clock)) < 1, "Po407/Po408 act only after a power cycle"
+            sim.bank.save_eeprom()            # what `param set --save` does; So-58 is set again after power-up
+            sim.power_cycle()
+            write(sim, "So-58", 1)
+        assert _jog_forward(sim, clock) > 100, pid

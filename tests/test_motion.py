@@ -21,6 +21,22 @@ from servotool.profile import load_profile
 
 ROOT = Path(__file__).resolve().parent.parent
 PROFILES = ("dsx7e", "sd25", "is620p", "sdc")
+# The drive setup each profile's motion_setup asks for, as a user does it (None: a power cycle).
+SETUP = {
+    "dsx7e": [],
+    "is620p": [["param", "set", "H02-00=0", "H0C-09=1", "H17-00=1"]],
+    "sdc": [["param", "set", "PN4=3"]],
+    "sd25": [["param", "set", "--save", "Po407.X=26", "Po408.X=27"], None, ["param", "set", "So-58.X=1"]],
+}
+
+
+def set_up(cli, profile: str, port: str = "sim") -> None:
+    """Set the drive up for host motion through the CLI (on a served drive too: it shares the state file)."""
+    for args in SETUP[profile]:
+        cmd = ("sim", "reset", "-P", profile, "--power-cycle") if args is None else \
+            ("--port", port, "--profile", profile, *args)
+        r = cli(*cmd)
+        assert r.code == 0, r.err
 
 
 def _serve(profile: str):
@@ -194,6 +210,7 @@ def test_a_long_stop_ramp_keeps_the_host_alive_and_a_trip_fails_the_jog(cli):
 
 @pytest.mark.parametrize("profile", PROFILES)
 def test_jog_reaches_the_speed_on_every_profile(cli, profile):
+    set_up(cli, profile)
     r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "1", "--json")
     assert r.code == 0, r.err
     assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
@@ -207,6 +224,7 @@ def test_killed_client_stops_a_drive_without_watchdog_in_the_simulator(cli, serv
     """No documented comm timeout: the simulator's assumed 500 ms watchdog stops the motor with the profile's
     communication alarm (a simulator extension where the manual has none), which a power cycle clears."""
     port = served_as(profile)
+    set_up(cli, profile, port)
     jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", port, "--profile", profile, "jog",
                             "--speed", "800", "--time", "30", "--yes"], cwd=ROOT, stdout=subprocess.DEVNULL,
                            stderr=subprocess.DEVNULL)
@@ -222,6 +240,7 @@ def test_killed_client_stops_a_drive_without_watchdog_in_the_simulator(cli, serv
     r = cli("--port", port, "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--yes")
     assert r.code == 2 and "alarm" in r.err   # latched: no JOG until it is cleared
     assert cli("--profile", profile, "sim", "reset", "--power-cycle").code == 0
+    set_up(cli, profile, port)                 # SD25's forced-DI mode does not survive the power cycle
     r = cli("--port", port, "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--yes")
     assert r.code == 0, r.err
 
@@ -229,11 +248,63 @@ def test_killed_client_stops_a_drive_without_watchdog_in_the_simulator(cli, serv
 def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
     """tcp:// could be a real drive: without --yes (and no terminal) nothing moves and the caveats are named."""
     port = served_as("sd25")
+    r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1", "--yes")
+    assert r.code == 2 and "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.err    # --yes skips no setup
+    set_up(cli, "sd25", port)
     r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1")
     assert r.code == 2 and "--yes" in r.err
     assert "So-57 (jog)" in r.err and "Po407.X = 26" in r.err
     assert "no communication timeout" in r.err
+    assert "Po407, Po408 take effect only after a power cycle" in r.err
+    assert "So-58 (setup): which digit" in r.err
     assert abs(read(port, "speed_feedback", profile="sd25")[0]) < 10
+
+
+@pytest.mark.parametrize(("profile", "differs"), [
+    ("is620p", ["H02-00 = 0 (now 8)", "H0C-09 = 1 (now 0)", "H17-00 = 1 (now 0)"]),
+    ("sdc", ["PN4 = 3 (now 0)"]),
+    ("sd25", ["Po407.X = 26 (now 0)", "Po408.X = 27 (now 0)", "So-58.X = 1 (now 0)"]),
+])
+def test_a_drive_not_set_up_refuses_in_one_line_and_its_fix_lets_the_jog_run(cli, profile, differs):
+    """The refusal names every setting that differs and the commands that fix them; following them, JOG runs."""
+    r = cli("--port", "sim", "--profile", profile, "-v", "jog", "--speed", "100", "--time", "0.5", "--yes")
+    assert r.code == 2
+    [line] = [x for x in r.err.splitlines() if x.startswith("servotool: error:")]
+    assert "JOG needs drive setup first: " + ", ".join(differs) + " — " in line
+    assert ">> 01 06" not in r.err and ">> 01 10" not in r.err           # nothing written: not the setup either
+    running = cli("sim", "show", "-P", profile, "--json").json()["running"]
+    assert running is None or not running["servo_on"]
+    for command in re.findall(r"'(servotool [^']*)'", line):              # do exactly what the message says
+        r = cli("--port", "sim", "--profile", profile, *command.split()[1:])
+        assert r.code == 0, r.err
+        if "power-cycle the drive" in line and "--save" in command:
+            assert cli("sim", "reset", "-P", profile, "--power-cycle").code == 0
+    r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
+
+
+def test_a_power_cycle_setting_written_but_not_in_effect_is_named_on_the_simulator(cli):
+    assert cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po407.X=26", "Po408.X=27",
+               "So-58.X=1").code == 0
+    r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5")
+    assert r.code == 2
+    assert ("Po407.X = 26 (set, in effect after a power cycle), Po408.X = 27 (set, in effect after a power cycle)"
+            " — power-cycle the drive ('servotool sim reset --power-cycle' on the simulator)") in r.err
+    assert cli("sim", "reset", "-P", "sd25", "--power-cycle").code == 0
+    r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--json")
+    assert r.code == 0, r.err                                   # --save kept So-58 too (the simulator stores it)
+    assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
+
+
+def test_a_tune_and_a_plan_jog_refuse_the_same_way(cli, tmp_path):
+    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--dry-run")
+    assert r.code == 2 and "tune inertia needs drive setup first: H02-00 = 0 (now 8)" in r.err, r.err
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - jog: {speed: 100, time: 0.5}\n")
+    r = cli("run", str(plan), "--yes", "--json")
+    assert r.code != 0
+    assert "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.json()["steps"][0]["detail"]
 
 
 def test_motion_routes_and_their_unverified_entries():

@@ -52,6 +52,18 @@ def test_good_profile_loads(tmp_path):
     (lambda d: d["entries"][0].update(colour="red"), "unknown key 'colour'"),
     (lambda d: d["entries"][0].update(format="digits"), "format: digits needs 'fields'"),
     (lambda d: d.pop("model"), "missing required key 'model'"),
+    (lambda d: d.update(motion_setup=[{"code": "P9", "value": 1, "reason": "r", "source": "s"}]),
+     "motion_setup[0] (P9).code: names unknown entry 'P9'"),
+    (lambda d: d.update(motion_setup=[{"code": "U1", "value": 1, "reason": "r", "source": "s"}]),
+     "motion_setup[0] (U1).code: U1 is not a settable parameter"),
+    (lambda d: d.update(motion_setup=[{"code": "P1", "value": 101, "reason": "r", "source": "s"}]),
+     "motion_setup[0] (P1).value: P1 (gain): value 101 is out of range 0..100"),
+    (lambda d: d.update(motion_setup=[{"code": "P1", "value": "X=1", "reason": "r", "source": "s"}]),
+     "motion_setup[0] (P1).value: P1 (gain): 'X=1' is not a number"),
+    (lambda d: d.update(motion_setup=[{"code": "P1", "value": 1, "source": "s"}]),
+     "motion_setup[0]: missing required key 'reason'"),
+    (lambda d: d.update(motion_setup=[{"code": "P1", "value": 1, "reason": "r", "source": "s", "when": "x"}]),
+     "motion_setup[0]: unknown key 'when'"),
 ])
 def test_broken_profile_reports_location(tmp_path, mutate, expected):
     import copy
@@ -123,3 +135,18 @@ def test_inertia_ratio_convention_roundtrip():
     p = load_profile("dsx7e")
     assert p.load_ratio_from_param(250) == pytest.approx(1.5)
     assert p.param_from_load_ratio(0.0) == pytest.approx(100)
+
+
+def test_motion_setup_values_read_as_users_type_them():
+    """Built-in motion_setup values parse like `param set` input; a field assignment compares only its fields."""
+    from servotool.prereq import requirements
+
+    reqs = {p: {r.entry.code: r for r in requirements(load_profile(p))} for p in builtin_ids()}
+    assert reqs["dsx7e"] == {}
+    assert {c: r.wanted for c, r in reqs["is620p"].items()} == {"H02-00": 0, "H06-00": 0, "H06-02": 0,
+                                                                 "H0C-09": 1, "H17-00": 1}
+    assert {c: r.wanted for c, r in reqs["sdc"].items()} == {"PN4": 3}
+    po407 = reqs["sd25"]["Po407"]
+    assert po407.fields == ("X",) and po407.met(0x011A) and po407.met(26) and not po407.met(0x1B)
+    assert po407.assignments() == ["Po407.X=26"]
+    assert reqs["sd25"]["So-58"].item.unverified                         # the digit meaning is a figure

@@ -17,7 +17,8 @@ from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.render import Verbosity, emit_json, err, info
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.motion import FEATURE, Jogger, motion_caveats
+from servotool.motion import FEATURE, Jogger, check_setup, motion_caveats
+from servotool.profile import Entry
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
 
@@ -42,9 +43,20 @@ def _raw_keys() -> Iterator[Callable[[], str | None]]:
         termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 
 
+def _sim_effective(d: Drive) -> Callable[[list[Entry]], list[int]]:
+    """The values in effect on the simulated drive (a real drive reads back a power-cycle value before it acts)."""
+    from servotool.sim.registers import RegisterBank
+
+    bank = RegisterBank.open(d.profile, d.unit)
+    return lambda entries: [bank.effective_value(e.code) for e in entries]
+
+
 def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
-    """On a real port: name the unverified motion entries (ask before moving) and a missing drive-side watchdog."""
-    if resolved(ctx).simulated:
+    """Refuse while the drive lacks its motion setup; on a real port name the unverified motion entries (ask
+    before moving) and a missing drive-side watchdog."""
+    simulated = resolved(ctx).simulated
+    check_setup(d, feature, _sim_effective(d) if simulated else None)
+    if simulated:
         return
     caveats = motion_caveats(d.profile, feature)
     for line in caveats.lines():

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from servotool import prereq
 from servotool.codec import raw_to_eng
 from servotool.gain_units import to_canonical
 from servotool.motion import jog_direction
@@ -70,6 +71,7 @@ class Firmware:
         self.profile: Profile = drive.profile
         self.clock = clock or RealClock()
         self.motor = self.profile.motor or DEFAULT_MOTOR
+        self._setup = prereq.requirements(self.profile)
         self._power_on()
         self._seq: int | None = None  # which stored machine state this process's state is (None: not stored)
         self._take_machine_state()
@@ -295,6 +297,11 @@ class Firmware:
     def _motion_allowed(self) -> bool:
         return self.plant.alarm is None
 
+    def _set_up_for_host_motion(self) -> bool:
+        """The profile's motion_setup, by the values in effect: without it a real drive ignores (or does something
+        else with) a host JOG or servo-on, so the simulated one does not move either."""
+        return all(r.met(self.drive.bank.effective_value(r.entry.code)) for r in self._setup)
+
     def _fn_keepalive(self, _d: SimulatedDrive, _e: Entry, _raw: int) -> None:
         self.update()
         self._host_alive()
@@ -312,6 +319,8 @@ class Firmware:
             return
         if not self._motion_allowed() or self.mode not in ("off", "jog", "stopping"):
             return
+        if self.mode != "jog" and not self._set_up_for_host_motion():
+            return
         if self.mode == "off":
             self.plant.set_mode("speed")
         self.mode = "jog"
@@ -328,7 +337,7 @@ class Firmware:
     def _fn_servo(self, _d: SimulatedDrive, _e: Entry, raw: int) -> None:
         self.update()
         self._host_alive()
-        if raw and self._motion_allowed() and self.mode == "off":
+        if raw and self._motion_allowed() and self.mode == "off" and self._set_up_for_host_motion():
             self.plant.set_mode("position")
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
