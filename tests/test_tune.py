@@ -254,9 +254,7 @@ def _after_motion_reads(sim_drive, reads: int, action) -> dict[str, float]:
 
 def _run_host(ident: wizard.Identifier, timing) -> wizard.Result:
     """What `tune inertia` does with the default options: rest check, automatic plan, host identification."""
-    rest = wizard.check_at_rest(ident.drive, timing)
-    plan = wizard.plan_motion(ident.p, max_speed=None, accel_time_ms=None, travel_rev=2.0, direction="both",
-                              repeats=None, samples_per_s=rest.samples_per_s)
+    plan, rest = wizard.plan_host_motion(ident.drive, timing)
     return ident.run_host(plan, rest=rest)
 
 
@@ -294,3 +292,14 @@ def test_travel_check_stops_an_axis_that_runs_away(sim_dir):
     plant = sim_drive.firmware.plant
     assert sim_drive.firmware.mode == "off" and not plant.servo_on
     assert sim_drive.firmware.plant.alarm is None            # stopped by the wizard, not by a drive alarm
+
+
+def test_plan_steps_get_the_automatic_motion_unless_the_plan_sets_it():
+    from servotool.plan import tune_options
+
+    profile = load_profile("dsx7e")
+    auto = tune_options({"rigidity": 12}, profile)
+    assert auto.motion.adaptive and auto.motion_options["repeats"] is None
+    assert auto.motion_options["accel_time_ms"] is None        # ramps follow the measured sampling rate
+    fixed = tune_options({"repeats": 3, "accel_time": 200}, profile)
+    assert not fixed.motion.adaptive and fixed.motion.repeats == 3 and fixed.motion.ramp_s == pytest.approx(0.2)

@@ -152,6 +152,21 @@ def plan_motion(profile: Profile, *, max_speed: float | None, accel_time_ms: flo
     return plan
 
 
+def plan_host_motion(drive: Drive, timing: Timing | None = None, *, max_speed: float | None = None,
+                     accel_time_ms: float | None = None, travel_rev: float = 2.0, direction: str = "both",
+                     repeats: int | None = None) -> tuple[MotionPlan, RestCheck]:
+    """The host method's motion as every caller runs it (CLI, plans, bench): the options checked before anything is
+    read, the axis checked at rest, then the plan for the sampling rate that check measured.
+
+    accel_time_ms and repeats None: automatic (ramps from the sampling rate, repeats until precise enough).
+    """
+    options = {"max_speed": max_speed, "accel_time_ms": accel_time_ms, "travel_rev": travel_rev,
+               "direction": direction, "repeats": repeats}
+    plan_motion(drive.profile, **options)
+    rest = check_at_rest(drive, timing)
+    return plan_motion(drive.profile, **options, samples_per_s=rest.samples_per_s), rest
+
+
 def preflight(drive: Drive, method: str) -> None:
     """Link, roles, alarm and servo state; raises with one clear line."""
     p = drive.profile
