@@ -93,9 +93,7 @@ def identify(ratio: float, friction: float, gravity: float, noise: float, baud: 
     timing = VirtualTiming(clock)
     t0 = clock.now()
     wizard.preflight(drive, "host")
-    rest = wizard.check_at_rest(drive, timing)
-    plan = wizard.plan_motion(profile, max_speed=None, accel_time_ms=None, travel_rev=TRAVEL_REV, direction="both",
-                              repeats=None, samples_per_s=rest.samples_per_s)
+    plan, rest = wizard.plan_host_motion(drive, timing, travel_rev=TRAVEL_REV)   # the CLI's defaults
     result = wizard.Identifier(drive, timing).run_host(plan, rest=rest)
     result.time_used_s = clock.now() - t0      # the whole identification, rest check included
     return result

@@ -291,10 +291,11 @@ def _describe(step: Step, profile: Profile, plan: Plan) -> str:
 
 @dataclass(frozen=True)
 class TuneOptions:
-    motion: Any                  # wizard.MotionPlan
+    motion: Any                  # wizard.MotionPlan, before the link's sampling rate is known
     rigidity: int | None
     bandwidth: float | None
     gains: bool
+    motion_options: dict[str, Any]   # for wizard.plan_host_motion; unset ones automatic, as in the CLI
 
 
 def tune_options(arg: Any, profile: Profile) -> TuneOptions:
@@ -308,14 +309,16 @@ def tune_options(arg: Any, profile: Profile) -> TuneOptions:
     direction = opts.get("direction", "both")
     if not isinstance(direction, str):
         raise UsageError("tune inertia direction must be both, forward or reverse")
-    repeats = _number(opts.get("repeats", 3), "tune inertia repeats", 1, 20)
-    if repeats != int(repeats):
+    repeats = _number(opts["repeats"], "tune inertia repeats", 1, 20) if "repeats" in opts else None
+    if repeats is not None and repeats != int(repeats):
         raise UsageError("tune inertia repeats must be a whole number 1..20")
-    motion = wizard.plan_motion(
-        profile, max_speed=_number(opts["max_speed"], "tune inertia max_speed", 0, 100_000) if "max_speed" in opts
-        else None, accel_time_ms=_number(opts.get("accel_time", 200), "tune inertia accel_time", 20, 5000),
-        travel_rev=_number(opts.get("travel", 2.0), "tune inertia travel", 0, 10_000), direction=direction,
-        repeats=int(repeats))
+    motion_options = {
+        "max_speed": _number(opts["max_speed"], "tune inertia max_speed", 0, 100_000) if "max_speed" in opts else None,
+        "accel_time_ms": _number(opts["accel_time"], "tune inertia accel_time", 20, 5000) if "accel_time" in opts
+        else None,
+        "travel_rev": _number(opts.get("travel", 2.0), "tune inertia travel", 0, 10_000), "direction": direction,
+        "repeats": None if repeats is None else int(repeats)}
+    motion = wizard.plan_motion(profile, **motion_options)
     gains = opts.get("gains", True)
     if not isinstance(gains, bool):
         raise UsageError("tune inertia gains must be true or false")
@@ -330,7 +333,7 @@ def tune_options(arg: Any, profile: Profile) -> TuneOptions:
                           rigidity=rigidity, bandwidth_hz=bandwidth)
         except ValueError as exc:
             raise UsageError(f"tune inertia: {exc}") from None
-    return TuneOptions(motion, rigidity, bandwidth, gains)
+    return TuneOptions(motion, rigidity, bandwidth, gains, motion_options)
 
 
 def _path(plan: Plan, text: str, unit: int, several: bool) -> Path:
@@ -463,7 +466,8 @@ class Runner:
 
         opts = tune_options(arg, d.profile)
         wizard.preflight(d, "host")
-        result = wizard.Identifier(d).run_host(opts.motion)
+        motion, rest = wizard.plan_host_motion(d, **opts.motion_options)
+        result = wizard.Identifier(d).run_host(motion, rest=rest)
         entry, raw = wizard.ratio_raw(d, result.new_ratio)
         d.write_verified(entry, raw)
         self._wrote(d, entry, raw)

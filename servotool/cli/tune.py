@@ -104,11 +104,8 @@ def inertia(
         ident = wizard.Identifier(d)
         plan, rest = None, None
         if method == "host":
-            plan = wizard.plan_motion(d.profile, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
-                                      direction=direction, repeats=repeats)   # option errors before reading
-            rest = wizard.check_at_rest(d)
-            plan = wizard.plan_motion(d.profile, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
-                                      direction=direction, repeats=repeats, samples_per_s=0.8 * rest.samples_per_s)
+            plan, rest = wizard.plan_host_motion(d, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
+                                                 direction=direction, repeats=repeats)
             info(f"motion: {plan.describe()}")
         else:
             info("motion: the drive's own identification (its parameters set torque and travel)")
