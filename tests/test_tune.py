@@ -308,3 +308,12 @@ def test_plan_steps_get_the_automatic_motion_unless_the_plan_sets_it():
     assert auto.motion_options["accel_time_ms"] is None        # ramps follow the measured sampling rate
     fixed = tune_options({"repeats": 3, "accel_time": 200}, profile)
     assert not fixed.motion.adaptive and fixed.motion.repeats == 3 and fixed.motion.ramp_s == pytest.approx(0.2)
+
+
+def test_identification_works_wherever_the_axis_stands(cli):
+    """The travel band is set around the axis's real position, not around position 0."""
+    cli("sim", "config", "--load-ratio", "5")
+    assert cli("--port", "sim", "jog", "--speed", "-300", "--time", "1").code == 0     # 5 rev below zero
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["ratio"] == pytest.approx(5.0, rel=0.05) and r.json()["travel_rev"] <= 2.0

@@ -405,6 +405,7 @@ class Identifier:
             if progress:
                 progress(f"pilot move at {pilot:.0f} rpm")
             excursion, peak = 0.0, 0.0
+            sample()                      # the axis's real position: the travel band is around it, not around 0
             origin = state["pred"]
             for direction in plan.directions:
                 excursion, pk = move(direction, pilot)
