@@ -16,6 +16,7 @@ from servotool import alarms, prereq
 from servotool.codec import parse_value, raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import DeviceError, UsageError
+from servotool.params import ram_writes
 from servotool.profile import Entry, Profile, status_bit
 
 FEATURE = "jog"
@@ -294,8 +295,14 @@ class Jogger:
             command: Callable[[], int | None] | None = None) -> None:
         """Run a planned JOG; `command` (interactive) returns a new direction (+1/-1/0) or None to quit.
 
-        Ctrl-C (KeyboardInterrupt) and any link error stop the motor before propagating.
+        Ctrl-C (KeyboardInterrupt) and any link error stop the motor before propagating. The JOG's own writes
+        stay out of EEPROM where the drive has a switch.
         """
+        with ram_writes(self.drive):
+            self._run(plan, on_sample, command)
+
+    def _run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
+             command: Callable[[], int | None] | None = None) -> None:
         self.set_speed(plan.speed_rpm)
         t0 = time.monotonic()
         try:

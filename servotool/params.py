@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from servotool.codec import split_field
 from servotool.drive import Drive, Reading, WriteResult
-from servotool.errors import UsageError
+from servotool.errors import ServoError, UsageError
 from servotool.profile import Entry, Profile
 
 
@@ -108,7 +108,7 @@ def read_all(drive: Drive, entries: list[Entry]) -> list[Reading]:
     return drive.read_entries(entries)
 
 
-def _switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
+def switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
     """(switch entry, its raw value, raw value meaning EEPROM, raw value meaning RAM) for switchable drives."""
     p = drive.profile.persistence
     entry = drive.profile.entry(p.switch_code)
@@ -119,6 +119,29 @@ def _switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
         base = raw & ~(mask << shift)
         return entry, raw, base | (p.switch_eeprom << shift), base | (p.switch_ram << shift)
     return entry, raw, p.switch_eeprom, p.switch_ram
+
+
+@contextmanager
+def ram_writes(drive: Drive) -> Iterator[None]:
+    """Keep transient writes (a motion's speed, ramp, servo-on) out of EEPROM where the drive has a switch
+    (IS620P's factory H0C-13 = 1 stores every write); the switch is put back afterwards."""
+    if drive.profile.persistence.mode != "switchable":
+        yield
+        return
+    entry, current, _eeprom, ram = switch_state(drive)
+    if current != ram:
+        drive.write_raw(entry, ram)
+    failing = True
+    try:
+        yield
+        failing = False
+    finally:
+        if current != ram:
+            try:
+                drive.write_raw(entry, current)
+            except ServoError:
+                if not failing:
+                    raise      # otherwise the first error is the one to report
 
 
 def can_save(profile: Profile) -> bool:
@@ -148,7 +171,7 @@ def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
     p = drive.profile.persistence
     state = {"persisted": p.mode == "immediate"}
     if p.mode == "switchable":
-        entry, current, eeprom, ram = _switch_state(drive)
+        entry, current, eeprom, ram = switch_state(drive)
         wanted = current if save is None else (eeprom if save else ram)
         if wanted != current:
             drive.write_raw(entry, wanted)

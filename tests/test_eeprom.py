@@ -45,3 +45,19 @@ def test_sdc_keeps_modbus_writes_in_ram_and_says_how_to_store_them(cli):
     assert get(cli, "sdc", "PN17") == {"PN17": 330}                # refused before any write
     assert cli("sim", "reset", "--profile", "sdc", "--power-cycle").code == 0
     assert get(cli, "sdc", "PN17") == {"PN17": 200}                # RAM only, as the manual says (L417)
+
+
+def test_jog_and_tune_keep_their_writes_out_of_eeprom_on_a_drive_that_stores_every_write(cli):
+    """IS620P stores every Modbus write by default (H0C-13 = 1): a JOG or an identification writes its speed
+    and ramp many times, so the motion runs with the switch on RAM and puts it back afterwards."""
+    def writes() -> int:
+        return cli("sim", "show", "--profile", "is620p", "--json").json()["eeprom_writes"]
+
+    cli("--port", "sim", "--profile", "is620p", "param", "set", "H02-00=0", "H0C-09=1", "H17-00=1")
+    before = writes()
+    r = cli("--port", "sim", "--profile", "is620p", "jog", "--speed", "300", "--time", "0.5")
+    assert r.code == 0, r.err
+    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--dry-run", "--json")
+    assert r.code == 0, r.err
+    assert writes() - before <= 4           # the switch there and back, per motion: not each speed write
+    assert get(cli, "is620p", "H0C-13") == {"H0C-13": 1}

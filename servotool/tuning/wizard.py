@@ -22,6 +22,7 @@ from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.gain_units import from_canonical
 from servotool.motion import Jogger, keepalive_interval_s, motion_route, servo_is_on
+from servotool.params import ram_writes
 from servotool.profile import Entry, Profile, status_bit
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.gains import GainSuggestion, suggest_gains
@@ -295,7 +296,14 @@ class Identifier:
     # ----- host method ---------------------------------------------------------------------------------------
     def run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None = None,
                  rest: RestCheck | None = None) -> Result:
-        """Pilot cycle, then the planned cycles; fit; raise IdentificationRefused when the fit is refused."""
+        """Pilot cycle, then the planned cycles; fit; raise IdentificationRefused when the fit is refused.
+
+        The motion's own writes (speed, ramp) stay out of EEPROM where the drive has a switch."""
+        with ram_writes(self.drive):
+            return self._run_host(plan, progress, rest)
+
+    def _run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None,
+                  rest: RestCheck | None) -> Result:
         p, d = self.p, self.drive
         beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
         jogger = Jogger(d, beat_s, FEATURE)
@@ -591,8 +599,14 @@ def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timin
                   ) -> StepResponse:
     """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
 
-    JOG parameters are put back afterwards; the keep-alive beats at the drive's watchdog rate.
+    JOG parameters are put back afterwards (their writes kept out of EEPROM where the drive has a switch); the
+    keep-alive beats at the drive's watchdog rate.
     """
+    with ram_writes(drive):
+        return _step_response(drive, speed_rpm, duration_s, timing)
+
+
+def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Timing | None) -> StepResponse:
     p, timing = drive.profile, timing or RealTiming()
     beat_s = keepalive_interval_s(drive)
     jogger = Jogger(drive, beat_s, FEATURE)
