@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import pytest
@@ -317,3 +318,11 @@ def test_identification_works_wherever_the_axis_stands(cli):
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json")
     assert r.code == 0, r.err
     assert r.json()["ratio"] == pytest.approx(5.0, rel=0.05) and r.json()["travel_rev"] <= 2.0
+
+
+def test_drive_method_is_refused_up_front_where_its_end_cannot_be_seen(cli):
+    """SD25 starts its own identification with Po008 but shows no 'identifying' status: no 30 s blind wait."""
+    start = time.monotonic()
+    r = cli("--port", "sim", "--profile", "sd25", "tune", "inertia", "--yes", "--method", "drive")
+    assert r.code == 2 and "--method host" in r.err and len(r.err.strip().splitlines()) <= 2
+    assert time.monotonic() - start < 10

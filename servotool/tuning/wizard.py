@@ -178,6 +178,13 @@ def preflight(drive: Drive, method: str) -> None:
         p.need_role(role, f"{FEATURE} --method {method}")
     if method == "host":
         motion_route(p, f"{FEATURE} --method {method}")   # a JOG trigger or speed reference + servo-on
+    else:
+        status = p.role("servo_status")
+        if status is None or status_bit(status, "identifying") is None:
+            # Without it the end could only be guessed: a timeout would report failure after a good run.
+            raise UsageError(f"{FEATURE} --method drive: profile {p.id} maps no status bit that shows the "
+                             "drive's identification running, so its end cannot be seen over Modbus; use "
+                             "--method host")
     if p.motor is None:
         raise UsageError(f"{FEATURE} needs the motor data (rated torque, rotor inertia) in profile {p.id}")
     active = active_alarm(drive)
