@@ -37,6 +37,7 @@ from servotool.codec import format_value, parse_value, raw_to_eng
 from servotool.connection import options_from
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError, UsageError, VerifyError
+from servotool.motion import motion_route
 from servotool.profile import Entry, Profile
 
 STEP_NAMES = ("set", "expect", "backup", "restore", "jog", "tune inertia", "wait", "alarm clear", "save", "prompt")
@@ -248,11 +249,11 @@ def _describe(step: Step, profile: Profile, plan: Plan) -> str:
     if name == "jog":
         if not isinstance(arg, dict) or set(arg) - JOG_KEYS or "speed" not in arg or "time" not in arg:
             raise UsageError("jog needs {speed: RPM, time: S} (optional max_travel)")
-        profile.need_role("jog", "jog")
+        route = motion_route(profile, "jog")           # a JOG trigger or speed reference + servo-on
         speed, secs = _number(arg["speed"], "jog speed", -100_000, 100_000), _number(arg["time"], "jog time", 0, 600)
         if speed == 0 or secs == 0:
             raise UsageError("jog speed must be non-zero and time 0..600 s")
-        parse_value(profile.need_role("jog_speed", "jog"), f"{abs(speed):g}")
+        parse_value(route.speed_entry, f"{abs(speed):g}")
         if "max_travel" in arg:
             limit = _number(arg["max_travel"], "jog max_travel", 0, 10_000)
             if abs(speed) / 60 * secs > limit:
@@ -260,7 +261,8 @@ def _describe(step: Step, profile: Profile, plan: Plan) -> str:
                                  f"rev, over its max_travel {limit:g} rev")
         return f"jog {speed:g} rpm for {secs:g} s"
     if name == "tune inertia":
-        for role in ("jog", "jog_speed", "jog_accel", "speed_feedback", "torque_feedback", "inertia_ratio"):
+        motion_route(profile, "tune inertia")
+        for role in ("jog_accel", "speed_feedback", "torque_feedback", "inertia_ratio"):
             profile.need_role(role, "tune inertia")
         opts = tune_options(arg, profile)
         return f"tune inertia: {opts.motion.describe()}" + ("" if opts.gains else "; gains left as they are")

@@ -307,6 +307,16 @@ def test_a_tune_and_a_plan_jog_refuse_the_same_way(cli, tmp_path):
     assert "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.json()["steps"][0]["detail"]
 
 
+def test_a_plan_jogs_a_drive_moved_by_speed_reference_and_servo_on(cli, tmp_path):
+    """IS620P has no JOG trigger: a plan's jog step goes through the same route as `servotool jog`."""
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: is620p\nsteps:\n  - set: {H02-00: 0, H0C-09: 1, H17-00: 1}\n"
+                    "  - jog: {speed: 200, time: 0.5}\n")
+    r = cli("run", str(plan), "--yes", "--json")
+    assert r.code == 0, r.err
+    assert [s["ok"] for s in r.json()["steps"]] == [True, True]
+
+
 def test_motion_routes_and_their_unverified_entries():
     routes = {p: motion_route(load_profile(p)) for p in PROFILES}
     assert {p: r.kind for p, r in routes.items()} == {"dsx7e": "trigger", "sd25": "trigger", "is620p": "speed",
