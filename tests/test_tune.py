@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 import time
 from dataclasses import replace
 
@@ -148,6 +149,14 @@ def test_refusals(cli):
     assert r.code == 2 and "--yes" in r.err                    # no TTY, no --yes: nothing moves
     r = cli("--port", "tcp://127.0.0.1:9", "--profile", "dsx7e", "tune", "inertia", "--yes")
     assert r.code == 1 and "cannot open port" in r.err
+    with socket.socket() as silent:                            # a gateway that accepts but never answers
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        port = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
+        start = time.monotonic()
+        r = cli("--port", port, "--profile", "dsx7e", "--timeout", "0.3", "tune", "inertia", "--yes")
+        assert r.code == 1 and "no response" in r.err and len(r.err.strip().splitlines()) == 1, r.err
+        assert time.monotonic() - start < 15
     r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes")    # PN60 semantics unknown
     assert r.code == 2 and "needs role 'inertia_ratio'" in r.err
 
