@@ -157,8 +157,22 @@ def test_refusals(cli):
         r = cli("--port", port, "--profile", "dsx7e", "--timeout", "0.3", "tune", "inertia", "--yes")
         assert r.code == 1 and "no response" in r.err and len(r.err.strip().splitlines()) == 1, r.err
         assert time.monotonic() - start < 15
-    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes")    # PN60 semantics unknown
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--method", "drive")
     assert r.code == 2 and "needs role 'inertia_ratio'" in r.err
+
+
+def test_a_drive_without_an_inertia_ratio_parameter_is_identified_and_nothing_is_written(cli):
+    """SDC maps no inertia-ratio parameter (PN60's meaning is unknown) and no usable position feedback: the host
+    method still measures the load, tracking travel from the speed, and reports it without writing."""
+    cli("sim", "config", "--profile", "sdc", "--load-ratio", "5")
+    assert cli("--port", "sim", "--profile", "sdc", "param", "set", "PN4=3").code == 0      # the JOG route's setup
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--json")
+    assert r.code == 0, r.err
+    res = r.json()
+    assert res["ratio"] == pytest.approx(5.0, rel=0.05) and res["travel_rev"] <= 2.0
+    assert res["old_ratio"] is None and res["parameter"] is None and res["written"] is False
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes")
+    assert r.code == 0 and "not a drive parameter" in r.out and "nothing to write" in r.out
 
 
 def test_active_alarm_refuses_before_any_motion(sim_dir):

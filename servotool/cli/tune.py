@@ -54,7 +54,8 @@ def _check_options(method: str, rigidity: int | None, bandwidth: float | None, n
 def _estimate_json(result: wizard.Result) -> dict[str, Any]:
     est = result.estimate
     return {
-        "method": result.method, "old_ratio": round(result.old_ratio, 4),
+        "method": result.method,
+        "old_ratio": round(result.old_ratio, 4) if result.old_ratio is not None else None,
         "ratio_std": est.ratio_std if est else None,
         "coulomb_nm": est.coulomb_nm if est else None,
         "viscous_nm_per_rad_s": est.viscous_nm_per_rad_s if est else None,
@@ -130,38 +131,44 @@ def inertia(
             raise
         if save_trace:
             result.trace.save(save_trace)
-        entry, raw = wizard.ratio_raw(d, result.new_ratio)
+        # Where the profile maps no inertia-ratio parameter (SDC) the result is reported, not written.
+        entry, raw = wizard.ratio_raw(d, result.new_ratio) if d.profile.role("inertia_ratio") else (None, 0)
         want_gains = rigidity is not None or bandwidth is not None
         sugg, changes = wizard.gain_changes(d, result.new_ratio, rigidity=rigidity, bandwidth_hz=bandwidth) \
             if want_gains else (None, [])
         est = result.estimate
         if not as_json:
-            _show(result, entry.code, raw * entry.scale, entry.unit, sugg, changes)
+            _show(result, entry, raw, sugg, changes)
         if method == "drive":
             write = False   # the drive stored its own result (or, dry run, it was put back)
             stored = not dry_run
+        elif entry is None:
+            write = stored = False
         else:
             stored = write = not dry_run and confirm(
                 f"Write {entry.code} = {raw * entry.scale:g} {entry.unit}" + (" and the gains" if changes else "")
                 + "?", yes)
         if write:
             d.write_verified(entry, raw)
-        gains_written = bool(changes) and not dry_run and (write if method == "host" else
-                                                            confirm("Write the gains?", yes))
+        gains_written = bool(changes) and not dry_run and (
+            write if method == "host" and entry is not None else confirm("Write the gains?", yes))
         for c in changes if gains_written else []:
             d.write_verified(c.entry, c.raw)
         after = wizard.step_response(d, wizard.STEP_SPEED_RPM, step_s) if before is not None and stored else None
     if as_json:
         emit_json(_clean({
             "ok": True, **_estimate_json(result), "ratio": round(result.new_ratio, 4),
-            "parameter": entry.code, "parameter_value": raw * entry.scale, "written": stored,
+            "parameter": entry.code if entry else None, "parameter_value": raw * entry.scale if entry else None,
+            "written": stored,
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
                       for c in changes],
             "gains_written": gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
             "step_before": vars(before) if before else None, "step_after": vars(after) if after else None,
         }))
         return
-    out.print(f"{entry.code} {'written' if stored else 'not written'}"
+    what = f"{entry.code} {'written' if stored else 'not written'}" if entry else \
+        f"nothing to write: {d.profile.id} maps no inertia-ratio parameter"
+    out.print(what
               + (f", gains {'written' if gains_written else 'not written'}" if changes else
                  " (gains unchanged: give --rigidity N or --bandwidth HZ to set them)"), markup=False)
     if est and est.notes:
@@ -173,11 +180,13 @@ def inertia(
         out.print(f"step after:  {after.describe()}", markup=False)
 
 
-def _show(result: wizard.Result, code: str, value: float, unit: str, sugg: Any, changes: list[Any]) -> None:
+def _show(result: wizard.Result, entry: Any, raw: int, sugg: Any, changes: list[Any]) -> None:
     """The result, shown before asking to write it."""
     est = result.estimate
-    out.print(f"load inertia ratio (J_load/J_motor): {result.old_ratio:.2f} -> {result.new_ratio:.2f}"
-              + (f" ± {est.ratio_std:.2f}" if est else "") + f"  ({code} = {value:g} {unit})", markup=False)
+    old = f"{result.old_ratio:.2f}" if result.old_ratio is not None else "(not a drive parameter)"
+    param = f"  ({entry.code} = {raw * entry.scale:g} {entry.unit})" if entry is not None else ""
+    out.print(f"load inertia ratio (J_load/J_motor): {old} -> {result.new_ratio:.2f}"
+              + (f" ± {est.ratio_std:.2f}" if est else "") + param, markup=False)
     if est:
         travel = f"{result.travel_used_rev:.2f} rev, " if result.travel_used_rev is not None else ""
         out.print(f"friction {est.coulomb_nm:.4f} N·m, viscous {est.viscous_nm_per_rad_s:.2e} N·m·s/rad, "

@@ -172,8 +172,9 @@ def plan_host_motion(drive: Drive, timing: Timing | None = None, *, max_speed: f
 def preflight(drive: Drive, method: str) -> None:
     """Link, roles, alarm and servo state; raises with one clear line."""
     p = drive.profile
-    need = ["speed_feedback", "torque_feedback", "inertia_ratio"]
-    need += ["jog_accel"] if method == "host" else ["inertia_id"]
+    # Host identification measures J without the drive's ratio parameter (SDC maps none): it then only reports.
+    need = ["speed_feedback", "torque_feedback"]
+    need += ["jog_accel"] if method == "host" else ["inertia_ratio", "inertia_id"]
     for role in need:
         p.need_role(role, f"{FEATURE} --method {method}")
     if method == "host":
@@ -265,7 +266,7 @@ class Trace:
 @dataclass
 class Result:
     method: str
-    old_ratio: float
+    old_ratio: float | None     # None: the profile maps no inertia-ratio parameter
     new_ratio: float
     estimate: InertiaEstimate | None
     trace: Trace
@@ -297,8 +298,10 @@ class Identifier:
     def _eng(self, entry: Entry) -> float:
         return float(raw_to_eng(entry, self.drive.read_entries([entry])[0].raw))
 
-    def current_ratio(self) -> float:
-        return self.p.load_ratio_from_param(self._eng(self.p.need_role("inertia_ratio", FEATURE)))
+    def current_ratio(self) -> float | None:
+        """The drive's configured load ratio; None where the profile maps no inertia-ratio parameter."""
+        entry = self.p.role("inertia_ratio")
+        return self.p.load_ratio_from_param(self._eng(entry)) if entry is not None else None
 
     # ----- host method ---------------------------------------------------------------------------------------
     def run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None = None,
@@ -363,13 +366,13 @@ class Identifier:
                 state["pos"], state["pos_t"], state["pred"] = x, self.timing.now(), x
                 state["lo"] = min(state["lo"], x) if len(trace.t) > 1 else x
                 state["hi"] = max(state["hi"], x) if len(trace.t) > 1 else x
-            if pos_e is not None:
-                x = state["pred"]
-                state["lo"], state["hi"] = min(state["lo"], x), max(state["hi"], x)
-                if state["hi"] - state["lo"] > plan.travel_limit_rev:
-                    raise TravelExceeded(f"travel limit {plan.travel_limit_rev:g} rev reached: motion stopped; the "
-                                         "loop overshoots (inertia ratio far off?): lower --max-speed or raise "
-                                         "--travel")
+            # Travel from the position reads, predicted from the speed between them (from the speed alone where
+            # the profile has no usable position feedback).
+            x = state["pred"]
+            state["lo"], state["hi"] = min(state["lo"], x), max(state["hi"], x)
+            if state["hi"] - state["lo"] > plan.travel_limit_rev:
+                raise TravelExceeded(f"travel limit {plan.travel_limit_rev:g} rev reached: motion stopped; the "
+                                     "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel")
             if self.timing.now() - state["last_beat"] >= beat_s:
                 jogger.beat()
                 state["last_beat"] = self.timing.now()
@@ -425,11 +428,10 @@ class Identifier:
             for direction in plan.directions:
                 excursion, pk = move(direction, pilot)
                 peak = max(peak, pk)
-            if pos_e is not None:
-                nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
-                limit_rev = plan.travel_limit_rev
-                lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.95 * limit_rev
-                guard.update(lo=lo, hi=lo + 0.95 * limit_rev, stretch=max(1.0, excursion / nominal))
+            nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
+            limit_rev = plan.travel_limit_rev
+            lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.95 * limit_rev
+            guard.update(lo=lo, hi=lo + 0.95 * limit_rev, stretch=max(1.0, excursion / nominal))
             # Excursion and torque grow in proportion to the speed at a fixed ramp time.
             speed = plan.speed_rpm
             stretch = float(guard["stretch"] or 1.0)
@@ -439,7 +441,7 @@ class Identifier:
                 factor = min(2.0, stretch / 1.5, 0.5 / ramp)
                 ramp, speed = ramp * factor, speed / factor
                 guard["stretch"] = stretch / factor
-            if pos_e is not None and excursion > 0:
+            if excursion > 0:
                 room = 0.9 * plan.travel_limit_rev - (excursion if not both else 0.0)
                 speed = min(speed, pilot * plan.ramp_s / ramp * room / (excursion * (plan.repeats if not both else 1)))
             if torque_limit is not None and peak > 0:
@@ -475,8 +477,8 @@ class Identifier:
         elapsed = self.timing.now() - t0
         rate = (len(trace.t) - 1) / elapsed if elapsed > 0 else 0.0
         est = self._estimate(settings, torque_limit, rate)
-        result = Result("host", old_ratio, est.load_ratio, est, trace, plan, state["hi"] - state["lo"]
-                        if pos_e is not None else None, elapsed, rate, cycles)
+        result = Result("host", old_ratio, est.load_ratio, est, trace, plan, state["hi"] - state["lo"], elapsed,
+                        rate, cycles)
         if not est.ok:
             raise IdentificationRefused(f"identification refused: {est.reason}", result)
         return result
