@@ -318,15 +318,13 @@ class Identifier:
         beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
         jogger = Jogger(d, beat_s, FEATURE)
         jog_accel = p.need_role("jog_accel", FEATURE)
-        # A trigger route's JOG speed is a setting to put back; a speed reference is put back by the jogger.
-        restore = [jogger.speed_entry, jog_accel] if jogger.route.kind == "trigger" else [jog_accel]
+        saved = _motion_settings(d, jogger)
         speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
         pos_e = p.role("position_feedback")
         motor = p.motor
         assert motor is not None
         limit_e = p.role("torque_limit_fwd")
         torque_limit = self._eng(limit_e) if limit_e is not None else None
-        saved = {e.code: r.raw for e, r in zip(restore, d.read_entries(restore), strict=True)}
         written = dict(saved)
         old_ratio = self.current_ratio()
         noise = rest.speed_noise_rpm if rest is not None else 0.0
@@ -461,19 +459,10 @@ class Identifier:
                     move(direction, speed)
                 cycles += 1
         except BaseException:
-            try:
-                jogger.command(0)
-            except ServoError:
-                pass  # the drive's watchdog stops it
+            _stop_quietly(jogger)
             raise
         finally:
-            try:
-                jogger.leave()
-                for e in restore:
-                    if d.read_entries([e])[0].raw != saved[e.code]:
-                        d.write_raw(e, saved[e.code])
-            except ServoError:
-                pass  # already failing: the first error is the one to report
+            _leave_and_restore(d, jogger, saved)
         elapsed = self.timing.now() - t0
         rate = (len(trace.t) - 1) / elapsed if elapsed > 0 else 0.0
         est = self._estimate(settings, torque_limit, rate)
@@ -604,6 +593,35 @@ def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> flo
     return duration
 
 
+def _motion_settings(drive: Drive, jogger: Jogger) -> dict[str, int]:
+    """Raw values of the settings a motion changes and puts back: the ramp, and a trigger route's JOG speed (a
+    speed reference is put back by the jogger)."""
+    entries = [drive.profile.need_role("jog_accel", FEATURE)]
+    if jogger.route.kind == "trigger":
+        entries.insert(0, jogger.speed_entry)
+    return {e.code: r.raw for e, r in zip(entries, drive.read_entries(entries), strict=True)}
+
+
+def _stop_quietly(jogger: Jogger) -> None:
+    """Command stop after a failure; if the link is gone, the drive's watchdog stops the motor."""
+    try:
+        jogger.command(0)
+    except ServoError:
+        pass
+
+
+def _leave_and_restore(drive: Drive, jogger: Jogger, saved: dict[str, int]) -> None:
+    """Servo off and the motion settings put back (saved: code -> raw); a failure here never hides the first one."""
+    try:
+        jogger.leave()
+        for code, raw in saved.items():
+            entry = drive.profile.entry(code)
+            if drive.read_entries([entry])[0].raw != raw:
+                drive.write_raw(entry, raw)
+    except ServoError:
+        pass
+
+
 def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Timing | None = None
                   ) -> StepResponse:
     """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
@@ -620,9 +638,8 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Ti
     beat_s = keepalive_interval_s(drive)
     jogger = Jogger(drive, beat_s, FEATURE)
     jog_accel = p.need_role("jog_accel", FEATURE)
-    restore = [jogger.speed_entry, jog_accel] if jogger.route.kind == "trigger" else [jog_accel]
     speed_e = p.need_role("speed_feedback", FEATURE)
-    saved = {e.code: r.raw for e, r in zip(restore, drive.read_entries(restore), strict=True)}
+    saved = _motion_settings(drive, jogger)
     t: list[float] = []
     v: list[float] = []
     last_beat = timing.now()
@@ -662,19 +679,10 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Ti
         if active:
             raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
     except BaseException:
-        try:
-            jogger.command(0)
-        except ServoError:
-            pass  # the drive's watchdog stops it
+        _stop_quietly(jogger)
         raise
     finally:
-        try:
-            jogger.leave()
-            for e in restore:
-                if drive.read_entries([e])[0].raw != saved[e.code]:
-                    drive.write_raw(e, saved[e.code])
-        except ServoError:
-            pass  # already failing: report the first error
+        _leave_and_restore(drive, jogger, saved)
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
