@@ -546,18 +546,9 @@ def _parse_motion_setup(chk: _Checker, raw: Any, entries: dict[str, Entry], brok
     from servotool.errors import ServoError
     from servotool.prereq import requirement
 
-    if raw is None:
-        return []
-    if not isinstance(raw, list):
-        chk.bad("motion_setup", "expected a list")
-        return []
     out: list[SetupItem] = []
     seen: set[str] = set()
-    for i, item in enumerate(raw):
-        loc = f"motion_setup[{i}]"
-        if not isinstance(item, dict):
-            chk.bad(loc, "expected a mapping {code, value, reason, source}")
-            continue
+    for loc, item in _mappings(chk, raw, "motion_setup", "{code, value, reason, source}"):
         for key in item:
             if key not in SETUP_KEYS:
                 chk.bad(loc, f"unknown key '{key}'")
@@ -591,19 +582,26 @@ def _parse_motion_setup(chk: _Checker, raw: Any, entries: dict[str, Entry], brok
     return out
 
 
-def _parse_alarms(chk: _Checker, raw: Any) -> list[Alarm]:
+def _mappings(chk: _Checker, raw: Any, name: str, shape: str = "") -> list[tuple[str, dict[str, Any]]]:
+    """The items of an optional top-level list of mappings, with their locations; problems go to the checker."""
     if raw is None:
         return []
     if not isinstance(raw, list):
-        chk.bad("alarms", "expected a list")
+        chk.bad(name, "expected a list")
         return []
+    items = []
+    for i, item in enumerate(raw):
+        if isinstance(item, dict):
+            items.append((f"{name}[{i}]", item))
+        else:
+            chk.bad(f"{name}[{i}]", f"expected a mapping {shape}".rstrip())
+    return items
+
+
+def _parse_alarms(chk: _Checker, raw: Any) -> list[Alarm]:
     out: list[Alarm] = []
     seen: set[int] = set()
-    for i, item in enumerate(raw):
-        loc = f"alarms[{i}]"
-        if not isinstance(item, dict):
-            chk.bad(loc, "expected a mapping")
-            continue
+    for loc, item in _mappings(chk, raw, "alarms"):
         code = chk.need(item, "code", loc, int)
         name = chk.need(item, "name", loc, str)
         kind = chk.choice(item, "kind", loc, ALARM_KINDS, "other")
