@@ -185,6 +185,10 @@ def parse_value(entry: Entry, text: str, *, raw: bool = False, current: int | No
 
 def _parse_number(entry: Entry, text: str, *, raw: bool) -> int:
     what = f"{entry.code} ({entry.name})"
+    if not raw and entry.scale != 1 and re.fullmatch(r"[+-]?0[xXbB][0-9a-fA-F]+", text):
+        # A hex/binary literal is a register pattern; read as engineering units it would be off by the scale.
+        raise UsageError(f"{what}: {text} reads as a raw register value; give the value in "
+                         f"{entry.unit or 'units'} (resolution {entry.scale:g}) or use --raw")
     try:
         if re.fullmatch(r"[+-]?0[xX][0-9a-fA-F]+", text):
             return int(text, 16)

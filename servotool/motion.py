@@ -203,13 +203,14 @@ class Jogger:
             raise UsageError(f"speed {abs(speed_rpm):g} rpm is over the limit {limit:g} rpm "
                              "(drive max-speed parameter, JOG range, motor)")
         parse_value(self.speed_entry, f"{abs(speed_rpm):g}")  # resolution and range of the speed entry
+        if self._speed_raw(abs(speed_rpm)) == 0:
+            raise UsageError(f"speed {abs(speed_rpm):g} rpm rounds to 0 in {self.speed_entry.code}: nothing would move")
         if self.profile.role("alarm_code") is not None:
             state = alarms.current(self.drive)
             if state.active:
                 raise UsageError(f"refusing to move: alarm {state.display} {state.name} is active "
                                  "(see 'servotool alarm', clear it first)")
-        if servo_is_on(self.drive) or (self.servo is not None and self.servo.readable and self.servo.cls == "Pn"
-                                       and self.drive.read_entries([self.servo])[0].raw != 0):
+        if self.servo_already_on():
             raise UsageError("refusing to JOG: the servo is already on (enabled from elsewhere); switch it off first")
         travel = abs(speed_rpm) / 60.0 * seconds if seconds is not None else None
         if max_travel_rev is not None and travel is not None and travel > max_travel_rev:
@@ -222,6 +223,12 @@ class Jogger:
             abs(speed_rpm) / (self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0)
         return JogPlan(abs(speed_rpm), 1 if speed_rpm > 0 else -1, seconds, limit,
                        float(accel_ms) if accel_ms is not None else None, travel)
+
+    def servo_already_on(self) -> bool:
+        """Servo on from elsewhere: the status word says so, or a servo-on held in a parameter is set."""
+        return bool(servo_is_on(self.drive)) or (
+            self.servo is not None and self.servo.readable and self.servo.cls == "Pn"
+            and self.drive.read_entries([self.servo])[0].raw != 0)
 
     def _speed_raw(self, signed_rpm: float) -> int:
         e = self.speed_entry

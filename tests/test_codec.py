@@ -65,6 +65,9 @@ def test_scaling_and_parse():
         parse_value(e, "fast")
     with pytest.raises(UsageError, match="not a finite number"):
         parse_value(e, "nan")
+    with pytest.raises(UsageError, match="raw register value"):
+        parse_value(e, "0x10")                                   # 16 raw or 16 1/s? refused, not guessed
+    assert parse_value(e, "0x10", raw=True) == 16
 
 
 def test_signed_parse_and_hex():

@@ -206,6 +206,8 @@ def test_a_long_stop_ramp_keeps_the_host_alive_and_a_trip_fails_the_jog(cli):
     assert r.code == 1 and "stopped the JOG with alarm E09" in r.err
     r = cli("--port", "sim", "jog", "--speed", "100", "--time", "nan")
     assert r.code == 2 and "--time must be a number" in r.err
+    r = cli("--port", "sim", "jog", "--speed", "1e-300", "--time", "0.3")
+    assert r.code == 2 and "rounds to 0" in r.err and "JOG done" not in r.err
 
 
 @pytest.mark.parametrize("profile", PROFILES)

@@ -349,3 +349,13 @@ def test_drive_method_is_refused_up_front_where_its_end_cannot_be_seen(cli):
     r = cli("--port", "sim", "--profile", "sd25", "tune", "inertia", "--yes", "--method", "drive")
     assert r.code == 2 and "--method host" in r.err and len(r.err.strip().splitlines()) <= 2
     assert time.monotonic() - start < 10
+
+
+def test_an_axis_switched_on_from_elsewhere_is_not_moved_nor_switched_off(cli):
+    """IS620P's servo-on is a parameter (VDI H31-00): set by someone else, tune must refuse and leave it on."""
+    assert cli("--port", "sim", "--profile", "is620p", "param", "set", "H02-00=0", "H0C-09=1", "H17-00=1",
+               "H31-00=1").code == 0
+    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes")
+    assert r.code == 2 and "servo is on" in r.err
+    r = cli("--port", "sim", "--profile", "is620p", "param", "get", "H31-00", "H08-15", "--json")
+    assert [row["changed"] for row in r.json()] == [True, False]            # still on, ratio untouched

@@ -191,7 +191,7 @@ def preflight(drive: Drive, method: str) -> None:
     active = active_alarm(drive)
     if active:
         raise UsageError(f"refusing to move: alarm {active} is active (clear it first)")
-    if servo_is_on(drive):
+    if servo_is_on(drive) or (method == "host" and Jogger(drive, feature=FEATURE).servo_already_on()):
         raise UsageError("refusing to move: the servo is on (enabled from elsewhere); switch it off first")
 
 
