@@ -61,3 +61,15 @@ def test_jog_and_tune_keep_their_writes_out_of_eeprom_on_a_drive_that_stores_eve
     assert r.code == 0, r.err
     assert writes() - before <= 4           # the switch there and back, per motion: not each speed write
     assert get(cli, "is620p", "H0C-13") == {"H0C-13": 1}
+
+
+def test_tune_says_when_its_result_is_in_ram_only_and_save_stores_it(cli):
+    cli("sim", "config", "--profile", "is620p", "--load-ratio", "4")
+    cli("--port", "sim", "--profile", "is620p", "param", "set", "H02-00=0", "H0C-09=1", "H17-00=1", "H0C-13=0")
+    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes")
+    assert r.code == 0 and "not saved to EEPROM" in r.err, r.err
+    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--save", "--json")
+    assert r.code == 0 and r.json()["persisted"] is True, r.err
+    ratio = get(cli, "is620p", "H08-15")["H08-15"]
+    cli("sim", "reset", "--profile", "is620p", "--power-cycle")
+    assert get(cli, "is620p", "H08-15", "H0C-13") == {"H08-15": ratio, "H0C-13": 0}   # kept; switch as it was

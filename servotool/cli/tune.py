@@ -9,9 +9,10 @@ from typing import Any
 
 import typer
 
+from servotool import params
 from servotool.cli.common import confirm, drive
 from servotool.cli.jog import confirm_motion
-from servotool.cli.render import emit_json, info, out, table
+from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.errors import ServoError, UsageError
 from servotool.tuning import wizard
 from servotool.tuning.gains import suggest_gains
@@ -90,6 +91,8 @@ def inertia(
                                     "(also when the identification is refused)."),
     step_check: bool = typer.Option(False, "--step-check", help="Measure a speed step (overshoot, settling) "
                                     "before and after; moves out and back inside --travel each time."),
+    save: bool = typer.Option(None, "--save/--no-save", help="Store the written ratio and gains in EEPROM (or keep "
+                              "them out of it) as the drive allows; default: the drive's current setting."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
     """Identify the load inertia ratio (with friction and gravity), write it, and set matching gains.
@@ -99,6 +102,7 @@ def inertia(
     _check_options(method, rigidity, bandwidth, no_gains, save_trace)
     step_s = wizard.step_duration_s(travel) if step_check else None
     with drive(ctx) as d:
+        params.check_save_request(d.profile, save)
         wizard.preflight(d, method)
         if method == "host" or step_check:
             confirm_motion(ctx, d, yes, wizard.FEATURE)
@@ -148,24 +152,30 @@ def inertia(
             stored = write = not dry_run and confirm(
                 f"Write {entry.code} = {raw * entry.scale:g} {entry.unit}" + (" and the gains" if changes else "")
                 + "?", yes)
-        if write:
-            d.write_verified(entry, raw)
         gains_written = bool(changes) and not dry_run and (
             write if method == "host" and entry is not None else confirm("Write the gains?", yes))
-        for c in changes if gains_written else []:
-            d.write_verified(c.entry, c.raw)
+        persisted = None
+        if write or gains_written:
+            with params.persistence(d, save) as outcome:
+                if write and entry is not None:
+                    d.write_verified(entry, raw)
+                for c in changes if gains_written else []:
+                    d.write_verified(c.entry, c.raw)
+            persisted = outcome["persisted"]
         after = wizard.step_response(d, wizard.STEP_SPEED_RPM, step_s) if before is not None and stored else None
     if as_json:
         emit_json(_clean({
             "ok": True, **_estimate_json(result), "ratio": round(result.new_ratio, 4),
             "parameter": entry.code if entry else None, "parameter_value": raw * entry.scale if entry else None,
-            "written": stored,
+            "written": stored, "persisted": persisted,
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
                       for c in changes],
             "gains_written": gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
             "step_before": vars(before) if before else None, "step_after": vars(after) if after else None,
         }))
         return
+    if persisted is False:
+        warn(f"not saved to EEPROM: the drive keeps these values only until power-off ({params.save_hint(d.profile)})")
     what = f"{entry.code} {'written' if stored else 'not written'}" if entry else \
         f"nothing to write: {d.profile.id} maps no inertia-ratio parameter"
     out.print(what
