@@ -428,8 +428,8 @@ class Identifier:
                 peak = max(peak, pk)
             nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
             limit_rev = plan.travel_limit_rev
-            lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.95 * limit_rev
-            guard.update(lo=lo, hi=lo + 0.95 * limit_rev, stretch=max(1.0, excursion / nominal))
+            lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
+            guard.update(lo=lo, hi=lo + 0.9 * limit_rev, stretch=max(1.0, excursion / nominal))
             # Excursion and torque grow in proportion to the speed at a fixed ramp time.
             speed = plan.speed_rpm
             stretch = float(guard["stretch"] or 1.0)
@@ -440,7 +440,7 @@ class Identifier:
                 ramp, speed = ramp * factor, speed / factor
                 guard["stretch"] = stretch / factor
             if excursion > 0:
-                room = 0.9 * plan.travel_limit_rev - (excursion if not both else 0.0)
+                room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
                 speed = min(speed, pilot * plan.ramp_s / ramp * room / (excursion * (plan.repeats if not both else 1)))
             if torque_limit is not None and peak > 0:
                 speed = min(speed, pilot * TORQUE_SHARE * torque_limit / peak)
