@@ -262,3 +262,13 @@ def test_malformed_input_raises() -> None:
         estimate((t, rpm, bad))
     with pytest.raises(ValueError, match="rotor inertia"):
         estimate_inertia(t, rpm, pct, rated_torque_nm=RATED_NM, rotor_inertia_kgcm2=0.0)
+
+
+def test_speed_read_a_request_before_the_torque_is_brought_onto_the_torques_times():
+    """SD25 cannot read speed and torque in one request: the speed is older than the torque by one request."""
+    from servotool.tuning.wizard import Trace
+
+    trace = Trace(t=[0.1, 0.2, 0.3], speed=[0.0, 100.0, 200.0], torque=[1.0, 1.0, 1.0], position=[None] * 3,
+                  speed_t=[0.05, 0.15, 0.25])
+    assert trace.aligned_speed() == pytest.approx([50.0, 150.0, 200.0])     # the last one is held, not guessed
+    assert Trace(t=[0.1, 0.2], speed=[1.0, 2.0]).aligned_speed() == [1.0, 2.0]   # read together: unchanged

@@ -16,9 +16,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Protocol
 
+import numpy as np
+
 from servotool import alarms
 from servotool.codec import raw_to_eng
-from servotool.drive import Drive
+from servotool.drive import Drive, plan_reads
 from servotool.errors import ServoError, UsageError
 from servotool.gain_units import from_canonical
 from servotool.motion import Jogger, keepalive_interval_s, motion_route, servo_is_on
@@ -251,6 +253,15 @@ class Trace:
     speed: list[float] = field(default_factory=list)
     torque: list[float] = field(default_factory=list)
     position: list[float | None] = field(default_factory=list)   # None where position was not read
+    # When speed and torque cannot share one request (SD25 reads at most 10 registers), the speed is read a
+    # request earlier: its own times, to bring it onto the torque's time base before the fit.
+    speed_t: list[float] = field(default_factory=list)
+
+    def aligned_speed(self) -> list[float]:
+        """Speed at the torque's sample times (linear between speed reads); the speed itself if read together."""
+        if len(self.speed_t) != len(self.t) or len(self.t) < 2:
+            return list(self.speed)
+        return [float(v) for v in np.interp(self.t, self.speed_t, self.speed)]
 
     def save(self, path: Path) -> None:
         try:
@@ -348,8 +359,15 @@ class Identifier:
             jogger.command(direction)
             state["last_beat"] = self.timing.now()
 
+        together = len(plan_reads(p, [speed_e, torque_e])) == 1     # one request carries both
+
         def sample() -> None:
-            readings = d.read_entries([speed_e, torque_e])
+            if together:
+                readings = d.read_entries([speed_e, torque_e])
+            else:
+                readings = d.read_entries([speed_e])
+                trace.speed_t.append(self.timing.now() - t0)
+                readings += d.read_entries([torque_e])
             now = self.timing.now()
             speed = float(raw_to_eng(speed_e, readings[0].raw))
             if trace.t:   # travel between position reads, from the speed (checked before it is reached)
@@ -477,7 +495,7 @@ class Identifier:
         assert motor is not None
         # Fast links give many samples per ramp: allow windows long enough to span ~1/5 s.
         cfg = replace(settings, max_window_intervals=max(6, int(rate / 5)))
-        return estimate_inertia(self.trace.t, self.trace.speed, self.trace.torque,
+        return estimate_inertia(self.trace.t, self.trace.aligned_speed(), self.trace.torque,
                                 rated_torque_nm=motor.rated_torque_nm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
                                 torque_limit_pct=torque_limit, settings=cfg)
 
