@@ -47,6 +47,15 @@ def current(drive: Drive) -> AlarmState:
     return describe(drive.profile, drive.read_role("alarm_code", FEATURE).raw)
 
 
+def confirmed(drive: Drive) -> AlarmState | None:
+    """The drive's alarm when two reads in a row report it (one stray reply is no alarm); None without one or
+    where the profile maps no alarm code."""
+    if drive.profile.role("alarm_code") is None:
+        return None
+    state = current(drive)
+    return state if state.active and current(drive).code == state.code else None
+
+
 def history_roles(profile: Profile) -> list[str]:
     roles = [r for r in profile.roles if re.fullmatch(r"alarm_history_\d+", r)]
     return sorted(roles, key=lambda r: int(r.rsplit("_", 1)[1]))

@@ -337,10 +337,8 @@ class Jogger:
 
     def check_tripped(self) -> None:
         """A JOG the drive ended with an alarm is a failure, not a finished JOG."""
-        if self.profile.role("alarm_code") is None:
-            return
-        state = alarms.current(self.drive)
-        if state.active and alarms.current(self.drive).code == state.code:   # seen twice, not one stray reply
+        state = alarms.confirmed(self.drive)
+        if state is not None:
             raise DeviceError(f"the drive stopped the JOG with alarm {state.display} {state.name} "
                               "(see 'servotool alarm')")
 

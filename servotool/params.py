@@ -150,9 +150,10 @@ def can_save(profile: Profile) -> bool:
     return p.mode != "ram" or profile.role("eeprom_save") is not None
 
 
-def save_hint(profile: Profile) -> str:
-    """How the user makes written values survive a power cycle on this drive."""
-    return "use --save" if can_save(profile) else profile.persistence.note
+def ram_only_warning(profile: Profile) -> str:
+    """What to tell the user when written values are in RAM only, and how to make them survive a power cycle."""
+    hint = "use --save" if can_save(profile) else profile.persistence.note
+    return f"not saved to EEPROM: the drive keeps these values only until power-off ({hint})"
 
 
 def check_save_request(profile: Profile, save: bool | None) -> None:

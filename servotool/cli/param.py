@@ -86,7 +86,7 @@ def set_(
                       markup=False)
         return
     if persisted is False:
-        warn(f"not saved to EEPROM: the drive keeps these values only until power-off ({params.save_hint(d.profile)})")
+        warn(params.ram_only_warning(d.profile))
     for r in results:
         note = f"  [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
         out.print(f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "

@@ -175,7 +175,7 @@ def inertia(
         }))
         return
     if persisted is False:
-        warn(f"not saved to EEPROM: the drive keeps these values only until power-off ({params.save_hint(d.profile)})")
+        warn(params.ram_only_warning(d.profile))
     what = f"{entry.code} {'written' if stored else 'not written'}" if entry else \
         f"nothing to write: {d.profile.id} maps no inertia-ratio parameter"
     out.print(what

@@ -199,12 +199,8 @@ def preflight(drive: Drive, method: str) -> None:
 
 def active_alarm(drive: Drive) -> str | None:
     """'CODE name' of an alarm seen active on two reads in a row (one stray reply is no alarm), else None."""
-    if drive.profile.role("alarm_code") is None:
-        return None
-    state = alarms.current(drive)
-    if state.active and alarms.current(drive).code == state.code:
-        return f"{state.display} {state.name}"
-    return None
+    state = alarms.confirmed(drive)
+    return f"{state.display} {state.name}" if state is not None else None
 
 
 @dataclass(frozen=True)
