@@ -39,7 +39,6 @@ from servotool.sim.plant import (
 from servotool.sim.registers import MACHINE_STATE_KEY
 
 DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
-HOST_MOTION_ROLES = ("jog", "speed_reference", "servo_on", "keepalive")
 # Simulator assumption for drives whose manual documents no communication timeout (no comm_timeout role): host
 # motion stops (ramped, no alarm) when no motion-role write arrives for this long. A real drive of that kind keeps
 # running; servotool says so before moving it.

@@ -339,7 +339,7 @@ class Identifier:
         trace = self.trace = Trace()
         t0 = self.timing.now()
         counts = motor.counts_per_rev
-        state = {"beat": 0, "last_beat": t0, "dir": 0, "pos": None, "pos_t": t0, "lo": 0.0, "hi": 0.0,
+        state = {"last_beat": t0, "pos": None, "pos_t": t0, "lo": 0.0, "hi": 0.0,
                  "pred": 0.0}
         guard: dict[str, float | None] = {"lo": None, "hi": None, "stretch": 1.0}
         pos_every = 0.05   # position costs a request of its own: read it at 20 Hz, predict from speed between
@@ -351,7 +351,6 @@ class Identifier:
                 written[entry.code] = raw
 
         def command(direction: int) -> None:
-            state["dir"] = direction
             jogger.command(direction)
             state["last_beat"] = self.timing.now()
 
@@ -667,14 +666,11 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Ti
         return value
 
     def stop() -> None:
-        nonlocal direction
-        direction = 0
         jogger.command(0)
         end = timing.now() + 2.0
         while timing.now() < end and abs(speed()) > 3:
             timing.sleep(0.02)
 
-    direction = 0
     try:
         jogger.set_speed(speed_rpm)
         drive.write_raw(jog_accel, jog_accel.min)
