@@ -24,12 +24,12 @@ import tempfile
 
 from servotool.drive import Drive
 from servotool.errors import ServoError
-from servotool.profile import load_profile
+from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import Plant, VirtualClock
 from servotool.sim.registers import SimRefusal
 from servotool.sim.server import wire_time
-from servotool.tuning import wizard
+from servotool.tuning import planning, preflight
 
 TRAVEL_REV = 2.0
 
@@ -81,7 +81,7 @@ def fit_brake(plant: Plant) -> None:
 
 
 def identify(ratio: float, friction: float, gravity: float, noise: float, baud: int, seed: int,
-             brake: bool = True) -> wizard.Result:
+             brake: bool = True) -> identify.Result:
     profile = load_profile("dsx7e")
     clock = VirtualClock(1000.0)
     sim = build_drive(profile, 1, clock, persist=False)
@@ -92,9 +92,9 @@ def identify(ratio: float, friction: float, gravity: float, noise: float, baud: 
     drive = Drive(WireLink(sim, clock, baud), profile, 1)
     timing = VirtualTiming(clock)
     t0 = clock.now()
-    wizard.preflight(drive, "host")
-    plan, rest = wizard.plan_host_motion(drive, timing, travel_rev=TRAVEL_REV)   # the CLI's defaults
-    result = wizard.Identifier(drive, timing).run_host(plan, rest=rest)
+    preflight.preflight(drive, "host")
+    plan, rest = planning.plan_host_motion(drive, timing, travel_rev=TRAVEL_REV)   # the CLI's defaults
+    result = identify.Identifier(drive, timing).run_host(plan, rest=rest)
     result.time_used_s = clock.now() - t0      # the whole identification, rest check included
     return result
 

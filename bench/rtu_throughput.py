@@ -15,7 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from servotool.connection import ConnectOptions, open_drives, resolve
+from servotool.config import ConnectOptions, resolve
+from servotool.session import open_drives
 
 
 def measure(port: str, n: int, profile: str = "dsx7e", baud: int | None = None) -> tuple[float, float]:

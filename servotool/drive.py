@@ -6,7 +6,9 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from itertools import pairwise
 
-from servotool.codec import (
+from servotool.errors import DeviceError, UsageError, VerifyError
+from servotool.link.ports import Link
+from servotool.model.codec import (
     fields_json,
     format_value,
     json_value,
@@ -16,9 +18,7 @@ from servotool.codec import (
     split_field,
     words_to_raw,
 )
-from servotool.errors import DeviceError, UsageError, VerifyError
-from servotool.profile import Entry, Profile
-from servotool.transport import Link
+from servotool.model.profile import Entry, Profile
 
 
 @dataclass(frozen=True)

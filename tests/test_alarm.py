@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from servotool import alarms
 from servotool.drive import Drive
-from servotool.profile import load_profile
+from servotool.link.modbus import ModbusLink
+from servotool.link.ports import LinkSettings
+from servotool.model.loader import load_profile
+from servotool.ops import alarms
 from servotool.sim.firmware import build_drive
 from servotool.sim.server import EmbeddedSim
-from servotool.transport import LinkSettings, ModbusLink
 
 
 def test_a_code_the_profile_does_not_list_is_shown_as_unknown():

@@ -10,12 +10,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from servotool import backup as bk
-from servotool import params
-from servotool.connection import ConnectOptions, open_drives, resolve
+from servotool.config import ConnectOptions, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
-from servotool.profile import load_profile
+from servotool.model.loader import load_profile
+from servotool.ops import backup, params, restore
+from servotool.session import open_drives
 from servotool.sim.device import SimulatedDrive
 
 CHANGES = {"Pn003": "20", "Pn004": "600", "Pn025": "250.0", "Pn026": "260.0", "Pn027": "5000", "Pn036": "90",
@@ -56,30 +56,30 @@ def changed_drive_backup(path: Path) -> dict[str, int]:
     """Set CHANGES on the simulated drive, back it up to path; return the values written."""
     with sim() as d:
         params.apply_set(d, params.plan_set(d, [f"{k}={v}" for k, v in CHANGES.items()]))
-        bk.write_backup(d, path)
-        return bk.take(d).values
+        backup.write_backup(d, path)
+        return backup.take(d).values
 
 
 def test_round_trip_restores_every_value_and_a_second_restore_writes_nothing(auto_dir, tmp_path):
     f = tmp_path / "drive.yaml"
     wanted = changed_drive_backup(f)
     with sim() as d:
-        auto = bk.factory_reset(d)
-        assert bk.not_at_default(d) == []
-        assert bk.load(auto, d.profile).values == wanted       # the automatic backup holds the pre-reset state
-        b = bk.load(f, d.profile)
-        current = bk.take(d).values
-        plan = bk.plan_restore(d.profile, b, current)
+        auto = restore.factory_reset(d)
+        assert restore.not_at_default(d) == []
+        assert backup.load(auto, d.profile).values == wanted       # the automatic backup holds the pre-reset state
+        b = backup.load(f, d.profile)
+        current = backup.take(d).values
+        plan = restore.plan_restore(d.profile, b, current)
         assert {e.code for e, _, _ in plan.changes} == set(CHANGES)
         effects = [e.effect for e, _, _ in plan.changes]
-        assert effects == sorted(effects, key=bk.EFFECT_ORDER.__getitem__)   # power-cycle entries last
+        assert effects == sorted(effects, key=restore.EFFECT_ORDER.__getitem__)   # power-cycle entries last
         notes: list[str] = []
-        report = bk.restore(d, b, plan, notice=notes.append)
+        report = restore.restore(d, b, plan, notice=notes.append)
         assert notes == [f"automatic backup of the drive's current state: {report.auto_backup}"]
         assert report.auto_backup.parent == auto_dir
-        assert bk.take(d).values == wanted
+        assert backup.take(d).values == wanted
         writes = count_writes(d)
-        assert bk.restore_file(d, f) == "nothing to restore: the drive already matches"
+        assert restore.restore_file(d, f) == "nothing to restore: the drive already matches"
         assert writes == []
 
 
@@ -87,9 +87,9 @@ def test_fault_midway_rolls_back_to_the_automatic_backup(auto_dir, tmp_path, cli
     f = tmp_path / "target.yaml"
     changed_drive_backup(f)
     with sim() as d:
-        bk.factory_reset(d)
-        before = bk.take(d).values
-        order = [e.code for e, _, _ in bk.plan_restore(d.profile, bk.load(f, d.profile), before).changes]
+        restore.factory_reset(d)
+        before = backup.take(d).values
+        order = [e.code for e, _, _ in restore.plan_restore(d.profile, backup.load(f, d.profile), before).changes]
     victim = order[len(order) // 2]                 # half of the plan is written before the refusal
     SimulatedDrive(load_profile("dsx7e"), 1).inject_fault(victim)
     r = cli("--port", "sim", "param", "restore", str(f), "--yes")
@@ -99,16 +99,16 @@ def test_fault_midway_rolls_back_to_the_automatic_backup(auto_dir, tmp_path, cli
     assert f"rolled back {len(order) // 2} written entries; read back, the drive equals the automatic" in r.err
     (auto,) = auto_dir.glob("*before-restore.yaml")
     with sim() as d:
-        assert bk.take(d).values == bk.load(auto, d.profile).values == before
+        assert backup.take(d).values == backup.load(auto, d.profile).values == before
 
 
 def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
     f = tmp_path / "target.yaml"
     changed_drive_backup(f)
     with sim() as d:
-        bk.factory_reset(d)
-        before = bk.take(d).values
-        plan = bk.plan_restore(d.profile, bk.load(f, d.profile), before)
+        restore.factory_reset(d)
+        before = backup.take(d).values
+        plan = restore.plan_restore(d.profile, backup.load(f, d.profile), before)
         victim = plan.changes[3][0]
         real = d.write_raw
         misbehave = [1]
@@ -120,15 +120,15 @@ def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
                 misbehave.pop()
 
         d.write_raw = off_by_one  # type: ignore[method-assign]
-        with pytest.raises(bk.RestoreFailed, match=f"restore stopped at {victim.code}: .*reads back") as exc:
-            bk.restore(d, bk.load(f, d.profile), plan)
+        with pytest.raises(restore.RestoreFailed, match=f"restore stopped at {victim.code}: .*reads back") as exc:
+            restore.restore(d, backup.load(f, d.profile), plan)
         assert exc.value.exit_code == 3
         assert "rolled back 3 written entries; read back, the drive equals the automatic backup" in str(exc.value)
-        assert bk.take(d).values == before
+        assert backup.take(d).values == before
 
         misbehave[:] = [1] * 10                     # now it keeps storing the wrong value: say so, exactly
-        with pytest.raises(bk.RestoreFailed) as exc:
-            bk.restore(d, bk.load(f, d.profile), plan)
+        with pytest.raises(restore.RestoreFailed) as exc:
+            restore.restore(d, backup.load(f, d.profile), plan)
         now = d.read_one(victim.code)
         assert now.raw == before[victim.code] + 1
         assert (f"rollback incomplete (could not undo {victim.code} ({victim.code}: wrote" in str(exc.value))
@@ -142,10 +142,10 @@ def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back
     with open_drives(opts, notice=lambda _m: None) as (d,):
         switch = d.read_one("Po505").raw                  # factory: writes stay in RAM
         params.apply_set(d, params.plan_set(d, ["Po301=50"]))
-        bk.write_backup(d, f)
-        bk.factory_reset(d)
-        b = bk.load(f, d.profile)
-        report = bk.restore(d, b, bk.plan_restore(d.profile, b, bk.take(d).values))
+        backup.write_backup(d, f)
+        restore.factory_reset(d)
+        b = backup.load(f, d.profile)
+        report = restore.restore(d, b, restore.plan_restore(d.profile, b, backup.take(d).values))
         assert [e.code for e in report.written] == ["Po301"] and report.persisted
         assert d.read_one("Po505").raw == switch
     drive = SimulatedDrive(load_profile("sd25"), 1)
@@ -159,12 +159,12 @@ def test_the_eeprom_switch_in_a_backup_never_redirects_the_restore(auto_dir, tmp
     with open_drives(resolve(ConnectOptions(port="sim", profile="is620p")), notice=lambda _m: None) as (d,):
         params.apply_set(d, params.plan_set(d, ["H08-00=30.0", "H08-02=50.0"]))
         d.write_raw(d.profile.entry("H0C-13"), 0)        # this axis kept Modbus writes in RAM when backed up
-        bk.write_backup(d, f)
-        bk.factory_reset(d)                              # H0C-13 back to 1 (store in EEPROM)
-        b = bk.load(f, d.profile)
-        plan = bk.plan_restore(d.profile, b, bk.take(d).values)
+        backup.write_backup(d, f)
+        restore.factory_reset(d)                              # H0C-13 back to 1 (store in EEPROM)
+        b = backup.load(f, d.profile)
+        plan = restore.plan_restore(d.profile, b, backup.take(d).values)
         assert [e.code for e, _ in plan.skipped] == ["H0C-13"]
-        report = bk.restore(d, b, plan)
+        report = restore.restore(d, b, plan)
         assert sorted(e.code for e in report.written) == ["H08-00", "H08-02"] and report.persisted
         assert d.read_one("H0C-13").raw == 1
     drive = SimulatedDrive(load_profile("is620p"), 1)
@@ -212,7 +212,7 @@ def good_backup_text(tmp_path_factory) -> str:
     try:
         path = tmp_path_factory.mktemp("b") / "good.yaml"
         with sim() as d:
-            bk.write_backup(d, path)
+            backup.write_backup(d, path)
         return path.read_text()
     finally:
         mp.undo()
@@ -223,7 +223,7 @@ def test_every_bad_file_is_refused_with_one_clear_line(good_backup_text, tmp_pat
     f = tmp_path / "bad.yaml"
     f.write_text(edit(good_backup_text))
     with pytest.raises(UsageError) as exc:
-        bk.load(f, load_profile("dsx7e"))
+        backup.load(f, load_profile("dsx7e"))
     text = str(exc.value)
     assert re.search(message, text), text
     assert "\n" not in text and text.startswith(str(f))
@@ -232,11 +232,11 @@ def test_every_bad_file_is_refused_with_one_clear_line(good_backup_text, tmp_pat
 def test_force_accepts_an_edited_checksum_with_a_warning_but_never_a_bad_value(good_backup_text, tmp_path):
     f = tmp_path / "edited.yaml"
     f.write_text(good_backup_text.replace("Pn004: 250", "Pn004: 260"))
-    b = bk.load(f, load_profile("dsx7e"), force=True)
+    b = backup.load(f, load_profile("dsx7e"), force=True)
     assert b.values["Pn004"] == 260 and "checksum mismatch" in b.warnings[0]
     f.write_text(good_backup_text.replace("Pn004: 250", "Pn004: 99"))
     with pytest.raises(UsageError, match="outside"):
-        bk.load(f, load_profile("dsx7e"), force=True)
+        backup.load(f, load_profile("dsx7e"), force=True)
 
 
 def test_cli_refuses_bad_files_before_connecting_or_writing(auto_dir, tmp_path, cli, good_backup_text):
@@ -260,12 +260,12 @@ def test_backups_are_atomic_and_never_overwrite(auto_dir, tmp_path):
     f.write_text("precious\n")
     with sim() as d:
         with pytest.raises(UsageError, match=r"exists; .* --force"):
-            bk.write_backup(d, f)
+            backup.write_backup(d, f)
         assert f.read_text() == "precious\n"
         assert not list(tmp_path.glob(".*.tmp"))
-        bk.write_backup(d, f, force=True)
+        backup.write_backup(d, f, force=True)
         assert yaml.safe_load(f.read_text())["model"] == "DSX7E"
-        a1, a2 = bk.auto_backup(d, "x"), bk.auto_backup(d, "x")
+        a1, a2 = backup.auto_backup(d, "x"), backup.auto_backup(d, "x")
     assert a1 != a2 and a1.exists() and a2.exists()
     assert not list(tmp_path.rglob("*.tmp"))
 
@@ -273,7 +273,7 @@ def test_backups_are_atomic_and_never_overwrite(auto_dir, tmp_path):
 def test_backup_file_has_the_metadata_and_a_checksum_of_the_values(auto_dir, tmp_path):
     f = tmp_path / "b.yaml"
     with sim() as d:
-        bk.write_backup(d, f)
+        backup.write_backup(d, f)
     data = yaml.safe_load(f.read_text())
     assert data["profile"] == "dsx7e" and data["profile_version"] == "1.0" and data["model"] == "DSX7E"
     assert data["unit"] == 1 and data["tool_version"] and data["created"].endswith("+00:00")
@@ -286,32 +286,32 @@ def test_axis_specific_entries_groups_and_include(auto_dir, tmp_path):
     f = tmp_path / "b.yaml"
     with sim() as d:
         params.apply_set(d, params.plan_set(d, ["Pn610=5", "Pn100=45"]))
-        bk.write_backup(d, f)
-        bk.factory_reset(d)
-        b, current = bk.load(f, d.profile), bk.take(d).values
-        plan = bk.plan_restore(d.profile, b, current)
+        backup.write_backup(d, f)
+        restore.factory_reset(d)
+        b, current = backup.load(f, d.profile), backup.take(d).values
+        plan = restore.plan_restore(d.profile, b, current)
         assert [e.code for e, _, _ in plan.changes] == ["Pn100"] and plan.skipped[0][0].code == "Pn610"
-        plan = bk.plan_restore(d.profile, b, current, include=["Pn610"])
+        plan = restore.plan_restore(d.profile, b, current, include=["Pn610"])
         assert {e.code for e, _, _ in plan.changes} == {"Pn100", "Pn610"}
-        assert bk.plan_restore(d.profile, b, current, only="io").changes == []
-        assert [e.code for e, _, _ in bk.plan_restore(d.profile, b, current, only="gain").changes] == ["Pn100"]
+        assert restore.plan_restore(d.profile, b, current, only="io").changes == []
+        assert [e.code for e, _, _ in restore.plan_restore(d.profile, b, current, only="gain").changes] == ["Pn100"]
         with pytest.raises(UsageError, match="unknown group"):
-            bk.plan_restore(d.profile, b, current, only="nope")
+            restore.plan_restore(d.profile, b, current, only="nope")
 
 
 def test_servo_on_blocks_changes_that_need_the_servo_off(auto_dir):
     with sim() as d:
         d.trigger("servo_on", "test", 1)
         with pytest.raises(UsageError, match="switch the servo off first"):
-            bk.check_servo_off(d, [d.profile.entry("Pn100")], "the restore")
+            restore.check_servo_off(d, [d.profile.entry("Pn100")], "the restore")
         d.trigger("servo_on", "test", 0)
-        bk.check_servo_off(d, [d.profile.entry("Pn100")], "the restore")
+        restore.check_servo_off(d, [d.profile.entry("Pn100")], "the restore")
 
 
 def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
     with sim() as d:
-        bk.write_backup(d, a)
+        backup.write_backup(d, a)
         params.apply_set(d, params.plan_set(d, ["Pn100=45", "Pn008=20000"]))
     r = cli("--port", "sim", "param", "backup", "-o", str(b))
     assert r.code == 0 and f"saved to {b}" in r.out, r.err

@@ -6,7 +6,8 @@ import re
 
 import pytest
 
-from servotool.codec import (
+from servotool.errors import UsageError
+from servotool.model.codec import (
     format_field,
     format_value,
     parse_value,
@@ -15,8 +16,9 @@ from servotool.codec import (
     split_field,
     words_to_raw,
 )
-from servotool.errors import UsageError
-from servotool.profile import Entry, _Checker, _parse_entry, load_profile
+from servotool.model.loader import load_profile
+from servotool.model.profile import Entry
+from servotool.model.schema import _Checker, _parse_entry
 
 
 def entry(**kw) -> Entry:

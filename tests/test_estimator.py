@@ -266,7 +266,7 @@ def test_malformed_input_raises() -> None:
 
 def test_speed_read_a_request_before_the_torque_is_brought_onto_the_torques_times():
     """SD25 cannot read speed and torque in one request: the speed is older than the torque by one request."""
-    from servotool.tuning.wizard import Trace
+    from servotool.tuning.identify import Trace
 
     trace = Trace(t=[0.1, 0.2, 0.3], speed=[0.0, 100.0, 200.0], torque=[1.0, 1.0, 1.0], position=[None] * 3,
                   speed_t=[0.05, 0.15, 0.25])

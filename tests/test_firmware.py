@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from servotool.alarms import describe
-from servotool.profile import load_profile
+from servotool.model.loader import load_profile
+from servotool.ops.alarms import describe
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import VirtualClock
 

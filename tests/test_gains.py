@@ -111,8 +111,8 @@ def test_rejects_bad_rotor_inertia(rotor: float) -> None:
 
 
 def test_gain_units_follow_what_each_drive_prints():
-    from servotool.gain_units import from_canonical, to_canonical
-    from servotool.profile import load_profile
+    from servotool.model.gain_units import from_canonical, to_canonical
+    from servotool.model.loader import load_profile
 
     sdc, dsx = load_profile("sdc"), load_profile("dsx7e")
     cutoff = sdc.role("torque_filter")                   # PN50: a cutoff in Hz, smaller = slower

@@ -9,7 +9,7 @@ import pytest
 
 from servotool.drive import Drive, plan_reads
 from servotool.errors import DeviceError
-from servotool.profile import load_profile
+from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.server import EmbeddedSim
 
@@ -84,7 +84,8 @@ def test_a_crc_error_is_reported_as_a_garbled_response_not_as_silence(cli, sim_d
 def test_silence_is_reported_as_no_response(sim_dir):
     sim = EmbeddedSim([build_drive(load_profile("dsx7e"), 1, persist=False)])
     try:
-        from servotool.transport import LinkSettings, ModbusLink
+        from servotool.link.modbus import ModbusLink
+        from servotool.link.ports import LinkSettings
 
         link = ModbusLink(LinkSettings(port=sim.port, timeout=0.2, retries=0))
         with pytest.raises(DeviceError, match=r"no response within 0.2 s after 1 try \(wrong unit id"):

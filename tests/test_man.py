@@ -55,7 +55,7 @@ def test_groff_reports_no_warnings():
 
 
 def test_every_plan_step_is_documented():
-    from servotool.plan import STEP_NAMES, TUNE_KEYS
+    from servotool.commission.plan import STEP_NAMES, TUNE_KEYS
 
     text = _plain(PAGE.read_text())
     section = text[text.index(".SH PLAN FILES"):text.index(".SH SHELL COMPLETION")]

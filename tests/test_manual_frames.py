@@ -7,12 +7,13 @@ from dataclasses import replace
 
 import pytest
 
-from servotool import params
-from servotool.codec import format_value, raw_to_words, words_to_raw
 from servotool.drive import Drive
 from servotool.errors import DeviceError, VerifyError
-from servotool.profile import Limits, load_profile
-from servotool.transport import parse_response_frame, read_request_frame, write_request_frame
+from servotool.link.modbus import parse_response_frame, read_request_frame, write_request_frame
+from servotool.model.codec import format_value, raw_to_words, words_to_raw
+from servotool.model.loader import load_profile
+from servotool.model.profile import Limits
+from servotool.ops import params
 
 
 def hexb(text: str) -> bytes:
@@ -20,7 +21,7 @@ def hexb(text: str) -> bytes:
 
 
 def write_frame(profile_id: str, code: str, value: str) -> bytes:
-    from servotool.codec import parse_value
+    from servotool.model.codec import parse_value
 
     p = load_profile(profile_id)
     e = p.entry(code)

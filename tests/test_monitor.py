@@ -8,8 +8,9 @@ import pytest
 from rich.console import Console
 
 from servotool.cli.monitor import _view
-from servotool.connection import ConnectOptions, open_drives, resolve
-from servotool.monitor import Monitor, default_entries
+from servotool.config import ConnectOptions, resolve
+from servotool.ops.monitor import Monitor, default_entries
+from servotool.session import open_drives
 
 PROFILES = ["dsx7e", "sd25", "is620p", "sdc"]
 NO_PORT = ("--port", "/dev/nonexistent", "--profile", "dsx7e")

@@ -14,10 +14,12 @@ from pathlib import Path
 
 import pytest
 
-from servotool.connection import ConnectOptions, open_drives, resolve
+from servotool.config import ConnectOptions, resolve
 from servotool.errors import UsageError
-from servotool.motion import jog_codes, motion_caveats, motion_route
-from servotool.profile import load_profile
+from servotool.model.loader import load_profile
+from servotool.model.roles import jog_codes, motion_route
+from servotool.motion.caveats import motion_caveats
+from servotool.session import open_drives
 
 ROOT = Path(__file__).resolve().parent.parent
 PROFILES = ("dsx7e", "sd25", "is620p", "sdc")

@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from servotool.errors import ProfileError
-from servotool.profile import builtin_ids, load_profile, read_profile
+from servotool.model.loader import builtin_ids, load_profile, read_profile
 
 GOOD = {
     "schema": 1, "id": "mini", "model": "MINI", "vendor": "test", "version": "1", "description": "test drive",
@@ -139,7 +139,7 @@ def test_inertia_ratio_convention_roundtrip():
 
 def test_motion_setup_values_read_as_users_type_them():
     """Built-in motion_setup values parse like `param set` input; a field assignment compares only its fields."""
-    from servotool.prereq import requirements
+    from servotool.model.setup import requirements
 
     reqs = {p: {r.entry.code: r for r in requirements(load_profile(p))} for p in builtin_ids()}
     assert reqs["dsx7e"] == {}

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from servotool.profile import builtin_ids, load_profile
+from servotool.model.loader import builtin_ids, load_profile
 
 PROFILES = ["dsx7e", "sd25", "is620p", "sdc"]
 
@@ -75,11 +75,12 @@ def test_the_readme_table_states_each_profiles_real_counts():
 
 
 def test_sd25_alarms_are_the_manuals_list_and_the_simulator_reports_them_by_kind(sim_dir):
-    from servotool import alarms
     from servotool.drive import Drive
+    from servotool.link.modbus import ModbusLink
+    from servotool.link.ports import LinkSettings
+    from servotool.ops import alarms
     from servotool.sim.firmware import build_drive
     from servotool.sim.server import EmbeddedSim
-    from servotool.transport import LinkSettings, ModbusLink
 
     p = load_profile("sd25")
     shown = {a.display for a in p.alarms}

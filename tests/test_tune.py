@@ -10,12 +10,13 @@ import pytest
 
 from servotool.drive import Drive
 from servotool.errors import UsageError
-from servotool.profile import load_profile
+from servotool.link.modbus import ModbusLink
+from servotool.link.ports import LinkSettings
+from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import VirtualClock
 from servotool.sim.server import EmbeddedSim, wire_time
-from servotool.transport import LinkSettings, ModbusLink
-from servotool.tuning import wizard
+from servotool.tuning import identify, planning, preflight
 
 
 @pytest.mark.parametrize("ratio", [0.0, 6.0, 30.0])
@@ -183,7 +184,7 @@ def test_active_alarm_refuses_before_any_motion(sim_dir):
         sim_drive.firmware._trip("overload")
         link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
         with pytest.raises(UsageError, match="alarm E09"):
-            wizard.preflight(Drive(link, profile, 1), "host")
+            preflight.preflight(Drive(link, profile, 1), "host")
         link.close()
     finally:
         sim.close()
@@ -209,7 +210,7 @@ def test_keepalive_follows_the_drive_watchdog(sim_dir):
     profile = load_profile("dsx7e")
     sim, link, d = _embedded(profile)
     try:
-        from servotool.motion import keepalive_interval_s
+        from servotool.motion.keepalive import keepalive_interval_s
         d.write_raw(profile.role("comm_timeout"), 150)
         assert keepalive_interval_s(d) == pytest.approx(0.05)
         d.write_raw(profile.role("comm_timeout"), 50)
@@ -281,9 +282,9 @@ def _after_motion_reads(sim_drive, reads: int, action) -> dict[str, float]:
     return when
 
 
-def _run_host(ident: wizard.Identifier, timing) -> wizard.Result:
+def _run_host(ident: identify.Identifier, timing) -> identify.Result:
     """What `tune inertia` does with the default options: rest check, automatic plan, host identification."""
-    plan, rest = wizard.plan_host_motion(ident.drive, timing)
+    plan, rest = planning.plan_host_motion(ident.drive, timing)
     return ident.run_host(plan, rest=rest)
 
 
@@ -292,8 +293,8 @@ def test_alarm_in_the_middle_of_the_motion_stops_it_and_refuses(sim_dir):
     p = d.profile
     jog_params = d.read_entries([p.role("jog_speed"), p.role("jog_accel")])
     tripped = _after_motion_reads(sim_drive, 150, lambda plant: plant.raise_alarm("overload"))
-    ident = wizard.Identifier(d, timing)
-    with pytest.raises(wizard.IdentificationFailed, match="alarm E09"):
+    ident = identify.Identifier(d, timing)
+    with pytest.raises(identify.IdentificationFailed, match="alarm E09"):
         _run_host(ident, timing)
     assert "t" in tripped                                   # the alarm came during the motion
     trace_t0 = timing.now() - ident.trace.t[-1]
@@ -316,15 +317,15 @@ def test_travel_check_stops_an_axis_that_runs_away(sim_dir):
         plant.set_settings(replace(plant.settings, load_torque_nm=3.5 * rated))
 
     _after_motion_reads(sim_drive, 150, overload)
-    with pytest.raises(wizard.TravelExceeded, match="travel limit 2 rev"):
-        _run_host(wizard.Identifier(d, timing), timing)
+    with pytest.raises(identify.TravelExceeded, match="travel limit 2 rev"):
+        _run_host(identify.Identifier(d, timing), timing)
     plant = sim_drive.firmware.plant
     assert sim_drive.firmware.mode == "off" and not plant.servo_on
     assert sim_drive.firmware.plant.alarm is None            # stopped by the wizard, not by a drive alarm
 
 
 def test_plan_steps_get_the_automatic_motion_unless_the_plan_sets_it():
-    from servotool.plan import tune_options
+    from servotool.commission.steps import tune_options
 
     profile = load_profile("dsx7e")
     auto = tune_options({"rigidity": 12}, profile)

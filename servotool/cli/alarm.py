@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import typer
 
-from servotool import alarms
 from servotool.cli.common import JSON_OPT, drive
 from servotool.cli.render import emit_json, out, table
+from servotool.ops import alarms
 
 app = typer.Typer(help="Show, clear and list the drive's alarms.")
 

@@ -7,15 +7,16 @@ from pathlib import Path
 import typer
 from rich.progress import Progress
 
-from servotool import backup as bk
 from servotool.cli.common import JSON_OPT, confirm, drive, state
 from servotool.cli.param import app
 from servotool.cli.render import emit_json, err, info, out, table, warn
-from servotool.codec import format_value
-from servotool.connection import resolve
+from servotool.config import resolve
 from servotool.errors import ServoError, UsageError
-from servotool.params import select
-from servotool.profile import Profile, load_profile
+from servotool.model.codec import format_value
+from servotool.model.loader import load_profile
+from servotool.model.profile import Profile
+from servotool.ops import backup, restore
+from servotool.ops.params import select
 
 MARK = {"power_cycle": "power cycle", "servo_off": "servo off"}
 
@@ -37,9 +38,9 @@ def backup_cmd(
         entries = select(d.profile)
         with Progress(console=err, transient=True, disable=as_json) as progress:
             task = progress.add_task("reading parameters", total=len(entries))
-            b = bk.take(d, progress=lambda n: progress.advance(task, n))
+            b = backup.take(d, progress=lambda n: progress.advance(task, n))
         path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.yaml")
-        bk.save(b, d.profile, path, force=force)
+        backup.save(b, d.profile, path, force=force)
     if as_json:
         emit_json({"file": str(path), "entries": len(b.values), "checksum": b.checksum(), "identity": b.identity})
     else:
@@ -62,8 +63,8 @@ def diff_cmd(
     if file2 is not None and from_default:
         raise UsageError("give FILE2 or --changed-from-default, not both")
 
-    def load(path: Path, profile: Profile) -> bk.Backup:
-        b = bk.load(path, profile, force=True)
+    def load(path: Path, profile: Profile) -> backup.Backup:
+        b = backup.load(path, profile, force=True)
         for w in b.warnings:
             warn(w)
         return b
@@ -83,16 +84,16 @@ def diff_cmd(
                 raise UsageError(f"{file}: cannot tell its profile; give --profile") from None
             profile = load_profile(head["profile"])
         a = load(file, profile)
-        b_values = bk.defaults(profile) if from_default else load(file2, profile).values
+        b_values = backup.defaults(profile) if from_default else load(file2, profile).values
         labels = (str(file), "factory default" if from_default else str(file2))
-        diffs = bk.diff(profile, a.values, b_values)
+        diffs = backup.diff(profile, a.values, b_values)
     else:
         with drive(ctx) as d:
             profile = d.profile
             a = load(file, profile)
             current = {r.entry.code: r.raw for r in d.read_entries(select(profile))}
         labels = ("drive", str(file))
-        diffs = bk.diff(profile, current, a.values)
+        diffs = backup.diff(profile, current, a.values)
     if as_json:
         emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs]})
         return
@@ -120,12 +121,12 @@ def restore_cmd(
 ) -> None:
     """Write only the differing entries, verified, after an automatic backup; roll back on failure."""
     profile = resolve(state(ctx).options).profile
-    b = bk.load(file, profile, force=force)       # every file problem is refused before connecting
+    b = backup.load(file, profile, force=force)       # every file problem is refused before connecting
     for w in b.warnings:
         warn(w)
     with drive(ctx) as d:
         current = {r.entry.code: r.raw for r in d.read_entries(select(d.profile))}
-        plan = bk.plan_restore(d.profile, b, current, only=only, include=include or [])
+        plan = restore.plan_restore(d.profile, b, current, only=only, include=include or [])
         if not as_json:
             _show_plan(plan)
         if dry_run or not plan.changes:
@@ -137,7 +138,7 @@ def restore_cmd(
             return
         if not confirm(f"Write {len(plan.changes)} parameters?", yes):
             raise ServoError("restore cancelled: nothing was written")
-        report = bk.restore(d, b, plan, notice=_where)
+        report = restore.restore(d, b, plan, notice=_where)
     if as_json:
         emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
                    "auto_backup": str(report.auto_backup), "persisted": report.persisted,
@@ -151,12 +152,12 @@ def restore_cmd(
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 
 
-def _changes_json(plan: bk.RestorePlan) -> list[dict[str, object]]:
+def _changes_json(plan: restore.RestorePlan) -> list[dict[str, object]]:
     return [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
              "effect": e.effect} for e, old, new in plan.changes]
 
 
-def _show_plan(plan: bk.RestorePlan) -> None:
+def _show_plan(plan: restore.RestorePlan) -> None:
     if plan.changes:
         t = table("Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{len(plan.changes)} changes, in order")
         for e, old, new in plan.changes:
@@ -177,9 +178,9 @@ def reset_cmd(
         d.profile.need_role("factory_reset", "param reset")
         if not confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):
             raise ServoError("factory reset cancelled: nothing was written")
-        auto = bk.factory_reset(d, notice=_where)
-        left = bk.not_at_default(d)
-        before = bk.load(auto, d.profile).values
+        auto = restore.factory_reset(d, notice=_where)
+        left = restore.not_at_default(d)
+        before = backup.load(auto, d.profile).values
     cycle = [e.code for e in d.profile.of_class("Pn")
              if e.effect == "power_cycle" and before.get(e.code, e.default) != e.default]
     if as_json:

@@ -10,9 +10,10 @@ from dataclasses import dataclass, field
 import typer
 
 from servotool.cli.render import Verbosity, notice, trace_frame
-from servotool.connection import ConnectOptions, Resolved, open_drives, resolve
+from servotool.config import ConnectOptions, Resolved, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
+from servotool.session import open_drives
 
 
 @dataclass

@@ -17,8 +17,11 @@ from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.render import Verbosity, emit_json, err, info
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.motion import FEATURE, Jogger, check_setup, motion_caveats
-from servotool.profile import Entry
+from servotool.model.profile import Entry
+from servotool.model.roles import FEATURE
+from servotool.motion.caveats import motion_caveats
+from servotool.motion.jogger import Jogger
+from servotool.motion.setup import check_setup
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
 

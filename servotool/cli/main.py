@@ -11,7 +11,7 @@ from servotool import __version__
 from servotool.cli import alarm, backup, jog, monitor, param, profiles, run, sim, tune
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, err
-from servotool.connection import ConnectOptions
+from servotool.config import ConnectOptions
 from servotool.errors import ServoError
 
 app = typer.Typer(

@@ -12,9 +12,9 @@ from rich.table import Table
 
 from servotool.cli.common import drive, resolved
 from servotool.cli.render import info, out, table
-from servotool.codec import decimals
 from servotool.errors import UsageError
-from servotool.monitor import CsvLog, CsvMode, Monitor, check_duration, check_rate, resolve_entries
+from servotool.model.codec import decimals
+from servotool.ops.monitor import CsvLog, CsvMode, Monitor, check_duration, check_rate, resolve_entries
 
 TREND_MIN = 8       # a trend narrower than this says nothing: drop the column instead
 NAME_FLOOR = 16     # the name keeps at least this much room (or its full length) before the trend gets any

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import typer
 
-from servotool import params
 from servotool.cli.common import JSON_OPT, drive
 from servotool.cli.render import emit_json, info, out, table, warn
-from servotool.codec import format_field, format_value, get_field, split_field
 from servotool.drive import Reading
+from servotool.model.codec import format_field, format_value, get_field, split_field
+from servotool.ops import eeprom, params
 
 app = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and restore drive parameters.")
 
@@ -62,11 +62,11 @@ def set_(
     """Validate every value against the profile, write the ones that differ, read back to verify."""
     persisted = None
     with drive(ctx) as d:
-        params.check_save_request(d.profile, save)
+        eeprom.check_save_request(d.profile, save)
         plan = params.plan_set(d, assignments, raw=raw)
         results = []
         if not dry_run and plan.changes:
-            with params.persistence(d, save) as outcome:
+            with eeprom.persistence(d, save) as outcome:
                 results = params.apply_set(d, plan)
             persisted = outcome["persisted"]
     if as_json:
@@ -86,7 +86,7 @@ def set_(
                       markup=False)
         return
     if persisted is False:
-        warn(params.ram_only_warning(d.profile))
+        warn(eeprom.ram_only_warning(d.profile))
     for r in results:
         note = f"  [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
         out.print(f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "

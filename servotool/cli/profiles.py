@@ -8,9 +8,9 @@ import typer
 
 from servotool.cli.common import JSON_OPT
 from servotool.cli.render import emit_json, out, table
-from servotool.codec import format_value
 from servotool.errors import UsageError
-from servotool.profile import builtin_dir, builtin_ids, load_profile, read_profile
+from servotool.model.codec import format_value
+from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
 
 app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
 

@@ -9,11 +9,14 @@ from pathlib import Path
 
 import typer
 
-from servotool import plan as plans
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame
-from servotool.connection import merge, open_drives, options_from, resolve
+from servotool.commission.plan import load_plan
+from servotool.commission.runner import Runner, write_report
+from servotool.commission.steps import validate
+from servotool.config import merge, options_from, resolve
 from servotool.errors import UsageError
+from servotool.session import open_drives
 
 
 def run(
@@ -28,7 +31,7 @@ def run(
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
 ) -> None:
     """Validate a commissioning plan completely, then run its steps on one or more axes."""
-    plan = plans.load_plan(plan_file)
+    plan = load_plan(plan_file)
     cli_opts = state(ctx).options
     resolved = resolve(merge(cli_opts, options_from(plan.options, str(plan_file))))
     units = plan.units or [resolved.unit]
@@ -36,7 +39,7 @@ def run(
         if cli_opts.unit not in plan.units:
             raise UsageError(f"--unit {cli_opts.unit} is not among the plan's units {plan.units}")
         units = [cli_opts.unit]
-    lines = plans.validate(plan, resolved.profile)
+    lines = validate(plan, resolved.profile)
     if dry_run:
         if as_json:
             emit_json({"plan": str(plan_file), "dry_run": True, "ok": True, "profile": resolved.profile.id,
@@ -62,13 +65,13 @@ def run(
 
     t0 = time.monotonic()
     with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice) as drives:
-        runner = plans.Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info)
+        runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info)
         runner.check_units()
         ok = False
         try:
             ok = runner.run()
         finally:  # also when interrupted: the report says what was written
-            data = plans.write_report(report_path, plan, runner.results, ok, time.monotonic() - t0,
+            data = write_report(report_path, plan, runner.results, ok, time.monotonic() - t0,
                                       profile=resolved.profile.id, port=resolved.settings.port, units=units)
     if as_json:
         emit_json(data)

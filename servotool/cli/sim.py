@@ -8,9 +8,9 @@ import typer
 
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, emit_json, info, out, table, trace_frame
-from servotool.connection import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit, line_format, merge
+from servotool.config import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit, line_format, merge
 from servotool.errors import UsageError
-from servotool.profile import load_profile
+from servotool.model.loader import load_profile
 from servotool.sim.device import SIM_SETTINGS, SimulatedDrive
 from servotool.sim.registers import MACHINE_STATE_KEY, state_path
 

@@ -9,12 +9,12 @@ from typing import Any
 
 import typer
 
-from servotool import params
 from servotool.cli.common import confirm, drive
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.errors import ServoError, UsageError
-from servotool.tuning import wizard
+from servotool.ops import eeprom
+from servotool.tuning import gain_writes, identify, planning, preflight, step
 from servotool.tuning.gains import suggest_gains
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
@@ -52,7 +52,7 @@ def _check_options(method: str, rigidity: int | None, bandwidth: float | None, n
             raise UsageError(f"cannot write the trace to {save_trace}")
 
 
-def _estimate_json(result: wizard.Result) -> dict[str, Any]:
+def _estimate_json(result: identify.Result) -> dict[str, Any]:
     est = result.estimate
     return {
         "method": result.method,
@@ -100,25 +100,25 @@ def inertia(
     Gains are changed only with --rigidity or --bandwidth.
     """
     _check_options(method, rigidity, bandwidth, no_gains, save_trace)
-    step_s = wizard.step_duration_s(travel) if step_check else None
+    step_s = step.step_duration_s(travel) if step_check else None
     with drive(ctx) as d:
-        params.check_save_request(d.profile, save)
-        wizard.preflight(d, method)
+        eeprom.check_save_request(d.profile, save)
+        preflight.preflight(d, method)
         if method == "host" or step_check:
-            confirm_motion(ctx, d, yes, wizard.FEATURE)
-        ident = wizard.Identifier(d)
+            confirm_motion(ctx, d, yes, preflight.FEATURE)
+        ident = identify.Identifier(d)
         plan, rest = None, None
         if method == "host":
-            plan, rest = wizard.plan_host_motion(d, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
+            plan, rest = planning.plan_host_motion(d, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
                                                  direction=direction, repeats=repeats)
             info(f"motion: {plan.describe()}")
         else:
             info("motion: the drive's own identification (its parameters set torque and travel)")
         if step_s is not None:
-            info(f"step check: {wizard.STEP_SPEED_RPM:g} rpm for {step_s:.2f} s forward and back, before and after")
+            info(f"step check: {step.STEP_SPEED_RPM:g} rpm for {step_s:.2f} s forward and back, before and after")
         if not confirm("Move the axis now?", yes):
             raise typer.Exit(1)
-        before = wizard.step_response(d, wizard.STEP_SPEED_RPM, step_s) if step_s is not None else None
+        before = step.step_response(d, step.STEP_SPEED_RPM, step_s) if step_s is not None else None
         try:
             if plan is not None:
                 result = ident.run_host(plan, progress=info, rest=rest)
@@ -128,17 +128,17 @@ def inertia(
             if save_trace:
                 ident.trace.save(save_trace)
             if as_json:
-                partial = _estimate_json(exc.result) if isinstance(exc, wizard.IdentificationRefused) else {}
+                partial = _estimate_json(exc.result) if isinstance(exc, identify.IdentificationRefused) else {}
                 emit_json(_clean({"ok": False, "reason": str(exc), **partial,
-                                  "ratio": exc.result.new_ratio if isinstance(exc, wizard.IdentificationRefused)
+                                  "ratio": exc.result.new_ratio if isinstance(exc, identify.IdentificationRefused)
                                   else None, "written": False}))
             raise
         if save_trace:
             result.trace.save(save_trace)
         # Where the profile maps no inertia-ratio parameter (SDC) the result is reported, not written.
-        entry, raw = wizard.ratio_raw(d, result.new_ratio) if d.profile.role("inertia_ratio") else (None, 0)
+        entry, raw = gain_writes.ratio_raw(d, result.new_ratio) if d.profile.role("inertia_ratio") else (None, 0)
         want_gains = rigidity is not None or bandwidth is not None
-        sugg, changes = wizard.gain_changes(d, result.new_ratio, rigidity=rigidity, bandwidth_hz=bandwidth) \
+        sugg, changes = gain_writes.gain_changes(d, result.new_ratio, rigidity=rigidity, bandwidth_hz=bandwidth) \
             if want_gains else (None, [])
         est = result.estimate
         if not as_json:
@@ -156,13 +156,13 @@ def inertia(
             write if method == "host" and entry is not None else confirm("Write the gains?", yes))
         persisted = None
         if write or gains_written:
-            with params.persistence(d, save) as outcome:
+            with eeprom.persistence(d, save) as outcome:
                 if write and entry is not None:
                     d.write_verified(entry, raw)
                 for c in changes if gains_written else []:
                     d.write_verified(c.entry, c.raw)
             persisted = outcome["persisted"]
-        after = wizard.step_response(d, wizard.STEP_SPEED_RPM, step_s) if before is not None and stored else None
+        after = step.step_response(d, step.STEP_SPEED_RPM, step_s) if before is not None and stored else None
     if as_json:
         emit_json(_clean({
             "ok": True, **_estimate_json(result), "ratio": round(result.new_ratio, 4),
@@ -175,7 +175,7 @@ def inertia(
         }))
         return
     if persisted is False:
-        warn(params.ram_only_warning(d.profile))
+        warn(eeprom.ram_only_warning(d.profile))
     what = f"{entry.code} {'written' if stored else 'not written'}" if entry else \
         f"nothing to write: {d.profile.id} maps no inertia-ratio parameter"
     out.print(what
@@ -190,7 +190,7 @@ def inertia(
         out.print(f"step after:  {after.describe()}", markup=False)
 
 
-def _show(result: wizard.Result, entry: Any, raw: int, sugg: Any, changes: list[Any]) -> None:
+def _show(result: identify.Result, entry: Any, raw: int, sugg: Any, changes: list[Any]) -> None:
     """The result, shown before asking to write it."""
     est = result.estimate
     old = f"{result.old_ratio:.2f}" if result.old_ratio is not None else "(not a drive parameter)"

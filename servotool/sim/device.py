@@ -6,7 +6,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from servotool.profile import Entry, Profile
+from servotool.model.profile import Entry, Profile
 from servotool.sim.registers import ILLEGAL_VALUE, RegisterBank, SimRefusal
 
 FnHandler = Callable[["SimulatedDrive", Entry, int], None]

@@ -21,11 +21,11 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-from servotool import prereq
-from servotool.codec import raw_to_eng
-from servotool.gain_units import to_canonical
-from servotool.motion import jog_direction
-from servotool.profile import Entry, Motor, Profile, status_bit
+from servotool.model.codec import raw_to_eng
+from servotool.model.gain_units import to_canonical
+from servotool.model.profile import Entry, Motor, Profile
+from servotool.model.roles import jog_direction, status_bit
+from servotool.model.setup import requirements
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.plant import (
     BRAKE_HOLD_X_RATED,
@@ -70,7 +70,7 @@ class Firmware:
         self.profile: Profile = drive.profile
         self.clock = clock or RealClock()
         self.motor = self.profile.motor or DEFAULT_MOTOR
-        self._setup = prereq.requirements(self.profile)
+        self._setup = requirements(self.profile)
         self._power_on()
         self._seq: int | None = None  # which stored machine state this process's state is (None: not stored)
         self._take_machine_state()

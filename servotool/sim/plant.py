@@ -24,7 +24,7 @@ import time
 from dataclasses import asdict, dataclass
 from typing import Protocol
 
-from servotool.profile import Motor as MotorData  # the profile's motor data drives the plant directly
+from servotool.model.profile import Motor as MotorData
 
 TS = 125e-6                 # control period, s
 SPEED_FILTER_S = 0.25e-3    # speed feedback low-pass

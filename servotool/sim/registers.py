@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from servotool.codec import raw_to_words, words_to_raw
 from servotool.errors import DeviceError
-from servotool.profile import Entry, Profile
+from servotool.model.codec import raw_to_words, words_to_raw
+from servotool.model.profile import Entry, Profile
 
 try:
     import fcntl

@@ -19,9 +19,9 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 from pymodbus.simulator.simcore import SimCore
 
 from servotool.errors import DeviceError
+from servotool.link.ports import parse_tcp
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.registers import SimRefusal
-from servotool.transport import parse_tcp
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 

@@ -6,7 +6,7 @@ import math
 import re
 
 from servotool.errors import UsageError
-from servotool.profile import Entry, Profile
+from servotool.model.profile import Entry, Profile
 
 
 def words_to_raw(entry: Entry, words: list[int]) -> int:

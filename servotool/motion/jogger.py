@@ -12,137 +12,15 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from servotool import alarms, prereq
-from servotool.codec import parse_value, raw_to_eng
 from servotool.drive import Drive
-from servotool.errors import DeviceError, UsageError
-from servotool.params import ram_writes
-from servotool.profile import Entry, Profile, status_bit
-
-FEATURE = "jog"
-DIRECTION_NAMES = {1: "forward", -1: "reverse", 0: "stop"}
-
-
-def is_sim_extension(entry: Entry) -> bool:
-    """An entry servotool added for its simulator (source "servotool ..."): not on the real drive."""
-    return entry.source.strip().lower().startswith("servotool")
-
-
-def jog_codes(entry: Entry) -> dict[int, int]:
-    """Direction (+1/-1/0) -> raw value of a JOG trigger entry."""
-    names = {name.split()[0].lower(): raw for raw, name in entry.enum.items() if name.strip()}
-    if all(n in names for n in DIRECTION_NAMES.values()):
-        return {d: names[n] for d, n in DIRECTION_NAMES.items()}
-    return {1: 1, -1: -1, 0: 0}
-
-
-def jog_direction(entry: Entry, raw: int) -> int:
-    """The direction a raw value written to a JOG trigger entry commands (unknown values stop)."""
-    codes = jog_codes(entry)
-    if codes == {1: 1, -1: -1, 0: 0}:
-        return (raw > 0) - (raw < 0)
-    return next((d for d, r in codes.items() if r == raw), 0)
-
-
-@dataclass(frozen=True)
-class MotionRoute:
-    """How this profile moves the motor over communication: kind 'trigger' or 'speed', and the entries by role."""
-
-    kind: str
-    entries: dict[str, Entry]
-
-    @property
-    def speed_entry(self) -> Entry:
-        return self.entries["jog_speed" if self.kind == "trigger" else "speed_reference"]
-
-
-ROUTE_ROLES = ("jog", "jog_speed", "speed_reference", "servo_on", "jog_accel", "keepalive", "comm_timeout")
-
-
-def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
-    """The profile's motion route; one clear line when it has none."""
-    found = {r: e for r in ROUTE_ROLES if (e := profile.role(r)) is not None}
-    if "jog" in found and "jog_speed" in found:
-        kind = "trigger"
-        found.pop("speed_reference", None)
-    elif "speed_reference" in found and "servo_on" in found:
-        kind = "speed"
-        found.pop("jog", None)
-    else:
-        raise UsageError(f"{feature} needs role 'jog' with 'jog_speed', or 'speed_reference' with 'servo_on', "
-                         f"which profile {profile.id} does not map")
-    return MotionRoute(kind, found)
-
-
-@dataclass(frozen=True)
-class MotionCaveats:
-    """What is not known to work on a real drive: unverified route entries, and a missing drive-side watchdog."""
-
-    unverified: tuple[tuple[str, Entry, str], ...]   # (role, entry, reason); role "setup" for motion_setup items
-    drive_timeout: Entry | None                       # None: nothing on the drive stops the motor if the host dies
-    power_cycle: tuple[Entry, ...] = ()               # motion_setup entries that take effect after a power cycle
-
-    def lines(self) -> list[str]:
-        out = [f"{e.code} ({role}): {reason}" for role, e, reason in self.unverified]
-        if self.power_cycle:
-            codes = ", ".join(e.code for e in self.power_cycle)
-            out.append(f"{codes} take effect only after a power cycle: if they were changed since the drive was "
-                       "switched on, it will not move")
-        if self.drive_timeout is None:
-            out.append("this drive has no communication timeout: if this program dies (kill, crash, cable), the "
-                       "motor keeps running until stopped at the drive; Ctrl-C still stops it")
-        return out
-
-
-def motion_caveats(profile: Profile, feature: str = FEATURE) -> MotionCaveats:
-    """Unverified entries of the motion route (with their reasons) and the drive-side watchdog, if real."""
-    route = motion_route(profile, feature)
-    unverified = []
-    for role, e in route.entries.items():
-        reason = e.unverified or ("a servotool simulator extension, not in the manual" if is_sim_extension(e) else "")
-        if reason:
-            unverified.append((role, e, reason))
-    setup = prereq.requirements(profile)
-    unverified += [("setup", r.entry, r.item.unverified) for r in setup if r.item.unverified]
-    timeout = route.entries.get("comm_timeout")
-    return MotionCaveats(tuple(unverified), timeout if timeout is not None and not is_sim_extension(timeout) else None,
-                         tuple(r.entry for r in setup if r.entry.effect == "power_cycle"))
-
-
-def check_setup(drive: Drive, feature: str = FEATURE,
-                effective_of: Callable[[list[Entry]], list[int]] | None = None) -> None:
-    """Refuse host motion while the drive lacks the profile's motion_setup settings (one line naming each)."""
-    def value_of(entries: list[Entry]) -> list[int]:
-        return [r.raw for r in drive.read_entries(entries)]
-
-    prereq.check(drive.profile, "JOG" if feature == FEATURE else feature, value_of, effective_of)
-
-
-def servo_is_on(drive: Drive) -> bool | None:
-    """Servo state from the servo_status role (None when the profile has no such role)."""
-    entry = drive.profile.role("servo_status")
-    if entry is None:
-        return None
-    raw = drive.read_entries([entry])[0].raw
-    bit = status_bit(entry, "servo_on")
-    return bool(raw >> bit & 1) if bit is not None else raw != 0
-
-
-def keepalive_interval_s(drive: Drive, default_s: float = 0.1) -> float:
-    """How often host motion must beat: three times per watchdog period (role comm_timeout), else default_s.
-
-    Raises UsageError when the watchdog is too short to keep any motion alive over a serial link.
-    """
-    timeout = drive.profile.role("comm_timeout")
-    if timeout is None:
-        return default_s
-    timeout_s = float(raw_to_eng(timeout, drive.read_entries([timeout])[0].raw)) / 1000.0
-    if timeout_s <= 0:          # watchdog disabled
-        return default_s
-    if timeout_s < 0.06:
-        raise UsageError(f"the drive's host watchdog {timeout.code} = {timeout_s * 1000:g} ms is too short "
-                         "to keep a motion alive over this link (at least 60 ms)")
-    return timeout_s / 3
+from servotool.errors import DeviceError, ServoError, UsageError
+from servotool.model.codec import parse_value, raw_to_eng
+from servotool.model.roles import FEATURE, jog_codes, motion_route
+from servotool.motion.keepalive import keepalive_interval_s
+from servotool.motion.setup import check_setup
+from servotool.ops import alarms
+from servotool.ops.eeprom import ram_writes
+from servotool.ops.status import servo_is_on
 
 
 @dataclass(frozen=True)
@@ -348,3 +226,31 @@ class Jogger:
         except DeviceError:
             pass  # the drive's own watchdog stops the motor when the host goes quiet
 
+
+def _motion_settings(drive: Drive, jogger: Jogger) -> dict[str, int]:
+    """Raw values of the settings a motion changes and puts back: the ramp, and a trigger route's JOG speed (a
+    speed reference is put back by the jogger)."""
+    entries = [drive.profile.need_role("jog_accel", FEATURE)]
+    if jogger.route.kind == "trigger":
+        entries.insert(0, jogger.speed_entry)
+    return {e.code: r.raw for e, r in zip(entries, drive.read_entries(entries), strict=True)}
+
+
+def _stop_quietly(jogger: Jogger) -> None:
+    """Command stop after a failure; if the link is gone, the drive's watchdog stops the motor."""
+    try:
+        jogger.command(0)
+    except ServoError:
+        pass
+
+
+def _leave_and_restore(drive: Drive, jogger: Jogger, saved: dict[str, int]) -> None:
+    """Servo off and the motion settings put back (saved: code -> raw); a failure here never hides the first one."""
+    try:
+        jogger.leave()
+        for code, raw in saved.items():
+            entry = drive.profile.entry(code)
+            if drive.read_entries([entry])[0].raw != raw:
+                drive.write_raw(entry, raw)
+    except ServoError:
+        pass

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from servotool.drive import Drive
 from servotool.errors import VerifyError
-from servotool.profile import Profile
+from servotool.model.profile import Profile
 
 FEATURE = "alarm"
 

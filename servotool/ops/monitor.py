@@ -12,10 +12,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO, Literal
 
-from servotool.codec import raw_to_eng
 from servotool.drive import Drive
 from servotool.errors import UsageError
-from servotool.profile import Entry, Profile
+from servotool.model.codec import raw_to_eng
+from servotool.model.profile import Entry, Profile
 
 KEY_MONITOR_ROLES = ("speed_feedback", "speed_command", "torque_feedback", "position_feedback", "following_error",
                      "load_rate", "current_rms", "bus_voltage")

@@ -12,9 +12,9 @@ import shlex
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
-from servotool.codec import decimals, field_index, format_value, parse_value, raw_to_eng
 from servotool.errors import UsageError
-from servotool.profile import Entry, Profile, SetupItem
+from servotool.model.codec import decimals, field_index, format_value, parse_value, raw_to_eng
+from servotool.model.profile import Entry, Profile, SetupItem
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,7 @@ def _command(reqs: Iterable[Requirement], save: bool) -> str:
 def fix_message(profile: Profile, feature: str, missing: list[tuple[Requirement, int]],
                 waiting: Sequence[Requirement] = ()) -> str:
     """One line: every setting that differs (and those set but waiting for a power cycle), and how to fix them."""
-    from servotool.params import can_save
+    from servotool.model.profile import can_save
 
     what = [part for r, raw in missing for part in r.compare(raw)]
     what += [f"{a.replace('=', ' = ')} (set, in effect after a power cycle)" for r in waiting for a in r.assignments()]

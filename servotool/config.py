@@ -1,25 +1,26 @@
-"""Connection options (CLI > environment > config file > profile defaults) and opening a session."""
+"""Connection options, layered CLI > environment > config file > profile defaults, resolved and checked."""
 
 from __future__ import annotations
 
 import math
 import os
-import sys
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from servotool.drive import Drive
 from servotool.errors import UsageError
-from servotool.profile import Profile, load_profile
-from servotool.transport import LinkSettings, ModbusLink, Trace, parse_tcp
+from servotool.link.ports import LinkSettings, parse_tcp
+from servotool.model.loader import load_profile
+from servotool.model.profile import Profile
 
 SIM_PORT = "sim"
+
+
 SIM_DEFAULT_PROFILE = "dsx7e"
+
+
 PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
 
 
@@ -161,41 +162,3 @@ def line_format(opts: ConnectOptions, profile: Profile) -> tuple[int, str, int]:
     if stopbits not in (1, 2):
         raise UsageError(f"bad stop bits {stopbits}: must be 1 or 2")
     return baud, parity, stopbits
-
-
-def sim_notice(resolved: Resolved, units: list[int]) -> str:
-    ids = ",".join(str(u) for u in units)
-    return (f"servotool: SIMULATED drive ({resolved.profile.model} profile '{resolved.profile.id}', unit {ids}); "
-            f"no real hardware is involved")
-
-
-@contextmanager
-def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace | None = None,
-                notice: Callable[[str], None] | None = None) -> Iterator[list[Drive]]:
-    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit."""
-    units = units or [resolved.unit]
-    sim = None
-    settings = resolved.settings
-    if resolved.simulated:
-        from servotool.sim.firmware import build_drive
-        from servotool.sim.server import EmbeddedSim
-
-        sim = EmbeddedSim([build_drive(resolved.profile, u) for u in units])
-        settings = replace(settings, port=sim.port)
-        (notice or _stderr)(sim_notice(resolved, units))
-    try:
-        link = ModbusLink(settings, trace=trace)
-    except Exception:
-        if sim:
-            sim.close()
-        raise
-    try:
-        yield [Drive(link, resolved.profile, u) for u in units]
-    finally:
-        link.close()
-        if sim:
-            sim.close()
-
-
-def _stderr(text: str) -> None:
-    print(text, file=sys.stderr)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from servotool.profile import Entry
+from servotool.model.profile import Entry
 
 
 def to_canonical(role: str, entry: Entry, eng: float) -> float:

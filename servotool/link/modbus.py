@@ -1,15 +1,12 @@
 """The one adapter over pymodbus' client side: open a port, read/write registers, build/parse RTU frames.
 
-Everything else in servotool talks to `Link`, never to pymodbus directly, because pymodbus' API churns.
-"""
+Everything else in servotool talks to `Link`, never to pymodbus directly, because pymodbus' API churns."""
 
 from __future__ import annotations
 
 import logging
 import re
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Protocol
 
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
@@ -22,47 +19,12 @@ from pymodbus.pdu.register_message import (
     WriteSingleRegisterRequest,
 )
 
-from servotool.errors import DeviceError, UsageError
+from servotool.errors import DeviceError
 from servotool.errors import ModbusException as DriveException
+from servotool.link.ports import LinkSettings, Trace, parse_tcp
 
 # pymodbus logs every dropped frame at error level; our own errors say what happened.
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-
-Trace = Callable[[bool, bytes], None]
-
-
-@dataclass(frozen=True)
-class LinkSettings:
-    """Where and how to talk to a drive."""
-
-    port: str
-    baud: int = 9600
-    parity: str = "N"
-    stopbits: int = 1
-    bytesize: int = 8
-    timeout: float = 1.0
-    retries: int = 2
-
-
-class Link(Protocol):
-    """What drive operations need from a Modbus master."""
-
-    def read(self, unit: int, address: int, count: int) -> list[int]: ...
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None: ...
-    def close(self) -> None: ...
-
-
-_TCP_RE = re.compile(r"^tcp://(?P<host>\[[^\]]+\]|[^:/]+):(?P<port>\d+)$")
-
-
-def parse_tcp(port: str) -> tuple[str, int] | None:
-    """(host, port) of a tcp://host:port spec, None for other specs; UsageError when malformed."""
-    if not port.startswith("tcp://"):
-        return None
-    m = _TCP_RE.match(port)
-    if not m or not 0 <= int(m["port"]) < 65536:
-        raise UsageError(f"bad port '{port}': expected tcp://HOST:PORT")
-    return m["host"].strip("[]"), int(m["port"])
 
 
 class ModbusLink:

@@ -1,0 +1,122 @@
+"""Commissioning plans: the YAML file format and its loading, with line numbers for every step."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from servotool.config import options_from
+from servotool.errors import UsageError
+
+STEP_NAMES = ("set", "expect", "backup", "restore", "jog", "tune inertia", "wait", "alarm clear", "save", "prompt")
+
+
+TOP_KEYS = {"port", "profile", "units", "unit", "steps", "baud", "parity", "stopbits", "timeout", "retries"}
+
+
+JOG_KEYS = {"speed", "time", "max_travel"}
+
+
+TUNE_KEYS = {"rigidity", "bandwidth", "travel", "max_speed", "accel_time", "direction", "repeats", "gains"}
+
+
+@dataclass
+class Step:
+    index: int
+    line: int
+    name: str
+    arg: Any
+    units: list[int] | None
+
+    def where(self) -> str:
+        return f"step {self.index + 1} ({self.name}, line {self.line})"
+
+
+@dataclass
+class Plan:
+    path: Path
+    options: dict[str, Any]
+    units: list[int]
+    steps: list[Step]
+
+
+def _fail(path: Path, line: int, msg: str) -> UsageError:
+    return UsageError(f"{path}:{line}: {msg}")
+
+
+def load_plan(path: Path) -> Plan:
+    """Parse and structurally check a plan (profile-dependent checks come in validate())."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise UsageError(f"cannot read plan {path}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise UsageError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark else 1
+        raise _fail(path, line, f"invalid YAML: {getattr(exc, 'problem', exc)}") from None
+    if not isinstance(data, dict) or not isinstance(root, yaml.MappingNode):
+        raise _fail(path, 1, "a plan is a mapping with 'steps:'")
+    key_lines: dict[str, int] = {}
+    for k, _v in root.value:
+        if k.value in key_lines:
+            raise _fail(path, k.start_mark.line + 1, f"'{k.value}' is given twice")
+        key_lines[k.value] = k.start_mark.line + 1
+    for key in data:
+        if key not in TOP_KEYS:
+            raise _fail(path, key_lines.get(str(key), 1),
+                        f"unknown key '{key}' (known: {', '.join(sorted(TOP_KEYS))})")
+    try:
+        options_from({k: v for k, v in data.items() if k not in ("steps", "units", "unit")}, "plan")
+    except UsageError as exc:
+        bad = next((k for k in data if f" {k} must" in str(exc)), "")
+        raise _fail(path, key_lines.get(bad, 1), str(exc).removeprefix("plan: ")) from None
+    units = _unit_list(data.get("units", data.get("unit")))
+    if units is False:
+        raise _fail(path, key_lines.get("units", key_lines.get("unit", 1)),
+                    "units must be a list of different unit ids 1..247")
+    steps_node = next((v for k, v in root.value if k.value == "steps"), None)
+    raw_steps = data.get("steps")
+    if not isinstance(raw_steps, list) or not raw_steps or steps_node is None:
+        raise _fail(path, 1, "'steps:' must be a non-empty list")
+    steps = []
+    for i, (raw, node) in enumerate(zip(raw_steps, steps_node.value, strict=True)):
+        line = node.start_mark.line + 1
+        if not isinstance(raw, dict):
+            raise _fail(path, line, f"step {i + 1}: expected '- NAME: ARGUMENT'")
+        names = [k for k in raw if k != "unit"]
+        if len(names) != 1 or names[0] not in STEP_NAMES:
+            raise _fail(path, line, f"step {i + 1}: unknown step {names or raw!r} "
+                                    f"(steps: {', '.join(STEP_NAMES)})")
+        step_units = _unit_list(raw.get("unit"))
+        if step_units is False:
+            raise _fail(path, line, f"step {i + 1}: unit must be an id or a list of different ids 1..247")
+        if step_units and not units:
+            raise _fail(path, line, f"step {i + 1}: 'unit:' on a step needs the plan's 'units:' list")
+        steps.append(Step(i, line, names[0], raw[names[0]], step_units))
+    options = {k: v for k, v in data.items() if k not in ("steps", "units", "unit")}
+    return Plan(path, options, units or [], steps)
+
+
+def _unit_list(value: Any) -> list[int] | bool | None:
+    """A unit id or list of them as a list; None when absent; False when malformed."""
+    if value is None:
+        return None
+    ids = [value] if isinstance(value, int) else value
+    ok = (isinstance(ids, list) and ids and len(set(ids)) == len(ids)
+          and all(isinstance(u, int) and not isinstance(u, bool) and 1 <= u <= 247 for u in ids))
+    return ids if ok else False
+
+
+def _number(value: Any, what: str, low: float, high: float) -> float:
+    """A number from a plan (YAML true/false are not numbers), within [low, high]."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
+        raise UsageError(f"{what} must be a number {low:g}..{high:g}, got {value!r}")
+    return float(value)

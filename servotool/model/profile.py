@@ -1,0 +1,246 @@
+"""Profile data types: entries, line settings, limits, persistence, motor, alarms, motion setup items."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from servotool.errors import UsageError
+
+CLASSES = ("Pn", "Un", "Sn", "Fn")
+
+
+TYPES = {"u16": (1, False), "s16": (1, True), "u32": (2, False), "s32": (2, True),
+         "u64": (4, False), "s64": (4, True)}
+
+
+ACCESS = ("rw", "ro", "wo")
+
+
+EFFECTS = ("immediate", "servo_off", "power_cycle", "unknown")
+
+
+FORMATS = ("dec", "hex", "digits", "bits")
+
+
+WORD_ORDERS = ("low_first", "high_first")
+
+
+PERSISTENCE = ("immediate", "ram", "switchable")
+
+
+DEFAULT_ACCESS = {"Pn": "rw", "Un": "ro", "Sn": "ro", "Fn": "wo"}
+
+
+ALARM_KINDS = ("overspeed", "overload", "following_error", "comm_timeout", "inertia_id_failed", "other")
+
+
+CONVENTIONS = {"inertia_ratio": ("load_over_motor", "total_over_motor")}
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One register-mapped item of a drive."""
+
+    code: str
+    cls: str
+    name: str
+    address: int
+    type: str = "u16"
+    word_order: str = "low_first"
+    combine: str = "binary"
+    digits: int = 5
+    scale: float = 1.0
+    unit: str = ""
+    min: int = 0
+    max: int = 0
+    default: int | None = None
+    access: str = "rw"
+    effect: str = "unknown"
+    group: str = ""
+    description: str = ""
+    source: str = ""
+    unverified: str = ""
+    format: str = "dec"
+    fields: tuple[str, ...] = ()
+    field_width: int = 4
+    field_ranges: dict[str, tuple[int, int]] = field(default_factory=dict)   # upper-case field name -> (lo, hi)
+    field_enums: dict[str, dict[int, str]] = field(default_factory=dict)     # upper-case field name -> meanings
+    bits: dict[int, str] = field(default_factory=dict)
+    enum: dict[int, str] = field(default_factory=dict)
+    trigger: int = 1
+    copy: bool = True
+
+    @property
+    def words(self) -> int:
+        """Number of 16-bit registers the entry occupies."""
+        return TYPES[self.type][0]
+
+    @property
+    def signed(self) -> bool:
+        return TYPES[self.type][1]
+
+    @property
+    def readable(self) -> bool:
+        return self.access in ("rw", "ro")
+
+    @property
+    def writable(self) -> bool:
+        return self.access in ("rw", "wo")
+
+    @property
+    def addresses(self) -> range:
+        return range(self.address, self.address + self.words)
+
+
+@dataclass(frozen=True)
+class Serial:
+    baud: int = 9600
+    parity: str = "N"
+    stopbits: int = 1
+    bytesize: int = 8
+    unit: int = 1
+
+
+@dataclass(frozen=True)
+class Limits:
+    max_read: int = 125
+    max_write: int = 123
+    write_multiple: bool = True
+
+
+@dataclass(frozen=True)
+class Persistence:
+    mode: str = "immediate"
+    switch_code: str = ""
+    switch_eeprom: int = 0
+    switch_ram: int = 1
+    switch_digit: str = ""
+    write_limit: int | None = None
+    note: str = ""
+
+    def is_switch(self, code: str) -> bool:
+        """Whether code is the RAM/EEPROM switch of a switchable drive."""
+        return bool(self.switch_code) and code.upper() == self.switch_code.upper()
+
+
+@dataclass(frozen=True)
+class Motor:
+    rated_torque_nm: float = 1.27
+    rated_speed_rpm: float = 3000.0
+    max_speed_rpm: float = 6000.0
+    rotor_inertia_kgcm2: float = 0.33
+    counts_per_rev: int = 131072
+    source: str = ""
+
+    @property
+    def jm(self) -> float:
+        """Rotor inertia in kg*m^2."""
+        return self.rotor_inertia_kgcm2 * 1e-4
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """One alarm/fault code the drive reports."""
+
+    code: int
+    display: str
+    name: str
+    clearable: bool = True
+    kind: str = "other"
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class SetupItem:
+    """A setting the drive needs before host motion works (motion_setup): value as users type it."""
+
+    code: str
+    value: str
+    reason: str
+    source: str
+    unverified: str = ""
+
+
+@dataclass
+class Profile:
+    """A loaded, validated drive profile."""
+
+    id: str
+    model: str
+    vendor: str
+    version: str
+    description: str
+    source: str
+    address_rule: str
+    serial: Serial
+    limits: Limits
+    word_order: str
+    persistence: Persistence
+    motor: Motor | None
+    entries: list[Entry]
+    roles: dict[str, str]
+    groups: dict[str, str]
+    alarms: list[Alarm] = field(default_factory=list)
+    conventions: dict[str, str] = field(default_factory=dict)
+    motion_setup: list[SetupItem] = field(default_factory=list)
+    unverified_note: str = ""
+    path: Path | None = None
+    _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        self._by_code = {e.code.upper(): e for e in self.entries}
+
+    def entry(self, code: str) -> Entry:
+        """The entry with this vendor code (case-insensitive) or role name."""
+        found = self.find(code)
+        if found is None:
+            raise UsageError(f"unknown code '{code}' for profile {self.id} (see 'servotool param list')")
+        return found
+
+    def find(self, code: str) -> Entry | None:
+        hit = self._by_code.get(code.strip().upper())
+        if hit is None and code in self.roles:
+            hit = self._by_code.get(self.roles[code].upper())
+        return hit
+
+    def role(self, name: str) -> Entry | None:
+        """The entry a semantic role maps to, or None when the profile lacks it."""
+        code = self.roles.get(name)
+        return self._by_code.get(code.upper()) if code else None
+
+    def need_role(self, name: str, feature: str) -> Entry:
+        """The entry for a role a feature cannot do without."""
+        hit = self.role(name)
+        if hit is None:
+            raise UsageError(f"{feature} needs role '{name}', which profile {self.id} does not map")
+        return hit
+
+    def of_class(self, *classes: str) -> list[Entry]:
+        return [e for e in self.entries if e.cls in classes]
+
+    def alarm(self, code: int) -> Alarm | None:
+        return next((a for a in self.alarms if a.code == code), None)
+
+    def alarm_of_kind(self, kind: str) -> Alarm | None:
+        return next((a for a in self.alarms if a.kind == kind), None)
+
+    def load_ratio_from_param(self, eng: float) -> float:
+        """J_load/J_motor from the inertia-ratio parameter's engineering value, per the profile's convention."""
+        entry = self.need_role("inertia_ratio", "inertia ratio conversion")
+        ratio = eng / 100.0 if entry.unit == "%" else float(eng)
+        if self.conventions.get("inertia_ratio") == "total_over_motor":
+            ratio -= 1.0
+        return ratio
+
+    def param_from_load_ratio(self, load_ratio: float) -> float:
+        """Engineering value of the inertia-ratio parameter for a J_load/J_motor ratio."""
+        entry = self.need_role("inertia_ratio", "inertia ratio conversion")
+        ratio = load_ratio + 1.0 if self.conventions.get("inertia_ratio") == "total_over_motor" else load_ratio
+        return ratio * 100.0 if entry.unit == "%" else ratio
+
+
+def can_save(profile: Profile) -> bool:
+    """Whether values written over Modbus can be made permanent over Modbus."""
+    p = profile.persistence
+    return p.mode != "ram" or profile.role("eeprom_save") is not None

@@ -1,0 +1,76 @@
+"""Roles by meaning: status bits, the motion route a profile maps, JOG trigger codes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from servotool.errors import UsageError
+from servotool.model.profile import Entry, Profile
+
+# Status-word bit names by meaning: servotool's own names and the vendors' DO-function mnemonics (SD25 SON-O,
+# ALM, TGON), so one status role works whatever the drive calls its bits.
+STATUS_ALIASES = {"servo_on": ("servo_on", "son", "son-o", "run"), "fault": ("fault", "alm"),
+                  "moving": ("moving", "tgon"), "jog": ("jog",), "identifying": ("identifying",)}
+
+
+def status_bit(entry: Entry, meaning: str) -> int | None:
+    """The bit of a status entry (format: bits) that carries a meaning (see STATUS_ALIASES), or None."""
+    names = STATUS_ALIASES.get(meaning, (meaning,))
+    return next((bit for bit, name in sorted(entry.bits.items()) if name.lower() in names), None)
+
+
+FEATURE = "jog"
+
+
+DIRECTION_NAMES = {1: "forward", -1: "reverse", 0: "stop"}
+
+
+def is_sim_extension(entry: Entry) -> bool:
+    """An entry servotool added for its simulator (source "servotool ..."): not on the real drive."""
+    return entry.source.strip().lower().startswith("servotool")
+
+
+def jog_codes(entry: Entry) -> dict[int, int]:
+    """Direction (+1/-1/0) -> raw value of a JOG trigger entry."""
+    names = {name.split()[0].lower(): raw for raw, name in entry.enum.items() if name.strip()}
+    if all(n in names for n in DIRECTION_NAMES.values()):
+        return {d: names[n] for d, n in DIRECTION_NAMES.items()}
+    return {1: 1, -1: -1, 0: 0}
+
+
+def jog_direction(entry: Entry, raw: int) -> int:
+    """The direction a raw value written to a JOG trigger entry commands (unknown values stop)."""
+    codes = jog_codes(entry)
+    if codes == {1: 1, -1: -1, 0: 0}:
+        return (raw > 0) - (raw < 0)
+    return next((d for d, r in codes.items() if r == raw), 0)
+
+
+@dataclass(frozen=True)
+class MotionRoute:
+    """How this profile moves the motor over communication: kind 'trigger' or 'speed', and the entries by role."""
+
+    kind: str
+    entries: dict[str, Entry]
+
+    @property
+    def speed_entry(self) -> Entry:
+        return self.entries["jog_speed" if self.kind == "trigger" else "speed_reference"]
+
+
+ROUTE_ROLES = ("jog", "jog_speed", "speed_reference", "servo_on", "jog_accel", "keepalive", "comm_timeout")
+
+
+def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
+    """The profile's motion route; one clear line when it has none."""
+    found = {r: e for r in ROUTE_ROLES if (e := profile.role(r)) is not None}
+    if "jog" in found and "jog_speed" in found:
+        kind = "trigger"
+        found.pop("speed_reference", None)
+    elif "speed_reference" in found and "servo_on" in found:
+        kind = "speed"
+        found.pop("jog", None)
+    else:
+        raise UsageError(f"{feature} needs role 'jog' with 'jog_speed', or 'speed_reference' with 'servo_on', "
+                         f"which profile {profile.id} does not map")
+    return MotionRoute(kind, found)

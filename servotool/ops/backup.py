@@ -1,0 +1,195 @@
+"""Parameter backups: the file format, taking one from a drive, saving, loading and diffing."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from servotool import __version__
+from servotool.drive import Drive
+from servotool.errors import ServoError, UsageError
+from servotool.model.codec import format_value
+from servotool.model.profile import Entry, Profile
+from servotool.ops.params import select
+
+FORMAT = 1
+
+
+IDENTITY_ROLES = ("firmware", "drive_type")
+
+
+@dataclass
+class Backup:
+    profile: str
+    profile_version: str
+    model: str
+    unit: int
+    created: str
+    tool_version: str
+    identity: dict[str, str]
+    values: dict[str, int]
+    path: Path | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    def checksum(self) -> str:
+        canon = json.dumps({"profile": self.profile, "model": self.model, "unit": self.unit,
+                            "values": dict(sorted(self.values.items()))}, sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(canon.encode()).hexdigest()
+
+    def to_yaml(self, profile: Profile) -> str:
+        text = {code: format_value(profile.entry(code), raw) + (f" {profile.entry(code).unit}"
+                                                                 if profile.entry(code).unit else "")
+                for code, raw in self.values.items()}
+        doc = {"servotool_backup": FORMAT, "profile": self.profile, "profile_version": self.profile_version,
+               "model": self.model, "unit": self.unit, "created": self.created, "tool_version": self.tool_version,
+               "identity": self.identity, "checksum": self.checksum(), "values": self.values, "display": text}
+        return "# servotool parameter backup; values are raw register integers, 'display' is for reading only\n" + \
+            yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
+
+
+def backup_dir() -> Path:
+    """Where automatic backups go (SERVOTOOL_BACKUP_DIR, else the XDG data dir)."""
+    if env := os.environ.get("SERVOTOOL_BACKUP_DIR"):
+        return Path(env)
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(base) / "servotool" / "backups"
+
+
+def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
+    """Read every readable Pn (coalesced) and the identity entries."""
+    p = drive.profile
+    entries = select(p)
+    readings = drive.read_entries(entries, progress=progress)
+    identity: dict[str, str] = {}
+    ident = [e for e in (p.role(r) for r in IDENTITY_ROLES) if e is not None and e.readable]
+    for r in drive.read_entries(ident) if ident else []:
+        identity[r.entry.code] = r.text
+    return Backup(p.id, p.version, p.model, drive.unit, datetime.now(UTC).isoformat(timespec="seconds"),
+                  __version__, identity, {r.entry.code: r.raw for r in readings})
+
+
+def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False) -> Path:
+    """Write atomically (temp file + rename); never replace an existing file unless forced."""
+    if path.exists() and not force:
+        raise UsageError(f"{path} exists; choose another name or pass --force to replace it")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}", suffix=".tmp")
+    except OSError as exc:
+        raise ServoError(f"cannot write {path}: {exc.strerror or exc}") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(backup.to_yaml(profile))
+            fh.flush()
+            os.fsync(fh.fileno())
+        if force:
+            os.replace(tmp, path)
+        else:
+            # link() fails if the name appeared since the check above, so nothing on disk is ever replaced.
+            os.link(tmp, path)
+    except FileExistsError:
+        raise UsageError(f"{path} exists; choose another name or pass --force to replace it") from None
+    except OSError as exc:
+        raise ServoError(f"cannot write {path}: {exc.strerror or exc}") from None
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    backup.path = path
+    return path
+
+
+def write_backup(drive: Drive, path: Path, *, force: bool = False,
+                 progress: Callable[[int], None] | None = None) -> Path:
+    return save(take(drive, progress), drive.profile, path, force=force)
+
+
+def _auto_path(drive: Drive, reason: str) -> Path:
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S%fZ")
+    return backup_dir() / f"{drive.profile.id}-unit{drive.unit}-{stamp}-{reason}.yaml"
+
+
+def auto_backup(drive: Drive, reason: str) -> Path:
+    """Save the drive's current state under backup_dir() (never replacing a file)."""
+    return write_backup(drive, _auto_path(drive, reason))
+
+
+def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
+    """Read and check a backup against the profile; every problem is a one-line UsageError, before any write."""
+    what = str(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise UsageError(f"cannot read {what}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise UsageError(f"{what}: not a servotool backup file (not UTF-8 text)") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise UsageError(f"{what}: not a valid backup (broken YAML{f' at line {mark.line + 1}' if mark else ''})") \
+            from None
+    if not isinstance(data, dict) or data.get("servotool_backup") != FORMAT:
+        raise UsageError(f"{what}: not a servotool backup file (format {FORMAT})")
+    for key, kind in (("profile", str), ("model", str), ("unit", int), ("values", dict), ("checksum", str)):
+        if not isinstance(data.get(key), kind) or isinstance(data.get(key), bool):
+            raise UsageError(f"{what}: '{key}' is missing or of the wrong type (truncated or edited file?)")
+    display = data.get("display")
+    if not isinstance(display, dict) or set(map(str, display)) != set(map(str, data["values"])):
+        raise UsageError(f"{what}: the file is incomplete (truncated?): its value and display sections differ")
+    warnings = []
+    if data["model"] != profile.model or data["profile"] != profile.id:
+        msg = f"{what}: backup of a {data['model']} ({data['profile']}), not of this {profile.model} ({profile.id})"
+        if not force:
+            raise UsageError(msg + "; --force to restore anyway")
+        warnings.append(msg)
+    values: dict[str, int] = {}
+    for code, raw in data["values"].items():
+        entry = profile.find(str(code))
+        if entry is None or entry.cls != "Pn":
+            raise UsageError(f"{what}: unknown parameter {code} for profile {profile.id}")
+        if not isinstance(raw, int) or isinstance(raw, bool):
+            raise UsageError(f"{what}: {code}: value {raw!r} is not an integer")
+        if not entry.min <= raw <= entry.max:
+            raise UsageError(f"{what}: {code}: value {raw} is outside {entry.min}..{entry.max}")
+        values[entry.code] = raw
+    b = Backup(data["profile"], str(data.get("profile_version", "")), data["model"], data["unit"],
+               str(data.get("created", "")), str(data.get("tool_version", "")),
+               {str(k): str(v) for k, v in (data.get("identity") or {}).items()}, values, path, warnings)
+    if b.checksum() != data["checksum"]:
+        msg = f"{what}: checksum mismatch: the values were edited or damaged"
+        if not force:
+            raise UsageError(msg + "; --force to use it anyway")
+        warnings.append(msg)
+    return b
+
+
+@dataclass(frozen=True)
+class Difference:
+    entry: Entry
+    a: int | None
+    b: int | None
+
+    def as_json(self) -> dict[str, Any]:
+        e = self.entry
+        return {"code": e.code, "name": e.name, "unit": e.unit, "effect": e.effect,
+                "a": None if self.a is None else format_value(e, self.a),
+                "b": None if self.b is None else format_value(e, self.b)}
+
+
+def diff(profile: Profile, a: dict[str, int], b: dict[str, int]) -> list[Difference]:
+    out = []
+    for e in profile.of_class("Pn"):
+        va, vb = a.get(e.code), b.get(e.code)
+        if (va is not None or vb is not None) and va != vb:
+            out.append(Difference(e, va, vb))
+    return out
+
+
+def defaults(profile: Profile) -> dict[str, int]:
+    return {e.code: e.default for e in profile.of_class("Pn") if e.default is not None}

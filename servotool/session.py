@@ -1,0 +1,51 @@
+"""Opening drives for a resolved connection, starting the embedded simulator for --port sim."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import replace
+
+from servotool.config import Resolved
+from servotool.drive import Drive
+from servotool.link.modbus import ModbusLink
+from servotool.link.ports import Trace
+
+
+def sim_notice(resolved: Resolved, units: list[int]) -> str:
+    ids = ",".join(str(u) for u in units)
+    return (f"servotool: SIMULATED drive ({resolved.profile.model} profile '{resolved.profile.id}', unit {ids}); "
+            f"no real hardware is involved")
+
+
+@contextmanager
+def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace | None = None,
+                notice: Callable[[str], None] | None = None) -> Iterator[list[Drive]]:
+    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit."""
+    units = units or [resolved.unit]
+    sim = None
+    settings = resolved.settings
+    if resolved.simulated:
+        from servotool.sim.firmware import build_drive
+        from servotool.sim.server import EmbeddedSim
+
+        sim = EmbeddedSim([build_drive(resolved.profile, u) for u in units])
+        settings = replace(settings, port=sim.port)
+        (notice or _stderr)(sim_notice(resolved, units))
+    try:
+        link = ModbusLink(settings, trace=trace)
+    except Exception:
+        if sim:
+            sim.close()
+        raise
+    try:
+        yield [Drive(link, resolved.profile, u) for u in units]
+    finally:
+        link.close()
+        if sim:
+            sim.close()
+
+
+def _stderr(text: str) -> None:
+    print(text, file=sys.stderr)

@@ -1,0 +1,129 @@
+"""Planning host-driven identification motion: speed, ramps, travel and repeats from the line's sampling rate."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from servotool.clock import Timing
+from servotool.drive import Drive
+from servotool.errors import UsageError
+from servotool.model.profile import Profile
+from servotool.tuning.preflight import DEFAULT_SAMPLES_PER_S, RestCheck, check_at_rest
+
+# Automatic ramps last this many sampling intervals of the rest check (the motion samples about 2/3 as fast:
+# position reads and keep-alives share the link). Fewer leave too few windows between torque steps and let the axis
+# run further between two samples than the travel guard can foresee; more lower the acceleration (it falls with the
+# square of the ramp time at a fixed travel), and a low-inertia axis with a noisy torque reading then cannot reach
+# the precision within the time budget (10 intervals: 2.0-2.7 % at 19200 baud with 0.4 % rated torque noise).
+SAMPLES_PER_RAMP = 7.0
+
+
+# Automatic repeats stop before the motion (with its pilot) would take longer than this.
+TIME_BUDGET_S = 8.8
+
+
+# The test acceleration is scaled so the pilot's peak torque, extrapolated, stays below this share of the limit.
+TORQUE_SHARE = 0.6
+
+
+# The pilot moves at this share of the planned speed: a badly matched speed loop can overshoot its travel
+# several times over, and the pilot must stay inside the limit even then.
+PILOT_SHARE = 0.25
+
+
+@dataclass(frozen=True)
+class MotionPlan:
+    speed_rpm: float
+    ramp_s: float            # time to reach speed (and to stop)
+    directions: tuple[int, ...]
+    repeats: int             # move cycles; with `adaptive` the most that will run
+    travel_limit_rev: float
+    adaptive: bool = False   # stop repeating once the estimate is precise enough (and within TIME_BUDGET_S)
+
+    @property
+    def move_travel_rev(self) -> float:
+        """Travel of one accelerate-then-stop move (triangular speed profile)."""
+        return self.speed_rpm / 60.0 * self.ramp_s
+
+    @property
+    def excursion_rev(self) -> float:
+        """Range of positions covered. Both directions: one move out and back (the slower pilot stays inside).
+        One direction: every move adds up, and so does the pilot."""
+        if len(self.directions) > 1:
+            return self.move_travel_rev
+        return self.move_travel_rev * (self.repeats + PILOT_SHARE)
+
+    @property
+    def duration_s(self) -> float:
+        moves = len(self.directions) * (self.repeats + 1)   # + the pilot
+        return min(moves * (2 * self.ramp_s + 0.1), TIME_BUDGET_S if self.adaptive else math.inf)
+
+    def describe(self) -> str:
+        names = {1: "forward", -1: "reverse"}
+        seq = " then ".join(names[d] for d in self.directions)
+        count = f"up to {self.repeats}" if self.adaptive else f"{self.repeats}"
+        return (f"{count} x ({seq}) moves to {self.speed_rpm:.0f} rpm, {self.ramp_s * 1000:.0f} ms ramps "
+                f"({self.speed_rpm / self.ramp_s:.0f} rpm/s), {self.move_travel_rev:.2f} rev per move, "
+                f"{self.excursion_rev:.2f} rev of travel in all (limit {self.travel_limit_rev:g} rev), about "
+                f"{self.duration_s:.1f} s; a pilot move at a quarter of that speed first")
+
+
+def plan_motion(profile: Profile, *, max_speed: float | None, accel_time_ms: float | None, travel_rev: float,
+                direction: str, repeats: int | None, samples_per_s: float | None = None) -> MotionPlan:
+    """Choose speed and ramp so the motion stays inside the travel limit; refuse what cannot.
+
+    accel_time_ms None: ramps of SAMPLES_PER_RAMP sampling intervals at samples_per_s (the measured link rate).
+    repeats None: cycles are repeated until the estimate is precise enough, within TIME_BUDGET_S.
+    """
+    if not (math.isfinite(travel_rev) and travel_rev > 0):
+        raise UsageError("--travel must be a number > 0 revolutions")
+    if repeats is not None and not 1 <= repeats <= 20:
+        raise UsageError("--repeats must be 1..20")
+    dirs = {"both": (1, -1), "forward": (1,), "reverse": (-1,)}.get(direction)
+    if dirs is None:
+        raise UsageError("--direction must be both, forward or reverse")
+    if accel_time_ms is None:
+        rate = samples_per_s if samples_per_s and math.isfinite(samples_per_s) else DEFAULT_SAMPLES_PER_S
+        ramp = min(0.5, max(0.1, SAMPLES_PER_RAMP / rate))
+    else:
+        if not (math.isfinite(accel_time_ms) and 20 <= accel_time_ms <= 5000):
+            raise UsageError("--accel-time must be 20..5000 ms")
+        ramp = accel_time_ms / 1000.0
+    adaptive = repeats is None and len(dirs) > 1
+    # One direction cannot stop early: the travel of every move is reserved up front.
+    cycles = repeats if repeats is not None else (20 if adaptive else 6)
+    # Keep a margin of 10 % for overshoot.
+    budget = 0.9 * travel_rev / (1.0 if len(dirs) > 1 else cycles + PILOT_SHARE)
+    speed = budget / ramp * 60.0
+    motor = profile.motor
+    limit = motor.rated_speed_rpm if motor else 3000.0
+    if max_speed is not None:
+        if not (math.isfinite(max_speed) and max_speed > 0):
+            raise UsageError("--max-speed must be a number > 0")
+        limit = min(limit, max_speed)
+    speed = min(speed, limit)
+    plan = MotionPlan(speed, ramp, dirs, cycles, travel_rev, adaptive)
+    if speed < 30.0:
+        raise UsageError(f"travel limit {travel_rev:g} rev is too small for an identification with "
+                         f"{ramp * 1000:.0f} ms ramps (needs at least {30 / 60 * ramp / 0.9:.2f} rev per move); "
+                         "raise --travel, shorten --accel-time" + (" or use --direction both" if len(dirs) == 1
+                                                                    else ""))
+    if plan.excursion_rev > travel_rev:
+        raise UsageError(f"the motion needs {plan.excursion_rev:.2f} rev, over the --travel limit {travel_rev:g}")
+    return plan
+
+
+def plan_host_motion(drive: Drive, timing: Timing | None = None, *, max_speed: float | None = None,
+                     accel_time_ms: float | None = None, travel_rev: float = 2.0, direction: str = "both",
+                     repeats: int | None = None) -> tuple[MotionPlan, RestCheck]:
+    """The host method's motion as every caller runs it (CLI, plans, bench): the options checked before anything is
+    read, the axis checked at rest, then the plan for the sampling rate that check measured.
+
+    accel_time_ms and repeats None: automatic (ramps from the sampling rate, repeats until precise enough).
+    """
+    options = {"max_speed": max_speed, "accel_time_ms": accel_time_ms, "travel_rev": travel_rev,
+               "direction": direction, "repeats": repeats}
+    plan_motion(drive.profile, **options)
+    rest = check_at_rest(drive, timing)
+    return plan_motion(drive.profile, **options, samples_per_s=rest.samples_per_s), rest

@@ -1,0 +1,92 @@
+"""Checks before identification: alarms, servo state, the axis at rest, and the line's sampling rate."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+from servotool.clock import RealTiming, Timing
+from servotool.drive import Drive
+from servotool.errors import UsageError
+from servotool.model.codec import raw_to_eng
+from servotool.model.roles import motion_route, status_bit
+from servotool.motion.jogger import Jogger
+from servotool.ops import alarms
+from servotool.ops.status import servo_is_on
+
+FEATURE = "tune inertia"
+# Sampling rate assumed when planning without a measured one (a 38400-baud link).
+DEFAULT_SAMPLES_PER_S = 40.0
+
+
+def preflight(drive: Drive, method: str) -> None:
+    """Link, roles, alarm and servo state; raises with one clear line."""
+    p = drive.profile
+    # Host identification measures J without the drive's ratio parameter (SDC maps none): it then only reports.
+    need = ["speed_feedback", "torque_feedback"]
+    need += ["jog_accel"] if method == "host" else ["inertia_ratio", "inertia_id"]
+    for role in need:
+        p.need_role(role, f"{FEATURE} --method {method}")
+    if method == "host":
+        motion_route(p, f"{FEATURE} --method {method}")   # a JOG trigger or speed reference + servo-on
+    else:
+        status = p.role("servo_status")
+        if status is None or status_bit(status, "identifying") is None:
+            # Without it the end could only be guessed: a timeout would report failure after a good run.
+            raise UsageError(f"{FEATURE} --method drive: profile {p.id} maps no status bit that shows the "
+                             "drive's identification running, so its end cannot be seen over Modbus; use "
+                             "--method host")
+    if p.motor is None:
+        raise UsageError(f"{FEATURE} needs the motor data (rated torque, rotor inertia) in profile {p.id}")
+    active = active_alarm(drive)
+    if active:
+        raise UsageError(f"refusing to move: alarm {active} is active (clear it first)")
+    if servo_is_on(drive) or (method == "host" and Jogger(drive, feature=FEATURE).servo_already_on()):
+        raise UsageError("refusing to move: the servo is on (enabled from elsewhere); switch it off first")
+
+
+def active_alarm(drive: Drive) -> str | None:
+    """'CODE name' of an alarm seen active on two reads in a row (one stray reply is no alarm), else None."""
+    state = alarms.confirmed(drive)
+    return f"{state.display} {state.name}" if state is not None else None
+
+
+@dataclass(frozen=True)
+class RestCheck:
+    """The axis observed with the servo off, before any motion."""
+
+    samples_per_s: float
+    speed_noise_rpm: float
+    mean_speed_rpm: float
+    drift_rev: float | None   # position change over the check (None: no position feedback)
+
+
+def check_at_rest(drive: Drive, timing: Timing | None = None, duration_s: float = 0.3) -> RestCheck:
+    """Sample the idle axis: it must stand still (a load torque with no brake drops it as soon as nothing holds it).
+
+    Also measures what the motion plan needs: the link's sampling rate and the speed reading's noise.
+    """
+    p, timing = drive.profile, timing or RealTiming()
+    speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
+    pos_e = p.role("position_feedback")
+    counts = p.motor.counts_per_rev if p.motor else 1
+    pos0 = drive.read_entries([pos_e])[0].raw / counts if pos_e else None
+    t0 = timing.now()
+    speeds: list[float] = []
+    while timing.now() - t0 < duration_s or len(speeds) < 5:
+        readings = drive.read_entries([speed_e, torque_e])
+        speeds.append(float(raw_to_eng(speed_e, readings[0].raw)))
+    elapsed = timing.now() - t0
+    drift = abs(drive.read_entries([pos_e])[0].raw / counts - pos0) if pos_e and pos0 is not None else None
+    mean = sum(speeds) / len(speeds)
+    # Speed noise from successive differences: insensitive to a slow drift.
+    diffs = [b - a for a, b in itertools.pairwise(speeds)]
+    noise = math.sqrt(sum(d * d for d in diffs) / (2 * len(diffs))) if diffs else 0.0
+    rest = RestCheck(len(speeds) / elapsed if elapsed > 0 else DEFAULT_SAMPLES_PER_S, noise, mean, drift)
+    moving = (drift is not None and drift > 0.01) or abs(mean) > max(5.0, 4 * noise / math.sqrt(len(speeds)))
+    if moving:
+        what = f"{drift:.3f} rev in {elapsed:.1f} s" if drift is not None else f"{mean:.0f} rpm"
+        raise UsageError(f"refusing to move: the axis is moving with the servo off ({what}); a load torque "
+                         "(gravity?) turns it and no brake holds it: secure the axis first")
+    return rest

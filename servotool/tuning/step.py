@@ -1,0 +1,106 @@
+"""A speed step response to check the tuned loop: overshoot and settling."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from servotool.clock import RealTiming, Timing
+from servotool.drive import Drive
+from servotool.errors import UsageError
+from servotool.model.codec import raw_to_eng
+from servotool.motion.jogger import Jogger, _leave_and_restore, _motion_settings, _stop_quietly
+from servotool.motion.keepalive import keepalive_interval_s
+from servotool.ops.eeprom import ram_writes
+from servotool.tuning.identify import IdentificationFailed
+from servotool.tuning.preflight import FEATURE, active_alarm
+
+
+@dataclass(frozen=True)
+class StepResponse:
+    """Speed step through JOG with the shortest ramp the drive allows."""
+
+    target_rpm: float
+    overshoot_pct: float
+    settling_ms: float | None     # within 5 % of the target for good; None when it never settles
+    samples: int
+
+    def describe(self) -> str:
+        settle = f"{self.settling_ms:.0f} ms" if self.settling_ms is not None else "does not settle"
+        return f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}"
+
+
+STEP_SPEED_RPM = 200.0
+
+
+def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> float:
+    """How long the step check may run at speed_rpm inside the travel limit (it returns to where it started)."""
+    duration = min(0.6, 0.9 * travel_rev / (1.3 * speed_rpm / 60.0))   # 30 % for overshoot and the stop
+    if duration < 0.2:
+        raise UsageError(f"--step-check needs at least {1.3 * speed_rpm / 60.0 * 0.2 / 0.9:.2f} rev of --travel "
+                         f"for a {speed_rpm:g} rpm step")
+    return duration
+
+
+def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Timing | None = None
+                  ) -> StepResponse:
+    """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
+
+    JOG parameters are put back afterwards (their writes kept out of EEPROM where the drive has a switch); the
+    keep-alive beats at the drive's watchdog rate.
+    """
+    with ram_writes(drive):
+        return _step_response(drive, speed_rpm, duration_s, timing)
+
+
+def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Timing | None) -> StepResponse:
+    p, timing = drive.profile, timing or RealTiming()
+    beat_s = keepalive_interval_s(drive)
+    jogger = Jogger(drive, beat_s, FEATURE)
+    jog_accel = p.need_role("jog_accel", FEATURE)
+    speed_e = p.need_role("speed_feedback", FEATURE)
+    saved = _motion_settings(drive, jogger)
+    t: list[float] = []
+    v: list[float] = []
+    last_beat = timing.now()
+
+    def speed() -> float:
+        nonlocal last_beat
+        value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
+        if timing.now() - last_beat >= beat_s:
+            jogger.beat()
+            last_beat = timing.now()
+        return value
+
+    def stop() -> None:
+        jogger.command(0)
+        end = timing.now() + 2.0
+        while timing.now() < end and abs(speed()) > 3:
+            timing.sleep(0.02)
+
+    try:
+        jogger.set_speed(speed_rpm)
+        drive.write_raw(jog_accel, jog_accel.min)
+        for direction in (1, -1):
+            t0 = timing.now()
+            jogger.command(direction)
+            last_beat = t0
+            while timing.now() - t0 < duration_s:
+                now = timing.now() - t0
+                value = speed()
+                if direction > 0:
+                    t.append(now)
+                    v.append(value)
+            stop()
+        active = active_alarm(drive)
+        if active:
+            raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
+    except BaseException:
+        _stop_quietly(jogger)
+        raise
+    finally:
+        _leave_and_restore(drive, jogger, saved)
+    band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
+    outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
+    settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
+        (t[outside[-1] + 1] if outside else t[0]) * 1000
+    return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v))
