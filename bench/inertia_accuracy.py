@@ -22,48 +22,16 @@ import os
 import statistics
 import tempfile
 
+from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.errors import ServoError
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
-from servotool.sim.plant import Plant, VirtualClock
-from servotool.sim.registers import SimRefusal
-from servotool.sim.server import wire_time
-from servotool.tuning import planning, preflight
+from servotool.sim.plant import Plant
+from servotool.sim.virtual import VirtualLink
+from servotool.tuning import identify, planning, preflight
 
 TRAVEL_REV = 2.0
-
-
-class WireLink:
-    """A Link straight into a SimulatedDrive that advances virtual time by each request's wire time."""
-
-    def __init__(self, sim, clock: VirtualClock, baud: int) -> None:
-        self.sim, self.clock, self.baud = sim, clock, baud
-
-    def read(self, unit: int, address: int, count: int) -> list[int]:
-        self.clock.advance(wire_time(3, count, self.baud) + 0.0005)
-        try:
-            return self.sim.read(address, count)
-        except SimRefusal as exc:
-            raise RuntimeError(exc) from None
-
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None:
-        self.clock.advance(wire_time(16 if multiple and len(values) > 1 else 6, len(values), self.baud) + 0.0005)
-        self.sim.write(address, values)
-
-    def close(self) -> None:
-        pass
-
-
-class VirtualTiming:
-    def __init__(self, clock: VirtualClock) -> None:
-        self.clock = clock
-
-    def now(self) -> float:
-        return self.clock.now()
-
-    def sleep(self, seconds: float) -> None:
-        self.clock.advance(max(0.0, seconds))
 
 
 def fit_brake(plant: Plant) -> None:
@@ -80,8 +48,8 @@ def fit_brake(plant: Plant) -> None:
     plant._step = braked  # type: ignore[method-assign]
 
 
-def identify(ratio: float, friction: float, gravity: float, noise: float, baud: int, seed: int,
-             brake: bool = True) -> identify.Result:
+def identify_once(ratio: float, friction: float, gravity: float, noise: float, baud: int, seed: int,
+                  brake: bool = True) -> identify.Result:
     profile = load_profile("dsx7e")
     clock = VirtualClock(1000.0)
     sim = build_drive(profile, 1, clock, persist=False)
@@ -89,8 +57,8 @@ def identify(ratio: float, friction: float, gravity: float, noise: float, baud: 
     sim.firmware.reconfigure()
     if brake:
         fit_brake(sim.firmware.plant)
-    drive = Drive(WireLink(sim, clock, baud), profile, 1)
-    timing = VirtualTiming(clock)
+    drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
+    timing = clock
     t0 = clock.now()
     preflight.preflight(drive, "host")
     plan, rest = planning.plan_host_motion(drive, timing, travel_rev=TRAVEL_REV)   # the CLI's defaults
@@ -116,7 +84,7 @@ def main() -> None:
     for n, (baud, ratio, fr, gr, nz) in enumerate(itertools.product(bauds, ratios, frictions, gravities, noises)):
         head = f"{baud:>6} {ratio:>6.1f} {fr:>5.2f} {gr:>5.2f} {nz:>6.3f}"
         try:
-            r = identify(ratio, fr, gr, nz, baud, seed=n + 1)
+            r = identify_once(ratio, fr, gr, nz, baud, seed=n + 1)
         except ServoError as exc:
             refused[baud] += 1
             print(f"{head}  REFUSED: {exc}")

@@ -1,4 +1,8 @@
-"""Time for motion and measurement: the real clock, or a virtual one the simulator advances."""
+"""The one clock protocol: the real clock, or a virtual one that moves only when told (tests, benchmarks).
+
+Motion, measurement and the simulated plant all take a Clock, so a run on virtual time is the same code as a run
+on a real line.
+"""
 
 from __future__ import annotations
 
@@ -6,14 +10,44 @@ import time
 from typing import Protocol
 
 
-class Timing(Protocol):
-    def now(self) -> float: ...
+class Clock(Protocol):
+    def now(self) -> float:
+        """Monotonic seconds."""
+        ...
+
+    def wall(self) -> float:
+        """Wall-clock seconds, to hand a simulated drive's state over to another process."""
+        ...
+
     def sleep(self, seconds: float) -> None: ...
 
 
-class RealTiming:
+class RealClock:
     def now(self) -> float:
         return time.monotonic()
 
+    def wall(self) -> float:
+        return time.time()
+
     def sleep(self, seconds: float) -> None:
         time.sleep(max(0.0, seconds))
+
+
+class VirtualClock:
+    """A clock that moves only when told: deterministic tests and fast benchmarks."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self.t = start
+
+    def now(self) -> float:
+        return self.t
+
+    def wall(self) -> float:
+        return self.t            # drives sharing one virtual clock share its time
+
+    def sleep(self, seconds: float) -> None:
+        self.advance(max(0.0, seconds))
+
+    def advance(self, dt: float) -> float:
+        self.t += dt
+        return self.t

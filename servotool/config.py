@@ -13,7 +13,7 @@ import yaml
 from servotool.errors import UsageError
 from servotool.link.ports import LinkSettings, parse_tcp
 from servotool.model.loader import load_profile
-from servotool.model.profile import Profile
+from servotool.model.profile import LineSettings, Profile
 
 SIM_PORT = "sim"
 
@@ -130,9 +130,8 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
     if name is None:
         raise UsageError("no drive profile given: use --profile (see 'servotool profiles list') or SERVOTOOL_PROFILE")
     profile = load_profile(name)
-    baud, parity, stopbits = line_format(opts, profile)
     settings = LinkSettings(
-        port=port, baud=baud, parity=parity, stopbits=stopbits, bytesize=profile.serial.bytesize,
+        port=port, line=line_format(opts, profile),
         timeout=opts.timeout if opts.timeout is not None else (0.5 if port == SIM_PORT else 1.0),
         retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else 2),
     )
@@ -140,7 +139,7 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
     if settings.retries < 0:
         raise UsageError("retries must be >= 0")
-    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.serial.unit))
+    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit))
 
 
 def check_unit(unit: int) -> int:
@@ -150,15 +149,15 @@ def check_unit(unit: int) -> int:
     return unit
 
 
-def line_format(opts: ConnectOptions, profile: Profile) -> tuple[int, str, int]:
-    """(baud, parity, stop bits) from the options, defaulting to the profile's factory settings; checked."""
-    baud = opts.baud if opts.baud is not None else profile.serial.baud
-    stopbits = opts.stopbits if opts.stopbits is not None else profile.serial.stopbits
-    parity = PARITIES.get((opts.parity or profile.serial.parity).upper())
+def line_format(opts: ConnectOptions, profile: Profile) -> LineSettings:
+    """The line settings from the options, defaulting to the profile's factory settings; checked."""
+    baud = opts.baud if opts.baud is not None else profile.line.baud
+    stopbits = opts.stopbits if opts.stopbits is not None else profile.line.stopbits
+    parity = PARITIES.get((opts.parity or profile.line.parity).upper())
     if parity is None:
         raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
     if not 300 <= baud <= 4_000_000:
         raise UsageError(f"bad baud rate {baud}: must be 300..4000000")
     if stopbits not in (1, 2):
         raise UsageError(f"bad stop bits {stopbits}: must be 1 or 2")
-    return baud, parity, stopbits
+    return LineSettings(baud, parity, stopbits, profile.line.bytesize)

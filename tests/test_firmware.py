@@ -5,10 +5,10 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from servotool.clock import VirtualClock
 from servotool.model.loader import load_profile
 from servotool.ops.alarms import describe
 from servotool.sim.firmware import build_drive
-from servotool.sim.plant import VirtualClock
 
 
 def write(sim, code: str, raw: int) -> None:

@@ -8,14 +8,15 @@ from dataclasses import replace
 
 import pytest
 
+from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.link.modbus import ModbusLink
 from servotool.link.ports import LinkSettings
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
-from servotool.sim.plant import VirtualClock
-from servotool.sim.server import EmbeddedSim, wire_time
+from servotool.sim.server import EmbeddedSim
+from servotool.sim.virtual import VirtualLink
 from servotool.tuning import identify, planning, preflight
 
 
@@ -228,35 +229,6 @@ def test_motion_stays_inside_a_small_travel_limit(cli):
 
 
 # ----- in-process runs on virtual time (fast, and the test can act on the machine mid-motion) ---------------------
-class _VirtualLink:
-    """A Link straight into a simulated drive; every request costs its 115200-baud wire time of virtual time."""
-
-    def __init__(self, sim_drive, clock) -> None:
-        self.sim, self.clock = sim_drive, clock
-
-    def read(self, unit: int, address: int, count: int) -> list[int]:
-        self.clock.advance(wire_time(3, count, 115200))
-        return self.sim.read(address, count)
-
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None:
-        self.clock.advance(wire_time(16, len(values), 115200))
-        self.sim.write(address, values)
-
-    def close(self) -> None:
-        pass
-
-
-class _VirtualTiming:
-    def __init__(self, clock) -> None:
-        self.clock = clock
-
-    def now(self) -> float:
-        return self.clock.now()
-
-    def sleep(self, seconds: float) -> None:
-        self.clock.advance(max(0.0, seconds))
-
-
 def _virtual(ratio: float = 3.0):
     """(simulated drive, wizard Drive, timing) of a dsx7e with the given load, on virtual time."""
     profile = load_profile("dsx7e")
@@ -264,7 +236,7 @@ def _virtual(ratio: float = 3.0):
     sim_drive = build_drive(profile, 1, clock, persist=False)
     sim_drive.settings.update(load_ratio=ratio, friction=0.05)
     sim_drive.firmware.reconfigure()
-    return sim_drive, Drive(_VirtualLink(sim_drive, clock), profile, 1), _VirtualTiming(clock)
+    return sim_drive, Drive(VirtualLink([sim_drive], clock), profile, 1), clock
 
 
 def _after_motion_reads(sim_drive, reads: int, action) -> dict[str, float]:

@@ -50,7 +50,7 @@ def show(
         emit_json({
             "id": p.id, "model": p.model, "vendor": p.vendor, "version": p.version, "source": p.source,
             "address_rule": p.address_rule, "unverified_note": p.unverified_note,
-            "serial": vars(p.serial), "limits": vars(p.limits), "word_order": p.word_order,
+            "serial": {**vars(p.line), "unit": p.default_unit}, "limits": vars(p.limits), "word_order": p.word_order,
             "persistence": vars(p.persistence), "roles": p.roles,
             "entries": [{"code": e.code, "class": e.cls, "name": e.name, "address": e.address, "type": e.type,
                          "unit": e.unit, "scale": e.scale, "min": e.min, "max": e.max, "default": e.default,
@@ -58,12 +58,11 @@ def show(
                          "unverified": e.unverified} for e in entries],
         })
         return
-    s = p.serial
     out.print(f"[bold]{p.model}[/bold] ({p.vendor}) profile '{p.id}' v{p.version}: {p.description}")
     out.print(f"source: {p.source}", markup=False)
     out.print(f"addresses: {p.address_rule}", markup=False)
     lim = p.limits
-    out.print(f"serial: {s.baud} {s.bytesize}{s.parity}{s.stopbits}, unit {s.unit}; max {lim.max_read} regs/read, "
+    out.print(f"serial: {p.line.describe()}, unit {p.default_unit}; max {lim.max_read} regs/read, "
               f"{lim.max_write}/write; 32-bit word order {p.word_order}; EEPROM: {p.persistence.mode}", markup=False)
     if p.unverified_note:
         out.print(f"[yellow]note:[/yellow] {p.unverified_note}")

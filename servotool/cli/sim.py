@@ -37,14 +37,13 @@ def serve(
 ) -> None:
     """Serve simulated drives in the foreground (Ctrl-C stops) for any Modbus RTU master."""
     from servotool.sim.firmware import build_drive
-    from servotool.sim.server import LineSettings, serve_forever
+    from servotool.sim.server import serve_forever
 
     p = _profile(ctx, profile)
-    ids = [check_unit(u) for u in units or [p.serial.unit]]
+    ids = [check_unit(u) for u in units or [p.default_unit]]
     if len(set(ids)) != len(ids):
         raise UsageError("each --unit may be given once")
-    bps, par, stop = line_format(ConnectOptions(baud=baud, parity=parity, stopbits=stopbits), p)
-    line = LineSettings(baud=bps, parity=par, stopbits=stop, bytesize=p.serial.bytesize)
+    line = line_format(ConnectOptions(baud=baud, parity=parity, stopbits=stopbits), p)
     drives = [build_drive(p, u) for u in ids]
     # Starting the server switches the drives on: pending power-cycle changes take effect.
     took = {d.unit: d.power_cycle() for d in drives}
@@ -80,7 +79,7 @@ def reset(
     """Power-cycle or wipe a simulated drive (its state file)."""
     opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
     p = _profile(ctx, opts.profile)
-    u = check_unit(opts.unit if opts.unit is not None else p.serial.unit)
+    u = check_unit(opts.unit if opts.unit is not None else p.default_unit)
     if power_cycle == factory:
         raise UsageError("give exactly one of --power-cycle or --factory")
     if factory:
@@ -103,7 +102,7 @@ def reset(
 def _target(ctx: typer.Context, profile: str | None, unit: int | None) -> SimulatedDrive:
     opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
     p = _profile(ctx, opts.profile)
-    return SimulatedDrive(p, check_unit(opts.unit if opts.unit is not None else p.serial.unit))
+    return SimulatedDrive(p, check_unit(opts.unit if opts.unit is not None else p.default_unit))
 
 
 @app.command("config")

@@ -45,8 +45,8 @@ class ModbusLink:
             )
         else:
             self._client = ModbusSerialClient(
-                settings.port, framer=FramerType.RTU, baudrate=settings.baud, parity=settings.parity,
-                stopbits=settings.stopbits, bytesize=settings.bytesize, timeout=settings.timeout,
+                settings.port, framer=FramerType.RTU, baudrate=settings.line.baud, parity=settings.line.parity,
+                stopbits=settings.line.stopbits, bytesize=settings.line.bytesize, timeout=settings.timeout,
                 retries=settings.retries, trace_packet=hook, reconnect_delay=0,
             )
         if not self._client.connect():

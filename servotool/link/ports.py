@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 from servotool.errors import UsageError
+from servotool.model.profile import LineSettings
 
 Trace = Callable[[bool, bytes], None]
 
@@ -18,10 +19,7 @@ class LinkSettings:
     """Where and how to talk to a drive."""
 
     port: str
-    baud: int = 9600
-    parity: str = "N"
-    stopbits: int = 1
-    bytesize: int = 8
+    line: LineSettings = field(default_factory=LineSettings)
     timeout: float = 1.0
     retries: int = 2
 

@@ -94,12 +94,18 @@ class Entry:
 
 
 @dataclass(frozen=True)
-class Serial:
+class LineSettings:
+    """How bytes travel on the RS485 line; the one line-settings type (a profile's factory settings, the client's
+    port, the simulator's serial server)."""
+
     baud: int = 9600
     parity: str = "N"
     stopbits: int = 1
     bytesize: int = 8
-    unit: int = 1
+
+    def describe(self) -> str:
+        """'9600 8N1' style."""
+        return f"{self.baud} {self.bytesize}{self.parity}{self.stopbits}"
 
 
 @dataclass(frozen=True)
@@ -173,7 +179,8 @@ class Profile:
     description: str
     source: str
     address_rule: str
-    serial: Serial
+    line: LineSettings
+    default_unit: int
     limits: Limits
     word_order: str
     persistence: Persistence

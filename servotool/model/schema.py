@@ -18,10 +18,10 @@ from servotool.model.profile import (
     Alarm,
     Entry,
     Limits,
+    LineSettings,
     Motor,
     Persistence,
     Profile,
-    Serial,
     SetupItem,
 )
 
@@ -276,7 +276,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     word_order = chk.choice(data, "word_order", "top", WORD_ORDERS, "low_first")
     if "word_order" not in data:
         chk.bad("top", "missing required key 'word_order'")
-    serial = _parse_serial(chk, data.get("serial"))
+    line, default_unit = _parse_serial(chk, data.get("serial"))
     limits = _parse_limits(chk, data.get("limits"))
     persistence = _parse_persistence(chk, data.get("persistence"))
     motor = _parse_motor(chk, data.get("motor"))
@@ -325,7 +325,8 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     profile = Profile(
         id=pid, model=texts["model"], vendor=texts["vendor"], version=texts["version"],
         description=texts["description"], source=texts["source"], address_rule=texts["address_rule"],
-        serial=serial, limits=limits, word_order=word_order, persistence=persistence, motor=motor,
+        line=line, default_unit=default_unit, limits=limits, word_order=word_order, persistence=persistence,
+        motor=motor,
         entries=entries, roles={str(k): str(v) for k, v in roles.items()},
         groups={str(k): str(v) for k, v in groups.items()}, alarms=alarms,
         conventions={str(k): str(v) for k, v in conventions.items()}, motion_setup=motion_setup,
@@ -408,25 +409,25 @@ def _parse_alarms(chk: _Checker, raw: Any) -> list[Alarm]:
     return out
 
 
-def _parse_serial(chk: _Checker, raw: Any) -> Serial:
+def _parse_serial(chk: _Checker, raw: Any) -> tuple[LineSettings, int]:
     if not isinstance(raw, dict):
         chk.bad("serial", "missing or not a mapping")
-        return Serial()
-    s = Serial(
+        return LineSettings(), 1
+    s = LineSettings(
         baud=chk.opt(raw, "baud", "serial", int, 9600),
         parity=chk.choice(raw, "parity", "serial", ("N", "E", "O"), "N"),
         stopbits=chk.opt(raw, "stopbits", "serial", int, 1), bytesize=chk.opt(raw, "bytesize", "serial", int, 8),
-        unit=chk.opt(raw, "unit", "serial", int, 1),
     )
+    unit = chk.opt(raw, "unit", "serial", int, 1)
     if s.baud <= 0:
         chk.bad("serial.baud", "must be positive")
     if s.stopbits not in (1, 2):
         chk.bad("serial.stopbits", "must be 1 or 2")
     if s.bytesize not in (7, 8):
         chk.bad("serial.bytesize", "must be 7 or 8")
-    if not 0 <= s.unit <= 247:
+    if not 0 <= unit <= 247:
         chk.bad("serial.unit", "must be 0..247")
-    return s
+    return s, unit
 
 
 def _parse_limits(chk: _Checker, raw: Any) -> Limits:

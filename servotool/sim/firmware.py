@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from servotool.clock import Clock, RealClock
 from servotool.model.codec import raw_to_eng
 from servotool.model.gain_units import to_canonical
 from servotool.model.profile import Entry, Motor, Profile
@@ -30,11 +31,9 @@ from servotool.sim.device import SimulatedDrive
 from servotool.sim.plant import (
     BRAKE_HOLD_X_RATED,
     FOLLOWING_LIMIT_REV,
-    Clock,
     DriveGains,
     Plant,
     PlantSettings,
-    RealClock,
 )
 from servotool.sim.registers import MACHINE_STATE_KEY
 

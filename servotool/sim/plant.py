@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import math
 import random
-import time
 from dataclasses import asdict, dataclass
-from typing import Protocol
 
 from servotool.model.profile import Motor as MotorData
 
@@ -41,39 +39,6 @@ ESTOP_MAX_S = 0.5           # an alarm stop at the torque limit lasts at most th
 STATE_FIELDS = ("time", "w", "theta", "mode", "alarm", "_w_meas", "_theta_prev_counts", "_integral", "_t_cmd",
                 "_t_filtered", "_t_applied", "_t_delayed", "_ref", "_loop_ref", "_target", "_torque_target",
                 "_pos_ref", "_heat", "_load", "_off_s", "_estop_s")
-
-
-class Clock(Protocol):
-    def now(self) -> float: ...
-
-    def wall(self) -> float: ...
-
-
-class RealClock:
-    """Monotonic clock for integration; wall time to hand the state over to another process."""
-
-    def now(self) -> float:
-        return time.monotonic()
-
-    def wall(self) -> float:
-        return time.time()
-
-
-class VirtualClock:
-    """A clock that moves only when told: deterministic tests and fast benchmarks."""
-
-    def __init__(self, start: float = 0.0) -> None:
-        self.t = start
-
-    def now(self) -> float:
-        return self.t
-
-    def wall(self) -> float:
-        return self.t            # drives sharing one virtual clock share its time
-
-    def advance(self, dt: float) -> float:
-        self.t += dt
-        return self.t
 
 
 @dataclass(frozen=True)

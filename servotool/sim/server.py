@@ -9,7 +9,6 @@ import asyncio
 import logging
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
@@ -20,25 +19,14 @@ from pymodbus.simulator.simcore import SimCore
 
 from servotool.errors import DeviceError
 from servotool.link.ports import parse_tcp
+from servotool.model.profile import LineSettings
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.registers import SimRefusal
+from servotool.sim.virtual import READ_CODES, wire_time
 
-logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-
-READ_CODES = (3, 4)
 WRITE_CODES = (6, 16)
 
-
-def wire_time(fc: int, count: int, baud: int) -> float:
-    """Seconds a request and its response occupy an RS485 line (11 bits/char, 3.5-char gaps)."""
-    if fc in READ_CODES:
-        chars = 8 + 5 + 2 * count
-    elif fc == 16:
-        chars = 9 + 2 * count + 8
-    else:
-        chars = 16
-    return (chars + 7) * 11.0 / baud
-
+logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 def _sim_device(drive: SimulatedDrive, lock: threading.Lock) -> SimDevice:
     """A pymodbus SimDevice whose every access goes through the simulated drive."""
@@ -85,14 +73,6 @@ class _Line(SimCore):
     async def async_setValues(self, device_id: int, func_code: int, address: int, values):  # type: ignore[override]
         self._known(device_id)
         return await super().async_setValues(device_id, func_code, address, values)
-
-
-@dataclass
-class LineSettings:
-    baud: int = 9600
-    parity: str = "N"
-    stopbits: int = 1
-    bytesize: int = 8
 
 
 async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lock: threading.Lock,

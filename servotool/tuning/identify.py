@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from servotool.clock import RealTiming, Timing
+from servotool.clock import Clock, RealClock
 from servotool.drive import Drive, plan_reads
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import raw_to_eng
@@ -85,10 +85,10 @@ class IdentificationRefused(IdentificationFailed):
 class Identifier:
     """Runs the identification motion on one drive."""
 
-    def __init__(self, drive: Drive, timing: Timing | None = None, keepalive_s: float | None = None) -> None:
+    def __init__(self, drive: Drive, timing: Clock | None = None, keepalive_s: float | None = None) -> None:
         self.drive = drive
         self.p = drive.profile
-        self.timing = timing or RealTiming()
+        self.timing = timing or RealClock()
         self.keepalive_s = keepalive_s
         self.trace = Trace()    # filled while the motion runs; kept when it fails
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from servotool.clock import Timing
+from servotool.clock import Clock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.profile import Profile
@@ -114,7 +114,7 @@ def plan_motion(profile: Profile, *, max_speed: float | None, accel_time_ms: flo
     return plan
 
 
-def plan_host_motion(drive: Drive, timing: Timing | None = None, *, max_speed: float | None = None,
+def plan_host_motion(drive: Drive, timing: Clock | None = None, *, max_speed: float | None = None,
                      accel_time_ms: float | None = None, travel_rev: float = 2.0, direction: str = "both",
                      repeats: int | None = None) -> tuple[MotionPlan, RestCheck]:
     """The host method's motion as every caller runs it (CLI, plans, bench): the options checked before anything is

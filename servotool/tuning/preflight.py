@@ -6,7 +6,7 @@ import itertools
 import math
 from dataclasses import dataclass
 
-from servotool.clock import RealTiming, Timing
+from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
@@ -62,12 +62,12 @@ class RestCheck:
     drift_rev: float | None   # position change over the check (None: no position feedback)
 
 
-def check_at_rest(drive: Drive, timing: Timing | None = None, duration_s: float = 0.3) -> RestCheck:
+def check_at_rest(drive: Drive, timing: Clock | None = None, duration_s: float = 0.3) -> RestCheck:
     """Sample the idle axis: it must stand still (a load torque with no brake drops it as soon as nothing holds it).
 
     Also measures what the motion plan needs: the link's sampling rate and the speed reading's noise.
     """
-    p, timing = drive.profile, timing or RealTiming()
+    p, timing = drive.profile, timing or RealClock()
     speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
     pos_e = p.role("position_feedback")
     counts = p.motor.counts_per_rev if p.motor else 1

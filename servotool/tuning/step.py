@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from servotool.clock import RealTiming, Timing
+from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
@@ -41,7 +41,7 @@ def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> flo
     return duration
 
 
-def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Timing | None = None
+def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None
                   ) -> StepResponse:
     """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
 
@@ -52,8 +52,8 @@ def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timin
         return _step_response(drive, speed_rpm, duration_s, timing)
 
 
-def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Timing | None) -> StepResponse:
-    p, timing = drive.profile, timing or RealTiming()
+def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None) -> StepResponse:
+    p, timing = drive.profile, timing or RealClock()
     beat_s = keepalive_interval_s(drive)
     jogger = Jogger(drive, beat_s, FEATURE)
     jog_accel = p.need_role("jog_accel", FEATURE)
