@@ -59,6 +59,13 @@ def raw_to_eng(entry: Entry, raw: int) -> float | int:
     return round(value, decimals(entry))
 
 
+def eng_to_raw(entry: Entry, eng: float, *, clamp: bool = True) -> int:
+    """The raw integer nearest an engineering value; clamped into the entry's range unless clamp=False (then the
+    caller checks the range itself). The one eng->raw conversion for computed values (user input: parse_value)."""
+    raw = round(eng / entry.scale)
+    return max(entry.min, min(entry.max, raw)) if clamp else raw
+
+
 def decimals(entry: Entry) -> int:
     """Digits after the point implied by the scale (0.1 -> 1, 0.01 -> 2)."""
     if entry.scale >= 1:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError, UsageError
-from servotool.model.codec import parse_value, raw_to_eng
+from servotool.model.codec import eng_to_raw, parse_value, raw_to_eng
 from servotool.model.roles import FEATURE, jog_codes, motion_route
 from servotool.motion.keepalive import keepalive_interval_s
 from servotool.motion.setup import check_setup
@@ -110,7 +110,7 @@ class Jogger:
 
     def _speed_raw(self, signed_rpm: float) -> int:
         e = self.speed_entry
-        return max(e.min, min(e.max, round(signed_rpm / e.scale)))
+        return eng_to_raw(e, signed_rpm)
 
     def set_speed(self, speed_rpm: float) -> None:
         """The speed of the following moves (rpm, sign ignored); a running speed-route move changes at once."""

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 from servotool.clock import Clock, RealClock
-from servotool.model.codec import raw_to_eng
+from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import to_canonical
 from servotool.model.profile import Entry, Motor, Profile
 from servotool.model.roles import jog_direction, status_bit
@@ -425,8 +425,7 @@ class Firmware:
         entry = self.profile.role("inertia_ratio")
         if entry is None:
             return
-        raw = round(self.profile.param_from_load_ratio(max(0.0, ratio)) / entry.scale)
-        raw = max(entry.min, min(entry.max, raw))
+        raw = eng_to_raw(entry, self.profile.param_from_load_ratio(max(0.0, ratio)))
         self.drive.bank.apply_parameter(entry, raw)
         self.plant.set_gains(self._gains())
         self.drive.bank.save()
@@ -436,7 +435,7 @@ class Firmware:
         entry = self.profile.role(role)
         if entry is None or entry.cls == "Pn" or entry.cls == "Fn":
             return
-        self.drive.bank.set_live(entry.code, round(eng / entry.scale))
+        self.drive.bank.set_live(entry.code, eng_to_raw(entry, eng, clamp=False))
 
     def _refresh_monitors(self) -> None:
         p = self.plant

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from servotool.drive import Drive
 from servotool.errors import UsageError
-from servotool.model.codec import raw_to_eng
+from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import from_canonical
 from servotool.model.profile import Entry
 from servotool.tuning.gains import GainSuggestion, suggest_gains
@@ -47,14 +47,14 @@ def gain_changes(drive: Drive, load_ratio: float, *, rigidity: int | None, bandw
     changes = []
     for (role, e), reading in zip(present, current, strict=True):
         target = from_canonical(role, e, getattr(sugg, GAIN_ROLES[role]))
-        raw = max(e.min, min(e.max, round(target / e.scale)))
+        raw = eng_to_raw(e, target)
         changes.append(GainChange(role, e, float(raw_to_eng(e, reading.raw)), float(raw_to_eng(e, raw)), raw))
     return sugg, changes
 
 
 def ratio_raw(drive: Drive, load_ratio: float) -> tuple[Entry, int]:
     entry = drive.profile.need_role("inertia_ratio", FEATURE)
-    raw = round(drive.profile.param_from_load_ratio(max(0.0, load_ratio)) / entry.scale)
+    raw = eng_to_raw(entry, drive.profile.param_from_load_ratio(max(0.0, load_ratio)), clamp=False)
     if not entry.min <= raw <= entry.max:
         raise IdentificationFailed(f"identified ratio {load_ratio:.2f} does not fit {entry.code}'s range")
     return entry, raw

@@ -12,7 +12,7 @@ import numpy as np
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive, plan_reads
 from servotool.errors import ServoError, UsageError
-from servotool.model.codec import raw_to_eng
+from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry
 from servotool.model.roles import status_bit
 from servotool.motion.jogger import Jogger, _leave_and_restore, _motion_settings, _stop_quietly
@@ -135,7 +135,7 @@ class Identifier:
         pos_every = 0.05   # position costs a request of its own: read it at 20 Hz, predict from speed between
 
         def set_param(entry: Entry, eng: float) -> None:
-            raw = max(entry.min, min(entry.max, round(eng / entry.scale)))
+            raw = eng_to_raw(entry, eng)
             if written[entry.code] != raw:
                 d.write_raw(entry, raw)
                 written[entry.code] = raw
