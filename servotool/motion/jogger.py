@@ -8,18 +8,20 @@ enum names forward/reverse/stop, else +1/-1/0), or a signed speed reference with
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError, UsageError
 from servotool.model.codec import eng_to_raw, parse_value, raw_to_eng
+from servotool.model.profile import Entry
 from servotool.model.roles import FEATURE, jog_codes, motion_route
-from servotool.motion.keepalive import keepalive_interval_s
+from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.setup import check_setup
 from servotool.ops import alarms
 from servotool.ops.eeprom import ram_writes
+from servotool.ops.params import write_one
 from servotool.ops.status import servo_is_on
 
 
@@ -40,25 +42,36 @@ class JogPlan:
 
 
 class Jogger:
-    """JOG one drive with a keep-alive; always leaves the motor stopped."""
+    """JOG one drive with a keep-alive; always leaves the motor stopped.
 
-    def __init__(self, drive: Drive, keepalive_s: float = 0.1, feature: str = FEATURE) -> None:
+    Motion commands (JOG trigger, speed reference, servo-on, keep-alive) are written as they are; the settings a
+    motion changes (JOG speed, ramp) are parameters and go through ops.params.write_one.
+    """
+
+    def __init__(self, drive: Drive, keepalive_s: float = 0.1, feature: str = FEATURE,
+                 clock: Clock | None = None) -> None:
         self.drive = drive
         self.profile = drive.profile
+        self.feature = feature
         self.route = motion_route(self.profile, feature)
         check_setup(drive, feature)    # before anything is written: a drive not set up would ignore or misread us
         self.speed_entry = self.route.speed_entry
         self.jog = self.route.entries.get("jog")
         self.servo = self.route.entries.get("servo_on")
-        self.keepalive = self.route.entries.get("keepalive")
         self.speed_fb = self.profile.role("speed_feedback")
-        self.keepalive_s = keepalive_s
+        self.clock = clock or RealClock()
+        self.keepalive = KeepAlive(drive, keepalive_s, self.clock, resend=self._resend_command)
         self.direction = 0
         self.speed_rpm = 0.0
         self._enabled = False          # speed route: servo switched on by us
         self._saved_reference: int | None = None
-        self._beat = 0
+        self._ramp_raw: int | None = None
         self._stop_wait_s = 3.0
+
+    @property
+    def keepalive_s(self) -> float:
+        """The beat period."""
+        return self.keepalive.interval_s
 
     def speed_limit(self) -> float:
         """The lowest of: the drive's max-speed parameter, the JOG speed range, the motor's max speed."""
@@ -94,7 +107,7 @@ class Jogger:
         if max_travel_rev is not None and travel is not None and travel > max_travel_rev:
             raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {travel:.2f} rev, over the "
                              f"--max-travel limit {max_travel_rev:g} rev")
-        self.keepalive_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
+        self.keepalive.interval_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
         accel = self.profile.role("jog_accel")
         accel_ms = raw_to_eng(accel, self.drive.read_entries([accel])[0].raw) if accel is not None else None
         self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * \
@@ -118,7 +131,7 @@ class Jogger:
         if self.route.kind == "trigger":
             raw = self._speed_raw(self.speed_rpm)
             if self.drive.read_entries([self.speed_entry])[0].raw != raw:  # no needless EEPROM write
-                self.drive.write_raw(self.speed_entry, raw)
+                write_one(self.drive, self.speed_entry, raw)
         elif self._enabled and self.direction:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
 
@@ -127,6 +140,7 @@ class Jogger:
         self.direction = (direction > 0) - (direction < 0)
         if self.jog is not None:
             self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
+            self.keepalive.sent()
             return
         assert self.servo is not None
         if self.direction and not self._enabled:
@@ -138,16 +152,18 @@ class Jogger:
             self._enabled = True
         if self._enabled:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
+            self.keepalive.sent()
 
     def beat(self) -> None:
-        """The dead-man keep-alive: without it the drive stops the motor after its timeout."""
-        self._beat = (self._beat + 1) & 0xFFFF
-        if self.keepalive is not None:
-            self.drive.write_raw(self.keepalive, self._beat if self.keepalive.max >= 0xFFFF else 1)
-        elif self.jog is not None:
-            self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])  # re-sending the command
+        """The dead-man keep-alive, now: without it the drive stops the motor after its timeout."""
+        self.keepalive.beat()
+
+    def _resend_command(self) -> None:
+        """The beat of a drive without a keep-alive entry: the running command again."""
+        if self.jog is not None:
+            self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
         elif self._enabled and self.servo is not None:
-            self.drive.write_raw(self.servo, 1)      # re-sending servo-on (no EEPROM write of the reference)
+            self.drive.write_raw(self.servo, 1)      # servo-on again (no EEPROM write of the reference)
 
     def leave(self) -> None:
         """Servo off (the drive stops holding the axis) and put back a parameter-held speed reference."""
@@ -156,7 +172,7 @@ class Jogger:
         self._enabled = False
         if self._saved_reference is not None:
             if self.drive.read_entries([self.speed_entry])[0].raw != self._saved_reference:
-                self.drive.write_raw(self.speed_entry, self._saved_reference)
+                write_one(self.drive, self.speed_entry, self._saved_reference)
             self._saved_reference = None
 
     def speed(self) -> float | None:
@@ -167,13 +183,13 @@ class Jogger:
     def stop(self, wait_s: float | None = None) -> None:
         """Command stop and wait (bounded by the ramp) until the motor is at rest, keeping the host alive."""
         self.command(0)
-        end = time.monotonic() + (wait_s if wait_s is not None else self._stop_wait_s)
-        while self.speed_fb is not None and time.monotonic() < end:
+        end = self.clock.now() + (wait_s if wait_s is not None else self._stop_wait_s)
+        while self.speed_fb is not None and self.clock.now() < end:
             speed = self.speed()
             if speed is not None and abs(speed) < 3.0:
                 break
             self.beat()           # the watchdog keeps running while the drive ramps down
-            time.sleep(min(0.05, self.keepalive_s))
+            self.clock.sleep(min(0.05, self.keepalive_s))
         self.leave()
 
     def run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
@@ -189,11 +205,11 @@ class Jogger:
     def _run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
              command: Callable[[], int | None] | None = None) -> None:
         self.set_speed(plan.speed_rpm)
-        t0 = time.monotonic()
+        t0 = self.clock.now()
         try:
             self.command(plan.direction if command is None else 0)   # interactive: wait for the first key
             while True:
-                elapsed = time.monotonic() - t0
+                elapsed = self.clock.now() - t0
                 if plan.seconds is not None and elapsed >= plan.seconds:
                     break
                 if command is not None:
@@ -206,7 +222,7 @@ class Jogger:
                 self.check_tripped()
                 if on_sample is not None:
                     on_sample(elapsed, self.speed())
-                time.sleep(self.keepalive_s)
+                self.clock.sleep(self.keepalive_s)
         except BaseException:
             self._emergency_stop()
             raise
@@ -227,30 +243,41 @@ class Jogger:
             pass  # the drive's own watchdog stops the motor when the host goes quiet
 
 
-def _motion_settings(drive: Drive, jogger: Jogger) -> dict[str, int]:
-    """Raw values of the settings a motion changes and puts back: the ramp, and a trigger route's JOG speed (a
-    speed reference is put back by the jogger)."""
-    entries = [drive.profile.need_role("jog_accel", FEATURE)]
-    if jogger.route.kind == "trigger":
-        entries.insert(0, jogger.speed_entry)
-    return {e.code: r.raw for e, r in zip(entries, drive.read_entries(entries), strict=True)}
+    # ----- for motions that change the JOG settings (identification, step response) --------------------------
+    def settings_to_restore(self) -> dict[str, int]:
+        """Raw values (code -> raw) of the settings a motion changes and puts back: the ramp (role jog_accel), and
+        a trigger route's JOG speed (a speed reference is put back by leave())."""
+        entries = [self._ramp_entry()]
+        if self.route.kind == "trigger":
+            entries.insert(0, self.speed_entry)
+        saved = {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
+        self._ramp_raw = saved[entries[-1].code]
+        return saved
 
+    def _ramp_entry(self) -> Entry:
+        return self.profile.need_role("jog_accel", self.feature)
 
-def _stop_quietly(jogger: Jogger) -> None:
-    """Command stop after a failure; if the link is gone, the drive's watchdog stops the motor."""
-    try:
-        jogger.command(0)
-    except ServoError:
-        pass
+    def set_ramp(self, raw: int) -> None:
+        """The JOG ramp time (role jog_accel, raw), written only when it changes."""
+        if raw != self._ramp_raw:
+            write_one(self.drive, self._ramp_entry(), raw)
+            self._ramp_raw = raw
 
+    def stop_quietly(self) -> None:
+        """Command stop after a failure; if the link is gone, the drive's watchdog stops the motor."""
+        try:
+            self.command(0)
+        except ServoError:
+            pass
 
-def _leave_and_restore(drive: Drive, jogger: Jogger, saved: dict[str, int]) -> None:
-    """Servo off and the motion settings put back (saved: code -> raw); a failure here never hides the first one."""
-    try:
-        jogger.leave()
-        for code, raw in saved.items():
-            entry = drive.profile.entry(code)
-            if drive.read_entries([entry])[0].raw != raw:
-                drive.write_raw(entry, raw)
-    except ServoError:
-        pass
+    def leave_and_restore(self, saved: dict[str, int]) -> None:
+        """Servo off and the settings put back (saved: from settings_to_restore); a failure here never hides the
+        first one."""
+        try:
+            self.leave()
+            for code, raw in saved.items():
+                entry = self.profile.entry(code)
+                if self.drive.read_entries([entry])[0].raw != raw:
+                    write_one(self.drive, entry, raw)
+        except ServoError:
+            pass

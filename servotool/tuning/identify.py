@@ -15,9 +15,10 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry
 from servotool.model.roles import status_bit
-from servotool.motion.jogger import Jogger, _leave_and_restore, _motion_settings, _stop_quietly
-from servotool.motion.keepalive import keepalive_interval_s
+from servotool.motion.jogger import Jogger
+from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.ops.eeprom import ram_writes
+from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.planning import PILOT_SHARE, TIME_BUDGET_S, TORQUE_SHARE, MotionPlan
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
@@ -113,36 +114,24 @@ class Identifier:
                   rest: RestCheck | None) -> Result:
         p, d = self.p, self.drive
         beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
-        jogger = Jogger(d, beat_s, FEATURE)
-        jog_accel = p.need_role("jog_accel", FEATURE)
-        saved = _motion_settings(d, jogger)
+        jogger = Jogger(d, beat_s, FEATURE, self.timing)
+        saved = jogger.settings_to_restore()
         speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
         pos_e = p.role("position_feedback")
+        jog_accel = p.need_role("jog_accel", FEATURE)
         motor = p.motor
         assert motor is not None
         limit_e = p.role("torque_limit_fwd")
         torque_limit = self._eng(limit_e) if limit_e is not None else None
-        written = dict(saved)
         old_ratio = self.current_ratio()
         noise = rest.speed_noise_rpm if rest is not None else 0.0
         stop_band = max(3.0, 4.0 * noise)
         trace = self.trace = Trace()
         t0 = self.timing.now()
         counts = motor.counts_per_rev
-        state = {"last_beat": t0, "pos": None, "pos_t": t0, "lo": 0.0, "hi": 0.0,
-                 "pred": 0.0}
+        state = {"pos": None, "pos_t": t0, "lo": 0.0, "hi": 0.0, "pred": 0.0}
         guard: dict[str, float | None] = {"lo": None, "hi": None, "stretch": 1.0}
         pos_every = 0.05   # position costs a request of its own: read it at 20 Hz, predict from speed between
-
-        def set_param(entry: Entry, eng: float) -> None:
-            raw = eng_to_raw(entry, eng)
-            if written[entry.code] != raw:
-                d.write_raw(entry, raw)
-                written[entry.code] = raw
-
-        def command(direction: int) -> None:
-            jogger.command(direction)
-            state["last_beat"] = self.timing.now()
 
         together = len(plan_reads(p, [speed_e, torque_e])) == 1     # one request carries both
 
@@ -174,9 +163,7 @@ class Identifier:
             if state["hi"] - state["lo"] > plan.travel_limit_rev:
                 raise TravelExceeded(f"travel limit {plan.travel_limit_rev:g} rev reached: motion stopped; the "
                                      "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel")
-            if self.timing.now() - state["last_beat"] >= beat_s:
-                jogger.beat()
-                state["last_beat"] = self.timing.now()
+            jogger.keepalive.beat_if_due()
 
         ramp = plan.ramp_s
 
@@ -184,8 +171,8 @@ class Identifier:
             """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
             first = len(trace.t)
             jogger.set_speed(speed)
-            set_param(jog_accel, ramp * 1000.0 * motor.rated_speed_rpm / speed)
-            command(direction)
+            jogger.set_ramp(eng_to_raw(jog_accel, ramp * 1000.0 * motor.rated_speed_rpm / speed))
+            jogger.command(direction)
             start = self.timing.now()
             while self.timing.now() - start < ramp:   # the drive's ramp reaches the speed in ramp_s
                 sample()
@@ -199,7 +186,7 @@ class Identifier:
                     if (state["pred"] + stop_rev > guard["hi"]) if direction > 0 else \
                             (state["pred"] - stop_rev < guard["lo"]):
                         break
-            command(0)
+            jogger.command(0)
             stop = self.timing.now()
             while self.timing.now() - stop < 3 * ramp + 0.5:
                 sample()
@@ -262,10 +249,10 @@ class Identifier:
                     move(direction, speed)
                 cycles += 1
         except BaseException:
-            _stop_quietly(jogger)
+            jogger.stop_quietly()
             raise
         finally:
-            _leave_and_restore(d, jogger, saved)
+            jogger.leave_and_restore(saved)
         elapsed = self.timing.now() - t0
         rate = (len(trace.t) - 1) / elapsed if elapsed > 0 else 0.0
         est = self._estimate(settings, torque_limit, rate)
@@ -294,17 +281,16 @@ class Identifier:
         ratio_e = p.need_role("inertia_ratio", FEATURE)
         old_raw = d.read_entries([ratio_e])[0].raw
         old = p.load_ratio_from_param(float(raw_to_eng(ratio_e, old_raw)))
-        beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
-        keepalive = p.role("keepalive")
+        keepalive = KeepAlive(d, self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d),
+                              self.timing)
         t0 = self.timing.now()
         d.trigger("inertia_id", FEATURE)
         status = p.role("servo_status")
         ident_bit = status_bit(status, "identifying") if status is not None else None
         try:
             while self.timing.now() - t0 < timeout_s:
-                self.timing.sleep(min(0.1, beat_s))
-                if keepalive is not None:
-                    d.write_raw(keepalive, 1)
+                self.timing.sleep(min(0.1, keepalive.interval_s))
+                keepalive.beat()
                 if status is None or ident_bit is None:
                     continue
                 if not d.read_entries([status])[0].raw >> ident_bit & 1:
@@ -323,5 +309,5 @@ class Identifier:
         new_raw = d.read_entries([ratio_e])[0].raw
         new = p.load_ratio_from_param(float(raw_to_eng(ratio_e, new_raw)))
         if not keep and new_raw != old_raw:
-            d.write_verified(ratio_e, old_raw)
+            write_one(d, ratio_e, old_raw)
         return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)

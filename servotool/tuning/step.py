@@ -8,7 +8,7 @@ from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
-from servotool.motion.jogger import Jogger, _leave_and_restore, _motion_settings, _stop_quietly
+from servotool.motion.jogger import Jogger
 from servotool.motion.keepalive import keepalive_interval_s
 from servotool.ops.eeprom import ram_writes
 from servotool.tuning.identify import IdentificationFailed
@@ -54,21 +54,16 @@ def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timin
 
 def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None) -> StepResponse:
     p, timing = drive.profile, timing or RealClock()
-    beat_s = keepalive_interval_s(drive)
-    jogger = Jogger(drive, beat_s, FEATURE)
+    jogger = Jogger(drive, keepalive_interval_s(drive), FEATURE, timing)
     jog_accel = p.need_role("jog_accel", FEATURE)
     speed_e = p.need_role("speed_feedback", FEATURE)
-    saved = _motion_settings(drive, jogger)
+    saved = jogger.settings_to_restore()
     t: list[float] = []
     v: list[float] = []
-    last_beat = timing.now()
 
     def speed() -> float:
-        nonlocal last_beat
         value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
-        if timing.now() - last_beat >= beat_s:
-            jogger.beat()
-            last_beat = timing.now()
+        jogger.keepalive.beat_if_due()
         return value
 
     def stop() -> None:
@@ -79,11 +74,10 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Cl
 
     try:
         jogger.set_speed(speed_rpm)
-        drive.write_raw(jog_accel, jog_accel.min)
+        jogger.set_ramp(jog_accel.min)
         for direction in (1, -1):
             t0 = timing.now()
             jogger.command(direction)
-            last_beat = t0
             while timing.now() - t0 < duration_s:
                 now = timing.now() - t0
                 value = speed()
@@ -95,10 +89,10 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Cl
         if active:
             raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
     except BaseException:
-        _stop_quietly(jogger)
+        jogger.stop_quietly()
         raise
     finally:
-        _leave_and_restore(drive, jogger, saved)
+        jogger.leave_and_restore(saved)
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
