@@ -13,8 +13,9 @@ from servotool.cli.common import confirm, drive
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.errors import ServoError, UsageError
+from servotool.model.profile import Profile
 from servotool.ops import eeprom
-from servotool.tuning import gain_writes, identify, planning, preflight, step
+from servotool.tuning import identify, planning, preflight, step, tune
 from servotool.tuning.gains import suggest_gains
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
@@ -100,101 +101,92 @@ def inertia(
     Gains are changed only with --rigidity or --bandwidth.
     """
     _check_options(method, rigidity, bandwidth, no_gains, save_trace)
-    step_s = step.step_duration_s(travel) if step_check else None
-    with drive(ctx) as d:
-        eeprom.check_save_request(d.profile, save)
-        preflight.preflight(d, method)
+    request = tune.TuneRequest(
+        method=method, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel, direction=direction,
+        repeats=repeats, gains=rigidity is not None or bandwidth is not None, rigidity=rigidity,
+        bandwidth_hz=bandwidth, save=save, dry_run=dry_run, step_check=step_check, trace_path=save_trace)
+    if step_check:
+        step.step_duration_s(travel)     # refused before the drive is opened
+
+    moving = [False]     # identifying: a failure now reports what was measured
+
+    def approve_motion(motion: planning.MotionPlan | None) -> bool:
         if method == "host" or step_check:
             confirm_motion(ctx, d, yes, preflight.FEATURE)
-        ident = identify.Identifier(d)
-        plan, rest = None, None
-        if method == "host":
-            plan, rest = planning.plan_host_motion(d, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel,
-                                                 direction=direction, repeats=repeats)
-            info(f"motion: {plan.describe()}")
-        else:
-            info("motion: the drive's own identification (its parameters set torque and travel)")
-        if step_s is not None:
-            info(f"step check: {step.STEP_SPEED_RPM:g} rpm for {step_s:.2f} s forward and back, before and after")
-        if not confirm("Move the axis now?", yes):
-            raise typer.Exit(1)
-        before = step.step_response(d, step.STEP_SPEED_RPM, step_s) if step_s is not None else None
-        try:
-            if plan is not None:
-                result = ident.run_host(plan, progress=info, rest=rest)
-            else:
-                result = ident.run_drive(keep=not dry_run)
-        except ServoError as exc:   # refused, tripped, travel exceeded, link lost: keep what was measured
-            if save_trace:
-                ident.trace.save(save_trace)
-            if as_json:
-                partial = _estimate_json(exc.result) if isinstance(exc, identify.IdentificationRefused) else {}
-                emit_json(_clean({"ok": False, "reason": str(exc), **partial,
-                                  "ratio": exc.result.new_ratio if isinstance(exc, identify.IdentificationRefused)
-                                  else None, "written": False}))
-            raise
-        if save_trace:
-            result.trace.save(save_trace)
-        # Where the profile maps no inertia-ratio parameter (SDC) the result is reported, not written.
-        entry, raw = gain_writes.ratio_raw(d, result.new_ratio) if d.profile.role("inertia_ratio") else (None, 0)
-        want_gains = rigidity is not None or bandwidth is not None
-        sugg, changes = gain_writes.gain_changes(d, result.new_ratio, rigidity=rigidity, bandwidth_hz=bandwidth) \
-            if want_gains else (None, [])
-        est = result.estimate
+        info(f"motion: {motion.describe()}" if motion is not None else
+             "motion: the drive's own identification (its parameters set torque and travel)")
+        if step_check:
+            info(f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(travel):.2f} s forward and "
+                 "back, before and after")
+        moving[0] = confirm("Move the axis now?", yes)
+        return moving[0]
+
+    def show(proposal: tune.Proposal) -> None:
+        moving[0] = False
         if not as_json:
-            _show(result, entry, raw, sugg, changes)
-        if method == "drive":
-            write = False   # the drive stored its own result (or, dry run, it was put back)
-            stored = not dry_run
-        elif entry is None:
-            write = stored = False
-        else:
-            stored = write = not dry_run and confirm(
-                f"Write {entry.code} = {raw * entry.scale:g} {entry.unit}" + (" and the gains" if changes else "")
-                + "?", yes)
-        gains_written = bool(changes) and not dry_run and (
-            write if method == "host" and entry is not None else confirm("Write the gains?", yes))
-        persisted = None
-        if write or gains_written:
-            with eeprom.persistence(d, save) as outcome:
-                if write and entry is not None:
-                    d.write_verified(entry, raw)
-                for c in changes if gains_written else []:
-                    d.write_verified(c.entry, c.raw)
-            persisted = outcome["persisted"]
-        after = step.step_response(d, step.STEP_SPEED_RPM, step_s) if before is not None and stored else None
+            _show(proposal)
+
+    def approve_write(proposal: tune.Proposal) -> bool:
+        entry = proposal.parameter
+        question = (f"Write {entry.code} = {proposal.parameter_value:g} {entry.unit}"
+                    + (" and the gains" if proposal.gain_changes else "") + "?") \
+            if proposal.writes_ratio and entry is not None else "Write the gains?"
+        return confirm(question, yes)
+
+    with drive(ctx) as d:
+        try:
+            res = tune.tune_inertia(d, request, progress=info, approve_motion=approve_motion,
+                                    on_proposal=show, approve_write=approve_write)
+        except tune.TuneDeclined:
+            raise typer.Exit(1) from None
+        except ServoError as exc:   # refused, tripped, travel exceeded, link lost
+            if as_json and moving[0]:
+                refused = exc.result if isinstance(exc, identify.IdentificationRefused) else None
+                emit_json(_clean({"ok": False, "reason": str(exc), **(_estimate_json(refused) if refused else {}),
+                                  "ratio": refused.new_ratio if refused else None, "written": False}))
+            raise
+        profile = d.profile
+    _render(res, profile, as_json)
+
+
+def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
+    """The outcome, after the writes."""
+    proposal, sugg = res.proposal, res.proposal.suggestion
+    entry, changes = proposal.parameter, proposal.gain_changes
     if as_json:
         emit_json(_clean({
-            "ok": True, **_estimate_json(result), "ratio": round(result.new_ratio, 4),
-            "parameter": entry.code if entry else None, "parameter_value": raw * entry.scale if entry else None,
-            "written": stored, "persisted": persisted,
+            "ok": True, **_estimate_json(res.identified), "ratio": round(res.ratio, 4),
+            "parameter": entry.code if entry else None, "parameter_value": proposal.parameter_value,
+            "written": res.ratio_stored, "persisted": res.persisted,
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
                       for c in changes],
-            "gains_written": gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
-            "step_before": vars(before) if before else None, "step_after": vars(after) if after else None,
+            "gains_written": res.gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
+            "step_before": vars(res.step_before) if res.step_before else None,
+            "step_after": vars(res.step_after) if res.step_after else None,
         }))
         return
-    if persisted is False:
-        warn(eeprom.ram_only_warning(d.profile))
-    what = f"{entry.code} {'written' if stored else 'not written'}" if entry else \
-        f"nothing to write: {d.profile.id} maps no inertia-ratio parameter"
+    if res.persisted is False:
+        warn(eeprom.ram_only_warning(profile))
+    what = f"{entry.code} {'written' if res.ratio_stored else 'not written'}" if entry else \
+        f"nothing to write: {profile.id} maps no inertia-ratio parameter"
     out.print(what
-              + (f", gains {'written' if gains_written else 'not written'}" if changes else
+              + (f", gains {'written' if res.gains_written else 'not written'}" if changes else
                  " (gains unchanged: give --rigidity N or --bandwidth HZ to set them)"), markup=False)
-    if est and est.notes:
-        for note in est.notes:
-            info(note)
-    if before is not None:
-        out.print(f"step before: {before.describe()}", markup=False)
-    if after is not None:
-        out.print(f"step after:  {after.describe()}", markup=False)
+    est = res.identified.estimate
+    for note in est.notes if est else []:
+        info(note)
+    if res.step_before is not None:
+        out.print(f"step before: {res.step_before.describe()}", markup=False)
+    if res.step_after is not None:
+        out.print(f"step after:  {res.step_after.describe()}", markup=False)
 
 
-def _show(result: identify.Result, entry: Any, raw: int, sugg: Any, changes: list[Any]) -> None:
-    """The result, shown before asking to write it."""
+def _show(proposal: tune.Proposal) -> None:
+    """What was identified and would be written, shown before asking to write it."""
+    result, entry, sugg, changes = proposal.identified, proposal.parameter, proposal.suggestion, proposal.gain_changes
     est = result.estimate
     old = f"{result.old_ratio:.2f}" if result.old_ratio is not None else "(not a drive parameter)"
-    param = f"  ({entry.code} = {raw * entry.scale:g} {entry.unit})" if entry is not None else ""
+    param = f"  ({entry.code} = {proposal.parameter_value:g} {entry.unit})" if entry is not None else ""
     out.print(f"load inertia ratio (J_load/J_motor): {old} -> {result.new_ratio:.2f}"
               + (f" ± {est.ratio_std:.2f}" if est else "") + param, markup=False)
     if est:

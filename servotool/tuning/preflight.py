@@ -10,6 +10,7 @@ from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
+from servotool.model.profile import Profile
 from servotool.model.roles import motion_route, status_bit
 from servotool.motion.jogger import Jogger
 from servotool.ops import alarms
@@ -20,16 +21,16 @@ FEATURE = "tune inertia"
 DEFAULT_SAMPLES_PER_S = 40.0
 
 
-def preflight(drive: Drive, method: str) -> None:
-    """Link, roles, alarm and servo state; raises with one clear line."""
-    p = drive.profile
+def check_profile(profile: Profile, method: str, feature: str | None = None) -> None:
+    """What the method needs of the profile (roles, motor data), before any I/O; feature names it in messages."""
+    p, what = profile, feature or f"{FEATURE} --method {method}"
     # Host identification measures J without the drive's ratio parameter (SDC maps none): it then only reports.
     need = ["speed_feedback", "torque_feedback"]
     need += ["jog_accel"] if method == "host" else ["inertia_ratio", "inertia_id"]
     for role in need:
-        p.need_role(role, f"{FEATURE} --method {method}")
+        p.need_role(role, what)
     if method == "host":
-        motion_route(p, f"{FEATURE} --method {method}")   # a JOG trigger or speed reference + servo-on
+        motion_route(p, what)   # a JOG trigger or speed reference + servo-on
     else:
         status = p.role("servo_status")
         if status is None or status_bit(status, "identifying") is None:
@@ -39,6 +40,11 @@ def preflight(drive: Drive, method: str) -> None:
                              "--method host")
     if p.motor is None:
         raise UsageError(f"{FEATURE} needs the motor data (rated torque, rotor inertia) in profile {p.id}")
+
+
+def preflight(drive: Drive, method: str) -> None:
+    """Profile, link, alarm and servo state; raises with one clear line."""
+    check_profile(drive.profile, method)
     active = active_alarm(drive)
     if active:
         raise UsageError(f"refusing to move: alarm {active} is active (clear it first)")

@@ -1,0 +1,197 @@
+"""`tune inertia` as one use case: identify the load inertia, then write the ratio and the gains by the drive's
+EEPROM rule.
+
+The CLI, commissioning plans and the accuracy bench all run `tune_inertia`; they differ only in how they ask
+(the approve_* callbacks) and how they show the facts it returns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from servotool.clock import Clock, RealClock
+from servotool.drive import Drive
+from servotool.errors import ServoError, UsageError
+from servotool.model.profile import Entry, Profile
+from servotool.ops import eeprom
+from servotool.ops.params import write_one
+from servotool.tuning import gain_writes, identify, planning, preflight, step
+from servotool.tuning.gain_writes import GainChange
+from servotool.tuning.gains import GainSuggestion, suggest_gains
+from servotool.tuning.planning import MotionPlan
+from servotool.tuning.preflight import RestCheck
+from servotool.tuning.step import StepResponse
+
+
+@dataclass(frozen=True)
+class TuneRequest:
+    """What to identify and what to write. Unset motion options are automatic, as `servotool tune inertia`'s."""
+
+    method: str = "host"                 # host: servotool moves and fits; drive: the drive's own identification
+    max_speed: float | None = None       # rpm; None: from the travel
+    accel_time_ms: float | None = None   # None: ramps from the link's sampling rate
+    travel_rev: float = 2.0
+    direction: str = "both"
+    repeats: int | None = None           # None: repeat until the estimate is precise enough
+    gains: bool = False                  # set matching gains (at rigidity/bandwidth, else the drive's rigidity)
+    rigidity: int | None = None
+    bandwidth_hz: float | None = None
+    save: bool | None = None             # EEPROM: None as the drive is set, True store, False keep out
+    dry_run: bool = False                # identify and report; write nothing
+    step_check: bool = False             # a speed step before and after (the after one only once written)
+    trace_path: Path | None = None       # the sampled trace, also when the identification fails
+
+    def nominal_motion(self, profile: Profile) -> MotionPlan:
+        """The host motion before the link's sampling rate is known (raises what is wrong with the options)."""
+        return planning.plan_motion(profile, max_speed=self.max_speed, accel_time_ms=self.accel_time_ms,
+                                    travel_rev=self.travel_rev, direction=self.direction, repeats=self.repeats)
+
+    def host_motion(self, drive: Drive, clock: Clock) -> tuple[MotionPlan, RestCheck]:
+        """The host motion for the sampling rate measured while checking the axis at rest."""
+        return planning.plan_host_motion(drive, clock, max_speed=self.max_speed, accel_time_ms=self.accel_time_ms,
+                                         travel_rev=self.travel_rev, direction=self.direction, repeats=self.repeats)
+
+
+def check_request(profile: Profile, request: TuneRequest, feature: str | None = None) -> MotionPlan | None:
+    """Everything that can be checked without the drive; returns the host motion as planned before the link's
+    sampling rate is known (None for the drive method)."""
+    if request.method not in ("host", "drive"):
+        raise UsageError("--method must be host or drive")
+    eeprom.check_save_request(profile, request.save)
+    if request.step_check:
+        step.step_duration_s(request.travel_rev)
+    motion = request.nominal_motion(profile) if request.method == "host" else None
+    preflight.check_profile(profile, request.method, feature)
+    if request.gains and (request.rigidity is not None or request.bandwidth_hz is not None):
+        rotor = profile.motor.rotor_inertia_kgcm2 if profile.motor is not None else 1.0
+        try:   # the rules the gains will be computed with, on a nominal load
+            suggest_gains(rotor_inertia_kgcm2=rotor, load_ratio=1.0, rigidity=request.rigidity,
+                          bandwidth_hz=request.bandwidth_hz)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    return motion
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """What the identification found and what would be written, before anything is."""
+
+    identified: identify.Result
+    parameter: Entry | None              # None: the profile maps no inertia-ratio parameter (reported only)
+    parameter_raw: int | None
+    suggestion: GainSuggestion | None
+    gain_changes: list[GainChange]
+
+    @property
+    def ratio(self) -> float:
+        return self.identified.new_ratio
+
+    @property
+    def parameter_value(self) -> float | None:
+        """The ratio parameter's new value in its unit."""
+        return None if self.parameter is None or self.parameter_raw is None else \
+            self.parameter_raw * self.parameter.scale
+
+    @property
+    def writes_ratio(self) -> bool:
+        """The host method writes the ratio parameter (the drive method's drive stores its own)."""
+        return self.identified.method == "host" and self.parameter is not None
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """The facts of one `tune inertia`."""
+
+    proposal: Proposal
+    ratio_stored: bool                   # the drive holds the new ratio (written, or stored by the drive itself)
+    gains_written: bool
+    persisted: bool | None               # None: nothing written; else whether the writes survive a power cycle
+    seconds: float                       # the whole run: checks, rest check, identification, writes
+    step_before: StepResponse | None = None
+    step_after: StepResponse | None = None
+    written: list[tuple[Entry, int]] = field(default_factory=list)   # (entry, raw) in the order written
+
+    @property
+    def identified(self) -> identify.Result:
+        return self.proposal.identified
+
+    @property
+    def ratio(self) -> float:
+        return self.proposal.ratio
+
+
+class TuneDeclined(ServoError):
+    """The operator said no before anything moved."""
+
+
+def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = None,
+                 progress: Callable[[str], None] | None = None,
+                 approve_motion: Callable[[MotionPlan | None], bool] | None = None,
+                 on_proposal: Callable[[Proposal], None] | None = None,
+                 approve_write: Callable[[Proposal], bool] | None = None) -> TuneResult:
+    """Check, identify, then write the ratio and (if asked) the gains through the drive's EEPROM rule.
+
+    approve_motion sees the host motion (None: the drive's own) before anything moves; False raises TuneDeclined.
+    on_proposal sees what was identified and would be written, always; approve_write is asked only where
+    something would be written (never on a dry run): False writes nothing. Unset: approved.
+    """
+    clock = clock or RealClock()
+    t0 = clock.now()
+    check_request(drive.profile, request)
+    step_s = step.step_duration_s(request.travel_rev) if request.step_check else None
+    preflight.preflight(drive, request.method)
+    ident = identify.Identifier(drive, clock)
+    motion, rest = None, None
+    if request.method == "host":
+        motion, rest = request.host_motion(drive, clock)
+    if approve_motion is not None and not approve_motion(motion):
+        raise TuneDeclined("nothing moved")
+    before = _step(drive, step_s, clock)
+    try:
+        result = ident.run_host(motion, progress=progress, rest=rest) if motion is not None else \
+            ident.run_drive(keep=not request.dry_run)
+    except ServoError:   # refused, tripped, travel exceeded, link lost: keep what was measured
+        if request.trace_path is not None:
+            ident.trace.save(request.trace_path)
+        raise
+    if request.trace_path is not None:
+        result.trace.save(request.trace_path)
+    proposal = propose(drive, result, request)
+    if on_proposal is not None:
+        on_proposal(proposal)
+    approved = not request.dry_run and (proposal.writes_ratio or bool(proposal.gain_changes)) and \
+        (approve_write is None or approve_write(proposal))
+    written, persisted = _write(drive, proposal, approved, request.save)
+    stored = written != [] and proposal.writes_ratio if request.method == "host" else not request.dry_run
+    after = _step(drive, step_s, clock) if before is not None and stored else None
+    return TuneResult(proposal, stored, approved and bool(proposal.gain_changes), persisted, clock.now() - t0,
+                      before, after, written)
+
+
+def propose(drive: Drive, result: identify.Result, request: TuneRequest) -> Proposal:
+    """The ratio parameter value (where the profile maps one; SDC does not) and the gains for the result."""
+    entry, raw = gain_writes.ratio_raw(drive, result.new_ratio) if drive.profile.role("inertia_ratio") else \
+        (None, None)
+    sugg, changes = gain_writes.gain_changes(drive, result.new_ratio, rigidity=request.rigidity,
+                                             bandwidth_hz=request.bandwidth_hz) if request.gains else (None, [])
+    return Proposal(result, entry, raw, sugg, changes)
+
+
+def _write(drive: Drive, proposal: Proposal, approved: bool, save: bool | None
+           ) -> tuple[list[tuple[Entry, int]], bool | None]:
+    """The approved writes, inside the drive's EEPROM rule: (written, persisted or None when nothing was)."""
+    writes = [(c.entry, c.raw) for c in proposal.gain_changes]
+    if proposal.writes_ratio and proposal.parameter is not None and proposal.parameter_raw is not None:
+        writes.insert(0, (proposal.parameter, proposal.parameter_raw))
+    if not approved or not writes:
+        return [], None
+    with eeprom.persistence(drive, save) as outcome:
+        for entry, raw in writes:
+            write_one(drive, entry, raw)
+    return writes, outcome["persisted"]
+
+
+def _step(drive: Drive, seconds: float | None, clock: Clock) -> StepResponse | None:
+    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock) if seconds is not None else None
