@@ -1,10 +1,10 @@
 """Accuracy of `tune inertia` (host method) on the simulated drive over a grid of machines and line speeds.
 
-The wizard's own code (rest check, motion planned from the measured sampling rate, pilot, adaptive repeats, fit)
-runs against the simulated drive's registers and firmware on virtual time; each request costs the RS485 wire time
-of its frames at the given baud, so 19200 baud samples as slowly as a real bus. A gravity axis (load torque above
-friction) gets a holding brake, as a real vertical axis has: without one it falls as soon as the servo is off and
-the wizard refuses it before moving.
+`tune inertia` itself (tuning.tune.tune_inertia: checks, rest check, motion planned from the measured sampling
+rate, pilot, adaptive repeats, fit; a dry run, so nothing is written) runs against the simulated drive's registers
+and firmware on virtual time; each request costs the RS485 wire time of its frames at the given baud, so 19200 baud
+samples as slowly as a real bus. A gravity axis (load torque above friction) gets a holding brake, as a real
+vertical axis has: without one it falls as soon as the servo is off and tune inertia refuses it before moving.
 
 Prints per run: true ratio, estimate, error % of J_total, the reported 1-sigma uncertainty (% of J_total), travel,
 time, samples/s; a refusal is printed as a row with its reason and counts as a failure of the targets.
@@ -29,7 +29,7 @@ from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import Plant
 from servotool.sim.virtual import VirtualLink
-from servotool.tuning import identify, planning, preflight
+from servotool.tuning.tune import TuneRequest, TuneResult, tune_inertia
 
 TRAVEL_REV = 2.0
 
@@ -49,7 +49,8 @@ def fit_brake(plant: Plant) -> None:
 
 
 def identify_once(ratio: float, friction: float, gravity: float, noise: float, baud: int, seed: int,
-                  brake: bool = True) -> identify.Result:
+                  brake: bool = True) -> TuneResult:
+    """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine."""
     profile = load_profile("dsx7e")
     clock = VirtualClock(1000.0)
     sim = build_drive(profile, 1, clock, persist=False)
@@ -58,13 +59,7 @@ def identify_once(ratio: float, friction: float, gravity: float, noise: float, b
     if brake:
         fit_brake(sim.firmware.plant)
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
-    timing = clock
-    t0 = clock.now()
-    preflight.preflight(drive, "host")
-    plan, rest = planning.plan_host_motion(drive, timing, travel_rev=TRAVEL_REV)   # the CLI's defaults
-    result = identify.Identifier(drive, timing).run_host(plan, rest=rest)
-    result.time_used_s = clock.now() - t0      # the whole identification, rest check included
-    return result
+    return tune_inertia(drive, TuneRequest(travel_rev=TRAVEL_REV, dry_run=True), clock=clock)
 
 
 def main() -> None:
@@ -89,14 +84,15 @@ def main() -> None:
             refused[baud] += 1
             print(f"{head}  REFUSED: {exc}")
             continue
-        assert r.estimate is not None
+        ident = r.identified
+        assert ident.estimate is not None
         # error relative to the total inertia the loop sees (ratio 0 has no relative error of its own)
-        err = (r.new_ratio - ratio) / (1.0 + ratio) * 100
-        sigma = r.estimate.ratio_std / (1.0 + r.new_ratio) * 100
-        travel = r.travel_used_rev or 0.0
-        rows[baud].append((abs(err), sigma, travel, r.time_used_s))
-        print(f"{head} {r.new_ratio:>8.3f} {err:>7.2f} {sigma:>7.2f} {travel:>7.2f} {r.time_used_s:>7.2f} "
-              f"{r.samples_per_s:>7.1f}")
+        err = (r.ratio - ratio) / (1.0 + ratio) * 100
+        sigma = ident.estimate.ratio_std / (1.0 + r.ratio) * 100
+        travel = ident.travel_used_rev or 0.0
+        rows[baud].append((abs(err), sigma, travel, r.seconds))   # the whole run, rest check included
+        print(f"{head} {r.ratio:>8.3f} {err:>7.2f} {sigma:>7.2f} {travel:>7.2f} {r.seconds:>7.2f} "
+              f"{ident.samples_per_s:>7.1f}")
     print()
     met = True
     for baud in bauds:
