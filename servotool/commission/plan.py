@@ -114,9 +114,3 @@ def _unit_list(value: Any) -> list[int] | bool | None:
           and all(isinstance(u, int) and not isinstance(u, bool) and 1 <= u <= 247 for u in ids))
     return ids if ok else False
 
-
-def _number(value: Any, what: str, low: float, high: float) -> float:
-    """A number from a plan (YAML true/false are not numbers), within [low, high]."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
-        raise UsageError(f"{what} must be a number {low:g}..{high:g}, got {value!r}")
-    return float(value)

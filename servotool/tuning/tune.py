@@ -56,7 +56,8 @@ class TuneRequest:
 
 def check_request(profile: Profile, request: TuneRequest, feature: str | None = None) -> MotionPlan | None:
     """Everything that can be checked without the drive; returns the host motion as planned before the link's
-    sampling rate is known (None for the drive method)."""
+    sampling rate is known (None for the drive method). feature names the caller in messages (default: the
+    command's)."""
     if request.method not in ("host", "drive"):
         raise UsageError("--method must be host or drive")
     eeprom.check_save_request(profile, request.save)
@@ -70,7 +71,7 @@ def check_request(profile: Profile, request: TuneRequest, feature: str | None = 
             suggest_gains(rotor_inertia_kgcm2=rotor, load_ratio=1.0, rigidity=request.rigidity,
                           bandwidth_hz=request.bandwidth_hz)
         except ValueError as exc:
-            raise UsageError(str(exc)) from None
+            raise UsageError(f"{feature}: {exc}" if feature else str(exc)) from None
     return motion
 
 

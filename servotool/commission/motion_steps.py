@@ -1,0 +1,104 @@
+"""Plan steps that move the motor: jog, tune inertia (the same code as `servotool jog` and `tune inertia`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from servotool.commission.plan import JOG_KEYS, TUNE_KEYS, Step
+from servotool.commission.step_type import Outcome, RunContext, StepType, number_in
+from servotool.drive import Drive
+from servotool.errors import UsageError
+from servotool.model.codec import parse_value
+from servotool.model.profile import Profile
+from servotool.model.roles import motion_route
+from servotool.motion.jogger import Jogger
+from servotool.tuning.tune import TuneRequest, check_request, tune_inertia
+
+
+class JogStep(StepType):
+    """`jog: {speed: RPM, time: S, max_travel: REV}`: a timed JOG with the dead-man."""
+
+    name = "jog"
+
+    def describe(self, step: Step, profile: Profile) -> str:
+        arg = step.arg
+        if not isinstance(arg, dict) or set(arg) - JOG_KEYS or "speed" not in arg or "time" not in arg:
+            raise UsageError("jog needs {speed: RPM, time: S} (optional max_travel)")
+        route = motion_route(profile, "jog")           # a JOG trigger or speed reference + servo-on
+        speed = number_in(arg["speed"], "jog speed", -100_000, 100_000)
+        secs = number_in(arg["time"], "jog time", 0, 600)
+        if speed == 0 or secs == 0:
+            raise UsageError("jog speed must be non-zero and time 0..600 s")
+        parse_value(route.speed_entry, f"{abs(speed):g}")
+        if "max_travel" in arg:
+            limit = number_in(arg["max_travel"], "jog max_travel", 0, 10_000)
+            if abs(speed) / 60 * secs > limit:
+                raise UsageError(f"a {secs:g} s JOG at {abs(speed):g} rpm travels about {abs(speed) / 60 * secs:.2f} "
+                                 f"rev, over its max_travel {limit:g} rev")
+        return f"jog {speed:g} rpm for {secs:g} s"
+
+    def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+        jogger = Jogger(drive)
+        plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
+        jogger.run(plan)
+        return Outcome(plan.describe())
+
+
+class TuneInertiaStep(StepType):
+    """`tune inertia: {rigidity, bandwidth, travel, max_speed, accel_time, direction, repeats, gains}`: what
+    `servotool tune inertia --yes` does (host method), with the gains set unless `gains: false`."""
+
+    name = "tune inertia"
+
+    def request(self, arg: Any, profile: Profile) -> TuneRequest:
+        """The step's options as a checked request (unset motion options automatic, as in the command)."""
+        opts = arg or {}
+        if not isinstance(opts, dict) or set(opts) - TUNE_KEYS:
+            raise UsageError(f"tune inertia options are {', '.join(sorted(TUNE_KEYS))}")
+        direction = opts.get("direction", "both")
+        if not isinstance(direction, str):
+            raise UsageError("tune inertia direction must be both, forward or reverse")
+        repeats = number_in(opts["repeats"], "tune inertia repeats", 1, 20) if "repeats" in opts else None
+        if repeats is not None and repeats != int(repeats):
+            raise UsageError("tune inertia repeats must be a whole number 1..20")
+        gains = opts.get("gains", True)
+        if not isinstance(gains, bool):
+            raise UsageError("tune inertia gains must be true or false")
+        rigidity, bandwidth = opts.get("rigidity"), opts.get("bandwidth")
+        if rigidity is not None and (isinstance(rigidity, bool) or not isinstance(rigidity, int)):
+            raise UsageError(f"tune inertia rigidity must be a whole number, got {rigidity!r}")
+        request = TuneRequest(
+            max_speed=number_in(opts["max_speed"], "tune inertia max_speed", 0, 100_000) if "max_speed" in opts
+            else None,
+            accel_time_ms=number_in(opts["accel_time"], "tune inertia accel_time", 20, 5000) if "accel_time" in opts
+            else None,
+            travel_rev=number_in(opts.get("travel", 2.0), "tune inertia travel", 0, 10_000), direction=direction,
+            repeats=None if repeats is None else int(repeats), gains=gains, rigidity=rigidity,
+            bandwidth_hz=None if bandwidth is None else number_in(bandwidth, "tune inertia bandwidth", 0, 10_000))
+        check_request(profile, request, "tune inertia")
+        return request
+
+    def describe(self, step: Step, profile: Profile) -> str:
+        motion = self.request(step.arg, profile).nominal_motion(profile)
+        gains = (step.arg or {}).get("gains", True)
+        reported = "" if profile.role("inertia_ratio") is not None else \
+            f"; the ratio is reported, not written ({profile.id} maps no inertia-ratio parameter)"
+        return f"tune inertia: {motion.describe()}" + ("" if gains else "; gains left as they are") + reported
+
+    def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+        request = self.request(step.arg, drive.profile)
+        res = tune_inertia(drive, request)
+        for entry, raw in res.written:
+            ctx.wrote(drive, entry, raw)
+        proposal = res.proposal
+        entry, value = proposal.parameter, proposal.parameter_value
+        data: dict[str, Any] = {"ratio": round(res.ratio, 4)}
+        if entry is not None:
+            data[entry.code] = value
+        if request.gains:
+            data["gains"] = {c.entry.code: c.new for c in proposal.gain_changes}
+        data["persisted"] = res.persisted
+        if entry is None:
+            return Outcome(f"load ratio {res.ratio:.2f} (nothing to write: {drive.profile.id} maps no "
+                           "inertia-ratio parameter)", data)
+        return Outcome(f"load ratio {res.ratio:.2f} -> {entry.code}={value:g}", data)
