@@ -132,3 +132,52 @@ def test_dry_run_json_has_the_run_report_keys(cli, tmp_path):
     assert data["ok"] and data["dry_run"] and data["units"] == [1, 2]
     assert [s["name"] for s in data["steps"]][:2] == ["set", "expect"] and data["steps"][0]["line"] == 5
     assert "moves to" in next(s["would"] for s in data["steps"] if s["name"] == "tune inertia")
+
+
+def test_every_step_name_has_one_step_type():
+    from servotool.commission.plan import STEP_NAMES
+    from servotool.commission.steps import STEP_TYPES
+
+    assert tuple(STEP_TYPES) == STEP_NAMES
+    assert all(kind.name == name for name, kind in STEP_TYPES.items())
+
+
+def test_tune_steps_get_the_automatic_motion_unless_the_plan_sets_it(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nsteps:\n  - tune inertia: {rigidity: 12}\n"
+                    "  - tune inertia: {repeats: 3, accel_time: 200, gains: false}\n")
+    r = cli("run", str(plan), "--dry-run", "--json")
+    assert r.code == 0, r.err
+    auto, fixed = (s["would"] for s in r.json()["steps"])
+    assert auto.startswith("tune inertia: up to 20 x (forward then reverse)")    # repeated until precise
+    assert "3 x (forward then reverse)" in fixed and "200 ms ramps" in fixed and "gains left as they are" in fixed
+
+
+def test_a_tune_step_measures_a_drive_without_an_inertia_ratio_parameter_like_the_command(cli, tmp_path):
+    """SDC maps no inertia-ratio parameter: `tune inertia` measures and reports; so does a plan's tune step."""
+    cli("sim", "config", "--profile", "sdc", "--load-ratio", "5")
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: sdc\nsteps:\n  - set: {PN4: 3}\n  - tune inertia: {gains: false}\n")
+    r = cli("run", str(plan), "--dry-run")
+    assert r.code == 0 and "reported, not written" in r.out, r.err
+    r = cli("run", str(plan), "--yes", "--json")
+    assert r.code == 0, r.err
+    tuned = r.json()["steps"][1]
+    assert tuned["ok"] and tuned["ratio"] == pytest.approx(5.0, rel=0.05)
+    assert "nothing to write" in tuned["detail"] and tuned["persisted"] is None
+
+
+def test_a_tune_step_writes_by_the_drives_eeprom_rule_like_the_command(cli, tmp_path):
+    """IS620P with H0C-13 = 0 keeps Modbus writes in RAM: the step says its ratio is not persisted, and a power
+    cycle indeed loses it."""
+    cli("sim", "config", "--profile", "is620p", "--load-ratio", "4")
+    before = cli("--port", "sim", "-P", "is620p", "param", "get", "H08-15", "--json").json()[0]["value"]
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: is620p\nsteps:\n  - set: {H02-00: 0, H0C-09: 1, H17-00: 1, H0C-13: 0}\n"
+                    "  - tune inertia: {gains: false}\n")
+    r = cli("run", str(plan), "--yes", "--json")
+    assert r.code == 0, r.err
+    tuned = r.json()["steps"][1]
+    assert tuned["persisted"] is False and tuned["H08-15"] != before
+    assert cli("sim", "reset", "-P", "is620p", "--power-cycle").code == 0
+    assert cli("--port", "sim", "-P", "is620p", "param", "get", "H08-15", "--json").json()[0]["value"] == before

@@ -21,7 +21,7 @@ from servotool.model.roles import jog_codes, motion_route
 from servotool.motion.caveats import motion_caveats
 from servotool.session import open_drives
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PROFILES = ("dsx7e", "sd25", "is620p", "sdc")
 # The drive setup each profile's motion_setup asks for, as a user does it (None: a power cycle).
 SETUP = {

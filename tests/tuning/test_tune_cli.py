@@ -4,20 +4,8 @@ from __future__ import annotations
 
 import socket
 import time
-from dataclasses import replace
 
 import pytest
-
-from servotool.clock import VirtualClock
-from servotool.drive import Drive
-from servotool.errors import UsageError
-from servotool.link.modbus import ModbusLink
-from servotool.link.ports import LinkSettings
-from servotool.model.loader import load_profile
-from servotool.sim.firmware import build_drive
-from servotool.sim.server import EmbeddedSim
-from servotool.sim.virtual import VirtualLink
-from servotool.tuning import identify, planning, preflight
 
 
 @pytest.mark.parametrize("ratio", [0.0, 6.0, 30.0])
@@ -177,20 +165,6 @@ def test_a_drive_without_an_inertia_ratio_parameter_is_identified_and_nothing_is
     assert r.code == 0 and "not a drive parameter" in r.out and "nothing to write" in r.out
 
 
-def test_active_alarm_refuses_before_any_motion(sim_dir):
-    profile = load_profile("dsx7e")
-    sim_drive = build_drive(profile, 1)
-    sim = EmbeddedSim([sim_drive])
-    try:
-        sim_drive.firmware._trip("overload")
-        link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
-        with pytest.raises(UsageError, match="alarm E09"):
-            preflight.preflight(Drive(link, profile, 1), "host")
-        link.close()
-    finally:
-        sim.close()
-
-
 def test_step_check_shows_the_better_response_after_tuning(cli):
     cli("sim", "config", "--load-ratio", "10")
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--step-check", "--rigidity", "15")
@@ -200,111 +174,10 @@ def test_step_check_shows_the_better_response_after_tuning(cli):
     assert after["overshoot_pct"] < before["overshoot_pct"]       # default ratio 1.5 vs true 10: under-damped
 
 
-def _embedded(profile):
-    sim_drive = build_drive(profile, 1)
-    sim = EmbeddedSim([sim_drive])
-    link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
-    return sim, link, Drive(link, profile, 1)
-
-
-def test_keepalive_follows_the_drive_watchdog(sim_dir):
-    profile = load_profile("dsx7e")
-    sim, link, d = _embedded(profile)
-    try:
-        from servotool.motion.keepalive import keepalive_interval_s
-        d.write_raw(profile.role("comm_timeout"), 150)
-        assert keepalive_interval_s(d) == pytest.approx(0.05)
-        d.write_raw(profile.role("comm_timeout"), 50)
-        with pytest.raises(UsageError, match="too short"):
-            keepalive_interval_s(d)
-    finally:
-        link.close()
-        sim.close()
-
-
 def test_motion_stays_inside_a_small_travel_limit(cli):
     cli("sim", "config", "--load-ratio", "30")       # far from the configured 1.5: the loop overshoots
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--travel", "1", "--no-gains")
     assert r.json()["travel_rev"] <= 1.0
-
-
-# ----- in-process runs on virtual time (fast, and the test can act on the machine mid-motion) ---------------------
-def _virtual(ratio: float = 3.0):
-    """(simulated drive, wizard Drive, timing) of a dsx7e with the given load, on virtual time."""
-    profile = load_profile("dsx7e")
-    clock = VirtualClock(100.0)
-    sim_drive = build_drive(profile, 1, clock, persist=False)
-    sim_drive.settings.update(load_ratio=ratio, friction=0.05)
-    sim_drive.firmware.reconfigure()
-    return sim_drive, Drive(VirtualLink([sim_drive], clock), profile, 1), clock
-
-
-def _after_motion_reads(sim_drive, reads: int, action) -> dict[str, float]:
-    """Run action(plant) once, on the first read after `reads` reads with the motor turning; returns the moment."""
-    plant, seen, when = sim_drive.firmware.plant, [0], {}
-
-    def hook(_drive) -> None:
-        if "t" not in when and abs(plant.true_speed_rpm) > 50:
-            seen[0] += 1
-            if seen[0] >= reads:
-                when["t"] = plant.time
-                action(plant)
-
-    sim_drive.on_read.append(hook)
-    return when
-
-
-def _run_host(ident: identify.Identifier, timing) -> identify.Result:
-    """What `tune inertia` does with the default options: rest check, automatic plan, host identification."""
-    plan, rest = planning.plan_host_motion(ident.drive, timing)
-    return ident.run_host(plan, rest=rest)
-
-
-def test_alarm_in_the_middle_of_the_motion_stops_it_and_refuses(sim_dir):
-    sim_drive, d, timing = _virtual()
-    p = d.profile
-    jog_params = d.read_entries([p.role("jog_speed"), p.role("jog_accel")])
-    tripped = _after_motion_reads(sim_drive, 150, lambda plant: plant.raise_alarm("overload"))
-    ident = identify.Identifier(d, timing)
-    with pytest.raises(identify.IdentificationFailed, match="alarm E09"):
-        _run_host(ident, timing)
-    assert "t" in tripped                                   # the alarm came during the motion
-    trace_t0 = timing.now() - ident.trace.t[-1]
-    # the wizard gave up within the move the alarm ended (no further moves were started) ...
-    assert ident.trace.t[-1] + trace_t0 - tripped["t"] < 1.0
-    late = [abs(v) for t, v in zip(ident.trace.t, ident.trace.speed, strict=True) if t + trace_t0 > tripped["t"] + 0.2]
-    assert max(late, default=0.0) < 5.0                     # ... and nothing moved once the drive had stopped
-    # the servo is off and the JOG parameters are back as they were
-    assert sim_drive.firmware.mode == "off" and not sim_drive.firmware.plant.servo_on
-    assert [r.raw for r in d.read_entries([p.role("jog_speed"), p.role("jog_accel")])] == [r.raw for r in jog_params]
-
-
-def test_travel_check_stops_an_axis_that_runs_away(sim_dir):
-    # After the pilot a load torque beyond the torque limit takes over (a slipping coupling on a hoist, say): no
-    # stopping distance the guard plans for helps, only the travel check in the sampling loop stops the motion.
-    sim_drive, d, timing = _virtual()
-    rated = d.profile.motor.rated_torque_nm
-
-    def overload(plant) -> None:
-        plant.set_settings(replace(plant.settings, load_torque_nm=3.5 * rated))
-
-    _after_motion_reads(sim_drive, 150, overload)
-    with pytest.raises(identify.TravelExceeded, match="travel limit 2 rev"):
-        _run_host(identify.Identifier(d, timing), timing)
-    plant = sim_drive.firmware.plant
-    assert sim_drive.firmware.mode == "off" and not plant.servo_on
-    assert sim_drive.firmware.plant.alarm is None            # stopped by the wizard, not by a drive alarm
-
-
-def test_plan_steps_get_the_automatic_motion_unless_the_plan_sets_it():
-    from servotool.commission.steps import tune_options
-
-    profile = load_profile("dsx7e")
-    auto = tune_options({"rigidity": 12}, profile)
-    assert auto.motion.adaptive and auto.motion_options["repeats"] is None
-    assert auto.motion_options["accel_time_ms"] is None        # ramps follow the measured sampling rate
-    fixed = tune_options({"repeats": 3, "accel_time": 200}, profile)
-    assert not fixed.motion.adaptive and fixed.motion.repeats == 3 and fixed.motion.ramp_s == pytest.approx(0.2)
 
 
 def test_identification_works_wherever_the_axis_stands(cli):

@@ -1,0 +1,64 @@
+"""The dead-man beat: its period follows the drive's watchdog, beats keep a motion running, silence stops it."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.clock import VirtualClock
+from servotool.drive import Drive
+from servotool.errors import UsageError
+from servotool.model.loader import load_profile
+from servotool.motion.jogger import Jogger
+from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
+from servotool.ops import alarms
+from servotool.ops.params import write_one
+from servotool.sim.firmware import build_drive
+from servotool.sim.virtual import VirtualLink
+
+
+def _virtual():
+    profile = load_profile("dsx7e")
+    clock = VirtualClock(100.0)
+    sim_drive = build_drive(profile, 1, clock, persist=False)
+    return sim_drive, Drive(VirtualLink([sim_drive], clock), profile, 1), clock
+
+
+def test_the_beat_period_follows_the_drive_watchdog(sim_dir):
+    _sim, d, clock = _virtual()
+    timeout = d.profile.role("comm_timeout")
+    write_one(d, timeout, 150)
+    assert keepalive_interval_s(d) == pytest.approx(0.05)
+    assert KeepAlive.for_drive(d, clock).interval_s == pytest.approx(0.05)
+    write_one(d, timeout, 50)
+    with pytest.raises(UsageError, match="too short"):
+        keepalive_interval_s(d)
+
+
+def test_a_beat_is_due_once_its_period_has_passed_since_the_last_write(sim_dir):
+    _sim, d, clock = _virtual()
+    beat = KeepAlive(d, 0.1, clock)
+    assert not beat.due()
+    clock.advance(0.101)
+    assert beat.due()
+    beat.beat()
+    assert not beat.due()
+    clock.advance(0.2)
+    beat.sent()                           # a motion command counts as a beat
+    assert not beat.due()
+
+
+def test_beats_keep_a_jog_running_and_silence_stops_it_with_the_comm_alarm(sim_dir):
+    sim_drive, d, clock = _virtual()
+    write_one(d, d.profile.role("comm_timeout"), 300)
+    jogger = Jogger(d, keepalive_interval_s(d), clock=clock)
+    jogger.set_speed(300)
+    jogger.command(1)
+    end = clock.now() + 2.0
+    while clock.now() < end:             # reads advance the virtual clock by their wire time
+        speed = jogger.speed()
+        jogger.keepalive.beat_if_due()
+    assert speed == pytest.approx(300, abs=30) and not alarms.current(d).active
+    clock.advance(0.5)                   # the host goes quiet for longer than the watchdog
+    state = alarms.current(d)
+    assert state.active and state.code == d.profile.alarm_of_kind("comm_timeout").code
+    assert sim_drive.firmware.mode != "jog"
