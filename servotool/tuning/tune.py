@@ -165,7 +165,8 @@ def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = No
     approved = not request.dry_run and (proposal.writes_ratio or bool(proposal.gain_changes)) and \
         (approve_write is None or approve_write(proposal))
     written, persisted = _write(drive, proposal, approved, request.save)
-    stored = written != [] and proposal.writes_ratio if request.method == "host" else not request.dry_run
+    # The host method stores the ratio by writing it; the drive method's drive stored its own (kept unless dry run).
+    stored = (proposal.writes_ratio and written != []) if request.method == "host" else not request.dry_run
     after = _step(drive, step_s, clock) if before is not None and stored else None
     return TuneResult(proposal, stored, approved and bool(proposal.gain_changes), persisted, clock.now() - t0,
                       before, after, written)
