@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import os
-import select
 import statistics
 import sys
-import termios
-import tty
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from functools import partial
 
 import typer
 
@@ -17,18 +15,50 @@ from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.render import Verbosity, emit_json, err, info
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.model.profile import Entry
 from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
 from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
+from servotool.sim.state import effective_values
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
 
 
+POSIX_KEYS = {"\x1b[C": "fwd", "\x1b[D": "rev", "d": "fwd", "a": "rev", " ": "stop", "q": "quit", "\x1b": "quit"}
+WINDOWS_KEYS = {"\xe0M": "fwd", "\xe0K": "rev", "\x00M": "fwd", "\x00K": "rev", "d": "fwd", "a": "rev", " ": "stop",
+                "q": "quit", "\x1b": "quit"}
+
+
 @contextmanager
-def _raw_keys() -> Iterator[Callable[[], str | None]]:
-    """Non-blocking single-key reader on the terminal; restores the terminal however we leave."""
+def raw_keys() -> Iterator[Callable[[], str | None]]:
+    """Non-blocking single-key reader on the terminal: yields a function returning fwd/rev/stop/quit, "" for
+    another key, None when no key was pressed. The platform's terminal modules are imported only here, so the
+    CLI starts where they do not exist."""
+    if sys.platform == "win32":
+        yield _windows_key
+        return
+    with _posix_keys() as key:
+        yield key
+
+
+def _windows_key() -> str | None:
+    import msvcrt
+
+    if not msvcrt.kbhit():  # type: ignore[attr-defined]
+        return None
+    data = msvcrt.getwch()  # type: ignore[attr-defined]
+    if data in ("\x00", "\xe0"):           # an arrow key arrives as a prefix and its scan code
+        data += msvcrt.getwch()  # type: ignore[attr-defined]
+    return WINDOWS_KEYS.get(data, "")
+
+
+@contextmanager
+def _posix_keys() -> Iterator[Callable[[], str | None]]:
+    """cbreak mode on stdin; restores the terminal however we leave."""
+    import select
+    import termios
+    import tty
+
     fd = sys.stdin.fileno()
     saved = termios.tcgetattr(fd)
     tty.setcbreak(fd)
@@ -36,9 +66,7 @@ def _raw_keys() -> Iterator[Callable[[], str | None]]:
     def key() -> str | None:
         if not select.select([fd], [], [], 0)[0]:
             return None
-        data = os.read(fd, 8).decode(errors="ignore")
-        return {"\x1b[C": "fwd", "\x1b[D": "rev", "d": "fwd", "a": "rev", " ": "stop", "q": "quit",
-                "\x1b": "quit"}.get(data, "")
+        return POSIX_KEYS.get(os.read(fd, 8).decode(errors="ignore"), "")
 
     try:
         yield key
@@ -46,19 +74,12 @@ def _raw_keys() -> Iterator[Callable[[], str | None]]:
         termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 
 
-def _sim_effective(d: Drive) -> Callable[[list[Entry]], list[int]]:
-    """The values in effect on the simulated drive (a real drive reads back a power-cycle value before it acts)."""
-    from servotool.sim.registers import RegisterBank
-
-    bank = RegisterBank.open(d.profile, d.unit)
-    return lambda entries: [bank.effective_value(e.code) for e in entries]
-
-
 def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
     """Refuse while the drive lacks its motion setup; on a real port name the unverified motion entries (ask
     before moving) and a missing drive-side watchdog."""
     simulated = resolved(ctx).simulated
-    check_setup(d, feature, _sim_effective(d) if simulated else None)
+    # A real drive reads back a power-cycle value before it acts on it; the simulator says what is in effect.
+    check_setup(d, feature, partial(effective_values, d.profile, d.unit) if simulated else None)
     if simulated:
         return
     caveats = motion_caveats(d.profile, feature)
@@ -105,7 +126,7 @@ def jog(
 
         try:
             if interactive:
-                with _raw_keys() as key:
+                with raw_keys() as key:
                     def command() -> int | None:
                         k = key()
                         if k == "quit":

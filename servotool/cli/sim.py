@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import math
+import dataclasses
 
 import typer
 
@@ -11,14 +11,22 @@ from servotool.cli.render import Verbosity, emit_json, info, out, table, trace_f
 from servotool.config import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit, line_format, merge
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
-from servotool.sim.device import SIM_SETTINGS, SimulatedDrive
-from servotool.sim.registers import MACHINE_STATE_KEY, state_path
+from servotool.model.profile import Profile
+from servotool.sim import state as sim_state
+from servotool.sim.device import SIM_SETTINGS
 
 app = typer.Typer(no_args_is_help=True, help="The simulated drive: serve it, configure its machine, reset it.")
 
 
-def _profile(ctx: typer.Context, profile: str | None):
+def _profile(ctx: typer.Context, profile: str | None) -> Profile:
     return load_profile(profile or state(ctx).options.profile or SIM_DEFAULT_PROFILE)
+
+
+def _target(ctx: typer.Context, profile: str | None, unit: int | None) -> tuple[Profile, int]:
+    """The simulated drive the options name (falling back to the global options and the profile's unit)."""
+    opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
+    p = _profile(ctx, opts.profile)
+    return p, check_unit(opts.unit if opts.unit is not None else p.default_unit)
 
 
 @app.command("serve")
@@ -36,24 +44,17 @@ def serve(
                                   "(overrides 'sim config --line-baud'; 0 = off)."),
 ) -> None:
     """Serve simulated drives in the foreground (Ctrl-C stops) for any Modbus RTU master."""
-    from servotool.sim.firmware import build_drive
-    from servotool.sim.server import serve_forever
+    from servotool.sim.server import serve_units
 
     p = _profile(ctx, profile)
     ids = [check_unit(u) for u in units or [p.default_unit]]
     if len(set(ids)) != len(ids):
         raise UsageError("each --unit may be given once")
+    if line_baud is not None and line_baud < 0:
+        raise UsageError("--line-baud must be >= 0")
     line = line_format(ConnectOptions(baud=baud, parity=parity, stopbits=stopbits), p)
-    drives = [build_drive(p, u) for u in ids]
-    # Starting the server switches the drives on: pending power-cycle changes take effect.
-    took = {d.unit: d.power_cycle() for d in drives}
-    if line_baud is not None:
-        if line_baud < 0:
-            raise UsageError("--line-baud must be >= 0")
-        for d in drives:
-            d.settings["line_baud"] = line_baud
 
-    def ready(where: str) -> None:
+    def ready(where: str, took: dict[int, list[str]]) -> None:
         info(f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "
              f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); Ctrl-C stops")
         for u, codes in took.items():
@@ -61,7 +62,8 @@ def serve(
                 info(f"servotool: unit {u} powered on; now in effect: {', '.join(codes)}")
 
     try:
-        serve_forever(port, drives, line, trace=trace_frame if Verbosity.level > 0 else None, ready=ready)
+        serve_units(port, p, ids, line, line_baud=line_baud, trace=trace_frame if Verbosity.level > 0 else None,
+                    ready=ready)
     except KeyboardInterrupt:
         info("servotool: simulator stopped")
 
@@ -77,32 +79,22 @@ def reset(
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Power-cycle or wipe a simulated drive (its state file)."""
-    opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
-    p = _profile(ctx, opts.profile)
-    u = check_unit(opts.unit if opts.unit is not None else p.default_unit)
+    p, u = _target(ctx, profile, unit)
     if power_cycle == factory:
         raise UsageError("give exactly one of --power-cycle or --factory")
     if factory:
-        path = state_path(p.id, u)
-        path.unlink(missing_ok=True)
+        path = sim_state.factory_reset(p, u)
         if as_json:
             emit_json({"profile": p.id, "unit": u, "reset": "factory", "state_file": str(path)})
             return
         out.print(f"simulated {p.model} unit {u}: factory state ({path} removed)", markup=False)
         return
-    drive = SimulatedDrive(p, u)
-    pending = drive.power_cycle()
+    pending = sim_state.power_cycle(p, u)
     if as_json:
         emit_json({"profile": p.id, "unit": u, "reset": "power_cycle", "took_effect": pending})
         return
     out.print(f"simulated {p.model} unit {u}: power-cycled"
               + (f"; now in effect: {', '.join(pending)}" if pending else ""), markup=False)
-
-
-def _target(ctx: typer.Context, profile: str | None, unit: int | None) -> SimulatedDrive:
-    opts = merge(ConnectOptions(profile=profile, unit=unit), state(ctx).options)
-    p = _profile(ctx, opts.profile)
-    return SimulatedDrive(p, check_unit(opts.unit if opts.unit is not None else p.default_unit))
 
 
 @app.command("config")
@@ -123,13 +115,13 @@ def config(
 ) -> None:
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
-    drive = _target(ctx, profile, unit)
-    drive.configure(load_ratio=load_ratio, friction=friction, viscous=viscous, load_torque=load_torque, noise=noise,
-                    seed=seed, line_baud=line_baud, brake=brake_on)
+    p, u = _target(ctx, profile, unit)
+    status = sim_state.configure(p, u, load_ratio=load_ratio, friction=friction, viscous=viscous,
+                                 load_torque=load_torque, noise=noise, seed=seed, line_baud=line_baud, brake=brake_on)
     if as_json:
-        emit_json({"profile": drive.profile.id, "unit": drive.unit, "settings": drive.settings})
+        emit_json({"profile": p.id, "unit": u, "settings": status.settings})
         return
-    _print_settings(drive)
+    _print_settings(status)
 
 
 @app.command("show")
@@ -140,30 +132,18 @@ def show(
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """The simulated machine's settings and the drive's state file."""
-    drive = _target(ctx, profile, unit)
+    status = sim_state.status(*_target(ctx, profile, unit))
+    run = status.running
     if as_json:
-        emit_json({"profile": drive.profile.id, "unit": drive.unit, "state_file": str(drive.bank.path),
-                   "settings": drive.settings, "pending_power_cycle": drive.bank.pending_power_cycle(),
-                   "eeprom_writes": drive.bank.eeprom_writes, "running": _running(drive)})
+        emit_json({"profile": status.profile.id, "unit": status.unit, "state_file": str(status.state_file),
+                   "settings": status.settings, "pending_power_cycle": status.pending_power_cycle,
+                   "eeprom_writes": status.eeprom_writes, "running": dataclasses.asdict(run) if run else None})
         return
-    _print_settings(drive)
-    run = _running(drive)
+    _print_settings(status)
     if run is not None:
         out.print(f"running state as last saved (a powered drive keeps it until a power cycle): servo "
-                  f"{'on' if run['servo_on'] else 'off'}, alarm {run['alarm'] or 'none'}, "
-                  f"position {run['position_rev']:.3f} rev", markup=False)
-
-
-def _running(drive: SimulatedDrive) -> dict[str, object] | None:
-    """The stored running state (servo, latched alarm, position), None when the drive was just powered on."""
-    stored = drive.bank.extra.get(MACHINE_STATE_KEY)
-    plant = stored.get("plant") if isinstance(stored, dict) else None
-    if not isinstance(plant, dict):
-        return None
-    theta = plant.get("theta")
-    alarm = plant.get("alarm")
-    return {"servo_on": plant.get("mode") not in ("off", None), "alarm": alarm if isinstance(alarm, str) else None,
-            "position_rev": theta / (2 * math.pi) if isinstance(theta, (int, float)) else 0.0}
+                  f"{'on' if run.servo_on else 'off'}, alarm {run.alarm or 'none'}, "
+                  f"position {run.position_rev:.3f} rev", markup=False)
 
 
 def _on_off(value: str, option: str) -> int:
@@ -173,13 +153,12 @@ def _on_off(value: str, option: str) -> int:
     return choices[value.lower()]
 
 
-def _print_settings(drive: SimulatedDrive) -> None:
-    t = table("Setting", "Value", "Meaning", title=f"simulated {drive.profile.model} unit {drive.unit} "
-              f"({drive.bank.path})")
-    for name, value in drive.settings.items():
+def _print_settings(status: sim_state.SimStatus) -> None:
+    t = table("Setting", "Value", "Meaning", title=f"simulated {status.profile.model} unit {status.unit} "
+              f"({status.state_file})")
+    for name, value in status.settings.items():
         shown = ("on" if value else "off") if name == "brake" else f"{value:g}"
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
-    pending = drive.bank.pending_power_cycle()
-    if pending:
-        out.print(f"waiting for a power cycle: {', '.join(pending)}", markup=False)
+    if status.pending_power_cycle:
+        out.print(f"waiting for a power cycle: {', '.join(status.pending_power_cycle)}", markup=False)

@@ -19,8 +19,9 @@ from pymodbus.simulator.simcore import SimCore
 
 from servotool.errors import DeviceError
 from servotool.link.ports import parse_tcp
-from servotool.model.profile import LineSettings
+from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
+from servotool.sim.firmware import build_drive
 from servotool.sim.registers import SimRefusal
 from servotool.sim.virtual import READ_CODES, wire_time
 
@@ -128,6 +129,20 @@ def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | 
             await server.shutdown()
 
     asyncio.run(main())
+
+
+def serve_units(port: str, profile: Profile, units: list[int], line: LineSettings, *, line_baud: int | None = None,
+                trace: Callable[[bool, bytes], None] | None = None,
+                ready: Callable[[str, dict[int, list[str]]], None] | None = None) -> None:
+    """Serve simulated drives of one profile in the foreground until interrupted. Starting them switches them on:
+    ready(where, took) gets, by unit, the codes whose pending power-cycle change took effect. line_baud overrides
+    the drives' own line emulation for this run."""
+    drives = [build_drive(profile, u) for u in units]
+    took = {d.unit: d.power_cycle() for d in drives}
+    if line_baud is not None:
+        for d in drives:
+            d.settings["line_baud"] = line_baud
+    serve_forever(port, drives, line, trace, ready=(lambda where: ready(where, took)) if ready else None)
 
 
 class EmbeddedSim:

@@ -15,7 +15,7 @@ import pytest
 pytestmark = pytest.mark.skipif(not (shutil.which("socat") and shutil.which("mbpoll")),
                                 reason="needs socat and mbpoll (installed by .ci/run)")
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _wait_for(path: Path, seconds: float = 5) -> None:

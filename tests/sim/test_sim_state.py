@@ -1,0 +1,96 @@
+"""What the CLI learns of and does to a simulated drive outside a Modbus session (servotool.sim.state), directly and
+through `servotool sim ...`."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.clock import VirtualClock
+from servotool.errors import UsageError
+from servotool.model.loader import load_profile
+from servotool.sim import state
+from servotool.sim.firmware import build_drive
+
+
+def test_a_power_cycle_value_is_in_effect_only_after_a_power_cycle(sim_dir, regs):
+    profile = load_profile("dsx7e")
+    pn008 = profile.entry("Pn008")
+    regs(build_drive(profile, 1)).write("Pn008", 20000)
+    assert state.effective_values(profile, 1, [pn008]) == [10000]
+    assert state.status(profile, 1).pending_power_cycle == ["Pn008"]
+    assert state.power_cycle(profile, 1) == ["Pn008"]
+    assert state.effective_values(profile, 1, [pn008]) == [20000]
+    assert state.status(profile, 1).pending_power_cycle == []
+
+
+def test_a_factory_reset_erases_the_drive_and_its_history(sim_dir, regs):
+    profile = load_profile("dsx7e")
+    clock = VirtualClock(10.0)
+    r = regs(build_drive(profile, 1, clock))
+    r.write("Pn101", 250)
+    r.write("Fn001", 1)                        # JOG, then silence: comm timeout into the history
+    clock.advance(2.0)
+    assert r.read("Un100") and state.status(profile, 1).running is not None
+    path = state.factory_reset(profile, 1)
+    assert path.parent == sim_dir and not path.exists()
+    fresh = regs(build_drive(profile, 1, clock))
+    assert fresh.read("Pn101") == profile.entry("Pn101").default and fresh.history() == [0, 0, 0]
+    assert state.status(profile, 1).running is None
+
+
+def test_configure_changes_the_machine_and_refuses_values_out_of_range(sim_dir):
+    profile = load_profile("dsx7e")
+    status = state.configure(profile, 2, load_ratio=7.5, brake=0, noise=None)
+    assert status.unit == 2 and status.settings["load_ratio"] == 7.5 and status.settings["brake"] == 0
+    assert state.status(profile, 2).settings == status.settings
+    with pytest.raises(UsageError, match="load_ratio"):
+        state.configure(profile, 2, load_ratio=-1.0)
+    assert state.status(profile, 2).settings["load_ratio"] == 7.5
+
+
+def test_a_corrupt_state_file_is_an_error_not_silent_factory_defaults(sim_dir, cli):
+    assert cli("--port", "sim", "param", "set", "Pn004=400").code == 0
+    state_file = sim_dir / "dsx7e-unit1.json"
+    good = state_file.read_text()
+    for broken in (good[: len(good) // 2], "[1, 2]", '{"profile": "dsx7e", "eeprom_writes": "x"}', "\xff"):
+        state_file.write_text(broken, encoding="latin-1")
+        r = cli("--port", "sim", "param", "get", "Pn004")
+        assert r.code == 1 and "state file" in r.err and "unreadable" in r.err and len(r.err.splitlines()) == 1
+        r = cli("--port", "sim", "param", "set", "Pn004=300")
+        assert r.code == 1 and state_file.read_text(encoding="latin-1") == broken     # nothing overwritten
+    state_file.write_text(good)
+    assert cli("--port", "sim", "param", "get", "Pn004", "--json").json()[0]["value"] == 400
+
+
+def test_an_alarm_latched_by_one_sim_process_is_seen_by_the_next(sim_dir, cli):
+    assert cli("sim", "config", "--load-torque", "-1.5", "--brake", "on").code == 0     # pushes forward
+    assert cli("--port", "sim", "param", "set", "Pn025=20", "Pn026=20").code == 0      # too weak to hold it
+    r = cli("--port", "sim", "jog", "--speed", "100", "--time", "0.5")
+    assert r.code == 1 and "E17" in r.err
+    r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
+    assert [v["value"] for v in r.json()] == [23, 23]
+    running = cli("sim", "show", "--json").json()["running"]
+    assert running["alarm"] == "overspeed" and not running["servo_on"] and running["position_rev"] > 1
+    assert "alarm overspeed" in cli("sim", "show").out
+    assert cli("sim", "reset", "--power-cycle").code == 0
+    r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
+    assert [v["value"] for v in r.json()] == [0, 23]            # power on clears the alarm, not the history
+    assert cli("sim", "show", "--json").json()["running"] is None             # fresh from power on
+
+
+def test_sim_config_sets_the_brake_and_sim_show_displays_it(cli):
+    assert cli("sim", "config", "--brake", "off").code == 0
+    r = cli("sim", "show")
+    assert r.code == 0 and any("brake" in line and " off " in line for line in r.out.splitlines())
+    assert cli("sim", "show", "--json").json()["settings"]["brake"] == 0
+    r = cli("sim", "config", "--brake", "maybe")
+    assert r.code != 0 and "--brake" in r.err and len(r.err.strip().splitlines()) == 1
+
+
+def test_sim_reset_factory_removes_the_state_and_reports_it(sim_dir, cli):
+    assert cli("--port", "sim", "param", "set", "Pn101=25").code == 0
+    r = cli("sim", "reset", "--factory", "--json")
+    assert r.code == 0 and r.json() == {"profile": "dsx7e", "unit": 1, "reset": "factory",
+                                        "state_file": str(sim_dir / "dsx7e-unit1.json")}
+    assert not (sim_dir / "dsx7e-unit1.json").exists()
+    assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
