@@ -186,9 +186,10 @@ def test_rollback_on_a_switchable_drive_is_judged_without_the_switch_it_flipped(
 
 def _edits() -> list[tuple[str, object, str]]:
     return [
-        ("truncated", lambda t: t[: len(t) // 2], "not a valid backup|incomplete"),
+        ("truncated", lambda t: t[: len(t) // 2], "line \\d+: invalid YAML|incomplete"),
         ("cut mid-values", lambda t: t[: t.index("Pn512:")], "incomplete"),
-        ("broken yaml", lambda t: "[1, 2", "not a valid backup"),
+        ("broken yaml", lambda t: "[1, 2", "line \\d+: invalid YAML"),
+        ("not UTF-8", lambda t: t.encode().replace(b"model: DSX7E", b"model: DSX\xe9"), r"not UTF-8 text \(byte \d+\)"),
         ("empty", lambda t: "", "not a servotool backup"),
         ("wrong type", lambda t: t.replace("Pn004: 250", "Pn004: fast"), "Pn004: value 'fast' is not an integer"),
         ("float", lambda t: t.replace("Pn004: 250", "Pn004: 250.5"), "is not an integer"),
@@ -221,7 +222,8 @@ def good_backup_text(tmp_path_factory) -> str:
 @pytest.mark.parametrize(("case", "edit", "message"), _edits(), ids=[c for c, _, _ in _edits()])
 def test_every_bad_file_is_refused_with_one_clear_line(good_backup_text, tmp_path, case, edit, message):
     f = tmp_path / "bad.yaml"
-    f.write_text(edit(good_backup_text))
+    edited = edit(good_backup_text)
+    f.write_bytes(edited if isinstance(edited, bytes) else edited.encode())
     with pytest.raises(UsageError) as exc:
         backup.load(f, load_profile("dsx7e"))
     text = str(exc.value)
@@ -244,7 +246,7 @@ def test_cli_refuses_bad_files_before_connecting_or_writing(auto_dir, tmp_path, 
     edited.write_text(good_backup_text.replace("Pn100: 320", "Pn100: 330"))
     truncated = tmp_path / "truncated.yaml"
     truncated.write_text(good_backup_text[: len(good_backup_text) // 3])
-    for f, why in ((edited, "checksum mismatch"), (truncated, "incomplete|not a valid backup")):
+    for f, why in ((edited, "checksum mismatch"), (truncated, "incomplete|invalid YAML")):
         r = cli("--port", "sim", "-v", "param", "restore", str(f), "--yes")
         assert r.code == 2 and re.search(why, r.err), r.err
         assert not WRITE_FRAME.search(r.err) and not auto_dir.exists()
