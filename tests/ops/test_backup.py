@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from servotool.cli.messages import error_text
 from servotool.config import ConnectOptions, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -134,6 +135,10 @@ def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
         assert (f"rollback incomplete (could not undo {victim.code} ({victim.code}: wrote" in str(exc.value))
         assert f"1 entries differ from the automatic backup {auto_dir}" in str(exc.value)
         assert f"{victim.code} is {now.text}, was " in str(exc.value)
+        assert exc.value.next_step == "restore"         # the CLI words it with the user's connection options
+        auto = exc.value.auto_backup
+        assert error_text(exc.value, ConnectOptions(port="sim", unit=1)).endswith(
+            f"; run 'servotool --port sim --unit 1 param restore {auto}' once the cause is fixed")
 
 
 def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back(auto_dir, tmp_path):
