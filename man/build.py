@@ -91,16 +91,17 @@ SERVOTOOL_STOPBITS, SERVOTOOL_TIMEOUT, SERVOTOOL_RETRIES"
 Defaults for the global options of the same names; the command line wins.
 .TP
 .B SERVOTOOL_CONFIG
-Configuration file (default \fI~/.config/servotool/config.yaml\fR) with the keys \fBport\fR, \fBprofile\fR,
+Configuration file (default \fIconfig.yaml\fR in the user configuration folder: \fI~/.config/servotool\fR
+on Linux, following \fB$XDG_CONFIG_HOME\fR) with the keys \fBport\fR, \fBprofile\fR,
 \fBunit\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR, \fBretries\fR; used after the environment.
 .TP
 .B SERVOTOOL_SIM_DIR
-Where simulated drives keep their parameters and machine settings (default
-\fI$XDG_STATE_HOME/servotool/sim\fR).
+Where simulated drives keep their parameters and machine settings (default \fIsim\fR in the user state folder:
+\fI~/.local/state/servotool/sim\fR on Linux, following \fB$XDG_STATE_HOME\fR).
 .TP
 .B SERVOTOOL_BACKUP_DIR
-Where automatic backups are written before a restore or a factory reset (default
-\fI$XDG_DATA_HOME/servotool/backups\fR).
+Where automatic backups are written before a restore or a factory reset (default \fIbackups\fR in the user data
+folder: \fI~/.local/share/servotool/backups\fR on Linux, following \fB$XDG_DATA_HOME\fR).
 .TP
 .B SERVOTOOL_DEBUG
 Show the Python traceback of an internal error.

@@ -5,12 +5,10 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, fields
-from pathlib import Path
 from typing import Any
 
-import yaml
-
 from servotool.errors import UsageError
+from servotool.files import config_file, load_yaml
 from servotool.link.ports import LinkSettings, parse_tcp
 from servotool.model.loader import load_profile
 from servotool.model.profile import LineSettings, Profile
@@ -41,13 +39,6 @@ class ConnectOptions:
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
 
 
-def config_path() -> Path:
-    if env := os.environ.get("SERVOTOOL_CONFIG"):
-        return Path(env)
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "servotool" / "config.yaml"
-
-
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
@@ -69,19 +60,10 @@ def _from_env() -> ConnectOptions:
 
 
 def _from_config() -> ConnectOptions:
-    path = config_path()
+    path = config_file()
     if not path.exists():
         return ConnectOptions()
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except OSError as exc:
-        raise UsageError(f"config file {path}: cannot read: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise UsageError(f"config file {path}: not UTF-8 text (byte {exc.start})") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}: " if mark else ""
-        raise UsageError(f"config file {path}: {where}invalid YAML: {getattr(exc, 'problem', None) or exc}") from None
+    data = load_yaml(path) or {}
     if not isinstance(data, dict):
         raise UsageError(f"config file {path}: expected a mapping of option: value")
     unknown = set(data) - set(ENV)

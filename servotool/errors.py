@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import ClassVar
 
 
@@ -49,3 +51,41 @@ class VerifyError(ServoError):
     """A value read back differs from what was written, or an expectation failed."""
 
     exit_code = 3
+
+
+class FileProblem(UsageError):
+    """A file that cannot be used as it is: 'FILE: [line N: ]PROBLEM' (cannot read, not UTF-8, invalid YAML)."""
+
+    def __init__(self, path: object, problem: str, line: int | None = None) -> None:
+        self.path, self.problem, self.line = path, problem, line
+        super().__init__(f"{path}: " + (f"line {line}: " if line is not None else "") + problem)
+
+
+@dataclass(frozen=True)
+class SetupGap:
+    """One motion-setup requirement the drive does not meet (yet)."""
+
+    code: str
+    differences: tuple[tuple[str, str, str], ...]   # (setting, wanted, now) for each part that differs
+    assignments: tuple[str, ...]    # the `param set` arguments that make it so: CODE=VALUE or CODE.FIELD=VALUE
+    power_cycle: bool               # takes effect only after a power cycle
+
+
+class SetupRequired(UsageError):
+    """Host motion refused: drive settings differ from what the feature needs.
+
+    `missing` differ now; `waiting` are written but not in effect until a power cycle (known on the simulator);
+    `save` tells that power-cycle settings must be stored in EEPROM (`param set --save`) to survive the cycle.
+    The message states the facts; the CLI adds the commands that fix them.
+    """
+
+    def __init__(self, feature: str, missing: Sequence[SetupGap], waiting: Sequence[SetupGap] = (),
+                 save: bool = False) -> None:
+        self.feature, self.missing, self.waiting, self.save = feature, tuple(missing), tuple(waiting), save
+        super().__init__(f"{feature} needs drive setup first: {', '.join(self.settings())}")
+
+    def settings(self) -> list[str]:
+        """'SETTING = wanted (now x)' for each difference, and the settings waiting for a power cycle."""
+        parts = [f"{s} = {want} (now {now})" for g in self.missing for s, want, now in g.differences]
+        return parts + [f"{a.replace('=', ' = ')} (set, in effect after a power cycle)"
+                        for g in self.waiting for a in g.assignments]

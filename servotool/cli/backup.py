@@ -1,4 +1,4 @@
-"""`servotool param backup|diff|restore|reset`."""
+"""`servotool param backup|diff|restore|reset`: parameter sets as files, and the way back to them."""
 
 from __future__ import annotations
 
@@ -8,7 +8,6 @@ import typer
 from rich.progress import Progress
 
 from servotool.cli.common import JSON_OPT, confirm, drive, state
-from servotool.cli.param import app
 from servotool.cli.render import emit_json, err, info, out, table, warn
 from servotool.config import resolve
 from servotool.errors import ServoError, UsageError
@@ -17,6 +16,8 @@ from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
 from servotool.ops import backup, restore
 from servotool.ops.params import select
+
+app = typer.Typer(help="Back up, compare and restore drive parameters; factory reset.")
 
 MARK = {"power_cycle": "power cycle", "servo_off": "servo off"}
 
@@ -70,19 +71,10 @@ def diff_cmd(
         return b
 
     if file2 is not None or from_default:
-        profile = load_profile(opts.profile) if opts.profile else None
-        if profile is None:
-            import yaml
-
-            try:
-                head = yaml.safe_load(file.read_text(encoding="utf-8"))
-            except OSError as exc:
-                raise UsageError(f"cannot read {file}: {exc.strerror}") from None
-            except (ValueError, yaml.YAMLError):
-                head = None
-            if not isinstance(head, dict) or not isinstance(head.get("profile"), str):
-                raise UsageError(f"{file}: cannot tell its profile; give --profile") from None
-            profile = load_profile(head["profile"])
+        name = opts.profile or backup.profile_of(file)
+        if name is None:
+            raise UsageError(f"{file}: cannot tell its profile; give --profile")
+        profile = load_profile(name)
         a = load(file, profile)
         b_values = backup.defaults(profile) if from_default else load(file2, profile).values
         labels = (str(file), "factory default" if from_default else str(file2))

@@ -9,7 +9,8 @@ import typer
 
 from servotool import __version__
 from servotool.cli import alarm, backup, jog, monitor, param, profiles, run, sim, tune
-from servotool.cli.common import state
+from servotool.cli.common import State, state
+from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, err
 from servotool.config import ConnectOptions
 from servotool.errors import ServoError
@@ -19,8 +20,11 @@ app = typer.Typer(
     help="Commission and tune AC servo drives over Modbus RTU (real or simulated).",
     context_settings={"help_option_names": ["-h", "--help"]},
 )
-app.add_typer(param.app, name="param")
-del backup  # imported for its commands on the param group
+# `param` is two groups of commands under one name: values (get, set, list) and files (backup, diff, restore, reset).
+param_group = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and restore drive parameters.")
+param_group.add_typer(param.app)
+param_group.add_typer(backup.app)
+app.add_typer(param_group, name="param")
 app.add_typer(profiles.app, name="profiles")
 app.add_typer(sim.app, name="sim")
 app.add_typer(alarm.app, name="alarm")
@@ -56,8 +60,8 @@ def main(
 ) -> None:
     """Commission and tune AC servo drives over Modbus RTU (real or simulated).
 
-    Options also come from SERVOTOOL_* environment variables and ~/.config/servotool/config.yaml
-    (override with SERVOTOOL_CONFIG); the command line wins.
+    Options also come from SERVOTOOL_* environment variables and the config file (~/.config/servotool/config.yaml
+    on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
     state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
                                         timeout=timeout, retries=retries, profile=profile)
@@ -66,10 +70,11 @@ def main(
 
 def run() -> None:
     """Console-script entry point: one clear line and an exit code for every failure."""
+    given = State()       # the options given on the command line, filled in by main(); fix commands repeat them
     try:
-        result = app(prog_name="servotool", standalone_mode=False)
+        result = app(prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
-        err.print(f"servotool: error: {exc}", markup=False)
+        err.print(f"servotool: error: {error_text(exc, given.options)}", markup=False)
         sys.exit(exc.exit_code)
     except (KeyboardInterrupt, typer.Abort):
         err.print("servotool: interrupted", markup=False)

@@ -31,7 +31,7 @@ def _title(mon: Monitor) -> str:
             + (f", {rate:.1f} Hz" if rate is not None else ""))
 
 
-def _view(mon: Monitor, width: int) -> Table:
+def monitor_table(mon: Monitor, width: int) -> Table:
     """The monitor table, fitted to `width` columns: long names are cut with '…', the trend shrinks or goes."""
     rows = []
     for s in mon.series.values():
@@ -89,11 +89,12 @@ def monitor(
             samples = mon.run(rate, duration, samples=1 if once else None)
             try:
                 if live_view:
-                    with Live(_view(mon, out.width), console=out, refresh_per_second=8, transient=False) as live:
+                    with Live(monitor_table(mon, out.width), console=out, refresh_per_second=8,
+                              transient=False) as live:
                         for s in samples:
                             if log:
                                 log.write(s)
-                            live.update(_view(mon, out.width))
+                            live.update(monitor_table(mon, out.width))
                 else:
                     for s in samples:
                         if log:
@@ -102,7 +103,7 @@ def monitor(
                             print(json.dumps({"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"),
                                               "values": s.values}), flush=True)
                     if not as_json:
-                        out.print(_view(mon, out.width))
+                        out.print(monitor_table(mon, out.width))
             except KeyboardInterrupt:
                 pass
     finally:

@@ -10,7 +10,7 @@ from servotool.drive import Reading
 from servotool.model.codec import format_field, format_value, get_field, split_field
 from servotool.ops import eeprom, params
 
-app = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and restore drive parameters.")
+app = typer.Typer(help="Read, set and list drive parameters.")
 
 
 @app.command("get")

@@ -10,6 +10,7 @@ import yaml
 
 from servotool.config import options_from
 from servotool.errors import UsageError
+from servotool.files import compose_yaml, parse_yaml, read_text
 
 STEP_NAMES = ("set", "expect", "backup", "restore", "jog", "tune inertia", "wait", "alarm clear", "save", "prompt")
 
@@ -49,19 +50,8 @@ def _fail(path: Path, line: int, msg: str) -> UsageError:
 
 def load_plan(path: Path) -> Plan:
     """Parse and structurally check a plan (profile-dependent checks come in validate())."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise UsageError(f"cannot read plan {path}: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise UsageError(f"{path}: not UTF-8 text (byte {exc.start})") from None
-    try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = mark.line + 1 if mark else 1
-        raise _fail(path, line, f"invalid YAML: {getattr(exc, 'problem', exc)}") from None
+    text = read_text(path)
+    root, data = compose_yaml(text, path), parse_yaml(text, path)
     if not isinstance(data, dict) or not isinstance(root, yaml.MappingNode):
         raise _fail(path, 1, "a plan is a mapping with 'steps:'")
     key_lines: dict[str, int] = {}

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
-
-from servotool.errors import ProfileError
+from servotool.errors import FileProblem, ProfileError
+from servotool.files import load_yaml
 from servotool.model.profile import Profile
 from servotool.model.schema import parse_profile
 
@@ -25,17 +24,9 @@ def builtin_ids() -> list[str]:
 def read_profile(path: Path) -> tuple[Profile | None, list[str]]:
     """Parse a profile file; return it (or None) and the list of problems."""
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        return None, [f"{path}: cannot read: {exc.strerror or exc}"]
-    except UnicodeDecodeError as exc:
-        return None, [f"{path}: not UTF-8 text (byte {exc.start})"]
-    try:
-        data = yaml.load(text, Loader=_SAFE_LOADER)  # safe loader (C-accelerated when available)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark else "?"
-        return None, [f"{path}: {where}: invalid YAML: {getattr(exc, 'problem', exc)}"]
+        data = load_yaml(path)
+    except FileProblem as exc:
+        return None, [str(exc)]
     profile, problems = parse_profile(data, str(path))
     if profile is not None:
         profile.path = path
@@ -45,9 +36,6 @@ def read_profile(path: Path) -> tuple[Profile | None, list[str]]:
 
 
 _CACHE: dict[str, Profile] = {}
-
-
-_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 def load_profile(name_or_path: str | Path) -> Profile:

@@ -2,17 +2,17 @@
 
 A requirement is an entry's whole value (`H02-00 = 0`) or some fields of a two-/four-parameter value
 (`Po407.X = 26`, written `X=26` in the profile): only the named fields are compared. servotool never writes them
-itself: they change how the drive takes commands from its terminals, so the user sets them on purpose.
+itself: they change how the drive takes commands from its terminals, so the user sets them on purpose. A refusal
+is a SetupRequired carrying the facts; the CLI words the commands that fix it.
 """
 
 from __future__ import annotations
 
 import re
-import shlex
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from servotool.errors import UsageError
+from servotool.errors import SetupGap, SetupRequired
 from servotool.model.codec import decimals, field_index, format_value, parse_value, raw_to_eng
 from servotool.model.profile import Entry, Profile, SetupItem
 
@@ -40,11 +40,11 @@ class Requirement:
         width = self.entry.field_width
         return raw >> (width * field_index(self.entry, name)) & ((1 << width) - 1)
 
-    def compare(self, raw: int) -> list[str]:
-        """'CODE = wanted (now x)' for each part that differs."""
+    def differences(self, raw: int) -> list[tuple[str, str, str]]:
+        """(setting, wanted, now) for each part that differs, values as users type them."""
         if not self.fields:
-            return [f"{self.entry.code} = {_short(self.entry, self.wanted)} (now {_short(self.entry, raw)})"]
-        return [f"{self.entry.code}.{f} = {self._field(self.wanted, f)} (now {self._field(raw, f)})"
+            return [(self.entry.code, _short(self.entry, self.wanted), _short(self.entry, raw))]
+        return [(f"{self.entry.code}.{f}", str(self._field(self.wanted, f)), str(self._field(raw, f)))
                 for f in self.fields if self._field(raw, f) != self._field(self.wanted, f)]
 
     def assignments(self) -> list[str]:
@@ -90,40 +90,24 @@ def unmet(profile: Profile, value_of: Callable[[list[Entry]], list[int]]) -> lis
     return [(r, v) for r, v in zip(reqs, values, strict=True) if not r.met(v)]
 
 
-def _command(reqs: Iterable[Requirement], save: bool) -> str:
-    args = [a for r in reqs for a in r.assignments()]
-    return "servotool param set " + ("--save " if save else "") + " ".join(shlex.quote(a) for a in args)
+def gap(req: Requirement, raw: int | None) -> SetupGap:
+    """The facts of one requirement for a SetupRequired: what differs from raw (None: set, waiting)."""
+    parts = () if raw is None else tuple(req.differences(raw))
+    return SetupGap(req.entry.code, parts, tuple(req.assignments()), req.entry.effect == "power_cycle")
 
 
-def fix_message(profile: Profile, feature: str, missing: list[tuple[Requirement, int]],
-                waiting: Sequence[Requirement] = ()) -> str:
-    """One line: every setting that differs (and those set but waiting for a power cycle), and how to fix them."""
+def setup_required(profile: Profile, feature: str, missing: list[tuple[Requirement, int]],
+                   waiting: Sequence[Requirement] = ()) -> SetupRequired:
+    """The refusal for settings that differ (and those set but waiting for a power cycle)."""
     from servotool.model.profile import can_save
 
-    what = [part for r, raw in missing for part in r.compare(raw)]
-    what += [f"{a.replace('=', ' = ')} (set, in effect after a power cycle)" for r in waiting for a in r.assignments()]
-    later = [r for r, _ in missing if r.entry.effect == "power_cycle"]
-    now = [r for r, _ in missing if r.entry.effect != "power_cycle"]
-    text = f"{feature} needs drive setup first: {', '.join(what)}"
-    them = "it" if len(what) == 1 else "them"
-    if not later and not waiting:
-        return text + f" — set {them} with '{_command(now, False)}'"
-    cycle = "power-cycle the drive" + (" ('servotool sim reset --power-cycle' on the simulator)" if waiting else "")
-    if later:
-        save = profile.persistence.mode != "immediate" and can_save(profile)
-        codes = ", ".join(r.entry.code for r in later)
-        text += (f" — set {'it' if len(later) == 1 else 'them'} with '{_command(later, save)}', {cycle} ({codes} "
-                 f"take{'s' if len(later) == 1 else ''} effect after a power cycle)")
-    else:
-        text += f" — {cycle}"
-    if now:
-        text += f", then '{_command(now, False)}'"
-    return text
+    save = profile.persistence.mode != "immediate" and can_save(profile)
+    return SetupRequired(feature, [gap(r, raw) for r, raw in missing], [gap(r, None) for r in waiting], save)
 
 
 def check(profile: Profile, feature: str, value_of: Callable[[list[Entry]], list[int]],
           effective_of: Callable[[list[Entry]], list[int]] | None = None) -> None:
-    """Refuse host motion (UsageError, one line) while any motion_setup setting differs.
+    """Refuse host motion (SetupRequired) while any motion_setup setting differs.
 
     effective_of, where the caller can know it (the simulator), gives the values in effect: a power-cycle
     setting written but not yet in effect is refused too. A real drive reads back the written value.
@@ -134,4 +118,4 @@ def check(profile: Profile, feature: str, value_of: Callable[[list[Entry]], list
         done = {r.entry.code for r, _ in missing}
         waiting = [r for r, _ in unmet(profile, effective_of) if r.entry.code not in done]
     if missing or waiting:
-        raise UsageError(fix_message(profile, feature, missing, waiting))
+        raise setup_required(profile, feature, missing, waiting)

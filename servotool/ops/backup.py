@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -17,6 +15,7 @@ import yaml
 from servotool import __version__
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
+from servotool.files import backup_dir, load_yaml, write_atomic
 from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile
 from servotool.ops.params import select
@@ -56,14 +55,6 @@ class Backup:
             yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
 
 
-def backup_dir() -> Path:
-    """Where automatic backups go (SERVOTOOL_BACKUP_DIR, else the XDG data dir)."""
-    if env := os.environ.get("SERVOTOOL_BACKUP_DIR"):
-        return Path(env)
-    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
-    return Path(base) / "servotool" / "backups"
-
-
 def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
     """Read every readable Pn (coalesced) and the identity entries."""
     p = drive.profile
@@ -78,30 +69,16 @@ def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
 
 
 def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False) -> Path:
-    """Write atomically (temp file + rename); never replace an existing file unless forced."""
+    """Write atomically; never replace an existing file unless forced."""
+    exists = UsageError(f"{path} exists; choose another name or pass --force to replace it")
     if path.exists() and not force:
-        raise UsageError(f"{path} exists; choose another name or pass --force to replace it")
+        raise exists
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}", suffix=".tmp")
-    except OSError as exc:
-        raise ServoError(f"cannot write {path}: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(backup.to_yaml(profile))
-            fh.flush()
-            os.fsync(fh.fileno())
-        if force:
-            os.replace(tmp, path)
-        else:
-            # link() fails if the name appeared since the check above, so nothing on disk is ever replaced.
-            os.link(tmp, path)
+        write_atomic(path, backup.to_yaml(profile), replace=force)
     except FileExistsError:
-        raise UsageError(f"{path} exists; choose another name or pass --force to replace it") from None
+        raise exists from None
     except OSError as exc:
         raise ServoError(f"cannot write {path}: {exc.strerror or exc}") from None
-    finally:
-        Path(tmp).unlink(missing_ok=True)
     backup.path = path
     return path
 
@@ -111,29 +88,21 @@ def write_backup(drive: Drive, path: Path, *, force: bool = False,
     return save(take(drive, progress), drive.profile, path, force=force)
 
 
-def _auto_path(drive: Drive, reason: str) -> Path:
+def auto_path(drive: Drive, reason: str) -> Path:
+    """A new file name under backup_dir() for an automatic backup taken for a reason ('before-restore')."""
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S%fZ")
     return backup_dir() / f"{drive.profile.id}-unit{drive.unit}-{stamp}-{reason}.yaml"
 
 
 def auto_backup(drive: Drive, reason: str) -> Path:
     """Save the drive's current state under backup_dir() (never replacing a file)."""
-    return write_backup(drive, _auto_path(drive, reason))
+    return write_backup(drive, auto_path(drive, reason))
 
 
 def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
     """Read and check a backup against the profile; every problem is a one-line UsageError, before any write."""
     what = str(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise UsageError(f"cannot read {what}: {exc.strerror}") from None
-    except UnicodeDecodeError:
-        raise UsageError(f"{what}: not a servotool backup file (not UTF-8 text)") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise UsageError(f"{what}: not a valid backup (broken YAML{f' at line {mark.line + 1}' if mark else ''})") \
-            from None
+    data = load_yaml(path)
     if not isinstance(data, dict) or data.get("servotool_backup") != FORMAT:
         raise UsageError(f"{what}: not a servotool backup file (format {FORMAT})")
     for key, kind in (("profile", str), ("model", str), ("unit", int), ("values", dict), ("checksum", str)):
@@ -167,6 +136,12 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
             raise UsageError(msg + "; --force to use it anyway")
         warnings.append(msg)
     return b
+
+
+def profile_of(path: Path) -> str | None:
+    """The profile id a backup file names, or None when the file does not say (not a backup)."""
+    data = load_yaml(path)
+    return data.get("profile") if isinstance(data, dict) and isinstance(data.get("profile"), str) else None
 
 
 @dataclass(frozen=True)

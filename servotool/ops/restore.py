@@ -5,12 +5,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ModbusException, ServoError, UsageError
 from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile
-from servotool.ops.backup import Backup, _auto_path, auto_backup, load, save, take
+from servotool.ops.backup import Backup, auto_backup, auto_path, load, save, take
 from servotool.ops.params import select
 
 EFFECT_ORDER = {"immediate": 0, "unknown": 1, "servo_off": 2, "power_cycle": 3}
@@ -69,12 +70,25 @@ class RestoreReport:
 class RestoreFailed(ServoError):
     """A write failed midway; the message says exactly what state the drive is in.
 
+    `next_step` is what the user should do with the automatic backup: "compare" (the drive stopped answering,
+    so its state is unknown), "restore" (the rollback left entries different) or None (rolled back fully).
     The exit code is the cause's: 1 when the drive or link refused, 3 when a value did not read back.
     """
 
-    def __init__(self, message: str, exit_code: int) -> None:
-        super().__init__(message)
-        self.exit_code = exit_code
+    ADVICE: ClassVar[dict[str, str]] = {
+        "compare": ": when it does, compare it with the automatic backup {auto} and restore that file if needed",
+        "restore": "; restore the automatic backup {auto} once the cause is fixed",
+    }
+
+    def __init__(self, code: str, cause: ServoError, state: str, auto_backup: Path, next_step: str | None) -> None:
+        self.code, self.cause, self.state = code, cause, state
+        self.auto_backup, self.next_step = auto_backup, next_step
+        self.exit_code = cause.exit_code
+        super().__init__(self.facts() + self.ADVICE.get(next_step or "", "").format(auto=auto_backup))
+
+    def facts(self) -> str:
+        """Where it stopped, why, and the drive's state after the rollback (without the advice)."""
+        return f"restore stopped at {self.code}: {self.cause}; {self.state}"
 
 
 Notice = Callable[[str], None]
@@ -98,7 +112,7 @@ def restore(drive: Drive, backup: Backup, plan: RestorePlan,
 
     check_servo_off(drive, plan.needs_servo_off, "the restore")
     before = take(drive)
-    auto = save(before, drive.profile, _auto_path(drive, "before-restore"))
+    auto = save(before, drive.profile, auto_path(drive, "before-restore"))
     if notice:
         notice(f"automatic backup of the drive's current state: {auto}")
     done: list[Entry] = []
@@ -110,16 +124,17 @@ def restore(drive: Drive, backup: Backup, plan: RestorePlan,
                 write_one(drive, entry, new, before.values.get(entry.code, old))
             except ServoError as exc:
                 # The failed entry too: a write that did not read back may still have changed it.
-                state = _roll_back(drive, [*done, entry], before.values, auto)
-                raise RestoreFailed(f"restore stopped at {entry.code}: {exc}; {state}", exc.exit_code) from None
+                state, next_step = _roll_back(drive, [*done, entry], before.values, auto)
+                raise RestoreFailed(entry.code, exc, state, auto, next_step) from None
             done.append(entry)
             if progress:
                 progress(entry)
     return RestoreReport(auto, done, plan, kept["persisted"])
 
 
-def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int], auto: Path) -> str:
-    """Put touched entries back to the snapshot, newest first, then say how the whole drive compares to it."""
+def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int], auto: Path) -> tuple[str, str | None]:
+    """Put touched entries back to the snapshot, newest first, then say how the whole drive compares to it
+    (and the RestoreFailed.next_step that follows)."""
     from servotool.ops.params import write_one
 
     undo_failed: list[str] = []
@@ -135,20 +150,19 @@ def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int], aut
     try:
         after = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile))}
     except ServoError as exc:
-        return (f"the drive no longer answers ({exc}), so its state is unknown: when it does, compare it with "
-                f"'servotool param diff {auto}' and restore that file if needed")
+        return f"the drive no longer answers ({exc}), so its state is unknown", "compare"
     # The EEPROM switch is flipped for the batch on purpose (and put back when it ends): not a difference.
     differ = [code for code, raw in snapshot.items()
               if after.get(code) != raw and not drive.profile.persistence.is_switch(code)]
     if not differ:
         return (f"rolled back {len(touched) - 1} written entries; read back, the drive equals the automatic "
-                f"backup {auto}")
+                f"backup {auto}"), None
     shown = ", ".join(f"{c} is {format_value(drive.profile.entry(c), after[c])}, was "
                       f"{format_value(drive.profile.entry(c), snapshot[c])}" for c in differ[:6])
     more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
     why = f" (could not undo {'; '.join(undo_failed)})" if undo_failed else ""
-    return (f"rollback incomplete{why}: {len(differ)} entries differ from the automatic backup {auto}: {shown}{more}; "
-            f"run 'servotool param restore {auto}' once the cause is fixed")
+    return f"rollback incomplete{why}: {len(differ)} entries differ from the automatic backup {auto}: {shown}{more}", \
+        "restore"
 
 
 def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -17,13 +16,9 @@ from pathlib import Path
 from typing import Any
 
 from servotool.errors import DeviceError
+from servotool.files import FileLock, sim_state_dir, write_atomic
 from servotool.model.codec import raw_to_words, words_to_raw
 from servotool.model.profile import Entry, Profile
-
-try:
-    import fcntl
-except ImportError:  # Windows: one process per simulated drive is then up to the user
-    fcntl = None  # type: ignore[assignment]
 
 ILLEGAL_FUNCTION = 1
 ILLEGAL_ADDRESS = 2
@@ -40,39 +35,9 @@ class SimRefusal(Exception):
         self.code = code
 
 
-def sim_dir() -> Path:
-    """Where simulated drives keep their state (XDG state dir, overridable by SERVOTOOL_SIM_DIR)."""
-    if env := os.environ.get("SERVOTOOL_SIM_DIR"):
-        return Path(env)
-    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
-    return Path(base) / "servotool" / "sim"
-
-
 def state_path(profile_id: str, unit: int) -> Path:
-    return sim_dir() / f"{profile_id}-unit{unit}.json"
-
-
-class _FileLock:
-    """An exclusive lock on a file kept open for the bank's lifetime (opening it per request costs a third of the
-    simulator's request rate)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self._fh: Any = None
-
-    @contextmanager
-    def held(self) -> Iterator[None]:
-        if self._fh is None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = self.path.open("a")
-        if fcntl is None:
-            yield
-            return
-        fcntl.flock(self._fh, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(self._fh, fcntl.LOCK_UN)
+    """The state file of one simulated drive, in files.sim_state_dir()."""
+    return sim_state_dir() / f"{profile_id}-unit{unit}.json"
 
 
 @dataclass
@@ -92,7 +57,7 @@ class RegisterBank:
     _stamp: tuple[int, int, int] | None = field(default=None, repr=False)   # the state file as last read/written
     _held: bool = field(default=False, repr=False)
     _dirty: bool = field(default=False, repr=False)
-    _file_lock: _FileLock | None = field(default=None, repr=False)
+    _file_lock: FileLock | None = field(default=None, repr=False)
     before_write: list[Callable[[], None]] = field(default_factory=list, repr=False)  # e.g. store the plant state
 
     def __post_init__(self) -> None:
@@ -116,10 +81,10 @@ class RegisterBank:
         bank.reload()
         return bank
 
-    def _lock(self) -> _FileLock:
+    def _lock(self) -> FileLock:
         assert self.path is not None
         if self._file_lock is None or self._file_lock.path.parent != self.path.parent:
-            self._file_lock = _FileLock(self.path.with_name(self.path.name + ".lock"))
+            self._file_lock = FileLock(self.path.with_name(self.path.name + ".lock"))
         return self._file_lock
 
     def reload(self) -> bool:
@@ -209,12 +174,8 @@ class RegisterBank:
         data = {"profile": self.profile.id, "version": self.profile.version, "unit": self.unit,
                 "eeprom": self.eeprom, "ram": self.ram, "effective": self.effective,
                 "eeprom_writes": self.eeprom_writes, "extra": self.extra}
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=self.path.name, suffix=".tmp")
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=1, sort_keys=True)
-            fh.flush()
-            st = os.fstat(fh.fileno())
-        os.replace(tmp, self.path)
+        # Not fsync'ed: it is rewritten after every change, and a drive's RAM does not survive a crash either.
+        st = write_atomic(self.path, json.dumps(data, indent=1, sort_keys=True), durable=False)
         self._stamp = (st.st_ino, st.st_mtime_ns, st.st_size)
         self._dirty = False
 

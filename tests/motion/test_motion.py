@@ -6,6 +6,7 @@ import csv
 import json
 import os
 import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -279,7 +280,8 @@ def test_a_drive_not_set_up_refuses_in_one_line_and_its_fix_lets_the_jog_run(cli
     running = cli("sim", "show", "-P", profile, "--json").json()["running"]
     assert running is None or not running["servo_on"]
     for command in re.findall(r"'(servotool [^']*)'", line):              # do exactly what the message says
-        r = cli("--port", "sim", "--profile", profile, *command.split()[1:])
+        assert command.startswith(f"servotool --port sim --profile {profile} ")   # the user's own connection
+        r = cli(*shlex.split(command)[1:])
         assert r.code == 0, r.err
         if "power-cycle the drive" in line and "--save" in command:
             assert cli("sim", "reset", "-P", profile, "--power-cycle").code == 0
@@ -294,7 +296,8 @@ def test_a_power_cycle_setting_written_but_not_in_effect_is_named_on_the_simulat
     r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5")
     assert r.code == 2
     assert ("Po407.X = 26 (set, in effect after a power cycle), Po408.X = 27 (set, in effect after a power cycle)"
-            " — power-cycle the drive ('servotool sim reset --power-cycle' on the simulator)") in r.err
+            " — power-cycle the drive ('servotool --port sim --profile sd25 sim reset --power-cycle' on the "
+            "simulator)") in r.err
     assert cli("sim", "reset", "-P", "sd25", "--power-cycle").code == 0
     r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--json")
     assert r.code == 0, r.err                                   # --save kept So-58 too (the simulator stores it)

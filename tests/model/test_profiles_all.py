@@ -65,7 +65,7 @@ def test_the_readme_table_states_each_profiles_real_counts():
     import re
     from pathlib import Path
 
-    text = (Path(__file__).resolve().parent.parent / "profiles" / "README.md").read_text()
+    text = (Path(__file__).resolve().parents[2] / "profiles" / "README.md").read_text()
     for pid in PROFILES:
         p = load_profile(pid)
         row = re.search(rf"^\| {pid} \| [^|]+ \| (\d+) / (\d+) / (\d+) / (\d+) \| (\d+) \| (\d+) \|", text, re.M)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -9,6 +10,7 @@ import yaml
 
 from servotool.errors import ProfileError
 from servotool.model.loader import builtin_ids, load_profile, read_profile
+from servotool.model.schema import parse_profile
 
 GOOD = {
     "schema": 1, "id": "mini", "model": "MINI", "vendor": "test", "version": "1", "description": "test drive",
@@ -150,3 +152,19 @@ def test_motion_setup_values_read_as_users_type_them():
     assert po407.fields == ("X",) and po407.met(0x011A) and po407.met(26) and not po407.met(0x1B)
     assert po407.assignments() == ["Po407.X=26"]
     assert reqs["sd25"]["So-58"].item.unverified                         # the digit meaning is a figure
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    ({"field_ranges": {"Q": [0, 1]}}, "unknown field"),
+    ({"field_ranges": {"X": [0, 100]}}, r"0 <= lo <= hi <= 99"),
+    ({"field_ranges": {"X": [5, 9]}}, r"field X=1 outside its range 5\.\.9"),
+    ({"field_ranges": {"Y": [0, 1]}, "max": 0x00FF}, "exclude field values"),
+    ({"format": "dec", "field_ranges": {"X": [0, 1]}}, "needs format: digits"),
+])
+def test_profile_checker_rejects_bad_field_ranges(extra, message):
+    raw = {"code": "Po999", "class": "Pn", "name": "t", "address": 999, "min": 0, "max": 0xFFFF, "default": 0x0101,
+           "effect": "immediate", "source": "test", "format": "digits", "fields": ["X", "Y"], "field_width": 8}
+    raw.update(extra)
+    profile, problems = parse_profile({**GOOD, "entries": [*GOOD["entries"], raw]}, "t")
+    assert profile is None
+    assert any(re.search(message, p) and "Po999" in p for p in problems), problems

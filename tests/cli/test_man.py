@@ -13,7 +13,7 @@ import typer
 
 from servotool.cli.main import app
 
-PAGE = Path(__file__).resolve().parent.parent / "man" / "servotool.1"
+PAGE = Path(__file__).resolve().parents[2] / "man" / "servotool.1"
 
 
 def _commands(group, prefix="servotool"):

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from servotool.cli.messages import error_text
 from servotool.config import ConnectOptions, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -134,6 +135,10 @@ def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
         assert (f"rollback incomplete (could not undo {victim.code} ({victim.code}: wrote" in str(exc.value))
         assert f"1 entries differ from the automatic backup {auto_dir}" in str(exc.value)
         assert f"{victim.code} is {now.text}, was " in str(exc.value)
+        assert exc.value.next_step == "restore"         # the CLI words it with the user's connection options
+        auto = exc.value.auto_backup
+        assert error_text(exc.value, ConnectOptions(port="sim", unit=1)).endswith(
+            f"; run 'servotool --port sim --unit 1 param restore {auto}' once the cause is fixed")
 
 
 def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back(auto_dir, tmp_path):
@@ -186,9 +191,10 @@ def test_rollback_on_a_switchable_drive_is_judged_without_the_switch_it_flipped(
 
 def _edits() -> list[tuple[str, object, str]]:
     return [
-        ("truncated", lambda t: t[: len(t) // 2], "not a valid backup|incomplete"),
+        ("truncated", lambda t: t[: len(t) // 2], "line \\d+: invalid YAML|incomplete"),
         ("cut mid-values", lambda t: t[: t.index("Pn512:")], "incomplete"),
-        ("broken yaml", lambda t: "[1, 2", "not a valid backup"),
+        ("broken yaml", lambda t: "[1, 2", "line \\d+: invalid YAML"),
+        ("not UTF-8", lambda t: t.encode().replace(b"model: DSX7E", b"model: DSX\xe9"), r"not UTF-8 text \(byte \d+\)"),
         ("empty", lambda t: "", "not a servotool backup"),
         ("wrong type", lambda t: t.replace("Pn004: 250", "Pn004: fast"), "Pn004: value 'fast' is not an integer"),
         ("float", lambda t: t.replace("Pn004: 250", "Pn004: 250.5"), "is not an integer"),
@@ -221,7 +227,8 @@ def good_backup_text(tmp_path_factory) -> str:
 @pytest.mark.parametrize(("case", "edit", "message"), _edits(), ids=[c for c, _, _ in _edits()])
 def test_every_bad_file_is_refused_with_one_clear_line(good_backup_text, tmp_path, case, edit, message):
     f = tmp_path / "bad.yaml"
-    f.write_text(edit(good_backup_text))
+    edited = edit(good_backup_text)
+    f.write_bytes(edited if isinstance(edited, bytes) else edited.encode())
     with pytest.raises(UsageError) as exc:
         backup.load(f, load_profile("dsx7e"))
     text = str(exc.value)
@@ -244,7 +251,7 @@ def test_cli_refuses_bad_files_before_connecting_or_writing(auto_dir, tmp_path, 
     edited.write_text(good_backup_text.replace("Pn100: 320", "Pn100: 330"))
     truncated = tmp_path / "truncated.yaml"
     truncated.write_text(good_backup_text[: len(good_backup_text) // 3])
-    for f, why in ((edited, "checksum mismatch"), (truncated, "incomplete|not a valid backup")):
+    for f, why in ((edited, "checksum mismatch"), (truncated, "incomplete|invalid YAML")):
         r = cli("--port", "sim", "-v", "param", "restore", str(f), "--yes")
         assert r.code == 2 and re.search(why, r.err), r.err
         assert not WRITE_FRAME.search(r.err) and not auto_dir.exists()

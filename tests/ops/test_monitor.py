@@ -7,7 +7,7 @@ import csv
 import pytest
 from rich.console import Console
 
-from servotool.cli.monitor import _view
+from servotool.cli.monitor import monitor_table
 from servotool.config import ConnectOptions, resolve
 from servotool.ops.monitor import Monitor, default_entries
 from servotool.session import open_drives
@@ -18,7 +18,7 @@ NO_PORT = ("--port", "/dev/nonexistent", "--profile", "dsx7e")
 
 def _render(mon: Monitor, width: int) -> list[str]:
     console = Console(width=width, record=True, force_terminal=True, color_system=None)
-    console.print(_view(mon, width))
+    console.print(monitor_table(mon, width))
     return console.export_text().splitlines()
 
 

@@ -7,8 +7,9 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
-from conftest import ROOT
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_installed_wheel_lists_its_profiles_from_another_directory(tmp_path):

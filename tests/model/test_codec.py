@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import re
-
 import pytest
 
 from servotool.errors import UsageError
@@ -18,7 +16,6 @@ from servotool.model.codec import (
 )
 from servotool.model.loader import load_profile
 from servotool.model.profile import Entry
-from servotool.model.schema import _Checker, _parse_entry
 
 
 def entry(**kw) -> Entry:
@@ -163,22 +160,6 @@ def test_sd25_digit_entries_carry_the_manuals_field_ranges():
     assert split_field(p, "po175") == (e, None)
     with pytest.raises(UsageError, match=r"Po109 .* has no fields"):
         split_field(p, "Po109.X")
-
-
-@pytest.mark.parametrize(("extra", "message"), [
-    ({"field_ranges": {"Q": [0, 1]}}, "unknown field"),
-    ({"field_ranges": {"X": [0, 100]}}, r"0 <= lo <= hi <= 99"),
-    ({"field_ranges": {"X": [5, 9]}}, r"field X=1 outside its range 5\.\.9"),
-    ({"field_ranges": {"Y": [0, 1]}, "max": 0x00FF}, "exclude field values"),
-    ({"format": "dec", "field_ranges": {"X": [0, 1]}}, "needs format: digits"),
-])
-def test_profile_checker_rejects_bad_field_ranges(extra, message):
-    raw = {"code": "Po999", "class": "Pn", "name": "t", "address": 999, "min": 0, "max": 0xFFFF, "default": 0x0101,
-           "effect": "immediate", "source": "test", "format": "digits", "fields": ["X", "Y"], "field_width": 8}
-    raw.update(extra)
-    chk = _Checker("t")
-    assert _parse_entry(chk, raw, 0, "low_first") is None
-    assert any(re.search(message, p) for p in chk.problems), chk.problems
 
 
 def test_enum_by_name():

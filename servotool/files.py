@@ -1,0 +1,141 @@
+"""The files servotool keeps: user folders, atomic writes, YAML reading with one error format, a cross-process lock.
+
+Folders come from platformdirs (XDG on Linux, so XDG_CONFIG_HOME, XDG_STATE_HOME and XDG_DATA_HOME apply there;
+the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and SERVOTOOL_BACKUP_DIR override them.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Any
+
+import platformdirs
+import yaml
+
+from servotool.errors import FileProblem
+
+APP = "servotool"
+
+# The C parser when PyYAML has it: a profile loads several times faster.
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+# ----- user folders ----------------------------------------------------------------------------------------------
+
+def config_file() -> Path:
+    """The user's config file (SERVOTOOL_CONFIG, else config.yaml in the user config folder)."""
+    if env := os.environ.get("SERVOTOOL_CONFIG"):
+        return Path(env)
+    return platformdirs.user_config_path(APP, appauthor=False) / "config.yaml"
+
+
+def sim_state_dir() -> Path:
+    """Where simulated drives keep their state (SERVOTOOL_SIM_DIR, else 'sim' in the user state folder)."""
+    if env := os.environ.get("SERVOTOOL_SIM_DIR"):
+        return Path(env)
+    return platformdirs.user_state_path(APP, appauthor=False) / "sim"
+
+
+def backup_dir() -> Path:
+    """Where automatic backups go (SERVOTOOL_BACKUP_DIR, else 'backups' in the user data folder)."""
+    if env := os.environ.get("SERVOTOOL_BACKUP_DIR"):
+        return Path(env)
+    return platformdirs.user_data_path(APP, appauthor=False) / "backups"
+
+
+# ----- writing ---------------------------------------------------------------------------------------------------
+
+def write_atomic(path: Path, text: str, *, replace: bool = True, durable: bool = True) -> os.stat_result:
+    """Write text (UTF-8) so that readers see the old file or the new one, never half of one.
+
+    The file is made as a private temporary file beside the target (mode 0600) and renamed over it. With
+    replace=False an existing file is never replaced, not even one that appears meanwhile: FileExistsError.
+    durable=False skips the fsync (for state rewritten many times a second). Returns the new file's stat.
+    Other failures are OSError, for the caller to word.
+    """
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            if durable:
+                os.fsync(fh.fileno())
+            st = os.fstat(fh.fileno())
+        if replace:
+            os.replace(tmp, path)
+        else:
+            os.link(tmp, path)     # fails if the name exists, even one that appeared since the caller looked
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    return st
+
+
+# ----- reading ---------------------------------------------------------------------------------------------------
+
+def read_text(path: Path) -> str:
+    """A text file's content; FileProblem when it cannot be read or is not UTF-8."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise FileProblem(path, f"cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise FileProblem(path, f"not UTF-8 text (byte {exc.start})") from None
+
+
+def _yaml_problem(path: Path, exc: yaml.YAMLError) -> FileProblem:
+    mark = getattr(exc, "problem_mark", None)
+    return FileProblem(path, f"invalid YAML: {getattr(exc, 'problem', None) or exc}",
+                       line=mark.line + 1 if mark else None)
+
+
+def parse_yaml(text: str, path: Path) -> Any:
+    """The data of a YAML document read from path; FileProblem (with the line) when it is not valid YAML."""
+    try:
+        return yaml.load(text, Loader=_SAFE_LOADER)
+    except yaml.YAMLError as exc:
+        raise _yaml_problem(path, exc) from None
+
+
+def compose_yaml(text: str, path: Path) -> yaml.Node | None:
+    """The node tree of a YAML document (for the line of each key); FileProblem when it is not valid YAML."""
+    try:
+        return yaml.compose(text, Loader=_SAFE_LOADER)
+    except yaml.YAMLError as exc:
+        raise _yaml_problem(path, exc) from None
+
+
+def load_yaml(path: Path) -> Any:
+    """Read and parse a YAML file; every problem is one FileProblem: 'FILE: [line N: ]PROBLEM'."""
+    return parse_yaml(read_text(path), path)
+
+
+# ----- locking ---------------------------------------------------------------------------------------------------
+
+class FileLock:
+    """An exclusive lock between processes, on a lock file kept open for the holder's lifetime (opening it for
+    each use costs a third of the simulator's request rate). Not reentrant. filelock's descriptor lock makes it
+    flock on POSIX and LockFileEx on Windows."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._fh: IO[str] | None = None
+
+    @contextmanager
+    def held(self) -> Iterator[None]:
+        # Imported here, where a lock is used: filelock takes 40 ms to import.
+        from filelock import lock_descriptor, unlock_descriptor
+
+        if self._fh is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = self.path.open("a", encoding="utf-8")
+        fd = self._fh.fileno()
+        lock_descriptor(fd, poll_interval=0.001)     # holders keep it for milliseconds: poll often
+        try:
+            yield
+        finally:
+            unlock_descriptor(fd)
