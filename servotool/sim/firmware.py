@@ -220,7 +220,6 @@ class Firmware:
         self.ident = None
         self.alarms.record(self.plant.alarm)
 
-    _trip = trip   # the name tests outside tests/sim still use
 
     # ----- actions (what the drive's functions trigger; see servotool.sim.functions) -------------------------
     def _host_alive(self) -> None:

@@ -92,7 +92,7 @@ def test_sd25_alarms_are_the_manuals_list_and_the_simulator_reports_them_by_kind
     sim_drive = build_drive(p, 1)
     sim = EmbeddedSim([sim_drive])
     try:
-        sim_drive.firmware._trip("overspeed")
+        sim_drive.firmware.trip("overspeed")
         link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
         state = alarms.current(Drive(link, p, 1))                 # register 926 holds the AL number
         assert (state.code, state.display, state.name) == (7, "AL-07", "Overspeed")

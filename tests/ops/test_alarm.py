@@ -46,7 +46,7 @@ def test_history_marks_only_the_current_alarm_active(sim_dir):
     sim = EmbeddedSim([sim_drive])
     try:
         sim_drive.firmware.alarm_history[:] = [0x09]
-        sim_drive.firmware._trip("overload")                   # E09 again: now current and the newest entry
+        sim_drive.firmware.trip("overload")                   # E09 again: now current and the newest entry
         link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
         items = alarms.history(Drive(link, profile, 1))
         link.close()
