@@ -10,6 +10,7 @@ from pathlib import Path
 import typer
 
 from servotool.cli.common import state
+from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame
 from servotool.commission.plan import load_plan
 from servotool.commission.runner import Runner, write_report
@@ -65,7 +66,8 @@ def run(
 
     t0 = time.monotonic()
     with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice) as drives:
-        runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info)
+        runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info,
+                        word=lambda exc: error_text(exc, cli_opts))
         runner.check_units()
         ok = False
         try:

@@ -34,9 +34,11 @@ class Runner:
     """Runs a validated plan on open drives, step by step (each on every axis it names), by its step type."""
 
     def __init__(self, plan: Plan, drives: list[Drive], *, yes: bool, continue_on_error: bool,
-                 ask: Callable[[int, str], bool], log: Callable[[str], None]) -> None:
+                 ask: Callable[[int, str], bool], log: Callable[[str], None],
+                 word: Callable[[ServoError], str] = str) -> None:
+        """word turns a failed step's error into its report line (the CLI adds fix commands)."""
         self.plan, self.drives = plan, drives
-        self.continue_on_error, self.log = continue_on_error, log
+        self.continue_on_error, self.log, self.word = continue_on_error, log, word
         self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives})
         self.results: list[StepResult] = []
 
@@ -60,7 +62,7 @@ class Runner:
                     outcome = kind.run(step, drive, self.context)
                     detail, data, ok = outcome.detail, outcome.data, True
                 except ServoError as exc:
-                    detail, data, ok = str(exc), {"error": type(exc).__name__, "exit_code": exc.exit_code}, False
+                    detail, data, ok = self.word(exc), {"error": type(exc).__name__, "exit_code": exc.exit_code}, False
                 result = StepResult(step, drive.unit, ok, detail, time.monotonic() - t0, data)
                 self.results.append(result)
                 self.log(f"{'ok  ' if ok else 'FAIL'} unit {drive.unit} {step.where()}: {detail}")

@@ -181,3 +181,14 @@ def test_a_tune_step_writes_by_the_drives_eeprom_rule_like_the_command(cli, tmp_
     assert tuned["persisted"] is False and tuned["H08-15"] != before
     assert cli("sim", "reset", "-P", "is620p", "--power-cycle").code == 0
     assert cli("--port", "sim", "-P", "is620p", "param", "get", "H08-15", "--json").json()[0]["value"] == before
+
+
+def test_a_jog_step_on_a_drive_not_set_up_reports_the_fix_with_the_users_connection_options(cli, tmp_path):
+    """The library says which settings differ; the report says how to fix them, for the drive the user named."""
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("steps:\n  - jog: {speed: 100, time: 0.2}\n")
+    r = cli("--port", "sim", "--profile", "sdc", "run", str(plan), "--yes", "--json")
+    assert r.code == 2, r.err
+    detail = r.json()["steps"][0]["detail"]
+    assert "needs drive setup first: PN4 = 3" in detail
+    assert "'servotool --port sim --profile sdc param set PN4=3'" in detail
