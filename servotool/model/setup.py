@@ -1,4 +1,4 @@
-"""Drive settings host motion needs (profile `motion_setup`): check them before moving, say how to fix them.
+"""Drive settings host motion needs (profile `motion_setup`): check them before moving; a refusal carries what differs.
 
 A requirement is an entry's whole value (`H02-00 = 0`) or some fields of a two-/four-parameter value
 (`Po407.X = 26`, written `X=26` in the profile): only the named fields are compared. servotool never writes them
