@@ -72,7 +72,7 @@ def _prefixed(exc: DeviceError, prefix: str) -> DeviceError:
     return exc
 
 
-def plan_reads(profile: Profile, entries: Iterable[Entry]) -> list[tuple[int, int, list[Entry]]]:
+def coalesce_reads(profile: Profile, entries: Iterable[Entry]) -> list[tuple[int, int, list[Entry]]]:
     """Group entries into as few FC03 requests as the profile allows: (address, count, entries).
 
     A request may span a gap only when every address in the gap belongs to a readable entry, since a real
@@ -115,7 +115,7 @@ class Drive:
             if not e.readable:
                 raise UsageError(f"{e.code} ({e.name}) is write-only and cannot be read")
         values: dict[str, int] = {}
-        for start, count, group in plan_reads(self.profile, entries):
+        for start, count, group in coalesce_reads(self.profile, entries):
             try:
                 words = self.link.read(self.unit, start, count)
             except DeviceError as exc:

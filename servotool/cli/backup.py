@@ -118,7 +118,7 @@ def restore_cmd(
         warn(w)
     with drive(ctx) as d:
         current = {r.entry.code: r.raw for r in d.read_entries(select(d.profile))}
-        plan = restore.plan_restore(d.profile, b, current, only=only, include=include or [])
+        plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [])
         if not as_json:
             _show_plan(plan)
         if dry_run or not plan.changes:
@@ -144,12 +144,12 @@ def restore_cmd(
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 
 
-def _changes_json(plan: restore.RestorePlan) -> list[dict[str, object]]:
+def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
     return [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
              "effect": e.effect} for e, old, new in plan.changes]
 
 
-def _show_plan(plan: restore.RestorePlan) -> None:
+def _show_plan(plan: restore.RestoreChanges) -> None:
     if plan.changes:
         t = table("Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{len(plan.changes)} changes, in order")
         for e, old, new in plan.changes:

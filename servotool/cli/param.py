@@ -63,7 +63,7 @@ def set_(
     persisted = None
     with drive(ctx) as d:
         eeprom.check_save_request(d.profile, save)
-        plan = params.plan_set(d, assignments, raw=raw)
+        plan = params.prepare_set(d, assignments, raw=raw)
         results = []
         if not dry_run and plan.changes:
             with eeprom.persistence(d, save) as outcome:

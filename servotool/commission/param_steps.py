@@ -35,7 +35,7 @@ class SetStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         texts = [f"{e.code}={raw}" for e, raw in self.assignments(step, drive.profile)]
-        plan = params.plan_set(drive, texts, raw=True)
+        plan = params.prepare_set(drive, texts, raw=True)
         done = params.apply_set(drive, plan)
         for r in done:
             ctx.wrote(drive, r.entry, r.new)

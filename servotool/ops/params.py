@@ -20,14 +20,14 @@ def select(profile: Profile, *, group: str | None = None, classes: tuple[str, ..
 
 
 @dataclass(frozen=True)
-class SetPlan:
+class PreparedSet:
     """Validated assignments with the drive's current values."""
 
     changes: list[tuple[Entry, int, int]]  # entry, old raw, new raw
     unchanged: list[tuple[Entry, int]]
 
 
-def plan_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> SetPlan:
+def prepare_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> PreparedSet:
     """Parse and range-check every CODE=VALUE, then read current values; nothing is written."""
     if not assignments:
         raise UsageError("nothing to set: give CODE=VALUE ...")
@@ -63,7 +63,7 @@ def plan_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> SetP
             unchanged.append((entry, new))
         else:
             changes.append((entry, old if old is not None else new, new))
-    return SetPlan(changes, unchanged)
+    return PreparedSet(changes, unchanged)
 
 
 def write_one(drive: Drive, entry: Entry, raw: int, old: int | None = None) -> WriteResult:
@@ -89,7 +89,7 @@ def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list
     return runs
 
 
-def apply_set(drive: Drive, plan: SetPlan) -> list[WriteResult]:
+def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
     """Write the planned changes in order, adjacent ones in one FC16 request (as the manuals' multi-register
     examples do), each verified by read-back."""
     results: list[WriteResult] = []

@@ -18,7 +18,7 @@ EFFECT_ORDER = {"immediate": 0, "unknown": 1, "servo_off": 2, "power_cycle": 3}
 
 
 @dataclass
-class RestorePlan:
+class RestoreChanges:
     changes: list[tuple[Entry, int, int]]       # entry, current, target (in write order)
     skipped: list[tuple[Entry, str]]
 
@@ -31,8 +31,8 @@ class RestorePlan:
         return [e for e, _, _ in self.changes if e.effect == "servo_off"]
 
 
-def plan_restore(profile: Profile, backup: Backup, current: dict[str, int], *, only: str | None = None,
-                 include: list[str] | None = None) -> RestorePlan:
+def restore_changes(profile: Profile, backup: Backup, current: dict[str, int], *, only: str | None = None,
+                 include: list[str] | None = None) -> RestoreChanges:
     """Only entries that differ; axis-specific (copy: false) ones only when named; immediate ones first."""
     named = {profile.entry(c).code for c in include or []}
     if only is not None and only not in {e.group for e in profile.entries}:
@@ -56,14 +56,14 @@ def plan_restore(profile: Profile, backup: Backup, current: dict[str, int], *, o
         if current.get(code) != target:
             changes.append((e, current[code], target))
     changes.sort(key=lambda c: EFFECT_ORDER.get(c[0].effect, 1))
-    return RestorePlan(changes, skipped)
+    return RestoreChanges(changes, skipped)
 
 
 @dataclass
 class RestoreReport:
     auto_backup: Path
     written: list[Entry]
-    plan: RestorePlan
+    plan: RestoreChanges
     persisted: bool = True      # False: the drive keeps the values in RAM only (lost at power-off)
 
 
@@ -104,7 +104,7 @@ def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
                          f"switch the servo off first")
 
 
-def restore(drive: Drive, backup: Backup, plan: RestorePlan,
+def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
             progress: Callable[[Entry], None] | None = None, notice: Notice | None = None) -> RestoreReport:
     """Automatic backup first, then write and verify each change; on failure, roll back what was changed."""
     from servotool.ops.eeprom import persistence
@@ -169,7 +169,7 @@ def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
     """Plan step: restore a backup file completely (no prompts)."""
     b = load(path, drive.profile)
     current = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile))}
-    rplan = plan_restore(drive.profile, b, current)
+    rplan = restore_changes(drive.profile, b, current)
     if not rplan.changes:
         return "nothing to restore: the drive already matches"
     report = restore(drive, b, rplan, notice=notice)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from servotool.clock import Clock, RealClock
-from servotool.drive import Drive, plan_reads
+from servotool.drive import Drive, coalesce_reads
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry
@@ -133,7 +133,7 @@ class Identifier:
         guard: dict[str, float | None] = {"lo": None, "hi": None, "stretch": 1.0}
         pos_every = 0.05   # position costs a request of its own: read it at 20 Hz, predict from speed between
 
-        together = len(plan_reads(p, [speed_e, torque_e])) == 1     # one request carries both
+        together = len(coalesce_reads(p, [speed_e, torque_e])) == 1     # one request carries both
 
         def sample() -> None:
             if together:

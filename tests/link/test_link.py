@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from servotool.drive import Drive, plan_reads
+from servotool.drive import Drive, coalesce_reads
 from servotool.errors import DeviceError
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
@@ -39,7 +39,7 @@ def test_reading_every_parameter_is_coalesced_within_the_drive_limit(sim_dir, pr
     readings = Drive(link, profile, 1).read(*[e.code for e in params])
     assert [r.entry.code for r in readings] == [e.code for e in params]
     assert all(count <= profile.limits.max_read for _, count in link.reads)
-    assert len(link.reads) == len(plan_reads(profile, params))
+    assert len(link.reads) == len(coalesce_reads(profile, params))
     # Coalescing happened: far fewer requests than entries (SD25's 10-register limit still groups a few).
     assert len(link.reads) * 2 < len(params)
 

@@ -181,7 +181,7 @@ def test_adjacent_writes_share_one_request_within_the_drives_limits(limits, expe
     link = RecordingLink()
     d = Drive(link, profile, 1)
     pn9, pn10, pn12 = (profile.entry(c) for c in ("PN9", "PN10", "PN12"))      # PN11 is not adjacent-written
-    results = params.apply_set(d, params.SetPlan([(pn9, 1, 5), (pn10, 1, 4), (pn12, 200, 7)], []))
+    results = params.apply_set(d, params.PreparedSet([(pn9, 1, 5), (pn10, 1, 4), (pn12, 200, 7)], []))
     assert link.writes == expected
     assert [(r.entry.code, r.new) for r in results] == [("PN9", 5), ("PN10", 4), ("PN12", 7)]
 
@@ -191,6 +191,6 @@ def test_a_coalesced_write_the_drive_does_not_keep_is_a_verify_error():
     link = RecordingLink()
     link.write = lambda unit, address, values, multiple=True: link.regs.update({address: values[0]})  # drops PN10
     d = Drive(link, profile, 1)
-    plan = params.SetPlan([(profile.entry("PN9"), 1, 5), (profile.entry("PN10"), 1, 4)], [])
+    plan = params.PreparedSet([(profile.entry("PN9"), 1, 5), (profile.entry("PN10"), 1, 4)], [])
     with pytest.raises(VerifyError, match="PN10: wrote 4 but the drive reads back 0"):
         params.apply_set(d, plan)

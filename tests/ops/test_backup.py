@@ -56,7 +56,7 @@ def count_writes(d: Drive) -> list[int]:
 def changed_drive_backup(path: Path) -> dict[str, int]:
     """Set CHANGES on the simulated drive, back it up to path; return the values written."""
     with sim() as d:
-        params.apply_set(d, params.plan_set(d, [f"{k}={v}" for k, v in CHANGES.items()]))
+        params.apply_set(d, params.prepare_set(d, [f"{k}={v}" for k, v in CHANGES.items()]))
         backup.write_backup(d, path)
         return backup.take(d).values
 
@@ -70,7 +70,7 @@ def test_round_trip_restores_every_value_and_a_second_restore_writes_nothing(aut
         assert backup.load(auto, d.profile).values == wanted       # the automatic backup holds the pre-reset state
         b = backup.load(f, d.profile)
         current = backup.take(d).values
-        plan = restore.plan_restore(d.profile, b, current)
+        plan = restore.restore_changes(d.profile, b, current)
         assert {e.code for e, _, _ in plan.changes} == set(CHANGES)
         effects = [e.effect for e, _, _ in plan.changes]
         assert effects == sorted(effects, key=restore.EFFECT_ORDER.__getitem__)   # power-cycle entries last
@@ -90,7 +90,7 @@ def test_fault_midway_rolls_back_to_the_automatic_backup(auto_dir, tmp_path, cli
     with sim() as d:
         restore.factory_reset(d)
         before = backup.take(d).values
-        order = [e.code for e, _, _ in restore.plan_restore(d.profile, backup.load(f, d.profile), before).changes]
+        order = [e.code for e, _, _ in restore.restore_changes(d.profile, backup.load(f, d.profile), before).changes]
     victim = order[len(order) // 2]                 # half of the plan is written before the refusal
     SimulatedDrive(load_profile("dsx7e"), 1).inject_fault(victim)
     r = cli("--port", "sim", "param", "restore", str(f), "--yes")
@@ -109,7 +109,7 @@ def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
     with sim() as d:
         restore.factory_reset(d)
         before = backup.take(d).values
-        plan = restore.plan_restore(d.profile, backup.load(f, d.profile), before)
+        plan = restore.restore_changes(d.profile, backup.load(f, d.profile), before)
         victim = plan.changes[3][0]
         real = d.write_raw
         misbehave = [1]
@@ -146,11 +146,11 @@ def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back
     opts = resolve(ConnectOptions(port="sim", profile="sd25"))
     with open_drives(opts, notice=lambda _m: None) as (d,):
         switch = d.read_one("Po505").raw                  # factory: writes stay in RAM
-        params.apply_set(d, params.plan_set(d, ["Po301=50"]))
+        params.apply_set(d, params.prepare_set(d, ["Po301=50"]))
         backup.write_backup(d, f)
         restore.factory_reset(d)
         b = backup.load(f, d.profile)
-        report = restore.restore(d, b, restore.plan_restore(d.profile, b, backup.take(d).values))
+        report = restore.restore(d, b, restore.restore_changes(d.profile, b, backup.take(d).values))
         assert [e.code for e in report.written] == ["Po301"] and report.persisted
         assert d.read_one("Po505").raw == switch
     drive = SimulatedDrive(load_profile("sd25"), 1)
@@ -162,12 +162,12 @@ def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back
 def test_the_eeprom_switch_in_a_backup_never_redirects_the_restore(auto_dir, tmp_path):
     f = tmp_path / "is620p.yaml"
     with open_drives(resolve(ConnectOptions(port="sim", profile="is620p")), notice=lambda _m: None) as (d,):
-        params.apply_set(d, params.plan_set(d, ["H08-00=30.0", "H08-02=50.0"]))
+        params.apply_set(d, params.prepare_set(d, ["H08-00=30.0", "H08-02=50.0"]))
         d.write_raw(d.profile.entry("H0C-13"), 0)        # this axis kept Modbus writes in RAM when backed up
         backup.write_backup(d, f)
         restore.factory_reset(d)                              # H0C-13 back to 1 (store in EEPROM)
         b = backup.load(f, d.profile)
-        plan = restore.plan_restore(d.profile, b, backup.take(d).values)
+        plan = restore.restore_changes(d.profile, b, backup.take(d).values)
         assert [e.code for e, _ in plan.skipped] == ["H0C-13"]
         report = restore.restore(d, b, plan)
         assert sorted(e.code for e in report.written) == ["H08-00", "H08-02"] and report.persisted
@@ -292,18 +292,18 @@ def test_backup_file_has_the_metadata_and_a_checksum_of_the_values(auto_dir, tmp
 def test_axis_specific_entries_groups_and_include(auto_dir, tmp_path):
     f = tmp_path / "b.yaml"
     with sim() as d:
-        params.apply_set(d, params.plan_set(d, ["Pn610=5", "Pn100=45"]))
+        params.apply_set(d, params.prepare_set(d, ["Pn610=5", "Pn100=45"]))
         backup.write_backup(d, f)
         restore.factory_reset(d)
         b, current = backup.load(f, d.profile), backup.take(d).values
-        plan = restore.plan_restore(d.profile, b, current)
+        plan = restore.restore_changes(d.profile, b, current)
         assert [e.code for e, _, _ in plan.changes] == ["Pn100"] and plan.skipped[0][0].code == "Pn610"
-        plan = restore.plan_restore(d.profile, b, current, include=["Pn610"])
+        plan = restore.restore_changes(d.profile, b, current, include=["Pn610"])
         assert {e.code for e, _, _ in plan.changes} == {"Pn100", "Pn610"}
-        assert restore.plan_restore(d.profile, b, current, only="io").changes == []
-        assert [e.code for e, _, _ in restore.plan_restore(d.profile, b, current, only="gain").changes] == ["Pn100"]
+        assert restore.restore_changes(d.profile, b, current, only="io").changes == []
+        assert [e.code for e, _, _ in restore.restore_changes(d.profile, b, current, only="gain").changes] == ["Pn100"]
         with pytest.raises(UsageError, match="unknown group"):
-            restore.plan_restore(d.profile, b, current, only="nope")
+            restore.restore_changes(d.profile, b, current, only="nope")
 
 
 def test_servo_on_blocks_changes_that_need_the_servo_off(auto_dir):
@@ -319,7 +319,7 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
     with sim() as d:
         backup.write_backup(d, a)
-        params.apply_set(d, params.plan_set(d, ["Pn100=45", "Pn008=20000"]))
+        params.apply_set(d, params.prepare_set(d, ["Pn100=45", "Pn008=20000"]))
     r = cli("--port", "sim", "param", "backup", "-o", str(b))
     assert r.code == 0 and f"saved to {b}" in r.out, r.err
     r = cli("--port", "sim", "param", "backup", "-o", str(b))
