@@ -18,6 +18,10 @@ from servotool.errors import DeviceError, ModbusException
 from servotool.link.ports import Trace
 from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, NotAnswer, Request
 
+# Silence that ends a frame. RTU's 3.5 characters, but USB-serial adapters and TCP gateways deliver bytes in
+# bursts (an FTDI's latency timer holds them up to 16 ms), so a frame is only taken as over after this long.
+FRAME_GAP = 0.05
+
 
 class Wire(Protocol):
     """A byte pipe to the line."""
@@ -166,7 +170,7 @@ class Exchange:
             except NotAnswer as exc:
                 raise _fault(exc, len(frame) + len(extra)) from None
             if extra:
-                raise LineFault("stray", len(frame) + len(extra), f"{len(extra)} more bytes after the reply")
+                raise LineFault("extra", len(frame) + len(extra), f"{len(extra)} more bytes after the reply")
             return words
         except LineFault as exc:
             fault = exc
@@ -188,7 +192,10 @@ class Exchange:
             left = deadline - self.clock()
             if left <= 0:
                 raise LineFault("garbled" if buf else "silent", len(buf), "a partial reply")
-            buf += self._recv(left)
+            chunk = self._recv(min(left, FRAME_GAP) if buf else left)
+            if buf and not chunk:
+                raise LineFault("garbled", len(buf), "a partial reply")    # the line went quiet mid-frame
+            buf += chunk
 
     def _skip_echo(self, req: Request, deadline: float) -> bytes:
         """Read back our own transmission when the adapter echoes it; the bytes after it."""
@@ -214,11 +221,14 @@ class Exchange:
 
     # ----- the line -----------------------------------------------------------------------------------------
     def _quiet(self, fault: LineFault, sent_at: float) -> None:
-        """Let a late reply to the failed try arrive and drop it, and everything else pending."""
-        until = sent_at + self.timeout + (self.late_window if fault.kind == "silent" else 0.0)
-        while (left := until - self.clock()) > 0:
-            self._recv(left)
-        self._take_pending(self.settle)
+        """Drop what is left of a failed try: a garbled or repeated reply is over once the line is quiet; after
+        another request's reply, the real one may still come (until the timeout); after silence, a late reply
+        (until the late-reply window has passed)."""
+        if fault.kind in ("silent", "stray"):
+            until = sent_at + self.timeout + (self.late_window if fault.kind == "silent" else 0.0)
+            while (left := until - self.clock()) > 0:
+                self._recv(left)
+        self._take_pending(max(self.settle, FRAME_GAP))
 
     def _take_pending(self, quiet: float, until: int = 0) -> bytes:
         """Bytes already waiting, and those that follow within `quiet` s of each other (or until `until` came)."""
