@@ -122,7 +122,7 @@ def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | 
     async def main() -> None:
         proxy = None
         server = await _start("tcp://127.0.0.1:0" if faults else port, drives, line or LineSettings(), lock, trace)
-        bound = bound_port(server)
+        bound = bound_port(server) if tcp else 0
         if faults is not None and tcp:
             proxy = FaultProxy(("127.0.0.1", bound), faults)
             try:
