@@ -39,7 +39,7 @@ FAULTS = (*KINDS, "mixed", "mixed+echo")
 RATES = (0.01, 0.05, 0.20)
 OPS = ("get", "set", "backup", "monitor")
 OUTCOMES = ("ok", "error", "WRONG", "traceback", "hang")
-TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.25, 30.0
+TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.15, 30.0     # late replies come after the timeout, within the late window
 VERBOSE = False
 
 

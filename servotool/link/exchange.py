@@ -5,6 +5,10 @@ after it make it suspect. After a fault the line is left to go quiet (a late rep
 that follows a fault is confirmed by a second read that must agree, when a stale reply of the same shape could
 stand in for it; a failed write is read back before it is sent again, and a write that is not safe to repeat (an Fn
 trigger) never is. Every operation has a bounded number of tries.
+
+The promise holds for replies that come within the late window (one timeout) after their timeout; a later reply
+is caught only when it stands in for a read that confirmation checks, so a drive slower than that needs a longer
+--timeout.
 """
 
 from __future__ import annotations

@@ -59,7 +59,7 @@ def exercise(profile, sim_drive, sim: EmbeddedSim, link: ModbusLink, seed: int) 
 @pytest.mark.parametrize("kind", KINDS)
 def test_no_fault_kind_makes_the_link_return_a_wrong_value(line, kind):
     profile, sim_drive, sim = line
-    sim.proxy.set_faults(LineFaults({kind: 0.3}, seed=7, late_s=0.25))
+    sim.proxy.set_faults(LineFaults({kind: 0.3}, seed=7, late_s=0.15))
     link = ModbusLink(LinkSettings(sim.port, timeout=0.1, retries=2))
     try:
         done, wrong = exercise(profile, sim_drive, sim, link, seed=3)
@@ -72,7 +72,7 @@ def test_no_fault_kind_makes_the_link_return_a_wrong_value(line, kind):
 
 def test_an_echoing_adapter_on_a_bad_line_is_found_and_never_taken_for_the_drive(line):
     profile, sim_drive, sim = line
-    sim.proxy.set_faults(LineFaults(parse_rates("mixed:20%"), seed=11, late_s=0.25, echo=True))
+    sim.proxy.set_faults(LineFaults(parse_rates("mixed:20%"), seed=11, late_s=0.15, echo=True))
     link = ModbusLink(LinkSettings(sim.port, timeout=0.1, retries=2, echo=None))
     try:
         done, wrong = exercise(profile, sim_drive, sim, link, seed=5)
