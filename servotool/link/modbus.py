@@ -8,8 +8,8 @@ from __future__ import annotations
 import logging
 import select
 import socket
-from typing import TYPE_CHECKING
 
+import serial
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.framer import FramerRTU
@@ -23,9 +23,6 @@ from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, Request
 
 # pymodbus logs every dropped frame at error level; our own errors say what happened.
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
-
-if TYPE_CHECKING:     # pyserial's platform module (serialposix imports fcntl) loads only with a real port
-    import serial
 
 
 class ModbusLink:
@@ -96,7 +93,7 @@ class _SocketWire:
 
 
 class _SerialWire:
-    def __init__(self, port: serial.SerialBase) -> None:   # pyserial, opened by pymodbus
+    def __init__(self, port: serial.SerialBase) -> None:
         self.port = port
 
     def send(self, data: bytes) -> None:
