@@ -66,9 +66,12 @@ def test_jog_and_tune_keep_their_writes_out_of_eeprom_on_a_drive_that_stores_eve
 def test_tune_says_when_its_result_is_in_ram_only_and_save_stores_it(cli):
     cli("sim", "config", "--profile", "is620p", "--load-ratio", "4")
     cli("--port", "sim", "--profile", "is620p", "param", "set", "H02-00=0", "H0C-09=1", "H17-00=1", "H0C-13=0")
-    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes")
+    # A moderate speed: at full automatic speed these drives' loops overshoot near the 2 rev travel limit now and
+    # then (issue 16); this test is about where the result is stored, not about that margin.
+    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--max-speed", "600")
     assert r.code == 0 and "not saved to EEPROM" in r.err, r.err
-    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--save", "--json")
+    r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--save", "--json",
+            "--max-speed", "600")
     assert r.code == 0 and r.json()["persisted"] is True, r.err
     ratio = get(cli, "is620p", "H08-15")["H08-15"]
     cli("sim", "reset", "--profile", "is620p", "--power-cycle")

@@ -156,12 +156,14 @@ def test_a_drive_without_an_inertia_ratio_parameter_is_identified_and_nothing_is
     method still measures the load, tracking travel from the speed, and reports it without writing."""
     cli("sim", "config", "--profile", "sdc", "--load-ratio", "5")
     assert cli("--port", "sim", "--profile", "sdc", "param", "set", "PN4=3").code == 0      # the JOG route's setup
-    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--json")
+    # A moderate speed: at full automatic speed these drives' loops overshoot near the 2 rev travel limit now and
+    # then (issue 16); this test is about a drive without an inertia-ratio parameter, not about that margin.
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--json", "--max-speed", "600")
     assert r.code == 0, r.err
     res = r.json()
     assert res["ratio"] == pytest.approx(5.0, rel=0.05) and res["travel_rev"] <= 2.0
     assert res["old_ratio"] is None and res["parameter"] is None and res["written"] is False
-    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes")
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--max-speed", "600")
     assert r.code == 0 and "not a drive parameter" in r.out and "nothing to write" in r.out
 
 
