@@ -157,17 +157,19 @@ class Drive:
             raise UsageError(f"{entry.code} ({entry.name}) is read-only")
         return entry, parse_value(entry, value, raw=raw, current=current)
 
-    def write_raw(self, entry: Entry, raw: int) -> None:
-        """Send one entry's value (FC06 for one register, FC16 for several, as the profile allows)."""
+    def write_raw(self, entry: Entry, raw: int, *, idempotent: bool = True) -> None:
+        """Send one entry's value (FC06 for one register, FC16 for several, as the profile allows). idempotent=False
+        (an Fn trigger) tells the link never to send it twice."""
         words = raw_to_words(entry, raw)
+        once = {} if idempotent else {"idempotent": False}
         try:
             if len(words) == 1:
-                self.link.write(self.unit, entry.address, words, multiple=False)
+                self.link.write(self.unit, entry.address, words, multiple=False, **once)
             elif self.profile.limits.write_multiple:
-                self.link.write(self.unit, entry.address, words, multiple=True)
+                self.link.write(self.unit, entry.address, words, multiple=True, **once)
             else:
                 for i, w in enumerate(words):
-                    self.link.write(self.unit, entry.address + i, [w], multiple=False)
+                    self.link.write(self.unit, entry.address + i, [w], multiple=False, **once)
         except DeviceError as exc:
             raise _prefixed(exc, f"writing {entry.code}") from None
 
@@ -207,4 +209,4 @@ class Drive:
     def trigger(self, role: str, feature: str, value: int | None = None) -> None:
         """Run an Fn function by role (writes its trigger value unless one is given)."""
         entry = self.profile.need_role(role, feature)
-        self.write_raw(entry, entry.trigger if value is None else value)
+        self.write_raw(entry, entry.trigger if value is None else value, idempotent=False)

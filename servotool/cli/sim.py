@@ -42,8 +42,15 @@ def serve(
     stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's)."),
     line_baud: int = typer.Option(None, "--line-baud", help="Delay each answer by its wire time at this baud "
                                   "(overrides 'sim config --line-baud'; 0 = off)."),
+    faults: str = typer.Option(None, "--faults", help="A bad line (tcp:// ports): KIND:RATE[,...] of crc, drop, "
+                               "late, duplicate, truncate, garbage or mixed, RATE as 0.05 or 5%, per reply."),
+    fault_seed: int = typer.Option(1, "--fault-seed", help="Seed of the line's faults (same seed, same faults)."),
+    late_ms: float = typer.Option(500.0, "--late-ms", help="How late a 'late' reply comes, ms."),
+    response_delay: float = typer.Option(0.0, "--response-delay", help="Delay every reply by this many ms."),
+    echo: bool = typer.Option(False, "--echo", help="Echo each request back to the master, as some adapters do."),
 ) -> None:
     """Serve simulated drives in the foreground (Ctrl-C stops) for any Modbus RTU master."""
+    from servotool.sim.faults import LineFaults, parse_rates
     from servotool.sim.server import serve_units
 
     p = _profile(ctx, profile)
@@ -61,9 +68,13 @@ def serve(
             if codes:
                 info(f"servotool: unit {u} powered on; now in effect: {', '.join(codes)}")
 
+    bad_line = None
+    if faults or response_delay or echo:
+        bad_line = LineFaults(parse_rates(faults or ""), seed=fault_seed, late_s=late_ms / 1000.0,
+                              response_delay_s=response_delay / 1000.0, echo=echo)
     try:
         serve_units(port, p, ids, line, line_baud=line_baud, trace=trace_frame if Verbosity.level > 0 else None,
-                    ready=ready)
+                    ready=ready, faults=bad_line)
     except KeyboardInterrupt:
         info("servotool: simulator stopped")
 

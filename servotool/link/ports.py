@@ -22,13 +22,18 @@ class LinkSettings:
     line: LineSettings = field(default_factory=LineSettings)
     timeout: float = 1.0
     retries: int = 2
+    echo: bool | None = False     # the adapter echoes what it sends (None: find out from the first replies)
 
 
 class Link(Protocol):
     """What drive operations need from a Modbus master."""
 
     def read(self, unit: int, address: int, count: int) -> list[int]: ...
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None: ...
+    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True,
+              idempotent: bool = True) -> None:
+        """Write registers. idempotent=False (an Fn trigger) means a write whose fate is unknown is never sent
+        again; an idempotent one may be."""
+        ...
     def close(self) -> None: ...
 
 

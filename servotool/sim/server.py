@@ -21,6 +21,7 @@ from servotool.errors import DeviceError
 from servotool.link.ports import parse_tcp
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
+from servotool.sim.faults import FaultProxy, LineFaults
 from servotool.sim.firmware import build_drive
 from servotool.sim.registers import SimRefusal
 from servotool.sim.virtual import READ_CODES, wire_time
@@ -112,20 +113,30 @@ def bound_port(server: ModbusTcpServer) -> int:
 
 def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | None = None,
                   trace: Callable[[bool, bytes], None] | None = None,
-                  ready: Callable[[str], None] | None = None) -> None:
-    """Serve in the foreground until interrupted."""
+                  ready: Callable[[str], None] | None = None, faults: LineFaults | None = None) -> None:
+    """Serve in the foreground until interrupted; with faults, behind a bad line on the tcp:// port."""
     lock = threading.Lock()
+    tcp = parse_tcp(port)
+    if faults is not None and not tcp:
+        raise DeviceError(f"cannot serve on {port}: line faults need a tcp://HOST:PORT port")
 
     async def main() -> None:
-        server = await _start(port, drives, line or LineSettings(), lock, trace)
-        where = port
-        if parse_tcp(port) and port.endswith(":0"):
-            where = f"{port[:-2]}:{bound_port(server)}"
+        proxy = None
+        server = await _start("tcp://127.0.0.1:0" if faults else port, drives, line or LineSettings(), lock, trace)
+        bound = bound_port(server) if tcp else 0
+        if faults is not None and tcp:
+            proxy = FaultProxy(("127.0.0.1", bound), faults)
+            try:
+                bound = await proxy.start(*tcp)
+            except OSError as exc:
+                raise DeviceError(f"cannot serve on {port}: {exc}") from None
         if ready:
-            ready(where)
+            ready(f"{port[:-2]}:{bound}" if tcp and port.endswith(":0") else port)
         try:
             await server.serving
         finally:
+            if proxy:
+                await proxy.close()
             await server.shutdown()
 
     asyncio.run(main())
@@ -133,34 +144,45 @@ def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | 
 
 def serve_units(port: str, profile: Profile, units: list[int], line: LineSettings, *, line_baud: int | None = None,
                 trace: Callable[[bool, bytes], None] | None = None,
-                ready: Callable[[str, dict[int, list[str]]], None] | None = None) -> None:
+                ready: Callable[[str, dict[int, list[str]]], None] | None = None,
+                faults: LineFaults | None = None) -> None:
     """Serve simulated drives of one profile in the foreground until interrupted. Starting them switches them on:
     ready(where, took) gets, by unit, the codes whose pending power-cycle change took effect. line_baud overrides
-    the drives' own line emulation for this run."""
+    the drives' own line emulation for this run; faults put them behind a bad line."""
     drives = [build_drive(profile, u) for u in units]
     took = {d.unit: d.power_cycle() for d in drives}
     if line_baud is not None:
         for d in drives:
             d.settings["line_baud"] = line_baud
-    serve_forever(port, drives, line, trace, ready=(lambda where: ready(where, took)) if ready else None)
+    serve_forever(port, drives, line, trace, ready=(lambda where: ready(where, took)) if ready else None,
+                  faults=faults)
 
 
 class EmbeddedSim:
-    """Simulated drives served on a loopback TCP port from a background thread (`--port sim`)."""
+    """Simulated drives served on a loopback TCP port from a background thread (`--port sim`); with faults, the
+    port is a bad line in front of them (`self.proxy` changes what it does)."""
 
-    def __init__(self, drives: list[SimulatedDrive]) -> None:
+    def __init__(self, drives: list[SimulatedDrive], faults: LineFaults | None = None) -> None:
         self.drives = drives
         self.lock = threading.Lock()
         self._loop = asyncio.new_event_loop()
         self._server: ModbusTcpServer | None = None
+        self.proxy: FaultProxy | None = None
         self._thread = threading.Thread(target=self._loop.run_forever, name="servotool-sim", daemon=True)
         self._thread.start()
         future = asyncio.run_coroutine_threadsafe(
             _start("tcp://127.0.0.1:0", drives, LineSettings(), self.lock, None), self._loop)
         self._server = future.result(timeout=10)
-        self.port = f"tcp://127.0.0.1:{bound_port(self._server)}"
+        port = bound_port(self._server)
+        if faults is not None:
+            self.proxy = FaultProxy(("127.0.0.1", port), faults)
+            port = asyncio.run_coroutine_threadsafe(self.proxy.start(), self._loop).result(timeout=10)
+        self.port = f"tcp://127.0.0.1:{port}"
 
     def close(self) -> None:
+        if self.proxy is not None:
+            asyncio.run_coroutine_threadsafe(self.proxy.close(), self._loop).result(timeout=5)
+            self.proxy = None
         if self._server is not None:
             asyncio.run_coroutine_threadsafe(self._server.shutdown(), self._loop).result(timeout=5)
             self._server = None

@@ -50,7 +50,8 @@ class VirtualLink:
         except SimRefusal as exc:
             raise ModbusException(exc.code, what) from None
 
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None:
+    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True,
+              idempotent: bool = True) -> None:
         what = f"write {len(values)} register(s) at {address} to unit {unit}"
         self.requests += 1
         fc = 16 if multiple or len(values) > 1 else 6

@@ -1,0 +1,155 @@
+"""RTU has no transaction id: the link must prove a reply answers its request. A scripted line on virtual time
+plays late, repeated and lost replies exactly where they hurt."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import pytest
+
+from servotool.errors import DeviceError
+from servotool.link.exchange import Exchange
+from servotool.link.rtu import with_crc
+
+TIMEOUT = 0.1
+REPLY_S = 0.001
+
+
+class ScriptedLine:
+    """A Wire to one drive (unit 1) on virtual time; each request is answered as the next script step says:
+    ok, drop (acted on, no reply), lost (never reached the drive), dup (answered twice), late:S (answered S s
+    after the request)."""
+
+    def __init__(self, regs: dict[int, int], script: list[str], then: str = "ok") -> None:
+        self.regs, self.script, self.then = dict(regs), deque(script), then
+        self.now = 0.0
+        self.sent: list[bytes] = []
+        self._due: list[tuple[float, bytes]] = []
+
+    def clock(self) -> float:
+        return self.now
+
+    def writes(self) -> int:
+        return sum(1 for f in self.sent if f[1] in (6, 16))
+
+    def send(self, frame: bytes) -> None:
+        self.sent.append(frame)
+        step = self.script.popleft() if self.script else self.then
+        if step == "lost":
+            return
+        reply = self._serve(frame)
+        if step == "drop":
+            return
+        delay = float(step.partition(":")[2]) if step.startswith("late") else REPLY_S
+        self._due += [(self.now + delay, reply)] * (2 if step == "dup" else 1)
+
+    def inject(self, delay: float, data: bytes) -> None:
+        """Bytes that arrive on the line `delay` s from now, whatever is asked."""
+        self._due.append((self.now + delay, data))
+
+    def recv(self, timeout: float) -> bytes:
+        arrivals = [t for t, _ in self._due if t <= self.now + timeout]
+        if not arrivals:
+            self.now += timeout
+            return b""
+        self.now = max(self.now, min(arrivals))
+        data = b"".join(b for t, b in self._due if t <= self.now)
+        self._due = [(t, b) for t, b in self._due if t > self.now]
+        return data
+
+    def _serve(self, frame: bytes) -> bytes:
+        fc, address = frame[1], int.from_bytes(frame[2:4], "big")
+        if fc == 3:
+            count = int.from_bytes(frame[4:6], "big")
+            data = b"".join(self.regs.get(a, 0).to_bytes(2, "big") for a in range(address, address + count))
+            return with_crc(bytes([1, 3, len(data)]) + data)
+        if fc == 6:
+            self.regs[address] = int.from_bytes(frame[4:6], "big")
+            return frame
+        count = int.from_bytes(frame[4:6], "big")
+        for i in range(count):
+            self.regs[address + i] = int.from_bytes(frame[7 + 2 * i: 9 + 2 * i], "big")
+        return with_crc(frame[:6])
+
+
+def exchange(line: ScriptedLine, retries: int = 2) -> Exchange:
+    return Exchange(line, timeout=TIMEOUT, retries=retries, clock=line.clock)
+
+
+def test_a_late_reply_is_not_taken_for_the_answer_to_the_next_read():
+    # The first read's reply comes after its timeout and its late window, while the second read is out; both
+    # read one register, so only the link's confirmation can tell the replies apart.
+    line = ScriptedLine({10: 111, 20: 222}, ["late:0.3", "late:0.08"])
+    ex = exchange(line, retries=0)
+    with pytest.raises(DeviceError, match=r"no response within 0\.1 s after 1 try"):
+        ex.read(1, 10, 1)
+    assert ex.read(1, 20, 1) == [222]
+    assert ex.read(1, 10, 1) == [111]
+
+
+def test_a_late_reply_within_the_late_window_is_flushed():
+    line = ScriptedLine({10: 111, 20: 222}, ["late:0.15"])
+    ex = exchange(line)
+    assert ex.read(1, 10, 1) == [111]
+    assert ex.read(1, 20, 1) == [222]
+    assert ex.read(1, 10, 1) == [111]
+
+
+def test_a_repeated_reply_is_not_taken_for_the_answer_to_the_next_read():
+    line = ScriptedLine({10: 111, 20: 222}, ["dup", "dup", "ok", "dup"])
+    ex = exchange(line)
+    assert ex.read(1, 10, 1) == [111]
+    assert ex.read(1, 20, 1) == [222]
+    assert ex.read(1, 10, 1) == [111]
+
+
+def test_a_write_whose_acknowledgement_is_lost_is_read_back_not_sent_again():
+    line = ScriptedLine({30: 0}, ["drop"])
+    exchange(line).write(1, 30, [5], multiple=False)
+    assert line.regs[30] == 5 and line.writes() == 1
+
+
+def test_a_write_the_drive_never_got_is_sent_again_after_the_read_back():
+    line = ScriptedLine({30: 0, 31: 0}, ["lost"])
+    exchange(line).write(1, 30, [5, 6])
+    assert [line.regs[30], line.regs[31]] == [5, 6]
+    assert line.writes() == 2
+
+
+def test_a_trigger_whose_acknowledgement_is_lost_is_never_sent_again():
+    line = ScriptedLine({40: 0}, ["drop"])
+    with pytest.raises(DeviceError, match="may or may not have run; not sent again"):
+        exchange(line).write(1, 40, [1], multiple=False, idempotent=False)
+    assert line.writes() == 1
+
+
+def test_an_acknowledgement_of_another_value_is_not_accepted():
+    line = ScriptedLine({30: 0}, ["lost"])
+    line.inject(0.01, with_crc(bytes([1, 6, 0, 30, 0, 7])))     # a stray acknowledgement of another write
+    with pytest.raises(DeviceError, match="no reply that answers it after 1 try, last an acknowledgement of 7"):
+        exchange(line, retries=0).write(1, 30, [9], multiple=False)
+
+
+@pytest.mark.parametrize("op", ["read", "write"])
+def test_tries_are_bounded(op):
+    line = ScriptedLine({10: 1}, [], then="lost")
+    ex = exchange(line, retries=2)
+    with pytest.raises(DeviceError, match=r"no response within 0\.1 s after 3 tries"):
+        ex.read(1, 10, 1) if op == "read" else ex.write(1, 10, [2])
+    assert len(line.sent) == 3 and line.writes() == (1 if op == "write" else 0)    # a write, then read-backs
+
+
+def test_an_echoing_adapter_is_recognised_and_its_echo_never_taken_for_a_reply():
+    class EchoLine(ScriptedLine):
+        def send(self, frame: bytes) -> None:
+            self.inject(0.0, frame)
+            super().send(frame)
+
+    line = EchoLine({10: 111}, [])
+    ex = Exchange(line, timeout=TIMEOUT, retries=0, echo=None, clock=line.clock)
+    assert ex.read(1, 10, 1) == [111]
+    ex.write(1, 10, [5], multiple=False)
+    assert line.regs[10] == 5 and ex.echo is True
+    line.script.append("lost")
+    with pytest.raises(DeviceError, match="no response"):    # the echo alone is no acknowledgement
+        ex.write(1, 10, [6], multiple=False)
