@@ -58,7 +58,7 @@ def test_alarm_in_the_middle_of_the_motion_stops_it_and_refuses(sim_dir):
         _run_host(ident, timing)
     assert "t" in tripped                                   # the alarm came during the motion
     trace_t0 = timing.now() - ident.trace.t[-1]
-    # the wizard gave up within the move the alarm ended (no further moves were started) ...
+    # the identification gave up within the move the alarm ended (no further moves were started) ...
     assert ident.trace.t[-1] + trace_t0 - tripped["t"] < 1.0
     late = [abs(v) for t, v in zip(ident.trace.t, ident.trace.speed, strict=True) if t + trace_t0 > tripped["t"] + 0.2]
     assert max(late, default=0.0) < 5.0                     # ... and nothing moved once the drive had stopped
@@ -81,7 +81,7 @@ def test_travel_check_stops_an_axis_that_runs_away(sim_dir):
         _run_host(identify.Identifier(d, timing), timing)
     plant = sim_drive.firmware.plant
     assert sim_drive.firmware.mode == "off" and not plant.servo_on
-    assert sim_drive.firmware.plant.alarm is None            # stopped by the wizard, not by a drive alarm
+    assert sim_drive.firmware.plant.alarm is None            # stopped by the identification, not by a drive alarm
 
 
 def test_an_active_alarm_refuses_before_any_motion(sim_dir):
