@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from servotool.drive import Drive, Reading, WriteResult
+from servotool.drive import Drive, WriteResult
 from servotool.errors import UsageError
 from servotool.model.codec import split_field
 from servotool.model.profile import Entry, Profile
@@ -101,6 +101,3 @@ def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
             results.extend(drive.write_block_verified([(e, new, old) for e, old, new in run]))
     return results
 
-
-def read_all(drive: Drive, entries: list[Entry]) -> list[Reading]:
-    return drive.read_entries(entries)
