@@ -18,15 +18,20 @@ from servotool.ops.trace import TRIGGER_FORMS, Capture, Tracer, Window, parse_tr
 from servotool.ops.trace_file import capture_json, capture_table, check_writable, trace_csv, write_trace
 
 
-def _about(res: Resolved, tracer: Tracer, expr: str | None, window: Window) -> list[str]:
+def about_lines(res: Resolved, detail: str) -> list[str]:
+    """The CSV header's '# ' lines: the drive, the line settings, what was captured, when."""
     s, p = res.settings, res.profile
+    return [f"servotool trace: {p.model} (profile {p.id}) unit {res.unit}",
+            f"line: {s.port}, {s.line.describe()}, timeout {s.timeout:g} s", detail,
+            f"started: {datetime.now(UTC).isoformat(timespec='seconds')}"]
+
+
+def _about(res: Resolved, tracer: Tracer, expr: str | None, window: Window) -> list[str]:
     size = f"{window.samples} samples" if window.samples is not None else f"{window.duration_s:g} s"
     trig = f"{tracer.trigger.describe()} ({expr}), {window.pre_share * 100:g} % before it" \
         if tracer.trigger is not None else "none (free run)"
-    return [f"servotool trace: {p.model} (profile {p.id}) unit {res.unit}",
-            f"line: {s.port}, {s.line.describe()}, timeout {s.timeout:g} s",
-            f"trigger: {trig}; capture {size}; {tracer.sampler.requests_per_sample} request(s) per sample",
-            f"started: {datetime.now(UTC).isoformat(timespec='seconds')}"]
+    return about_lines(res, f"trigger: {trig}; capture {size}; {tracer.sampler.requests_per_sample} request(s) "
+                            "per sample")
 
 
 def trace(

@@ -95,6 +95,21 @@ def _bit_number(entry: Entry, name: str, expr: str) -> int:
     return bit
 
 
+MOTION_ROLES = ("speed_feedback", "speed_command", "torque_feedback", "position_feedback", "following_error")
+
+
+def motion_entries(profile: Profile) -> list[Entry]:
+    """What a motion's own trace records: the profile's speed, torque and position monitors, by role."""
+    found: list[Entry] = []
+    for role in MOTION_ROLES:
+        e = profile.role(role)
+        if e is not None and e.readable and e not in found:
+            found.append(e)
+    if not found:
+        raise UsageError(f"profile {profile.id} maps no speed, torque or position monitor to trace")
+    return found
+
+
 @dataclass(frozen=True)
 class Window:
     """How much a capture holds: a sample count or a duration, pre_share of it from before the trigger."""

@@ -37,8 +37,13 @@ def trace_csv(captures: list[Capture], entries: list[Entry], about: list[str]) -
     for cap in captures:
         buf.write(f"# capture {cap.index}: {cap.timing.describe()}, {cap.pre_samples} before the trigger\n")
         for i, t in enumerate(cap.t):
-            w.writerow([cap.index, f"{t:.5f}", *[f"{cap.values[e.code][i]:g}" for e in entries]])
+            w.writerow([cap.index, f"{t:.5f}", *[_value(cap.values[e.code][i]) for e in entries]])
     return buf.getvalue()
+
+
+def _value(v: float) -> str:
+    """Exact for counts (a 32-bit position must not lose digits), short for scaled values."""
+    return str(int(v)) if v.is_integer() and abs(v) < 2**53 else f"{v:.10g}"
 
 
 def write_trace(path: Path, captures: list[Capture], entries: list[Entry], about: list[str],
