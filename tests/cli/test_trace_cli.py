@@ -77,3 +77,10 @@ def test_jog_trace_records_its_own_motion_on_the_same_port(cli, tmp_path):
     assert len(table.t) > 20 and json.loads(r.out)["peak_speed_rpm"] > 250
     position = next(s for s in table.series if s.name == "Un012")
     assert position.values[-1] > position.values[0]                        # exact counts, moving forward
+
+
+def test_tune_report_is_refused_before_anything_moves_where_it_cannot_be_written(cli, tmp_path):
+    """(The report itself is drawn by tests/report on virtual time and by a plan's tune step.)"""
+    (tmp_path / "file").write_text("")
+    r = cli(*NO_PORT, "tune", "inertia", "--report", str(tmp_path / "file"))
+    assert r.code == 2 and "it is a file" in r.err
