@@ -84,3 +84,26 @@ def test_tune_report_is_refused_before_anything_moves_where_it_cannot_be_written
     (tmp_path / "file").write_text("")
     r = cli(*NO_PORT, "tune", "inertia", "--report", str(tmp_path / "file"))
     assert r.code == 2 and "it is a file" in r.err
+
+
+def test_the_monitor_chart_is_readable_at_80_columns_with_every_entry_in_a_legend(sim_dir):
+    from collections import deque
+
+    from rich.console import Console
+
+    from servotool.cli.monitor import monitor_chart
+    from servotool.config import ConnectOptions, resolve
+    from servotool.ops.monitor import Monitor
+    from servotool.session import open_drives
+
+    with open_drives(resolve(ConnectOptions(port="sim", profile="dsx7e")), notice=lambda _m: None) as (d,):
+        mon = Monitor(d, [d.profile.entry(c) for c in ("Un000", "Un001", "Un002")])
+        history = deque(mon.run(1000, None, samples=30))
+    console = Console(width=80, record=True, force_terminal=True, color_system=None)
+    console.print(monitor_chart(mon, history, 80, 30))
+    lines = console.export_text().splitlines()
+    assert max(len(line) for line in lines) <= 80
+    text = "\n".join(lines)
+    for label in ("Un000 [rpm]", "Un001 [rpm]", "Un002 [%]"):
+        assert label in text
+    assert "30 samples" in lines[0] and "not drawn" not in text           # title; two units fit in 30 rows
