@@ -102,6 +102,15 @@ class TimeTable:
     about: list[str] = field(default_factory=list)
     capture: list[int] = field(default_factory=list)
 
+    def segments(self) -> list[tuple[int, list[int]]]:
+        """(capture number, row indices) of each capture; one segment numbered 0 for a file without captures."""
+        if not self.capture:
+            return [(0, list(range(len(self.t))))]
+        found: dict[int, list[int]] = {}
+        for i, c in enumerate(self.capture):
+            found.setdefault(c, []).append(i)
+        return list(found.items())
+
     def select(self, names: list[str]) -> TimeTable:
         """Only the named series (by code or full label); UsageError for a name the file lacks."""
         if not names:

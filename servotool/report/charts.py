@@ -48,12 +48,11 @@ def table_figure(table: TimeTable, title: str = "") -> Figure:
     """Any trace or monitor CSV: one panel per unit, one labelled line per column, trigger at t = 0 marked."""
     groups = by_unit(table.series)
     fig, axes = new_figure(len(groups))
-    captures = sorted(set(table.capture)) or [0]
+    segments = table.segments()
     for ax, group in zip(axes, groups, strict=True):
         for s in group:
-            for c in captures:
-                idx = [i for i, k in enumerate(table.capture) if k == c] if table.capture else range(len(table.t))
-                label = s.label + (f" #{c}" if len(captures) > 1 else "")
+            for c, idx in segments:
+                label = s.label + (f" #{c}" if len(segments) > 1 else "")
                 ax.plot([table.t[i] for i in idx], [s.values[i] for i in idx], label=label, linewidth=1.2)
         ax.set_ylabel(group[0].unit or "value")
         ax.grid(True, alpha=0.3)

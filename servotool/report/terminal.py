@@ -23,13 +23,22 @@ def by_unit(series: list[Series]) -> list[list[Series]]:
     return list(groups.values())
 
 
+def panel_rows(labels: int) -> int:
+    """Rows a panel needs for its legend box (plotext leaves out a legend that does not fit) and its axes."""
+    return max(MIN_PANEL_ROWS, 2 * labels + 6)
+
+
 def terminal_chart(table: TimeTable, width: int, height: int, title: str = "", color: bool = True) -> TerminalChart:
     """Panels stacked to fit width x height cells; the panels that do not fit are named in left_out."""
     import plotext as plt
 
     groups = by_unit(table.series)
-    fit = max(1, min(len(groups), height // MIN_PANEL_ROWS))
+    segments = table.segments()
+    fit = len(groups)
+    while fit > 1 and height // fit < max(panel_rows(len(g) * len(segments)) for g in groups[:fit]):
+        fit -= 1
     shown, rest = groups[:fit], groups[fit:]
+    plt.terminal.limit(False, False)     # the caller knows the room (rich's console, a test); plotext need not guess
     fig = plt.figure
     fig.clear()
     fig.plot_size(max(40, width), max(MIN_PANEL_ROWS, height))
@@ -39,9 +48,11 @@ def terminal_chart(table: TimeTable, width: int, height: int, title: str = "", c
         ax = fig.subplot(row, 1) if len(shown) > 1 else fig
         ax.theme("simple" if color else "colorless")
         for s in group:
-            pairs = [(t, v) for t, v in zip(table.t, s.values, strict=True) if v == v]   # NaN: no reading
-            if pairs:
-                ax.draw(ax.signal([p[0] for p in pairs], [p[1] for p in pairs]).label(s.label).lines())
+            for c, idx in segments:
+                pairs = [(table.t[i], s.values[i]) for i in idx if s.values[i] == s.values[i]]   # NaN: no reading
+                if pairs:
+                    label = s.label + (f" #{c}" if len(segments) > 1 else "")
+                    ax.draw(ax.signal([p[0] for p in pairs], [p[1] for p in pairs]).label(label).lines())
         ax.label(group[0].unit or "value", "y")
         if row == 1 and title:
             ax.title(title)

@@ -136,3 +136,12 @@ def test_a_report_folder_that_is_a_file_is_refused(tmp_path):
     (tmp_path / "f").write_text("")
     with pytest.raises(UsageError, match="it is a file"):
         tune_report.check_folder(tmp_path / "f")
+
+
+def test_each_capture_of_a_repeated_trace_is_its_own_line():
+    table = _table()
+    table.capture = [1] * 50 + [2] * 50
+    lines = lines_of(table_figure(table))
+    assert lines["Un002 [%] #1"][1] == table.series[2].values[:50]
+    assert lines["Un002 [%] #2"][1] == table.series[2].values[50:]
+    assert "Un000 [rpm] #2" in terminal_chart(table, 100, 30, color=False).text
