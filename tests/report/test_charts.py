@@ -71,6 +71,8 @@ def test_reading_a_monitor_and_a_tune_csv(tmp_path):
     table = read_table(tune)
     assert [s.label for s in table.series] == ["speed [rpm]", "torque [%]", "position [rev]"]
     assert math.isnan(table.series[2].values[0])
+    position = lines_of(table_figure(table))["position [rev]"]
+    assert position == ([0.01], [0.5])                          # drawn where it was read, no NaN gap
     with pytest.raises(UsageError, match="no column Un999"):
         table.select(["Un999"])
     (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
