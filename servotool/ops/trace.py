@@ -321,10 +321,3 @@ class Tracer:
                 return
             if self.stop is not None and self.stop():
                 return
-
-    @property
-    def timing(self) -> Timing:
-        """Over the whole run (armed and capturing)."""
-        elapsed = self.clock.now() - self.sampler.t0
-        rate = (self.samples - 1) / elapsed if self.samples > 1 and elapsed > 0 else None
-        return Timing(self.samples, rate, None, None)
