@@ -27,6 +27,7 @@ class DeviceError(ServoError):
     """The link or the drive failed: timeout, CRC error, Modbus exception."""
 
     exit_code = 1
+    fault = ""      # for a failed exchange: silent, garbled, stray or extra (what the last try met)
 
 
 class ModbusException(DeviceError):
