@@ -114,9 +114,14 @@ class Resolved:
         return self.settings.port == SIM_PORT
 
 
+def effective(cli: ConnectOptions) -> ConnectOptions:
+    """The options in force: CLI > environment > config file (no profile defaults; nothing checked)."""
+    return merge(cli, _from_env(), _from_config())
+
+
 def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
     """Apply CLI > environment > config file > profile defaults, and check every value."""
-    opts = merge(cli, _from_env(), _from_config())
+    opts = effective(cli)
     port = opts.port
     if port is None:
         if need_port:
@@ -150,13 +155,18 @@ def check_unit(unit: int) -> int:
 
 def line_format(opts: ConnectOptions, profile: Profile) -> LineSettings:
     """The line settings from the options, defaulting to the profile's factory settings; checked."""
-    baud = opts.baud if opts.baud is not None else profile.line.baud
-    stopbits = opts.stopbits if opts.stopbits is not None else profile.line.stopbits
-    parity = PARITIES.get((opts.parity or profile.line.parity).upper())
+    return line_settings(opts, profile.line)
+
+
+def line_settings(opts: ConnectOptions, defaults: LineSettings) -> LineSettings:
+    """The line settings from the options, defaulting to the given ones; checked."""
+    baud = opts.baud if opts.baud is not None else defaults.baud
+    stopbits = opts.stopbits if opts.stopbits is not None else defaults.stopbits
+    parity = PARITIES.get((opts.parity or defaults.parity).upper())
     if parity is None:
         raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
     if not 300 <= baud <= 4_000_000:
         raise UsageError(f"bad baud rate {baud}: must be 300..4000000")
     if stopbits not in (1, 2):
         raise UsageError(f"bad stop bits {stopbits}: must be 1 or 2")
-    return LineSettings(baud, parity, stopbits, profile.line.bytesize)
+    return LineSettings(baud, parity, stopbits, defaults.bytesize)

@@ -8,7 +8,7 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, backup, jog, monitor, param, profiles, run, sim, tune
+from servotool.cli import alarm, backup, doctor, jog, monitor, param, profiles, run, scan, sim, tune
 from servotool.cli.common import State, state
 from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, err
@@ -32,6 +32,8 @@ app.add_typer(tune.app, name="tune")
 app.command("monitor")(monitor.monitor)
 app.command("jog")(jog.jog)
 app.command("run")(run.run)
+app.command("scan")(scan.scan)
+app.command("doctor")(doctor.doctor)
 
 
 def _version(value: bool) -> None:

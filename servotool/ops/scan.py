@@ -8,11 +8,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from servotool.config import PARITIES, SIM_PORT, ConnectOptions, effective
 from servotool.errors import DeviceError, ModbusException, UsageError
 from servotool.link.modbus import ModbusLink
 from servotool.link.ports import Link, LinkSettings, parse_tcp
+from servotool.model.loader import load_profile
 from servotool.model.profile import LineSettings, Profile
-from servotool.ops.identity import MATCH, Verdict, identify
+from servotool.ops.identity import MATCH, Verdict, identify, shipped_profiles
 
 SCAN_TIMEOUT = 0.1                        # s per silent id: a drive answers a 1-register read within ~20 ms at 9600
 COMMON_BAUDS = (9600, 19200, 38400, 57600, 115200)
@@ -163,3 +165,44 @@ def _probe(link: Link, unit: int, result: ScanResult, line: LineSettings | None)
             result.noise.append((line, unit, exc.fault))
         return False
     return True
+
+
+@dataclass(frozen=True)
+class ScanPlan:
+    """What a scan will do, from the options."""
+
+    port: str
+    units: list[int]
+    settings: list[LineSettings]
+    profiles: list[Profile]
+    timeout: float
+
+
+def plan(options: ConnectOptions, units: str | None = None, bauds: list[int] | None = None,
+         formats: list[str] | None = None) -> ScanPlan:
+    """The scan the options ask for: the port; ids (all 1..247 by default); line settings narrowed by --baud and
+    --format (or the global --baud/--parity/--stopbits); the candidate profiles (a --profile file joins the
+    shipped ones and goes first); the global --timeout, else a short one."""
+    opts = effective(options)
+    if not opts.port or opts.port == SIM_PORT:
+        raise UsageError("scan needs a real port: --port /dev/ttyUSB0|COM3|tcp://HOST:PORT")
+    profiles = shipped_profiles()
+    if opts.profile:
+        given = load_profile(opts.profile)
+        profiles = [given, *(p for p in profiles if p.id != given.id)]
+    if not formats and (opts.parity or opts.stopbits):
+        parity = PARITIES.get(opts.parity.upper()) if opts.parity else None
+        if opts.parity and parity is None:
+            raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
+        formats = [f"8{p}{s}" for p in ([parity] if parity else ["N", "E", "O"])
+                   for s in ([opts.stopbits] if opts.stopbits else [1, 2])]
+    bauds = bauds or ([opts.baud] if opts.baud else None)
+    for b in bauds or ():
+        if not 300 <= b <= 4_000_000:
+            raise UsageError(f"bad baud rate {b}: must be 300..4000000")
+    timeout = opts.timeout if opts.timeout is not None else SCAN_TIMEOUT
+    if not 0 < timeout <= 60:
+        raise UsageError(f"bad timeout {timeout:g}: a scan takes > 0 and at most 60 s per id")
+    tcp = parse_tcp(opts.port) is not None       # RTU over TCP: line settings do not apply, one pass
+    return ScanPlan(opts.port, parse_units(units) if units else list(range(1, 248)),
+                    [] if tcp else settings_to_try(profiles, bauds, formats), profiles, timeout)
