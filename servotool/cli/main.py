@@ -56,9 +56,9 @@ def main(
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
     profile: str = typer.Option(None, "--profile", "-P", help="Drive profile id or YAML file (default for sim: "
                                 "dsx7e). Env: SERVOTOOL_PROFILE."),
-    no_identity_check: bool = typer.Option(None, "--no-identity-check", help="Do not check that the drive "
-                                           "answering is the profile's before writing. Env: "
-                                           "SERVOTOOL_NO_IDENTITY_CHECK=1.", show_default=False),
+    no_identity_check: bool = typer.Option(None, "--no-identity-check", help="Skip the check, made before "
+                                           "any write, that the drive answering is the one the profile describes. "
+                                           "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.", show_default=False),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Show the version."),

@@ -30,8 +30,8 @@ class Answer:
     verdict: str = UNKNOWN
 
     def describe(self, model: str) -> str:
-        c, where = self.check, self.check.label if not self.check.code else \
-            f"{self.check.code} (address {self.check.address})"
+        c = self.check
+        where = f"{c.code} (address {c.address})" if c.code else c.label
         if self.raw is None:
             got = f"exception {self.exception:02d}" if self.exception is not None else "no answer"
             if self.exception == 2 and not c.absent:
