@@ -158,6 +158,21 @@ def best_fit(link: Link, unit: int, profiles: list[Profile]) -> Verdict | None:
     return ranked[0] if ranked and ranked[0].outcome == MATCH else None
 
 
+def consistent(profile: Profile, answers: tuple[Answer, ...]) -> bool:
+    """Whether answers read for another profile's checks could come from a drive with this profile's map: a value
+    where it maps a readable entry (within the entry's range), exception 02 where it maps nothing."""
+    for a in answers:
+        entry = next((e for e in profile.entries if a.check.address in e.addresses), None)
+        if a.raw is not None:
+            if entry is None or not entry.readable:
+                return False
+            if a.check.words == 1 and entry.words == 1 and not entry.min <= a.raw <= entry.max:
+                return False
+        elif a.exception == 2 and entry is not None:
+            return False
+    return True
+
+
 def confirm(drives: list[Drive], others: list[Profile] | None = None) -> list[Verdict]:
     """Check each drive against its profile before anything is written; IdentityMismatch (naming what answered
     and the shipped profile that fits better) on a contradiction. Returns the verdicts (inconclusive ones are for
@@ -167,7 +182,9 @@ def confirm(drives: list[Drive], others: list[Profile] | None = None) -> list[Ve
         verdict = probe(drive.link, drive.unit, drive.profile)
         if verdict.outcome == MISMATCH:
             pool = others if others is not None else shipped_profiles()
-            better = best_fit(drive.link, drive.unit, [p for p in pool if p.id != drive.profile.id])
+            # Only profiles whose map agrees with what was already answered are worth their own reads.
+            pool = [p for p in pool if p.id != drive.profile.id and consistent(p, verdict.answers)]
+            better = best_fit(drive.link, drive.unit, pool)
             raise IdentityMismatch(drive.profile.id, drive.profile.model, drive.unit,
                                    verdict.reasons(CONTRADICTS),
                                    (better.profile.id, better.profile.model) if better else None)

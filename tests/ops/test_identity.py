@@ -108,3 +108,33 @@ def sd25_data():
 def test_schema_refuses_a_broken_identity_section(sd25_data, change, problem):
     profile, problems = parse_profile({**sd25_data, "identity": change}, "sd25.yaml")
     assert profile is None and len(problems) == 1 and problem in problems[0] and "identity" in problems[0]
+
+
+class _Refusing:
+    """A link whose drive answers every read with one Modbus exception."""
+
+    def __init__(self, code: int) -> None:
+        self.code = code
+
+    def read(self, unit, address, count):
+        from servotool.errors import ModbusException
+
+        raise ModbusException(self.code, f"unit {unit}")
+
+
+def test_an_exception_other_than_02_tells_nothing():
+    from servotool.ops.identity import INCONCLUSIVE, probe, warning_text
+
+    verdict = probe(_Refusing(4), 1, load_profile("sd25"))
+    assert verdict.outcome == INCONCLUSIVE
+    assert "So-00 (address 800): exception 04" in warning_text([verdict])
+    assert probe(_Refusing(2), 1, load_profile("sd25")).outcome == MISMATCH
+
+
+def test_answers_for_one_profile_rule_out_maps_that_cannot_give_them(bus):
+    from servotool.ops.identity import consistent, probe
+
+    _sim, link = bus
+    answers = probe(link, IDS.index("sd25") + 1, load_profile("sdc")).answers     # PN1/PN2 read from an SD25
+    assert consistent(load_profile("sd25"), answers)
+    assert not consistent(load_profile("is620p"), answers) and not consistent(load_profile("dsx7e"), answers)
