@@ -68,6 +68,9 @@ def _render(result: scanning.ScanResult) -> None:
             t.add_row(f.port, str(f.line.baud) if f.line else "-", scanning.line_format_text(f.line) if f.line else
                       "-", str(f.unit), model, firmware, best.profile.id if best else "unknown (no profile matches)")
         out.print(t)
+    if result.unusable:
+        skipped = ", ".join(scanning.line_format_text(s, baud=True) for s, _e in result.unusable)
+        info(f"not tried, the port cannot do them: {skipped} ({result.unusable[0][1]})")
     if result.noise:
         ids = ", ".join(f"{u} ({k})" for _s, u, k in result.noise[:8]) + (" ..." if len(result.noise) > 8 else "")
         info(f"garbled or stray answers at {len(result.noise)} id(s): {ids} - a wrong baud rate or format, noise, "

@@ -51,6 +51,7 @@ class ScanResult:
     found: list[Found] = field(default_factory=list)
     tried: list[LineSettings | None] = field(default_factory=list)
     noise: list[tuple[LineSettings | None, int, str]] = field(default_factory=list)   # (line, unit, fault kind)
+    unusable: list[tuple[LineSettings, str]] = field(default_factory=list)   # settings the port could not open
     probes: int = 0
     seconds: float = 0.0
 
@@ -59,6 +60,7 @@ class ScanResult:
                 "tried": [line_format_text(s, baud=True) if s else "tcp" for s in self.tried],
                 "noise": [{"setting": line_format_text(s, baud=True) if s else "tcp", "unit": u, "fault": k}
                           for s, u, k in self.noise],
+                "unusable": [{"setting": line_format_text(s, baud=True), "error": e} for s, e in self.unusable],
                 "probes": self.probes, "seconds": round(self.seconds, 3)}
 
 
@@ -125,7 +127,14 @@ def scan(port: str, units: list[int], settings: list[LineSettings], profiles: li
     total, done, start = len(lines) * len(units), 0, time.monotonic()
     seen: set[int] = set()
     for line in lines:
-        link = (open_link or _open)(LinkSettings(port, line or LineSettings(), timeout=timeout, retries=0))
+        try:
+            link = (open_link or _open)(LinkSettings(port, line or LineSettings(), timeout=timeout, retries=0))
+        except DeviceError as exc:      # a setting the port cannot do (parity on a pty): the others may work
+            if line is None or len(result.unusable) == len(lines) - 1:
+                raise
+            result.unusable.append((line, str(exc)))
+            done += len(units)
+            continue
         try:
             for unit in units:
                 if progress:

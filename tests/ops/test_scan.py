@@ -46,3 +46,27 @@ def test_unit_ranges():
     for bad in ("0-3", "5-2", "1-300", "a"):
         with pytest.raises(UsageError):
             parse_units(bad)
+
+
+def test_a_setting_the_port_cannot_open_is_skipped_not_fatal():
+    from dataclasses import replace
+
+    from servotool.errors import DeviceError
+    from servotool.link.modbus import ModbusLink
+
+    sim = EmbeddedSim([build_drive(load_profile("sdc"), 2, persist=False)])
+
+    def open_link(settings):
+        if settings.line.parity == "E":
+            raise DeviceError("cannot open port /dev/fake: parity E")
+        return ModbusLink(replace(settings, port=sim.port))
+
+    lines = [LineSettings(9600, "E", 1, 8), LineSettings(9600, "O", 1, 8)]
+    try:
+        result = scan("/dev/fake", [1, 2], lines, shipped_profiles(), timeout=0.1, open_link=open_link)
+        with pytest.raises(DeviceError):
+            scan("/dev/fake", [1, 2], lines[:1], shipped_profiles(), timeout=0.1, open_link=open_link)
+    finally:
+        sim.close()
+    assert [(f.unit, f.line, f.best.profile.id) for f in result.found] == [(2, lines[1], "sdc")]
+    assert result.unusable == [(lines[0], "cannot open port /dev/fake: parity E")]
