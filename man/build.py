@@ -45,6 +45,13 @@ before any motion.
 On drives whose Modbus motion route needs the drive set up for it (the profile's \fBmotion_setup\fR: SD25,
 IS620P, SDC) those settings are read first; when any differs nothing moves and the error names each one with the
 \fBservotool param set\fR command that fixes it (servotool never writes them itself).
+.PP
+Before a command's first request on a real port, servotool reads the profile's identity checks (firmware and
+model entries and a few signature addresses, one or two requests): a drive that answers otherwise is refused
+(exit 2) with what it answered and the shipped profile it matches, before anything is written; a check that
+cannot tell warns once.
+\fB\-\-no\-identity\-check\fR skips it.
+\fBservotool scan\fR finds the drives on a bus and the profile each one matches.
 """
 
 TAIL = r""".SH PLAN FILES
@@ -92,10 +99,14 @@ A run writes a JSON report (steps, values written, results, timing) next to the 
 SERVOTOOL_STOPBITS, SERVOTOOL_TIMEOUT, SERVOTOOL_RETRIES"
 Defaults for the global options of the same names; the command line wins.
 .TP
+.B SERVOTOOL_NO_IDENTITY_CHECK
+\fB1\fR (or \fBtrue\fR) skips the identity check, like \fB\-\-no\-identity\-check\fR.
+.TP
 .B SERVOTOOL_CONFIG
 Configuration file (default \fIconfig.yaml\fR in the user configuration folder: \fI~/.config/servotool\fR
 on Linux, following \fB$XDG_CONFIG_HOME\fR) with the keys \fBport\fR, \fBprofile\fR,
-\fBunit\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR, \fBretries\fR; used after the environment.
+\fBunit\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR, \fBretries\fR,
+\fBno_identity_check\fR; used after the environment.
 .TP
 .B SERVOTOOL_SIM_DIR
 Where simulated drives keep their parameters and machine settings (default \fIsim\fR in the user state folder:
@@ -116,7 +127,8 @@ Success.
 Device or I/O error: port, timeout, CRC, Modbus exception, a motion or identification that failed.
 .TP
 .B 2
-Usage or validation error: unknown code, value out of range, bad file or plan, missing confirmation.
+Usage or validation error: unknown code, value out of range, bad file or plan, missing confirmation, a drive
+that does not answer like its profile.
 Nothing is written to a drive before all values of a command are validated.
 .TP
 .B 3
@@ -143,6 +155,8 @@ servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13
 servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13 \-\-step\-check \-\-report tune\-report
 servotool run examples/commission.yaml \-\-yes
 servotool sim serve \-\-port tcp://127.0.0.1:5020 \-\-unit 1 \-\-unit 2
+servotool scan \-\-port /dev/ttyUSB0 \-\-units 1\-10 \-\-baud 9600 \-\-format 8N1
+servotool \-\-profile sd25 doctor \-\-port /dev/ttyUSB0 \-u 1 \-\-count 200
 .fi
 .SH SEE ALSO
 .BR mbpoll (1),

@@ -8,7 +8,7 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, backup, jog, monitor, param, plot, profiles, run, sim, trace, tune
+from servotool.cli import alarm, backup, doctor, jog, monitor, param, plot, profiles, run, scan, sim, trace, tune
 from servotool.cli.common import State, state
 from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, err
@@ -32,6 +32,8 @@ app.add_typer(tune.app, name="tune")
 app.command("monitor")(monitor.monitor)
 app.command("jog")(jog.jog)
 app.command("run")(run.run)
+app.command("scan")(scan.scan)
+app.command("doctor")(doctor.doctor)
 app.command("trace")(trace.trace)
 app.command("plot")(plot.plot)
 
@@ -56,6 +58,9 @@ def main(
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
     profile: str = typer.Option(None, "--profile", "-P", help="Drive profile id or YAML file (default for sim: "
                                 "dsx7e). Env: SERVOTOOL_PROFILE."),
+    no_identity_check: bool = typer.Option(None, "--no-identity-check", help="Skip the check, made before "
+                                           "any write, that the drive answering is the one the profile describes. "
+                                           "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.", show_default=False),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Show the version."),
@@ -66,7 +71,8 @@ def main(
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
     state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
-                                        timeout=timeout, retries=retries, profile=profile)
+                                        timeout=timeout, retries=retries, profile=profile,
+                                        no_identity_check=no_identity_check or None)
     Verbosity.level = -1 if quiet else verbose
 
 
