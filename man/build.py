@@ -27,8 +27,9 @@ servotool \- commission and tune AC servo drives over Modbus RTU
 .RI [ arguments ]
 .SH DESCRIPTION
 .B servotool
-reads, writes, backs up and restores drive parameters, watches live values, jogs the motor, identifies the load
-inertia and sets gains, and runs whole commissioning plans, over Modbus RTU (RS485, CRC\-16), against a real
+reads, writes, backs up and restores drive parameters, watches live values, captures triggered traces and draws
+them, jogs the motor, identifies the load inertia and sets gains (with a report of charts), and runs whole
+commissioning plans, over Modbus RTU (RS485, CRC\-16), against a real
 drive or a built\-in simulated one.
 Each drive family is described by a YAML profile that keeps the vendor's own parameter codes
 (for example SD25 \fBPo109\fR, IS620P \fBH09\-06\fR, SDC \fBPN22\fR, DSX7E \fBPn004\fR).
@@ -74,8 +75,9 @@ with several units a name without it gets \fB\-unit\fIN\fR before its suffix.
 A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBservotool jog\fR.
 .TP
 .B "tune inertia: {rigidity: N | bandwidth: HZ, travel: REV, max_speed: RPM, \
-accel_time: MS, direction: D, repeats: N, gains: BOOL}"
-Identify the load inertia and write it, then (unless \fBgains: false\fR) the matching gains.
+accel_time: MS, direction: D, repeats: N, gains: BOOL, report: DIR}"
+Identify the load inertia and write it, then (unless \fBgains: false\fR) the matching gains; \fBreport\fR
+writes the same folder of charts as \fBtune inertia \-\-report\fR (beside the plan, one per axis).
 .TP
 .BR "wait: S" ", " "alarm clear:" ", " "prompt: QUESTION"
 Pause; reset the alarm; ask the operator (answered yes by \fB\-\-yes\fR; refused without a terminal).
@@ -142,10 +144,15 @@ servotool \-\-port sim param set Pn100=40.0 Pn101=25.0
 servotool \-\-port sim param backup \-o axis1.yaml
 servotool \-\-port sim param restore axis1.yaml \-\-dry\-run
 servotool \-\-port sim monitor \-\-rate 20 \-\-csv log.csv
+servotool \-\-port sim monitor Un000 Un002 \-\-plot
+servotool \-\-port tcp://127.0.0.1:5020 trace Un000 Un002 \-\-trigger 'Un000>100' \-\-pre 25 \-o start.csv
+servotool \-\-port sim trace 5E00h Un000 \-\-trigger 5E00h.moving=0 \-\-duration 0.5 \-\-repeat 3 \-\-plot
+servotool plot start.csv \-o start.png
 servotool \-\-port sim jog \-\-speed 300 \-\-time 2
 servotool \-\-port sim \-P sdc param set PN4=3 && servotool \-\-port sim \-P sdc jog \-s 100 \-t 1
 servotool sim config \-\-load\-ratio 5 \-\-friction 0.03
 servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13
+servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13 \-\-step\-check \-\-report tune\-report
 servotool run examples/commission.yaml \-\-yes
 servotool sim serve \-\-port tcp://127.0.0.1:5020 \-\-unit 1 \-\-unit 2
 servotool scan \-\-port /dev/ttyUSB0 \-\-units 1\-10 \-\-baud 9600 \-\-format 8N1

@@ -8,7 +8,7 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, backup, doctor, jog, monitor, param, profiles, run, scan, sim, tune
+from servotool.cli import alarm, backup, doctor, jog, monitor, param, plot, profiles, run, scan, sim, trace, tune
 from servotool.cli.common import State, state
 from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, err
@@ -34,6 +34,8 @@ app.command("jog")(jog.jog)
 app.command("run")(run.run)
 app.command("scan")(scan.scan)
 app.command("doctor")(doctor.doctor)
+app.command("trace")(trace.trace)
+app.command("plot")(plot.plot)
 
 
 def _version(value: bool) -> None:
