@@ -112,6 +112,7 @@ class Exchange:
                    "it may or may not have run; not sent again, since running it twice is not safe")
         op = _Op(f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}", self.retries,
                  self.timeout, outcome)
+        refused: int | None = None
         try:
             while True:
                 try:
@@ -120,18 +121,32 @@ class Exchange:
                 except LineFault as fault:
                     if not idempotent:
                         raise op.error(fault) from None
+                except ModbusException as exc:
+                    # After a fault, a stale exception reply could stand in for this write's: an idempotent
+                    # write is refused only when the drive says so twice in a row.
+                    if not idempotent or not (self._suspect or op.troubled) or exc.code == refused:
+                        raise
+                    refused = exc.code
+                    continue
                 if self._holds(req, op):
                     return
         finally:
             self._suspect = op.troubled
 
     def _read(self, req: Request, op: _Op) -> list[int]:
-        previous: list[int] | None = None
+        previous: list[int] | int | None = None
         while True:
             try:
                 words = self._attempt(req, op)
             except LineFault:
                 previous = None
+                continue
+            except ModbusException as exc:
+                # An exception reply names no address, so after a fault a stale one could stand in for this
+                # read's reply: believe it (an entry the drive lacks, say) only when it comes twice in a row.
+                if not (self._suspect or op.troubled) or exc.code == previous:
+                    raise
+                previous = exc.code
                 continue
             if not (self._suspect or op.troubled) or not self._ambiguous(req) or words == previous:
                 return words
