@@ -19,6 +19,10 @@ SIM_PORT = "sim"
 SIM_DEFAULT_PROFILE = "dsx7e"
 
 
+ECHO = {"auto": None, "on": True, "off": False}
+FLOATS = ("timeout", "turnaround_ms", "silence_ms")
+
+
 PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
 
 
@@ -34,6 +38,9 @@ class ConnectOptions:
     timeout: float | None = None
     retries: int | None = None
     profile: str | None = None
+    echo: str | None = None             # auto, on or off
+    turnaround_ms: float | None = None
+    silence_ms: float | None = None
 
 
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
@@ -42,14 +49,16 @@ ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
-    if name not in ("baud", "stopbits", "unit", "retries", "timeout"):
+    if name == "echo" and isinstance(value, bool):      # YAML reads a bare on/off as a boolean
+        return "on" if value else "off"
+    if name not in ("baud", "stopbits", "unit", "retries", *FLOATS):
         return str(value)
     try:
         if isinstance(value, bool):       # YAML's 'yes'/'true' is no number
             raise ValueError
-        number = float(value) if name == "timeout" else int(value)
+        number = float(value) if name in FLOATS else int(value)
     except (TypeError, ValueError):
-        kind = "a number" if name == "timeout" else "a whole number"
+        kind = "a number" if name in FLOATS else "a whole number"
         raise UsageError(f"{where}: {name} must be {kind}, got {value!r}") from None
     return number
 
@@ -116,12 +125,28 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         port=port, line=line_format(opts, profile),
         timeout=opts.timeout if opts.timeout is not None else (0.5 if port == SIM_PORT else 1.0),
         retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else 2),
+        **rs485(opts),
     )
     if not (math.isfinite(settings.timeout) and 0 < settings.timeout <= 3600):
         raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
     if settings.retries < 0:
         raise UsageError("retries must be >= 0")
     return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit))
+
+
+def rs485(opts: ConnectOptions) -> dict[str, Any]:
+    """The line habits in LinkSettings' terms: echo (auto: find out), turnaround delay and frame-ending silence."""
+    echo = (opts.echo or "auto").lower()
+    if echo not in ECHO:
+        raise UsageError(f"bad echo '{opts.echo}': use auto, on or off")
+    out: dict[str, Any] = {"echo": ECHO[echo]}
+    for name, key in (("turnaround_ms", "turnaround"), ("silence_ms", "silence")):
+        ms = getattr(opts, name)
+        if ms is not None:
+            if not (math.isfinite(ms) and 0 <= ms <= 10_000):
+                raise UsageError(f"bad {name.replace('_', '-')} {ms:g}: must be 0..10000 ms")
+            out[key] = ms / 1000.0
+    return out
 
 
 def check_unit(unit: int) -> int:

@@ -16,7 +16,8 @@ from servotool.ops.restore import RestoreFailed
 
 # ConnectOptions field -> its long option on the command line
 OPTION_FLAGS = {"port": "--port", "baud": "--baud", "parity": "--parity", "stopbits": "--stopbits",
-                "unit": "--unit", "timeout": "--timeout", "retries": "--retries", "profile": "--profile"}
+                "unit": "--unit", "timeout": "--timeout", "retries": "--retries", "profile": "--profile",
+                "echo": "--echo", "turnaround_ms": "--turnaround-ms", "silence_ms": "--silence-ms"}
 
 
 def connection_args(given: ConnectOptions) -> list[str]:

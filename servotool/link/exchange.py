@@ -85,9 +85,12 @@ class _Op:
 class Exchange:
     """Reads and writes over a Wire with reply matching, quiet-and-flush after faults, and confirmation."""
 
-    def __init__(self, wire: Wire, *, timeout: float, retries: int, settle: float = 0.0, echo: bool | None = False,
-                 trace: Trace | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, wire: Wire, *, timeout: float, retries: int, settle: float = 0.0, turnaround: float = 0.0,
+                 echo: bool | None = False, trace: Trace | None = None,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
         self.wire, self.timeout, self.retries, self.settle = wire, timeout, retries, settle
+        self.turnaround, self.sleep = turnaround, sleep     # quiet after the last byte heard, before a request
+        self._heard = -float("inf")                         # when the last byte came
         self.echo = echo                   # the adapter echoes what we send; None: find out
         self.late_window = timeout         # how long after its timeout a late reply may still come
         self.trace, self.clock = trace, clock
@@ -112,6 +115,8 @@ class Exchange:
                    "it may or may not have run; not sent again, since running it twice is not safe")
         op = _Op(f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}", self.retries,
                  self.timeout, outcome)
+        if self.echo is None and fc == WRITE_ONE:
+            self._probe_echo(unit, address)
         refused: int | None = None
         try:
             while True:
@@ -152,6 +157,14 @@ class Exchange:
                 return words
             previous = words
 
+    def _probe_echo(self, unit: int, address: int) -> None:
+        """Find out whether the adapter echoes before a first FC06 write, whose reply repeats the request (one copy
+        alone cannot tell echo from reply): any answer to a one-register read tells, even an exception."""
+        try:
+            self._attempt(Request(unit, READ, address, 1), _Op("echo probe", 0, self.timeout))
+        except (LineFault, DeviceError):      # ModbusException too: the reply's head already told
+            pass
+
     def _holds(self, req: Request, op: _Op) -> bool:
         """Whether the drive already holds what a failed write sent (then sending it again is not needed)."""
         try:
@@ -176,6 +189,8 @@ class Exchange:
         op.begin()
         if self._take_pending(0.0):
             op.troubled = True          # bytes nobody asked for: a late or repeated reply
+        if (wait := self._heard + self.turnaround - self.clock()) > 0:
+            self.sleep(wait)
         self.requests += 1
         self._recent.append(req)
         sent_at = self.clock()
@@ -260,8 +275,10 @@ class Exchange:
 
     def _recv(self, timeout: float) -> bytes:
         data = self.wire.recv(max(0.0, timeout))
-        if data and self.trace:
-            self.trace(False, data)
+        if data:
+            self._heard = self.clock()
+            if self.trace:
+                self.trace(False, data)
         return data
 
 

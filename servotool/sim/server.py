@@ -19,7 +19,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 from pymodbus.simulator.simcore import SimCore
 
 from servotool.errors import DeviceError
-from servotool.link.ports import parse_tcp
+from servotool.link.ports import open_serial, parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.faults import FaultProxy, LineFaults
@@ -130,6 +130,9 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
         server = ModbusTcpServer(devices, framer=FramerType.RTU, address=tcp, trace_packet=hook if trace else None,
                                  ignore_missing_devices=True, broadcast_enable=True)
     else:
+        # pymodbus would fail with a bare '(22, Invalid argument)' for, say, parity on a pty: open it once here,
+        # where the cause gets named.
+        open_serial(port, line, 0.1).close()
         server = ModbusSerialServer(
             devices, framer=FramerType.RTU, port=port, baudrate=line.baud, parity=line.parity,
             stopbits=line.stopbits, bytesize=line.bytesize, trace_packet=hook if trace else None,
@@ -139,8 +142,8 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
     server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
-    except (RuntimeError, OSError) as exc:
-        raise DeviceError(f"cannot serve on {port}: {exc}") from None
+    except Exception as exc:        # OSError, termios.error, pyserial's errors, RuntimeError
+        raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc, line)}") from None
     return server
 
 
@@ -167,7 +170,7 @@ def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | 
             try:
                 bound = await proxy.start(*tcp)
             except OSError as exc:
-                raise DeviceError(f"cannot serve on {port}: {exc}") from None
+                raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
         if ready:
             ready(f"{port[:-2]}:{bound}" if tcp and port.endswith(":0") else port)
         try:
