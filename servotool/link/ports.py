@@ -103,8 +103,9 @@ def port_problem(port: str, exc: BaseException, line: LineSettings | None = None
     tcp = parse_tcp(port) if port.startswith("tcp://") else None
     where = f"{tcp[0]}:{tcp[1]}" if tcp else port
     text, code = str(exc), _errno(exc)
-    if isinstance(exc, socket.gaierror):
-        return f"host name '{tcp[0] if tcp else port}' not found (DNS lookup failed: {exc.strerror or exc})"
+    if isinstance(exc, socket.gaierror) or (code is not None and code < 0):     # getaddrinfo's EAI_* codes
+        why = exc.strerror if isinstance(exc, socket.gaierror) else text
+        return f"host name '{tcp[0] if tcp else port}' not found (DNS lookup failed: {why})"
     if isinstance(exc, ConnectionRefusedError) or code == errno.ECONNREFUSED:
         return f"connection refused: nothing listens on {where}"
     if isinstance(exc, TimeoutError) or code == errno.ETIMEDOUT:

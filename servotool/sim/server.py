@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import threading
 from collections.abc import Callable
 
@@ -126,6 +127,10 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
     tcp = parse_tcp(port)
     server: ModbusTcpServer | ModbusSerialServer
     if tcp:
+        try:       # pymodbus says only 'Could not start listen': bind once here, where the cause gets named
+            socket.create_server(tcp).close()
+        except OSError as exc:
+            raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
         # A real RS485 slave stays silent for other unit ids, so missing devices get no answer.
         server = ModbusTcpServer(devices, framer=FramerType.RTU, address=tcp, trace_packet=hook if trace else None,
                                  ignore_missing_devices=True, broadcast_enable=True)

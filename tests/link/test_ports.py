@@ -51,6 +51,18 @@ def test_a_port_that_will_not_open_names_the_cause(cli, tmp_path, port, cause):
     assert f"cannot open port {spec}: {cause}" in r.err, r.err
 
 
+def test_sim_serve_names_why_it_cannot_listen(cli):
+    taken = socket.create_server(("127.0.0.1", 0))
+    try:
+        where = f"127.0.0.1:{taken.getsockname()[1]}"
+        r = cli("sim", "serve", "--port", f"tcp://{where}", timeout=30)
+        assert r.code == 1 and f"cannot serve on tcp://{where}: {where} is in use by another program" in r.err, r.err
+    finally:
+        taken.close()
+    r = cli("sim", "serve", "--port", "tcp://no-such-host.invalid:5020", timeout=30)
+    assert r.code == 1 and "host name 'no-such-host.invalid' not found (DNS lookup failed" in r.err, r.err
+
+
 @pytest.fixture
 def pty_pair(tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
