@@ -52,6 +52,11 @@ class ModbusLink:
         """Frames sent so far (tries and confirming reads included)."""
         return self._exchange.requests
 
+    @property
+    def echo(self) -> bool | None:
+        """Whether the adapter echoes what it sends: as set, or as found out (None: not yet known)."""
+        return self._exchange.echo
+
     def read(self, unit: int, address: int, count: int) -> list[int]:
         return self._exchange.read(unit, address, count)
 

@@ -173,7 +173,7 @@ def test_echo_auto_finds_an_echoing_adapter_on_the_first_exchange(sim_dir, first
         if first == "write":                  # an FC06 reply repeats the request: a probe tells echo from reply
             link.write(1, entry.address, [300], multiple=False)
         assert link.read(1, entry.address, 1) == [300 if first == "write" else 250]
-        assert link._exchange.echo is True
+        assert link.echo is True
         link.close()
         off = ModbusLink(LinkSettings(sim.port, timeout=0.1, retries=0, echo=False))
         with pytest.raises(Exception, match="no reply that answers it"):
