@@ -185,7 +185,10 @@ def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
     if not rplan.changes:
         return "nothing to restore: the drive already matches"
     report = restore(drive, b, rplan, notice=notice)
-    return f"{len(report.written)} entries restored (automatic backup {report.auto_backup})"
+    left = [f"{e.code} not on this drive" for e in rplan.missing] + \
+        [f"{e.code} refused by the drive" for e, _ in report.refused]
+    return (f"{len(report.written)} entries restored (automatic backup {report.auto_backup})"
+            + (f"; left out: {', '.join(left)}" if left else ""))
 
 
 def factory_reset(drive: Drive, notice: Notice | None = None) -> Path:
