@@ -148,7 +148,7 @@ def test_libmodbus_broadcast_write_is_applied_by_every_drive_and_unanswered(pty_
     assert read(master, 0x2004, unit=2) == [321]
 
 
-@pytest.mark.parametrize(("pdu", "code"), [
+SPEC_EXCEPTIONS = [
     (bytes([3, 0x20, 0x04, 0, 0]), 3),                 # read 0 registers
     (bytes([3, 0x20, 0x04, 0, 126]), 3),               # read 126
     (bytes([4, 0x20, 0x04, 0, 200]), 3),               # FC04 likewise
@@ -157,16 +157,19 @@ def test_libmodbus_broadcast_write_is_applied_by_every_drive_and_unanswered(pty_
     (bytes([1, 0, 100, 0, 1]), 1),                     # read coils: unsupported, at an unmapped address
     (bytes([5, 0x20, 0x04, 0xFF, 0]), 1),              # write coil at a mapped address
     (bytes([23, 0x20, 0x04, 0, 1, 0x20, 0x04, 0, 1, 2, 0, 5]), 1),   # read/write multiple
-])
-def test_libmodbus_gets_the_specified_exception(pty_line, pdu, code):
+]
+
+
+def test_libmodbus_gets_the_specified_exceptions(pty_line):
     _, master = pty_line
     lib, ctx = _libmodbus(master)
     try:
-        reply = _raw_exchange(lib, ctx, 1, pdu)
+        replies = [(_raw_exchange(lib, ctx, 1, pdu), pdu, code) for pdu, code in SPEC_EXCEPTIONS]
     finally:
         lib.modbus_close(ctx)
         lib.modbus_free(ctx)
-    assert reply[:3] == bytes([1, pdu[0] | 0x80, code]), reply.hex(" ")
+    for reply, pdu, code in replies:
+        assert reply[:3] == bytes([1, pdu[0] | 0x80, code]), (pdu.hex(" "), reply.hex(" "))
 
 
 def test_mbpoll_unsupported_function_is_illegal_function_at_any_address(pty_line):
