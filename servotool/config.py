@@ -19,6 +19,10 @@ SIM_PORT = "sim"
 SIM_DEFAULT_PROFILE = "dsx7e"
 
 
+ECHO = {"auto": None, "on": True, "off": False}
+FLOATS = ("timeout", "turnaround_ms", "silence_ms")
+
+
 PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
 
 
@@ -35,6 +39,9 @@ class ConnectOptions:
     retries: int | None = None
     profile: str | None = None
     no_identity_check: bool | None = None
+    echo: str | None = None             # auto, on or off
+    turnaround_ms: float | None = None
+    silence_ms: float | None = None
 
 
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
@@ -45,14 +52,16 @@ def _convert(name: str, value: Any, where: str) -> Any:
         return None
     if name == "no_identity_check":
         return _flag(value, where)
-    if name not in ("baud", "stopbits", "unit", "retries", "timeout"):
+    if name == "echo" and isinstance(value, bool):      # YAML reads a bare on/off as a boolean
+        return "on" if value else "off"
+    if name not in ("baud", "stopbits", "unit", "retries", *FLOATS):
         return str(value)
     try:
         if isinstance(value, bool):       # YAML's 'yes'/'true' is no number
             raise ValueError
-        number = float(value) if name == "timeout" else int(value)
+        number = float(value) if name in FLOATS else int(value)
     except (TypeError, ValueError):
-        kind = "a number" if name == "timeout" else "a whole number"
+        kind = "a number" if name in FLOATS else "a whole number"
         raise UsageError(f"{where}: {name} must be {kind}, got {value!r}") from None
     return number
 
@@ -137,6 +146,7 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         port=port, line=line_format(opts, profile),
         timeout=opts.timeout if opts.timeout is not None else (0.5 if port == SIM_PORT else 1.0),
         retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else 2),
+        **rs485(opts),
     )
     if not (math.isfinite(settings.timeout) and 0 < settings.timeout <= 3600):
         raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
@@ -144,6 +154,21 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         raise UsageError("retries must be >= 0")
     return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit),
                     identity_check=not opts.no_identity_check)
+
+
+def rs485(opts: ConnectOptions) -> dict[str, Any]:
+    """The line habits in LinkSettings' terms: echo (auto: find out), turnaround delay and frame-ending silence."""
+    echo = (opts.echo or "auto").lower()
+    if echo not in ECHO:
+        raise UsageError(f"bad echo '{opts.echo}': use auto, on or off")
+    out: dict[str, Any] = {"echo": ECHO[echo]}
+    for name, key in (("turnaround_ms", "turnaround"), ("silence_ms", "silence")):
+        ms = getattr(opts, name)
+        if ms is not None:
+            if not (math.isfinite(ms) and 0 <= ms <= 10_000):
+                raise UsageError(f"bad {name.replace('_', '-')} {ms:g}: must be 0..10000 ms")
+            out[key] = ms / 1000.0
+    return out
 
 
 def check_unit(unit: int) -> int:

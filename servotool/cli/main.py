@@ -56,6 +56,12 @@ def main(
                              "Env: SERVOTOOL_UNIT."),
     timeout: float = typer.Option(None, "--timeout", help="Response timeout in seconds. Env: SERVOTOOL_TIMEOUT."),
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
+    echo: str = typer.Option(None, "--echo", help="auto|on|off: the RS485 adapter echoes what it sends (default auto: "
+                             "found out on the first exchange). Env: SERVOTOOL_ECHO."),
+    turnaround_ms: float = typer.Option(None, "--turnaround-ms", help="Quiet time after a reply before the next "
+                                        "request, for slow drives (default 0). Env: SERVOTOOL_TURNAROUND_MS."),
+    silence_ms: float = typer.Option(None, "--silence-ms", help="Silence that ends a frame (default: 3.5 characters "
+                                     "at the baud rate). Env: SERVOTOOL_SILENCE_MS."),
     profile: str = typer.Option(None, "--profile", "-P", help="Drive profile id or YAML file (default for sim: "
                                 "dsx7e). Env: SERVOTOOL_PROFILE."),
     no_identity_check: bool = typer.Option(None, "--no-identity-check", help="Skip the check, made before "
@@ -71,7 +77,8 @@ def main(
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
     state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
-                                        timeout=timeout, retries=retries, profile=profile,
+                                        timeout=timeout, retries=retries, profile=profile, echo=echo,
+                                        turnaround_ms=turnaround_ms, silence_ms=silence_ms,
                                         no_identity_check=no_identity_check or None)
     Verbosity.level = -1 if quiet else verbose
 

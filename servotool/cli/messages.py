@@ -17,6 +17,7 @@ from servotool.ops.restore import RestoreFailed
 # ConnectOptions field -> its long option on the command line
 OPTION_FLAGS = {"port": "--port", "baud": "--baud", "parity": "--parity", "stopbits": "--stopbits",
                 "unit": "--unit", "timeout": "--timeout", "retries": "--retries", "profile": "--profile",
+                "echo": "--echo", "turnaround_ms": "--turnaround-ms", "silence_ms": "--silence-ms",
                 "no_identity_check": "--no-identity-check"}
 
 

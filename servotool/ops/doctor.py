@@ -5,16 +5,14 @@ from __future__ import annotations
 
 import os
 import statistics
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from servotool.config import SIM_PORT, ConnectOptions, check_unit, effective, line_settings
 from servotool.errors import DeviceError, ModbusException, UsageError
 from servotool.link.modbus import ModbusLink
-from servotool.link.ports import LinkSettings, parse_tcp
+from servotool.link.ports import SYSFS_USB_SERIAL, LinkSettings, parse_tcp, usb_latency_ms
 from servotool.model.identity import read_plan
 from servotool.model.loader import load_profile
 from servotool.model.profile import LineSettings, Profile
@@ -138,13 +136,9 @@ def check(settings: LinkSettings, unit: int, profile: Profile | None, count: int
 
 
 def latency_timer(port: str) -> LatencyTimer | None:
-    """The adapter's latency timer on Linux (/sys/bus/usb-serial/devices/<tty>/latency_timer), None elsewhere or
-    when the port is no USB-serial adapter or the file cannot be read."""
-    if not sys.platform.startswith("linux"):
+    """The USB-serial adapter's latency timer (link.ports.usb_latency_ms), with the file that sets it."""
+    ms = usb_latency_ms(port)
+    if ms is None:
         return None
-    try:
-        tty = Path(os.path.realpath(port)).name
-        path = Path("/sys/bus/usb-serial/devices") / tty / "latency_timer"
-        return LatencyTimer(str(path), int(path.read_text().strip()))
-    except (OSError, ValueError):
-        return None
+    return LatencyTimer(str(SYSFS_USB_SERIAL / os.path.basename(os.path.realpath(port)) / "latency_timer"), ms)
+
