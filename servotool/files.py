@@ -1,7 +1,8 @@
 """The files servotool keeps: user folders, atomic writes, YAML reading with one error format, a cross-process lock.
 
 Folders come from platformdirs (XDG on Linux, so XDG_CONFIG_HOME, XDG_STATE_HOME and XDG_DATA_HOME apply there;
-the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and SERVOTOOL_BACKUP_DIR override them.
+the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and SERVOTOOL_BACKUP_DIR override them
+(and SERVOTOOL_CACHE_DIR the cache folder).
 """
 
 from __future__ import annotations
@@ -47,10 +48,17 @@ def backup_dir() -> Path:
     return platformdirs.user_data_path(APP, appauthor=False) / "backups"
 
 
+def cache_dir() -> Path:
+    """Where servotool keeps what it can rebuild (SERVOTOOL_CACHE_DIR, else the user cache folder)."""
+    if env := os.environ.get("SERVOTOOL_CACHE_DIR"):
+        return Path(env)
+    return platformdirs.user_cache_path(APP, appauthor=False)
+
+
 # ----- writing ---------------------------------------------------------------------------------------------------
 
-def write_atomic(path: Path, text: str, *, replace: bool = True, durable: bool = True) -> os.stat_result:
-    """Write text (UTF-8) so that readers see the old file or the new one, never half of one.
+def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable: bool = True) -> os.stat_result:
+    """Write text (UTF-8) or bytes so that readers see the old file or the new one, never half of one.
 
     The file is made as a private temporary file beside the target (mode 0600) and renamed over it. With
     replace=False an existing file is never replaced, not even one that appears meanwhile: FileExistsError.
@@ -60,7 +68,7 @@ def write_atomic(path: Path, text: str, *, replace: bool = True, durable: bool =
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        with (os.fdopen(fd, "wb") if isinstance(text, bytes) else os.fdopen(fd, "w", encoding="utf-8")) as fh:
             fh.write(text)
             fh.flush()
             if durable:

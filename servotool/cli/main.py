@@ -8,30 +8,34 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, backup, jog, monitor, param, profiles, run, sim, tune
+from servotool.cli import fastparse
 from servotool.cli.common import State, state
+from servotool.cli.lazy import lazy, lazy_group
 from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, err
 from servotool.config import ConnectOptions
 from servotool.errors import ServoError
 
+fastparse.install()
+
+# Each command's module is imported when that command runs (a typer app or a command function, "module:name").
+COMMANDS = {
+    "param": lazy("servotool.cli.param:app", "servotool.cli.backup:app",
+                  help="Read, set, list, back up and restore drive parameters."),
+    "profiles": lazy("servotool.cli.profiles:app"),
+    "sim": lazy("servotool.cli.sim:app"),
+    "alarm": lazy("servotool.cli.alarm:app"),
+    "tune": lazy("servotool.cli.tune:app"),
+    "monitor": lazy("servotool.cli.monitor:monitor"),
+    "jog": lazy("servotool.cli.jog:jog"),
+    "run": lazy("servotool.cli.run:run"),
+}
+
 app = typer.Typer(
     name="servotool", no_args_is_help=True, add_completion=True, pretty_exceptions_enable=False,
     help="Commission and tune AC servo drives over Modbus RTU (real or simulated).",
-    context_settings={"help_option_names": ["-h", "--help"]},
+    context_settings={"help_option_names": ["-h", "--help"]}, cls=lazy_group(COMMANDS),
 )
-# `param` is two groups of commands under one name: values (get, set, list) and files (backup, diff, restore, reset).
-param_group = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and restore drive parameters.")
-param_group.add_typer(param.app)
-param_group.add_typer(backup.app)
-app.add_typer(param_group, name="param")
-app.add_typer(profiles.app, name="profiles")
-app.add_typer(sim.app, name="sim")
-app.add_typer(alarm.app, name="alarm")
-app.add_typer(tune.app, name="tune")
-app.command("monitor")(monitor.monitor)
-app.command("jog")(jog.jog)
-app.command("run")(run.run)
 
 
 def _version(value: bool) -> None:
@@ -100,7 +104,8 @@ def _usage_error(exc: Exception) -> int | None:
         return None
     ctx = getattr(exc, "ctx", None)
     if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:
-        print(ctx.get_help())
+        if text := str(message()).strip():    # typer's rich help printed itself when the error was made
+            print(text)
         return code
     where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
     err.print(f"servotool: error: {' '.join(str(message()).split())}{where}", markup=False)
