@@ -5,10 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import typer
-from rich.progress import Progress
 
 from servotool.cli.common import JSON_OPT, confirm, drive, state
-from servotool.cli.render import emit_json, err, info, out, table, warn
+from servotool.cli.render import emit_json, err, info, out, progress, table, warn
 from servotool.config import resolve
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value
@@ -37,9 +36,8 @@ def backup_cmd(
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file."""
     with drive(ctx) as d:
         entries = select(d.profile)
-        with Progress(console=err, transient=True, disable=as_json) as progress:
-            task = progress.add_task("reading parameters", total=len(entries))
-            b = backup.take(d, progress=lambda n: progress.advance(task, n))
+        with progress("reading parameters", len(entries), enabled=not as_json) as advance:
+            b = backup.take(d, progress=advance)
         path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.yaml")
         backup.save(b, d.profile, path, force=force)
     if as_json:
