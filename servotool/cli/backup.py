@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from servotool.cli.common import JSON_OPT, confirm, drive, state
-from servotool.cli.render import emit_json, err, info, out, progress, table, warn
+from servotool.cli.render import count, emit_json, err, info, out, progress, table, warn
 from servotool.config import resolve
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value
@@ -43,7 +43,7 @@ def backup_cmd(
     if as_json:
         emit_json({"file": str(path), "entries": len(b.values), "checksum": b.checksum(), "identity": b.identity})
     else:
-        out.print(f"{len(b.values)} parameters saved to {path}", markup=False)
+        out.print(f"{count(len(b.values), 'parameter')} saved to {path}", markup=False)
 
 
 @app.command("diff")
@@ -126,7 +126,7 @@ def restore_cmd(
             elif not plan.changes:
                 out.print("nothing to restore: the drive already matches", markup=False)
             return
-        if not confirm(f"Write {len(plan.changes)} parameters?", yes):
+        if not confirm(f"Write {count(len(plan.changes), 'parameter')}?", yes):
             raise ServoError("restore cancelled: nothing was written")
         report = restore.restore(d, b, plan, notice=_where)
     if as_json:
@@ -134,7 +134,7 @@ def restore_cmd(
                    "auto_backup": str(report.auto_backup), "persisted": report.persisted,
                    "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
         return
-    out.print(f"{len(report.written)} parameters restored and verified by read-back", markup=False)
+    out.print(f"{count(len(report.written), 'parameter')} restored and verified by read-back", markup=False)
     if not report.persisted:
         # restore asks for EEPROM, so this is a drive that cannot store over Modbus
         warn(f"the drive keeps these values in RAM only, lost at power-off: {d.profile.persistence.note}")
@@ -149,7 +149,8 @@ def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
 
 def _show_plan(plan: restore.RestoreChanges) -> None:
     if plan.changes:
-        t = table("Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{len(plan.changes)} changes, in order")
+        t = table("Code", "Name", "Drive", "Backup", "Unit", "Needs",
+                  title=f"{count(len(plan.changes), 'change')}, in order")
         for e, old, new in plan.changes:
             t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
         out.print(t)

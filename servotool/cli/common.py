@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import typer
 
-from servotool.cli.render import Verbosity, notice, trace_frame
+from servotool.cli.render import Verbosity, info, trace_frame
 from servotool.config import ConnectOptions, Resolved, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -35,14 +35,14 @@ def resolved(ctx: typer.Context) -> Resolved:
 @contextmanager
 def drive(ctx: typer.Context) -> Iterator[Drive]:
     """The one drive the global options point at."""
-    with open_drives(resolved(ctx), trace=trace_frame if Verbosity.level > 0 else None, notice=notice) as drives:
+    with open_drives(resolved(ctx), trace=trace_frame if Verbosity.level > 0 else None, notice=info) as drives:
         yield drives[0]
 
 
 @contextmanager
 def drives(ctx: typer.Context, units: list[int]) -> Iterator[list[Drive]]:
     with open_drives(resolved(ctx), units, trace=trace_frame if Verbosity.level > 0 else None,
-                     notice=notice) as found:
+                     notice=info) as found:
         yield found
 
 

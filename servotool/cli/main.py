@@ -9,10 +9,11 @@ import typer
 
 from servotool import __version__
 from servotool.cli import fastparse
+from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, state
 from servotool.cli.lazy import lazy, lazy_group
-from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, err
+from servotool.cli.messages import error_code, error_text
+from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.config import ConnectOptions
 from servotool.errors import ServoError
 
@@ -73,28 +74,45 @@ def main(
 
 
 def run() -> None:
-    """Console-script entry point: one clear line and an exit code for every failure."""
+    """Console-script entry point: one clear line (and with --json a JSON object) and an exit code for every
+    failure; Ctrl-C exits 130 after flushing what was produced."""
     given = State()       # the options given on the command line, filled in by main(); fix commands repeat them
+    if hasattr(sys.stdout, "reconfigure"):
+        sys.stdout.reconfigure(line_buffering=True)       # streamed lines reach a pipe as they are made
+    root = typer.main.get_command(app)
+    args = hoist_globals(root, sys.argv[1:])
+    as_json = "--json" in args[:args.index("--")] if "--" in args else "--json" in args
     try:
-        result = app(prog_name="servotool", standalone_mode=False, obj=given)
+        result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
-        err.print(f"servotool: error: {error_text(exc, given.options)}", markup=False)
-        sys.exit(exc.exit_code)
+        sys.exit(_fail(error_code(exc), error_text(exc, given.options, Verbosity.level > 0), exc.exit_code,
+                       as_json))
     except (KeyboardInterrupt, typer.Abort):
-        err.print("servotool: interrupted", markup=False)
-        sys.exit(130)
+        sys.exit(_fail("interrupted", "interrupted", 130, as_json))
+    except BrokenPipeError:           # `| head` closed the pipe: nothing more to say, to anyone
+        sys.stderr.close()
+        os._exit(141)
     except Exception as exc:
-        if (code := _usage_error(exc)) is not None:
+        if (code := _usage_error(exc, as_json)) is not None:
             sys.exit(code)
         if os.environ.get("SERVOTOOL_DEBUG"):  # a bug: still one line for the user, the traceback on request
             raise
-        err.print(f"servotool: internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the traceback)",
-                  markup=False)
-        sys.exit(1)
+        sys.exit(_fail("internal", f"internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the "
+                       "traceback)", 1, as_json))
+    sys.stdout.flush()
     sys.exit(result if isinstance(result, int) else 0)
 
 
-def _usage_error(exc: Exception) -> int | None:
+def _fail(code: str, message: str, status: int, as_json: bool) -> int:
+    """Say why on stderr (and as a JSON object on stdout for --json, unless the command printed its own)."""
+    sys.stdout.flush()
+    err.print(f"servotool: {'error: ' if code not in ('interrupted', 'internal') else ''}{message}", markup=False)
+    if as_json and not json_emitted():
+        emit_json({"error": {"code": code, "message": message, "exit_status": status}})
+    return status
+
+
+def _usage_error(exc: Exception, as_json: bool) -> int | None:
     """Report typer's own usage errors (bad option value, unknown option) in one line; None for other exceptions.
 
     Matched by shape: typer vendors click privately, so its exception classes are not importable API.
@@ -108,5 +126,4 @@ def _usage_error(exc: Exception) -> int | None:
             print(text)
         return code
     where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
-    err.print(f"servotool: error: {' '.join(str(message()).split())}{where}", markup=False)
-    return code
+    return _fail("usage", f"{' '.join(str(message()).split())}{where}", code, as_json)

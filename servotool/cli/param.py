@@ -7,7 +7,9 @@ import typer
 from servotool.cli.common import JSON_OPT, drive
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.drive import Reading
+from servotool.errors import UnknownName
 from servotool.model.codec import format_field, format_value, get_field, split_field
+from servotool.model.lookup import class_name, suggest
 from servotool.ops import eeprom, params
 
 app = typer.Typer(help="Read, set and list drive parameters.")
@@ -93,19 +95,31 @@ def set_(
                   f"{format_value(r.entry, r.new)} {r.entry.unit}{note}".replace("  [", " [").rstrip(), markup=False)
 
 
+def _class(text: str) -> str:
+    """An entry class in any case ('un' -> 'Un')."""
+    found = class_name(text, LISTABLE)
+    if found is None:
+        raise UnknownName("class", text, None, suggest(text, LISTABLE), LISTABLE)
+    return found
+
+
+LISTABLE = ("Pn", "Un", "Sn")
+
+
 @app.command("list")
 def list_(
     ctx: typer.Context,
-    group: str = typer.Option(None, "--group", "-g", help="Only this group (see 'profiles show')."),
+    group: str = typer.Option(None, "--group", "-g", help="Only this group: the profile's own (see 'profiles "
+                              "show') or gain, speed, position, torque, io, comm, monitor on every profile."),
     changed: bool = typer.Option(False, "--changed", help="Only entries that differ from the factory default."),
-    cls: str = typer.Option("Pn", "--class", help="Entry class to list: Pn, Un or Sn."),
+    cls: str = typer.Option(None, "--class", help="Entry class to list: Pn, Un or Sn (default: Pn; with --group, "
+                            "every class in the group)."),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Read and show a whole group of entries, with defaults and a changed mark."""
-    if cls not in ("Pn", "Un", "Sn"):
-        raise typer.BadParameter("use Pn, Un or Sn", param_hint="--class")
+    classes = ("Pn",) if cls is None and group is None else ("Pn", "Un", "Sn") if cls is None else (_class(cls),)
     with drive(ctx) as d:
-        readings = d.read_entries(params.select(d.profile, group=group, classes=(cls,)))
+        readings = d.read_entries(params.select(d.profile, group=group, classes=classes))
     if changed:
         readings = [r for r in readings if r.changed]
     if as_json:

@@ -7,10 +7,11 @@ from pathlib import Path
 import typer
 
 from servotool.cli.common import JSON_OPT
-from servotool.cli.render import emit_json, out, table
-from servotool.errors import UsageError
+from servotool.cli.render import count, emit_json, out, table
+from servotool.errors import UnknownName
 from servotool.model.codec import format_value
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
+from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
 
 app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
 
@@ -43,9 +44,11 @@ def show(
 ) -> None:
     """A profile's settings, roles and entries."""
     p = load_profile(profile)
-    entries = [e for e in p.entries if (not unverified or e.unverified) and (group is None or e.group == group)]
-    if group is not None and group not in {e.group for e in p.entries}:
-        raise UsageError(f"unknown group '{group}' for profile {p.id}")
+    members = p.entries if group is None else group_members(p.entries, group)
+    if members is None:
+        known = sorted({e.group for e in p.entries if e.group} | set(COMMON_GROUPS))
+        raise UnknownName("group", str(group), p.id, suggest(str(group), known), known)
+    entries = [e for e in members if not unverified or e.unverified]
     if as_json:
         emit_json({
             "id": p.id, "model": p.model, "vendor": p.vendor, "version": p.version, "source": p.source,
@@ -67,7 +70,8 @@ def show(
     if p.unverified_note:
         out.print(f"[yellow]note:[/yellow] {p.unverified_note}")
     if unverified:
-        t = table("Code", "Name", "Why unverified", title=f"{len(entries)} unverified entries")
+        t = table("Code", "Name", "Why unverified",
+                  title=count(len(entries), "unverified entry", "unverified entries"))
         for e in entries:
             t.add_row(e.code, e.name, e.unverified)
         out.print(t)

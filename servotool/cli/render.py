@@ -74,9 +74,23 @@ def warn(text: str) -> None:
     err.print(f"servotool: warning: {text}", markup=False)
 
 
+_emitted = [False]
+
+
 def emit_json(data: Any) -> None:
+    _emitted[0] = True
     sys.stdout.write(json.dumps(data, indent=2, ensure_ascii=False, default=str) + "\n")
     sys.stdout.flush()
+
+
+def json_emitted() -> bool:
+    """Whether this command has printed a JSON document already (an error then adds none)."""
+    return _emitted[0]
+
+
+def count(n: int, noun: str, plural: str | None = None) -> str:
+    """'1 parameter', '2 parameters'."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
 
 
 def table(*columns: str, title: str | None = None, drop: Sequence[str] | None = None) -> Table:

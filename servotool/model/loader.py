@@ -14,8 +14,9 @@ from functools import cache
 from pathlib import Path
 
 from servotool import __version__
-from servotool.errors import FileProblem, ProfileError
+from servotool.errors import FileProblem, ProfileError, UnknownName
 from servotool.files import cache_dir, parse_yaml, read_text, write_atomic
+from servotool.model.lookup import suggest
 from servotool.model.profile import Profile
 from servotool.model.schema import parse_profile
 
@@ -29,6 +30,10 @@ def builtin_dir() -> Path:
 
 def builtin_ids() -> list[str]:
     return sorted(p.stem for p in builtin_dir().glob("*.yaml"))
+
+
+class UnknownProfile(UnknownName, ProfileError):
+    """No built-in profile by that id (a path to a .yaml file also works)."""
 
 
 @cache
@@ -110,8 +115,7 @@ def load_profile(name_or_path: str | Path) -> Profile:
     if path.suffix not in (".yaml", ".yml") and "/" not in key and "\\" not in key:
         path = builtin_dir() / f"{key.lower()}.yaml"
         if not path.exists():
-            known = ", ".join(builtin_ids())
-            raise ProfileError(f"unknown profile '{key}' (built-in: {known}; or give a path to a .yaml file)")
+            raise UnknownProfile("profile", key, None, suggest(key, builtin_ids()), builtin_ids())
     profile, problems = read_profile(path)
     if profile is None:
         more = f" (and {len(problems) - 1} more; run 'servotool profiles check {path}')" if len(problems) > 1 else ""

@@ -116,9 +116,11 @@ def test_options_from_environment_and_config_file(cli, tmp_path):
         assert r.code == 2 and why in r.err and len(r.err.splitlines()) == 1, r.err
 
 
-def test_quiet_still_says_the_drive_is_simulated(cli):
+def test_quiet_prints_only_results_and_errors(cli):
     r = cli("-q", "--port", "sim", "param", "get", "Pn004", "--json")
-    assert r.code == 0 and r.err.strip().startswith("servotool: SIMULATED drive")
+    assert r.code == 0 and r.err == "" and r.json()[0]["value"] == 250
+    r = cli("--port", "sim", "param", "get", "Pn004")
+    assert r.err.strip().startswith("servotool: SIMULATED drive")
 
 
 def test_profiles_list_show_check(cli, tmp_path):
