@@ -56,7 +56,10 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
         return args
     own = _options(leaf)
     moved: list[str] = []
-    rest = args[:start]
+    # A flag of the sub-command given to its group (`alarm --json show`) goes to the sub-command.
+    first = next((k for k, a in enumerate(args) if not a.startswith("-") and a not in _values(args, glob)), start)
+    between = [k for k in range(first, start) if own.get(args[k]) is False and args[k] not in glob]
+    rest = [a for k, a in enumerate(args[:start]) if k not in between] + [args[k] for k in between]
     i = start
     while i < len(args):
         token = args[i]
@@ -78,6 +81,17 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
                 i += 1
         i += 1
     return moved + rest
+
+
+def _values(args: list[str], glob: dict[str, bool]) -> set[str]:
+    """The values of the leading global options (`--port sim`: 'sim' is no sub-command name)."""
+    found: set[str] = set()
+    for k, token in enumerate(args):
+        if not token.startswith("-"):
+            break
+        if glob.get(token) and k + 1 < len(args):
+            found.add(args[k + 1])
+    return found
 
 
 def _short_flags(token: str, glob: dict[str, bool], own: dict[str, bool]) -> bool:

@@ -10,7 +10,7 @@ from servotool.cli.common import JSON_OPT, confirm, drive, state
 from servotool.cli.render import count, emit_json, err, info, out, progress, table, warn
 from servotool.config import resolve
 from servotool.errors import ServoError, UsageError
-from servotool.model.codec import format_value
+from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
 from servotool.ops import backup, restore
@@ -143,7 +143,7 @@ def restore_cmd(
 
 
 def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
-    return [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
+    return [{"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit,
              "effect": e.effect} for e, old, new in plan.changes]
 
 

@@ -10,7 +10,7 @@ import typer
 
 from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.keys import raw_keys
-from servotool.cli.render import Verbosity, emit_json, err, info
+from servotool.cli.render import Verbosity, caution, emit_json, err, info
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.roles import FEATURE
@@ -31,8 +31,7 @@ def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATU
     if simulated:
         return
     caveats = motion_caveats(d.profile, feature)
-    for line in caveats.lines():
-        err.print(f"servotool: caution: {line}", markup=False)
+    caution(caveats.lines())
     if caveats.unverified:
         codes = ", ".join(e.code for _, e, _ in caveats.unverified)
         if not confirm(f"Move the motor through unverified entries ({codes})?", yes):

@@ -61,6 +61,8 @@ def main(
                                 "dsx7e). Env: SERVOTOOL_PROFILE."),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
+    explain: bool = typer.Option(False, "--explain", help="Cautions in full (why an entry is not confirmed by the "
+                                 "manual, what a missing watchdog means), not one line each."),
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Show the version."),
 ) -> None:
     """Commission and tune AC servo drives over Modbus RTU (real or simulated).
@@ -71,6 +73,7 @@ def main(
     state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
                                         timeout=timeout, retries=retries, profile=profile)
     Verbosity.level = -1 if quiet else verbose
+    Verbosity.explain = explain
 
 
 def run() -> None:

@@ -11,10 +11,10 @@ from rich.live import Live
 from rich.table import Table
 
 from servotool.cli.common import drive, resolved
-from servotool.cli.render import info, out, table
+from servotool.cli.render import count, info, out, table
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
-from servotool.ops.monitor import CsvLog, CsvMode, Monitor, check_duration, check_rate, resolve_entries
+from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
 
 TREND_MIN = 8       # a trend narrower than this says nothing: drop the column instead
 NAME_FLOOR = 16     # the name keeps at least this much room (or its full length) before the trend gets any
@@ -57,6 +57,15 @@ def monitor_table(mon: Monitor, width: int) -> Table:
     return t
 
 
+def _sample_json(mon: Monitor, s: Sample) -> dict[str, object]:
+    """One JSON line: values rounded to each entry's resolution, with their units."""
+    series = mon.series
+    values = {c: round(v, decimals(series[c].entry)) if isinstance(v, float) and c in series else v
+              for c, v in s.values.items()}
+    return {"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"), "values": values,
+            "units": {c: series[c].entry.unit for c in s.values if c in series}}
+
+
 def monitor(
     ctx: typer.Context,
     codes: list[str] = typer.Argument(None, help="Entries to watch (default: the profile's key monitors)."),
@@ -82,6 +91,7 @@ def monitor(
     entries = resolve_entries(resolved(ctx).profile, codes or [])
     mode: CsvMode = "replace" if force else "append" if append else "new"
     log = CsvLog(csv_file, entries, mode) if csv_file else None
+    interrupted = False
     try:
         with drive(ctx) as d:
             mon = Monitor(d, resolve_entries(d.profile, codes or []))
@@ -100,16 +110,19 @@ def monitor(
                         if log:
                             log.write(s)
                         if as_json:
-                            print(json.dumps({"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"),
-                                              "values": s.values}), flush=True)
+                            print(json.dumps(_sample_json(mon, s)), flush=True)
                     if not as_json:
                         out.print(monitor_table(mon, out.width))
-            except KeyboardInterrupt:
-                pass
+            except KeyboardInterrupt:     # the samples so far are shown, then exit 130 as for any Ctrl-C
+                interrupted = True
+                if not live_view and not as_json:
+                    out.print(monitor_table(mon, out.width))
     finally:
         if log:
             log.close()
     if not once:
         rate_text = f"{mon.achieved_rate:.1f} samples/s achieved" if mon.achieved_rate is not None else \
             "too few samples to measure a rate"
-        info(f"{mon.samples} sample{'' if mon.samples == 1 else 's'} in {mon.elapsed:.2f} s: {rate_text}")
+        info(f"{count(mon.samples, 'sample')} in {mon.elapsed:.2f} s: {rate_text}")
+    if interrupted:
+        raise typer.Exit(130)

@@ -8,7 +8,7 @@ from servotool.cli.common import JSON_OPT, drive
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.drive import Reading
 from servotool.errors import UnknownName
-from servotool.model.codec import format_field, format_value, get_field, split_field
+from servotool.model.codec import format_field, format_value, get_field, json_value, split_field
 from servotool.model.lookup import class_name, suggest
 from servotool.ops import eeprom, params
 
@@ -74,9 +74,9 @@ def set_(
     if as_json:
         emit_json({
             "dry_run": dry_run,
-            "changed": [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
+            "changed": [{"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit,
                          "effect": e.effect} for e, old, new in plan.changes],
-            "unchanged": [{"code": e.code, "value": format_value(e, v)} for e, v in plan.unchanged],
+            "unchanged": [{"code": e.code, "value": json_value(e, v), "unit": e.unit} for e, v in plan.unchanged],
             "persisted": persisted,
         })
         return

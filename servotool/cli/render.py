@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -54,9 +55,10 @@ err = Console(stderr=True, highlight=False, soft_wrap=True)
 
 
 class Verbosity:
-    """Global -q/-v state."""
+    """Global -q/-v/--explain state."""
 
     level = 0  # -1 quiet, 0 normal, 1+ verbose
+    explain = False     # cautions in full
 
 
 def info(text: str) -> None:
@@ -68,6 +70,22 @@ def info(text: str) -> None:
 def notice(text: str) -> None:
     """A line on stderr that --quiet does not hide (that the drive is simulated, for one)."""
     err.print(text, markup=False)
+
+
+_UNVERIFIED = re.compile(r"(\S+) \((\w+)\): ")
+
+
+def caution(lines: Sequence[str]) -> None:
+    """Cautions before something acts on a real drive: one line each (what it is about), the full text with
+    --explain."""
+    for line in lines:
+        if not Verbosity.explain:
+            m = _UNVERIFIED.match(line)
+            line = (f"{m.group(1)} ({m.group(2).replace('_', ' ')}) is not confirmed by the manual" if m
+                    else line.split(": ", 1)[0])
+        err.print(f"servotool: caution: {line}", markup=False)
+    if lines and not Verbosity.explain:
+        err.print("servotool: (--explain shows why)", markup=False)
 
 
 def warn(text: str) -> None:

@@ -32,7 +32,13 @@ def suggest(word: str, candidates: Iterable[str], n: int = 3) -> list[str]:
     by_upper: dict[str, str] = {}
     for c in candidates:
         by_upper.setdefault(c.upper(), c)
-    return [by_upper[m] for m in difflib.get_close_matches(word.upper(), list(by_upper), n=n, cutoff=0.6)]
+    w = word.upper()
+    scored = []
+    for c in by_upper:
+        ratio = difflib.SequenceMatcher(None, w, c).ratio()
+        if ratio >= 0.6:     # ties go to the one with more characters in the same place (Pn1O1 -> Pn101)
+            scored.append((ratio + 0.01 * sum(a == b for a, b in zip(w, c, strict=False)), c))
+    return [by_upper[c] for _, c in sorted(scored, key=lambda sc: (-sc[0], sc[1]))[:n]]
 
 
 def did_you_mean(word: str, candidates: Iterable[str]) -> str:

@@ -16,7 +16,7 @@ from servotool import __version__
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.files import backup_dir, load_yaml, write_atomic
-from servotool.model.codec import format_value
+from servotool.model.codec import format_value, json_value
 from servotool.model.profile import Entry, Profile
 from servotool.ops.params import select
 
@@ -152,9 +152,13 @@ class Difference:
 
     def as_json(self) -> dict[str, Any]:
         e = self.entry
-        return {"code": e.code, "name": e.name, "unit": e.unit, "effect": e.effect,
-                "a": None if self.a is None else format_value(e, self.a),
-                "b": None if self.b is None else format_value(e, self.b)}
+        out: dict[str, Any] = {"code": e.code, "name": e.name, "unit": e.unit, "effect": e.effect,
+                               "a": None if self.a is None else json_value(e, self.a),
+                               "b": None if self.b is None else json_value(e, self.b)}
+        for key, raw in (("a", self.a), ("b", self.b)):
+            if raw is not None and raw in e.enum:
+                out[f"{key}_meaning"] = e.enum[raw]
+        return out
 
 
 def diff(profile: Profile, a: dict[str, int], b: dict[str, int]) -> list[Difference]:
