@@ -13,7 +13,7 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
-from servotool.ops import backup, restore
+from servotool.ops import backup, backup_csv, restore
 from servotool.ops.params import select
 
 app = typer.Typer(help="Back up, compare and restore drive parameters; factory reset.")
@@ -29,19 +29,30 @@ def _where(text: str) -> None:
 @app.command("backup")
 def backup_cmd(
     ctx: typer.Context,
-    output: Path = typer.Option(None, "--output", "-o", help="Backup file (default: MODEL-unitN-DATE.yaml here)."),
+    output: Path = typer.Option(None, "--output", "-o", help="Backup file (default: MODEL-unitN-DATE.yaml here, "
+                                "or .csv)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing file."),
+    fmt: str = typer.Option(None, "--format", help="yaml (checksummed; the default) or csv (for a spreadsheet; "
+                            "restore reads it too). Default: from the file name's suffix."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Save every readable parameter (and the drive's identity) to a checksummed YAML file."""
+    """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
+    kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
+    if kind not in ("yaml", "yml", "csv"):
+        raise UsageError(f"--format must be yaml or csv, not '{fmt or kind}'")
     with drive(ctx) as d:
         entries = select(d.profile)
         with progress("reading parameters", len(entries), enabled=not as_json) as advance:
             b = backup.take(d, progress=advance)
-        path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.yaml")
-        backup.save(b, d.profile, path, force=force)
+        suffix = "csv" if kind == "csv" else "yaml"
+        path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
+        if kind == "csv":
+            backup_csv.save(b, d.profile, path, force=force)
+        else:
+            backup.save(b, d.profile, path, force=force)
     if as_json:
-        emit_json({"file": str(path), "entries": len(b.values), "checksum": b.checksum(), "identity": b.identity})
+        emit_json({"file": str(path), "format": "csv" if kind == "csv" else "yaml", "entries": len(b.values),
+                   "checksum": b.checksum(), "identity": b.identity})
     else:
         out.print(f"{count(len(b.values), 'parameter')} saved to {path}", markup=False)
 
@@ -49,18 +60,28 @@ def backup_cmd(
 @app.command("diff")
 def diff_cmd(
     ctx: typer.Context,
-    file: Path = typer.Argument(..., help="Backup file (compared with the drive, or with FILE2)."),
+    file: Path = typer.Argument(None, help="Backup file (compared with the drive, or with FILE2); none with --factory: "
+                                "the drive against its factory defaults."),
     file2: Path = typer.Argument(None, help="Second backup file: compare the two files, no drive needed."),
-    from_default: bool = typer.Option(False, "--changed-from-default", help="Compare with the factory defaults."),
+    from_default: bool = typer.Option(False, "--factory", "--changed-from-default", help="Compare with the factory "
+                                      "defaults (the drive's, or FILE's)."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Differences between the drive and a file, two files, or a file and the factory defaults.
+    """Differences between the drive and a file, two files, a file or the drive and the factory defaults.
 
     A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning.
     """
     opts = state(ctx).options
     if file2 is not None and from_default:
-        raise UsageError("give FILE2 or --changed-from-default, not both")
+        raise UsageError("give FILE2 or --factory, not both")
+    if file is None and not from_default:
+        raise UsageError("give a backup FILE to compare with, or --factory for the factory defaults")
+    if file is None:
+        with drive(ctx) as d:
+            profile = d.profile
+            current = {r.entry.code: r.raw for r in d.read_entries(select(profile))}
+        _show_diff(backup.diff(profile, current, backup.defaults(profile)), ("drive", "factory default"), as_json)
+        return
 
     def load(path: Path, profile: Profile) -> backup.Backup:
         b = backup.load(path, profile, force=True)
@@ -84,6 +105,10 @@ def diff_cmd(
             current = {r.entry.code: r.raw for r in d.read_entries(select(profile))}
         labels = ("drive", str(file))
         diffs = backup.diff(profile, current, a.values)
+    _show_diff(diffs, labels, as_json)
+
+
+def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], as_json: bool) -> None:
     if as_json:
         emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs]})
         return

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import csv
+import sys
+
 import typer
 
-from servotool.cli.common import JSON_OPT, drive
-from servotool.cli.render import emit_json, info, out, table, warn
+from servotool.cli.common import JSON_OPT, drive, state
+from servotool.cli.render import count, emit_json, info, out, progress, table, warn
+from servotool.config import resolve
 from servotool.drive import Reading
 from servotool.errors import UnknownName
 from servotool.model.codec import format_field, format_value, get_field, json_value, split_field
-from servotool.model.lookup import class_name, suggest
+from servotool.model.lookup import class_name, search, suggest
 from servotool.ops import eeprom, params
+from servotool.ops.backup_csv import value_text
 
 app = typer.Typer(help="Read, set and list drive parameters.")
 
@@ -114,14 +119,20 @@ def list_(
     changed: bool = typer.Option(False, "--changed", help="Only entries that differ from the factory default."),
     cls: str = typer.Option(None, "--class", help="Entry class to list: Pn, Un or Sn (default: Pn; with --group, "
                             "every class in the group)."),
+    as_csv: bool = typer.Option(False, "--csv", help="CSV on stdout, for a spreadsheet."),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Read and show a whole group of entries, with defaults and a changed mark."""
     classes = ("Pn",) if cls is None and group is None else ("Pn", "Un", "Sn") if cls is None else (_class(cls),)
     with drive(ctx) as d:
-        readings = d.read_entries(params.select(d.profile, group=group, classes=classes))
+        entries = params.select(d.profile, group=group, classes=classes)
+        with progress("reading", len(entries), enabled=not (as_json or as_csv)) as advance:
+            readings = d.read_entries(entries, progress=advance)
     if changed:
         readings = [r for r in readings if r.changed]
+    if as_csv:
+        _csv(readings)
+        return
     if as_json:
         emit_json([r.as_json() for r in readings])
         return
@@ -131,3 +142,37 @@ def list_(
         default = format_value(e, e.default) if e.default is not None else ""
         t.add_row(e.code, e.name, r.text, e.unit, default, "*" if r.changed else "")
     out.print(t)
+
+
+@app.command("find")
+def find(
+    ctx: typer.Context,
+    words: list[str] = typer.Argument(..., help="Words to look for in codes, names, descriptions and groups "
+                                      "(every word must match; any case)."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Search the profile's entries of every class; no drive needed (the profile from --profile or the port)."""
+    profile = resolve(state(ctx).options, need_port=False).profile
+    hits = search(profile.entries, words)
+    if as_json:
+        emit_json([{"code": e.code, "class": e.cls, "name": e.name, "unit": e.unit, "group": e.group,
+                    "description": e.description} for e in hits])
+        return
+    if not hits:
+        out.print(f"nothing in profile {profile.id} matches {' '.join(words)}", markup=False)
+        return
+    t = table("Code", "Class", "Name", "Unit", "Group", title=f"{count(len(hits), 'match', 'matches')} in "
+              f"{profile.model} profile '{profile.id}'")
+    for e in hits:
+        t.add_row(e.code, e.cls, e.name, e.unit, e.group)
+    out.print(t)
+
+
+def _csv(readings: list[Reading]) -> None:
+    """The table as CSV on stdout, for a spreadsheet."""
+    w = csv.writer(sys.stdout, lineterminator="\n")
+    w.writerow(["code", "name", "value", "unit", "meaning", "default", "changed", "raw"])
+    for r in readings:
+        e = r.entry
+        w.writerow([e.code, e.name, value_text(e, r.raw), e.unit, e.enum.get(r.raw, ""),
+                    "" if e.default is None else value_text(e, e.default), "yes" if r.changed else "", r.raw])

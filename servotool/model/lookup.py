@@ -139,3 +139,14 @@ def group_members(entries: Iterable[Entry], name: str) -> list[Entry] | None:
         words = COMMON_WORDS.get(name.strip().lower(), ())
         return [e for e in entries if any(re.search(rf"\b{w}\b", e.name.lower()) for w in words)]
     return None
+
+
+def search(entries: Iterable[Entry], words: Iterable[str]) -> list[Entry]:
+    """Entries whose code, name, description or group hold every word (any case; a code in any spelling)."""
+    wanted = [w.lower() for w in words if w.strip()]
+    found = []
+    for e in entries:
+        text = f"{e.code} {code_key(e.code) or ''} {e.name} {e.description} {e.group}".lower()
+        if all(w in text or (code_key(w) or "#").lower() == (code_key(e.code) or "").lower() for w in wanted):
+            found.append(e)
+    return found

@@ -100,7 +100,12 @@ def auto_backup(drive: Drive, reason: str) -> Path:
 
 
 def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
-    """Read and check a backup against the profile; every problem is a one-line UsageError, before any write."""
+    """Read and check a backup (YAML, or CSV from a spreadsheet) against the profile; every problem is a one-line
+    UsageError, before any write."""
+    if path.suffix.lower() == ".csv":
+        from servotool.ops import backup_csv
+
+        return backup_csv.load(path, profile, force=force)
     what = str(path)
     data = load_yaml(path)
     if not isinstance(data, dict) or data.get("servotool_backup") != FORMAT:
@@ -140,6 +145,10 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
 
 def profile_of(path: Path) -> str | None:
     """The profile id a backup file names, or None when the file does not say (not a backup)."""
+    if path.suffix.lower() == ".csv":
+        from servotool.ops import backup_csv
+
+        return backup_csv.profile_of(path)
     data = load_yaml(path)
     return data.get("profile") if isinstance(data, dict) and isinstance(data.get("profile"), str) else None
 
