@@ -30,6 +30,7 @@ COMMANDS = {
     "monitor": lazy("servotool.cli.monitor:monitor"),
     "jog": lazy("servotool.cli.jog:jog"),
     "run": lazy("servotool.cli.run:run"),
+    "raw": lazy("servotool.cli.raw:app"),
 }
 
 app = typer.Typer(
