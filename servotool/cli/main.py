@@ -8,7 +8,7 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import fastparse
+from servotool.cli import complete, fastparse
 from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, state
 from servotool.cli.lazy import lazy, lazy_group
@@ -58,7 +58,9 @@ def main(
                              "Env: SERVOTOOL_UNIT."),
     timeout: float = typer.Option(None, "--timeout", help="Response timeout in seconds. Env: SERVOTOOL_TIMEOUT."),
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
-    profile: str = typer.Option(None, "--profile", "-P", help="Drive profile id or YAML file (default for sim: "
+    profile: str = typer.Option(
+        None, "--profile", "-P", autocompletion=complete.profiles,
+        help="Drive profile id or YAML file (default for sim: "
                                 "dsx7e). Env: SERVOTOOL_PROFILE."),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),

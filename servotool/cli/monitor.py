@@ -10,6 +10,7 @@ import typer
 from rich.live import Live
 from rich.table import Table
 
+from servotool.cli import complete
 from servotool.cli.common import drive, resolved
 from servotool.cli.render import count, info, out, table
 from servotool.errors import UsageError
@@ -68,7 +69,9 @@ def _sample_json(mon: Monitor, s: Sample) -> dict[str, object]:
 
 def monitor(
     ctx: typer.Context,
-    codes: list[str] = typer.Argument(None, help="Entries to watch (default: the profile's key monitors)."),
+    codes: list[str] = typer.Argument(
+        None, autocompletion=complete.codes,
+        help="Entries to watch (default: the profile's key monitors)."),
     rate: float = typer.Option(10.0, "--rate", "-r", help="Samples per second, > 0 (a rate the link cannot keep up "
                                                           "with polls as fast as it can; the rate achieved is shown)."),
     duration: float = typer.Option(None, "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C)."),

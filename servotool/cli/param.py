@@ -7,6 +7,7 @@ import sys
 
 import typer
 
+from servotool.cli import complete
 from servotool.cli.common import JSON_OPT, drive, state
 from servotool.cli.render import count, emit_json, info, out, progress, table, warn
 from servotool.config import resolve
@@ -23,7 +24,9 @@ app = typer.Typer(help="Read, set and list drive parameters.")
 @app.command("get")
 def get(
     ctx: typer.Context,
-    codes: list[str] = typer.Argument(..., help="Vendor codes (e.g. Pn004, Po109, H09-06), role names, or "
+    codes: list[str] = typer.Argument(
+        ..., autocompletion=complete.codes,
+        help="Vendor codes (e.g. Pn004, Po109, H09-06), role names, or "
                                       "CODE.FIELD for one field of a two-/four-parameter value (e.g. Po001.Y)."),
     as_json: bool = JSON_OPT,
 ) -> None:
@@ -57,7 +60,9 @@ def _field_json(r: Reading, field: str) -> dict[str, object]:
 @app.command("set")
 def set_(
     ctx: typer.Context,
-    assignments: list[str] = typer.Argument(..., help="CODE=VALUE in engineering units (e.g. Pn100=40.0); "
+    assignments: list[str] = typer.Argument(
+        ..., autocompletion=complete.assignments,
+        help="CODE=VALUE in engineering units (e.g. Pn100=40.0); "
                                             "two-/four-parameter values as the manual shows them (Po001='d 1 21', "
                                             "Po175=b1200) or one field at a time (Po001.Y=1)."),
     raw: bool = typer.Option(False, "--raw", help="Values are raw register integers, not engineering units."),
@@ -114,7 +119,9 @@ LISTABLE = ("Pn", "Un", "Sn")
 @app.command("list")
 def list_(
     ctx: typer.Context,
-    group: str = typer.Option(None, "--group", "-g", help="Only this group: the profile's own (see 'profiles "
+    group: str = typer.Option(
+        None, "--group", "-g", autocompletion=complete.groups,
+        help="Only this group: the profile's own (see 'profiles "
                               "show') or gain, speed, position, torque, io, comm, monitor on every profile."),
     changed: bool = typer.Option(False, "--changed", help="Only entries that differ from the factory default."),
     cls: str = typer.Option(None, "--class", help="Entry class to list: Pn, Un or Sn (default: Pn; with --group, "

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from servotool.cli import complete
 from servotool.cli.common import JSON_OPT
 from servotool.cli.render import count, emit_json, out, table
 from servotool.errors import UnknownName
@@ -37,9 +38,10 @@ def list_(as_json: bool = JSON_OPT) -> None:
 
 @app.command("show")
 def show(
-    profile: str = typer.Argument(..., help="Profile id or YAML file."),
+    profile: str = typer.Argument(..., autocompletion=complete.profiles, help="Profile id or YAML file."),
     unverified: bool = typer.Option(False, "--unverified", help="Only entries the manual leaves open, with why."),
-    group: str = typer.Option(None, "--group", "-g", help="Only this group."),
+    group: str = typer.Option(None, "--group", "-g", help="Only this group (its id, or a common name: gain, "
+                              "speed, position, torque, io, comm, monitor)."),
     as_json: bool = JSON_OPT,
 ) -> None:
     """A profile's settings, roles and entries."""

@@ -64,3 +64,16 @@ def test_raw_read_and_write_by_address(cli):
     assert r.json() == [{"address": 8196, "value": 300, "signed": 300, "entry": "Pn004"}]
     assert cli("--port", "sim", "raw", "write", "0x2004=70000").code == 2
     assert cli("--port", "sim", "raw", "read", "banana").code == 2
+
+
+def _complete(cli, words: str) -> list[str]:
+    r = cli(env={"_SERVOTOOL_COMPLETE": "complete_bash", "COMP_WORDS": words,
+                 "COMP_CWORD": str(len(words.split()) - 1)})
+    return r.out.split()
+
+
+def test_shell_completion_of_codes_groups_and_profiles(cli):
+    assert "H08-00" in _complete(cli, "servotool -P is620p param get H08-0")
+    assert _complete(cli, "servotool -P s") == ["sd25", "sdc"]
+    assert "gain" in _complete(cli, "servotool param list --group g")
+    assert "Pn101=" in _complete(cli, "servotool param set Pn10")
