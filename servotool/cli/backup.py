@@ -140,7 +140,9 @@ def restore_cmd(
     for w in b.warnings:
         warn(w)
     with drive(ctx) as d:
-        current = {r.entry.code: r.raw for r in d.read_entries(select(d.profile))}
+        entries = select(d.profile)
+        with progress("reading the drive", len(entries), enabled=not as_json) as advance:
+            current = {r.entry.code: r.raw for r in d.read_entries(entries, progress=advance)}
         plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [])
         if not as_json:
             _show_plan(plan)
@@ -153,7 +155,8 @@ def restore_cmd(
             return
         if not confirm(f"Write {count(len(plan.changes), 'parameter')}?", yes):
             raise ServoError("restore cancelled: nothing was written")
-        report = restore.restore(d, b, plan, notice=_where)
+        with progress("writing", len(plan.changes), enabled=not as_json) as advance:
+            report = restore.restore(d, b, plan, progress=lambda _entry: advance(1), notice=_where)
     if as_json:
         emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
                    "auto_backup": str(report.auto_backup), "persisted": report.persisted,

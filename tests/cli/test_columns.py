@@ -100,3 +100,14 @@ def test_a_table_that_fits_is_left_alone():
     t = render.table("Code", "Name")
     t.add_row("Pn004", "Load inertia ratio")
     assert render.fit(t, 80) is t
+
+
+def test_progress_shows_a_bar_with_time_left_on_a_terminal_only(monkeypatch):
+    screen = io.StringIO()
+    monkeypatch.setattr(render, "err", render.Console(file=screen, force_terminal=True, width=80))
+    with render.progress("reading parameters", 10) as advance:
+        advance(5)
+    assert "reading parameters" in screen.getvalue()
+    monkeypatch.setattr(render, "err", render.Console(file=io.StringIO(), force_terminal=False))
+    with render.progress("reading", 10) as advance:     # piped: nothing, and advancing is harmless
+        advance(3)
