@@ -13,7 +13,7 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
-from servotool.ops import backup, backup_csv, restore
+from servotool.ops import backup, restore
 from servotool.ops.params import select
 
 app = typer.Typer(help="Back up, compare and restore drive parameters; factory reset.")
@@ -46,10 +46,7 @@ def backup_cmd(
             b = backup.take(d, progress=advance)
         suffix = "csv" if kind == "csv" else "yaml"
         path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
-        if kind == "csv":
-            backup_csv.save(b, d.profile, path, force=force)
-        else:
-            backup.save(b, d.profile, path, force=force)
+        backup.save(b, d.profile, path, force=force, fmt=suffix)
     if as_json:
         emit_json({"file": str(path), "format": "csv" if kind == "csv" else "yaml", "entries": len(b.values),
                    "checksum": b.checksum(), "identity": b.identity})

@@ -10,10 +10,19 @@ from __future__ import annotations
 import difflib
 import re
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
+from typing import Protocol, TypeVar
 
-if TYPE_CHECKING:
-    from servotool.model.profile import Entry
+
+class Entry(Protocol):
+    """What lookups read of a profile entry (model.profile.Entry; not imported: profile imports this module)."""
+
+    code: str
+    name: str
+    description: str
+    group: str
+
+
+E = TypeVar("E", bound=Entry)
 
 _CODE = re.compile(r"([A-Za-z]+?)[-._ ]?([0-9][0-9A-Fa-f]*)(?:[-._ ]([0-9A-Fa-f]+))?")
 
@@ -128,7 +137,7 @@ def class_name(text: str, classes: Iterable[str]) -> str | None:
     return next((c for c in classes if c.lower() == text.strip().lower()), None)
 
 
-def group_members(entries: Iterable[Entry], name: str) -> list[Entry] | None:
+def group_members(entries: Iterable[E], name: str) -> list[E] | None:
     """The entries a group name stands for (its own id in any case, or a common name), None when the name means
     nothing for these entries."""
     entries = list(entries)
@@ -141,7 +150,7 @@ def group_members(entries: Iterable[Entry], name: str) -> list[Entry] | None:
     return None
 
 
-def search(entries: Iterable[Entry], words: Iterable[str]) -> list[Entry]:
+def search(entries: Iterable[E], words: Iterable[str]) -> list[E]:
     """Entries whose code, name, description or group hold every word (any case; a code in any spelling)."""
     wanted = [w.lower() for w in words if w.strip()]
     found = []

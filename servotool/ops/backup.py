@@ -18,6 +18,7 @@ from servotool.errors import ServoError, UsageError
 from servotool.files import backup_dir, load_yaml, write_atomic
 from servotool.model.codec import format_value, json_value
 from servotool.model.profile import Entry, Profile
+from servotool.ops import backup_csv
 from servotool.ops.params import select
 
 FORMAT = 1
@@ -68,13 +69,17 @@ def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
                   __version__, identity, {r.entry.code: r.raw for r in readings})
 
 
-def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False) -> Path:
-    """Write atomically; never replace an existing file unless forced."""
+def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False, fmt: str = "yaml") -> Path:
+    """Write atomically (YAML, or with fmt="csv" a table for a spreadsheet); never replace an existing file unless
+    forced."""
     exists = UsageError(f"{path} exists; choose another name or pass --force to replace it")
     if path.exists() and not force:
         raise exists
+    meta = {"profile": backup.profile, "model": backup.model, "unit": str(backup.unit), "created": backup.created,
+            "tool_version": backup.tool_version}
+    text = backup_csv.to_csv(profile, meta, backup.values) if fmt == "csv" else backup.to_yaml(profile)
     try:
-        write_atomic(path, backup.to_yaml(profile), replace=force)
+        write_atomic(path, text, replace=force)
     except FileExistsError:
         raise exists from None
     except OSError as exc:
@@ -103,9 +108,10 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
     """Read and check a backup (YAML, or CSV from a spreadsheet) against the profile; every problem is a one-line
     UsageError, before any write."""
     if path.suffix.lower() == ".csv":
-        from servotool.ops import backup_csv
-
-        return backup_csv.load(path, profile, force=force)
+        meta, values, warnings = backup_csv.read(path, profile, force=force)
+        unit = meta.get("unit", "")
+        return Backup(meta.get("profile", ""), "", meta.get("model", ""), int(unit) if unit.isdigit() else 0,
+                      meta.get("created", ""), meta.get("tool_version", ""), {}, values, path, warnings)
     what = str(path)
     data = load_yaml(path)
     if not isinstance(data, dict) or data.get("servotool_backup") != FORMAT:
@@ -146,8 +152,6 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
 def profile_of(path: Path) -> str | None:
     """The profile id a backup file names, or None when the file does not say (not a backup)."""
     if path.suffix.lower() == ".csv":
-        from servotool.ops import backup_csv
-
         return backup_csv.profile_of(path)
     data = load_yaml(path)
     return data.get("profile") if isinstance(data, dict) and isinstance(data.get("profile"), str) else None

@@ -1,4 +1,4 @@
-"""Parameter sets as CSV, for spreadsheets: written from a backup, read back as one (the value column counts).
+"""Parameter sets as CSV, for spreadsheets: written from a backup, read back into one (the value column counts).
 
 The first row names the profile, model and unit; then a header and one row per parameter: code, name, value (in
 engineering units, as `param set` takes it), unit, meaning (of an enum value), raw (the register integer, for
@@ -11,11 +11,10 @@ import csv
 import io
 from pathlib import Path
 
-from servotool.errors import ServoError, UsageError
-from servotool.files import read_text, write_atomic
+from servotool.errors import UsageError
+from servotool.files import read_text
 from servotool.model.codec import format_value, parse_value, raw_to_eng
 from servotool.model.profile import Entry, Profile
-from servotool.ops.backup import Backup
 
 MARK = "servotool parameter backup"
 COLUMNS = ["code", "name", "value", "unit", "meaning", "raw"]
@@ -37,28 +36,14 @@ def rows(profile: Profile, values: dict[str, int]) -> list[list[str]]:
     return out
 
 
-def to_csv(backup: Backup, profile: Profile) -> str:
+def to_csv(profile: Profile, meta: dict[str, str], values: dict[str, int]) -> str:
+    """The CSV text: the identifying first row (meta as key=value), the header, one row per parameter."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow([MARK, f"profile={backup.profile}", f"model={backup.model}", f"unit={backup.unit}",
-                f"created={backup.created}", f"tool_version={backup.tool_version}"])
+    w.writerow([MARK, *(f"{k}={v}" for k, v in meta.items())])
     w.writerow(COLUMNS)
-    w.writerows(rows(profile, backup.values))
+    w.writerows(rows(profile, values))
     return buf.getvalue()
-
-
-def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False) -> Path:
-    """Write atomically; never replace an existing file unless forced."""
-    if path.exists() and not force:
-        raise UsageError(f"{path} exists; choose another name or pass --force to replace it")
-    try:
-        write_atomic(path, to_csv(backup, profile), replace=force)
-    except FileExistsError:
-        raise UsageError(f"{path} exists; choose another name or pass --force to replace it") from None
-    except OSError as exc:
-        raise ServoError(f"cannot write {path}: {exc.strerror or exc}") from None
-    backup.path = path
-    return path
 
 
 def _meta(path: Path) -> tuple[dict[str, str], list[list[str]]]:
@@ -76,8 +61,9 @@ def profile_of(path: Path) -> str | None:
         return None
 
 
-def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
-    """A CSV backup as a Backup, every value parsed and range-checked against the profile (nothing is sent)."""
+def read(path: Path, profile: Profile, *, force: bool = False) -> tuple[dict[str, str], dict[str, int], list[str]]:
+    """A CSV backup's first-row facts, its values (each parsed and range-checked against the profile; nothing is
+    sent) and warnings."""
     meta, table = _meta(path)
     if not table or [c.strip().lower() for c in table[0][:3]] != COLUMNS[:3]:
         raise UsageError(f"{path}: the second row must be the header {','.join(COLUMNS)}")
@@ -99,9 +85,4 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
             values[entry.code] = parse_value(entry, row[2] if len(row) > 2 else "")
         except UsageError as exc:
             raise UsageError(f"{path}: line {n}: {exc}") from None
-    try:
-        unit = int(meta.get("unit", "0"))
-    except ValueError:
-        unit = 0
-    return Backup(meta.get("profile", ""), "", meta.get("model", ""), unit, meta.get("created", ""),
-                  meta.get("tool_version", ""), {}, values, path, warnings)
+    return meta, values, warnings
