@@ -2,8 +2,9 @@
 
 Runs `servotool --port sim param get Pn004` (a new process each time, on the embedded simulator) and
 `python -c "import pymodbus.client"` alternately, 7 times each by default, and prints the medians and their ratio
-(target: at most 2x). One warm-up run of each first, so that both find their files in the OS cache and servotool
-its compiled profile in the user cache.
+(target: at most 2x). Both run with their bytecode cached (PYTHONPYCACHEPREFIX in a temporary folder, even where
+PYTHONDONTWRITEBYTECODE is set: an installed package has its .pyc files), after one warm-up run of each, so that both
+find their files in the OS cache and servotool its compiled profile in the user cache.
 
     python bench/startup.py [--runs N]
 """
@@ -36,8 +37,9 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "SERVOTOOL_SIM_DIR": str(Path(tmp) / "sim"),
-               "SERVOTOOL_CONFIG": str(Path(tmp) / "none.yaml"),
+               "SERVOTOOL_CONFIG": str(Path(tmp) / "none.yaml"), "PYTHONPYCACHEPREFIX": str(Path(tmp) / "pyc"),
                "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
         seconds(SERVOTOOL, env)
         seconds(BASELINE, env)
         ours, base = [], []

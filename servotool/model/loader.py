@@ -18,7 +18,6 @@ from servotool.errors import FileProblem, ProfileError, UnknownName
 from servotool.files import cache_dir, parse_yaml, read_text, write_atomic
 from servotool.model.lookup import suggest
 from servotool.model.profile import Profile
-from servotool.model.schema import parse_profile
 
 
 def builtin_dir() -> Path:
@@ -87,6 +86,8 @@ def _parse(path: Path) -> tuple[Profile | None, list[str]]:
         data = parse_yaml(text, path)
     except FileProblem as exc:
         return None, [str(exc)]
+    from servotool.model.schema import parse_profile  # the parser only when the cache has not the profile
+
     parsed = parse_profile(data, str(path))
     _store(where, parsed)
     return parsed

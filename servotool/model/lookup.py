@@ -106,6 +106,11 @@ def _unit_key(unit: str) -> str:
 def split_unit(text: str, unit: str) -> tuple[str, str | None]:
     """'3000rpm' -> ('3000', 'rpm'); text without a unit -> (text, None). The caller checks the unit with
     unit_matches."""
+    try:
+        float(text)
+        return text, None          # a number as it is (1e-300 is no '1' in 'e-300')
+    except ValueError:
+        pass
     m = _NUMBER_UNIT.fullmatch(text.strip())
     if m is None or (m.group(2).lower().startswith(("x", "b")) and text.strip().lower().startswith(("0x", "0b"))):
         return text, None

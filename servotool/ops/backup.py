@@ -10,8 +10,6 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from servotool import __version__
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
@@ -53,7 +51,13 @@ class Backup:
                "model": self.model, "unit": self.unit, "created": self.created, "tool_version": self.tool_version,
                "identity": self.identity, "checksum": self.checksum(), "values": self.values, "display": text}
         return "# servotool parameter backup; values are raw register integers, 'display' is for reading only\n" + \
-            yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
+            _dump(doc)
+
+
+def _dump(doc: dict[str, Any]) -> str:
+    import yaml  # only where a backup is written: `param get` starts without PyYAML
+
+    return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
 
 
 def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:

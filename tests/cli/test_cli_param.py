@@ -66,7 +66,7 @@ def test_bad_input_is_one_line_and_writes_nothing(cli, sim_dir):
         (("param", "set", "Pn100"), 2, "is not CODE=VALUE"),
         (("param", "get", "Pn999"), 2, "unknown code"),
         (("param", "list", "--group", "nosuch"), 2, "unknown group"),
-        (("param", "list", "--class", "Xn"), 2, "Invalid value for --class"),
+        (("param", "list", "--class", "Xn"), 2, "unknown class 'Xn' (classes: Pn, Un, Sn)"),
         (("--unit", "abc", "param", "list"), 2, "Invalid value for '--unit'"),
         (("--unit", "0", "param", "list"), 2, "bad unit id 0"),
         (("--timeout", "nan", "param", "list"), 2, "bad timeout nan"),

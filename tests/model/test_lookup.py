@@ -58,6 +58,12 @@ def test_a_value_with_its_unit(code, typed, raw):
     assert parse_value(load_profile("dsx7e").entry(code), typed) == raw
 
 
+def test_numbers_with_an_exponent_or_in_hex_are_no_units():
+    assert lookup.split_unit("1e-300", "rpm") == ("1e-300", None)
+    assert lookup.split_unit("0x1F", "") == ("0x1F", None)
+    assert lookup.split_unit("3000 r/min", "rpm") == ("3000", "r/min")
+
+
 def test_a_value_in_another_unit_is_refused_naming_the_right_one():
     entry = load_profile("dsx7e").entry("Pn027")
     with pytest.raises(UsageError, match=r"'3000Hz' is in Hz, but Pn027 is in rpm"):

@@ -256,7 +256,7 @@ def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
     r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1", "--yes")
     assert r.code == 2 and "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.err    # --yes skips no setup
     set_up(cli, "sd25", port)
-    r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1")
+    r = cli("--port", port, "--profile", "sd25", "--explain", "jog", "--speed", "300", "--time", "1")
     assert r.code == 2 and "--yes" in r.err
     assert "So-57 (jog)" in r.err and "Po407.X = 26" in r.err
     assert "no communication timeout" in r.err

@@ -257,7 +257,7 @@ def test_cli_refuses_bad_files_before_connecting_or_writing(auto_dir, tmp_path, 
         assert not WRITE_FRAME.search(r.err) and not auto_dir.exists()
     r = cli("--port", "sim", "param", "restore", str(edited), "--yes", "--force")
     assert r.code == 0, r.err
-    assert "warning:" in r.err and "checksum mismatch" in r.err and "1 parameters restored" in r.out
+    assert "warning:" in r.err and "checksum mismatch" in r.err and "1 parameter restored" in r.out
     with sim() as d:
         assert d.read_one("Pn100").raw == 330
 
