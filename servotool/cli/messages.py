@@ -67,7 +67,22 @@ def error_text(exc: ServoError, given: ConnectOptions, verbose: bool = False) ->
         text = unknown_text(exc, given)
     else:
         text = str(exc)
-    return plain(text, verbose)
+    return with_options(plain(text, verbose), given)
+
+
+_SUGGESTED = re.compile(r"'servotool ((?!-)[^']*)'")
+
+
+def with_options(text: str, given: ConnectOptions) -> str:
+    """Commands a library message suggests ('servotool alarm') with the user's connection options, so that
+    copying one reaches the same drive; commands that carry options already are left as they are."""
+    def repl(m: re.Match[str]) -> str:
+        try:
+            return "'" + command(given, *shlex.split(m.group(1))) + "'"
+        except ValueError:
+            return m.group(0)
+
+    return _SUGGESTED.sub(repl, text)
 
 
 def unknown_text(exc: UnknownName, given: ConnectOptions) -> str:
@@ -80,9 +95,14 @@ def unknown_text(exc: UnknownName, given: ConnectOptions) -> str:
     return str(exc)
 
 
+# Roles whose name says little to a user.
+ROLE_WORDS = {"motion_route": "JOG or speed command (a JOG trigger with its speed, or a speed reference with servo-on)",
+              "speed_feedback": "motor speed reading", "torque_feedback": "motor torque reading"}
+
+
 def missing_role_text(exc: MissingRole, verbose: bool) -> str:
     """A feature the drive's profile gives no Modbus way to: say so, and what is left to the user."""
-    what = exc.role.replace("_", " ")
+    what = ROLE_WORDS.get(exc.role, exc.role.replace("_", " "))
     text = (f"{exc.feature}: servotool knows no way to reach the {what} of this drive over Modbus "
             f"(profile {exc.profile_id}); do it on the drive's panel, or give a profile that maps it with --profile")
     return text + (f" [role '{exc.role}']" if verbose else "")

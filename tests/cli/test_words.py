@@ -5,13 +5,21 @@ from __future__ import annotations
 from servotool.cli import render
 from servotool.cli.messages import error_text, plain
 from servotool.config import ConnectOptions
-from servotool.errors import MissingRole
+from servotool.errors import MissingRole, ServoError
 
 
 def test_manual_line_references_only_with_verbose():
     text = "needs H0C-09 = 1 (communication VDI, L3392) and H17-00 (is620p.md L1044); 2 stop bits (L2713-2719)"
     assert plain(text) == "needs H0C-09 = 1 (communication VDI) and H17-00; 2 stop bits"
     assert plain(text, verbose=True) == text
+
+
+def test_commands_a_library_message_suggests_get_the_users_connection_options():
+    given = ConnectOptions(port="COM3", profile="sd25")
+    text = error_text(ServoError("the drive is in alarm (see 'servotool alarm', clear it first)"), given)
+    assert "'servotool --port COM3 --profile sd25 alarm'" in text
+    already = "set it with 'servotool --port sim param set Pn4=1'"
+    assert error_text(ServoError(already), given) == already
 
 
 def test_a_missing_role_is_worded_as_what_the_user_can_do():
