@@ -88,9 +88,11 @@ def jog(
         if err.is_terminal:
             err.print("")
         final = jogger.speed()
+    sign = plan.direction if seconds is not None else 1      # a timed reverse JOG peaks at a negative speed
     if as_json:
-        emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds, "peak_speed_rpm": round(peak, 1),
-                   "median_speed_rpm": round(statistics.median(late), 1) if late else None,
+        emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds,
+                   "peak_speed_rpm": round(peak, 1) * sign,
+                   "median_speed_rpm": round(statistics.median(late), 1) * sign if late else None,
                    "final_speed_rpm": final})
     else:
-        info(f"JOG done: peak {peak:.1f} rpm, now {final if final is not None else '?'} rpm")
+        info(f"JOG done: peak {peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")
