@@ -8,6 +8,7 @@ list every sub-command, import them all; commands registered the usual typer way
 
 from __future__ import annotations
 
+import copy
 import importlib
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -34,23 +35,58 @@ def _load(target: str) -> Any:
 
 
 def build(name: str, spec: Lazy) -> Any:
-    """The click command for a registry entry (imports its modules)."""
+    """The click command for a registry entry (imports its modules; a group's sub-commands are built when
+    called)."""
     objects = [_load(t) for t in spec.targets]
     if len(objects) == 1 and not isinstance(objects[0], typer.Typer):
         single = typer.Typer()
         single.command(name)(objects[0])
         command = typer.main.get_command(single)
     else:
-        command = typer.main.get_group(objects[0])
-        for extra in objects[1:]:
-            for sub_name, sub in typer.main.get_group(extra).commands.items():
-                command.add_command(sub, sub_name)
+        command = _app_group(objects)
     command.name = name
-    if hasattr(command, "commands") and not command.invoke_without_command:
-        command.no_args_is_help = True      # a bare group name shows its help, once
     if spec.help is not None:
         command.help = spec.help
+    if hasattr(command, "commands") and not command.invoke_without_command:
+        command.no_args_is_help = True      # a bare group name shows its help, once
     return command
+
+
+def _app_group(apps: list[typer.Typer]) -> Any:
+    """One group of the typer apps' commands, each built (typer reads its signature) only when asked for; an app
+    with sub-groups of its own is built whole, the usual typer way."""
+    if any(a.registered_groups for a in apps):
+        group = typer.main.get_group(apps[0])
+        for extra in apps[1:]:
+            for sub_name, sub in typer.main.get_group(extra).commands.items():
+                group.add_command(sub, sub_name)
+        return group
+    infos = {(i.name or typer.main.get_command_name(i.callback.__name__)): (i, a)
+             for a in apps for i in a.registered_commands if i.callback is not None}
+    shell = copy.copy(apps[0])
+    shell.registered_commands = []
+    shell.info = copy.copy(apps[0].info)
+    shell.info.cls = _OnDemand
+    group = typer.main.get_group(shell)
+    group.infos = infos
+    return group
+
+
+class _OnDemand(TyperGroup):
+    """A typer group whose commands are made from their CommandInfo on first use."""
+
+    infos: dict[str, tuple[Any, typer.Typer]]
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        return [*super().list_commands(ctx), *(n for n in getattr(self, "infos", {}) if n not in self.commands)]
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        found = getattr(self, "infos", {}).get(cmd_name)
+        if cmd_name not in self.commands and found is not None:
+            info, app = found
+            self.commands[cmd_name] = typer.main.get_command_from_info(
+                info, pretty_exceptions_short=app.pretty_exceptions_short, rich_markup_mode=app.rich_markup_mode)
+        return super().get_command(ctx, cmd_name)
 
 
 def lazy_group(commands: dict[str, Lazy]) -> type[TyperGroup]:
