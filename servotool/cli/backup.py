@@ -194,8 +194,11 @@ def reset_cmd(
         d.profile.need_role("factory_reset", "param reset")
         if not confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):
             raise ServoError("factory reset cancelled: nothing was written")
-        auto = restore.factory_reset(d, notice=_where)
-        left = restore.not_at_default(d)
+        count_pn = len(select(d.profile))
+        with progress("automatic backup", count_pn, enabled=not as_json) as advance:
+            auto = restore.factory_reset(d, notice=_where, progress=advance)
+        with progress("checking the defaults", count_pn, enabled=not as_json) as advance:
+            left = restore.not_at_default(d, progress=advance)
         before = backup.load(auto, d.profile).values
     cycle = [e.code for e in d.profile.of_class("Pn")
              if e.effect == "power_cycle" and before.get(e.code, e.default) != e.default]

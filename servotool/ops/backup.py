@@ -103,9 +103,9 @@ def auto_path(drive: Drive, reason: str) -> Path:
     return backup_dir() / f"{drive.profile.id}-unit{drive.unit}-{stamp}-{reason}.yaml"
 
 
-def auto_backup(drive: Drive, reason: str) -> Path:
+def auto_backup(drive: Drive, reason: str, progress: Callable[[int], None] | None = None) -> Path:
     """Save the drive's current state under backup_dir() (never replacing a file)."""
-    return write_backup(drive, auto_path(drive, reason))
+    return write_backup(drive, auto_path(drive, reason), progress=progress)
 
 
 def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
