@@ -26,9 +26,9 @@ class ProfileError(UsageError):
 class MissingRole(UsageError):
     """A feature needs an entry by meaning (a role) that the drive's profile does not map."""
 
-    def __init__(self, feature: str, role: str, profile_id: str) -> None:
+    def __init__(self, feature: str, role: str, profile_id: str, message: str | None = None) -> None:
         self.feature, self.role, self.profile_id = feature, role, profile_id
-        super().__init__(f"{feature} needs role '{role}', which profile {profile_id} does not map")
+        super().__init__(message or f"{feature} needs role '{role}', which profile {profile_id} does not map")
 
 
 class UnknownName(UsageError):

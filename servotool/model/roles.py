@@ -71,5 +71,7 @@ def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
         kind = "speed"
         found.pop("jog", None)
     else:
-        raise MissingRole(feature, "motion_route", profile.id)
+        raise MissingRole(feature, "motion_route", profile.id,
+                          f"{feature} needs role 'jog' with 'jog_speed', or 'speed_reference' with 'servo_on', "
+                          f"which profile {profile.id} does not map")
     return MotionRoute(kind, found)
