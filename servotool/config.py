@@ -34,6 +34,7 @@ class ConnectOptions:
     timeout: float | None = None
     retries: int | None = None
     profile: str | None = None
+    no_identity_check: bool | None = None
 
 
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
@@ -42,6 +43,8 @@ ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
+    if name == "no_identity_check":
+        return _flag(value, where)
     if name not in ("baud", "stopbits", "unit", "retries", "timeout"):
         return str(value)
     try:
@@ -52,6 +55,18 @@ def _convert(name: str, value: Any, where: str) -> Any:
         kind = "a number" if name == "timeout" else "a whole number"
         raise UsageError(f"{where}: {name} must be {kind}, got {value!r}") from None
     return number
+
+
+def _flag(value: Any, where: str) -> bool:
+    """A yes/no option from the environment or a file."""
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("1", "true", "yes", "on"):
+        return True
+    if text in ("0", "false", "no", "off"):
+        return False
+    raise UsageError(f"{where}: expected true or false, got {value!r}")
 
 
 def _from_env() -> ConnectOptions:
@@ -92,15 +107,21 @@ class Resolved:
     profile: Profile
     settings: LinkSettings
     unit: int
+    identity_check: bool = True     # check the drive answering against the profile before any write
 
     @property
     def simulated(self) -> bool:
         return self.settings.port == SIM_PORT
 
 
+def effective(cli: ConnectOptions) -> ConnectOptions:
+    """The options in force: CLI > environment > config file (no profile defaults; nothing checked)."""
+    return merge(cli, _from_env(), _from_config())
+
+
 def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
     """Apply CLI > environment > config file > profile defaults, and check every value."""
-    opts = merge(cli, _from_env(), _from_config())
+    opts = effective(cli)
     port = opts.port
     if port is None:
         if need_port:
@@ -121,7 +142,8 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
     if settings.retries < 0:
         raise UsageError("retries must be >= 0")
-    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit))
+    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit),
+                    identity_check=not opts.no_identity_check)
 
 
 def check_unit(unit: int) -> int:
@@ -133,13 +155,18 @@ def check_unit(unit: int) -> int:
 
 def line_format(opts: ConnectOptions, profile: Profile) -> LineSettings:
     """The line settings from the options, defaulting to the profile's factory settings; checked."""
-    baud = opts.baud if opts.baud is not None else profile.line.baud
-    stopbits = opts.stopbits if opts.stopbits is not None else profile.line.stopbits
-    parity = PARITIES.get((opts.parity or profile.line.parity).upper())
+    return line_settings(opts, profile.line)
+
+
+def line_settings(opts: ConnectOptions, defaults: LineSettings) -> LineSettings:
+    """The line settings from the options, defaulting to the given ones; checked."""
+    baud = opts.baud if opts.baud is not None else defaults.baud
+    stopbits = opts.stopbits if opts.stopbits is not None else defaults.stopbits
+    parity = PARITIES.get((opts.parity or defaults.parity).upper())
     if parity is None:
         raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
     if not 300 <= baud <= 4_000_000:
         raise UsageError(f"bad baud rate {baud}: must be 300..4000000")
     if stopbits not in (1, 2):
         raise UsageError(f"bad stop bits {stopbits}: must be 1 or 2")
-    return LineSettings(baud, parity, stopbits, profile.line.bytesize)
+    return LineSettings(baud, parity, stopbits, defaults.bytesize)

@@ -11,6 +11,7 @@ from servotool.config import Resolved
 from servotool.drive import Drive
 from servotool.link.modbus import ModbusLink
 from servotool.link.ports import Trace
+from servotool.ops.identity import confirm, warning_text
 
 
 def sim_notice(resolved: Resolved, units: list[int]) -> str:
@@ -40,7 +41,13 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
             sim.close()
         raise
     try:
-        yield [Drive(link, resolved.profile, u) for u in units]
+        drives = [Drive(link, resolved.profile, u) for u in units]
+        # Before anything is written: the drive answering must be the one the profile describes. The embedded
+        # simulator is built from the profile itself.
+        if resolved.identity_check and not resolved.simulated:
+            if text := warning_text(confirm(drives)):
+                (notice or _stderr)(f"servotool: warning: {text}")
+        yield drives
     finally:
         link.close()
         if sim:

@@ -31,6 +31,10 @@ COMMANDS = {
     "jog": lazy("servotool.cli.jog:jog"),
     "run": lazy("servotool.cli.run:run"),
     "raw": lazy("servotool.cli.raw:app"),
+    "scan": lazy("servotool.cli.scan:scan"),
+    "doctor": lazy("servotool.cli.doctor:doctor"),
+    "trace": lazy("servotool.cli.trace:trace"),
+    "plot": lazy("servotool.cli.plot:plot"),
 }
 
 app = typer.Typer(
@@ -62,6 +66,9 @@ def main(
         None, "--profile", "-P", autocompletion=complete.profiles,
         help="Drive profile id or YAML file (default for sim: "
                                 "dsx7e). Env: SERVOTOOL_PROFILE."),
+    no_identity_check: bool = typer.Option(None, "--no-identity-check", help="Skip the check, made before "
+                                           "any write, that the drive answering is the one the profile describes. "
+                                           "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.", show_default=False),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
     explain: bool = typer.Option(False, "--explain", help="Cautions in full (why an entry is not confirmed by the "
@@ -74,7 +81,8 @@ def main(
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
     state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
-                                        timeout=timeout, retries=retries, profile=profile)
+                                        timeout=timeout, retries=retries, profile=profile,
+                                        no_identity_check=no_identity_check or None)
     Verbosity.level = -1 if quiet else verbose
     Verbosity.explain = explain
 

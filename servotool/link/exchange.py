@@ -79,7 +79,9 @@ class _Op:
         else:
             text = (f"no reply that answers it after {tries}, last {fault.why} (a late or repeated reply, an "
                     f"echoing adapter, or two masters on the line)")
-        return DeviceError(f"{self.what}: {text}{'; ' + self.outcome if self.outcome else ''}")
+        error = DeviceError(f"{self.what}: {text}{'; ' + self.outcome if self.outcome else ''}")
+        error.fault = fault.kind
+        return error
 
 
 class Exchange:
@@ -90,6 +92,7 @@ class Exchange:
         self.wire, self.timeout, self.retries, self.settle = wire, timeout, retries, settle
         self.echo = echo                   # the adapter echoes what we send; None: find out
         self.late_window = timeout         # how long after its timeout a late reply may still come
+        self.flush_gap = FRAME_GAP         # the silence that ends what is left of a failed try
         self.trace, self.clock = trace, clock
         self.requests = 0
         self._suspect = False              # the last operation met a fault: confirm the next reads
@@ -232,7 +235,7 @@ class Exchange:
             until = sent_at + self.timeout + (self.late_window if fault.kind == "silent" else 0.0)
             while (left := until - self.clock()) > 0:
                 self._recv(left)
-        self._take_pending(max(self.settle, FRAME_GAP))
+        self._take_pending(max(self.settle, self.flush_gap))
 
     def _take_pending(self, quiet: float, until: int = 0) -> bytes:
         """Bytes already waiting, and those that follow within `quiet` s of each other (or until `until` came)."""

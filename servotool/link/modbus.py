@@ -70,6 +70,17 @@ class ModbusLink:
               idempotent: bool = True) -> None:
         self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent)
 
+    @property
+    def echo(self) -> bool | None:
+        """Whether the adapter echoes what is sent (None: not found out yet)."""
+        return self._exchange.echo
+
+    def hurry(self) -> None:
+        """For a bus scan, where most ids are silent by design: after a silent try, neither wait for a late reply
+        nor for a long quiet gap (a late reply then shows up as a stray frame at the next id)."""
+        self._exchange.late_window = 0.0
+        self._exchange.flush_gap = 0.0
+
     def close(self) -> None:
         self._client.close()
 
