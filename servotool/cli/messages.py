@@ -73,6 +73,7 @@ def error_text(exc: ServoError, given: ConnectOptions, verbose: bool = False) ->
     return with_options(plain(text, verbose), given)
 
 
+OFFLINE = ("sim", "profiles")      # commands that take no connection options
 _SUGGESTED = re.compile(r"'servotool ((?!-)[^']*)'")
 
 
@@ -81,9 +82,13 @@ def with_options(text: str, given: ConnectOptions) -> str:
     copying one reaches the same drive; commands that carry options already are left as they are."""
     def repl(m: re.Match[str]) -> str:
         try:
-            return "'" + command(given, *shlex.split(m.group(1))) + "'"
+            args = shlex.split(m.group(1))
         except ValueError:
             return m.group(0)
+        own = set(OPTION_FLAGS.values()) | {"-p", "-P", "-u", "-b"}
+        if not args or args[0] in OFFLINE or own & {a.split("=")[0] for a in args}:
+            return m.group(0)         # a command that reaches no drive, or names its own connection
+        return "'" + command(given, *args) + "'"
 
     return _SUGGESTED.sub(repl, text)
 

@@ -20,6 +20,8 @@ def test_commands_a_library_message_suggests_get_the_users_connection_options():
     assert "'servotool --port COM3 --profile sd25 alarm'" in text
     already = "set it with 'servotool --port sim param set Pn4=1'"
     assert error_text(ServoError(already), given) == already
+    serve = "start 'servotool sim serve --port tcp://127.0.0.1:0' and give its tcp:// port"
+    assert error_text(ServoError(serve), given) == serve
 
 
 def test_a_missing_role_is_worded_as_what_the_user_can_do():
