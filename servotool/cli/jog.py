@@ -17,6 +17,7 @@ from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
+from servotool.motion.deadman import sentence
 from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
 from servotool.sim.state import effective_values
@@ -100,17 +101,22 @@ def jog(
     as_json: bool = typer.Option(False, "--json", help="Print the plan and the result as JSON."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving through unverified entries "
                              "(real drives only; the simulator never asks)."),
+    no_dead_man: bool = typer.Option(False, "--no-dead-man", help="Move a drive that has no dead-man route (nothing "
+                                     "stops the motor if this program dies); keep an E-stop at hand."),
 ) -> None:
-    """JOG the motor; the drive stops by itself if this program goes quiet. Ctrl-C stops at once."""
+    """JOG the motor. Before moving it prints what stops the motor if this program stops, and the bound."""
     if (seconds is None) == (not interactive):
         raise UsageError("give exactly one of --time SECONDS or --interactive")
     if interactive and not sys.stdin.isatty():
         raise UsageError("--interactive needs a terminal")
     with drive(ctx) as d:
+        d.dead_man_waived = no_dead_man
         jogger = Jogger(d)
         plan = jogger.plan(speed, seconds, max_travel)
         confirm_motion(ctx, d, yes)
         info(plan.describe() + ("" if not interactive else f"  [{KEYS}]"))
+        if plan.dead_man is not None:
+            info(sentence(plan.dead_man))
         peak = 0.0
         late: list[float] = []    # speeds over the second half of a timed JOG: the speed it settled at
 
@@ -144,6 +150,7 @@ def jog(
     if as_json:
         emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds, "peak_speed_rpm": round(peak, 1),
                    "median_speed_rpm": round(statistics.median(late), 1) if late else None,
-                   "final_speed_rpm": final})
+                   "final_speed_rpm": final,
+                   "dead_man": plan.dead_man.as_json() if plan.dead_man is not None else None})
     else:
         info(f"JOG done: peak {peak:.1f} rpm, now {final if final is not None else '?'} rpm")

@@ -168,6 +168,18 @@ class SetupItem:
     unverified: str = ""
 
 
+@dataclass(frozen=True)
+class DeadManRoute:
+    """What stops host motion when the host dies (profile key dead_man): the drive's own communication timeout
+    (drive_timeout), bounded relative moves re-armed by each beat (segment), or nothing (none)."""
+
+    route: str
+    reason: str
+    source: str
+    unverified: str = ""
+    if_host_dies: str = ""
+
+
 @dataclass
 class Profile:
     """A loaded, validated drive profile."""
@@ -191,6 +203,7 @@ class Profile:
     alarms: list[Alarm] = field(default_factory=list)
     conventions: dict[str, str] = field(default_factory=dict)
     motion_setup: list[SetupItem] = field(default_factory=list)
+    dead_man: DeadManRoute | None = None
     unverified_note: str = ""
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)

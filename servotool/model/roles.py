@@ -30,6 +30,29 @@ def is_sim_extension(entry: Entry) -> bool:
     return entry.source.strip().lower().startswith("servotool")
 
 
+@dataclass(frozen=True)
+class SimExtension:
+    """Something the simulated drive does that the drive's manual does not document."""
+
+    what: str
+    why: str
+
+
+def sim_extensions(profile: Profile) -> list[SimExtension]:
+    """Every simulator extension of a profile: entries and alarms servotool added, and the fake watchdog setting
+    where the drive documents no communication timeout."""
+    found = [SimExtension(f"entry {e.code} ({e.name})", e.source) for e in profile.entries if is_sim_extension(e)]
+    found += [SimExtension(f"alarm {a.display} ({a.name})", a.source) for a in profile.alarms
+              if a.source.strip().lower().startswith("servotool")]
+    if profile.role("comm_timeout") is None:
+        found.append(SimExtension("sim config --fake-watchdog", "NOT REAL, off by default: stops host motion after "
+                                  "500 ms of host silence; the real drive documents no communication timeout"))
+    if profile.motor is None:
+        found.append(SimExtension("motor", "no motor data in the profile: the simulator assumes a 400 W, 3000 rpm "
+                                  "motor"))
+    return found
+
+
 def jog_codes(entry: Entry) -> dict[int, int]:
     """Direction (+1/-1/0) -> raw value of a JOG trigger entry."""
     names = {name.split()[0].lower(): raw for raw, name in entry.enum.items() if name.strip()}

@@ -17,6 +17,8 @@ from servotool.errors import DeviceError, ServoError, UsageError
 from servotool.model.codec import eng_to_raw, parse_value, raw_to_eng
 from servotool.model.profile import Entry
 from servotool.model.roles import FEATURE, jog_codes, motion_route
+from servotool.motion import deadman
+from servotool.motion.deadman import DeadManBound
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.setup import check_setup
 from servotool.ops import alarms
@@ -33,6 +35,7 @@ class JogPlan:
     max_speed_rpm: float
     accel_ms: float | None
     travel_rev: float | None  # estimate for a timed jog
+    dead_man: DeadManBound | None = None
 
     def describe(self) -> str:
         what = "forward" if self.direction > 0 else "reverse"
@@ -67,6 +70,7 @@ class Jogger:
         self._saved_reference: int | None = None
         self._ramp_raw: int | None = None
         self._stop_wait_s = 3.0
+        self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
 
     @property
     def keepalive_s(self) -> float:
@@ -108,12 +112,27 @@ class Jogger:
             raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {travel:.2f} rev, over the "
                              f"--max-travel limit {max_travel_rev:g} rev")
         self.keepalive.interval_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
-        accel = self.profile.role("jog_accel")
-        accel_ms = raw_to_eng(accel, self.drive.read_entries([accel])[0].raw) if accel is not None else None
+        accel_ms = self._ramp_ms()
         self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * \
             abs(speed_rpm) / (self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0)
+        bound = self.arm_dead_man(abs(speed_rpm), accel_ms)
         return JogPlan(abs(speed_rpm), 1 if speed_rpm > 0 else -1, seconds, limit,
-                       float(accel_ms) if accel_ms is not None else None, travel)
+                       float(accel_ms) if accel_ms is not None else None, travel, bound)
+
+    def _ramp_ms(self) -> float | None:
+        accel = self.profile.role("jog_accel")
+        return float(raw_to_eng(accel, self.drive.read_entries([accel])[0].raw)) if accel is not None else None
+
+    def arm_dead_man(self, speed_rpm: float, ramp_ms: float | None = None) -> DeadManBound:
+        """The dead-man bound of motion up to speed_rpm (see motion/deadman); UsageError when it cannot be kept
+        (no route without --no-dead-man, a link too slow for the beat). Every motion goes through here before it
+        moves, the JOG's plan and each speed an identification or step check sets."""
+        bound = deadman.bound(self.drive, speed_rpm, self.keepalive.interval_s,
+                              ramp_ms if ramp_ms is not None else self._ramp_ms(), self.drive.dead_man_waived)
+        deadman.check(bound, self.drive.dead_man_waived)
+        if self.dead_man is None or bound.speed_rpm >= self.dead_man.speed_rpm:
+            self.dead_man = bound
+        return bound
 
     def servo_already_on(self) -> bool:
         """Servo on from elsewhere: the status word says so, or a servo-on held in a parameter is set."""
@@ -128,6 +147,8 @@ class Jogger:
     def set_speed(self, speed_rpm: float) -> None:
         """The speed of the following moves (rpm, sign ignored); a running speed-route move changes at once."""
         self.speed_rpm = abs(speed_rpm)
+        if self.dead_man is None or self.speed_rpm > self.dead_man.speed_rpm:
+            self.arm_dead_man(self.speed_rpm)
         if self.route.kind == "trigger":
             raw = self._speed_raw(self.speed_rpm)
             if self.drive.read_entries([self.speed_entry])[0].raw != raw:  # no needless EEPROM write
@@ -260,6 +281,8 @@ class Jogger:
     def set_ramp(self, raw: int) -> None:
         """The JOG ramp time (role jog_accel, raw), written only when it changes."""
         if raw != self._ramp_raw:
+            if self.speed_rpm:
+                self.arm_dead_man(self.speed_rpm, float(raw_to_eng(self._ramp_entry(), raw)))
             write_one(self.drive, self._ramp_entry(), raw)
             self._ramp_raw = raw
 

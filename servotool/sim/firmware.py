@@ -37,10 +37,10 @@ from servotool.sim.plant import (
 )
 
 DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
-# Simulator assumption for drives whose manual documents no communication timeout (no comm_timeout role): host
-# motion stops (ramped, no alarm) when no motion-role write arrives for this long. A real drive of that kind keeps
-# running; servotool says so before moving it.
-DEFAULT_HOST_TIMEOUT_MS = 500.0
+# A drive whose manual documents no communication timeout (no comm_timeout role) keeps running when the host dies,
+# and so does the simulated one. Only `sim config --fake-watchdog on` (not real, off by default) makes it stop host
+# motion, ramped and without an alarm, when no motion-role write arrives for this long.
+FAKE_WATCHDOG_MS = 500.0
 STATUS_BITS = {"servo_on": 0, "fault": 1, "warning": 2, "moving": 3, "jog": 4, "identifying": 5}
 COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
 STOP_STEP_S = 0.01           # a quiet ramp-down after host loss is checked for standstill at this resolution
@@ -167,7 +167,7 @@ class Firmware:
         """Integrate the plant up to now, applying the watchdog and identification on the way; refresh monitors."""
         now = self.clock.now()
         if self._watched():
-            expiry = self.last_host + self._eng("comm_timeout", DEFAULT_HOST_TIMEOUT_MS) / 1000.0
+            expiry = self.last_host + self._eng("comm_timeout", FAKE_WATCHDOG_MS) / 1000.0
             if expiry < now:
                 self.plant.advance_to(expiry)
                 self._host_lost()
@@ -184,22 +184,25 @@ class Firmware:
         self._refresh_monitors()
 
     def _watched(self) -> bool:
-        """Whether the host watchdog runs: a documented one (comm_timeout role) whenever the host holds the servo;
-        the simulator's assumed one (drives that document none) only while the host commands motion, so a servo
-        switched on by a plain parameter write stays on, as it would on the real drive."""
+        """Whether a host watchdog runs: the profile's documented one (comm_timeout role) whenever the host holds
+        the servo. A drive that documents none has none: only the labelled fake watchdog (sim config
+        --fake-watchdog, off by default) stops host-commanded motion there."""
         if self.profile.role("comm_timeout") is not None:
-            return self.mode in ("jog", "speed", "servo")
-        return self.mode in ("jog", "speed") and (self.jog_dir != 0 or self.plant.target_rpm != 0.0)
+            return self.mode in ("jog", "speed", "servo", "segment")
+        return bool(self.drive.settings["fake_watchdog"]) and self.mode in ("jog", "speed", "segment") and (
+            self.jog_dir != 0 or self.plant.target_rpm != 0.0)
 
     def _host_lost(self) -> None:
-        """The watchdog expired: stop with the profile's communication alarm (ramp down quietly if it has none)."""
+        """The watchdog expired: a documented one stops with the profile's communication alarm; the fake one ramps
+        down quietly (it has no alarm to show: the real drive has none)."""
+        if self.profile.role("comm_timeout") is not None and self.profile.alarm_of_kind("comm_timeout") is not None:
+            self.trip("comm_timeout")
+            return
         servo = self.profile.role("servo_on")
         if servo is not None and servo.cls == "Pn":
             self.drive.bank.apply_parameter(servo, 0)   # a servo-on held in a parameter drops with the servo
             self.drive.bank.save()
-        if self.profile.alarm_of_kind("comm_timeout") is not None:
-            self.trip("comm_timeout")
-            return
+        self.segment = None
         self.plant.set_speed_command(0.0)
         self.jog_dir = 0
         self.mode = "stopping"
