@@ -178,6 +178,7 @@ class DeadManRoute:
     source: str
     unverified: str = ""
     if_host_dies: str = ""
+    start_value: int = 1      # segment: the value OR-ed into role segment_start's servo-on value to start a move
 
 
 @dataclass

@@ -71,17 +71,21 @@ def jog_direction(entry: Entry, raw: int) -> int:
 
 @dataclass(frozen=True)
 class MotionRoute:
-    """How this profile moves the motor over communication: kind 'trigger' or 'speed', and the entries by role."""
+    """How this profile moves the motor over communication: kind 'trigger' (a JOG trigger), 'segment' (short
+    relative position moves, each started by a write) or 'speed' (a speed reference with servo-on), and the entries
+    by role."""
 
     kind: str
     entries: dict[str, Entry]
 
     @property
     def speed_entry(self) -> Entry:
-        return self.entries["jog_speed" if self.kind == "trigger" else "speed_reference"]
+        return self.entries[{"trigger": "jog_speed", "segment": "segment_speed"}.get(self.kind, "speed_reference")]
 
 
-ROUTE_ROLES = ("jog", "jog_speed", "speed_reference", "servo_on", "jog_accel", "keepalive", "comm_timeout")
+ROUTE_ROLES = ("jog", "jog_speed", "speed_reference", "servo_on", "jog_accel", "keepalive", "comm_timeout",
+               "segment_start", "segment_distance", "segment_speed", "segment_units_per_rev")
+SEGMENT_ROLES = ("segment_start", "segment_distance", "segment_speed", "servo_on")
 
 
 def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
@@ -89,6 +93,9 @@ def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
     found = {r: e for r in ROUTE_ROLES if (e := profile.role(r)) is not None}
     if "jog" in found and "jog_speed" in found:
         kind = "trigger"
+        found.pop("speed_reference", None)
+    elif all(r in found for r in SEGMENT_ROLES):
+        kind = "segment"
         found.pop("speed_reference", None)
     elif "speed_reference" in found and "servo_on" in found:
         kind = "speed"

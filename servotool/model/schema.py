@@ -28,7 +28,7 @@ TOP_KEYS = {
     "motion_setup", "dead_man",
 }
 DEAD_MAN_ROUTES = ("drive_timeout", "segment", "none")
-DEAD_MAN_KEYS = {"route", "reason", "source", "unverified", "if_host_dies"}
+DEAD_MAN_KEYS = {"route", "reason", "source", "unverified", "if_host_dies", "start_value"}
 
 
 SETUP_KEYS = {"code", "value", "reason", "source", "unverified"}
@@ -125,7 +125,8 @@ def _parse_dead_man(chk: Checker, raw: Any) -> DeadManRoute | None:
     texts = {k: chk.opt(raw, k, "dead_man", str, "") for k in ("reason", "source", "unverified", "if_host_dies")}
     if not texts["reason"] or not texts["source"]:
         chk.bad("dead_man", "needs a reason and a source (the manual lines it relies on)")
-    return DeadManRoute(route=route, **texts)
+    start_value = chk.opt(raw, "start_value", "dead_man", int, 1)
+    return DeadManRoute(route=route, start_value=start_value, **texts)
 
 
 def _parse_motion_setup(chk: Checker, raw: Any, entries: dict[str, Entry], broken: set[str]) -> list[SetupItem]:

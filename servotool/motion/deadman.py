@@ -14,8 +14,9 @@ from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import DeadManRoute, Profile
 
-# Exchanges one beat cycle of host motion makes (the beat, the alarm check, the speed read).
-EXCHANGES_PER_BEAT = 3
+# Exchanges one beat cycle of host motion makes (the beat, at most two writes re-arming a segment, the alarm check and
+# the speed read).
+EXCHANGES_PER_BEAT = 4
 # Bytes on the wire of one exchange (request + reply of a short read or write) and the turnaround allowance.
 EXCHANGE_BYTES = 17
 TURNAROUND_S = 0.005
@@ -73,6 +74,19 @@ def stop_time_s(speed_rpm: float, ramp_ms: float | None) -> float:
     return ramp_s * abs(speed_rpm) / RAMP_REFERENCE_RPM
 
 
+SEGMENT_BEATS = 3.0      # a segment covers this many beat periods at speed, so a late beat never stutters the motion
+
+
+def braking_rev(speed_rpm: float, ramp_ms: float | None) -> float:
+    """Distance to ramp down from speed_rpm (see stop_time_s)."""
+    return abs(speed_rpm) / 60.0 * stop_time_s(speed_rpm, ramp_ms) / 2.0
+
+
+def segment_rev(speed_rpm: float, beat_s: float, ramp_ms: float | None) -> float:
+    """The length of each re-armed segment: SEGMENT_BEATS beats at speed, then room to stop."""
+    return abs(speed_rpm) / 60.0 * SEGMENT_BEATS * beat_s + braking_rev(speed_rpm, ramp_ms)
+
+
 def drive_timeout_s(drive: Drive) -> float | None:
     """The drive's communication timeout in seconds (role comm_timeout), None when absent or disabled."""
     entry = drive.profile.role("comm_timeout")
@@ -98,15 +112,22 @@ def bound(drive: Drive, speed_rpm: float, beat_s: float, ramp_ms: float | None,
         else:
             s = timeout + stop_s
             rev = abs(speed_rpm) / 60.0 * (timeout + stop_s / 2.0)
+    elif kind == "segment":
+        rev = segment_rev(speed_rpm, beat_s, ramp_ms)
+        s = SEGMENT_BEATS * beat_s + stop_s
     return DeadManBound(kind, abs(speed_rpm), beat_s, cycle, rev, s, route.reason, route.source, route.unverified,
                         route.if_host_dies, waived and kind == "none")
 
 
-def motion_bound(drive: Drive, speed_rpm: float, stop_s: float) -> DeadManBound:
-    """The checked bound of a planned motion (identification, step check) at the drive's beat rate."""
+def motion_bound(drive: Drive, speed_rpm: float, ramp_s: float) -> DeadManBound:
+    """The checked bound of a planned motion (identification, step check: ramp_s to reach speed_rpm) at the
+    drive's beat rate, as its Jogger arms it."""
     from servotool.motion.keepalive import keepalive_interval_s
 
-    b = bound(drive, speed_rpm, keepalive_interval_s(drive), None, drive.dead_man_waived, stop_s)
+    motor = drive.profile.motor
+    rated = motor.rated_speed_rpm if motor is not None else 3000.0
+    ramp_ms = ramp_s * 1000.0 * rated / abs(speed_rpm)     # the ramp parameter's reading: time to rated speed
+    b = bound(drive, speed_rpm, min(0.1, keepalive_interval_s(drive)), ramp_ms, drive.dead_man_waived)
     check(b, drive.dead_man_waived)
     return b
 

@@ -71,6 +71,8 @@ class Jogger:
         self._ramp_raw: int | None = None
         self._stop_wait_s = 3.0
         self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
+        self._segment_raw: int | None = None   # segment route: the displacement last written
+        self._moving_dir = 0                    # segment route: the direction of the running move
 
     @property
     def keepalive_s(self) -> float:
@@ -149,16 +151,21 @@ class Jogger:
         self.speed_rpm = abs(speed_rpm)
         if self.dead_man is None or self.speed_rpm > self.dead_man.speed_rpm:
             self.arm_dead_man(self.speed_rpm)
-        if self.route.kind == "trigger":
+        if self.route.kind in ("trigger", "segment"):
             raw = self._speed_raw(self.speed_rpm)
             if self.drive.read_entries([self.speed_entry])[0].raw != raw:  # no needless EEPROM write
                 write_one(self.drive, self.speed_entry, raw)
+            if self.route.kind == "segment" and self.direction:
+                self._segment_command()          # the running move takes the new speed at once
         elif self._enabled and self.direction:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
 
     def command(self, direction: int) -> None:
         """+1 forward, -1 reverse, 0 stop (ramped by the drive's JOG/speed accel time)."""
         self.direction = (direction > 0) - (direction < 0)
+        if self.route.kind == "segment":
+            self._segment_command()
+            return
         if self.jog is not None:
             self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
             self.keepalive.sent()
@@ -175,12 +182,63 @@ class Jogger:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
             self.keepalive.sent()
 
+    # ----- the segment route: short relative moves, each started afresh by a beat ----------------------------
+    def _segment_command(self) -> None:
+        assert self.servo is not None
+        if self.direction and not self._enabled:
+            self.drive.write_raw(self.servo, 1)
+            self._enabled = True
+        if not self._enabled:
+            return
+        ramp_ms = self._ramp_ms_now()
+        if self.direction:
+            rev = self.direction * deadman.segment_rev(self.speed_rpm, self.keepalive.interval_s, ramp_ms)
+        elif self._moving_dir:
+            rev = self._moving_dir * deadman.braking_rev(self.speed_rpm, ramp_ms)    # a move that only brakes
+        else:
+            return
+        self._moving_dir = self.direction
+        self._start_segment(rev)
+
+    def _start_segment(self, rev: float) -> None:
+        """Write the move's displacement (when it changes) and a start edge (the start bits off, then on)."""
+        assert self.servo is not None
+        distance = self.route.entries["segment_distance"]
+        per_rev = self._segment_units_per_rev()
+        raw = max(distance.min, min(distance.max, round(rev * per_rev))) or (1 if rev > 0 else -1)
+        if raw != self._segment_raw:
+            self.drive.write_raw(distance, raw)
+            self._segment_raw = raw
+        start = self.route.entries["segment_start"]
+        bits = self.profile.dead_man.start_value if self.profile.dead_man is not None else 1
+        self.drive.write_raw(start, 1)
+        self.drive.write_raw(start, 1 | bits)
+        self.keepalive.sent()
+
+    def _segment_units_per_rev(self) -> float:
+        entry = self.route.entries.get("segment_units_per_rev")
+        value = float(raw_to_eng(entry, self.drive.read_entries([entry])[0].raw)) if entry is not None else 0.0
+        if value <= 0:
+            raise UsageError(f"{self.feature} needs {entry.code if entry else 'a units-per-revolution setting'} set "
+                             "(the segment displacement's units per motor revolution)")
+        return value
+
+    def _ramp_ms_now(self) -> float | None:
+        if self._ramp_raw is not None:
+            return float(raw_to_eng(self._ramp_entry(), self._ramp_raw))
+        return self._ramp_ms()
+
     def beat(self) -> None:
         """The dead-man keep-alive, now: without it the drive stops the motor after its timeout."""
         self.keepalive.beat()
 
     def _resend_command(self) -> None:
-        """The beat of a drive without a keep-alive entry: the running command again."""
+        """The beat of a drive without a keep-alive entry: the running command again (a segment route starts a
+        fresh move from where the axis is)."""
+        if self.route.kind == "segment":
+            if self.direction:
+                self._segment_command()
+            return
         if self.jog is not None:
             self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
         elif self._enabled and self.servo is not None:
@@ -191,6 +249,7 @@ class Jogger:
         if self.servo is not None:
             self.drive.write_raw(self.servo, 0)
         self._enabled = False
+        self._moving_dir = 0
         if self._saved_reference is not None:
             if self.drive.read_entries([self.speed_entry])[0].raw != self._saved_reference:
                 write_one(self.drive, self.speed_entry, self._saved_reference)
@@ -269,7 +328,7 @@ class Jogger:
         """Raw values (code -> raw) of the settings a motion changes and puts back: the ramp (role jog_accel), and
         a trigger route's JOG speed (a speed reference is put back by leave())."""
         entries = [self._ramp_entry()]
-        if self.route.kind == "trigger":
+        if self.route.kind in ("trigger", "segment"):
             entries.insert(0, self.speed_entry)
         saved = {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
         self._ramp_raw = saved[entries[-1].code]

@@ -35,6 +35,7 @@ from servotool.sim.plant import (
     Plant,
     PlantSettings,
 )
+from servotool.sim.segment import Segment
 
 DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 # A drive whose manual documents no communication timeout (no comm_timeout role) keeps running when the host dies,
@@ -73,6 +74,8 @@ class Firmware:
         self.jog_dir = 0
         self.last_host = self.clock.now()
         self.ident: Identification | None = None
+        self.segment: Segment | None = None
+        self._start_level = False
         self.alarms.recorded = False
 
     # ----- the running state, shared with other processes through the state file -----------------------------
@@ -96,6 +99,9 @@ class Firmware:
         if self.mode == "ident" and self.ident is None:
             self.mode = "off"
             self.plant.set_mode("off")
+        if self.mode == "segment":          # a move is not handed over: it ends here, braking at the ramp
+            self.plant.set_speed_command(0.0)
+            self.mode = "servo"
 
     def _reloaded(self, _drive: SimulatedDrive) -> None:
         """Another process changed the drive's state (sim config, sim reset, another server): take it over."""
@@ -175,11 +181,16 @@ class Firmware:
             self._advance_identification(self.ident, now)
         if self.mode == "stopping":
             self._advance_stop(now)
+        if self.mode == "segment" and self.segment is not None:
+            if self.segment.advance(self.plant, now, self._ramp_rev_s2()):
+                self.segment = None
+                self.mode = "servo"           # the move ended: the drive holds there, servo on
         self.plant.advance_to(now)
         if self.plant.alarm is not None:
             if self.mode != "off":
                 self.mode = "off"
                 self.ident = None
+                self.segment = None
             self.alarms.record(self.plant.alarm)       # also alarms raised with the servo off
         self._refresh_monitors()
 
@@ -258,6 +269,22 @@ class Firmware:
         self.jog_dir = direction
         self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))
 
+    def _ramp_rev_s2(self) -> float:
+        """The drive's ramp (role jog_accel: time from 0 to rated speed) in rev/s^2, as the plant runs it."""
+        return self.motor.rated_speed_rpm / 60.0 / max(self.plant.gains.jog_accel_ms / 1000.0, 1e-3)
+
+    def segment_start(self, level: bool) -> None:
+        """The segment start input: a rising edge with the servo on starts segment 1 afresh from here."""
+        self.keep_alive()
+        rising = level and not self._start_level
+        self._start_level = level
+        if not rising or self.mode not in ("servo", "segment") or self.plant.alarm is not None:
+            return
+        per_rev = self._eng("segment_units_per_rev", 0.0) or float(self.motor.counts_per_rev)
+        distance = self._eng("segment_distance", 0.0) / per_rev
+        self.segment = Segment.start(self.plant, distance, self._eng("segment_speed", 0.0))
+        self.mode = "segment"
+
     def command_speed(self, rpm: float) -> None:
         """A host speed reference: acts while the servo is on by command."""
         self.keep_alive()
@@ -271,9 +298,10 @@ class Firmware:
             self.plant.set_mode("position")
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
-        elif not on and self.mode in ("servo", "speed", "jog", "stopping"):
+        elif not on and self.mode in ("servo", "speed", "jog", "stopping", "segment"):
             self.plant.set_mode("off")
             self.mode = "off"
+            self.segment = None
 
     def reset_alarm(self) -> None:
         """Clear the latched alarm if its cause is gone; one that stays latched is not entered again."""
