@@ -34,6 +34,7 @@ class ConnectOptions:
     timeout: float | None = None
     retries: int | None = None
     profile: str | None = None
+    travel: float | None = None       # soft travel limit of host motion, rev either way (jog --travel)
 
 
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
@@ -42,14 +43,15 @@ ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
-    if name not in ("baud", "stopbits", "unit", "retries", "timeout"):
+    if name not in ("baud", "stopbits", "unit", "retries", "timeout", "travel"):
         return str(value)
+    real = name in ("timeout", "travel")
     try:
         if isinstance(value, bool):       # YAML's 'yes'/'true' is no number
             raise ValueError
-        number = float(value) if name == "timeout" else int(value)
+        number = float(value) if real else int(value)
     except (TypeError, ValueError):
-        kind = "a number" if name == "timeout" else "a whole number"
+        kind = "a number" if real else "a whole number"
         raise UsageError(f"{where}: {name} must be {kind}, got {value!r}") from None
     return number
 
@@ -92,6 +94,7 @@ class Resolved:
     profile: Profile
     settings: LinkSettings
     unit: int
+    travel: float | None = None      # soft travel limit (rev) from the environment or config file
 
     @property
     def simulated(self) -> bool:
@@ -121,7 +124,10 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
     if settings.retries < 0:
         raise UsageError("retries must be >= 0")
-    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit))
+    if opts.travel is not None and not (math.isfinite(opts.travel) and opts.travel > 0):
+        raise UsageError(f"bad travel {opts.travel:g}: must be a number of revolutions > 0")
+    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit),
+                    opts.travel)
 
 
 def check_unit(unit: int) -> int:

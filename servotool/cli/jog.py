@@ -18,8 +18,10 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
 from servotool.motion.deadman import sentence
+from servotool.motion.hold import HoldToRun
 from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
+from servotool.motion.travel import TravelLimit
 from servotool.sim.state import effective_values
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
@@ -28,6 +30,19 @@ KEYS = "→/d forward  ←/a reverse  space stop  q quit"
 POSIX_KEYS = {"\x1b[C": "fwd", "\x1b[D": "rev", "d": "fwd", "a": "rev", " ": "stop", "q": "quit", "\x1b": "quit"}
 WINDOWS_KEYS = {"\xe0M": "fwd", "\xe0K": "rev", "\x00M": "fwd", "\x00K": "rev", "d": "fwd", "a": "rev", " ": "stop",
                 "q": "quit", "\x1b": "quit"}
+
+
+def last_key(data: str, keys: dict[str, str]) -> str:
+    """The last known key in what the terminal sent since the last poll (a held key arrives repeated); "" if none."""
+    found, i = "", 0
+    names = sorted(keys, key=len, reverse=True)
+    while i < len(data):
+        match = next((k for k in names if data.startswith(k, i)), None)
+        if match is None:
+            i += 1
+            continue
+        found, i = keys[match], i + len(match)
+    return found
 
 
 @contextmanager
@@ -47,10 +62,12 @@ def _windows_key() -> str | None:
 
     if not msvcrt.kbhit():  # type: ignore[attr-defined]
         return None
-    data = msvcrt.getwch()  # type: ignore[attr-defined]
-    if data in ("\x00", "\xe0"):           # an arrow key arrives as a prefix and its scan code
+    data = ""
+    while msvcrt.kbhit():  # type: ignore[attr-defined]   # a held key queues repeats: take them all
         data += msvcrt.getwch()  # type: ignore[attr-defined]
-    return WINDOWS_KEYS.get(data, "")
+        if data[-1] in ("\x00", "\xe0"):    # an arrow key arrives as a prefix and its scan code
+            data += msvcrt.getwch()  # type: ignore[attr-defined]
+    return last_key(data, WINDOWS_KEYS)
 
 
 @contextmanager
@@ -67,12 +84,20 @@ def _posix_keys() -> Iterator[Callable[[], str | None]]:
     def key() -> str | None:
         if not select.select([fd], [], [], 0)[0]:
             return None
-        return POSIX_KEYS.get(os.read(fd, 8).decode(errors="ignore"), "")
+        return last_key(os.read(fd, 64).decode(errors="ignore"), POSIX_KEYS)
 
     try:
         yield key
     finally:
         termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+
+def travel_limit(ctx: typer.Context, travel: float | None) -> TravelLimit | None:
+    """The soft travel limit: --travel, else the environment or config file's 'travel'."""
+    if travel is not None:
+        return TravelLimit(travel, "--travel")
+    configured = resolved(ctx).travel
+    return TravelLimit(configured, "config file / SERVOTOOL_TRAVEL") if configured is not None else None
 
 
 def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
@@ -96,8 +121,14 @@ def jog(
     ctx: typer.Context,
     speed: float = typer.Option(..., "--speed", "-s", help="JOG speed in rpm; negative runs in reverse."),
     seconds: float = typer.Option(None, "--time", "-t", help="Run this long, then ramp down and stop."),
-    interactive: bool = typer.Option(False, "--interactive", "-i", help=f"Keyboard control: {KEYS}."),
+    interactive: bool = typer.Option(False, "--interactive", "-i", help=f"Keyboard control, hold-to-run: the motor "
+                                     f"moves only while a direction key is held. {KEYS}."),
+    toggle: bool = typer.Option(False, "--toggle", help="With --interactive: a direction key starts the motion and "
+                                "space stops it (no need to hold the key)."),
     max_travel: float = typer.Option(None, "--max-travel", help="Refuse a timed JOG longer than this (revolutions)."),
+    travel: float = typer.Option(None, "--travel", help="Soft travel limit: revolutions either way from where the "
+                                 "JOG starts, checked before and during motion (default: 'travel' in the config "
+                                 "file or SERVOTOOL_TRAVEL; none)."),
     as_json: bool = typer.Option(False, "--json", help="Print the plan and the result as JSON."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving through unverified entries "
                              "(real drives only; the simulator never asks)."),
@@ -107,14 +138,17 @@ def jog(
     """JOG the motor. Before moving it prints what stops the motor if this program stops, and the bound."""
     if (seconds is None) == (not interactive):
         raise UsageError("give exactly one of --time SECONDS or --interactive")
+    if toggle and not interactive:
+        raise UsageError("--toggle goes with --interactive")
     if interactive and not sys.stdin.isatty():
         raise UsageError("--interactive needs a terminal")
     with drive(ctx) as d:
         d.dead_man_waived = no_dead_man
         jogger = Jogger(d)
-        plan = jogger.plan(speed, seconds, max_travel)
+        plan = jogger.plan(speed, seconds, max_travel, travel_limit(ctx, travel))
         confirm_motion(ctx, d, yes)
-        info(plan.describe() + ("" if not interactive else f"  [{KEYS}]"))
+        info(plan.describe() + ("" if not interactive else
+                                f"  [{'toggle' if toggle else 'hold a key to move'}: {KEYS}]"))
         if plan.dead_man is not None:
             info(sentence(plan.dead_man))
         peak = 0.0
@@ -132,12 +166,16 @@ def jog(
 
         try:
             if interactive:
+                hold = None if toggle else HoldToRun(jogger.clock, jogger.keepalive_s)
                 with raw_keys() as key:
                     def command() -> int | None:
                         k = key()
                         if k == "quit":
                             return None
-                        return {"fwd": 1, "rev": -1, "stop": 0}.get(k or "", jogger.direction)
+                        pressed = {"fwd": 1, "rev": -1, "stop": 0}.get(k or "")
+                        if hold is not None:
+                            return hold.key(pressed)
+                        return jogger.direction if pressed is None else pressed
                     jogger.run(plan, show, command)
             else:
                 jogger.run(plan, show)

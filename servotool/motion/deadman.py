@@ -67,19 +67,19 @@ def link_cycle_s(drive: Drive) -> float:
     return EXCHANGES_PER_BEAT * (EXCHANGE_BYTES * 11.0 / baud + TURNAROUND_S)
 
 
-def stop_time_s(speed_rpm: float, ramp_ms: float | None) -> float:
-    """Time to ramp down from speed_rpm with a ramp time ramp_ms (read against the slower of the two readings);
-    without a known ramp, one second per 1000 rpm."""
+def stop_time_s(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
+    """Time to ramp down from speed_rpm with a ramp time ramp_ms per reference_rpm (by default the slower of the
+    two readings); without a known ramp, one second per 1000 rpm."""
     ramp_s = (ramp_ms if ramp_ms is not None else 1000.0) / 1000.0
-    return ramp_s * abs(speed_rpm) / RAMP_REFERENCE_RPM
+    return ramp_s * abs(speed_rpm) / reference_rpm
 
 
 SEGMENT_BEATS = 3.0      # a segment covers this many beat periods at speed, so a late beat never stutters the motion
 
 
-def braking_rev(speed_rpm: float, ramp_ms: float | None) -> float:
-    """Distance to ramp down from speed_rpm (see stop_time_s)."""
-    return abs(speed_rpm) / 60.0 * stop_time_s(speed_rpm, ramp_ms) / 2.0
+def braking_rev(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
+    """Distance to ramp down from speed_rpm (see stop_time_s; reference_rpm: the speed the ramp time is for)."""
+    return abs(speed_rpm) / 60.0 * stop_time_s(speed_rpm, ramp_ms, reference_rpm) / 2.0
 
 
 def segment_rev(speed_rpm: float, beat_s: float, ramp_ms: float | None) -> float:
@@ -96,17 +96,20 @@ def drive_timeout_s(drive: Drive) -> float | None:
     return value if value > 0 else None
 
 
+UNREAD = -1.0     # timeout_s not given: read it from the drive
+
+
 def bound(drive: Drive, speed_rpm: float, beat_s: float, ramp_ms: float | None,
-          waived: bool = False, stop_s: float | None = None) -> DeadManBound:
-    """The dead-man bound of a motion at speed_rpm on this drive (stop_s: its ramp-down time when known, else from
-    ramp_ms); see check() for when it cannot be kept."""
+          waived: bool = False, timeout_s: float | None = UNREAD) -> DeadManBound:
+    """The dead-man bound of a motion at speed_rpm on this drive (timeout_s: the drive's communication timeout when
+    already read); see check() for when it cannot be kept."""
     route = route_of(drive.profile)
     cycle = link_cycle_s(drive)
-    stop_s = stop_time_s(speed_rpm, ramp_ms) if stop_s is None else stop_s
+    stop_s = stop_time_s(speed_rpm, ramp_ms)
     rev = s = None
     kind = route.route
     if kind == "drive_timeout":
-        timeout = drive_timeout_s(drive)
+        timeout = drive_timeout_s(drive) if timeout_s == UNREAD else timeout_s
         if timeout is None:
             kind = "none"                  # the watchdog is switched off on this drive: nothing stops the motor
         else:

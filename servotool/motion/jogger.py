@@ -21,10 +21,18 @@ from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.setup import check_setup
+from servotool.motion.travel import TravelGuard, TravelLimit
 from servotool.ops import alarms
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.ops.status import servo_is_on
+
+KEY_POLL_S = 0.02      # interactive JOG polls the keys this often (key repeat comes about every 30 ms)
+
+
+def travel_estimate(speed_rpm: float, seconds: float | None) -> float:
+    """How far a timed JOG travels at speed (0 for an interactive one, whose travel the guard watches)."""
+    return abs(speed_rpm) / 60.0 * seconds if seconds is not None else 0.0
 
 
 @dataclass(frozen=True)
@@ -36,12 +44,14 @@ class JogPlan:
     accel_ms: float | None
     travel_rev: float | None  # estimate for a timed jog
     dead_man: DeadManBound | None = None
+    travel_limit: TravelLimit | None = None
 
     def describe(self) -> str:
         what = "forward" if self.direction > 0 else "reverse"
         more = f" for {self.seconds:g} s (about {self.travel_rev:.2f} rev)" if self.seconds is not None else ""
         ramp = f", ramp {self.accel_ms:g} ms" if self.accel_ms is not None else ""
-        return f"JOG {what} at {self.speed_rpm:g} rpm{more}{ramp}"
+        limit = f", {self.travel_limit.describe()}" if self.travel_limit is not None else ""
+        return f"JOG {what} at {self.speed_rpm:g} rpm{more}{ramp}{limit}"
 
 
 class Jogger:
@@ -73,6 +83,9 @@ class Jogger:
         self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
         self._segment_raw: int | None = None   # segment route: the displacement last written
         self._moving_dir = 0                    # segment route: the direction of the running move
+        self.guard = TravelGuard(drive, None)   # the soft travel limit of the planned JOG (none until plan())
+        self._timeout_s: float | None = deadman.UNREAD   # the drive's communication timeout, read once
+        self._per_rev: float | None = None
 
     @property
     def keepalive_s(self) -> float:
@@ -89,8 +102,9 @@ class Jogger:
             limits.append(self.profile.motor.max_speed_rpm)
         return float(min(limits))
 
-    def plan(self, speed_rpm: float, seconds: float | None, max_travel_rev: float | None = None) -> JogPlan:
-        """Check everything before any motion: alarm, servo state, speed and travel limits."""
+    def plan(self, speed_rpm: float, seconds: float | None, max_travel_rev: float | None = None,
+             travel: TravelLimit | None = None) -> JogPlan:
+        """Check everything before any motion: alarm, servo state, speed and travel limits, the dead-man."""
         if speed_rpm == 0 or not math.isfinite(speed_rpm):
             raise UsageError("--speed must be a non-zero number (its sign gives the direction)")
         if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
@@ -109,17 +123,22 @@ class Jogger:
                                  "(see 'servotool alarm', clear it first)")
         if self.servo_already_on():
             raise UsageError("refusing to JOG: the servo is already on (enabled from elsewhere); switch it off first")
-        travel = abs(speed_rpm) / 60.0 * seconds if seconds is not None else None
-        if max_travel_rev is not None and travel is not None and travel > max_travel_rev:
-            raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {travel:.2f} rev, over the "
-                             f"--max-travel limit {max_travel_rev:g} rev")
+        estimate = travel_estimate(speed_rpm, seconds)
+        if max_travel_rev is not None and estimate > max_travel_rev:
+            raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {estimate:.2f} rev, over "
+                             f"the --max-travel limit {max_travel_rev:g} rev")
+        self.guard = TravelGuard(self.drive, travel)
+        if travel is not None and travel_estimate(speed_rpm, seconds) > travel.rev:
+            raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about "
+                             f"{travel_estimate(speed_rpm, seconds):.2f} rev, over the {travel.describe()}")
         self.keepalive.interval_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
         accel_ms = self._ramp_ms()
         self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * \
             abs(speed_rpm) / (self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0)
         bound = self.arm_dead_man(abs(speed_rpm), accel_ms)
         return JogPlan(abs(speed_rpm), 1 if speed_rpm > 0 else -1, seconds, limit,
-                       float(accel_ms) if accel_ms is not None else None, travel, bound)
+                       float(accel_ms) if accel_ms is not None else None,
+                       abs(speed_rpm) / 60.0 * seconds if seconds is not None else None, bound, travel)
 
     def _ramp_ms(self) -> float | None:
         accel = self.profile.role("jog_accel")
@@ -129,8 +148,11 @@ class Jogger:
         """The dead-man bound of motion up to speed_rpm (see motion/deadman); UsageError when it cannot be kept
         (no route without --no-dead-man, a link too slow for the beat). Every motion goes through here before it
         moves, the JOG's plan and each speed an identification or step check sets."""
+        if self._timeout_s == deadman.UNREAD:
+            self._timeout_s = deadman.drive_timeout_s(self.drive)
         bound = deadman.bound(self.drive, speed_rpm, self.keepalive.interval_s,
-                              ramp_ms if ramp_ms is not None else self._ramp_ms(), self.drive.dead_man_waived)
+                              ramp_ms if ramp_ms is not None else self._ramp_ms_now(), self.drive.dead_man_waived,
+                              self._timeout_s)
         deadman.check(bound, self.drive.dead_man_waived)
         if self.dead_man is None or bound.speed_rpm >= self.dead_man.speed_rpm:
             self.dead_man = bound
@@ -193,8 +215,9 @@ class Jogger:
         ramp_ms = self._ramp_ms_now()
         if self.direction:
             rev = self.direction * deadman.segment_rev(self.speed_rpm, self.keepalive.interval_s, ramp_ms)
-        elif self._moving_dir:
-            rev = self._moving_dir * deadman.braking_rev(self.speed_rpm, ramp_ms)    # a move that only brakes
+        elif self._moving_dir:       # a move that only brakes, at the ramp read as time to rated speed
+            rated = self.profile.motor.rated_speed_rpm if self.profile.motor is not None else 3000.0
+            rev = self._moving_dir * deadman.braking_rev(self.speed_rpm, ramp_ms, rated)
         else:
             return
         self._moving_dir = self.direction
@@ -216,6 +239,12 @@ class Jogger:
         self.keepalive.sent()
 
     def _segment_units_per_rev(self) -> float:
+        """Segment displacement units per motor revolution, read once."""
+        if self._per_rev is None:
+            self._per_rev = self._read_units_per_rev()
+        return self._per_rev
+
+    def _read_units_per_rev(self) -> float:
         entry = self.route.entries.get("segment_units_per_rev")
         value = float(raw_to_eng(entry, self.drive.read_entries([entry])[0].raw)) if entry is not None else 0.0
         if value <= 0:
@@ -285,6 +314,8 @@ class Jogger:
     def _run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
              command: Callable[[], int | None] | None = None) -> None:
         self.set_speed(plan.speed_rpm)
+        guard = self.guard
+        guard.start()
         t0 = self.clock.now()
         try:
             self.command(plan.direction if command is None else 0)   # interactive: wait for the first key
@@ -298,11 +329,14 @@ class Jogger:
                         break
                     if new != self.direction:
                         self.command(new)
-                self.beat()
-                self.check_tripped()
-                if on_sample is not None:
-                    on_sample(elapsed, self.speed())
-                self.clock.sleep(self.keepalive_s)
+                if command is None or self.keepalive.due():     # interactive: keys are polled between beats
+                    self.beat()
+                    self.check_tripped()
+                    guard.check(self.direction, deadman.braking_rev(self.speed_rpm, plan.accel_ms)
+                                + self.speed_rpm / 60.0 * self.keepalive_s)
+                    if on_sample is not None:
+                        on_sample(elapsed, self.speed())
+                self.clock.sleep(self.keepalive_s if command is None else min(self.keepalive_s, KEY_POLL_S))
         except BaseException:
             self._emergency_stop()
             raise
