@@ -115,6 +115,8 @@ def test_a_drive_without_dead_man_refuses_and_a_killed_jog_runs_on_as_the_real_d
     set_up(cli, profile, port)
     r = cli("--port", port, "--profile", profile, "jog", "--speed", "300", "--time", "1", "--yes")
     assert r.code == 2 and "no dead-man on this drive" in r.err and "--no-dead-man" in r.err
+    r = cli("--port", port, "--profile", profile, "tune", "inertia", "--yes", "--dry-run")
+    assert r.code == 2 and "no dead-man on this drive" in r.err and "keeps running" in r.err
     assert abs(sample(port, profile)[0]) < 10
     proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", port, "--profile", profile, "jog",
                              "--speed", "300", "--time", "30", "--yes", "--no-dead-man"], cwd=ROOT,
