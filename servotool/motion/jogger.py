@@ -20,6 +20,7 @@ from servotool.model.roles import FEATURE, jog_codes, motion_route
 from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
+from servotool.motion.segments import SegmentMoves
 from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelGuard, TravelLimit
 from servotool.ops import alarms
@@ -81,11 +82,9 @@ class Jogger:
         self._ramp_raw: int | None = None
         self._stop_wait_s = 3.0
         self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
-        self._segment_raw: int | None = None   # segment route: the displacement last written
-        self._moving_dir = 0                    # segment route: the direction of the running move
+        self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
         self.guard = TravelGuard(drive, None)   # the soft travel limit of the planned JOG (none until plan())
         self._timeout_s: float | None = deadman.UNREAD   # the drive's communication timeout, read once
-        self._per_rev: float | None = None
 
     @property
     def keepalive_s(self) -> float:
@@ -204,53 +203,15 @@ class Jogger:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
             self.keepalive.sent()
 
-    # ----- the segment route: short relative moves, each started afresh by a beat ----------------------------
     def _segment_command(self) -> None:
+        """The segment route: servo on for the first move, then a fresh move (or a braking one) now."""
         assert self.servo is not None
         if self.direction and not self._enabled:
             self.drive.write_raw(self.servo, 1)
             self._enabled = True
-        if not self._enabled:
-            return
-        ramp_ms = self._ramp_ms_now()
-        if self.direction:
-            rev = self.direction * deadman.segment_rev(self.speed_rpm, self.keepalive.interval_s, ramp_ms)
-        elif self._moving_dir:       # a move that only brakes, at the ramp read as time to rated speed
-            rated = self.profile.motor.rated_speed_rpm if self.profile.motor is not None else 3000.0
-            rev = self._moving_dir * deadman.braking_rev(self.speed_rpm, ramp_ms, rated)
-        else:
-            return
-        self._moving_dir = self.direction
-        self._start_segment(rev)
-
-    def _start_segment(self, rev: float) -> None:
-        """Write the move's displacement (when it changes) and a start edge (the start bits off, then on)."""
-        assert self.servo is not None
-        distance = self.route.entries["segment_distance"]
-        per_rev = self._segment_units_per_rev()
-        raw = max(distance.min, min(distance.max, round(rev * per_rev))) or (1 if rev > 0 else -1)
-        if raw != self._segment_raw:
-            self.drive.write_raw(distance, raw)
-            self._segment_raw = raw
-        start = self.route.entries["segment_start"]
-        bits = self.profile.dead_man.start_value if self.profile.dead_man is not None else 1
-        self.drive.write_raw(start, 1)
-        self.drive.write_raw(start, 1 | bits)
-        self.keepalive.sent()
-
-    def _segment_units_per_rev(self) -> float:
-        """Segment displacement units per motor revolution, read once."""
-        if self._per_rev is None:
-            self._per_rev = self._read_units_per_rev()
-        return self._per_rev
-
-    def _read_units_per_rev(self) -> float:
-        entry = self.route.entries.get("segment_units_per_rev")
-        value = float(raw_to_eng(entry, self.drive.read_entries([entry])[0].raw)) if entry is not None else 0.0
-        if value <= 0:
-            raise UsageError(f"{self.feature} needs {entry.code if entry else 'a units-per-revolution setting'} set "
-                             "(the segment displacement's units per motor revolution)")
-        return value
+        if self._enabled and self.segments is not None and self.segments.move(
+                self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now()):
+            self.keepalive.sent()
 
     def _ramp_ms_now(self) -> float | None:
         if self._ramp_raw is not None:
@@ -278,7 +239,8 @@ class Jogger:
         if self.servo is not None:
             self.drive.write_raw(self.servo, 0)
         self._enabled = False
-        self._moving_dir = 0
+        if self.segments is not None:
+            self.segments.moving = 0
         if self._saved_reference is not None:
             if self.drive.read_entries([self.speed_entry])[0].raw != self._saved_reference:
                 write_one(self.drive, self.speed_entry, self._saved_reference)
