@@ -181,7 +181,7 @@ def test_monitor_csv_while_jogging(cli, served, tmp_path):
 
 
 def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
-    """Keys in a real terminal (tmux): nothing moves before a key, ← runs reverse, q stops and exits."""
+    """Keys in a real terminal (tmux): nothing moves before a key, a held ← runs reverse (hold-to-run), q exits."""
     import shutil
 
     if not shutil.which("tmux"):
@@ -193,8 +193,10 @@ def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
     subprocess.run(["tmux", "new-session", "-d", "-s", session, "-x", "120", "-y", "20", cmd], check=True)
     try:
         time.sleep(2.5)
-        subprocess.run(["tmux", "send-keys", "-t", session, "Left"], check=True)
-        time.sleep(1.5)
+        for _ in range(40):                      # a held key: the terminal repeats it about every 30 ms
+            subprocess.run(["tmux", "send-keys", "-t", session, "Left"], check=True)
+            time.sleep(0.03)
+        time.sleep(1.0)
         subprocess.run(["tmux", "send-keys", "-t", session, "q"], check=True)
         deadline = time.monotonic() + 15
         while time.monotonic() < deadline and not out.read_text().strip().endswith("0"):
