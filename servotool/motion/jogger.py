@@ -206,8 +206,9 @@ class Jogger:
     def _segment_command(self) -> None:
         """The segment route: servo on for the first move, then a fresh move (or a braking one) now."""
         assert self.servo is not None
-        if self.direction and not self._enabled:
-            self.drive.write_raw(self.servo, 1)
+        if self.direction and not self._enabled and self.segments is not None:
+            self.drive.write_raw(self.servo, 1)         # servo on, start bits off: the next write is an edge
+            self.segments.start_high = False
             self._enabled = True
         if self._enabled and self.segments is not None and self.segments.move(
                 self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now()):

@@ -24,6 +24,7 @@ class SegmentMoves:
         self.moving = 0                       # the direction of the running move (0: none or braking)
         self._raw: int | None = None          # the displacement last written
         self._per_rev: float | None = None
+        self.start_high = True                # the start bits may be on: a move needs them off first
 
     def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
         """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop; direction 0 brakes a
@@ -45,8 +46,10 @@ class SegmentMoves:
             self.drive.write_raw(distance, raw)
             self._raw = raw
         start = self.route.entries["segment_start"]
-        self.drive.write_raw(start, 1)                      # servo on, start bits off ...
+        if self.start_high:
+            self.drive.write_raw(start, 1)                  # servo on, start bits off ...
         self.drive.write_raw(start, 1 | self.start_bits)    # ... then on: the edge starts the move
+        self.start_high = True
 
     def units_per_rev(self) -> float:
         """Displacement units per motor revolution (role segment_units_per_rev), read once."""
