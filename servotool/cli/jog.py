@@ -8,6 +8,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import partial
+from pathlib import Path
 
 import typer
 
@@ -22,6 +23,8 @@ from servotool.motion.hold import HoldToRun
 from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelLimit
+from servotool.ops.trace import Sampler, motion_entries
+from servotool.ops.trace_file import check_writable, write_trace
 from servotool.sim.state import effective_values
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
@@ -117,6 +120,26 @@ def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATU
             raise ServoError("cancelled: nothing moved")
 
 
+@contextmanager
+def _traced(ctx: typer.Context, d: Drive, path: Path | None) -> Iterator[Sampler | None]:
+    """A recording of the JOG's own motion, written however the JOG ends (stopped, failed, interrupted)."""
+    if path is None:
+        yield None
+        return
+    from servotool.cli.trace import about_lines
+
+    sampler = Sampler(d, motion_entries(d.profile))
+    try:
+        yield sampler
+    finally:
+        if sampler.samples:
+            rec = sampler.recording()
+            about = about_lines(resolved(ctx), f"trigger: none (the JOG's own motion, sampled between keep-alive "
+                                f"beats); {sampler.requests_per_sample} request(s) per sample")
+            write_trace(path, [rec], sampler.entries, about, replace=True)
+            info(f"trace: {rec.timing.describe()} written to {path}")
+
+
 def jog(
     ctx: typer.Context,
     speed: float = typer.Option(..., "--speed", "-s", help="JOG speed in rpm; negative runs in reverse."),
@@ -134,6 +157,8 @@ def jog(
                              "(real drives only; the simulator never asks)."),
     no_dead_man: bool = typer.Option(False, "--no-dead-man", help="Move a drive that has no dead-man route (nothing "
                                      "stops the motor if this program dies); keep an E-stop at hand."),
+    trace_file: Path = typer.Option(None, "--trace", help="Record speed, torque and position between the "
+                                    "keep-alive beats, on the same port, to this CSV ('servotool plot' draws it)."),
 ) -> None:
     """JOG the motor. Before moving it prints what stops the motor if this program stops, and the bound."""
     if (seconds is None) == (not interactive):
@@ -142,9 +167,13 @@ def jog(
         raise UsageError("--toggle goes with --interactive")
     if interactive and not sys.stdin.isatty():
         raise UsageError("--interactive needs a terminal")
-    with drive(ctx) as d:
+    if trace_file is not None:
+        check_writable(trace_file, replace=True)
+    with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
         d.dead_man_waived = no_dead_man
         jogger = Jogger(d)
+        if sampler is not None:
+            jogger.idle = sampler.sample_for
         plan = jogger.plan(speed, seconds, max_travel, travel_limit(ctx, travel))
         confirm_motion(ctx, d, yes)
         info(plan.describe() + ("" if not interactive else

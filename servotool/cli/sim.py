@@ -126,17 +126,21 @@ def config(
     fake_watchdog: str = typer.Option(None, "--fake-watchdog", help="on|off, NOT REAL (default off): stop host "
                                       "motion after 500 ms of host silence on a drive whose manual documents no "
                                       "communication timeout. The real drive keeps running."),
+    missing: str = typer.Option(None, "--missing", help="CODE,...: entries this drive lacks (answered with "
+                                "exception 02, like a firmware without them); '' restores them all."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
     fake_on = None if fake_watchdog is None else _on_off(fake_watchdog, "--fake-watchdog")
     p, u = _target(ctx, profile, unit)
+    if missing is not None:
+        sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
     status = sim_state.configure(p, u, load_ratio=load_ratio, friction=friction, viscous=viscous,
                                  load_torque=load_torque, noise=noise, seed=seed, line_baud=line_baud, brake=brake_on,
                                  fake_watchdog=fake_on)
     if as_json:
-        emit_json({"profile": p.id, "unit": u, "settings": status.settings})
+        emit_json({"profile": p.id, "unit": u, "settings": status.settings, "missing": list(status.missing)})
         return
     _print_settings(status)
 
@@ -155,6 +159,7 @@ def show(
         emit_json({"profile": status.profile.id, "unit": status.unit, "state_file": str(status.state_file),
                    "settings": status.settings, "pending_power_cycle": status.pending_power_cycle,
                    "eeprom_writes": status.eeprom_writes, "running": dataclasses.asdict(run) if run else None,
+                   "missing": list(status.missing),
                    "extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(status.profile)]})
         return
     _print_settings(status)
@@ -179,6 +184,8 @@ def _print_settings(status: sim_state.SimStatus) -> None:
         shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
+    if status.missing:
+        out.print(f"entries this drive lacks (exception 02): {', '.join(status.missing)}", markup=False)
     if status.pending_power_cycle:
         out.print(f"waiting for a power cycle: {', '.join(status.pending_power_cycle)}", markup=False)
 

@@ -114,3 +114,15 @@ def test_every_simulator_extension_is_listed_and_the_fake_watchdog_is_off_and_la
     assert "dead-man route: segment" in r.out and "simulator extensions (not in the manual):" in r.out
     assert "SIM.COMM" not in r.out                                   # the invented alarm is gone
     assert cli("profiles", "show", "sd25", "--json").json()["dead_man"]["route"] == "none"
+
+
+def test_sim_config_missing_makes_the_drive_lack_entries_until_cleared(cli):
+    r = cli("sim", "config", "--missing", "Pn101,pn512", "--json")
+    assert r.code == 0 and r.json()["missing"] == ["Pn101", "Pn512"], r.err
+    assert cli("sim", "show", "--json").json()["missing"] == ["Pn101", "Pn512"]
+    r = cli("--port", "sim", "param", "get", "Pn512")
+    assert r.code == 1 and "Pn512: not on this drive" in r.err
+    assert cli("sim", "config", "--missing", "", "--json").json()["missing"] == []
+    assert cli("--port", "sim", "param", "get", "Pn512").code == 0
+    r = cli("sim", "config", "--missing", "Pn9999")
+    assert r.code == 2 and "Pn9999" in r.err
