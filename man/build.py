@@ -39,9 +39,21 @@ TCP serial gateway) or \fBsim\fR (a simulated drive served in\-process on a loop
 speaks real RTU frames with CRC).
 Output that comes from a simulated drive says so once on standard error.
 .PP
-Anything that moves the motor has a dead\-man: the host refreshes a keep\-alive, the drive stops the motor and
-raises a communication alarm when it goes quiet, Ctrl\-C stops at once, and speed and travel limits are checked
-before any motion.
+Anything that moves the motor first prints what stops the motor if this program stops (kill, crash, pulled
+cable) and the bound: "if this program stops, the motor stops within X rev (Y s)" (\fBdead_man\fR in \fB\-\-json\fR).
+Ctrl\-C stops at once; speed and travel limits (\fB\-\-travel\fR) are checked before and during motion.
+.TS
+l l l.
+Drive	If the host dies	Bound
+DSX7E	its host watchdog Pn620 (kept alive by Fn032) stops the motor with E25	speed x (Pn620 + ramp/2)
+IS620P	the running multi\-segment position move (H11 segment 1) ends and stops	one segment: 3 beats at speed + stop
+SD25	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR
+SDC	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR
+.TE
+The IS620P route is unverified (the start of a segment is the general IS620P manual's); see
+\fBservotool profiles show \fIID\fB \-\-unverified\fR for each profile's route, its manual lines and the simulator's
+extensions. The simulator stops nothing the manual does not: \fBsim config \-\-fake\-watchdog on\fR (NOT REAL, off
+by default) is the only exception.
 On drives whose Modbus motion route needs the drive set up for it (the profile's \fBmotion_setup\fR: SD25,
 IS620P, SDC) those settings are read first; when any differs nothing moves and the error names each one with the
 \fBservotool param set\fR command that fixes it (servotool never writes them itself).
@@ -71,11 +83,12 @@ resolution step).
 Back up to or restore from FILE, relative to the plan; \fB{unit}\fR in the name is replaced by the unit id, and
 with several units a name without it gets \fB\-unit\fIN\fR before its suffix.
 .TP
-.B "jog: {speed: RPM, time: S, max_travel: REV}"
-A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBservotool jog\fR.
+.B "jog: {speed: RPM, time: S, max_travel: REV, no_dead_man: BOOL}"
+A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBservotool jog\fR;
+\fBno_dead_man: true\fR acknowledges a drive without one (SD25, SDC), as \fB\-\-no\-dead\-man\fR does.
 .TP
 .B "tune inertia: {rigidity: N | bandwidth: HZ, travel: REV, max_speed: RPM, \
-accel_time: MS, direction: D, repeats: N, gains: BOOL, report: DIR}"
+accel_time: MS, direction: D, repeats: N, gains: BOOL, report: DIR, no_dead_man: BOOL}"
 Identify the load inertia and write it, then (unless \fBgains: false\fR) the matching gains; \fBreport\fR
 writes the same folder of charts as \fBtune inertia \-\-report\fR (beside the plan, one per axis).
 .TP
@@ -96,7 +109,7 @@ A run writes a JSON report (steps, values written, results, timing) next to the 
 .SH ENVIRONMENT
 .TP
 .B "SERVOTOOL_PORT, SERVOTOOL_PROFILE, SERVOTOOL_UNIT, SERVOTOOL_BAUD, SERVOTOOL_PARITY, \
-SERVOTOOL_STOPBITS, SERVOTOOL_TIMEOUT, SERVOTOOL_RETRIES"
+SERVOTOOL_STOPBITS, SERVOTOOL_TIMEOUT, SERVOTOOL_RETRIES, SERVOTOOL_TRAVEL"
 Defaults for the global options of the same names; the command line wins.
 .TP
 .B SERVOTOOL_NO_IDENTITY_CHECK
@@ -106,7 +119,8 @@ Defaults for the global options of the same names; the command line wins.
 Configuration file (default \fIconfig.yaml\fR in the user configuration folder: \fI~/.config/servotool\fR
 on Linux, following \fB$XDG_CONFIG_HOME\fR) with the keys \fBport\fR, \fBprofile\fR,
 \fBunit\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR, \fBretries\fR,
-\fBno_identity_check\fR; used after the environment.
+\fBno_identity_check\fR, \fBtravel\fR (the default soft travel limit of \fBjog\fR, rev); used after
+the environment.
 .TP
 .B SERVOTOOL_SIM_DIR
 Where simulated drives keep their parameters and machine settings (default \fIsim\fR in the user state folder:

@@ -20,7 +20,7 @@ SIM_DEFAULT_PROFILE = "dsx7e"
 
 
 ECHO = {"auto": None, "on": True, "off": False}
-FLOATS = ("timeout", "turnaround_ms", "silence_ms")
+FLOATS = ("timeout", "turnaround_ms", "silence_ms", "travel")
 
 
 PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
@@ -38,6 +38,7 @@ class ConnectOptions:
     timeout: float | None = None
     retries: int | None = None
     profile: str | None = None
+    travel: float | None = None       # soft travel limit of host motion, rev either way (jog --travel)
     no_identity_check: bool | None = None
     echo: str | None = None             # auto, on or off
     turnaround_ms: float | None = None
@@ -116,6 +117,7 @@ class Resolved:
     profile: Profile
     settings: LinkSettings
     unit: int
+    travel: float | None = None      # soft travel limit (rev) from the environment or config file
     identity_check: bool = True     # check the drive answering against the profile before any write
 
     @property
@@ -152,8 +154,10 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
     if settings.retries < 0:
         raise UsageError("retries must be >= 0")
+    if opts.travel is not None and not (math.isfinite(opts.travel) and opts.travel > 0):
+        raise UsageError(f"bad travel {opts.travel:g}: must be a number of revolutions > 0")
     return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit),
-                    identity_check=not opts.no_identity_check)
+                    identity_check=not opts.no_identity_check, travel=opts.travel)
 
 
 def rs485(opts: ConnectOptions) -> dict[str, Any]:

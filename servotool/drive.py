@@ -124,6 +124,8 @@ class Drive:
 
     def __init__(self, link: Link, profile: Profile, unit: int) -> None:
         self.link = link
+        # The user acknowledged host motion without a dead-man on this drive (--no-dead-man): see motion/deadman.
+        self.dead_man_waived = False
         self.profile = profile
         self.unit = unit
         self.missing: dict[str, Entry] = {}     # entries the drive answered exception 02 for, this run, by code

@@ -18,13 +18,24 @@ from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
+from servotool.motion.deadman import sentence
+from servotool.motion.hold import HoldToRun
 from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
+from servotool.motion.travel import TravelLimit
 from servotool.ops.trace import Sampler, motion_entries
 from servotool.ops.trace_file import check_writable, write_trace
 from servotool.sim.state import effective_values
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
+
+
+def travel_limit(ctx: typer.Context, travel: float | None) -> TravelLimit | None:
+    """The soft travel limit: --travel, else the environment or config file's 'travel'."""
+    if travel is not None:
+        return TravelLimit(travel, "--travel")
+    configured = resolved(ctx).travel
+    return TravelLimit(configured, "config file / SERVOTOOL_TRAVEL") if configured is not None else None
 
 
 def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
@@ -67,28 +78,42 @@ def jog(
     ctx: typer.Context,
     speed: float = typer.Option(..., "--speed", "-s", help="JOG speed in rpm; negative runs in reverse."),
     seconds: float = typer.Option(None, "--time", "-t", help="Run this long, then ramp down and stop."),
-    interactive: bool = typer.Option(False, "--interactive", "-i", help=f"Keyboard control: {KEYS}."),
+    interactive: bool = typer.Option(False, "--interactive", "-i", help=f"Keyboard control, hold-to-run: the motor "
+                                     f"moves only while a direction key is held. {KEYS}."),
+    toggle: bool = typer.Option(False, "--toggle", help="With --interactive: a direction key starts the motion and "
+                                "space stops it (no need to hold the key)."),
     max_travel: float = typer.Option(None, "--max-travel", help="Refuse a timed JOG longer than this (revolutions)."),
+    travel: float = typer.Option(None, "--travel", help="Soft travel limit: revolutions either way from where the "
+                                 "JOG starts, checked before and during motion (default: 'travel' in the config "
+                                 "file or SERVOTOOL_TRAVEL; none)."),
     as_json: bool = typer.Option(False, "--json", help="Print the plan and the result as JSON."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving through unverified entries "
                              "(real drives only; the simulator never asks)."),
+    no_dead_man: bool = typer.Option(False, "--no-dead-man", help="Move a drive that has no dead-man route (nothing "
+                                     "stops the motor if this program dies); keep an E-stop at hand."),
     trace_file: Path = typer.Option(None, "--trace", help="Record speed, torque and position between the "
                                     "keep-alive beats, on the same port, to this CSV ('servotool plot' draws it)."),
 ) -> None:
-    """JOG the motor; the drive stops by itself if this program goes quiet. Ctrl-C stops at once."""
+    """JOG the motor. Before moving it prints what stops the motor if this program stops, and the bound."""
     if (seconds is None) == (not interactive):
         raise UsageError("give exactly one of --time SECONDS or --interactive")
+    if toggle and not interactive:
+        raise UsageError("--toggle goes with --interactive")
     if interactive and not sys.stdin.isatty():
         raise UsageError("--interactive needs a terminal")
     if trace_file is not None:
         check_writable(trace_file, replace=True)
     with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
+        d.dead_man_waived = no_dead_man
         jogger = Jogger(d)
         if sampler is not None:
             jogger.idle = sampler.sample_for
-        plan = jogger.plan(speed, seconds, max_travel)
+        plan = jogger.plan(speed, seconds, max_travel, travel_limit(ctx, travel))
         confirm_motion(ctx, d, yes)
-        info(plan.describe() + ("" if not interactive else f"  [{KEYS}]"))
+        info(plan.describe() + ("" if not interactive else
+                                f"  [{'toggle' if toggle else 'hold a key to move'}: {KEYS}]"))
+        if plan.dead_man is not None:
+            info(sentence(plan.dead_man))
         peak = 0.0
         late: list[float] = []    # speeds over the second half of a timed JOG: the speed it settled at
 
@@ -104,12 +129,16 @@ def jog(
 
         try:
             if interactive:
+                hold = None if toggle else HoldToRun(jogger.clock, jogger.keepalive_s)
                 with raw_keys() as key:
                     def command() -> int | None:
                         k = key()
                         if k == "quit":
                             return None
-                        return {"fwd": 1, "rev": -1, "stop": 0}.get(k or "", jogger.direction)
+                        pressed = {"fwd": 1, "rev": -1, "stop": 0}.get(k or "")
+                        if hold is not None:
+                            return hold.key(pressed)
+                        return jogger.direction if pressed is None else pressed
                     jogger.run(plan, show, command)
             else:
                 jogger.run(plan, show)
@@ -124,6 +153,7 @@ def jog(
         emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds,
                    "peak_speed_rpm": round(peak, 1) * sign,
                    "median_speed_rpm": round(statistics.median(late), 1) * sign if late else None,
-                   "final_speed_rpm": final})
+                   "final_speed_rpm": final,
+                   "dead_man": plan.dead_man.as_json() if plan.dead_man is not None else None})
     else:
         info(f"JOG done: peak {peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")

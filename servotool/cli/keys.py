@@ -19,10 +19,24 @@ WINDOWS_KEYS = {"\xe0M": "fwd", "\xe0K": "rev", "\x00M": "fwd", "\x00K": "rev", 
 KeyReader = Callable[[], "str | None"]
 
 
+def last_key(data: str, keys: dict[str, str]) -> str:
+    """The last known key in what the terminal sent since the last poll (a held key arrives repeated); "" if none."""
+    found, i = "", 0
+    names = sorted(keys, key=len, reverse=True)
+    while i < len(data):
+        match = next((k for k in names if data.startswith(k, i)), None)
+        if match is None:
+            i += 1
+            continue
+        found, i = keys[match], i + len(match)
+    return found
+
+
 @contextmanager
 def raw_keys() -> Iterator[KeyReader]:
-    """A non-blocking key reader: yields a function returning fwd/rev/stop/quit, "" for another key and None
-    when no key was pressed. The terminal is restored however the block is left."""
+    """A non-blocking key reader: yields a function returning the last of fwd/rev/stop/quit pressed since the last
+    call (a held key queues repeats), "" for another key and None when no key was pressed. The terminal is
+    restored however the block is left."""
     if sys.platform == "win32":
         yield windows_key
         return
@@ -31,15 +45,17 @@ def raw_keys() -> Iterator[KeyReader]:
 
 
 def windows_key() -> str | None:
-    """One key from the Windows console, or None when none is waiting."""
+    """The last key waiting on the Windows console, or None when none is waiting."""
     import msvcrt
 
     if not msvcrt.kbhit():  # type: ignore[attr-defined]
         return None
-    data = msvcrt.getwch()  # type: ignore[attr-defined]
-    if data in ("\x00", "\xe0"):           # an arrow key arrives as a prefix and its scan code
+    data = ""
+    while msvcrt.kbhit():  # type: ignore[attr-defined]   # a held key queues repeats: take them all
         data += msvcrt.getwch()  # type: ignore[attr-defined]
-    return WINDOWS_KEYS.get(data, "")
+        if data[-1] in ("\x00", "\xe0"):    # an arrow key arrives as a prefix and its scan code
+            data += msvcrt.getwch()  # type: ignore[attr-defined]
+    return last_key(data, WINDOWS_KEYS)
 
 
 @contextmanager
@@ -56,7 +72,7 @@ def _posix_keys() -> Iterator[KeyReader]:
     def key() -> str | None:
         if not select.select([fd], [], [], 0)[0]:
             return None
-        return POSIX_KEYS.get(os.read(fd, 8).decode(errors="ignore"), "")
+        return last_key(os.read(fd, 64).decode(errors="ignore"), POSIX_KEYS)
 
     try:
         yield key

@@ -13,7 +13,8 @@ from servotool.errors import UnknownName
 from servotool.model.codec import field_range, format_value
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
 from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
-from servotool.model.profile import Entry
+from servotool.model.profile import Entry, Profile
+from servotool.model.roles import sim_extensions
 
 app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
 
@@ -59,6 +60,8 @@ def show(
             "serial": {**vars(p.line), "unit": p.default_unit}, "limits": vars(p.limits), "word_order": p.word_order,
             "persistence": vars(p.persistence), "roles": p.roles,
             "entries": [_entry_json(e) for e in entries],
+            "dead_man": vars(p.dead_man) if p.dead_man is not None else None,
+            "sim_extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(p)],
         })
         return
     out.print(f"[bold]{p.model}[/bold] ({p.vendor}) profile '{p.id}' v{p.version}: {p.description}")
@@ -75,6 +78,12 @@ def show(
         for e in entries:
             t.add_row(e.code, e.name, e.unverified)
         out.print(t)
+        _print_dead_man(p)
+        found = sim_extensions(p)
+        if found:
+            out.print("simulator extensions (not in the manual):", markup=False)
+            for x in found:
+                out.print(f"  {x.what}: {x.why}", markup=False)
         return
     t = table("Code", "Class", "Name", "Address", "Type", "Min", "Max", "Default", "Unit", "Effect", "")
     for e in entries:
@@ -141,3 +150,16 @@ def _profile_paths(names: list[str]) -> list[Path]:
     ids = {i.lower(): i for i in builtin_ids()}
     return [builtin_dir() / f"{ids[n.lower()]}.yaml" if not Path(n).exists() and n.lower() in ids else Path(n)
             for n in names]
+
+
+def _print_dead_man(p: Profile) -> None:
+    """What stops host motion when the host dies, as the profile describes it."""
+    dm = p.dead_man
+    if dm is None:
+        out.print("dead-man route: not described by this profile", markup=False)
+        return
+    out.print(f"dead-man route: {dm.route}: {dm.reason} (source: {dm.source})", markup=False)
+    if dm.unverified:
+        out.print(f"  unverified: {dm.unverified}", markup=False)
+    if dm.if_host_dies:
+        out.print(f"  if the host dies: {dm.if_host_dies}", markup=False)

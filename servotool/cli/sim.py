@@ -12,6 +12,7 @@ from servotool.config import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit, li
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
+from servotool.model.roles import sim_extensions
 from servotool.sim import state as sim_state
 from servotool.sim.device import SIM_SETTINGS
 
@@ -122,17 +123,22 @@ def config(
     line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
     brake: str = typer.Option(None, "--brake", help="on|off: holding brake, closed while the servo is off "
                               "(default on; off lets a gravity load fall, held back only by friction)."),
+    fake_watchdog: str = typer.Option(None, "--fake-watchdog", help="on|off, NOT REAL (default off): stop host "
+                                      "motion after 500 ms of host silence on a drive whose manual documents no "
+                                      "communication timeout. The real drive keeps running."),
     missing: str = typer.Option(None, "--missing", help="CODE,...: entries this drive lacks (answered with "
                                 "exception 02, like a firmware without them); '' restores them all."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
+    fake_on = None if fake_watchdog is None else _on_off(fake_watchdog, "--fake-watchdog")
     p, u = _target(ctx, profile, unit)
     if missing is not None:
         sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
     status = sim_state.configure(p, u, load_ratio=load_ratio, friction=friction, viscous=viscous,
-                                 load_torque=load_torque, noise=noise, seed=seed, line_baud=line_baud, brake=brake_on)
+                                 load_torque=load_torque, noise=noise, seed=seed, line_baud=line_baud, brake=brake_on,
+                                 fake_watchdog=fake_on)
     if as_json:
         emit_json({"profile": p.id, "unit": u, "settings": status.settings, "missing": list(status.missing)})
         return
@@ -153,9 +159,11 @@ def show(
         emit_json({"profile": status.profile.id, "unit": status.unit, "state_file": str(status.state_file),
                    "settings": status.settings, "pending_power_cycle": status.pending_power_cycle,
                    "eeprom_writes": status.eeprom_writes, "running": dataclasses.asdict(run) if run else None,
-                   "missing": list(status.missing)})
+                   "missing": list(status.missing),
+                   "extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(status.profile)]})
         return
     _print_settings(status)
+    _print_extensions(status.profile)
     if run is not None:
         out.print(f"running state as last saved (a powered drive keeps it until a power cycle): servo "
                   f"{'on' if run.servo_on else 'off'}, alarm {run.alarm or 'none'}, "
@@ -173,10 +181,21 @@ def _print_settings(status: sim_state.SimStatus) -> None:
     t = table("Setting", "Value", "Meaning", title=f"simulated {status.profile.model} unit {status.unit} "
               f"({status.state_file})")
     for name, value in status.settings.items():
-        shown = ("on" if value else "off") if name == "brake" else f"{value:g}"
+        shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
     if status.missing:
         out.print(f"entries this drive lacks (exception 02): {', '.join(status.missing)}", markup=False)
     if status.pending_power_cycle:
         out.print(f"waiting for a power cycle: {', '.join(status.pending_power_cycle)}", markup=False)
+
+
+def _print_extensions(profile: Profile) -> None:
+    """What this simulated drive does that the manual does not document (also in profiles show --unverified)."""
+    found = sim_extensions(profile)
+    if not found:
+        out.print("simulator extensions: none (the simulated drive does what its profile documents)", markup=False)
+        return
+    out.print("simulator extensions (not on the real drive, or not in its manual):", markup=False)
+    for x in found:
+        out.print(f"  {x.what}: {x.why}", markup=False)

@@ -14,6 +14,7 @@ from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.errors import ServoError, UsageError
 from servotool.model.profile import Profile
+from servotool.motion import deadman
 from servotool.ops import eeprom
 from servotool.tuning import identify, planning, preflight, step, tune
 from servotool.tuning.gains import suggest_gains
@@ -96,6 +97,8 @@ def inertia(
                                     "before and after; moves out and back inside --travel each time."),
     save: bool = typer.Option(None, "--save/--no-save", help="Store the written ratio and gains in EEPROM (or keep "
                               "them out of it) as the drive allows; default: the drive's current setting."),
+    no_dead_man: bool = typer.Option(False, "--no-dead-man", help="Move a drive that has no dead-man route "
+                                     "(nothing stops the motor if this program dies); keep an E-stop at hand."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
     """Identify the load inertia ratio (with friction and gravity), write it, and set matching gains.
@@ -115,6 +118,7 @@ def inertia(
         step.step_duration_s(travel)     # refused before the drive is opened
 
     moving = [False]     # identifying: a failure now reports what was measured
+    dead_man: list[deadman.DeadManBound | None] = [None]
 
     def approve_motion(motion: planning.MotionPlan | None) -> bool:
         if method == "host" or step_check:
@@ -124,6 +128,12 @@ def inertia(
         if step_check:
             info(f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(travel):.2f} s forward and "
                  "back, before and after")
+        if method == "host" and motion is not None:
+            dead_man[0] = deadman.motion_bound(d, motion.speed_rpm, motion.ramp_s)
+        elif step_check:
+            dead_man[0] = deadman.motion_bound(d, step.STEP_SPEED_RPM, 0.0)
+        if dead_man[0] is not None:
+            info(deadman.sentence(dead_man[0]))
         moving[0] = confirm("Move the axis now?", yes)
         return moving[0]
 
@@ -140,6 +150,7 @@ def inertia(
         return confirm(question, yes)
 
     with drive(ctx) as d:
+        d.dead_man_waived = no_dead_man
         try:
             res = tune.tune_inertia(d, request, progress=info, approve_motion=approve_motion,
                                     on_proposal=show, approve_write=approve_write)
@@ -156,7 +167,7 @@ def inertia(
         profile = d.profile
     if report is not None:
         _report(report, res.identified, profile, res)
-    _render(res, profile, as_json)
+    _render(res, profile, as_json, dead_man[0])
 
 
 def _report(folder: Path, result: identify.Result, profile: Profile, res: tune.TuneResult | None,
@@ -167,7 +178,8 @@ def _report(folder: Path, result: identify.Result, profile: Profile, res: tune.T
     info(f"report: {len(written.files)} files in {folder} (open {folder / 'report.md'})")
 
 
-def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
+def _render(res: tune.TuneResult, profile: Profile, as_json: bool,
+            dead_man: deadman.DeadManBound | None = None) -> None:
     """The outcome, after the writes."""
     proposal, sugg = res.proposal, res.proposal.suggestion
     entry, changes = proposal.parameter, proposal.gain_changes
@@ -181,6 +193,7 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
             "gains_written": res.gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
             "step_before": res.step_before.summary() if res.step_before else None,
             "step_after": res.step_after.summary() if res.step_after else None,
+            "dead_man": dead_man.as_json() if dead_man is not None else None,
         }))
         return
     if res.persisted is False:

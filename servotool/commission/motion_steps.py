@@ -11,6 +11,7 @@ from servotool.errors import UsageError
 from servotool.model.codec import parse_value
 from servotool.model.profile import Profile
 from servotool.model.roles import motion_route
+from servotool.motion.deadman import sentence
 from servotool.motion.jogger import Jogger
 from servotool.report.charts import need_matplotlib
 from servotool.report.tune_report import write_tune_report
@@ -41,10 +42,21 @@ class JogStep(StepType):
         return f"jog {speed:g} rpm for {secs:g} s"
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+        drive.dead_man_waived = _waived(step.arg)
         jogger = Jogger(drive)
         plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
         jogger.run(plan)
-        return Outcome(plan.describe())
+        bound = plan.dead_man
+        return Outcome(plan.describe() + (f"; {sentence(bound)}" if bound is not None else ""),
+                       {"dead_man": bound.as_json()} if bound is not None else {})
+
+
+def _waived(arg: Any) -> bool:
+    """`no_dead_man: true` in a motion step: the plan's author acknowledges a drive without a dead-man."""
+    value = (arg or {}).get("no_dead_man", False) if isinstance(arg, dict) else False
+    if not isinstance(value, bool):
+        raise UsageError("no_dead_man must be true or false")
+    return value
 
 
 def _report_option(arg: Any) -> str | None:
@@ -104,6 +116,7 @@ class TuneInertiaStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         request = self.request(step.arg, drive.profile)
+        drive.dead_man_waived = _waived(step.arg)
         report = _report_option(step.arg)
         folder = ctx.path(report, drive.unit) if report else None
         try:

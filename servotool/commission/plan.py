@@ -18,10 +18,11 @@ STEP_NAMES = ("set", "expect", "backup", "restore", "jog", "tune inertia", "wait
 TOP_KEYS = {"port", "profile", "units", "unit", "steps", "baud", "parity", "stopbits", "timeout", "retries"}
 
 
-JOG_KEYS = {"speed", "time", "max_travel"}
+JOG_KEYS = {"speed", "time", "max_travel", "no_dead_man"}
 
 
-TUNE_KEYS = {"rigidity", "bandwidth", "travel", "max_speed", "accel_time", "direction", "repeats", "gains", "report"}
+TUNE_KEYS = {"rigidity", "bandwidth", "travel", "max_speed", "accel_time", "direction", "repeats", "gains", "report",
+             "no_dead_man"}
 
 
 @dataclass

@@ -170,6 +170,19 @@ class SetupItem:
 
 
 @dataclass(frozen=True)
+class DeadManRoute:
+    """What stops host motion when the host dies (profile key dead_man): the drive's own communication timeout
+    (drive_timeout), bounded relative moves re-armed by each beat (segment), or nothing (none)."""
+
+    route: str
+    reason: str
+    source: str
+    unverified: str = ""
+    if_host_dies: str = ""
+    start_value: int = 1      # segment: the value OR-ed into role segment_start's servo-on value to start a move
+
+
+@dataclass(frozen=True)
 class IdentityCheck:
     """One read-only address a drive of this family answers in a known way (or, `absent`, refuses with exception
     02): part of the profile's identity signature."""
@@ -220,6 +233,7 @@ class Profile:
     alarms: list[Alarm] = field(default_factory=list)
     conventions: dict[str, str] = field(default_factory=dict)
     motion_setup: list[SetupItem] = field(default_factory=list)
+    dead_man: DeadManRoute | None = None
     unverified_note: str = ""
     identity: Identity | None = None
     path: Path | None = None

@@ -30,6 +30,29 @@ def is_sim_extension(entry: Entry) -> bool:
     return entry.source.strip().lower().startswith("servotool")
 
 
+@dataclass(frozen=True)
+class SimExtension:
+    """Something the simulated drive does that the drive's manual does not document."""
+
+    what: str
+    why: str
+
+
+def sim_extensions(profile: Profile) -> list[SimExtension]:
+    """Every simulator extension of a profile: entries and alarms servotool added, and the fake watchdog setting
+    where the drive documents no communication timeout."""
+    found = [SimExtension(f"entry {e.code} ({e.name})", e.source) for e in profile.entries if is_sim_extension(e)]
+    found += [SimExtension(f"alarm {a.display} ({a.name})", a.source) for a in profile.alarms
+              if a.source.strip().lower().startswith("servotool")]
+    if profile.role("comm_timeout") is None:
+        found.append(SimExtension("sim config --fake-watchdog", "NOT REAL, off by default: stops host motion after "
+                                  "500 ms of host silence; the real drive documents no communication timeout"))
+    if profile.motor is None:
+        found.append(SimExtension("motor", "no motor data in the profile: the simulator assumes a 400 W, 3000 rpm "
+                                  "motor"))
+    return found
+
+
 def jog_codes(entry: Entry) -> dict[int, int]:
     """Direction (+1/-1/0) -> raw value of a JOG trigger entry."""
     names = {name.split()[0].lower(): raw for raw, name in entry.enum.items() if name.strip()}
@@ -48,17 +71,21 @@ def jog_direction(entry: Entry, raw: int) -> int:
 
 @dataclass(frozen=True)
 class MotionRoute:
-    """How this profile moves the motor over communication: kind 'trigger' or 'speed', and the entries by role."""
+    """How this profile moves the motor over communication: kind 'trigger' (a JOG trigger), 'segment' (short
+    relative position moves, each started by a write) or 'speed' (a speed reference with servo-on), and the entries
+    by role."""
 
     kind: str
     entries: dict[str, Entry]
 
     @property
     def speed_entry(self) -> Entry:
-        return self.entries["jog_speed" if self.kind == "trigger" else "speed_reference"]
+        return self.entries[{"trigger": "jog_speed", "segment": "segment_speed"}.get(self.kind, "speed_reference")]
 
 
-ROUTE_ROLES = ("jog", "jog_speed", "speed_reference", "servo_on", "jog_accel", "keepalive", "comm_timeout")
+ROUTE_ROLES = ("jog", "jog_speed", "speed_reference", "servo_on", "jog_accel", "keepalive", "comm_timeout",
+               "segment_start", "segment_distance", "segment_speed", "segment_units_per_rev")
+SEGMENT_ROLES = ("segment_start", "segment_distance", "segment_speed", "servo_on")
 
 
 def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
@@ -66,6 +93,9 @@ def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
     found = {r: e for r in ROUTE_ROLES if (e := profile.role(r)) is not None}
     if "jog" in found and "jog_speed" in found:
         kind = "trigger"
+        found.pop("speed_reference", None)
+    elif all(r in found for r in SEGMENT_ROLES):
+        kind = "segment"
         found.pop("speed_reference", None)
     elif "speed_reference" in found and "servo_on" in found:
         kind = "speed"

@@ -13,6 +13,7 @@ from servotool.model.profile import (
     PERSISTENCE,
     WORD_ORDERS,
     Alarm,
+    DeadManRoute,
     Entry,
     Limits,
     LineSettings,
@@ -25,8 +26,10 @@ from servotool.model.profile import (
 TOP_KEYS = {
     "schema", "id", "model", "vendor", "version", "description", "source", "address_rule", "serial", "limits",
     "word_order", "persistence", "motor", "unverified_note", "groups", "roles", "entries", "alarms", "conventions",
-    "motion_setup", "identity",
+    "motion_setup", "dead_man", "identity",
 }
+DEAD_MAN_ROUTES = ("drive_timeout", "segment", "none")
+DEAD_MAN_KEYS = {"route", "reason", "source", "unverified", "if_host_dies", "start_value"}
 
 
 SETUP_KEYS = {"code", "value", "reason", "source", "unverified"}
@@ -93,6 +96,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         if key not in CONVENTIONS or value not in CONVENTIONS[key]:
             chk.bad(f"conventions.{key}", f"unknown convention {key}: {value!r}")
     motion_setup = _parse_motion_setup(chk, data.get("motion_setup"), {e.code.upper(): e for e in entries}, broken)
+    dead_man = _parse_dead_man(chk, data.get("dead_man"))
     identity = parse_identity(chk, data.get("identity"), {e.code.upper(): e for e in entries}, limits)
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
@@ -104,9 +108,27 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         entries=entries, roles={str(k): str(v) for k, v in roles.items()},
         groups={str(k): str(v) for k, v in groups.items()}, alarms=alarms,
         conventions={str(k): str(v) for k, v in conventions.items()}, motion_setup=motion_setup,
-        unverified_note=str(data.get("unverified_note", "")), identity=identity,
+        unverified_note=str(data.get("unverified_note", "")), dead_man=dead_man, identity=identity,
     )
     return profile, []
+
+
+def _parse_dead_man(chk: Checker, raw: Any) -> DeadManRoute | None:
+    """dead_man: what stops host motion on this drive when the host dies (route, reason, source, unverified)."""
+    if raw is None:
+        return None
+    if not isinstance(raw, dict):
+        chk.bad("dead_man", "expected a mapping {route, reason, source, unverified, if_host_dies}")
+        return None
+    for key in raw:
+        if key not in DEAD_MAN_KEYS:
+            chk.bad("dead_man", f"unknown key '{key}'")
+    route = chk.choice(raw, "route", "dead_man", DEAD_MAN_ROUTES, "none")
+    texts = {k: chk.opt(raw, k, "dead_man", str, "") for k in ("reason", "source", "unverified", "if_host_dies")}
+    if not texts["reason"] or not texts["source"]:
+        chk.bad("dead_man", "needs a reason and a source (the manual lines it relies on)")
+    start_value = chk.opt(raw, "start_value", "dead_man", int, 1)
+    return DeadManRoute(route=route, start_value=start_value, **texts)
 
 
 def _parse_motion_setup(chk: Checker, raw: Any, entries: dict[str, Entry], broken: set[str]) -> list[SetupItem]:

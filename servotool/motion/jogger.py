@@ -17,12 +17,23 @@ from servotool.errors import DeviceError, ServoError, UsageError
 from servotool.model.codec import eng_to_raw, parse_value, raw_to_eng
 from servotool.model.profile import Entry
 from servotool.model.roles import FEATURE, jog_codes, motion_route
+from servotool.motion import deadman
+from servotool.motion.deadman import DeadManBound
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
+from servotool.motion.segments import SegmentMoves
 from servotool.motion.setup import check_setup
+from servotool.motion.travel import TravelGuard, TravelLimit
 from servotool.ops import alarms
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.ops.status import servo_is_on
+
+KEY_POLL_S = 0.02      # interactive JOG polls the keys this often (key repeat comes about every 30 ms)
+
+
+def travel_estimate(speed_rpm: float, seconds: float | None) -> float:
+    """How far a timed JOG travels at speed (0 for an interactive one, whose travel the guard watches)."""
+    return abs(speed_rpm) / 60.0 * seconds if seconds is not None else 0.0
 
 
 @dataclass(frozen=True)
@@ -33,12 +44,15 @@ class JogPlan:
     max_speed_rpm: float
     accel_ms: float | None
     travel_rev: float | None  # estimate for a timed jog
+    dead_man: DeadManBound | None = None
+    travel_limit: TravelLimit | None = None
 
     def describe(self) -> str:
         what = "forward" if self.direction > 0 else "reverse"
         more = f" for {self.seconds:g} s (about {self.travel_rev:.2f} rev)" if self.seconds is not None else ""
         ramp = f", ramp {self.accel_ms:g} ms" if self.accel_ms is not None else ""
-        return f"JOG {what} at {self.speed_rpm:g} rpm{more}{ramp}"
+        limit = f", {self.travel_limit.describe()}" if self.travel_limit is not None else ""
+        return f"JOG {what} at {self.speed_rpm:g} rpm{more}{ramp}{limit}"
 
 
 class Jogger:
@@ -69,6 +83,10 @@ class Jogger:
         self._saved_reference: int | None = None
         self._ramp_raw: int | None = None
         self._stop_wait_s = 3.0
+        self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
+        self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
+        self.guard = TravelGuard(drive, None)   # the soft travel limit of the planned JOG (none until plan())
+        self._timeout_s: float | None = deadman.UNREAD   # the drive's communication timeout, read once
 
     @property
     def keepalive_s(self) -> float:
@@ -85,8 +103,9 @@ class Jogger:
             limits.append(self.profile.motor.max_speed_rpm)
         return float(min(limits))
 
-    def plan(self, speed_rpm: float, seconds: float | None, max_travel_rev: float | None = None) -> JogPlan:
-        """Check everything before any motion: alarm, servo state, speed and travel limits."""
+    def plan(self, speed_rpm: float, seconds: float | None, max_travel_rev: float | None = None,
+             travel: TravelLimit | None = None) -> JogPlan:
+        """Check everything before any motion: alarm, servo state, speed and travel limits, the dead-man."""
         if speed_rpm == 0 or not math.isfinite(speed_rpm):
             raise UsageError("--speed must be a non-zero number (its sign gives the direction)")
         if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
@@ -105,17 +124,40 @@ class Jogger:
                                  "(see 'servotool alarm', clear it first)")
         if self.servo_already_on():
             raise UsageError("refusing to JOG: the servo is already on (enabled from elsewhere); switch it off first")
-        travel = abs(speed_rpm) / 60.0 * seconds if seconds is not None else None
-        if max_travel_rev is not None and travel is not None and travel > max_travel_rev:
-            raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {travel:.2f} rev, over the "
-                             f"--max-travel limit {max_travel_rev:g} rev")
+        estimate = travel_estimate(speed_rpm, seconds)
+        if max_travel_rev is not None and estimate > max_travel_rev:
+            raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {estimate:.2f} rev, over "
+                             f"the --max-travel limit {max_travel_rev:g} rev")
+        self.guard = TravelGuard(self.drive, travel)
+        if travel is not None and travel_estimate(speed_rpm, seconds) > travel.rev:
+            raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about "
+                             f"{travel_estimate(speed_rpm, seconds):.2f} rev, over the {travel.describe()}")
         self.keepalive.interval_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
-        accel = self.profile.role("jog_accel")
-        accel_ms = raw_to_eng(accel, self.drive.read_entries([accel])[0].raw) if accel is not None else None
+        accel_ms = self._ramp_ms()
         self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * \
             abs(speed_rpm) / (self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0)
+        bound = self.arm_dead_man(abs(speed_rpm), accel_ms)
         return JogPlan(abs(speed_rpm), 1 if speed_rpm > 0 else -1, seconds, limit,
-                       float(accel_ms) if accel_ms is not None else None, travel)
+                       float(accel_ms) if accel_ms is not None else None,
+                       abs(speed_rpm) / 60.0 * seconds if seconds is not None else None, bound, travel)
+
+    def _ramp_ms(self) -> float | None:
+        accel = self.profile.role("jog_accel")
+        return float(raw_to_eng(accel, self.drive.read_entries([accel])[0].raw)) if accel is not None else None
+
+    def arm_dead_man(self, speed_rpm: float, ramp_ms: float | None = None) -> DeadManBound:
+        """The dead-man bound of motion up to speed_rpm (see motion/deadman); UsageError when it cannot be kept
+        (no route without --no-dead-man, a link too slow for the beat). Every motion goes through here before it
+        moves, the JOG's plan and each speed an identification or step check sets."""
+        if self._timeout_s == deadman.UNREAD:
+            self._timeout_s = deadman.drive_timeout_s(self.drive)
+        bound = deadman.bound(self.drive, speed_rpm, self.keepalive.interval_s,
+                              ramp_ms if ramp_ms is not None else self._ramp_ms_now(), self.drive.dead_man_waived,
+                              self._timeout_s)
+        deadman.check(bound, self.drive.dead_man_waived)
+        if self.dead_man is None or bound.speed_rpm >= self.dead_man.speed_rpm:
+            self.dead_man = bound
+        return bound
 
     def servo_already_on(self) -> bool:
         """Servo on from elsewhere: the status word says so, or a servo-on held in a parameter is set."""
@@ -130,16 +172,23 @@ class Jogger:
     def set_speed(self, speed_rpm: float) -> None:
         """The speed of the following moves (rpm, sign ignored); a running speed-route move changes at once."""
         self.speed_rpm = abs(speed_rpm)
-        if self.route.kind == "trigger":
+        if self.dead_man is None or self.speed_rpm > self.dead_man.speed_rpm:
+            self.arm_dead_man(self.speed_rpm)
+        if self.route.kind in ("trigger", "segment"):
             raw = self._speed_raw(self.speed_rpm)
             if self.drive.read_entries([self.speed_entry])[0].raw != raw:  # no needless EEPROM write
                 write_one(self.drive, self.speed_entry, raw)
+            if self.route.kind == "segment" and self.direction:
+                self._segment_command()          # the running move takes the new speed at once
         elif self._enabled and self.direction:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
 
     def command(self, direction: int) -> None:
         """+1 forward, -1 reverse, 0 stop (ramped by the drive's JOG/speed accel time)."""
         self.direction = (direction > 0) - (direction < 0)
+        if self.route.kind == "segment":
+            self._segment_command()
+            return
         if self.jog is not None:
             self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
             self.keepalive.sent()
@@ -156,12 +205,33 @@ class Jogger:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
             self.keepalive.sent()
 
+    def _segment_command(self) -> None:
+        """The segment route: servo on for the first move, then a fresh move (or a braking one) now."""
+        assert self.servo is not None
+        if self.direction and not self._enabled and self.segments is not None:
+            self.drive.write_raw(self.servo, 1)         # servo on, start bits off: the next write is an edge
+            self.segments.start_high = False
+            self._enabled = True
+        if self._enabled and self.segments is not None and self.segments.move(
+                self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now()):
+            self.keepalive.sent()
+
+    def _ramp_ms_now(self) -> float | None:
+        if self._ramp_raw is not None:
+            return float(raw_to_eng(self._ramp_entry(), self._ramp_raw))
+        return self._ramp_ms()
+
     def beat(self) -> None:
         """The dead-man keep-alive, now: without it the drive stops the motor after its timeout."""
         self.keepalive.beat()
 
     def _resend_command(self) -> None:
-        """The beat of a drive without a keep-alive entry: the running command again."""
+        """The beat of a drive without a keep-alive entry: the running command again (a segment route starts a
+        fresh move from where the axis is)."""
+        if self.route.kind == "segment":
+            if self.direction:
+                self._segment_command()
+            return
         if self.jog is not None:
             self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
         elif self._enabled and self.servo is not None:
@@ -172,6 +242,8 @@ class Jogger:
         if self.servo is not None:
             self.drive.write_raw(self.servo, 0)
         self._enabled = False
+        if self.segments is not None:
+            self.segments.moving = 0
         if self._saved_reference is not None:
             if self.drive.read_entries([self.speed_entry])[0].raw != self._saved_reference:
                 write_one(self.drive, self.speed_entry, self._saved_reference)
@@ -207,6 +279,8 @@ class Jogger:
     def _run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
              command: Callable[[], int | None] | None = None) -> None:
         self.set_speed(plan.speed_rpm)
+        guard = self.guard
+        guard.start()
         t0 = self.clock.now()
         try:
             self.command(plan.direction if command is None else 0)   # interactive: wait for the first key
@@ -220,11 +294,14 @@ class Jogger:
                         break
                     if new != self.direction:
                         self.command(new)
-                self.beat()
-                self.check_tripped()
-                if on_sample is not None:
-                    on_sample(elapsed, self.speed())
-                self.idle(self.keepalive_s)
+                if command is None or self.keepalive.due():     # interactive: keys are polled between beats
+                    self.beat()
+                    self.check_tripped()
+                    guard.check(self.direction, deadman.braking_rev(self.speed_rpm, plan.accel_ms)
+                                + self.speed_rpm / 60.0 * self.keepalive_s)
+                    if on_sample is not None:
+                        on_sample(elapsed, self.speed())
+                self.idle(self.keepalive_s if command is None else min(self.keepalive_s, KEY_POLL_S))
         except BaseException:
             self._emergency_stop()
             raise
@@ -250,7 +327,7 @@ class Jogger:
         """Raw values (code -> raw) of the settings a motion changes and puts back: the ramp (role jog_accel), and
         a trigger route's JOG speed (a speed reference is put back by leave())."""
         entries = [self._ramp_entry()]
-        if self.route.kind == "trigger":
+        if self.route.kind in ("trigger", "segment"):
             entries.insert(0, self.speed_entry)
         saved = {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
         self._ramp_raw = saved[entries[-1].code]
@@ -262,6 +339,8 @@ class Jogger:
     def set_ramp(self, raw: int) -> None:
         """The JOG ramp time (role jog_accel, raw), written only when it changes."""
         if raw != self._ramp_raw:
+            if self.speed_rpm:
+                self.arm_dead_man(self.speed_rpm, float(raw_to_eng(self._ramp_entry(), raw)))
             write_one(self.drive, self._ramp_entry(), raw)
             self._ramp_raw = raw
 

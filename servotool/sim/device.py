@@ -22,6 +22,8 @@ SIM_SETTINGS: dict[str, tuple[type, float | int, float, float, str]] = {
     "seed": (int, 1, 0, 2**31 - 1, "random seed of the measurement noise"),
     "brake": (int, 1, 0, 1, "holding brake (on/off): closed while the servo is off; holds any load_torque"),
     "line_baud": (int, 0, 0, 10_000_000, "emulate an RS485 line at this baud (delay answers by wire time); 0 = off"),
+    "fake_watchdog": (int, 0, 0, 1, "NOT REAL (on/off): stop host motion after 500 ms of host silence on a drive "
+                      "whose manual documents no communication timeout; off by default, as on the real drive"),
 }
 
 

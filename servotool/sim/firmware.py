@@ -35,12 +35,13 @@ from servotool.sim.plant import (
     Plant,
     PlantSettings,
 )
+from servotool.sim.segment import Segment
 
 DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
-# Simulator assumption for drives whose manual documents no communication timeout (no comm_timeout role): host
-# motion stops (ramped, no alarm) when no motion-role write arrives for this long. A real drive of that kind keeps
-# running; servotool says so before moving it.
-DEFAULT_HOST_TIMEOUT_MS = 500.0
+# A drive whose manual documents no communication timeout (no comm_timeout role) keeps running when the host dies,
+# and so does the simulated one. Only `sim config --fake-watchdog on` (not real, off by default) makes it stop host
+# motion, ramped and without an alarm, when no motion-role write arrives for this long.
+FAKE_WATCHDOG_MS = 500.0
 STATUS_BITS = {"servo_on": 0, "fault": 1, "warning": 2, "moving": 3, "jog": 4, "identifying": 5}
 COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
 STOP_STEP_S = 0.01           # a quiet ramp-down after host loss is checked for standstill at this resolution
@@ -73,6 +74,8 @@ class Firmware:
         self.jog_dir = 0
         self.last_host = self.clock.now()
         self.ident: Identification | None = None
+        self.segment: Segment | None = None
+        self._start_level = False
         self.alarms.recorded = False
 
     # ----- the running state, shared with other processes through the state file -----------------------------
@@ -96,6 +99,9 @@ class Firmware:
         if self.mode == "ident" and self.ident is None:
             self.mode = "off"
             self.plant.set_mode("off")
+        if self.mode == "segment":          # a move is not handed over: it ends here, braking at the ramp
+            self.plant.set_speed_command(0.0)
+            self.mode = "servo"
 
     def _reloaded(self, _drive: SimulatedDrive) -> None:
         """Another process changed the drive's state (sim config, sim reset, another server): take it over."""
@@ -167,7 +173,7 @@ class Firmware:
         """Integrate the plant up to now, applying the watchdog and identification on the way; refresh monitors."""
         now = self.clock.now()
         if self._watched():
-            expiry = self.last_host + self._eng("comm_timeout", DEFAULT_HOST_TIMEOUT_MS) / 1000.0
+            expiry = self.last_host + self._eng("comm_timeout", FAKE_WATCHDOG_MS) / 1000.0
             if expiry < now:
                 self.plant.advance_to(expiry)
                 self._host_lost()
@@ -175,31 +181,39 @@ class Firmware:
             self._advance_identification(self.ident, now)
         if self.mode == "stopping":
             self._advance_stop(now)
+        if self.mode == "segment" and self.segment is not None:
+            if self.segment.advance(self.plant, now, self._ramp_rev_s2()):
+                self.segment = None
+                self.mode = "servo"           # the move ended: the drive holds there, servo on
         self.plant.advance_to(now)
         if self.plant.alarm is not None:
             if self.mode != "off":
                 self.mode = "off"
                 self.ident = None
+                self.segment = None
             self.alarms.record(self.plant.alarm)       # also alarms raised with the servo off
         self._refresh_monitors()
 
     def _watched(self) -> bool:
-        """Whether the host watchdog runs: a documented one (comm_timeout role) whenever the host holds the servo;
-        the simulator's assumed one (drives that document none) only while the host commands motion, so a servo
-        switched on by a plain parameter write stays on, as it would on the real drive."""
+        """Whether a host watchdog runs: the profile's documented one (comm_timeout role) whenever the host holds
+        the servo. A drive that documents none has none: only the labelled fake watchdog (sim config
+        --fake-watchdog, off by default) stops host-commanded motion there."""
         if self.profile.role("comm_timeout") is not None:
-            return self.mode in ("jog", "speed", "servo")
-        return self.mode in ("jog", "speed") and (self.jog_dir != 0 or self.plant.target_rpm != 0.0)
+            return self.mode in ("jog", "speed", "servo", "segment")
+        return bool(self.drive.settings["fake_watchdog"]) and self.mode in ("jog", "speed", "segment") and (
+            self.jog_dir != 0 or self.plant.target_rpm != 0.0)
 
     def _host_lost(self) -> None:
-        """The watchdog expired: stop with the profile's communication alarm (ramp down quietly if it has none)."""
+        """The watchdog expired: a documented one stops with the profile's communication alarm; the fake one ramps
+        down quietly (it has no alarm to show: the real drive has none)."""
+        if self.profile.role("comm_timeout") is not None and self.profile.alarm_of_kind("comm_timeout") is not None:
+            self.trip("comm_timeout")
+            return
         servo = self.profile.role("servo_on")
         if servo is not None and servo.cls == "Pn":
             self.drive.bank.apply_parameter(servo, 0)   # a servo-on held in a parameter drops with the servo
             self.drive.bank.save()
-        if self.profile.alarm_of_kind("comm_timeout") is not None:
-            self.trip("comm_timeout")
-            return
+        self.segment = None
         self.plant.set_speed_command(0.0)
         self.jog_dir = 0
         self.mode = "stopping"
@@ -255,6 +269,22 @@ class Firmware:
         self.jog_dir = direction
         self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))
 
+    def _ramp_rev_s2(self) -> float:
+        """The drive's ramp (role jog_accel: time from 0 to rated speed) in rev/s^2, as the plant runs it."""
+        return self.motor.rated_speed_rpm / 60.0 / max(self.plant.gains.jog_accel_ms / 1000.0, 1e-3)
+
+    def segment_start(self, level: bool) -> None:
+        """The segment start input: a rising edge with the servo on starts segment 1 afresh from here."""
+        self.keep_alive()
+        rising = level and not self._start_level
+        self._start_level = level
+        if not rising or self.mode not in ("servo", "segment") or self.plant.alarm is not None:
+            return
+        per_rev = self._eng("segment_units_per_rev", 0.0) or float(self.motor.counts_per_rev)
+        distance = self._eng("segment_distance", 0.0) / per_rev
+        self.segment = Segment.start(self.plant, distance, self._eng("segment_speed", 0.0))
+        self.mode = "segment"
+
     def command_speed(self, rpm: float) -> None:
         """A host speed reference: acts while the servo is on by command."""
         self.keep_alive()
@@ -268,9 +298,10 @@ class Firmware:
             self.plant.set_mode("position")
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
-        elif not on and self.mode in ("servo", "speed", "jog", "stopping"):
+        elif not on and self.mode in ("servo", "speed", "jog", "stopping", "segment"):
             self.plant.set_mode("off")
             self.mode = "off"
+            self.segment = None
 
     def reset_alarm(self) -> None:
         """Clear the latched alarm if its cause is gone; one that stays latched is not entered again."""

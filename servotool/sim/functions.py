@@ -22,24 +22,29 @@ class FirmwareActions(Protocol):
     def jog(self, direction: int) -> None: ...
     def command_speed(self, rpm: float) -> None: ...
     def servo(self, on: bool) -> None: ...
+    def segment_start(self, level: bool) -> None: ...
     def reset_alarm(self) -> None: ...
     def reboot(self) -> None: ...
     def identify(self, start: bool) -> None: ...
 
 
-def motion_handlers(fw: FirmwareActions) -> dict[str, FnHandler]:
-    """Handlers of the host-motion roles, by role."""
+def motion_handlers(fw: FirmwareActions, start_value: int = 0) -> dict[str, FnHandler]:
+    """Handlers of the host-motion roles, by role (start_value: the segment start bits, which share the servo-on
+    entry on a segment route and do not switch the servo on)."""
     return {
         "jog": lambda _d, entry, raw: fw.jog(jog_direction(entry, raw)),
         "speed_reference": lambda _d, entry, raw: fw.command_speed(float(raw_to_eng(entry, raw))),
-        "servo_on": lambda _d, _e, raw: fw.servo(bool(raw)),
+        "servo_on": lambda _d, _e, raw: fw.servo(bool(raw & ~start_value)),
+        "segment_start": lambda _d, _e, raw: fw.segment_start(bool(raw & start_value)),
         "keepalive": lambda _d, _e, _raw: fw.keep_alive(),
     }
 
 
 def install(drive: SimulatedDrive, fw: FirmwareActions) -> None:
     """Route the drive's function writes, and writes of motion roles held in parameters, to the firmware."""
-    motion = motion_handlers(fw)
+    dead_man = drive.profile.dead_man
+    motion = motion_handlers(fw, dead_man.start_value if dead_man is not None and dead_man.route == "segment"
+                             else 0)
     drive.handlers.update({
         **motion,
         "alarm_reset": lambda _d, _e, raw: fw.reset_alarm() if raw else fw.update(),

@@ -108,5 +108,9 @@ def fake_msvcrt(monkeypatch: pytest.MonkeyPatch, typed: str) -> Iterator[None]:
 
 
 def test_windows_keys_arrows_and_letters(monkeypatch):
-    with fake_msvcrt(monkeypatch, "\xe0M\xe0Kx q"), keys.raw_keys() as key:
-        assert [key() for _ in range(6)] == ["fwd", "rev", "", "stop", "quit", None]
+    for typed, action in (("\xe0M", "fwd"), ("\x00K", "rev"), ("x", ""), (" ", "stop"), ("q", "quit")):
+        with fake_msvcrt(monkeypatch, typed), keys.raw_keys() as key:
+            assert [key(), key()] == [action, None]
+    # a held key queues its repeats: one poll takes them all and answers the last key pressed
+    with fake_msvcrt(monkeypatch, "\xe0M\xe0M\xe0Kx"), keys.raw_keys() as key:
+        assert [key(), key()] == ["rev", None]

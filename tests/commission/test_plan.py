@@ -159,7 +159,7 @@ def test_a_tune_step_measures_a_drive_without_an_inertia_ratio_parameter_like_th
     plan = tmp_path / "plan.yaml"
     # max_speed: at full automatic speed SDC's loop overshoots near the travel limit now and then (issue 16)
     plan.write_text("port: sim\nprofile: sdc\nsteps:\n  - set: {PN4: 3}\n"
-                    "  - tune inertia: {gains: false, max_speed: 600}\n")
+                    "  - tune inertia: {gains: false, max_speed: 600, no_dead_man: true}\n")
     r = cli("run", str(plan), "--dry-run")
     assert r.code == 0 and "reported, not written" in r.out, r.err
     r = cli("run", str(plan), "--yes", "--json")
@@ -175,7 +175,9 @@ def test_a_tune_step_writes_by_the_drives_eeprom_rule_like_the_command(cli, tmp_
     cli("sim", "config", "--profile", "is620p", "--load-ratio", "4")
     before = cli("--port", "sim", "-P", "is620p", "param", "get", "H08-15", "--json").json()[0]["value"]
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nprofile: is620p\nsteps:\n  - set: {H02-00: 0, H0C-09: 1, H17-00: 1, H0C-13: 0}\n"
+    plan.write_text("port: sim\nprofile: is620p\nsteps:\n"
+                    "  - set: {H02-00: 1, H05-00: 2, H05-02: 10000, H11-00: 0, H0C-09: 1, H17-00: 1, H17-02: 28, "
+                    "H0C-13: 0}\n"
                     "  - tune inertia: {gains: false, max_speed: 600}\n")
     r = cli("run", str(plan), "--yes", "--json")
     assert r.code == 0, r.err

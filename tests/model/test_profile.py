@@ -145,8 +145,9 @@ def test_motion_setup_values_read_as_users_type_them():
 
     reqs = {p: {r.entry.code: r for r in requirements(load_profile(p))} for p in builtin_ids()}
     assert reqs["dsx7e"] == {}
-    assert {c: r.wanted for c, r in reqs["is620p"].items()} == {"H02-00": 0, "H06-00": 0, "H06-02": 0,
-                                                                 "H0C-09": 1, "H17-00": 1}
+    assert {c: r.wanted for c, r in reqs["is620p"].items()} == {"H02-00": 1, "H05-00": 2, "H05-02": 10000,
+                                                                 "H11-00": 0, "H11-01": 1, "H11-04": 0,
+                                                                 "H0C-09": 1, "H17-00": 1, "H17-02": 28}
     assert {c: r.wanted for c, r in reqs["sdc"].items()} == {"PN4": 3}
     po407 = reqs["sd25"]["Po407"]
     assert po407.fields == ("X",) and po407.met(0x011A) and po407.met(26) and not po407.met(0x1B)

@@ -20,6 +20,7 @@ from servotool.errors import UsageError
 from servotool.model.loader import load_profile
 from servotool.model.roles import jog_codes, motion_route
 from servotool.motion.caveats import motion_caveats
+from servotool.motion.deadman import route_of
 from servotool.session import open_drives
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -27,10 +28,16 @@ PROFILES = ("dsx7e", "sd25", "is620p", "sdc")
 # The drive setup each profile's motion_setup asks for, as a user does it (None: a power cycle).
 SETUP = {
     "dsx7e": [],
-    "is620p": [["param", "set", "H02-00=0", "H0C-09=1", "H17-00=1"]],
+    "is620p": [["param", "set", "H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1",
+                "H17-02=28"]],
     "sdc": [["param", "set", "PN4=3"]],
     "sd25": [["param", "set", "--save", "Po407.X=26", "Po408.X=27"], None, ["param", "set", "So-58.X=1"]],
 }
+
+
+def ack(profile: str) -> list[str]:
+    """The acknowledgement a drive without a dead-man route needs before any host motion."""
+    return [] if route_of(load_profile(profile)).route != "none" else ["--no-dead-man"]
 
 
 def set_up(cli, profile: str, port: str = "sim") -> None:
@@ -174,7 +181,7 @@ def test_monitor_csv_while_jogging(cli, served, tmp_path):
 
 
 def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
-    """Keys in a real terminal (tmux): nothing moves before a key, ← runs reverse, q stops and exits."""
+    """Keys in a real terminal (tmux): nothing moves before a key, a held ← runs reverse (hold-to-run), q exits."""
     import shutil
 
     if not shutil.which("tmux"):
@@ -186,8 +193,10 @@ def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
     subprocess.run(["tmux", "new-session", "-d", "-s", session, "-x", "120", "-y", "20", cmd], check=True)
     try:
         time.sleep(2.5)
-        subprocess.run(["tmux", "send-keys", "-t", session, "Left"], check=True)
-        time.sleep(1.5)
+        for _ in range(40):                      # a held key: the terminal repeats it about every 30 ms
+            subprocess.run(["tmux", "send-keys", "-t", session, "Left"], check=True)
+            time.sleep(0.03)
+        time.sleep(1.0)
         subprocess.run(["tmux", "send-keys", "-t", session, "q"], check=True)
         deadline = time.monotonic() + 15
         while time.monotonic() < deadline and not out.read_text().strip().endswith("0"):
@@ -216,38 +225,13 @@ def test_a_long_stop_ramp_keeps_the_host_alive_and_a_trip_fails_the_jog(cli):
 @pytest.mark.parametrize("profile", PROFILES)
 def test_jog_reaches_the_speed_on_every_profile(cli, profile):
     set_up(cli, profile)
-    r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "1", "--json")
+    r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "1", "--json", *ack(profile))
     assert r.code == 0, r.err
+    assert r.json()["dead_man"]["route"] == route_of(load_profile(profile)).route
     assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
     assert r.json()["peak_speed_rpm"] < 160              # SDC/IS620P ramps default to 0: the step overshoots
     assert abs(r.json()["final_speed_rpm"]) < 10
     assert "unverified" not in r.err and "caution" not in r.err          # the simulator never asks
-
-
-@pytest.mark.parametrize("profile", ["sd25", "is620p", "sdc"])
-def test_killed_client_stops_a_drive_without_watchdog_in_the_simulator(cli, served_as, profile):
-    """No documented comm timeout: the simulator's assumed 500 ms watchdog stops the motor with the profile's
-    communication alarm (a simulator extension where the manual has none), which a power cycle clears."""
-    port = served_as(profile)
-    set_up(cli, profile, port)
-    jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", port, "--profile", profile, "jog",
-                            "--speed", "800", "--time", "30", "--yes"], cwd=ROOT, stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 15
-    while time.monotonic() < deadline and read(port, "speed_feedback", profile=profile)[0] < 700:
-        time.sleep(0.1)
-    assert read(port, "speed_feedback", profile=profile)[0] > 700
-    jog.send_signal(signal.SIGKILL)
-    jog.wait()
-    time.sleep(0.5 + 0.6)                      # assumed watchdog 500 ms + the alarm stop
-    speed, alarm = read(port, "speed_feedback", "alarm_code", profile=profile)
-    assert abs(speed) < 10 and alarm == load_profile(profile).alarm_of_kind("comm_timeout").code
-    r = cli("--port", port, "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--yes")
-    assert r.code == 2 and "alarm" in r.err   # latched: no JOG until it is cleared
-    assert cli("--profile", profile, "sim", "reset", "--power-cycle").code == 0
-    set_up(cli, profile, port)                 # SD25's forced-DI mode does not survive the power cycle
-    r = cli("--port", port, "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--yes")
-    assert r.code == 0, r.err
 
 
 def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
@@ -256,7 +240,8 @@ def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
     r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1", "--yes")
     assert r.code == 2 and "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.err    # --yes skips no setup
     set_up(cli, "sd25", port)
-    r = cli("--port", port, "--profile", "sd25", "--explain", "jog", "--speed", "300", "--time", "1")
+    r = cli("--port", port, "--profile", "sd25", "--explain", "jog", "--speed", "300", "--time", "1",
+            "--no-dead-man")
     assert r.code == 2 and "--yes" in r.err
     assert "So-57 (jog)" in r.err and "Po407.X = 26" in r.err
     assert "no communication timeout" in r.err
@@ -266,7 +251,8 @@ def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
 
 
 @pytest.mark.parametrize(("profile", "differs"), [
-    ("is620p", ["H02-00 = 0 (now 8)", "H0C-09 = 1 (now 0)", "H17-00 = 1 (now 0)"]),
+    ("is620p", ["H02-00 = 1 (now 8)", "H05-00 = 2 (now 0)", "H05-02 = 10000 (now 0)", "H11-00 = 0 (now 1)",
+                "H0C-09 = 1 (now 0)", "H17-00 = 1 (now 0)", "H17-02 = 28 (now 0)"]),
     ("sdc", ["PN4 = 3 (now 0)"]),
     ("sd25", ["Po407.X = 26 (now 0)", "Po408.X = 27 (now 0)", "So-58.X = 1 (now 0)"]),
 ])
@@ -285,7 +271,8 @@ def test_a_drive_not_set_up_refuses_in_one_line_and_its_fix_lets_the_jog_run(cli
         assert r.code == 0, r.err
         if "power-cycle the drive" in line and "--save" in command:
             assert cli("sim", "reset", "-P", profile, "--power-cycle").code == 0
-    r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--json")
+    r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--json",
+            *ack(profile))
     assert r.code == 0, r.err
     assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
 
@@ -293,20 +280,20 @@ def test_a_drive_not_set_up_refuses_in_one_line_and_its_fix_lets_the_jog_run(cli
 def test_a_power_cycle_setting_written_but_not_in_effect_is_named_on_the_simulator(cli):
     assert cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po407.X=26", "Po408.X=27",
                "So-58.X=1").code == 0
-    r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5")
+    r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--no-dead-man")
     assert r.code == 2
     assert ("Po407.X = 26 (set, in effect after a power cycle), Po408.X = 27 (set, in effect after a power cycle)"
             " — power-cycle the drive ('servotool --port sim --profile sd25 sim reset --power-cycle' on the "
             "simulator)") in r.err
     assert cli("sim", "reset", "-P", "sd25", "--power-cycle").code == 0
-    r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--json")
+    r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--json", "--no-dead-man")
     assert r.code == 0, r.err                                   # --save kept So-58 too (the simulator stores it)
     assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
 
 
 def test_a_tune_and_a_plan_jog_refuse_the_same_way(cli, tmp_path):
     r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--dry-run")
-    assert r.code == 2 and "tune inertia needs drive setup first: H02-00 = 0 (now 8)" in r.err, r.err
+    assert r.code == 2 and "tune inertia needs drive setup first: H02-00 = 1 (now 8)" in r.err, r.err
     plan = tmp_path / "plan.yaml"
     plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - jog: {speed: 100, time: 0.5}\n")
     r = cli("run", str(plan), "--yes", "--json")
@@ -314,11 +301,11 @@ def test_a_tune_and_a_plan_jog_refuse_the_same_way(cli, tmp_path):
     assert "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.json()["steps"][0]["detail"]
 
 
-def test_a_plan_jogs_a_drive_moved_by_speed_reference_and_servo_on(cli, tmp_path):
-    """IS620P has no JOG trigger: a plan's jog step goes through the same route as `servotool jog`."""
+def test_a_plan_jogs_a_drive_moved_by_segments(cli, tmp_path):
+    """IS620P has no JOG trigger: a plan's jog step goes through the same segment route as `servotool jog`."""
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nprofile: is620p\nsteps:\n  - set: {H02-00: 0, H0C-09: 1, H17-00: 1}\n"
-                    "  - jog: {speed: 200, time: 0.5}\n")
+    plan.write_text("port: sim\nprofile: is620p\nsteps:\n  - set: {H02-00: 1, H05-00: 2, H05-02: 10000, H11-00: 0, "
+                    "H0C-09: 1, H17-00: 1, H17-02: 28}\n  - jog: {speed: 200, time: 0.5}\n")
     r = cli("run", str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     assert [s["ok"] for s in r.json()["steps"]] == [True, True]
@@ -326,14 +313,14 @@ def test_a_plan_jogs_a_drive_moved_by_speed_reference_and_servo_on(cli, tmp_path
 
 def test_motion_routes_and_their_unverified_entries():
     routes = {p: motion_route(load_profile(p)) for p in PROFILES}
-    assert {p: r.kind for p, r in routes.items()} == {"dsx7e": "trigger", "sd25": "trigger", "is620p": "speed",
+    assert {p: r.kind for p, r in routes.items()} == {"dsx7e": "trigger", "sd25": "trigger", "is620p": "segment",
                                                        "sdc": "speed"}
     assert routes["sd25"].speed_entry.code == "So-13" and routes["sdc"].speed_entry.code == "PN22"
     assert jog_codes(routes["sd25"].entries["jog"]) == {1: 1, -1: 2, 0: 0}       # forced DI1 = JOGU, DI2 = JOGD
     assert jog_codes(routes["dsx7e"].entries["jog"]) == {1: 1, -1: -1, 0: 0}
     listed = {p: {e.code for _, e, _ in motion_caveats(load_profile(p)).unverified} for p in PROFILES}
     assert {"So-57", "Po109"} <= listed["sd25"]
-    assert {"H06-03", "H31-00", "H06-05"} <= listed["is620p"]
+    assert {"H31-00"} <= listed["is620p"]
     assert {"PN22", "PN95", "PN29"} <= listed["sdc"]
     assert {"Fn001", "Fn032", "Pn620"} <= listed["dsx7e"]                    # simulator extensions count too
     assert "So-13" not in listed["sd25"]                                     # documented entries are not listed

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+# The IS620P segment route's setup (profiles/is620p.yaml motion_setup), as a user types it.
+IS620P_SETUP = ("H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1", "H17-02=28")
+
 
 def get(cli, profile, *codes):
     r = cli("--port", "sim", "--profile", profile, "param", "get", *codes, "--json")
@@ -53,7 +56,7 @@ def test_jog_and_tune_keep_their_writes_out_of_eeprom_on_a_drive_that_stores_eve
     def writes() -> int:
         return cli("sim", "show", "--profile", "is620p", "--json").json()["eeprom_writes"]
 
-    cli("--port", "sim", "--profile", "is620p", "param", "set", "H02-00=0", "H0C-09=1", "H17-00=1")
+    cli("--port", "sim", "--profile", "is620p", "param", "set", *IS620P_SETUP)
     before = writes()
     r = cli("--port", "sim", "--profile", "is620p", "jog", "--speed", "300", "--time", "0.5")
     assert r.code == 0, r.err
@@ -65,7 +68,8 @@ def test_jog_and_tune_keep_their_writes_out_of_eeprom_on_a_drive_that_stores_eve
 
 def test_tune_says_when_its_result_is_in_ram_only_and_save_stores_it(cli):
     cli("sim", "config", "--profile", "is620p", "--load-ratio", "4")
-    cli("--port", "sim", "--profile", "is620p", "param", "set", "H02-00=0", "H0C-09=1", "H17-00=1", "H0C-13=0")
+    cli("--port", "sim", "--profile", "is620p", "param", "set", *IS620P_SETUP,
+        "H0C-13=0")
     # A moderate speed: at full automatic speed these drives' loops overshoot near the 2 rev travel limit now and
     # then (issue 16); this test is about where the result is stored, not about that margin.
     r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--max-speed", "600")

@@ -138,23 +138,26 @@ def test_the_following_error_limit_comes_from_the_drive_parameter_where_it_has_o
     assert sim.firmware.plant.gains.following_limit_rev == 0.5
 
 
-def test_a_servo_on_by_parameter_stays_on_and_only_commanded_motion_is_watched(sim_dir, regs):
-    """SDC documents no comm timeout: the simulator's assumed watchdog stops host-commanded motion only."""
+def test_a_drive_without_a_documented_timeout_keeps_running_when_the_host_goes_quiet(sim_dir, regs):
+    """SDC documents no comm timeout: like the real drive, the strict simulator keeps running after the host is
+    gone; only the labelled fake watchdog (off by default) stops host-commanded motion, without an alarm."""
     profile = load_profile("sdc")
     clock = VirtualClock()
-    r = regs(build_drive(profile, 1, clock, persist=False))
-    r.write("PN4", 3)                                    # speed mode (the JOG route's setup)
-    r.write("PN95", 1)                                   # servo on, nothing commanded
-    for _ in range(20):                                  # far beyond the assumed 500 ms, no host traffic
-        clock.advance(0.1)
-        r.read("UN-1")
-    assert r.drive.firmware.plant.servo_on and r.read("UN-21") == 0
+    sim = build_drive(profile, 1, clock, persist=False)
+    r = regs(sim)
+    r.write("PN4", 3)                                    # the JOG mode (the route's setup)
+    r.write("PN95", 1)                                   # servo on
     r.write("PN22", 300)                                 # commanded motion ...
-    for _ in range(10):                                  # ... and then silence
+    for _ in range(50):                                  # ... and then 5 s of silence
         clock.advance(0.1)
         r.read("UN-1")
-    code = profile.alarm_of_kind("comm_timeout").code
-    assert r.read("UN-21") == code and not r.drive.firmware.plant.servo_on
+    assert r.read("UN-1") > 250 and r.read("UN-21") == 0 and sim.firmware.plant.servo_on
+    sim.configure(fake_watchdog=1)                       # NOT REAL: sim config --fake-watchdog on
+    r.write("PN22", 300)
+    for _ in range(20):
+        clock.advance(0.1)
+        r.read("UN-1")
+    assert abs(r.read("UN-1")) < 10 and r.read("UN-21") == 0 and not sim.firmware.plant.servo_on
 
 
 def test_sd25_reports_servo_on_and_motion_in_its_do_function_state_word(sim_dir, regs):
@@ -179,19 +182,26 @@ def jog_forward(r, clock: VirtualClock) -> float:
     p = r.drive.profile
     if p.role("jog") is not None:
         r.write(p.roles["jog"], 1)
+    elif p.role("segment_start") is not None:         # a 5 rev move at 300 rpm, started by an edge
+        r.write(p.roles["segment_speed"], 300)
+        r.write(p.roles["segment_distance"], 50000)
+        r.write(p.roles["servo_on"], 1)
+        r.write(p.roles["segment_start"], 1 | p.dead_man.start_value)
     else:
         r.write(p.roles["servo_on"], 1)
         r.write(p.roles["speed_reference"], 300)
     for _ in range(10):                              # the keep-alive a host would send
         clock.advance(0.05)
-        r.write(p.roles.get("jog") or p.roles["servo_on"], 1)
+        r.write(p.roles.get("jog") or p.roles["servo_on"], 1 | (p.dead_man.start_value if p.role("segment_start")
+                                                                else 0))
     return r.read(p.roles["speed_feedback"]) * p.role("speed_feedback").scale
 
 
 def test_host_motion_writes_move_nothing_until_the_drive_is_set_up(sim_dir, regs):
     """A third-party master writing the motion registers of a drive not set up sees it stand still, as a real
     drive would; after the setup (and, for SD25, the power cycle) the same writes move it."""
-    setups = {"is620p": {"H02-00": 0, "H0C-09": 1, "H17-00": 1}, "sdc": {"PN4": 3},
+    setups = {"is620p": {"H02-00": 1, "H05-00": 2, "H05-02": 10000, "H11-00": 0, "H0C-09": 1, "H17-00": 1,
+                         "H17-02": 28}, "sdc": {"PN4": 3},
               "sd25": {"Po407": 26, "Po408": 27, "So-58": 1}}
     for pid, setup in setups.items():
         clock = VirtualClock(10.0)
@@ -210,3 +220,34 @@ def test_host_motion_writes_move_nothing_until_the_drive_is_set_up(sim_dir, regs
             sim.power_cycle()
             r.write("So-58", 1)               # the real drive clears So-58 at power-up: set it again
         assert jog_forward(r, clock) > 100, pid
+
+
+def test_a_segment_move_ends_and_stops_by_itself_at_its_end(sim_dir, regs):
+    """IS620P's route: one start edge runs segment 1 (relative, at H11-14 rpm) to its end and holds there, with no
+    host traffic at all; a new edge during a move starts a fresh segment from where the axis is."""
+    profile = load_profile("is620p")
+    clock = VirtualClock(5.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    r = regs(sim)
+    for code, value in {"H02-00": 1, "H05-00": 2, "H05-02": 10000, "H11-00": 0, "H0C-09": 1, "H17-00": 1,
+                        "H17-02": 28, "H11-14": 600, "H11-12": 30000, "H11-15": 100}.items():
+        r.write(code, value)
+    start = sim.firmware.plant.position_rev
+    r.write("H31-00", 1)                                 # servo on
+    r.write("H31-00", 3)                                 # start edge: 3 rev at 600 rpm
+    clock.advance(0.2)
+    assert r.read("H0B-00") > 500                        # running
+    clock.advance(5.0)                                   # the host is gone
+    r.read("H0B-00")
+    moved = sim.firmware.plant.position_rev - start
+    assert 2.8 < moved <= 3.0 and abs(r.read("H0B-00")) < 5 and sim.firmware.plant.servo_on
+    r.write("H31-00", 1)
+    r.write("H31-00", 3)                                 # a fresh segment from here
+    clock.advance(0.1)
+    r.write("H31-00", 1)
+    r.write("H31-00", 3)                                 # re-armed during the move: 3 rev from this point
+    here = sim.firmware.plant.position_rev
+    clock.advance(5.0)
+    r.read("H0B-00")
+    assert sim.firmware.plant.position_rev - here <= 3.0
+    assert 2.8 + 0.5 < sim.firmware.plant.position_rev - start - moved <= 3.0 + 1.0

@@ -96,6 +96,26 @@ def test_sim_reset_factory_removes_the_state_and_reports_it(sim_dir, cli):
     assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
 
 
+def test_every_simulator_extension_is_listed_and_the_fake_watchdog_is_off_and_labelled(cli):
+    """The strict simulator: what it does beyond the manual is listed by sim show and profiles show --unverified;
+    the only watchdog a drive without a documented timeout can get is the labelled fake one, off by default."""
+    shown = cli("sim", "show", "-P", "sdc", "--json").json()
+    assert shown["settings"]["fake_watchdog"] == 0
+    assert [x["what"] for x in shown["extensions"]] == ["sim config --fake-watchdog"]
+    assert "NOT REAL" in shown["extensions"][0]["why"]
+    assert cli("sim", "config", "-P", "sdc", "--fake-watchdog", "on").code == 0
+    text = cli("sim", "show", "-P", "sdc").out
+    assert "fake_watchdog" in text and "simulator extensions" in text
+    dsx = cli("sim", "show", "-P", "dsx7e", "--json").json()["extensions"]
+    assert {"entry Pn620 (Host communication watchdog timeout)", "entry Fn032 (Host keep-alive (any write "
+            "refreshes the watchdog))"} <= {x["what"] for x in dsx}
+    assert not any("fake" in x["what"] for x in dsx)                  # DSX7E's map documents its watchdog
+    r = cli("profiles", "show", "is620p", "--unverified")
+    assert "dead-man route: segment" in r.out and "simulator extensions (not in the manual):" in r.out
+    assert "SIM.COMM" not in r.out                                   # the invented alarm is gone
+    assert cli("profiles", "show", "sd25", "--json").json()["dead_man"]["route"] == "none"
+
+
 def test_sim_config_missing_makes_the_drive_lack_entries_until_cleared(cli):
     r = cli("sim", "config", "--missing", "Pn101,pn512", "--json")
     assert r.code == 0 and r.json()["missing"] == ["Pn101", "Pn512"], r.err

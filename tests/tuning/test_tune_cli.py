@@ -23,6 +23,9 @@ def test_tune_identifies_the_configured_load_and_writes_it(cli, ratio):
     assert value == pytest.approx((ratio + 1) * 100, abs=0.05 * (ratio + 1) * 100)
 
 
+# The IS620P segment route's setup (profiles/is620p.yaml motion_setup), as a user types it.
+IS620P_SETUP = ("H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1", "H17-02=28")
+
 def test_tune_sets_gains_for_a_rigidity_and_saves_the_trace(cli, tmp_path):
     cli("sim", "config", "--load-ratio", "4")
     trace = tmp_path / "trace.csv"
@@ -158,12 +161,13 @@ def test_a_drive_without_an_inertia_ratio_parameter_is_identified_and_nothing_is
     assert cli("--port", "sim", "--profile", "sdc", "param", "set", "PN4=3").code == 0      # the JOG route's setup
     # A moderate speed: at full automatic speed these drives' loops overshoot near the 2 rev travel limit now and
     # then (issue 16); this test is about a drive without an inertia-ratio parameter, not about that margin.
-    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--json", "--max-speed", "600")
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--json", "--max-speed", "600",
+            "--no-dead-man")
     assert r.code == 0, r.err
     res = r.json()
     assert res["ratio"] == pytest.approx(5.0, rel=0.05) and res["travel_rev"] <= 2.0
     assert res["old_ratio"] is None and res["parameter"] is None and res["written"] is False
-    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--max-speed", "600")
+    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--max-speed", "600", "--no-dead-man")
     assert r.code == 0 and "not a drive parameter" in r.out and "nothing to write" in r.out
 
 
@@ -201,7 +205,7 @@ def test_drive_method_is_refused_up_front_where_its_end_cannot_be_seen(cli):
 
 def test_an_axis_switched_on_from_elsewhere_is_not_moved_nor_switched_off(cli):
     """IS620P's servo-on is a parameter (VDI H31-00): set by someone else, tune must refuse and leave it on."""
-    assert cli("--port", "sim", "--profile", "is620p", "param", "set", "H02-00=0", "H0C-09=1", "H17-00=1",
+    assert cli("--port", "sim", "--profile", "is620p", "param", "set", *IS620P_SETUP,
                "H31-00=1").code == 0
     r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes")
     assert r.code == 2 and "servo is on" in r.err

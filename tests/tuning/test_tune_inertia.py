@@ -130,7 +130,8 @@ def test_the_writes_follow_the_drives_eeprom_rule(sim_dir):
     """IS620P stores every write while H0C-13 = 1: save=False keeps the result out of EEPROM (a power cycle loses
     it) and puts the switch back."""
     sim_drive, d, clock = _virtual(ratio=4.0, profile_id="is620p")
-    for code, raw in (("H02-00", 0), ("H0C-09", 1), ("H17-00", 1)):     # the speed route's setup
+    for code, raw in (("H02-00", 1), ("H05-00", 2), ("H05-02", 10000), ("H11-00", 0), ("H0C-09", 1), ("H17-00", 1),
+                      ("H17-02", 28)):                                  # the segment route's setup
         d.write_verified(d.profile.entry(code), raw)
     old = _raw(d, "H08-15")
     res = tune_inertia(d, TuneRequest(save=False), clock=clock)
@@ -147,6 +148,7 @@ def test_the_writes_follow_the_drives_eeprom_rule(sim_dir):
 def test_a_profile_without_an_inertia_ratio_parameter_is_measured_and_nothing_written(sim_dir):
     _sim, d, clock = _virtual(ratio=5.0, profile_id="sdc")
     d.write_verified(d.profile.entry("PN4"), 3)                          # the JOG route's setup
+    d.dead_man_waived = True                                             # SDC has no dead-man route
     res = tune_inertia(d, TuneRequest(), clock=clock)
     assert res.ratio == pytest.approx(5.0, rel=0.05) and res.identified.old_ratio is None
     assert res.proposal.parameter is None and res.written == [] and res.persisted is None

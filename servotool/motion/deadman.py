@@ -1,0 +1,158 @@
+"""What stops the motor if this program stops: the profile's dead-man route and the bound it gives.
+
+The bound is computed before any motion from the route (the profile's `dead_man` section), the speed, the beat
+period and the ramp, and is returned as facts; the CLI words them ("if this program stops, the motor stops within
+X rev (Y s)"). A route that stops nothing (route none) needs the user's explicit acknowledgement (--no-dead-man).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from servotool.drive import Drive
+from servotool.errors import UsageError
+from servotool.model.codec import raw_to_eng
+from servotool.model.profile import DeadManRoute, Profile
+
+# Exchanges one beat cycle of host motion makes (the beat, at most two writes re-arming a segment, the alarm check and
+# the speed read).
+EXCHANGES_PER_BEAT = 4
+# Bytes on the wire of one exchange (request + reply of a short read or write) and the turnaround allowance.
+EXCHANGE_BYTES = 17
+TURNAROUND_S = 0.005
+# Ramp times of these drives are specified up to 1000 rpm on some (IS620P) and up to the rated speed on others:
+# the bound takes the slower reading.
+RAMP_REFERENCE_RPM = 1000.0
+NO_ROUTE = DeadManRoute(route="none", reason="the profile describes no dead-man route", source="")
+
+
+@dataclass(frozen=True)
+class DeadManBound:
+    """The dead-man facts of one motion: the route, and how far/long the motor runs on if the host dies now."""
+
+    route: str                 # drive_timeout | segment | none
+    speed_rpm: float
+    beat_s: float
+    link_cycle_s: float        # the host's estimated time for one beat cycle on this link
+    stop_rev: float | None     # None: nothing on the drive stops the motor
+    stop_s: float | None
+    reason: str
+    source: str
+    unverified: str
+    if_host_dies: str
+    waived: bool = False       # route none, acknowledged with --no-dead-man
+
+    @property
+    def bounded(self) -> bool:
+        return self.stop_rev is not None
+
+    def as_json(self) -> dict[str, object]:
+        return {"route": self.route, "bounded": self.bounded,
+                "stop_within_rev": None if self.stop_rev is None else round(self.stop_rev, 3),
+                "stop_within_s": None if self.stop_s is None else round(self.stop_s, 3),
+                "speed_rpm": self.speed_rpm, "beat_s": round(self.beat_s, 4),
+                "link_cycle_s": round(self.link_cycle_s, 4), "waived": self.waived, "reason": self.reason,
+                "source": self.source, "unverified": self.unverified}
+
+
+def route_of(profile: Profile) -> DeadManRoute:
+    """The profile's dead-man route; a profile that describes none has none."""
+    return profile.dead_man or NO_ROUTE
+
+
+def link_cycle_s(drive: Drive) -> float:
+    """How long one beat cycle takes on this link: its exchanges at the line's baud rate, with turnarounds."""
+    settings = getattr(drive.link, "settings", None)
+    baud = settings.line.baud if settings is not None else drive.profile.line.baud
+    return EXCHANGES_PER_BEAT * (EXCHANGE_BYTES * 11.0 / baud + TURNAROUND_S)
+
+
+def stop_time_s(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
+    """Time to ramp down from speed_rpm with a ramp time ramp_ms per reference_rpm (by default the slower of the
+    two readings); without a known ramp, one second per 1000 rpm."""
+    ramp_s = (ramp_ms if ramp_ms is not None else 1000.0) / 1000.0
+    return ramp_s * abs(speed_rpm) / reference_rpm
+
+
+SEGMENT_BEATS = 3.0      # a segment covers this many beat periods at speed, so a late beat never stutters the motion
+
+
+def braking_rev(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
+    """Distance to ramp down from speed_rpm (see stop_time_s; reference_rpm: the speed the ramp time is for)."""
+    return abs(speed_rpm) / 60.0 * stop_time_s(speed_rpm, ramp_ms, reference_rpm) / 2.0
+
+
+def segment_rev(speed_rpm: float, beat_s: float, ramp_ms: float | None) -> float:
+    """The length of each re-armed segment: SEGMENT_BEATS beats at speed, then room to stop."""
+    return abs(speed_rpm) / 60.0 * SEGMENT_BEATS * beat_s + braking_rev(speed_rpm, ramp_ms)
+
+
+def drive_timeout_s(drive: Drive) -> float | None:
+    """The drive's communication timeout in seconds (role comm_timeout), None when absent or disabled."""
+    entry = drive.profile.role("comm_timeout")
+    if entry is None:
+        return None
+    value = float(raw_to_eng(entry, drive.read_entries([entry])[0].raw)) / 1000.0
+    return value if value > 0 else None
+
+
+UNREAD = -1.0     # timeout_s not given: read it from the drive
+
+
+def bound(drive: Drive, speed_rpm: float, beat_s: float, ramp_ms: float | None,
+          waived: bool = False, timeout_s: float | None = UNREAD) -> DeadManBound:
+    """The dead-man bound of a motion at speed_rpm on this drive (timeout_s: the drive's communication timeout when
+    already read); see check() for when it cannot be kept."""
+    route = route_of(drive.profile)
+    cycle = link_cycle_s(drive)
+    stop_s = stop_time_s(speed_rpm, ramp_ms)
+    rev = s = None
+    kind = route.route
+    if kind == "drive_timeout":
+        timeout = drive_timeout_s(drive) if timeout_s == UNREAD else timeout_s
+        if timeout is None:
+            kind = "none"                  # the watchdog is switched off on this drive: nothing stops the motor
+        else:
+            s = timeout + stop_s
+            rev = abs(speed_rpm) / 60.0 * (timeout + stop_s / 2.0)
+    elif kind == "segment":
+        rev = segment_rev(speed_rpm, beat_s, ramp_ms)
+        s = SEGMENT_BEATS * beat_s + stop_s
+    return DeadManBound(kind, abs(speed_rpm), beat_s, cycle, rev, s, route.reason, route.source, route.unverified,
+                        route.if_host_dies, waived and kind == "none")
+
+
+def motion_bound(drive: Drive, speed_rpm: float, ramp_s: float) -> DeadManBound:
+    """The checked bound of a planned motion (identification, step check: ramp_s to reach speed_rpm) at the
+    drive's beat rate, as its Jogger arms it."""
+    from servotool.motion.keepalive import keepalive_interval_s
+
+    motor = drive.profile.motor
+    rated = motor.rated_speed_rpm if motor is not None else 3000.0
+    ramp_ms = ramp_s * 1000.0 * rated / abs(speed_rpm)     # the ramp parameter's reading: time to rated speed
+    b = bound(drive, speed_rpm, min(0.1, keepalive_interval_s(drive)), ramp_ms, drive.dead_man_waived)
+    check(b, drive.dead_man_waived)
+    return b
+
+
+def check(b: DeadManBound, waived: bool) -> None:
+    """Refuse a motion whose dead-man cannot be kept: no route and no acknowledgement, or a link too slow for the
+    beat the bound needs (with the alternatives)."""
+    if b.route == "none":
+        if not waived:
+            what = b.if_host_dies or "the motor keeps running until stopped at the drive"
+            raise UsageError(f"no dead-man on this drive ({b.reason}): if this program dies (kill, crash, cable), "
+                             f"{what}. Pass --no-dead-man to move anyway, with an E-stop at hand")
+        return
+    if b.link_cycle_s * 2 > b.beat_s:
+        raise UsageError(f"this link cannot keep the dead-man beat: one beat cycle takes about "
+                         f"{b.link_cycle_s * 1000:.0f} ms, the bound needs a beat every {b.beat_s * 1000:.0f} ms; "
+                         "use a faster baud rate, a longer drive timeout or a longer segment, or a slower speed")
+
+
+def sentence(b: DeadManBound) -> str:
+    """The bound in words, as printed before moving."""
+    if b.stop_rev is None:
+        return ("NO DEAD-MAN (--no-dead-man): if this program stops, the motor keeps running at "
+                f"{b.speed_rpm:g} rpm until stopped at the drive")
+    return f"if this program stops, the motor stops within {b.stop_rev:.2f} rev ({b.stop_s:.2f} s)"
