@@ -1,0 +1,40 @@
+"""tune inertia on loads and line settings the first version got wrong (issue 16), in-process on virtual time."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.clock import VirtualClock
+from servotool.drive import Drive
+from servotool.model.loader import load_profile
+from servotool.model.setup import requirements
+from servotool.sim.firmware import build_drive
+from servotool.sim.virtual import VirtualLink
+from servotool.tuning.tune import TuneRequest, tune_inertia
+
+
+def set_up(profile_id: str, baud: int = 115200, **machine: float):
+    """(simulated drive, host Drive, clock) of a drive with its motion setup made, on virtual time."""
+    profile = load_profile(profile_id)
+    clock = VirtualClock(100.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    sim.settings.update(**machine)
+    sim.firmware.reconfigure()
+    for req in requirements(profile):
+        now = sim.bank.effective_value(req.entry.code)
+        sim.bank.apply_parameter(req.entry, (now & ~req.mask) | (req.wanted & req.mask))
+    sim.firmware.plant.set_gains(sim.firmware._gains())
+    return sim, Drive(VirtualLink([sim], clock, baud), profile, 1), clock
+
+
+@pytest.mark.parametrize("ratio,seed", [(37.0, 2), (49.0, 1)])
+def test_is620p_with_a_heavy_load_identifies_instead_of_oscillating_after_the_pilot(sim_dir, ratio, seed):
+    """IS620P's speed mode has no position loop: at the factory ratio 1.00 with a load of 37-49 a position hold
+    after the pilot swung with growing amplitude until the travel guard stopped it (these seeds did, at 57600)."""
+    sim, d, clock = set_up("is620p", 57600, load_ratio=ratio, friction=0.02, noise=0.002, seed=seed)
+    peak = [0.0]
+    sim.on_read.append(lambda _d: peak.__setitem__(0, max(peak[0], abs(sim.firmware.plant.true_speed_rpm))))
+    res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    est = res.identified.estimate
+    assert est is not None and abs(res.ratio - ratio) <= 3 * est.ratio_std
+    assert peak[0] < 1.3 * res.identified.plan.speed_rpm          # no swing beyond the planned speed
