@@ -9,14 +9,13 @@ from typing import Any
 
 import typer
 
-from servotool.cli.common import confirm, drive
+from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.errors import ServoError, UsageError
 from servotool.model.profile import Profile
 from servotool.ops import eeprom
 from servotool.tuning import identify, planning, preflight, step, tune
-from servotool.tuning.gains import suggest_gains
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
 
@@ -41,11 +40,6 @@ def _check_options(method: str, rigidity: int | None, bandwidth: float | None, n
         raise UsageError("give --rigidity or --bandwidth, not both")
     if no_gains and (rigidity is not None or bandwidth is not None):
         raise UsageError("--no-gains contradicts --rigidity/--bandwidth")
-    if rigidity is not None or bandwidth is not None:
-        try:   # the rules the gains will be computed with, on a nominal load
-            suggest_gains(rotor_inertia_kgcm2=1.0, load_ratio=1.0, rigidity=rigidity, bandwidth_hz=bandwidth)
-        except ValueError as exc:
-            raise UsageError(str(exc)) from None
     if save_trace is not None:
         parent = save_trace.parent if str(save_trace.parent) else Path(".")
         if save_trace.is_dir() or not parent.is_dir() or not os.access(parent, os.W_OK) or \
@@ -82,7 +76,8 @@ def inertia(
                                   "friction), forward or reverse (only; friction and load torque fitted as one)."),
     repeats: int = typer.Option(None, "--repeats", help="Number of move cycles (default: repeat until the "
                                 "estimate is precise, within about 9 s)."),
-    rigidity: int = typer.Option(None, "--rigidity", help="Set gains for this rigidity level 1..31."),
+    rigidity: int = typer.Option(None, "--rigidity", help="Set gains for the drive's own rigidity level N (its own "
+                                 "range, anchored at its factory gains); also writes its rigidity parameter."),
     bandwidth: float = typer.Option(None, "--bandwidth", help="Set gains for this speed-loop bandwidth in Hz."),
     no_gains: bool = typer.Option(False, "--no-gains", help="Leave the gains alone (the default unless --rigidity "
                                   "or --bandwidth is given)."),
@@ -94,6 +89,9 @@ def inertia(
                                     "before and after; moves out and back inside --travel each time."),
     save: bool = typer.Option(None, "--save/--no-save", help="Store the written ratio and gains in EEPROM (or keep "
                               "them out of it) as the drive allows; default: the drive's current setting."),
+    force: bool = typer.Option(False, "--force", help="Write gains even with under 45° phase or 6 dB gain margin."),
+    check: bool = typer.Option(None, "--check/--no-check", help="Step check after writing gains; on failure the "
+                               "previous gains go back (default: on with the simulated drive)."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
     """Identify the load inertia ratio (with friction and gravity), write it, and set matching gains.
@@ -101,7 +99,8 @@ def inertia(
     Gains are changed only with --rigidity or --bandwidth.
     """
     _check_options(method, rigidity, bandwidth, no_gains, save_trace)
-    request = tune.TuneRequest(
+    verify = check if check is not None else resolved(ctx).simulated
+    request = tune.TuneRequest(force=force, verify=verify and (rigidity is not None or bandwidth is not None),
         method=method, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel, direction=direction,
         repeats=repeats, gains=rigidity is not None or bandwidth is not None, rigidity=rigidity,
         bandwidth_hz=bandwidth, save=save, dry_run=dry_run, step_check=step_check, trace_path=save_trace)
@@ -161,6 +160,9 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
                       for c in changes],
             "gains_written": res.gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
+            "rigidity": sugg.rigidity if sugg else None,
+            "phase_margin_deg": proposal.margins.phase_deg if proposal.margins else None,
+            "gain_margin_db": proposal.margins.gain_db if proposal.margins else None,
             "step_before": vars(res.step_before) if res.step_before else None,
             "step_after": vars(res.step_after) if res.step_after else None,
         }))
@@ -197,8 +199,9 @@ def _show(proposal: tune.Proposal) -> None:
                   f"{result.time_used_s:.1f} s", markup=False)
     if changes and sugg is not None:
         t = table("Role", "Code", "Current", "Suggested", "Unit",
-                  title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop bandwidth"
-                        + (f" (rigidity {sugg.rigidity})" if sugg.rigidity else ""))
+                  title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop gain"
+                        + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else "")
+                        + (f"; {proposal.margins.describe()}" if proposal.margins is not None else ""))
         for c in changes:
             t.add_row(c.role, c.entry.code, f"{c.old:g}", f"{c.new:g}", c.entry.unit)
         out.print(t)

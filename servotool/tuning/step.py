@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -14,6 +16,8 @@ from servotool.ops.eeprom import ram_writes
 from servotool.tuning.identify import IdentificationFailed
 from servotool.tuning.preflight import FEATURE, active_alarm
 
+OVERSHOOT_LIMIT_PCT = 35.0    # a PI speed loop at 45 degrees of phase margin overshoots a fast step by about 30 %
+
 
 @dataclass(frozen=True)
 class StepResponse:
@@ -23,13 +27,26 @@ class StepResponse:
     overshoot_pct: float
     settling_ms: float | None     # within 5 % of the target for good; None when it never settles
     samples: int
+    ripple_pct: float = 0.0       # speed's standard deviation over the second half, % of the target (ringing)
+
+    def failure(self, overshoot_limit_pct: float = OVERSHOOT_LIMIT_PCT) -> str | None:
+        """Why this response fails the check after writing gains (None: it passes)."""
+        if self.settling_ms is None:
+            return "the speed does not settle"
+        if self.overshoot_pct > overshoot_limit_pct:
+            return f"overshoot {self.overshoot_pct:.0f} % over the {overshoot_limit_pct:g} % limit"
+        if self.ripple_pct > RIPPLE_LIMIT_PCT:
+            return f"the speed rings ({self.ripple_pct:.1f} % ripple at constant speed)"
+        return None
 
     def describe(self) -> str:
         settle = f"{self.settling_ms:.0f} ms" if self.settling_ms is not None else "does not settle"
-        return f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}"
+        return f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}, " \
+               f"ripple {self.ripple_pct:.1f} %"
 
 
 STEP_SPEED_RPM = 200.0
+RIPPLE_LIMIT_PCT = 3.0        # a loop that keeps oscillating (torque at its limit) shows as ripple, often aliased
 
 
 def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> float:
@@ -97,4 +114,7 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Cl
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
         (t[outside[-1] + 1] if outside else t[0]) * 1000
-    return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v))
+    late = [x for tt, x in zip(t, v, strict=True) if tt >= duration_s / 2]
+    ripple = float(np.std(late)) / speed_rpm * 100 if len(late) > 2 else 0.0
+    return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v),
+                        ripple)

@@ -29,7 +29,9 @@ def test_tune_sets_gains_for_a_rigidity_and_saves_the_trace(cli, tmp_path):
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--rigidity", "14", "--save-trace", str(trace))
     assert r.code == 0, r.err
     gains = {g["role"]: g for g in r.json()["gains"]}
-    assert set(gains) == {"speed_loop_gain", "speed_loop_integral", "position_loop_gain", "torque_filter"}
+    assert set(gains) == {"speed_loop_gain", "speed_loop_integral", "position_loop_gain", "torque_filter", "rigidity"}
+    assert gains["rigidity"]["code"] == "Pn003" and gains["rigidity"]["new"] == 14     # DSX7E's own level, written
+    assert r.json()["phase_margin_deg"] >= 45 and r.json()["gain_margin_db"] >= 6
     now = cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"]
     assert now == pytest.approx(gains["speed_loop_gain"]["new"])
     lines = trace.read_text().splitlines()
@@ -79,7 +81,7 @@ def test_drive_method_dry_run_puts_the_old_ratio_back(cli):
 
 @pytest.mark.parametrize("args, message", [
     (("--travel", "nan"), "--travel must be a number"),
-    (("--rigidity", "40"), "rigidity must be 1..31"),
+    (("--rigidity", "40"), "rigidity must be 0..31 (this drive's own levels, factory 13)"),
     (("--bandwidth", "5000"), "bandwidth must be"),
     (("--save-trace", "/nonexistent-dir/t.csv"), "cannot write the trace"),
     (("--step-check", "--travel", "0.5"), "--step-check needs"),

@@ -10,7 +10,8 @@ from servotool.model.loader import load_profile
 from servotool.model.setup import requirements
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink
-from servotool.tuning.tune import TuneRequest, tune_inertia
+from servotool.tuning.gain_writes import MarginRefused
+from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
 
 
 def set_up(profile_id: str, baud: int = 115200, **machine: float):
@@ -38,3 +39,38 @@ def test_is620p_with_a_heavy_load_identifies_instead_of_oscillating_after_the_pi
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - ratio) <= 3 * est.ratio_std
     assert peak[0] < 1.3 * res.identified.plan.speed_rpm          # no swing beyond the planned speed
+
+
+GAIN_CODES = ("Pn101", "Pn102", "Pn100", "Pn128", "Pn003")
+
+
+def _raws(d, codes=GAIN_CODES) -> list[int]:
+    return [r.raw for r in d.read_entries([d.profile.entry(c) for c in codes])]
+
+
+def test_gains_without_the_margins_are_refused_and_nothing_is_written(sim_dir):
+    _sim, d, clock = set_up("dsx7e", load_ratio=3.0, noise=0.002)
+    before = _raws(d, (*GAIN_CODES, "Pn004"))
+    with pytest.raises(MarginRefused, match=r"rigidity 31 leaves phase margin -\d+°.*highest level that keeps them"):
+        tune_inertia(d, TuneRequest(gains=True, rigidity=31), clock=clock)
+    assert _raws(d, (*GAIN_CODES, "Pn004")) == before
+
+
+def test_gains_that_fail_the_step_check_are_rolled_back(sim_dir):
+    """Forced past the margins, DSX7E's level 31 oscillates on the simulated drive: the check after writing sees
+    it, the previous gains go back, and the use case fails (the CLI exits non-zero)."""
+    _sim, d, clock = set_up("dsx7e", load_ratio=3.0, noise=0.002)
+    before = _raws(d)
+    with pytest.raises(GainsRolledBack, match="previous gains were written back") as failed:
+        tune_inertia(d, TuneRequest(gains=True, rigidity=31, force=True, verify=True), clock=clock)
+    assert failed.value.exit_code == 1 and failed.value.response is not None
+    assert _raws(d) == before
+
+
+def test_gains_at_a_safe_level_pass_the_step_check_and_stay(sim_dir):
+    _sim, d, clock = set_up("dsx7e", load_ratio=3.0, noise=0.002)
+    res = tune_inertia(d, TuneRequest(gains=True, rigidity=18, verify=True), clock=clock)
+    assert res.verified is not None and res.verified.failure() is None
+    assert res.proposal.margins is not None and res.proposal.margins.ok()
+    assert _raws(d)[-1] == 18 and res.gains_written                   # the drive's own rigidity parameter too
+
