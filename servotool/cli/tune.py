@@ -15,7 +15,7 @@ from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.errors import ServoError, UsageError
 from servotool.model.profile import Profile
 from servotool.ops import eeprom
-from servotool.tuning import identify, planning, preflight, step, tune
+from servotool.tuning import gain_search, identify, planning, preflight, step, tune
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
 
@@ -205,3 +205,72 @@ def _show(proposal: tune.Proposal) -> None:
         for c in changes:
             t.add_row(c.role, c.entry.code, f"{c.old:g}", f"{c.new:g}", c.entry.unit)
         out.print(t)
+
+
+@app.command("gains")
+def gains(
+    ctx: typer.Context,
+    load_ratio: float = typer.Option(None, "--load-ratio", help="J_load/J_motor to tune for (default: the drive's "
+                                     "inertia-ratio parameter, as tune inertia wrote it)."),
+    start: int = typer.Option(None, "--from", help="First rigidity level to try (default: the drive's current)."),
+    top: int = typer.Option(None, "--to", help="Highest level to try (default: the highest the margins allow)."),
+    travel: float = typer.Option(2.0, "--travel", help="Travel limit of each step check in revolutions."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
+    save: bool = typer.Option(None, "--save/--no-save", help="Store the chosen gains in EEPROM (or keep them out "
+                              "of it) as the drive allows; default: the drive's current setting."),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
+) -> None:
+    """Raise the drive's own rigidity level step by step with a step check at each; keep a safe level.
+
+    Stops at the first level that overshoots, rings or trips, backs off one level and writes that level's gains
+    (and the rigidity parameter where the drive has one). Levels beyond 45° / 6 dB of computed margin are not tried.
+    """
+    step.step_duration_s(travel)
+
+    def show(trial: gain_search.LevelTrial) -> None:
+        if not as_json:
+            info(f"level {trial.level}: {trial.speed_gain_hz:.1f} Hz, "
+                 + (trial.response.describe() if trial.response else "no response")
+                 + (f": FAILED ({trial.failure})" if trial.failure else ""))
+
+    with drive(ctx) as d:
+        confirm_motion(ctx, d, yes, "tune gains")
+        if not confirm("Move the axis now (a speed step forward and back at each level)?", yes):
+            raise typer.Exit(1)
+        try:
+            res = gain_search.search_gains(d, load_ratio=load_ratio, start=start, top=top, travel_rev=travel,
+                                           save=save, progress=show)
+        except gain_search.GainSearchFailed as exc:
+            _render_search(exc.search, as_json, ok=False)
+            raise
+        profile = d.profile
+    if res.persisted is False:
+        warn(eeprom.ram_only_warning(profile))
+    _render_search(res, as_json, ok=True)
+
+
+def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None:
+    rows = [{"level": t.level, "speed_gain_hz": round(t.speed_gain_hz, 2),
+             "phase_margin_deg": round(t.margins.phase_deg, 1), "gain_margin_db": _clean(round(t.margins.gain_db, 1)),
+             "overshoot_pct": t.response.overshoot_pct if t.response else None,
+             "settling_ms": t.response.settling_ms if t.response else None,
+             "ripple_pct": round(t.response.ripple_pct, 2) if t.response else None, "failure": t.failure}
+            for t in res.trials]
+    if as_json:
+        emit_json(_clean({"ok": ok, "load_ratio": res.load_ratio, "levels": rows, "chosen": res.chosen,
+                          "reason": res.reason,
+                          "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new,
+                                     "unit": c.entry.unit} for c in res.changes], "persisted": res.persisted}))
+        return
+    t = table("Level", "Speed gain Hz", "Phase margin", "Gain margin", "Overshoot", "Settling", "Result",
+              title=f"rigidity levels tried (load ratio {res.load_ratio:.2f})")
+    for r in rows:
+        settle = f"{r['settling_ms']:.0f} ms" if r["settling_ms"] is not None else "-"
+        over = f"{r['overshoot_pct']:.0f} %" if r["overshoot_pct"] is not None else "-"
+        gm = f"{r['gain_margin_db']:.1f} dB" if r["gain_margin_db"] is not None else "inf"
+        t.add_row(str(r["level"]), f"{r['speed_gain_hz']:.1f}", f"{r['phase_margin_deg']:.0f}°", gm, over, settle,
+                  r["failure"] or "ok")
+    out.print(t)
+    if res.chosen is not None:
+        out.print(f"{res.reason}; kept level {res.chosen}: " + ", ".join(f"{c.entry.code} {c.old:g} -> {c.new:g}"
+                                                         for c in res.changes), markup=False)

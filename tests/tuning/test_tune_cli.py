@@ -209,3 +209,14 @@ def test_an_axis_switched_on_from_elsewhere_is_not_moved_nor_switched_off(cli):
     assert r.code == 2 and "servo is on" in r.err
     r = cli("--port", "sim", "--profile", "is620p", "param", "get", "H31-00", "H08-15", "--json")
     assert [row["changed"] for row in r.json()] == [True, False]            # still on, ratio untouched
+
+
+def test_tune_gains_prints_the_levels_tried_and_keeps_one(cli):
+    cli("sim", "config", "--load-ratio", "3")
+    assert cli("--port", "sim", "param", "set", "Pn004=400").code == 0       # as tune inertia would write it
+    r = cli("--port", "sim", "tune", "gains", "--yes", "--json", "--from", "16", "--to", "18")
+    assert r.code == 0, r.err
+    res = r.json()
+    assert [row["level"] for row in res["levels"]] == [16, 17, 18] and res["chosen"] == 18
+    assert all(row["phase_margin_deg"] >= 45 and row["failure"] is None for row in res["levels"])
+    assert _params(cli, "Pn003")["Pn003"] == 18

@@ -10,6 +10,7 @@ from servotool.model.loader import load_profile
 from servotool.model.setup import requirements
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink
+from servotool.tuning.gain_search import GainSearchFailed, search_gains
 from servotool.tuning.gain_writes import MarginRefused
 from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
 
@@ -74,3 +75,25 @@ def test_gains_at_a_safe_level_pass_the_step_check_and_stay(sim_dir):
     assert res.proposal.margins is not None and res.proposal.margins.ok()
     assert _raws(d)[-1] == 18 and res.gains_written                   # the drive's own rigidity parameter too
 
+
+
+def test_tune_gains_raises_the_level_until_a_step_check_fails_and_backs_off(sim_dir):
+    """Told a load 20x the real one, the gains come out 21x too stiff: a level inside the computed margins still
+    overshoots on the machine; the search stops there, backs off one level and keeps that level's gains."""
+    _sim, d, clock = set_up("dsx7e", load_ratio=0.0, friction=0.02, noise=0.002)
+    res = search_gains(d, load_ratio=20.0, clock=clock)
+    failed = [t for t in res.trials if t.failure]
+    assert len(failed) == 1 and failed[0] is res.trials[-1]                     # stopped at the first failure
+    assert [t.level for t in res.trials] == list(range(13, failed[0].level + 1))  # from the drive's own level up
+    assert res.chosen == failed[0].level - 2 and "backed off" in res.reason
+    assert all(t.margins.ok() for t in res.trials)                              # never beyond the margins
+    assert _raws(d)[-1] == res.chosen                                            # Pn003 holds the level kept
+    assert _raws(d)[0] == next(c.raw for c in res.changes if c.entry.code == "Pn101")
+
+
+def test_tune_gains_that_fail_at_the_first_level_put_the_old_gains_back(sim_dir):
+    _sim, d, clock = set_up("dsx7e", load_ratio=0.0, friction=0.02, noise=0.002)
+    before = _raws(d)
+    with pytest.raises(GainSearchFailed, match="previous gains were written back"):
+        search_gains(d, load_ratio=60.0, start=22, clock=clock)
+    assert _raws(d) == before
