@@ -16,6 +16,7 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.profile import Profile
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
+from servotool.tuning.friction import friction_report
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
 
@@ -148,6 +149,14 @@ def inertia(
     _render(res, profile, as_json)
 
 
+def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:
+    report = friction_report(profile, est) if est is not None else None
+    if report is None:
+        return None
+    return {"coulomb_pct": report.coulomb_pct, "viscous_pct_at_rated_speed": report.viscous_pct_at_rated,
+            "load_pct": report.load_pct, "compensation": {s.entry.code: s.value for s in report.settings}}
+
+
 def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
     """The outcome, after the writes."""
     proposal, sugg = res.proposal, res.proposal.suggestion
@@ -155,6 +164,7 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
     if as_json:
         emit_json(_clean({
             "ok": True, **_estimate_json(res.identified), "ratio": round(res.ratio, 4),
+            "friction": _friction_json(profile, res.identified.estimate),
             "parameter": entry.code if entry else None, "parameter_value": proposal.parameter_value,
             "written": res.ratio_stored, "persisted": res.persisted,
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
@@ -197,6 +207,12 @@ def _show(proposal: tune.Proposal) -> None:
                   f"load torque {est.load_torque_nm:.4f} N·m, fit residual {est.residual_rel:.1%}; "
                   f"{len(result.trace.t)} samples ({result.samples_per_s:.0f}/s), {travel}"
                   f"{result.time_used_s:.1f} s", markup=False)
+        report = friction_report(proposal.profile, est)
+        if report is not None:
+            out.print(f"in drive units: {report.describe()}", markup=False)
+            for s in report.settings:
+                out.print(f"  friction compensation (suggested, not written): {s.entry.code} = {s.value:g} "
+                          f"{s.entry.unit} ({s.what})", markup=False)
     if changes and sugg is not None:
         t = table("Role", "Code", "Current", "Suggested", "Unit",
                   title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop gain"

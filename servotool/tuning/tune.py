@@ -88,6 +88,7 @@ class Proposal:
     suggestion: GainSuggestion | None
     gain_changes: list[GainChange]
     margins: Margins | None = None       # of the suggested gains on the identified inertia
+    profile: Profile | None = None
 
     @property
     def ratio(self) -> float:
@@ -214,10 +215,10 @@ def propose(drive: Drive, result: identify.Result, request: TuneRequest) -> Prop
     entry, raw = gain_writes.ratio_raw(drive, result.new_ratio) if drive.profile.role("inertia_ratio") else \
         (None, None)
     if not request.gains:
-        return Proposal(result, entry, raw, None, [])
+        return Proposal(result, entry, raw, None, [], None, drive.profile)
     sugg, changes, found = gain_writes.gain_changes(drive, result.new_ratio, rigidity=request.rigidity,
                                                     bandwidth_hz=request.bandwidth_hz, force=request.force)
-    return Proposal(result, entry, raw, sugg, changes, found)
+    return Proposal(result, entry, raw, sugg, changes, found, drive.profile)
 
 
 def _write(drive: Drive, proposal: Proposal, approved: bool, save: bool | None

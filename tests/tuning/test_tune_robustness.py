@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from servotool.clock import VirtualClock
@@ -10,6 +12,7 @@ from servotool.model.loader import load_profile
 from servotool.model.setup import requirements
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink
+from servotool.tuning.friction import friction_report
 from servotool.tuning.gain_search import GainSearchFailed, search_gains
 from servotool.tuning.gain_writes import MarginRefused
 from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
@@ -97,3 +100,14 @@ def test_tune_gains_that_fail_at_the_first_level_put_the_old_gains_back(sim_dir)
     with pytest.raises(GainSearchFailed, match="previous gains were written back"):
         search_gains(d, load_ratio=60.0, start=22, clock=clock)
     assert _raws(d) == before
+
+
+def test_friction_is_reported_in_drive_units_with_the_drives_compensation_entries(sim_dir):
+    _sim, d, clock = set_up("sdc", load_ratio=3.0, friction=0.1, viscous=0.0005, noise=0.002)
+    res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    report = friction_report(d.profile, res.identified.estimate)
+    assert report is not None and report.coulomb_pct == pytest.approx(10.0, abs=1.0)
+    assert report.viscous_pct_at_rated == pytest.approx(0.0005 * 100 * 2 * math.pi * 50, rel=0.25)   # 15.7 %
+    suggested = {s.entry.code: s.value for s in report.settings}
+    assert set(suggested) == {"PN137", "PN138", "PN139", "PN140"}
+    assert suggested["PN137"] == pytest.approx(report.coulomb_pct, abs=0.1)
