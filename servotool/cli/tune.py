@@ -114,7 +114,8 @@ def inertia(
         if method == "host" or step_check:
             confirm_motion(ctx, d, yes, preflight.FEATURE)
         info(f"motion: {motion.describe()}" if motion is not None else
-             "motion: the drive's own identification (its parameters set torque and travel)")
+             "motion: the drive's own identification (its parameters set torque and travel), then host "
+             "moves that check its result")
         if step_check:
             info(f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(travel):.2f} s forward and "
                  "back, before and after")

@@ -15,6 +15,7 @@ from servotool.sim.virtual import VirtualLink
 from servotool.tuning.friction import friction_report
 from servotool.tuning.gain_search import GainSearchFailed, search_gains
 from servotool.tuning.gain_writes import MarginRefused
+from servotool.tuning.identify import IdentificationFailed
 from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
 
 
@@ -111,3 +112,15 @@ def test_friction_is_reported_in_drive_units_with_the_drives_compensation_entrie
     suggested = {s.entry.code: s.value for s in report.settings}
     assert set(suggested) == {"PN137", "PN138", "PN139", "PN140"}
     assert suggested["PN137"] == pytest.approx(report.coulomb_pct, abs=0.1)
+
+
+def test_a_drive_side_result_fooled_by_friction_is_put_back_and_refused(sim_dir):
+    """DSX7E's own identification reads 30 % friction as inertia (9.3 for a load of 5): the host method's check
+    catches it before it is kept."""
+    _sim, d, clock = set_up("dsx7e", load_ratio=5.0, friction=0.3, noise=0.002)
+    before = _raws(d, ("Pn004",))
+    with pytest.raises(IdentificationFailed, match=r"implausible against the host measurement 5\.0"):
+        tune_inertia(d, TuneRequest(method="drive"), clock=clock)
+    assert _raws(d, ("Pn004",)) == before
+    _sim, d, clock = set_up("dsx7e", load_ratio=5.0, friction=0.02, noise=0.002)
+    assert tune_inertia(d, TuneRequest(method="drive"), clock=clock).ratio == pytest.approx(5.0, rel=0.1)
