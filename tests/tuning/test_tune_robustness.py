@@ -26,9 +26,13 @@ def set_up(profile_id: str, baud: int = 115200, **machine: float):
     sim = build_drive(profile, 1, clock, persist=False)
     sim.settings.update(**machine)
     sim.firmware.reconfigure()
-    for req in requirements(profile):
-        now = sim.bank.effective_value(req.entry.code)
-        sim.bank.apply_parameter(req.entry, (now & ~req.mask) | (req.wanted & req.mask))
+    for _power_up in range(2):       # stored and power-cycled (SD25's DI functions act after a power cycle), then
+        for req in requirements(profile):   # once more for what a power-up clears (SD25's So-58)
+            now = sim.bank.effective_value(req.entry.code)
+            sim.bank.apply_parameter(req.entry, (now & ~req.mask) | (req.wanted & req.mask))
+        sim.bank.save()
+        if _power_up == 0:
+            sim.power_cycle()
     sim.firmware.plant.set_gains(sim.firmware._gains())
     return sim, Drive(VirtualLink([sim], clock, baud), profile, 1), clock
 
