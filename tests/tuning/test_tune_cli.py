@@ -220,3 +220,4 @@ def test_tune_gains_prints_the_levels_tried_and_keeps_one(cli):
     assert [row["level"] for row in res["levels"]] == [16, 17, 18] and res["chosen"] == 18
     assert all(row["phase_margin_deg"] >= 45 and row["failure"] is None for row in res["levels"])
     assert _params(cli, "Pn003")["Pn003"] == 18
+

@@ -30,7 +30,7 @@ def set_up(profile_id: str, baud: int = 115200, **machine: float):
         for req in requirements(profile):   # once more for what a power-up clears (SD25's So-58)
             now = sim.bank.effective_value(req.entry.code)
             sim.bank.apply_parameter(req.entry, (now & ~req.mask) | (req.wanted & req.mask))
-        sim.bank.save()
+        sim.bank.save_eeprom()
         if _power_up == 0:
             sim.power_cycle()
     sim.firmware.plant.set_gains(sim.firmware._gains())
@@ -128,3 +128,19 @@ def test_a_drive_side_result_fooled_by_friction_is_put_back_and_refused(sim_dir)
     assert _raws(d, ("Pn004",)) == before
     _sim, d, clock = set_up("dsx7e", load_ratio=5.0, friction=0.02, noise=0.002)
     assert tune_inertia(d, TuneRequest(method="drive"), clock=clock).ratio == pytest.approx(5.0, rel=0.1)
+
+
+UNMET_AT_FACTORY = "issue 16 item 1 not done: at 9600 baud SD25 (8 samples/s: speed and torque take two requests) " \
+    "and SDC get too little excitation within 2 rev; see bench/inertia_accuracy.py --profiles"
+
+
+@pytest.mark.parametrize("profile_id, baud", [
+    pytest.param("sd25", 9600, marks=pytest.mark.xfail(reason=UNMET_AT_FACTORY, strict=False)),
+    pytest.param("sdc", 9600, marks=pytest.mark.xfail(reason=UNMET_AT_FACTORY, strict=False)),
+    ("is620p", 57600), ("dsx7e", 115200), ("sdc", 19200)])
+def test_identification_at_each_drives_factory_line_speed(sim_dir, profile_id, baud):
+    _sim, d, clock = set_up(profile_id, baud, load_ratio=5.0, friction=0.05, noise=0.002, seed=3)
+    res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    est = res.identified.estimate
+    assert est is not None and abs(res.ratio - 5.0) <= 3 * est.ratio_std
+    assert res.identified.travel_used_rev <= 2.0 and res.seconds <= 12.0
