@@ -191,7 +191,8 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
     if res.step_before is not None:
         out.print(f"step before: {res.step_before.describe()}", markup=False)
     if res.step_after is not None:
-        out.print(f"step after:  {res.step_after.describe()}", markup=False)
+        label = "step check after writing the gains:" if res.verified is not None else "step after: "
+        out.print(f"{label} {res.step_after.describe()}", markup=False)
 
 
 def _show(proposal: tune.Proposal) -> None:
@@ -217,11 +218,12 @@ def _show(proposal: tune.Proposal) -> None:
     if changes and sugg is not None:
         t = table("Role", "Code", "Current", "Suggested", "Unit",
                   title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop gain"
-                        + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else "")
-                        + (f"; {proposal.margins.describe()}" if proposal.margins is not None else ""))
+                        + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else ""))
         for c in changes:
             t.add_row(c.role, c.entry.code, f"{c.old:g}", f"{c.new:g}", c.entry.unit)
         out.print(t)
+        if proposal.margins is not None:
+            out.print(f"margins on the identified inertia: {proposal.margins.describe()}", markup=False)
 
 
 @app.command("gains")
