@@ -1,7 +1,7 @@
-"""Does servotool ever accept a wrong value on a bad line? Param get, set, backup and monitor-like reads through the
-real client path (ModbusLink + Drive, RTU over TCP) to simulated drives behind a fault-injecting line
+"""Does servotool ever accept a wrong value on a bad line? Param get, set, backup, restore and monitor-like reads
+through the real client path (ModbusLink + Drive, RTU over TCP) to simulated drives behind a fault-injecting line
 (servotool.sim.faults), at 1, 5 and 20 % of replies for each fault kind and mixed, on every profile. Every value is
-checked against the simulator's true state.
+checked against the simulator's true state; a restore that fails must not claim a state the drive is not in.
 
 Run: python bench/line_faults.py [--quick] [--tries N] [--seed S]
 Prints one row per fault kind, rate and operation (profiles summed): tries, ok, clean error, silent wrong,
@@ -28,7 +28,7 @@ from servotool.link.ports import LinkSettings
 from servotool.model.codec import words_to_raw
 from servotool.model.loader import load_profile
 from servotool.model.profile import Entry, Profile
-from servotool.ops import backup, monitor
+from servotool.ops import backup, monitor, restore
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.faults import KINDS, LineFaults, parse_rates
 from servotool.sim.firmware import build_drive
@@ -37,7 +37,7 @@ from servotool.sim.server import EmbeddedSim
 PROFILES = ("sd25", "is620p", "sdc", "dsx7e")
 FAULTS = (*KINDS, "mixed", "mixed+echo")
 RATES = (0.01, 0.05, 0.20)
-OPS = ("get", "set", "backup", "monitor")
+OPS = ("get", "set", "backup", "restore", "monitor")
 OUTCOMES = ("ok", "error", "WRONG", "traceback", "hang")
 TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.15, 30.0     # late replies come after the timeout, within the late window
 VERBOSE = False
@@ -91,6 +91,29 @@ class Bench:
         taken = backup.take(drive)
         for e in self.params:
             self.check(e, taken.values[e.code])
+
+    def restore(self, drive: Drive) -> None:
+        """Restore a backup that differs from the drive in a few entries; success must leave every planned entry
+        at its target, and a failure that says the drive equals the automatic backup must be true."""
+        values = {e.code: self.truth(e) for e in self.params}
+        for e in self.rng.sample(self.settable, 4):
+            values[e.code] = self.rng.randint(e.min, e.max)
+        p = self.profile
+        target = backup.Backup(p.id, p.version, p.model, drive.unit, "", "", {}, values)
+        current = {r.entry.code: r.raw for r in drive.read_entries(self.params, partial=True)}
+        plan = restore.restore_changes(p, target, current)
+        try:
+            restore.restore(drive, target, plan)
+        except restore.RestoreFailed as exc:
+            if "the drive equals the automatic backup" in str(exc):
+                before = backup.load(exc.auto_backup, p).values
+                for e in self.params:
+                    if not p.persistence.is_switch(e.code) and self.truth(e) != before[e.code]:
+                        raise Wrong(f"restore says rolled back, but {e.code} is {self.truth(e)}, "
+                                    f"was {before[e.code]}") from None
+            raise
+        for e, _old, new in plan.changes:
+            self.check(e, new)
 
     def monitor(self, drive: Drive) -> None:
         for _ in range(8):
@@ -152,6 +175,7 @@ def main() -> None:
     global VERBOSE
     VERBOSE = args.verbose
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
+    os.environ.setdefault("SERVOTOOL_BACKUP_DIR", tempfile.mkdtemp())     # the restores' automatic backups
     rates = (0.20,) if args.quick else RATES
     counts: dict[tuple[str, float, str], Counter[str]] = {}
     t0 = time.monotonic()

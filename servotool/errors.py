@@ -27,6 +27,7 @@ class DeviceError(ServoError):
     """The link or the drive failed: timeout, CRC error, Modbus exception."""
 
     exit_code = 1
+    fault = ""      # for a failed exchange: silent, garbled, stray or extra (what the last try met)
 
 
 class ModbusException(DeviceError):
@@ -89,3 +90,18 @@ class SetupRequired(UsageError):
         parts = [f"{s} = {want} (now {now})" for g in self.missing for s, want, now in g.differences]
         return parts + [f"{a.replace('=', ' = ')} (set, in effect after a power cycle)"
                         for g in self.waiting for a in g.assignments]
+
+
+class IdentityMismatch(UsageError):
+    """The drive answering contradicts its profile's identity checks; nothing was written.
+
+    `answers` say what the drive answered; `better` is (profile id, model) of a shipped profile it matches, or None.
+    """
+
+    def __init__(self, profile: str, model: str, unit: int, answers: Sequence[str],
+                 better: tuple[str, str] | None) -> None:
+        self.profile, self.model, self.unit, self.answers, self.better = profile, model, unit, tuple(answers), better
+        fit = (f"it answers like profile {better[0]} ({better[1]}): use --profile {better[0]}" if better else
+               "no shipped profile fits it")
+        super().__init__(f"unit {unit} is not the drive profile {profile} ({model}) describes: "
+                         f"{'; '.join(answers)}; {fit}; nothing was written (--no-identity-check skips this check)")

@@ -43,9 +43,11 @@ def backup_cmd(
         path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.yaml")
         backup.save(b, d.profile, path, force=force)
     if as_json:
-        emit_json({"file": str(path), "entries": len(b.values), "checksum": b.checksum(), "identity": b.identity})
+        emit_json({"file": str(path), "entries": len(b.values), "checksum": b.checksum(), "identity": b.identity,
+                   "missing": b.missing})
     else:
-        out.print(f"{len(b.values)} parameters saved to {path}", markup=False)
+        lacking = f" ({len(b.missing)} not on this drive, marked in the file)" if b.missing else ""
+        out.print(f"{len(b.values)} parameters saved to {path}{lacking}", markup=False)
 
 
 @app.command("diff")
@@ -70,6 +72,7 @@ def diff_cmd(
             warn(w)
         return b
 
+    missing: list[str] = []           # entries the drive lacks (a drive diff only)
     if file2 is not None or from_default:
         name = opts.profile or backup.profile_of(file)
         if name is None:
@@ -83,11 +86,12 @@ def diff_cmd(
         with drive(ctx) as d:
             profile = d.profile
             a = load(file, profile)
-            current = {r.entry.code: r.raw for r in d.read_entries(select(profile))}
+            current = {r.entry.code: r.raw for r in d.read_entries(select(profile), partial=True)}
+            missing = list(d.missing)
         labels = ("drive", str(file))
-        diffs = backup.diff(profile, current, a.values)
+        diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
     if as_json:
-        emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs]})
+        emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs], "missing": missing})
         return
     if not diffs:
         out.print(f"no differences between {labels[0]} and {labels[1]}", markup=False)
@@ -117,14 +121,15 @@ def restore_cmd(
     for w in b.warnings:
         warn(w)
     with drive(ctx) as d:
-        current = {r.entry.code: r.raw for r in d.read_entries(select(d.profile))}
+        current = {r.entry.code: r.raw for r in d.read_entries(select(d.profile), partial=True)}
         plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [])
         if not as_json:
             _show_plan(plan)
         if dry_run or not plan.changes:
             if as_json:
                 emit_json({"dry_run": dry_run, "changes": _changes_json(plan), "written": [],
-                           "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
+                           "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
+                           "missing": [e.code for e in plan.missing], "refused": []})
             elif not plan.changes:
                 out.print("nothing to restore: the drive already matches", markup=False)
             return
@@ -134,8 +139,12 @@ def restore_cmd(
     if as_json:
         emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
                    "auto_backup": str(report.auto_backup), "persisted": report.persisted,
-                   "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
+                   "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
+                   "missing": [e.code for e in plan.missing],
+                   "refused": [{"code": e.code, "why": why} for e, why in report.refused]})
         return
+    for e, why in report.refused:
+        warn(f"{e.code} ({e.name}) not restored: the drive refuses writes there ({why})")
     out.print(f"{len(report.written)} parameters restored and verified by read-back", markup=False)
     if not report.persisted:
         # restore asks for EEPROM, so this is a drive that cannot store over Modbus

@@ -8,6 +8,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import partial
+from pathlib import Path
 
 import typer
 
@@ -19,6 +20,8 @@ from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
 from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
+from servotool.ops.trace import Sampler, motion_entries
+from servotool.ops.trace_file import check_writable, write_trace
 from servotool.sim.state import effective_values
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
@@ -91,6 +94,26 @@ def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATU
             raise ServoError("cancelled: nothing moved")
 
 
+@contextmanager
+def _traced(ctx: typer.Context, d: Drive, path: Path | None) -> Iterator[Sampler | None]:
+    """A recording of the JOG's own motion, written however the JOG ends (stopped, failed, interrupted)."""
+    if path is None:
+        yield None
+        return
+    from servotool.cli.trace import about_lines
+
+    sampler = Sampler(d, motion_entries(d.profile))
+    try:
+        yield sampler
+    finally:
+        if sampler.samples:
+            rec = sampler.recording()
+            about = about_lines(resolved(ctx), f"trigger: none (the JOG's own motion, sampled between keep-alive "
+                                f"beats); {sampler.requests_per_sample} request(s) per sample")
+            write_trace(path, [rec], sampler.entries, about, replace=True)
+            info(f"trace: {rec.timing.describe()} written to {path}")
+
+
 def jog(
     ctx: typer.Context,
     speed: float = typer.Option(..., "--speed", "-s", help="JOG speed in rpm; negative runs in reverse."),
@@ -100,14 +123,20 @@ def jog(
     as_json: bool = typer.Option(False, "--json", help="Print the plan and the result as JSON."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving through unverified entries "
                              "(real drives only; the simulator never asks)."),
+    trace_file: Path = typer.Option(None, "--trace", help="Record speed, torque and position between the "
+                                    "keep-alive beats, on the same port, to this CSV ('servotool plot' draws it)."),
 ) -> None:
     """JOG the motor; the drive stops by itself if this program goes quiet. Ctrl-C stops at once."""
     if (seconds is None) == (not interactive):
         raise UsageError("give exactly one of --time SECONDS or --interactive")
     if interactive and not sys.stdin.isatty():
         raise UsageError("--interactive needs a terminal")
-    with drive(ctx) as d:
+    if trace_file is not None:
+        check_writable(trace_file, replace=True)
+    with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
         jogger = Jogger(d)
+        if sampler is not None:
+            jogger.idle = sampler.sample_for
         plan = jogger.plan(speed, seconds, max_travel)
         confirm_motion(ctx, d, yes)
         info(plan.describe() + ("" if not interactive else f"  [{KEYS}]"))

@@ -8,7 +8,7 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, backup, jog, monitor, param, profiles, run, sim, tune
+from servotool.cli import alarm, backup, doctor, jog, monitor, param, plot, profiles, run, scan, sim, trace, tune
 from servotool.cli.common import State, state
 from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, err
@@ -32,6 +32,10 @@ app.add_typer(tune.app, name="tune")
 app.command("monitor")(monitor.monitor)
 app.command("jog")(jog.jog)
 app.command("run")(run.run)
+app.command("scan")(scan.scan)
+app.command("doctor")(doctor.doctor)
+app.command("trace")(trace.trace)
+app.command("plot")(plot.plot)
 
 
 def _version(value: bool) -> None:
@@ -52,8 +56,17 @@ def main(
                              "Env: SERVOTOOL_UNIT."),
     timeout: float = typer.Option(None, "--timeout", help="Response timeout in seconds. Env: SERVOTOOL_TIMEOUT."),
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
+    echo: str = typer.Option(None, "--echo", help="auto|on|off: the RS485 adapter echoes what it sends (default auto: "
+                             "found out on the first exchange). Env: SERVOTOOL_ECHO."),
+    turnaround_ms: float = typer.Option(None, "--turnaround-ms", help="Quiet time after a reply before the next "
+                                        "request, for slow drives (default 0). Env: SERVOTOOL_TURNAROUND_MS."),
+    silence_ms: float = typer.Option(None, "--silence-ms", help="Silence that ends a frame (default: 3.5 characters "
+                                     "at the baud rate). Env: SERVOTOOL_SILENCE_MS."),
     profile: str = typer.Option(None, "--profile", "-P", help="Drive profile id or YAML file (default for sim: "
                                 "dsx7e). Env: SERVOTOOL_PROFILE."),
+    no_identity_check: bool = typer.Option(None, "--no-identity-check", help="Skip the check, made before "
+                                           "any write, that the drive answering is the one the profile describes. "
+                                           "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.", show_default=False),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Show the version."),
@@ -64,7 +77,9 @@ def main(
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
     state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
-                                        timeout=timeout, retries=retries, profile=profile)
+                                        timeout=timeout, retries=retries, profile=profile, echo=echo,
+                                        turnaround_ms=turnaround_ms, silence_ms=silence_ms,
+                                        no_identity_check=no_identity_check or None)
     Verbosity.level = -1 if quiet else verbose
 
 

@@ -16,7 +16,9 @@ from servotool.ops.restore import RestoreFailed
 
 # ConnectOptions field -> its long option on the command line
 OPTION_FLAGS = {"port": "--port", "baud": "--baud", "parity": "--parity", "stopbits": "--stopbits",
-                "unit": "--unit", "timeout": "--timeout", "retries": "--retries", "profile": "--profile"}
+                "unit": "--unit", "timeout": "--timeout", "retries": "--retries", "profile": "--profile",
+                "echo": "--echo", "turnaround_ms": "--turnaround-ms", "silence_ms": "--silence-ms",
+                "no_identity_check": "--no-identity-check"}
 
 
 def connection_args(given: ConnectOptions) -> list[str]:
@@ -24,7 +26,9 @@ def connection_args(given: ConnectOptions) -> list[str]:
     args: list[str] = []
     for f in fields(ConnectOptions):
         value = getattr(given, f.name)
-        if value is not None:
+        if isinstance(value, bool):
+            args += [OPTION_FLAGS[f.name]] if value else []
+        elif value is not None:
             args += [OPTION_FLAGS[f.name], f"{value:g}" if isinstance(value, float) else str(value)]
     return args
 

@@ -4,18 +4,25 @@ from __future__ import annotations
 
 import json
 import sys
+import time
+from collections import deque
+from collections.abc import Iterator
 from pathlib import Path
 
 import typer
 from rich.live import Live
 from rich.table import Table
+from rich.text import Text
 
 from servotool.cli.common import drive, resolved
 from servotool.cli.render import info, out, table
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
-from servotool.ops.monitor import CsvLog, CsvMode, Monitor, check_duration, check_rate, resolve_entries
+from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
+from servotool.ops.trace_file import Series, TimeTable
 
+PLOT_SAMPLES = 300   # the scrolling chart shows this many of the latest samples
+PLOT_REFRESH_S = 0.2
 TREND_MIN = 8       # a trend narrower than this says nothing: drop the column instead
 NAME_FLOOR = 16     # the name keeps at least this much room (or its full length) before the trend gets any
 
@@ -57,6 +64,37 @@ def monitor_table(mon: Monitor, width: int) -> Table:
     return t
 
 
+def monitor_chart(mon: Monitor, history: deque[Sample], width: int, height: int) -> Text:
+    """The latest samples as a chart: one panel per unit, one series per entry, a legend with the units."""
+    from servotool.report.terminal import terminal_chart
+
+    table = TimeTable(Path("monitor"), "elapsed_s", [s.t for s in history],
+                      [Series(e.code, e.unit, [float(s.values[e.code]) for s in history]) for e in mon.entries])
+    chart = terminal_chart(table, width, height - 1, _title(mon))
+    rest = f"\nnot drawn (no room; name fewer entries): {', '.join(chart.left_out)}" if chart.left_out else ""
+    return Text.from_ansi(chart.text + rest)
+
+
+def _plain_line(mon: Monitor, s: Sample) -> str:
+    """One sample as a line: what --plot prints when the output is not a terminal."""
+    return f"{s.t:8.3f} s  " + "  ".join(f"{e.code} {s.values[e.code]:g}{' ' + e.unit if e.unit else ''}"
+                                          for e in mon.entries)
+
+
+def _plot_live(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None) -> None:
+    history: deque[Sample] = deque(maxlen=PLOT_SAMPLES)
+    drawn = 0.0
+    with Live(Text(""), console=out, auto_refresh=False, transient=False) as live:
+        for s in samples:
+            if log:
+                log.write(s)
+            history.append(s)
+            if time.monotonic() - drawn >= PLOT_REFRESH_S:
+                live.update(monitor_chart(mon, history, min(out.width, 160), out.height - 1), refresh=True)
+                drawn = time.monotonic()
+        live.update(monitor_chart(mon, history, min(out.width, 160), out.height - 1), refresh=True)
+
+
 def monitor(
     ctx: typer.Context,
     codes: list[str] = typer.Argument(None, help="Entries to watch (default: the profile's key monitors)."),
@@ -70,6 +108,8 @@ def monitor(
                                                         "columns."),
     as_json: bool = typer.Option(False, "--json", help="One JSON object per sample, one per line."),
     once: bool = typer.Option(False, "--once", help="Print one sample and exit."),
+    plot: bool = typer.Option(False, "--plot", help="A scrolling chart instead of the table (one panel per unit); "
+                              "plain lines when the output is not a terminal."),
 ) -> None:
     """Watch live values with units, min/max and a trend; report the sample rate achieved."""
     check_rate(rate)
@@ -88,7 +128,14 @@ def monitor(
             live_view = not (as_json or once) and sys.stdout.isatty()
             samples = mon.run(rate, duration, samples=1 if once else None)
             try:
-                if live_view:
+                if plot and live_view:
+                    _plot_live(mon, samples, log)
+                elif plot and not (as_json or once):
+                    for s in samples:
+                        if log:
+                            log.write(s)
+                        print(_plain_line(mon, s), flush=True)
+                elif live_view:
                     with Live(monitor_table(mon, out.width), console=out, refresh_per_second=8,
                               transient=False) as live:
                         for s in samples:

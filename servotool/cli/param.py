@@ -105,11 +105,12 @@ def list_(
     if cls not in ("Pn", "Un", "Sn"):
         raise typer.BadParameter("use Pn, Un or Sn", param_hint="--class")
     with drive(ctx) as d:
-        readings = d.read_entries(params.select(d.profile, group=group, classes=(cls,)))
+        readings = d.read_entries(params.select(d.profile, group=group, classes=(cls,)), partial=True)
     if changed:
         readings = [r for r in readings if r.changed]
     if as_json:
-        emit_json([r.as_json() for r in readings])
+        emit_json([r.as_json() for r in readings] + [{"code": e.code, "name": e.name, "value": None,
+                                                      "missing": "not on this drive"} for e in d.missing.values()])
         return
     t = table("Code", "Name", "Value", "Unit", "Default", "", title=f"{d.profile.model} unit {d.unit}")
     for r in readings:

@@ -9,8 +9,9 @@ import typer
 from servotool.cli.common import JSON_OPT
 from servotool.cli.render import emit_json, out, table
 from servotool.errors import UsageError
-from servotool.model.codec import format_value
+from servotool.model.codec import field_range, format_value
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
+from servotool.model.profile import Entry
 
 app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
 
@@ -52,10 +53,7 @@ def show(
             "address_rule": p.address_rule, "unverified_note": p.unverified_note,
             "serial": {**vars(p.line), "unit": p.default_unit}, "limits": vars(p.limits), "word_order": p.word_order,
             "persistence": vars(p.persistence), "roles": p.roles,
-            "entries": [{"code": e.code, "class": e.cls, "name": e.name, "address": e.address, "type": e.type,
-                         "unit": e.unit, "scale": e.scale, "min": e.min, "max": e.max, "default": e.default,
-                         "access": e.access, "effect": e.effect, "group": e.group, "source": e.source,
-                         "unverified": e.unverified} for e in entries],
+            "entries": [_entry_json(e) for e in entries],
         })
         return
     out.print(f"[bold]{p.model}[/bold] ({p.vendor}) profile '{p.id}' v{p.version}: {p.description}")
@@ -79,6 +77,31 @@ def show(
                   e.effect if e.cls == "Pn" else e.access, "?" if e.unverified else "")
     out.print(t)
     out.print("roles: " + ", ".join(f"{k}={v}" for k, v in sorted(p.roles.items())), markup=False)
+
+
+def _entry_json(e: Entry) -> dict[str, object]:
+    """Everything a third party needs to build the entry's registers: address, words and their order, how they
+    combine, and the layout of a multi-field value."""
+    out: dict[str, object] = {
+        "code": e.code, "class": e.cls, "name": e.name, "address": e.address, "words": e.words, "type": e.type,
+        "word_order": e.word_order, "combine": e.combine, "unit": e.unit, "scale": e.scale, "min": e.min,
+        "max": e.max, "default": e.default, "access": e.access, "effect": e.effect, "group": e.group,
+        "format": e.format, "copy": e.copy, "source": e.source, "unverified": e.unverified}
+    if e.combine == "decimal":
+        out["digits"] = e.digits           # decimal digits each word carries
+    if e.fields:
+        # field i holds bits [width*i, width*(i+1)) of the raw value (i = 0 lowest)
+        out["fields"] = [{"name": f, "bit_offset": e.field_width * i, "width": e.field_width,
+                          "range": list(field_range(e, f)),
+                          "enum": {str(k): v for k, v in e.field_enums.get(f.upper(), {}).items()}}
+                         for i, f in enumerate(e.fields)]
+    if e.bits:
+        out["bits"] = {str(k): v for k, v in e.bits.items()}
+    if e.enum:
+        out["enum"] = {str(k): v for k, v in e.enum.items()}
+    if e.cls == "Fn":
+        out["trigger"] = e.trigger
+    return out
 
 
 @app.command("check")

@@ -84,8 +84,10 @@ def inertia(
                                   "or --bandwidth is given)."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask: move, then write the results."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Identify and show results; write nothing."),
-    save_trace: Path = typer.Option(None, "--save-trace", help="Save the sampled speed/torque to this CSV "
-                                    "(also when the identification is refused)."),
+    save_trace: Path = typer.Option(None, "--save-trace", "--trace", help="Save the sampled speed/torque to this "
+                                    "CSV (also when the identification is refused); 'servotool plot' draws it."),
+    report: Path = typer.Option(None, "--report", help="Write a report folder: PNG charts of the motion, the fit, "
+                                "each move, the step response and the gains, with report.md (needs servotool[plot])."),
     step_check: bool = typer.Option(False, "--step-check", help="Measure a speed step (overshoot, settling) "
                                     "before and after; moves out and back inside --travel each time."),
     save: bool = typer.Option(None, "--save/--no-save", help="Store the written ratio and gains in EEPROM (or keep "
@@ -100,6 +102,10 @@ def inertia(
     Gains are changed only with --rigidity or --bandwidth.
     """
     _check_options(method, rigidity, bandwidth, no_gains, save_trace)
+    if report is not None:
+        from servotool.report.tune_report import check_folder
+
+        check_folder(report)
     verify = check if check is not None else resolved(ctx).simulated
     request = tune.TuneRequest(force=force, verify=verify and (rigidity is not None or bandwidth is not None),
         method=method, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel, direction=direction,
@@ -141,12 +147,16 @@ def inertia(
         except tune.TuneDeclined:
             raise typer.Exit(1) from None
         except ServoError as exc:   # refused, tripped, travel exceeded, link lost
+            refused = exc.result if isinstance(exc, identify.IdentificationRefused) else None
+            if report is not None and refused is not None:
+                _report(report, refused, d.profile, None, str(exc))
             if as_json and moving[0]:
-                refused = exc.result if isinstance(exc, identify.IdentificationRefused) else None
                 emit_json(_clean({"ok": False, "reason": str(exc), **(_estimate_json(refused) if refused else {}),
                                   "ratio": refused.new_ratio if refused else None, "written": False}))
             raise
         profile = d.profile
+    if report is not None:
+        _report(report, res.identified, profile, res)
     _render(res, profile, as_json)
 
 
@@ -156,6 +166,14 @@ def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:
         return None
     return {"coulomb_pct": report.coulomb_pct, "viscous_pct_at_rated_speed": report.viscous_pct_at_rated,
             "load_pct": report.load_pct, "compensation": {s.entry.code: s.value for s in report.settings}}
+
+
+def _report(folder: Path, result: identify.Result, profile: Profile, res: tune.TuneResult | None,
+            reason: str = "") -> None:
+    from servotool.report.tune_report import write_tune_report
+
+    written = write_tune_report(folder, result, profile, res, reason)
+    info(f"report: {len(written.files)} files in {folder} (open {folder / 'report.md'})")
 
 
 def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
@@ -174,8 +192,8 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
             "rigidity": sugg.rigidity if sugg else None,
             "phase_margin_deg": proposal.margins.phase_deg if proposal.margins else None,
             "gain_margin_db": proposal.margins.gain_db if proposal.margins else None,
-            "step_before": vars(res.step_before) if res.step_before else None,
-            "step_after": vars(res.step_after) if res.step_after else None,
+            "step_before": res.step_before.summary() if res.step_before else None,
+            "step_after": res.step_after.summary() if res.step_after else None,
         }))
         return
     if res.persisted is False:

@@ -168,6 +168,34 @@ class SetupItem:
     unverified: str = ""
 
 
+@dataclass(frozen=True)
+class IdentityCheck:
+    """One read-only address a drive of this family answers in a known way (or, `absent`, refuses with exception
+    02): part of the profile's identity signature."""
+
+    address: int
+    words: int = 1
+    code: str = ""                         # the entry read there; "" for an address this map does not have
+    absent: bool = False
+    range: tuple[int, int] | None = None   # raw values a drive of this family answers; None: presence only
+    sim: int | None = None                 # what the simulated drive answers (non-Pn entries)
+    source: str = ""
+    unverified: str = ""
+
+    @property
+    def label(self) -> str:
+        return self.code or f"address {self.address} (0x{self.address:04X})"
+
+
+@dataclass(frozen=True)
+class Identity:
+    """What identifies a profile's drive: its firmware and model entries and the checks made before any write."""
+
+    checks: tuple[IdentityCheck, ...]
+    firmware: str = ""
+    model: str = ""
+
+
 @dataclass
 class Profile:
     """A loaded, validated drive profile."""
@@ -192,6 +220,7 @@ class Profile:
     conventions: dict[str, str] = field(default_factory=dict)
     motion_setup: list[SetupItem] = field(default_factory=list)
     unverified_note: str = ""
+    identity: Identity | None = None
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
 

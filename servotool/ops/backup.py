@@ -38,6 +38,7 @@ class Backup:
     values: dict[str, int]
     path: Path | None = None
     warnings: list[str] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)    # Pn entries the drive lacks (not in values)
 
     def checksum(self) -> str:
         canon = json.dumps({"profile": self.profile, "model": self.model, "unit": self.unit,
@@ -51,21 +52,25 @@ class Backup:
         doc = {"servotool_backup": FORMAT, "profile": self.profile, "profile_version": self.profile_version,
                "model": self.model, "unit": self.unit, "created": self.created, "tool_version": self.tool_version,
                "identity": self.identity, "checksum": self.checksum(), "values": self.values, "display": text}
+        if self.missing:
+            doc["missing"] = {code: "not on this drive" for code in self.missing}
         return "# servotool parameter backup; values are raw register integers, 'display' is for reading only\n" + \
             yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
 
 
 def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
-    """Read every readable Pn (coalesced) and the identity entries."""
+    """Read every readable Pn (coalesced) and the identity entries; entries the drive lacks are left out and
+    listed in `missing`."""
     p = drive.profile
     entries = select(p)
-    readings = drive.read_entries(entries, progress=progress)
+    readings = drive.read_entries(entries, progress=progress, partial=True)
     identity: dict[str, str] = {}
     ident = [e for e in (p.role(r) for r in IDENTITY_ROLES) if e is not None and e.readable]
-    for r in drive.read_entries(ident) if ident else []:
+    for r in drive.read_entries(ident, partial=True) if ident else []:
         identity[r.entry.code] = r.text
     return Backup(p.id, p.version, p.model, drive.unit, datetime.now(UTC).isoformat(timespec="seconds"),
-                  __version__, identity, {r.entry.code: r.raw for r in readings})
+                  __version__, identity, {r.entry.code: r.raw for r in readings},
+                  missing=[e.code for e in entries if e.code in drive.missing])
 
 
 def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False) -> Path:
@@ -127,9 +132,13 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
         if not entry.min <= raw <= entry.max:
             raise UsageError(f"{what}: {code}: value {raw} is outside {entry.min}..{entry.max}")
         values[entry.code] = raw
+    missing = data.get("missing") or {}
+    if not isinstance(missing, dict) or any(profile.find(str(c)) is None for c in missing):
+        raise UsageError(f"{what}: 'missing' must map this profile's codes to a note")
     b = Backup(data["profile"], str(data.get("profile_version", "")), data["model"], data["unit"],
                str(data.get("created", "")), str(data.get("tool_version", "")),
-               {str(k): str(v) for k, v in (data.get("identity") or {}).items()}, values, path, warnings)
+               {str(k): str(v) for k, v in (data.get("identity") or {}).items()}, values, path, warnings,
+               [profile.entry(str(c)).code for c in missing])
     if b.checksum() != data["checksum"]:
         msg = f"{what}: checksum mismatch: the values were edited or damaged"
         if not force:

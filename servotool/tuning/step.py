@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -28,6 +28,13 @@ class StepResponse:
     settling_ms: float | None     # within 5 % of the target for good; None when it never settles
     samples: int
     ripple_pct: float = 0.0       # speed's standard deviation over the second half, % of the target (ringing)
+    t_s: tuple[float, ...] = field(default=(), repr=False)       # the forward step's samples, for its chart
+    speed_rpm: tuple[float, ...] = field(default=(), repr=False)
+
+    def summary(self) -> dict[str, float | int | None]:
+        """The figures without the samples."""
+        return {"target_rpm": self.target_rpm, "overshoot_pct": self.overshoot_pct, "settling_ms": self.settling_ms,
+                "samples": self.samples, "ripple_pct": self.ripple_pct}
 
     def failure(self, overshoot_limit_pct: float = OVERSHOOT_LIMIT_PCT) -> str | None:
         """Why this response fails the check after writing gains (None: it passes)."""
@@ -117,4 +124,4 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Cl
     late = [x for tt, x in zip(t, v, strict=True) if tt >= duration_s / 2]
     ripple = float(np.std(late)) / speed_rpm * 100 if len(late) > 2 else 0.0
     return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v),
-                        ripple)
+                        ripple, tuple(t), tuple(v))
