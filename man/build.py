@@ -201,7 +201,8 @@ def option_lines(cmd) -> list[str]:
 
 def command_sections(group, prefix: str) -> list[str]:
     out = []
-    for name, cmd in sorted(group.commands.items()):
+    for name in sorted(group.list_commands(None)):      # lazily loaded commands too
+        cmd = group.get_command(None, name)
         full = f"{prefix} {name}"
         if hasattr(cmd, "commands"):
             if any(p.name != "help" for p in cmd.params):

@@ -46,6 +46,8 @@ class Reading:
                                   "unit": e.unit}
         if (fields := fields_json(e, self.raw)) is not None:
             out["fields"] = fields
+        if self.raw in e.enum:
+            out["meaning"] = e.enum[self.raw]
         if e.default is not None:
             out["default"] = json_value(e, e.default)
             out["changed"] = self.changed

@@ -23,6 +23,29 @@ class ProfileError(UsageError):
     """A profile is missing or broken."""
 
 
+class MissingRole(UsageError):
+    """A feature needs an entry by meaning (a role) that the drive's profile does not map."""
+
+    def __init__(self, feature: str, role: str, profile_id: str, message: str | None = None) -> None:
+        self.feature, self.role, self.profile_id = feature, role, profile_id
+        super().__init__(message or f"{feature} needs role '{role}', which profile {profile_id} does not map")
+
+
+class UnknownName(UsageError):
+    """A code, group, class or profile id that is not there; `suggestions` are the closest that are."""
+
+    def __init__(self, kind: str, name: str, profile_id: str | None, suggestions: Sequence[str] = (),
+                 known: Sequence[str] = ()) -> None:
+        self.kind, self.name, self.profile_id = kind, name, profile_id
+        self.suggestions, self.known = list(suggestions), list(known)
+        where = f" for profile {profile_id}" if profile_id else ""
+        hint = ""
+        if suggestions:
+            hint = "; did you mean " + (self.suggestions[0] if len(self.suggestions) == 1 else
+                                        ", ".join(self.suggestions[:-1]) + " or " + self.suggestions[-1]) + "?"
+        super().__init__(f"unknown {kind} '{name}'{where}{hint}")
+
+
 class DeviceError(ServoError):
     """The link or the drive failed: timeout, CRC error, Modbus exception."""
 

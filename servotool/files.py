@@ -1,27 +1,30 @@
 """The files servotool keeps: user folders, atomic writes, YAML reading with one error format, a cross-process lock.
 
 Folders come from platformdirs (XDG on Linux, so XDG_CONFIG_HOME, XDG_STATE_HOME and XDG_DATA_HOME apply there;
-the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and SERVOTOOL_BACKUP_DIR override them.
+the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and SERVOTOOL_BACKUP_DIR override them
+(and SERVOTOOL_CACHE_DIR the cache folder).
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
 import platformdirs
-import yaml
 
 from servotool.errors import FileProblem
 
 APP = "servotool"
 
-# The C parser when PyYAML has it: a profile loads several times faster.
-_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+def _yaml() -> tuple[Any, Any]:
+    """PyYAML and its safe loader (the C one when PyYAML has it: several times faster), imported when a YAML file
+    is read: a command that reads none (a profile from the compiled cache) starts without it."""
+    import yaml
+
+    return yaml, getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 # ----- user folders ----------------------------------------------------------------------------------------------
@@ -47,10 +50,17 @@ def backup_dir() -> Path:
     return platformdirs.user_data_path(APP, appauthor=False) / "backups"
 
 
+def cache_dir() -> Path:
+    """Where servotool keeps what it can rebuild (SERVOTOOL_CACHE_DIR, else the user cache folder)."""
+    if env := os.environ.get("SERVOTOOL_CACHE_DIR"):
+        return Path(env)
+    return platformdirs.user_cache_path(APP, appauthor=False)
+
+
 # ----- writing ---------------------------------------------------------------------------------------------------
 
-def write_atomic(path: Path, text: str, *, replace: bool = True, durable: bool = True) -> os.stat_result:
-    """Write text (UTF-8) so that readers see the old file or the new one, never half of one.
+def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable: bool = True) -> os.stat_result:
+    """Write text (UTF-8) or bytes so that readers see the old file or the new one, never half of one.
 
     The file is made as a private temporary file beside the target (mode 0600) and renamed over it. With
     replace=False an existing file is never replaced, not even one that appears meanwhile: FileExistsError.
@@ -58,9 +68,11 @@ def write_atomic(path: Path, text: str, *, replace: bool = True, durable: bool =
     Other failures are OSError, for the caller to word.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
+    import tempfile
+
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        with (os.fdopen(fd, "wb") if isinstance(text, bytes) else os.fdopen(fd, "w", encoding="utf-8")) as fh:
             fh.write(text)
             fh.flush()
             if durable:
@@ -87,7 +99,7 @@ def read_text(path: Path) -> str:
         raise FileProblem(path, f"not UTF-8 text (byte {exc.start})") from None
 
 
-def _yaml_problem(path: Path, exc: yaml.YAMLError) -> FileProblem:
+def _yaml_problem(path: Path, exc: Any) -> FileProblem:
     mark = getattr(exc, "problem_mark", None)
     return FileProblem(path, f"invalid YAML: {getattr(exc, 'problem', None) or exc}",
                        line=mark.line + 1 if mark else None)
@@ -95,16 +107,18 @@ def _yaml_problem(path: Path, exc: yaml.YAMLError) -> FileProblem:
 
 def parse_yaml(text: str, path: Path) -> Any:
     """The data of a YAML document read from path; FileProblem (with the line) when it is not valid YAML."""
+    yaml, loader = _yaml()
     try:
-        return yaml.load(text, Loader=_SAFE_LOADER)
+        return yaml.load(text, Loader=loader)
     except yaml.YAMLError as exc:
         raise _yaml_problem(path, exc) from None
 
 
-def compose_yaml(text: str, path: Path) -> yaml.Node | None:
+def compose_yaml(text: str, path: Path) -> Any:
     """The node tree of a YAML document (for the line of each key); FileProblem when it is not valid YAML."""
+    yaml, loader = _yaml()
     try:
-        return yaml.compose(text, Loader=_SAFE_LOADER)
+        return yaml.compose(text, Loader=loader)
     except yaml.YAMLError as exc:
         raise _yaml_problem(path, exc) from None
 

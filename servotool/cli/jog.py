@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import os
 import statistics
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
@@ -13,7 +12,8 @@ from pathlib import Path
 import typer
 
 from servotool.cli.common import confirm, drive, resolved
-from servotool.cli.render import Verbosity, emit_json, err, info
+from servotool.cli.keys import raw_keys
+from servotool.cli.render import Verbosity, caution, emit_json, err, info
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.roles import FEATURE
@@ -27,56 +27,6 @@ from servotool.sim.state import effective_values
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
 
 
-POSIX_KEYS = {"\x1b[C": "fwd", "\x1b[D": "rev", "d": "fwd", "a": "rev", " ": "stop", "q": "quit", "\x1b": "quit"}
-WINDOWS_KEYS = {"\xe0M": "fwd", "\xe0K": "rev", "\x00M": "fwd", "\x00K": "rev", "d": "fwd", "a": "rev", " ": "stop",
-                "q": "quit", "\x1b": "quit"}
-
-
-@contextmanager
-def raw_keys() -> Iterator[Callable[[], str | None]]:
-    """Non-blocking single-key reader on the terminal: yields a function returning fwd/rev/stop/quit, "" for
-    another key, None when no key was pressed. The platform's terminal modules are imported only here, so the
-    CLI starts where they do not exist."""
-    if sys.platform == "win32":
-        yield _windows_key
-        return
-    with _posix_keys() as key:
-        yield key
-
-
-def _windows_key() -> str | None:
-    import msvcrt
-
-    if not msvcrt.kbhit():  # type: ignore[attr-defined]
-        return None
-    data = msvcrt.getwch()  # type: ignore[attr-defined]
-    if data in ("\x00", "\xe0"):           # an arrow key arrives as a prefix and its scan code
-        data += msvcrt.getwch()  # type: ignore[attr-defined]
-    return WINDOWS_KEYS.get(data, "")
-
-
-@contextmanager
-def _posix_keys() -> Iterator[Callable[[], str | None]]:
-    """cbreak mode on stdin; restores the terminal however we leave."""
-    import select
-    import termios
-    import tty
-
-    fd = sys.stdin.fileno()
-    saved = termios.tcgetattr(fd)
-    tty.setcbreak(fd)
-
-    def key() -> str | None:
-        if not select.select([fd], [], [], 0)[0]:
-            return None
-        return POSIX_KEYS.get(os.read(fd, 8).decode(errors="ignore"), "")
-
-    try:
-        yield key
-    finally:
-        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
-
-
 def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
     """Refuse while the drive lacks its motion setup; on a real port name the unverified motion entries (ask
     before moving) and a missing drive-side watchdog."""
@@ -86,8 +36,7 @@ def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATU
     if simulated:
         return
     caveats = motion_caveats(d.profile, feature)
-    for line in caveats.lines():
-        err.print(f"servotool: caution: {line}", markup=False)
+    caution(caveats.lines())
     if caveats.unverified:
         codes = ", ".join(e.code for _, e, _ in caveats.unverified)
         if not confirm(f"Move the motor through unverified entries ({codes})?", yes):
@@ -170,9 +119,11 @@ def jog(
         if err.is_terminal:
             err.print("")
         final = jogger.speed()
+    sign = plan.direction if seconds is not None else 1      # a timed reverse JOG peaks at a negative speed
     if as_json:
-        emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds, "peak_speed_rpm": round(peak, 1),
-                   "median_speed_rpm": round(statistics.median(late), 1) if late else None,
+        emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds,
+                   "peak_speed_rpm": round(peak, 1) * sign,
+                   "median_speed_rpm": round(statistics.median(late), 1) * sign if late else None,
                    "final_speed_rpm": final})
     else:
-        info(f"JOG done: peak {peak:.1f} rpm, now {final if final is not None else '?'} rpm")
+        info(f"JOG done: peak {peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")

@@ -14,8 +14,9 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from servotool.cli import complete
 from servotool.cli.common import drive, resolved
-from servotool.cli.render import info, out, table
+from servotool.cli.render import count, info, out, table
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
 from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
@@ -64,6 +65,15 @@ def monitor_table(mon: Monitor, width: int) -> Table:
     return t
 
 
+def _sample_json(mon: Monitor, s: Sample) -> dict[str, object]:
+    """One JSON line: values rounded to each entry's resolution, with their units."""
+    series = mon.series
+    values = {c: round(v, decimals(series[c].entry)) if isinstance(v, float) and c in series else v
+              for c, v in s.values.items()}
+    return {"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"), "values": values,
+            "units": {c: series[c].entry.unit for c in s.values if c in series}}
+
+
 def monitor_chart(mon: Monitor, history: deque[Sample], width: int, height: int) -> Text:
     """The latest samples as a chart: one panel per unit, one series per entry, a legend with the units."""
     from servotool.report.terminal import terminal_chart
@@ -97,7 +107,9 @@ def _plot_live(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None) -> N
 
 def monitor(
     ctx: typer.Context,
-    codes: list[str] = typer.Argument(None, help="Entries to watch (default: the profile's key monitors)."),
+    codes: list[str] = typer.Argument(
+        None, autocompletion=complete.codes,
+        help="Entries to watch (default: the profile's key monitors)."),
     rate: float = typer.Option(10.0, "--rate", "-r", help="Samples per second, > 0 (a rate the link cannot keep up "
                                                           "with polls as fast as it can; the rate achieved is shown)."),
     duration: float = typer.Option(None, "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C)."),
@@ -122,6 +134,7 @@ def monitor(
     entries = resolve_entries(resolved(ctx).profile, codes or [])
     mode: CsvMode = "replace" if force else "append" if append else "new"
     log = CsvLog(csv_file, entries, mode) if csv_file else None
+    interrupted = False
     try:
         with drive(ctx) as d:
             mon = Monitor(d, resolve_entries(d.profile, codes or []))
@@ -147,16 +160,19 @@ def monitor(
                         if log:
                             log.write(s)
                         if as_json:
-                            print(json.dumps({"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"),
-                                              "values": s.values}), flush=True)
+                            print(json.dumps(_sample_json(mon, s)), flush=True)
                     if not as_json:
                         out.print(monitor_table(mon, out.width))
-            except KeyboardInterrupt:
-                pass
+            except KeyboardInterrupt:     # the samples so far are shown, then exit 130 as for any Ctrl-C
+                interrupted = True
+                if not (live_view or as_json or plot):
+                    out.print(monitor_table(mon, out.width))
     finally:
         if log:
             log.close()
     if not once:
         rate_text = f"{mon.achieved_rate:.1f} samples/s achieved" if mon.achieved_rate is not None else \
             "too few samples to measure a rate"
-        info(f"{mon.samples} sample{'' if mon.samples == 1 else 's'} in {mon.elapsed:.2f} s: {rate_text}")
+        info(f"{count(mon.samples, 'sample')} in {mon.elapsed:.2f} s: {rate_text}")
+    if interrupted:
+        raise typer.Exit(130)

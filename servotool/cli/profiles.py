@@ -6,11 +6,13 @@ from pathlib import Path
 
 import typer
 
+from servotool.cli import complete
 from servotool.cli.common import JSON_OPT
-from servotool.cli.render import emit_json, out, table
-from servotool.errors import UsageError
+from servotool.cli.render import count, emit_json, out, table
+from servotool.errors import UnknownName
 from servotool.model.codec import field_range, format_value
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
+from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
 from servotool.model.profile import Entry
 
 app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
@@ -37,16 +39,19 @@ def list_(as_json: bool = JSON_OPT) -> None:
 
 @app.command("show")
 def show(
-    profile: str = typer.Argument(..., help="Profile id or YAML file."),
+    profile: str = typer.Argument(..., autocompletion=complete.profiles, help="Profile id or YAML file."),
     unverified: bool = typer.Option(False, "--unverified", help="Only entries the manual leaves open, with why."),
-    group: str = typer.Option(None, "--group", "-g", help="Only this group."),
+    group: str = typer.Option(None, "--group", "-g", help="Only this group (its id, or a common name: gain, "
+                              "speed, position, torque, io, comm, monitor)."),
     as_json: bool = JSON_OPT,
 ) -> None:
     """A profile's settings, roles and entries."""
     p = load_profile(profile)
-    entries = [e for e in p.entries if (not unverified or e.unverified) and (group is None or e.group == group)]
-    if group is not None and group not in {e.group for e in p.entries}:
-        raise UsageError(f"unknown group '{group}' for profile {p.id}")
+    members = p.entries if group is None else group_members(p.entries, group)
+    if members is None:
+        known = sorted({e.group for e in p.entries if e.group} | set(COMMON_GROUPS))
+        raise UnknownName("group", str(group), p.id, suggest(str(group), known), known)
+    entries = [e for e in members if not unverified or e.unverified]
     if as_json:
         emit_json({
             "id": p.id, "model": p.model, "vendor": p.vendor, "version": p.version, "source": p.source,
@@ -65,7 +70,8 @@ def show(
     if p.unverified_note:
         out.print(f"[yellow]note:[/yellow] {p.unverified_note}")
     if unverified:
-        t = table("Code", "Name", "Why unverified", title=f"{len(entries)} unverified entries")
+        t = table("Code", "Name", "Why unverified",
+                  title=count(len(entries), "unverified entry", "unverified entries"))
         for e in entries:
             t.add_row(e.code, e.name, e.unverified)
         out.print(t)

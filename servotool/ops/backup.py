@@ -10,14 +10,13 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from servotool import __version__
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.files import backup_dir, load_yaml, write_atomic
-from servotool.model.codec import format_value
+from servotool.model.codec import format_value, json_value
 from servotool.model.profile import Entry, Profile
+from servotool.ops import backup_csv
 from servotool.ops.params import select
 
 FORMAT = 1
@@ -55,7 +54,13 @@ class Backup:
         if self.missing:
             doc["missing"] = {code: "not on this drive" for code in self.missing}
         return "# servotool parameter backup; values are raw register integers, 'display' is for reading only\n" + \
-            yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
+            _dump(doc)
+
+
+def _dump(doc: dict[str, Any]) -> str:
+    import yaml  # only where a backup is written: `param get` starts without PyYAML
+
+    return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
 
 
 def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
@@ -73,13 +78,17 @@ def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
                   missing=[e.code for e in entries if e.code in drive.missing])
 
 
-def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False) -> Path:
-    """Write atomically; never replace an existing file unless forced."""
+def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False, fmt: str = "yaml") -> Path:
+    """Write atomically (YAML, or with fmt="csv" a table for a spreadsheet); never replace an existing file unless
+    forced."""
     exists = UsageError(f"{path} exists; choose another name or pass --force to replace it")
     if path.exists() and not force:
         raise exists
+    meta = {"profile": backup.profile, "model": backup.model, "unit": str(backup.unit), "created": backup.created,
+            "tool_version": backup.tool_version}
+    text = backup_csv.to_csv(profile, meta, backup.values) if fmt == "csv" else backup.to_yaml(profile)
     try:
-        write_atomic(path, backup.to_yaml(profile), replace=force)
+        write_atomic(path, text, replace=force)
     except FileExistsError:
         raise exists from None
     except OSError as exc:
@@ -99,13 +108,19 @@ def auto_path(drive: Drive, reason: str) -> Path:
     return backup_dir() / f"{drive.profile.id}-unit{drive.unit}-{stamp}-{reason}.yaml"
 
 
-def auto_backup(drive: Drive, reason: str) -> Path:
+def auto_backup(drive: Drive, reason: str, progress: Callable[[int], None] | None = None) -> Path:
     """Save the drive's current state under backup_dir() (never replacing a file)."""
-    return write_backup(drive, auto_path(drive, reason))
+    return write_backup(drive, auto_path(drive, reason), progress=progress)
 
 
 def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
-    """Read and check a backup against the profile; every problem is a one-line UsageError, before any write."""
+    """Read and check a backup (YAML, or CSV from a spreadsheet) against the profile; every problem is a one-line
+    UsageError, before any write."""
+    if path.suffix.lower() == ".csv":
+        meta, values, warnings = backup_csv.read(path, profile, force=force)
+        unit = meta.get("unit", "")
+        return Backup(meta.get("profile", ""), "", meta.get("model", ""), int(unit) if unit.isdigit() else 0,
+                      meta.get("created", ""), meta.get("tool_version", ""), {}, values, path, warnings)
     what = str(path)
     data = load_yaml(path)
     if not isinstance(data, dict) or data.get("servotool_backup") != FORMAT:
@@ -149,6 +164,8 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
 
 def profile_of(path: Path) -> str | None:
     """The profile id a backup file names, or None when the file does not say (not a backup)."""
+    if path.suffix.lower() == ".csv":
+        return backup_csv.profile_of(path)
     data = load_yaml(path)
     return data.get("profile") if isinstance(data, dict) and isinstance(data.get("profile"), str) else None
 
@@ -161,9 +178,13 @@ class Difference:
 
     def as_json(self) -> dict[str, Any]:
         e = self.entry
-        return {"code": e.code, "name": e.name, "unit": e.unit, "effect": e.effect,
-                "a": None if self.a is None else format_value(e, self.a),
-                "b": None if self.b is None else format_value(e, self.b)}
+        out: dict[str, Any] = {"code": e.code, "name": e.name, "unit": e.unit, "effect": e.effect,
+                               "a": None if self.a is None else json_value(e, self.a),
+                               "b": None if self.b is None else json_value(e, self.b)}
+        for key, raw in (("a", self.a), ("b", self.b)):
+            if raw is not None and raw in e.enum:
+                out[f"{key}_meaning"] = e.enum[raw]
+        return out
 
 
 def diff(profile: Profile, a: dict[str, int], b: dict[str, int]) -> list[Difference]:

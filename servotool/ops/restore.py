@@ -191,18 +191,19 @@ def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
             + (f"; left out: {', '.join(left)}" if left else ""))
 
 
-def factory_reset(drive: Drive, notice: Notice | None = None) -> Path:
-    """Automatic backup, then the profile's factory-reset function."""
+def factory_reset(drive: Drive, notice: Notice | None = None,
+                  progress: Callable[[int], None] | None = None) -> Path:
+    """Automatic backup (progress: entries read), then the profile's factory-reset function."""
     drive.profile.need_role("factory_reset", "param reset")
     check_servo_off(drive, [e for e in drive.profile.of_class("Pn") if e.effect == "servo_off"], "a factory reset")
-    auto = auto_backup(drive, "before-reset")
+    auto = auto_backup(drive, "before-reset", progress)
     if notice:
         notice(f"automatic backup of the drive's current state: {auto}")
     drive.trigger("factory_reset", "param reset")
     return auto
 
 
-def not_at_default(drive: Drive) -> list[tuple[Entry, int]]:
+def not_at_default(drive: Drive, progress: Callable[[int], None] | None = None) -> list[tuple[Entry, int]]:
     """Readable parameters whose value differs from the profile's factory default (entry, raw)."""
-    return [(r.entry, r.raw) for r in drive.read_entries(select(drive.profile), partial=True)
+    return [(r.entry, r.raw) for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)
             if r.entry.default is not None and r.raw != r.entry.default]
