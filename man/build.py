@@ -89,7 +89,8 @@ A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBs
 .TP
 .B "tune inertia: {rigidity: N | bandwidth: HZ, travel: REV, max_speed: RPM, \
 accel_time: MS, direction: D, repeats: N, gains: BOOL, report: DIR, no_dead_man: BOOL}"
-Identify the load inertia and write it, then (unless \fBgains: false\fR) the matching gains; \fBreport\fR
+Identify the load inertia and write it, then the matching gains only with \fBrigidity\fR or \fBbandwidth\fR
+(or \fBgains: true\fR: at the drive's current level); without them the gains are left as they are. \fBreport\fR
 writes the same folder of charts as \fBtune inertia \-\-report\fR (beside the plan, one per axis).
 .TP
 .BR "wait: S" ", " "alarm clear:" ", " "prompt: QUESTION"
@@ -165,8 +166,8 @@ servotool plot start.csv \-o start.png
 servotool \-\-port sim jog \-\-speed 300 \-\-time 2
 servotool \-\-port sim \-P sdc param set PN4=3 && servotool \-\-port sim \-P sdc jog \-s 100 \-t 1
 servotool sim config \-\-load\-ratio 5 \-\-friction 0.03
-servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13
-servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13 \-\-step\-check \-\-report tune\-report
+servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 16
+servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 16 \-\-step\-check \-\-report tune\-report
 servotool run examples/commission.yaml \-\-yes
 servotool sim serve \-\-port tcp://127.0.0.1:5020 \-\-unit 1 \-\-unit 2
 servotool scan \-\-port /dev/ttyUSB0 \-\-units 1\-10 \-\-baud 9600 \-\-format 8N1

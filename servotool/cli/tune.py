@@ -9,15 +9,15 @@ from typing import Any
 
 import typer
 
-from servotool.cli.common import confirm, drive
+from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.errors import ServoError, UsageError
 from servotool.model.profile import Profile
 from servotool.motion import deadman
 from servotool.ops import eeprom
-from servotool.tuning import identify, planning, preflight, step, tune
-from servotool.tuning.gains import suggest_gains
+from servotool.tuning import gain_search, identify, planning, preflight, step, tune
+from servotool.tuning.friction import friction_report
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
 
@@ -42,11 +42,6 @@ def _check_options(method: str, rigidity: int | None, bandwidth: float | None, n
         raise UsageError("give --rigidity or --bandwidth, not both")
     if no_gains and (rigidity is not None or bandwidth is not None):
         raise UsageError("--no-gains contradicts --rigidity/--bandwidth")
-    if rigidity is not None or bandwidth is not None:
-        try:   # the rules the gains will be computed with, on a nominal load
-            suggest_gains(rotor_inertia_kgcm2=1.0, load_ratio=1.0, rigidity=rigidity, bandwidth_hz=bandwidth)
-        except ValueError as exc:
-            raise UsageError(str(exc)) from None
     if save_trace is not None:
         parent = save_trace.parent if str(save_trace.parent) else Path(".")
         if save_trace.is_dir() or not parent.is_dir() or not os.access(parent, os.W_OK) or \
@@ -83,7 +78,8 @@ def inertia(
                                   "friction), forward or reverse (only; friction and load torque fitted as one)."),
     repeats: int = typer.Option(None, "--repeats", help="Number of move cycles (default: repeat until the "
                                 "estimate is precise, within about 9 s)."),
-    rigidity: int = typer.Option(None, "--rigidity", help="Set gains for this rigidity level 1..31."),
+    rigidity: int = typer.Option(None, "--rigidity", help="Set gains for the drive's own rigidity level N (its own "
+                                 "range, anchored at its factory gains); also writes its rigidity parameter."),
     bandwidth: float = typer.Option(None, "--bandwidth", help="Set gains for this speed-loop bandwidth in Hz."),
     no_gains: bool = typer.Option(False, "--no-gains", help="Leave the gains alone (the default unless --rigidity "
                                   "or --bandwidth is given)."),
@@ -99,6 +95,9 @@ def inertia(
                               "them out of it) as the drive allows; default: the drive's current setting."),
     no_dead_man: bool = typer.Option(False, "--no-dead-man", help="Move a drive that has no dead-man route "
                                      "(nothing stops the motor if this program dies); keep an E-stop at hand."),
+    force: bool = typer.Option(False, "--force", help="Write gains even with under 45° phase or 6 dB gain margin."),
+    check: bool = typer.Option(None, "--check/--no-check", help="Step check after writing gains; on failure the "
+                               "previous gains go back (default: on with the simulated drive)."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
     """Identify the load inertia ratio (with friction and gravity), write it, and set matching gains.
@@ -110,7 +109,8 @@ def inertia(
         from servotool.report.tune_report import check_folder
 
         check_folder(report)
-    request = tune.TuneRequest(
+    verify = check if check is not None else resolved(ctx).simulated
+    request = tune.TuneRequest(force=force, verify=verify and (rigidity is not None or bandwidth is not None),
         method=method, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel, direction=direction,
         repeats=repeats, gains=rigidity is not None or bandwidth is not None, rigidity=rigidity,
         bandwidth_hz=bandwidth, save=save, dry_run=dry_run, step_check=step_check, trace_path=save_trace)
@@ -124,7 +124,8 @@ def inertia(
         if method == "host" or step_check:
             confirm_motion(ctx, d, yes, preflight.FEATURE)
         info(f"motion: {motion.describe()}" if motion is not None else
-             "motion: the drive's own identification (its parameters set torque and travel)")
+             "motion: the drive's own identification (its parameters set torque and travel), then host "
+             "moves that check its result")
         if step_check:
             info(f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(travel):.2f} s forward and "
                  "back, before and after")
@@ -170,6 +171,14 @@ def inertia(
     _render(res, profile, as_json, dead_man[0])
 
 
+def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:
+    report = friction_report(profile, est) if est is not None else None
+    if report is None:
+        return None
+    return {"coulomb_pct": report.coulomb_pct, "viscous_pct_at_rated_speed": report.viscous_pct_at_rated,
+            "load_pct": report.load_pct, "compensation": {s.entry.code: s.value for s in report.settings}}
+
+
 def _report(folder: Path, result: identify.Result, profile: Profile, res: tune.TuneResult | None,
             reason: str = "") -> None:
     from servotool.report.tune_report import write_tune_report
@@ -186,11 +195,15 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool,
     if as_json:
         emit_json(_clean({
             "ok": True, **_estimate_json(res.identified), "ratio": round(res.ratio, 4),
+            "friction": _friction_json(profile, res.identified.estimate),
             "parameter": entry.code if entry else None, "parameter_value": proposal.parameter_value,
             "written": res.ratio_stored, "persisted": res.persisted,
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
                       for c in changes],
             "gains_written": res.gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
+            "rigidity": sugg.rigidity if sugg else None,
+            "phase_margin_deg": proposal.margins.phase_deg if proposal.margins else None,
+            "gain_margin_db": proposal.margins.gain_db if proposal.margins else None,
             "step_before": res.step_before.summary() if res.step_before else None,
             "step_after": res.step_after.summary() if res.step_after else None,
             "dead_man": dead_man.as_json() if dead_man is not None else None,
@@ -209,7 +222,8 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool,
     if res.step_before is not None:
         out.print(f"step before: {res.step_before.describe()}", markup=False)
     if res.step_after is not None:
-        out.print(f"step after:  {res.step_after.describe()}", markup=False)
+        label = "step check after writing the gains:" if res.verified is not None else "step after: "
+        out.print(f"{label} {res.step_after.describe()}", markup=False)
 
 
 def _show(proposal: tune.Proposal) -> None:
@@ -226,10 +240,90 @@ def _show(proposal: tune.Proposal) -> None:
                   f"load torque {est.load_torque_nm:.4f} N·m, fit residual {est.residual_rel:.1%}; "
                   f"{len(result.trace.t)} samples ({result.samples_per_s:.0f}/s), {travel}"
                   f"{result.time_used_s:.1f} s", markup=False)
+        report = friction_report(proposal.profile, est)
+        if report is not None:
+            out.print(f"in drive units: {report.describe()}", markup=False)
+            for s in report.settings:
+                out.print(f"  friction compensation (suggested, not written): {s.entry.code} = {s.value:g} "
+                          f"{s.entry.unit} ({s.what})", markup=False)
     if changes and sugg is not None:
         t = table("Role", "Code", "Current", "Suggested", "Unit",
-                  title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop bandwidth"
-                        + (f" (rigidity {sugg.rigidity})" if sugg.rigidity else ""))
+                  title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop gain"
+                        + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else ""))
         for c in changes:
             t.add_row(c.role, c.entry.code, f"{c.old:g}", f"{c.new:g}", c.entry.unit)
         out.print(t)
+        if proposal.margins is not None:
+            out.print(f"margins on the identified inertia: {proposal.margins.describe()}", markup=False)
+
+
+@app.command("gains")
+def gains(
+    ctx: typer.Context,
+    load_ratio: float = typer.Option(None, "--load-ratio", help="J_load/J_motor to tune for (default: the drive's "
+                                     "inertia-ratio parameter, as tune inertia wrote it)."),
+    start: int = typer.Option(None, "--from", help="First rigidity level to try (default: the drive's current)."),
+    top: int = typer.Option(None, "--to", help="Highest level to try (default: the highest the margins allow)."),
+    travel: float = typer.Option(2.0, "--travel", help="Travel limit of each step check in revolutions."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
+    save: bool = typer.Option(None, "--save/--no-save", help="Store the chosen gains in EEPROM (or keep them out "
+                              "of it) as the drive allows; default: the drive's current setting."),
+    no_dead_man: bool = typer.Option(False, "--no-dead-man", help="Move a drive that has no dead-man route "
+                                     "(nothing stops the motor if this program dies); keep an E-stop at hand."),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
+) -> None:
+    """Raise the drive's own rigidity level step by step with a step check at each; keep a safe level.
+
+    Stops at the first level that overshoots, rings or trips, backs off one level and writes that level's gains
+    (and the rigidity parameter where the drive has one). Levels beyond 45° / 6 dB of computed margin are not tried.
+    """
+    step.step_duration_s(travel)
+
+    def show(trial: gain_search.LevelTrial) -> None:
+        if not as_json:
+            info(f"level {trial.level}: {trial.speed_gain_hz:.1f} Hz, "
+                 + (trial.response.describe() if trial.response else "no response")
+                 + (f": FAILED ({trial.failure})" if trial.failure else ""))
+
+    with drive(ctx) as d:
+        d.dead_man_waived = no_dead_man
+        confirm_motion(ctx, d, yes, "tune gains")
+        if not confirm("Move the axis now (a speed step forward and back at each level)?", yes):
+            raise typer.Exit(1)
+        try:
+            res = gain_search.search_gains(d, load_ratio=load_ratio, start=start, top=top, travel_rev=travel,
+                                           save=save, progress=show)
+        except gain_search.GainSearchFailed as exc:
+            _render_search(exc.search, as_json, ok=False)
+            raise
+        profile = d.profile
+    if res.persisted is False:
+        warn(eeprom.ram_only_warning(profile))
+    _render_search(res, as_json, ok=True)
+
+
+def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None:
+    rows = [{"level": t.level, "speed_gain_hz": round(t.speed_gain_hz, 2),
+             "phase_margin_deg": round(t.margins.phase_deg, 1), "gain_margin_db": _clean(round(t.margins.gain_db, 1)),
+             "overshoot_pct": t.response.overshoot_pct if t.response else None,
+             "settling_ms": t.response.settling_ms if t.response else None,
+             "ripple_pct": round(t.response.ripple_pct, 2) if t.response else None, "failure": t.failure}
+            for t in res.trials]
+    if as_json:
+        emit_json(_clean({"ok": ok, "load_ratio": res.load_ratio, "levels": rows, "chosen": res.chosen,
+                          "reason": res.reason,
+                          "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new,
+                                     "unit": c.entry.unit} for c in res.changes], "persisted": res.persisted}))
+        return
+    t = table("Level", "Speed gain Hz", "Phase margin", "Gain margin", "Overshoot", "Settling", "Result",
+              title=f"rigidity levels tried (load ratio {res.load_ratio:.2f})")
+    for r in rows:
+        settle = f"{r['settling_ms']:.0f} ms" if r["settling_ms"] is not None else "-"
+        over = f"{r['overshoot_pct']:.0f} %" if r["overshoot_pct"] is not None else "-"
+        gm = f"{r['gain_margin_db']:.1f} dB" if r["gain_margin_db"] is not None else "inf"
+        t.add_row(str(r["level"]), f"{r['speed_gain_hz']:.1f}", f"{r['phase_margin_deg']:.0f}°", gm, over, settle,
+                  r["failure"] or "ok")
+    out.print(t)
+    if res.chosen is not None:
+        out.print(f"{res.reason}; kept level {res.chosen}: " + ", ".join(f"{c.entry.code} {c.old:g} -> {c.new:g}"
+                                                         for c in res.changes), markup=False)

@@ -72,7 +72,8 @@ def _report_option(arg: Any) -> str | None:
 
 class TuneInertiaStep(StepType):
     """`tune inertia: {rigidity, bandwidth, travel, max_speed, accel_time, direction, repeats, gains, report}`: what
-    `servotool tune inertia --yes` does (host method), with the gains set unless `gains: false`; `report: DIR`
+    `servotool tune inertia --yes` does (host method): the gains are set only with rigidity or bandwidth (or
+    `gains: true`: at the drive's own current level), as the command leaves them alone without; `report: DIR`
     writes the charts and report.md there (as `--report DIR`)."""
 
     name = "tune inertia"
@@ -88,10 +89,10 @@ class TuneInertiaStep(StepType):
         repeats = number_in(opts["repeats"], "tune inertia repeats", 1, 20) if "repeats" in opts else None
         if repeats is not None and repeats != int(repeats):
             raise UsageError("tune inertia repeats must be a whole number 1..20")
-        gains = opts.get("gains", True)
+        rigidity, bandwidth = opts.get("rigidity"), opts.get("bandwidth")
+        gains = opts.get("gains", rigidity is not None or bandwidth is not None)
         if not isinstance(gains, bool):
             raise UsageError("tune inertia gains must be true or false")
-        rigidity, bandwidth = opts.get("rigidity"), opts.get("bandwidth")
         if rigidity is not None and (isinstance(rigidity, bool) or not isinstance(rigidity, int)):
             raise UsageError(f"tune inertia rigidity must be a whole number, got {rigidity!r}")
         request = TuneRequest(
@@ -107,7 +108,7 @@ class TuneInertiaStep(StepType):
 
     def describe(self, step: Step, profile: Profile) -> str:
         motion = self.request(step.arg, profile).nominal_motion(profile)
-        gains = (step.arg or {}).get("gains", True)
+        gains = self.request(step.arg, profile).gains
         report = _report_option(step.arg)
         reported = "" if profile.role("inertia_ratio") is not None else \
             f"; the ratio is reported, not written ({profile.id} maps no inertia-ratio parameter)"

@@ -4,11 +4,16 @@ It runs only when a request arrives: the plant is integrated up to "now", with s
 identification phases) applied at their exact simulated times on the way. Roles, not vendor codes, say which
 entry does what, so any profile with the roles gets the behaviour.
 
-Servo on by command puts the drive in its control mode (the plant's position mode): standing still holds position
-through the position loop, so a load the motor cannot hold ends in the following-error alarm; a host speed reference
-runs under speed control and the hold resumes where it returns to zero. JOG, a test function, runs under speed
-control throughout, its stop included, as real drives' JOG does (a position hold there would also make a badly
-mis-tuned speed loop oscillate at every JOG stop of the inertia identification).
+Servo on by command puts the drive in its control mode. Where the profile's motion route is a speed reference
+(IS620P, SDC), its motion_setup puts the drive in a speed mode (IS620P H02-00 = 0, SDC's JOG mode), which has no
+position loop: standing still is the speed loop holding zero speed (its integral keeps the position, softly).
+Elsewhere (DSX7E's Fn033) servo on is the plant's position mode: standing still holds position through the position
+loop, so a load the motor cannot hold ends in the following-error alarm; a host speed reference runs under speed
+control and the hold resumes where it returns to zero. (A position hold in speed mode made IS620P's hold after a
+move oscillate with growing amplitude whenever the configured inertia ratio was far below the load's: the position
+gain then exceeds the speed loop's real bandwidth, which the manual's speed mode never does.)
+JOG, a test function, runs under speed control throughout, its stop included, as real drives' JOG does (a position
+hold there would also make a badly mis-tuned speed loop oscillate at every JOG stop of the inertia identification).
 
 Around this core: `functions` decodes function writes into the actions below, `alarms` keeps the fault history,
 `identification` runs the drive-side inertia identification, and `handover` keeps the running state in the state
@@ -295,7 +300,7 @@ class Firmware:
     def servo(self, on: bool) -> None:
         self.keep_alive()
         if on and self.mode == "off" and self._ready_for_host_motion():
-            self.plant.set_mode("position")
+            self.plant.set_mode(self._servo_mode())
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
         elif not on and self.mode in ("servo", "speed", "jog", "stopping", "segment"):
@@ -313,6 +318,12 @@ class Firmware:
     def reboot(self) -> None:
         """A soft reset: the running state starts afresh with the parameters now in effect."""
         self._power_on()
+
+    def _servo_mode(self) -> str:
+        """The plant mode of servo on by command: speed control where the route is a speed reference (the
+        motion_setup's speed mode), the position loop's hold otherwise."""
+        speed_route = self.profile.role("speed_reference") is not None and self.profile.role("jog") is None
+        return "speed" if speed_route else "position"
 
     def identify(self, start: bool) -> None:
         """Start the drive-side inertia identification (from standstill, servo off), or abort it."""

@@ -98,7 +98,10 @@ def jackknife_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, groups: np.nda
         keep = groups != label
         if np.count_nonzero(keep) <= xs.shape[1]:
             return np.zeros(xs.shape[1])
-        thetas.append(corrected_lstsq(xs[keep], y[keep], eiv))
+        try:
+            thetas.append(corrected_lstsq(xs[keep], y[keep], eiv))
+        except np.linalg.LinAlgError:      # the rest cannot determine the parameters: no honest bound
+            return np.full(xs.shape[1], np.inf)
     th = np.asarray(thetas)
     return np.sqrt((g - 1) / g * np.sum((th - th.mean(axis=0)) ** 2, axis=0))
 

@@ -1,4 +1,9 @@
-"""Turning an identified inertia into the drive's inertia-ratio and gain parameter values."""
+"""Turning an identified inertia into the drive's inertia-ratio, gain and rigidity parameter values, with margins.
+
+Before anything is written the margins of the suggested gains are computed on the identified inertia
+(tuning.margins); gains with less than 45 degrees of phase or 6 dB of gain margin are refused, naming the highest
+level that keeps them, unless forced.
+"""
 
 from __future__ import annotations
 
@@ -7,14 +12,19 @@ from dataclasses import dataclass
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import eng_to_raw, raw_to_eng
-from servotool.model.gain_units import from_canonical
-from servotool.model.profile import Entry
-from servotool.tuning.gains import GainSuggestion, suggest_gains
+from servotool.model.gain_units import from_canonical, to_canonical
+from servotool.model.profile import Entry, Profile
+from servotool.tuning.gains import GainSuggestion, LoopGains, RigidityScale, rigidity_scale, suggest_gains
 from servotool.tuning.identify import IdentificationFailed
+from servotool.tuning.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
 from servotool.tuning.preflight import FEATURE
 
 GAIN_ROLES = {"speed_loop_gain": "speed_loop_gain_hz", "speed_loop_integral": "speed_integral_ms",
               "position_loop_gain": "position_loop_gain_per_s", "torque_filter": "torque_filter_ms"}
+
+
+class MarginRefused(UsageError):
+    """The suggested gains would leave too little phase or gain margin."""
 
 
 @dataclass(frozen=True)
@@ -24,32 +34,88 @@ class GainChange:
     old: float
     new: float
     raw: int
+    old_raw: int = 0
 
 
-def gain_changes(drive: Drive, load_ratio: float, *, rigidity: int | None, bandwidth_hz: float | None
-                 ) -> tuple[GainSuggestion, list[GainChange]]:
-    """Gains for the identified inertia, mapped onto the profile's gain roles (clamped to their ranges)."""
+def configured_inertia(profile: Profile, j_total_kgm2: float) -> float:
+    """The inertia the drive's speed gain is computed with once the ratio is written: the identified one, or the
+    rotor's alone where the drive has no ratio parameter (SDC: its speed gain is absolute, F3's levels are for
+    "large-inertia loads" below the factory level)."""
+    motor = profile.motor
+    assert motor is not None
+    return j_total_kgm2 if profile.role("inertia_ratio") is not None else motor.rotor_inertia_kgcm2 * 1e-4
+
+
+def loop_margins(profile: Profile, loop: LoopGains, j_total_kgm2: float, viscous: float = 0.0) -> Margins:
+    return margins(loop, j_total_kgm2, configured_inertia(profile, j_total_kgm2), viscous)
+
+
+def safe_level(profile: Profile, scale: RigidityScale, j_total_kgm2: float, upto: int | None = None) -> int | None:
+    """The highest level (up to `upto`) whose gains keep the minimum margins; None when none does."""
+    top = scale.highest if upto is None else upto
+    for level in range(top, scale.lowest - 1, -1):
+        if loop_margins(profile, scale.factory.scaled(scale.factor(level)), j_total_kgm2).ok():
+            return level
+    return None
+
+
+def current_level(drive: Drive, scale: RigidityScale) -> int:
+    """The drive's rigidity level now (its factory level where it has no parameter for it)."""
+    if scale.parameter is None:
+        return scale.factory_level
+    level = int(raw_to_eng(scale.parameter, drive.read_entries([scale.parameter])[0].raw))
+    return max(scale.lowest, min(scale.highest, level))
+
+
+def gain_changes(drive: Drive, load_ratio: float, *, rigidity: int | None, bandwidth_hz: float | None,
+                 force: bool = False) -> tuple[GainSuggestion, list[GainChange], Margins]:
+    """Gains for the identified inertia at the drive's own level (its current one when neither is given), mapped
+    onto the profile's gain roles (and its rigidity parameter), with their margins; MarginRefused unless forced."""
     p = drive.profile
     motor = p.motor
     assert motor is not None
+    scale = rigidity_scale(p)
     if rigidity is None and bandwidth_hz is None:
-        rig = p.role("rigidity")
-        rigidity = int(raw_to_eng(rig, drive.read_entries([rig])[0].raw)) if rig else 13
-        rigidity = max(1, min(31, rigidity))
+        rigidity = current_level(drive, scale)
     try:
-        sugg = suggest_gains(rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2, load_ratio=max(0.0, load_ratio),
-                             rigidity=rigidity, bandwidth_hz=bandwidth_hz)
+        sugg = suggest_gains(rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2, scale=scale,
+                             load_ratio=max(0.0, load_ratio), rigidity=rigidity, bandwidth_hz=bandwidth_hz)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    found = loop_margins(p, sugg.loop, sugg.j_total_kgm2)
+    if not found.ok() and not force:
+        what = f"rigidity {rigidity}" if rigidity is not None else f"{bandwidth_hz:g} Hz"
+        safe = safe_level(p, scale, sugg.j_total_kgm2, rigidity)
+        hint = f"the highest level that keeps them is {safe} (--rigidity {safe})" if safe is not None else \
+            "no level does"
+        raise MarginRefused(f"{what} leaves {found.describe()} on the identified inertia, under the "
+                            f"{MIN_PHASE_DEG:g}° and {MIN_GAIN_DB:g} dB minimum: {hint}; --force writes it anyway")
     entries = [(role, p.role(role)) for role in GAIN_ROLES]
     present = [(role, e) for role, e in entries if e is not None]
+    if scale.parameter is not None and rigidity is not None:
+        present.append(("rigidity", scale.parameter))
     current = drive.read_entries([e for _, e in present])
     changes = []
     for (role, e), reading in zip(present, current, strict=True):
-        target = from_canonical(role, e, getattr(sugg, GAIN_ROLES[role]))
-        raw = eng_to_raw(e, target)
-        changes.append(GainChange(role, e, float(raw_to_eng(e, reading.raw)), float(raw_to_eng(e, raw)), raw))
-    return sugg, changes
+        value = float(rigidity) if role == "rigidity" else from_canonical(role, e, getattr(sugg, GAIN_ROLES[role]))
+        raw = eng_to_raw(e, value)
+        changes.append(GainChange(role, e, float(raw_to_eng(e, reading.raw)), float(raw_to_eng(e, raw)), raw,
+                                  reading.raw))
+    return sugg, changes, found
+
+
+def drive_loop(drive: Drive) -> LoopGains:
+    """The gains the drive runs now, in canonical units (the factory's where a role is not mapped)."""
+    p = drive.profile
+    factory = rigidity_scale(p).factory
+    fallback = {"speed_loop_gain": factory.speed_hz, "speed_loop_integral": factory.integral_ms,
+                "position_loop_gain": factory.position_per_s, "torque_filter": factory.filter_ms}
+    present = [(role, e) for role in GAIN_ROLES if (e := p.role(role)) is not None]
+    values = dict(fallback)
+    for (role, e), reading in zip(present, drive.read_entries([e for _, e in present]), strict=True):
+        values[role] = to_canonical(role, e, float(raw_to_eng(e, reading.raw)))
+    return LoopGains(values["speed_loop_gain"], values["speed_loop_integral"], values["position_loop_gain"],
+                     values["torque_filter"])
 
 
 def ratio_raw(drive: Drive, load_ratio: float) -> tuple[Entry, int]:

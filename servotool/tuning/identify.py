@@ -131,6 +131,10 @@ class Identifier:
         counts = motor.counts_per_rev
         state = {"pos": None, "pos_t": t0, "lo": 0.0, "hi": 0.0, "pred": 0.0}
         guard: dict[str, float | None] = {"lo": None, "hi": None, "stretch": 1.0}
+        # The loop's lag (s): how much further than its ramp the axis coasted after a stop command, per speed. A
+        # speed loop configured for a fraction of the real inertia lags its ramps by tens of ms, more with high
+        # friction (the integral winds up at breakaway); the stop guard adds the travel of that lag.
+        lag = {"s": 0.0}
         pos_every = 0.05   # position costs a request of its own: read it at 20 Hz, predict from speed between
 
         together = len(coalesce_reads(p, [speed_e, torque_e])) == 1     # one request carries both
@@ -183,17 +187,22 @@ class Identifier:
                     stop_rev = guard["stretch"] * v * v * ramp / (2 * speed) / 60.0
                     # ... plus the travel until the stop command can act: the next sample and the write
                     stop_rev += v / 60.0 * 2.0 * (trace.t[-1] - trace.t[-2] if len(trace.t) > 1 else 0.0)
+                    stop_rev += v / 60.0 * lag["s"]
                     if (state["pred"] + stop_rev > guard["hi"]) if direction > 0 else \
                             (state["pred"] - stop_rev < guard["lo"]):
                         break
             jogger.command(0)
             stop = self.timing.now()
+            at_stop, v_stop = state["pred"], abs(trace.speed[-1]) if trace.speed else 0.0
             while self.timing.now() - stop < 3 * ramp + 0.5:
                 sample()
                 if self.timing.now() - stop >= ramp and abs(trace.speed[-1]) < stop_band:
                     break
             sample()
             sample()                      # two samples at rest separate this move from the next
+            if v_stop > stop_band:
+                coast = abs(state["pred"] - at_stop) - v_stop * v_stop * ramp / (2 * speed) / 60.0
+                lag["s"] = max(lag["s"], coast / (v_stop / 60.0))
             active = active_alarm(d)
             if active:
                 raise IdentificationFailed(f"the drive stopped the identification with alarm {active}")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -14,6 +16,8 @@ from servotool.ops.eeprom import ram_writes
 from servotool.tuning.identify import IdentificationFailed
 from servotool.tuning.preflight import FEATURE, active_alarm
 
+OVERSHOOT_LIMIT_PCT = 35.0    # a PI speed loop at 45 degrees of phase margin overshoots a fast step by about 30 %
+
 
 @dataclass(frozen=True)
 class StepResponse:
@@ -23,20 +27,33 @@ class StepResponse:
     overshoot_pct: float
     settling_ms: float | None     # within 5 % of the target for good; None when it never settles
     samples: int
+    ripple_pct: float = 0.0       # speed's standard deviation over the second half, % of the target (ringing)
     t_s: tuple[float, ...] = field(default=(), repr=False)       # the forward step's samples, for its chart
     speed_rpm: tuple[float, ...] = field(default=(), repr=False)
 
     def summary(self) -> dict[str, float | int | None]:
         """The figures without the samples."""
         return {"target_rpm": self.target_rpm, "overshoot_pct": self.overshoot_pct, "settling_ms": self.settling_ms,
-                "samples": self.samples}
+                "samples": self.samples, "ripple_pct": self.ripple_pct}
+
+    def failure(self, overshoot_limit_pct: float = OVERSHOOT_LIMIT_PCT) -> str | None:
+        """Why this response fails the check after writing gains (None: it passes)."""
+        if self.settling_ms is None:
+            return "the speed does not settle"
+        if self.overshoot_pct > overshoot_limit_pct:
+            return f"overshoot {self.overshoot_pct:.0f} % over the {overshoot_limit_pct:g} % limit"
+        if self.ripple_pct > RIPPLE_LIMIT_PCT:
+            return f"the speed rings ({self.ripple_pct:.1f} % ripple at constant speed)"
+        return None
 
     def describe(self) -> str:
         settle = f"{self.settling_ms:.0f} ms" if self.settling_ms is not None else "does not settle"
-        return f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}"
+        return f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}, " \
+               f"ripple {self.ripple_pct:.1f} %"
 
 
 STEP_SPEED_RPM = 200.0
+RIPPLE_LIMIT_PCT = 3.0        # a loop that keeps oscillating (torque at its limit) shows as ripple, often aliased
 
 
 def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> float:
@@ -104,5 +121,7 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Cl
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
         (t[outside[-1] + 1] if outside else t[0]) * 1000
+    late = [x for tt, x in zip(t, v, strict=True) if tt >= duration_s / 2]
+    ripple = float(np.std(late)) / speed_rpm * 100 if len(late) > 2 else 0.0
     return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v),
-                        tuple(t), tuple(v))
+                        ripple, tuple(t), tuple(v))

@@ -19,7 +19,8 @@ from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, identify, planning, preflight, step
 from servotool.tuning.gain_writes import GainChange
-from servotool.tuning.gains import GainSuggestion, suggest_gains
+from servotool.tuning.gains import GainSuggestion, rigidity_scale, suggest_gains
+from servotool.tuning.margins import Margins
 from servotool.tuning.planning import MotionPlan
 from servotool.tuning.preflight import RestCheck
 from servotool.tuning.step import StepResponse
@@ -41,6 +42,8 @@ class TuneRequest:
     save: bool | None = None             # EEPROM: None as the drive is set, True store, False keep out
     dry_run: bool = False                # identify and report; write nothing
     step_check: bool = False             # a speed step before and after (the after one only once written)
+    verify: bool = False                 # a step check after gains are written; failed: the old gains go back
+    force: bool = False                  # write gains even with too little phase/gain margin
     trace_path: Path | None = None       # the sampled trace, also when the identification fails
 
     def nominal_motion(self, profile: Profile) -> MotionPlan:
@@ -61,15 +64,15 @@ def check_request(profile: Profile, request: TuneRequest, feature: str | None = 
     if request.method not in ("host", "drive"):
         raise UsageError("--method must be host or drive")
     eeprom.check_save_request(profile, request.save)
-    if request.step_check:
+    if request.step_check or request.verify:
         step.step_duration_s(request.travel_rev)
     motion = request.nominal_motion(profile) if request.method == "host" else None
     preflight.check_profile(profile, request.method, feature)
     if request.gains and (request.rigidity is not None or request.bandwidth_hz is not None):
         rotor = profile.motor.rotor_inertia_kgcm2 if profile.motor is not None else 1.0
         try:   # the rules the gains will be computed with, on a nominal load
-            suggest_gains(rotor_inertia_kgcm2=rotor, load_ratio=1.0, rigidity=request.rigidity,
-                          bandwidth_hz=request.bandwidth_hz)
+            suggest_gains(rotor_inertia_kgcm2=rotor, scale=rigidity_scale(profile), load_ratio=1.0,
+                          rigidity=request.rigidity, bandwidth_hz=request.bandwidth_hz)
         except ValueError as exc:
             raise UsageError(f"{feature}: {exc}" if feature else str(exc)) from None
     return motion
@@ -84,6 +87,8 @@ class Proposal:
     parameter_raw: int | None
     suggestion: GainSuggestion | None
     gain_changes: list[GainChange]
+    margins: Margins | None = None       # of the suggested gains on the identified inertia
+    profile: Profile | None = None
 
     @property
     def ratio(self) -> float:
@@ -113,6 +118,7 @@ class TuneResult:
     step_before: StepResponse | None = None
     step_after: StepResponse | None = None
     written: list[tuple[Entry, int]] = field(default_factory=list)   # (entry, raw) in the order written
+    verified: StepResponse | None = None   # the step check after the gains were written (request.verify)
 
     @property
     def identified(self) -> identify.Result:
@@ -125,6 +131,16 @@ class TuneResult:
 
 class TuneDeclined(ServoError):
     """The operator said no before anything moved."""
+
+
+class GainsRolledBack(ServoError):
+    """The step check after writing the gains failed; the previous gains were written back."""
+
+    exit_code = 1
+
+    def __init__(self, message: str, response: StepResponse | None) -> None:
+        super().__init__(message)
+        self.response = response
 
 
 def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = None,
@@ -159,6 +175,8 @@ def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = No
         raise
     if request.trace_path is not None:
         result.trace.save(request.trace_path)
+    if result.method == "drive" and not request.dry_run:
+        check_drive_result(drive, result, request, clock)
     proposal = propose(drive, result, request)
     if on_proposal is not None:
         on_proposal(proposal)
@@ -167,18 +185,63 @@ def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = No
     written, persisted = _write(drive, proposal, approved, request.save)
     # The host method stores the ratio by writing it; the drive method's drive stored its own (kept unless dry run).
     stored = (proposal.writes_ratio and written != []) if request.method == "host" else not request.dry_run
-    after = _step(drive, step_s, clock) if before is not None and stored else None
+    verified = verify_gains(drive, proposal.gain_changes, request, clock) if \
+        request.verify and approved and proposal.gain_changes else None
+    changed = stored or bool(written)     # SDC stores no ratio: its gains changed all the same
+    after = verified or (_step(drive, step_s, clock) if before is not None and changed else None)
     return TuneResult(proposal, stored, approved and bool(proposal.gain_changes), persisted, clock.now() - t0,
-                      before, after, written)
+                      before, after, written, verified)
+
+
+def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, clock: Clock) -> StepResponse:
+    """The step check after the gains were written; on no settling, overshoot over the limit or an alarm the
+    previous gains go back (by the same EEPROM rule) and GainsRolledBack is raised."""
+    response: StepResponse | None = None
+    try:
+        response = step.step_response(drive, step.STEP_SPEED_RPM, step.step_duration_s(request.travel_rev), clock)
+        fault = response.failure()
+    except ServoError as exc:
+        fault = str(exc)
+    if fault is None:
+        assert response is not None
+        return response
+    with eeprom.persistence(drive, request.save):
+        for c in changes:
+            write_one(drive, c.entry, c.old_raw)
+    raise GainsRolledBack(f"step check after writing the gains failed ({fault}): the previous gains were written "
+                          "back", response)
+
+
+def check_drive_result(drive: Drive, result: identify.Result, request: TuneRequest, clock: Clock) -> None:
+    """A drive-side result is checked before it is kept: the host method measures the same load (it also fits the
+    friction the drive's method may mistake for inertia, +71 % at 30 % friction on the simulated DSX7E); a result
+    outside the host's 3 sigma (plus 5 % of J_total) is put back to the previous value and refused."""
+    motion, rest = request.host_motion(drive, clock)
+    host = identify.Identifier(drive, clock).run_host(motion, rest=rest)
+    est = host.estimate
+    assert est is not None
+    tolerance = 3 * est.ratio_std + 0.05 * (1 + host.new_ratio)
+    if abs(result.new_ratio - host.new_ratio) <= tolerance:
+        return
+    if result.old_ratio is not None:
+        entry, raw = gain_writes.ratio_raw(drive, result.old_ratio)
+        with eeprom.persistence(drive, request.save):
+            write_one(drive, entry, raw)
+    raise identify.IdentificationFailed(
+        f"the drive's identification gave load ratio {result.new_ratio:.2f}, implausible against the host "
+        f"measurement {host.new_ratio:.2f} ± {est.ratio_std:.2f} (friction {est.coulomb_nm:.3g} N·m): the previous "
+        f"ratio {result.old_ratio:.2f} was put back; use --method host")
 
 
 def propose(drive: Drive, result: identify.Result, request: TuneRequest) -> Proposal:
     """The ratio parameter value (where the profile maps one; SDC does not) and the gains for the result."""
     entry, raw = gain_writes.ratio_raw(drive, result.new_ratio) if drive.profile.role("inertia_ratio") else \
         (None, None)
-    sugg, changes = gain_writes.gain_changes(drive, result.new_ratio, rigidity=request.rigidity,
-                                             bandwidth_hz=request.bandwidth_hz) if request.gains else (None, [])
-    return Proposal(result, entry, raw, sugg, changes)
+    if not request.gains:
+        return Proposal(result, entry, raw, None, [], None, drive.profile)
+    sugg, changes, found = gain_writes.gain_changes(drive, result.new_ratio, rigidity=request.rigidity,
+                                                    bandwidth_hz=request.bandwidth_hz, force=request.force)
+    return Proposal(result, entry, raw, sugg, changes, found, drive.profile)
 
 
 def _write(drive: Drive, proposal: Proposal, approved: bool, save: bool | None

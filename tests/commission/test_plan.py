@@ -67,7 +67,7 @@ def test_dry_run_touches_nothing(cli, tmp_path):
     ("port: sim\nsteps:\n  - wait: 1\n    unit: 9\n", "needs the plan's 'units:' list"),
     ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - jog: {speed: fast, time: 1}\n", "jog speed must be a number"),
     ("port: sim\nsteps:\n  - jog: {speed: 600, time: 10, max_travel: 5}\n", "over its max_travel 5 rev"),
-    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - tune inertia: {rigidity: 99}\n", "rigidity must be 1..31"),
+    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - tune inertia: {rigidity: 99}\n", "rigidity must be 0..31"),
     ("port: sim\nsteps:\n  - tune inertia: {rigidity: 12, bandwidth: 20}\n", "exactly one of rigidity"),
     ("port: sim\nsteps:\n  - tune inertia: {repeats: many}\n", "repeats must be a number"),
     ("port: sim\nsteps:\n  - tune inertia: {travel: 0.05}\n", "too small for an identification"),

@@ -1,4 +1,4 @@
-"""Gain suggestions: the rigidity table, the cascade rules, scaling with inertia and refusal of bad input."""
+"""Gain suggestions: each drive's own levels, the factory ratios, margins, scaling with inertia, bad input."""
 
 from __future__ import annotations
 
@@ -7,34 +7,36 @@ from itertools import pairwise
 
 import pytest
 
-from servotool.tuning.gains import (
-    RIGIDITY_BANDWIDTH_HZ,
-    GainSuggestion,
-    rigidity_bandwidth_hz,
-    suggest_gains,
-)
+from servotool.model.loader import load_profile
+from servotool.tuning.gains import LEVEL_STEP, GainSuggestion, rigidity_scale, suggest_gains
+from servotool.tuning.margins import margins
 
 ROTOR_KGCM2 = 0.29
 JM = ROTOR_KGCM2 * 1e-4
+SD25 = rigidity_scale(load_profile("sd25"))
 
 
-def by_rigidity(rigidity: int, ratio: float = 3.0) -> GainSuggestion:
-    return suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, load_ratio=ratio, rigidity=rigidity)
+def by_rigidity(rigidity: int, ratio: float = 3.0, scale=SD25) -> GainSuggestion:
+    return suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, scale=scale, load_ratio=ratio, rigidity=rigidity)
 
 
-def test_rigidity_table_spans_1_to_400_hz_geometrically() -> None:
-    assert len(RIGIDITY_BANDWIDTH_HZ) == 31
-    assert RIGIDITY_BANDWIDTH_HZ[0] == 1.0 and RIGIDITY_BANDWIDTH_HZ[-1] == 400.0
-    steps = [b / a for a, b in pairwise(RIGIDITY_BANDWIDTH_HZ)]
-    assert all(1.15 < s < 1.30 for s in steps)  # 400**(1/30) = 1.221, blurred only by 0.1 Hz rounding
-    assert rigidity_bandwidth_hz(16) == pytest.approx(20.0)
+@pytest.mark.parametrize("profile_id, levels, factory_level, factory_hz, parameter", [
+    ("sd25", (1, 40), 6, 60.0, "Po010"), ("is620p", (0, 31), 12, 25.0, "H09-01"),
+    ("dsx7e", (0, 31), 13, 18.0, "Pn003"), ("sdc", (0, 19), 10, 200.0, None)])
+def test_each_drive_has_its_own_levels_anchored_at_its_factory_gains(profile_id, levels, factory_level, factory_hz,
+                                                                      parameter) -> None:
+    """The drive's own factory level gives its factory speed gain (SD25: 60 Hz, not servotool's old 2.7 Hz)."""
+    scale = rigidity_scale(load_profile(profile_id))
+    assert (scale.lowest, scale.highest, scale.factory_level) == (*levels, factory_level)
+    assert scale.bandwidth_hz(factory_level) == pytest.approx(factory_hz)
+    assert scale.bandwidth_hz(factory_level + 4) == pytest.approx(2 * factory_hz)     # four levels per doubling
+    assert (scale.parameter.code if scale.parameter else None) == parameter
 
 
 def test_gains_are_monotonic_in_rigidity() -> None:
-    gains = [by_rigidity(r) for r in range(1, 32)]
+    gains = [by_rigidity(r) for r in range(1, 41)]
     for lo, hi in pairwise(gains):
-        assert hi.bandwidth_hz > lo.bandwidth_hz
-        assert hi.speed_loop_gain_hz > lo.speed_loop_gain_hz
+        assert hi.bandwidth_hz == pytest.approx(lo.bandwidth_hz * LEVEL_STEP)
         assert hi.speed_kp_nm_s_per_rad > lo.speed_kp_nm_s_per_rad
         assert hi.position_loop_gain_per_s > lo.position_loop_gain_per_s
         assert hi.speed_integral_ms < lo.speed_integral_ms
@@ -42,15 +44,22 @@ def test_gains_are_monotonic_in_rigidity() -> None:
     assert all(g.rigidity == r for r, g in enumerate(gains, start=1))
 
 
+def test_the_factory_ratios_hold_at_every_level_and_the_filter_sits_8x_above_or_more() -> None:
+    is620p = rigidity_scale(load_profile("is620p"))
+    for level in (0, 12, 20, 31):
+        g = by_rigidity(level, scale=is620p)
+        wc = 2 * math.pi * g.speed_loop_gain_hz
+        assert wc * g.speed_integral_ms / 1000 == pytest.approx(2 * math.pi * 25 * 0.03183)   # the PI zero's place
+        assert g.position_loop_gain_per_s / g.speed_loop_gain_hz == pytest.approx(40 / 25)
+        assert 1000 / (2 * math.pi * g.torque_filter_ms) >= 7.9 * g.speed_loop_gain_hz     # not the old 4x
+
+
 def test_rules_at_an_explicit_bandwidth() -> None:
-    g = suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, load_ratio=3.0, bandwidth_hz=50.0)
-    wc = 2 * math.pi * 50.0
-    assert g.rigidity is None
-    assert g.speed_loop_gain_hz == 50.0
-    assert g.speed_kp_nm_s_per_rad == pytest.approx(wc * 4 * JM)
-    assert g.speed_integral_ms == pytest.approx(4000 / wc)  # 12.7 ms
-    assert g.position_loop_gain_per_s == pytest.approx(wc / 4)  # 78.5 1/s
-    assert g.torque_filter_ms == pytest.approx(1000 / (4 * wc))  # 0.80 ms
+    g = suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, scale=SD25, load_ratio=3.0, bandwidth_hz=120.0)
+    assert g.rigidity is None and g.speed_loop_gain_hz == 120.0
+    assert g.speed_kp_nm_s_per_rad == pytest.approx(2 * math.pi * 120 * 4 * JM)
+    assert g.speed_integral_ms == pytest.approx(25.0)                 # the factory 50 ms at 60 Hz, scaled
+    assert g.position_loop_gain_per_s == pytest.approx(80.0)
 
 
 def test_absolute_gain_scales_with_inertia_and_hz_gains_do_not() -> None:
@@ -62,28 +71,40 @@ def test_absolute_gain_scales_with_inertia_and_hz_gains_do_not() -> None:
     assert heavy.speed_integral_ms == bare.speed_integral_ms
 
 
+def test_margins_fall_with_the_level_and_match_a_textbook_loop() -> None:
+    is620p = rigidity_scale(load_profile("is620p"))
+    found = [margins(is620p.factory.scaled(is620p.factor(level)), 4 * JM) for level in (12, 21, 30)]
+    assert 60 < found[0].phase_deg < 75 and found[0].gain_db > 15            # the factory level: comfortable
+    assert 40 < found[1].phase_deg < 50                                      # about the 45 degree limit
+    assert found[2].phase_deg < 0 and not found[2].ok()                      # unstable
+    # IS620P's factory gains configured for ratio 1 on a load of 49: the speed loop alone is stable but poorly
+    # damped, a position loop around it is unstable (the growing oscillation of a position hold, issue 16)
+    far_off = margins(is620p.factory, 50 * JM, 2 * JM)
+    assert 0 < far_off.speed_phase_deg < 30 and far_off.position_phase_deg < 0
+
+
 def test_total_inertia_and_ratio_inputs_agree() -> None:
     from_ratio = by_rigidity(12, ratio=20.0)
-    from_j = suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, j_total_kgm2=21 * JM, rigidity=12)
+    from_j = suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, scale=SD25, j_total_kgm2=21 * JM, rigidity=12)
     assert from_j.load_ratio == pytest.approx(20.0)
     assert from_j.speed_kp_nm_s_per_rad == pytest.approx(from_ratio.speed_kp_nm_s_per_rad)
 
 
 def test_identified_inertia_a_hair_below_the_rotor_is_taken_as_the_rotor() -> None:
-    g = suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, j_total_kgm2=0.99 * JM, rigidity=10)
+    g = suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, scale=SD25, j_total_kgm2=0.99 * JM, rigidity=10)
     assert g.load_ratio == 0.0 and g.j_total_kgm2 == pytest.approx(JM)
 
 
-@pytest.mark.parametrize("rigidity", [0, 32, -1, 3.5, True, "10"])
+@pytest.mark.parametrize("rigidity", [0, 41, -1, 3.5, True, "10"])
 def test_rejects_bad_rigidity(rigidity: object) -> None:
-    with pytest.raises(ValueError, match="rigidity"):
-        suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, load_ratio=1.0, rigidity=rigidity)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"rigidity must be 1\.\.40"):
+        suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, scale=SD25, load_ratio=1.0, rigidity=rigidity)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("bandwidth", [0.0, -5.0, math.inf, math.nan, 5000.0])
 def test_rejects_bad_bandwidth(bandwidth: float) -> None:
     with pytest.raises(ValueError, match="bandwidth"):
-        suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, load_ratio=1.0, bandwidth_hz=bandwidth)
+        suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, scale=SD25, load_ratio=1.0, bandwidth_hz=bandwidth)
 
 
 @pytest.mark.parametrize(
@@ -101,13 +122,13 @@ def test_rejects_bad_bandwidth(bandwidth: float) -> None:
 )
 def test_rejects_bad_inertia_and_missing_choices(kwargs: dict[str, float], message: str) -> None:
     with pytest.raises(ValueError, match=message):
-        suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, **kwargs)  # type: ignore[arg-type]
+        suggest_gains(rotor_inertia_kgcm2=ROTOR_KGCM2, scale=SD25, **kwargs)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("rotor", [0.0, -0.3, math.nan])
 def test_rejects_bad_rotor_inertia(rotor: float) -> None:
     with pytest.raises(ValueError, match="rotor inertia"):
-        suggest_gains(rotor_inertia_kgcm2=rotor, load_ratio=1.0, rigidity=5)
+        suggest_gains(rotor_inertia_kgcm2=rotor, scale=SD25, load_ratio=1.0, rigidity=5)
 
 
 def test_gain_units_follow_what_each_drive_prints():

@@ -32,7 +32,9 @@ def test_tune_sets_gains_for_a_rigidity_and_saves_the_trace(cli, tmp_path):
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--rigidity", "14", "--save-trace", str(trace))
     assert r.code == 0, r.err
     gains = {g["role"]: g for g in r.json()["gains"]}
-    assert set(gains) == {"speed_loop_gain", "speed_loop_integral", "position_loop_gain", "torque_filter"}
+    assert set(gains) == {"speed_loop_gain", "speed_loop_integral", "position_loop_gain", "torque_filter", "rigidity"}
+    assert gains["rigidity"]["code"] == "Pn003" and gains["rigidity"]["new"] == 14     # DSX7E's own level, written
+    assert r.json()["phase_margin_deg"] >= 45 and r.json()["gain_margin_db"] >= 6
     now = cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"]
     assert now == pytest.approx(gains["speed_loop_gain"]["new"])
     lines = trace.read_text().splitlines()
@@ -82,7 +84,7 @@ def test_drive_method_dry_run_puts_the_old_ratio_back(cli):
 
 @pytest.mark.parametrize("args, message", [
     (("--travel", "nan"), "--travel must be a number"),
-    (("--rigidity", "40"), "rigidity must be 1..31"),
+    (("--rigidity", "40"), "rigidity must be 0..31 (this drive's own levels, factory 13)"),
     (("--bandwidth", "5000"), "bandwidth must be"),
     (("--save-trace", "/nonexistent-dir/t.csv"), "cannot write the trace"),
     (("--step-check", "--travel", "0.5"), "--step-check needs"),
@@ -211,3 +213,15 @@ def test_an_axis_switched_on_from_elsewhere_is_not_moved_nor_switched_off(cli):
     assert r.code == 2 and "servo is on" in r.err
     r = cli("--port", "sim", "--profile", "is620p", "param", "get", "H31-00", "H08-15", "--json")
     assert [row["changed"] for row in r.json()] == [True, False]            # still on, ratio untouched
+
+
+def test_tune_gains_prints_the_levels_tried_and_keeps_one(cli):
+    cli("sim", "config", "--load-ratio", "3")
+    assert cli("--port", "sim", "param", "set", "Pn004=400").code == 0       # as tune inertia would write it
+    r = cli("--port", "sim", "tune", "gains", "--yes", "--json", "--from", "16", "--to", "18")
+    assert r.code == 0, r.err
+    res = r.json()
+    assert [row["level"] for row in res["levels"]] == [16, 17, 18] and res["chosen"] == 18
+    assert all(row["phase_margin_deg"] >= 45 and row["failure"] is None for row in res["levels"])
+    assert _params(cli, "Pn003")["Pn003"] == 18
+

@@ -1,0 +1,137 @@
+"""`tune gains`: raise the drive's own rigidity level step by step with a step check at each, as vendors'
+one-parameter auto-tuning does; stop at the first level that overshoots, rings or trips, back off, keep a safe level.
+
+Levels are tried only where the computed margins allow them (tuning.margins): the search never writes gains the
+margin check refuses. Each level's gains are written to RAM where the drive lets us keep them out of EEPROM; the
+chosen level is written last by the drive's EEPROM rule (save). When even the first level fails, the gains the
+drive had go back and the search fails.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from servotool.clock import Clock, RealClock
+from servotool.drive import Drive
+from servotool.errors import ServoError, UsageError
+from servotool.model.codec import raw_to_eng
+from servotool.ops import eeprom
+from servotool.ops.params import write_one
+from servotool.tuning import gain_writes, step
+from servotool.tuning.gain_writes import GainChange
+from servotool.tuning.gains import rigidity_scale
+from servotool.tuning.margins import Margins
+from servotool.tuning.preflight import preflight
+from servotool.tuning.step import StepResponse
+
+BACK_OFF_LEVELS = 1      # below the last level that passed: a margin for load changes and wear
+
+
+@dataclass(frozen=True)
+class LevelTrial:
+    level: int
+    speed_gain_hz: float
+    margins: Margins
+    response: StepResponse | None
+    failure: str | None          # None: passed
+
+
+@dataclass
+class GainSearch:
+    load_ratio: float
+    start_level: int
+    trials: list[LevelTrial] = field(default_factory=list)
+    chosen: int | None = None
+    changes: list[GainChange] = field(default_factory=list)   # the chosen level's writes (old: before the search)
+    persisted: bool | None = None
+    reason: str = ""                                         # why the search stopped where it did
+
+
+class GainSearchFailed(ServoError):
+    """Not even the first level passed its step check; the previous gains are back."""
+
+    exit_code = 1
+
+    def __init__(self, message: str, search: GainSearch) -> None:
+        super().__init__(message)
+        self.search = search
+
+
+def drive_load_ratio(drive: Drive, load_ratio: float | None) -> float:
+    """The load ratio to tune for: given, else the drive's inertia-ratio parameter (identified by tune inertia)."""
+    if load_ratio is not None:
+        if not 0 <= load_ratio <= 1000:
+            raise UsageError("--load-ratio must be 0..1000 (J_load/J_motor)")
+        return load_ratio
+    entry = drive.profile.role("inertia_ratio")
+    if entry is None:
+        raise UsageError(f"{drive.profile.id} keeps no inertia ratio: give --load-ratio (from tune inertia --dry-run)")
+    return drive.profile.load_ratio_from_param(float(raw_to_eng(entry, drive.read_entries([entry])[0].raw)))
+
+
+def search_gains(drive: Drive, *, load_ratio: float | None = None, start: int | None = None, top: int | None = None,
+                 travel_rev: float = 2.0, save: bool | None = None, clock: Clock | None = None,
+                 progress: Callable[[LevelTrial], None] | None = None) -> GainSearch:
+    """Try levels from `start` (the drive's current level) up to `top` (the highest the margins allow)."""
+    clock = clock or RealClock()
+    p = drive.profile
+    eeprom.check_save_request(p, save)
+    duration = step.step_duration_s(travel_rev)
+    scale = rigidity_scale(p)
+    ratio = drive_load_ratio(drive, load_ratio)
+    motor = p.motor
+    assert motor is not None
+    j_total = motor.rotor_inertia_kgcm2 * 1e-4 * (1 + ratio)
+    first = scale.check(start) if start is not None else gain_writes.current_level(drive, scale)
+    highest = gain_writes.safe_level(p, scale, j_total, scale.check(top) if top is not None else None)
+    if highest is None or highest < first:
+        raise UsageError(f"no level from {first} up keeps 45° and 6 dB of margin on load ratio {ratio:.2f}")
+    preflight(drive, "host")
+    search = GainSearch(ratio, first)
+    original: list[GainChange] = []
+    for level in range(first, highest + 1):
+        sugg, changes, found = gain_writes.gain_changes(drive, ratio, rigidity=level, bandwidth_hz=None)
+        original = original or changes
+        _write(drive, changes, False)
+        try:
+            response: StepResponse | None = step.step_response(drive, step.STEP_SPEED_RPM, duration, clock)
+            failure = response.failure() if response is not None else None
+        except ServoError as exc:
+            response, failure = None, str(exc)
+        trial = LevelTrial(level, sugg.speed_loop_gain_hz, found, response, failure)
+        search.trials.append(trial)
+        if progress is not None:
+            progress(trial)
+        if failure is not None:
+            break
+    passed = [t.level for t in search.trials if t.failure is None]
+    if not passed:
+        _restore(drive, original, save)
+        raise GainSearchFailed(f"level {first} already fails its step check ({search.trials[0].failure}): the "
+                               "previous gains were written back", search)
+    failed = any(t.failure is not None for t in search.trials)
+    chosen = max(first, passed[-1] - BACK_OFF_LEVELS) if failed else passed[-1]
+    _sugg, changes, _m = gain_writes.gain_changes(drive, ratio, rigidity=chosen, bandwidth_hz=None)
+    search.chosen = chosen
+    last = search.trials[-1]
+    search.reason = f"level {last.level} failed ({last.failure}): backed off to {chosen}" if failed else \
+        f"level {chosen} is the highest with 45° and 6 dB of computed margin"
+    search.changes = [GainChange(c.role, c.entry, o.old, c.new, c.raw, o.old_raw)
+                      for c, o in zip(changes, original, strict=True)]
+    search.persisted = _write(drive, changes, save)
+    return search
+
+
+def _write(drive: Drive, changes: list[GainChange], save: bool | None) -> bool:
+    with eeprom.persistence(drive, save) as outcome:
+        for c in changes:
+            write_one(drive, c.entry, c.raw)
+    return outcome["persisted"]
+
+
+def _restore(drive: Drive, original: list[GainChange], save: bool | None) -> None:
+    with eeprom.persistence(drive, save):
+        for c in original:
+            write_one(drive, c.entry, c.old_raw)
+

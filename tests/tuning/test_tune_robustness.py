@@ -1,0 +1,146 @@
+"""tune inertia on loads and line settings the first version got wrong (issue 16), in-process on virtual time."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from servotool.clock import VirtualClock
+from servotool.drive import Drive
+from servotool.model.loader import load_profile
+from servotool.model.setup import requirements
+from servotool.sim.firmware import build_drive
+from servotool.sim.virtual import VirtualLink
+from servotool.tuning.friction import friction_report
+from servotool.tuning.gain_search import GainSearchFailed, search_gains
+from servotool.tuning.gain_writes import MarginRefused
+from servotool.tuning.identify import IdentificationFailed
+from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
+
+
+def set_up(profile_id: str, baud: int = 115200, **machine: float):
+    """(simulated drive, host Drive, clock) of a drive with its motion setup made, on virtual time."""
+    profile = load_profile(profile_id)
+    clock = VirtualClock(100.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    sim.settings.update(**machine)
+    sim.firmware.reconfigure()
+    for _power_up in range(2):       # stored and power-cycled (SD25's DI functions act after a power cycle), then
+        for req in requirements(profile):   # once more for what a power-up clears (SD25's So-58)
+            now = sim.bank.effective_value(req.entry.code)
+            sim.bank.apply_parameter(req.entry, (now & ~req.mask) | (req.wanted & req.mask))
+        sim.bank.save_eeprom()
+        if _power_up == 0:
+            sim.power_cycle()
+    sim.firmware.plant.set_gains(sim.firmware._gains())
+    return sim, Drive(VirtualLink([sim], clock, baud), profile, 1), clock
+
+
+@pytest.mark.parametrize("ratio,seed", [(37.0, 2), (49.0, 1)])
+def test_is620p_with_a_heavy_load_identifies_instead_of_oscillating_after_the_pilot(sim_dir, ratio, seed):
+    """IS620P's speed mode has no position loop: at the factory ratio 1.00 with a load of 37-49 a position hold
+    after the pilot swung with growing amplitude until the travel guard stopped it (these seeds did, at 57600)."""
+    sim, d, clock = set_up("is620p", 57600, load_ratio=ratio, friction=0.02, noise=0.002, seed=seed)
+    peak = [0.0]
+    sim.on_read.append(lambda _d: peak.__setitem__(0, max(peak[0], abs(sim.firmware.plant.true_speed_rpm))))
+    res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    est = res.identified.estimate
+    assert est is not None and abs(res.ratio - ratio) <= 3 * est.ratio_std
+    assert peak[0] < 1.3 * res.identified.plan.speed_rpm          # no swing beyond the planned speed
+
+
+GAIN_CODES = ("Pn101", "Pn102", "Pn100", "Pn128", "Pn003")
+
+
+def _raws(d, codes=GAIN_CODES) -> list[int]:
+    return [r.raw for r in d.read_entries([d.profile.entry(c) for c in codes])]
+
+
+def test_gains_without_the_margins_are_refused_and_nothing_is_written(sim_dir):
+    _sim, d, clock = set_up("dsx7e", load_ratio=3.0, noise=0.002)
+    before = _raws(d, (*GAIN_CODES, "Pn004"))
+    with pytest.raises(MarginRefused, match=r"rigidity 31 leaves phase margin -\d+°.*highest level that keeps them"):
+        tune_inertia(d, TuneRequest(gains=True, rigidity=31), clock=clock)
+    assert _raws(d, (*GAIN_CODES, "Pn004")) == before
+
+
+def test_gains_that_fail_the_step_check_are_rolled_back(sim_dir):
+    """Forced past the margins, DSX7E's level 31 oscillates on the simulated drive: the check after writing sees
+    it, the previous gains go back, and the use case fails (the CLI exits non-zero)."""
+    _sim, d, clock = set_up("dsx7e", load_ratio=3.0, noise=0.002)
+    before = _raws(d)
+    with pytest.raises(GainsRolledBack, match="previous gains were written back") as failed:
+        tune_inertia(d, TuneRequest(gains=True, rigidity=31, force=True, verify=True), clock=clock)
+    assert failed.value.exit_code == 1 and failed.value.response is not None
+    assert _raws(d) == before
+
+
+def test_gains_at_a_safe_level_pass_the_step_check_and_stay(sim_dir):
+    _sim, d, clock = set_up("dsx7e", load_ratio=3.0, noise=0.002)
+    res = tune_inertia(d, TuneRequest(gains=True, rigidity=18, verify=True), clock=clock)
+    assert res.verified is not None and res.verified.failure() is None
+    assert res.proposal.margins is not None and res.proposal.margins.ok()
+    assert _raws(d)[-1] == 18 and res.gains_written                   # the drive's own rigidity parameter too
+
+
+
+def test_tune_gains_raises_the_level_until_a_step_check_fails_and_backs_off(sim_dir):
+    """Told a load 20x the real one, the gains come out 21x too stiff: a level inside the computed margins still
+    overshoots on the machine; the search stops there, backs off one level and keeps that level's gains."""
+    _sim, d, clock = set_up("dsx7e", load_ratio=0.0, friction=0.02, noise=0.002)
+    res = search_gains(d, load_ratio=20.0, clock=clock)
+    failed = [t for t in res.trials if t.failure]
+    assert len(failed) == 1 and failed[0] is res.trials[-1]                     # stopped at the first failure
+    assert [t.level for t in res.trials] == list(range(13, failed[0].level + 1))  # from the drive's own level up
+    assert res.chosen == failed[0].level - 2 and "backed off" in res.reason
+    assert all(t.margins.ok() for t in res.trials)                              # never beyond the margins
+    assert _raws(d)[-1] == res.chosen                                            # Pn003 holds the level kept
+    assert _raws(d)[0] == next(c.raw for c in res.changes if c.entry.code == "Pn101")
+
+
+def test_tune_gains_that_fail_at_the_first_level_put_the_old_gains_back(sim_dir):
+    _sim, d, clock = set_up("dsx7e", load_ratio=0.0, friction=0.02, noise=0.002)
+    before = _raws(d)
+    with pytest.raises(GainSearchFailed, match="previous gains were written back"):
+        search_gains(d, load_ratio=60.0, start=22, clock=clock)
+    assert _raws(d) == before
+
+
+def test_friction_is_reported_in_drive_units_with_the_drives_compensation_entries(sim_dir):
+    _sim, d, clock = set_up("sdc", load_ratio=3.0, friction=0.1, viscous=0.0005, noise=0.002)
+    res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    report = friction_report(d.profile, res.identified.estimate)
+    assert report is not None and report.coulomb_pct == pytest.approx(10.0, abs=1.0)
+    assert report.viscous_pct_at_rated == pytest.approx(0.0005 * 100 * 2 * math.pi * 50, rel=0.25)   # 15.7 %
+    suggested = {s.entry.code: s.value for s in report.settings}
+    assert set(suggested) == {"PN137", "PN138", "PN139", "PN140"}
+    assert suggested["PN137"] == pytest.approx(report.coulomb_pct, abs=0.1)
+
+
+def test_a_drive_side_result_fooled_by_friction_is_put_back_and_refused(sim_dir):
+    """DSX7E's own identification reads 30 % friction as inertia (9.3 for a load of 5): the host method's check
+    catches it before it is kept."""
+    _sim, d, clock = set_up("dsx7e", load_ratio=5.0, friction=0.3, noise=0.002)
+    before = _raws(d, ("Pn004",))
+    with pytest.raises(IdentificationFailed, match=r"implausible against the host measurement (4\.9|5\.0)"):
+        tune_inertia(d, TuneRequest(method="drive"), clock=clock)
+    assert _raws(d, ("Pn004",)) == before
+    _sim, d, clock = set_up("dsx7e", load_ratio=5.0, friction=0.02, noise=0.002)
+    assert tune_inertia(d, TuneRequest(method="drive"), clock=clock).ratio == pytest.approx(5.0, rel=0.1)
+
+
+UNMET_AT_FACTORY = "issue 16 item 1 not done: at 9600 baud SD25 (8 samples/s: speed and torque take two requests) " \
+    "and SDC get too little excitation within 2 rev; see bench/inertia_accuracy.py --profiles"
+
+
+@pytest.mark.parametrize("profile_id, baud", [
+    pytest.param("sd25", 9600, marks=pytest.mark.xfail(reason=UNMET_AT_FACTORY, strict=False)),
+    pytest.param("sdc", 9600, marks=pytest.mark.xfail(reason=UNMET_AT_FACTORY, strict=False)),
+    ("is620p", 57600), ("dsx7e", 115200), ("sdc", 19200)])
+def test_identification_at_each_drives_factory_line_speed(sim_dir, profile_id, baud):
+    _sim, d, clock = set_up(profile_id, baud, load_ratio=5.0, friction=0.05, noise=0.002, seed=3)
+    res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    est = res.identified.estimate
+    assert est is not None and abs(res.ratio - 5.0) <= 3 * est.ratio_std
+    assert res.identified.travel_used_rev <= 2.0 and res.seconds <= 12.0
