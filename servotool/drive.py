@@ -102,10 +102,12 @@ def coalesce_reads(profile: Profile, entries: Iterable[Entry]) -> list[tuple[int
 class Drive:
     """One drive (unit) on a link, described by a profile."""
 
-    def __init__(self, link: Link, profile: Profile, unit: int) -> None:
+    def __init__(self, link: Link, profile: Profile, unit: int, *, port: str = "") -> None:
+        """port names the bus for the host's journal and write lock (ops/journal); "" for in-process links."""
         self.link = link
         self.profile = profile
         self.unit = unit
+        self.port = port
 
     # ----- reading -------------------------------------------------------------------------------------------
     def read_entries(self, entries: Iterable[Entry], progress: Callable[[int], None] | None = None) -> list[Reading]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 
 import typer
@@ -71,6 +72,7 @@ def main(
 def run() -> None:
     """Console-script entry point: one clear line and an exit code for every failure."""
     given = State()       # the options given on the command line, filled in by main(); fix commands repeat them
+    _interrupt_on_termination()
     try:
         result = app(prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
@@ -88,6 +90,18 @@ def run() -> None:
                   markup=False)
         sys.exit(1)
     sys.exit(result if isinstance(result, int) else 0)
+
+
+def _terminated(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def _interrupt_on_termination() -> None:
+    """A terminate or hang-up signal unwinds like Ctrl-C, so every `finally` puts back what it changed on a drive
+    (the EEPROM switch); only kill -9 skips them, and the host's journal covers that."""
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), _terminated)
 
 
 def _usage_error(exc: Exception) -> int | None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 
 def get(cli, profile, *codes):
     r = cli("--port", "sim", "--profile", profile, "param", "get", *codes, "--json")
@@ -31,9 +33,39 @@ def test_is620p_stores_by_default_and_no_save_keeps_it_out(cli):
     assert get(cli, "is620p", "H08-00", "H08-02", "H0C-13") == {"H08-00": 30.0, "H08-02": 40.0, "H0C-13": 1}
 
 
-def test_unchanged_value_touches_neither_parameter_nor_switch(cli):
-    r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po109=200", "--save")
+def test_unchanged_value_touches_neither_parameter_nor_switch_unless_saved(cli):
+    r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po109=200")
     assert r.code == 0 and ">> 01 06" not in r.err
+    # --save cannot know what EEPROM holds, so it stores the value again under the EEPROM setting
+    r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po109=200", "--save")
+    assert r.code == 0 and ">> 01 06 01 f9 01 00" in r.err and "1 value stored in EEPROM" in r.out
+
+
+SWITCHED = [("sd25", "Po101", "80", "Po505", "d 1 1"), ("is620p", "H08-00", "30.0", "H0C-13", 0)]
+
+
+@pytest.mark.parametrize(("profile", "code", "value", "switch", "ram"), SWITCHED)
+def test_save_after_a_ram_only_write_survives_a_power_cycle(cli, profile, code, value, switch, ram):
+    """Defect 1 of issue 14: --save stored nothing when RAM already held the value."""
+    default = get(cli, profile, code)[code]
+    if profile == "is620p":
+        assert cli("--port", "sim", "-P", profile, "param", "set", f"{switch}={ram}").code == 0
+    r = cli("--port", "sim", "-P", profile, "param", "set", f"{code}={value}")
+    assert r.code == 0 and "not saved to EEPROM" in r.err, r.err
+    r = cli("--port", "sim", "-P", profile, "param", "set", "--save", f"{code}={value}", "--json")
+    assert r.code == 0 and r.json()["stored"] == [code] and r.json()["persisted"] is True, r.err
+    assert cli("sim", "reset", "-P", profile, "--power-cycle").code == 0
+    after = get(cli, profile, code, switch)
+    assert after[code] == float(value) != default and after[switch] == ram
+
+
+def test_a_power_cycle_parameter_in_ram_mode_is_refused_with_the_reason(cli):
+    before = get(cli, "sd25", "Po407")
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "Po407.X=26")
+    assert r.code == 2 and "lost by that power cycle" in r.err and "--save" in r.err
+    assert get(cli, "sd25", "Po407") == before                     # refused before any write
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po407.X=26", "--json")
+    assert r.code == 0 and r.json()["persisted"] is True, r.err
 
 
 def test_sdc_keeps_modbus_writes_in_ram_and_says_how_to_store_them(cli):
