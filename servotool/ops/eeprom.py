@@ -24,9 +24,11 @@ def switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
 
 
 @contextmanager
-def _switched(drive: Drive, entry: Entry, current: int, wanted: int) -> Iterator[None]:
+def _switched(drive: Drive, entry: Entry, current: int, wanted: int,
+              state: dict[str, bool] | None = None) -> Iterator[None]:
     """Run the block with the switch at `wanted`, journaled on the host, and put it back (verified) on every exit
-    path; the journal record goes only once the switch is confirmed back, else the next command finishes it."""
+    path; the journal record goes only once the switch is confirmed back, else the next command finishes it.
+    state['switch_back'] says whether it was put back."""
     from servotool.ops import journal
 
     if wanted == current:
@@ -42,7 +44,11 @@ def _switched(drive: Drive, entry: Entry, current: int, wanted: int) -> Iterator
         try:
             drive.write_verified(entry, current)
             journal.clear_switch(drive)
+            if state is not None:
+                state["switch_back"] = True
         except ServoError:
+            if state is not None:
+                state["switch_back"] = False
             if not failing:
                 raise      # otherwise the first error is the one to report
 
@@ -118,7 +124,7 @@ def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
             entry, current, eeprom, ram = switch_state(drive)
             wanted = current if save is None else (eeprom if save else ram)
             state["persisted"] = wanted == eeprom
-            with _switched(drive, entry, current, wanted):
+            with _switched(drive, entry, current, wanted, state):
                 yield state
             return
         yield state
