@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from pathlib import Path
 
 import typer
@@ -13,10 +12,10 @@ from servotool.cli.common import state
 from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame
 from servotool.commission.plan import load_plan
-from servotool.commission.runner import Runner, write_report
+from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
 from servotool.config import merge, options_from, resolve
-from servotool.errors import UsageError
+from servotool.errors import ServoError, UsageError
 from servotool.session import open_drives
 
 
@@ -64,17 +63,22 @@ def run(
     def ask(unit: int, question: str) -> bool:
         return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
 
-    t0 = time.monotonic()
     with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice) as drives:
         runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info,
                         word=lambda exc: error_text(exc, cli_opts))
-        runner.check_units()
-        ok = False
+        rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)
+        rep.write("running")
+        runner.after_step = lambda: rep.write("running")
+        ok: bool | None = None
         try:
+            runner.check_units()
+            runner.back_up(notice)
             ok = runner.run()
-        finally:  # also when interrupted: the report says what was written
-            data = write_report(report_path, plan, runner.results, ok, time.monotonic() - t0,
-                                      profile=resolved.profile.id, port=resolved.settings.port, units=units)
+        except ServoError:
+            ok = False
+            raise
+        finally:  # also when interrupted: the report says what was written and where it stopped
+            data = rep.final(ok)
     if as_json:
         emit_json(data)
     else:
