@@ -77,6 +77,11 @@ def write_atomic(path: Path, text: str, *, replace: bool = True, durable: bool =
             if durable:
                 os.fsync(fh.fileno())
             st = os.fstat(fh.fileno())
+        if replace and os.name == "posix":
+            try:      # a replaced file keeps its mode (a user's 0644 backup stays readable by others)
+                os.chmod(tmp, path.stat().st_mode & 0o7777)
+            except FileNotFoundError:
+                pass
         if replace:
             os.replace(tmp, path)
         else:

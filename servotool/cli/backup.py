@@ -35,6 +35,7 @@ def backup_cmd(
     as_json: bool = JSON_OPT,
 ) -> None:
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file."""
+    backup.check_output(output or Path("new.yaml"), force=force)    # before reading the drive (24 s at 1200 Bd)
     with drive(ctx) as d:
         entries = select(d.profile)
         with Progress(console=err, transient=True, disable=as_json) as progress:
