@@ -142,7 +142,8 @@ def read_text(path: Path) -> str:
 
 def _yaml_problem(path: Path, exc: yaml.YAMLError) -> FileProblem:
     mark = getattr(exc, "problem_mark", None)
-    return FileProblem(path, f"invalid YAML: {getattr(exc, 'problem', None) or exc}",
+    problem = " ".join(str(getattr(exc, "problem", None) or exc).split())     # one line, whatever the file held
+    return FileProblem(path, f"invalid YAML: {problem}",
                        line=mark.line + 1 if mark else None)
 
 

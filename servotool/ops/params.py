@@ -91,7 +91,7 @@ def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list
 
 def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
     """Write the planned changes in order, adjacent ones in one FC16 request (as the manuals' multi-register
-    examples do), each verified by read-back. A failure is SetFailed, naming what was written before it."""
+    examples do), each verified by read-back. A failure names what was written before it."""
     results: list[WriteResult] = []
     for run in write_runs(drive, plan.changes):
         try:
@@ -101,23 +101,21 @@ def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
             else:
                 results.extend(drive.write_block_verified([(e, new, old) for e, old, new in run]))
         except ServoError as exc:
-            raise SetFailed(exc, results, [e for e, _, _ in run]) from None
+            raise _naming_written(exc, results, [e for e, _, _ in run]) from None
     return results
 
 
-class SetFailed(ServoError):
-    """A `param set` that stopped midway: the cause, and which entries it had written (verified) before it."""
-
-    def __init__(self, cause: ServoError, written: list[WriteResult], unsure: list[Entry]) -> None:
-        self.cause, self.written, self.unsure = cause, written, unsure
-        self.exit_code = cause.exit_code
-        done = ", ".join(f"{r.entry.code}={format_value(r.entry, r.new)}" for r in written)
-        text = f"{cause}; written and verified before it stopped: {done}" if written else \
-            f"{cause}; nothing was written before it"
-        if unsure:
-            text += f"; {', '.join(e.code for e in unsure)} may or may not have changed (read it back with " \
-                    f"'param get')"
-        super().__init__(text)
+def _naming_written(exc: ServoError, written: list[WriteResult], unsure: list[Entry]) -> ServoError:
+    """The error of a set that stopped midway, its message extended by what was written before it (same type and
+    exit code); `exc.written` holds those results."""
+    done = ", ".join(f"{r.entry.code}={format_value(r.entry, r.new)}" for r in written)
+    text = f"{exc}; written and verified before it stopped: {done}" if written else \
+        f"{exc}; nothing was written before it"
+    if unsure:
+        text += f"; {', '.join(e.code for e in unsure)} may or may not have changed (read back with 'param get')"
+    exc.args = (text,)
+    exc.written = written  # type: ignore[attr-defined]
+    return exc
 
 
 @dataclass(frozen=True)
@@ -144,7 +142,7 @@ def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome
             try:
                 write_one(drive, entry, raw, raw)
             except ServoError as exc:
-                raise SetFailed(exc, results, []) from None
+                raise _naming_written(exc, results, []) from None
     stored = ([r.entry for r in results] + ([e for e, _ in plan.unchanged] if save else [])) \
         if kept["persisted"] else []
     return SetOutcome(results, stored, kept["persisted"])
