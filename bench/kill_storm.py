@@ -10,7 +10,10 @@ and the automatic backup say:
   backup is the true number;
 - no journal record and no temporary file is left in servotool's folders (automatic backups, journal, simulator).
 
-Run: python bench/kill_storm.py [--kills N] [--seed S] [--baud B] [--ops restore,reset,save,plan]
+Half the kills come at any moment of the command, half within --window s of its first write (the journal record
+appearing, or a reset's automatic backup), where a kill can leave the switch changed or a restore half done.
+
+Run: python bench/kill_storm.py [--kills N] [--seed S] [--baud B] [--window S] [--ops restore,reset,save,plan]
 Prints, per profile and operation, kills, recovered and % (the target is 100 %), and how many of the kills left
 something the next command put back or reported (the switch changed, a restore midway).
 """
@@ -42,6 +45,12 @@ PROFILES = {
 OPS = ("restore", "reset", "save", "plan")
 
 
+def load_profile_cached(name: str):
+    from servotool.model.loader import load_profile
+
+    return load_profile(name)
+
+
 class Storm:
     """One profile's simulated drive in its own folders, brought to a known state before every kill."""
 
@@ -67,19 +76,38 @@ class Storm:
         return self.cli("--port", "sim", "-P", self.profile, *args)
 
     def _prepare(self, baud: int) -> None:
-        def ok(r: subprocess.CompletedProcess[str]) -> None:
-            assert r.returncode == 0, r.stderr
+        """In-process (through the library, as the CLI would): a target backup, then a drive that differs from it
+        with its switch on RAM only and one value already in RAM, on a slow line."""
+        from servotool.config import ConnectOptions, resolve
+        from servotool.ops import backup, params, restore
+        from servotool.session import open_drives
+        from servotool.sim import state as sim_state
 
-        ok(self.on_drive("param", "set", "--save", *(f"{k}={v}" for k, v in self.target_values.items())))
-        ok(self.on_drive("param", "backup", "-o", str(self.target)))
-        ok(self.on_drive("param", "reset", "--yes"))
-        ok(self.on_drive("param", "set", "--raw", f"{self.switch}={self.ram_mode}"))   # RAM only: the switch flips
-        ok(self.on_drive("param", "set", *(f"{k}={v}" for k, v in list(self.save_values.items())[:1])))
+        saved = {k: os.environ.get(k) for k in ("SERVOTOOL_SIM_DIR", "SERVOTOOL_BACKUP_DIR", "SERVOTOOL_CONFIG")}
+        os.environ.update({k: self.env[k] for k in saved})
+        try:
+            with open_drives(resolve(ConnectOptions(port="sim", profile=self.profile)), notice=lambda _m: None) \
+                    as (d,):
+                def put(values: dict[str, str], save: bool | None, raw: bool = False) -> None:
+                    plan = params.prepare_set(d, [f"{k}={v}" for k, v in values.items()], raw=raw)
+                    params.set_values(d, plan, save)
+
+                put(self.target_values, True)
+                backup.write_backup(d, self.target)
+                restore.factory_reset(d)
+                put({self.switch: str(self.ram_mode)}, None, raw=True)   # RAM only: the switch flips
+                put(dict(list(self.save_values.items())[:1]), None)      # one value already in RAM
+            sim_state.configure(load_profile_cached(self.profile), 1, line_baud=baud)
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
         steps = "\n".join(f"  - {line}" for line in (
             "set: {" + ", ".join(f"{k}: {v}" for k, v in self.save_values.items()) + "}", "save:",
             "backup: {file: out.yaml, overwrite: true}"))
         self.plan.write_text(f"port: sim\nprofile: {self.profile}\nsteps:\n{steps}\n")
-        ok(self.cli("sim", "config", "-P", self.profile, "--line-baud", str(baud)))
         self.start_state = self.state_file.read_text()
         self.before = self.drive_state()
 
@@ -112,11 +140,21 @@ class Storm:
         assert r.returncode == 0, f"{op}: {r.stderr}"
         return time.monotonic() - t0
 
-    def kill_at(self, op: str, delay: float) -> tuple[bool, str]:
-        """Kill the operation after delay s; run the next command; (recovered, why not)."""
+    def marker(self, op: str) -> bool:
+        """The operation has reached its writes: a journal record (switch or restore), or a reset's backup."""
+        if op == "reset":
+            return any((self.root / "auto").glob("*before-reset.yaml"))
+        return any((self.root / "auto" / "journal").glob("*.json"))
+
+    def kill_at(self, op: str, delay: float, targeted: bool = False) -> tuple[bool, str]:
+        """Kill the operation after delay s (targeted: delay s after it reached its writes); run the next
+        command; (recovered, why not)."""
         self.reset()
         proc = subprocess.Popen([sys.executable, "-m", "servotool", *self.command(op)], env=self.env, cwd=ROOT,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        if targeted:
+            while proc.poll() is None and not self.marker(op):
+                time.sleep(0.002)
         time.sleep(delay)
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -181,6 +219,7 @@ def main() -> None:
     ap.add_argument("--kills", type=int, default=10, help="kills per profile and operation")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--baud", type=int, default=2400, help="the emulated line's baud (slower: more to kill)")
+    ap.add_argument("--window", type=float, default=1.0, help="targeted kills: within this many s of the writes")
     ap.add_argument("--ops", default=",".join(OPS))
     ap.add_argument("--profiles", default=",".join(PROFILES))
     args = ap.parse_args()
@@ -193,8 +232,11 @@ def main() -> None:
             for op in args.ops.split(","):
                 span = storm.duration(op)
                 ok, storm.repaired = 0, 0
-                for _ in range(args.kills):
-                    good, why = storm.kill_at(op, rng.uniform(0.2, span))
+                for n in range(args.kills):
+                    # half at any moment of the command, half in the window where it writes
+                    targeted = n % 2 == 1
+                    good, why = storm.kill_at(op, rng.uniform(0, args.window) if targeted else
+                                              rng.uniform(0.2, span), targeted)
                     ok += good
                     if not good:
                         print(f"  {profile} {op}: NOT recovered: {why}", file=sys.stderr)
