@@ -1,7 +1,8 @@
-"""Does servotool ever accept a wrong value on a bad line? Param get, set, backup and monitor-like reads through the
-real client path (ModbusLink + Drive, RTU over TCP) to simulated drives behind a fault-injecting line
+"""Does servotool ever accept a wrong value on a bad line? Param get, set, backup, monitor-like reads and restore
+through the real client path (ModbusLink + Drive, RTU over TCP) to simulated drives behind a fault-injecting line
 (servotool.sim.faults), at 1, 5 and 20 % of replies for each fault kind and mixed, on every profile. Every value is
-checked against the simulator's true state.
+checked against the simulator's true state, and so is every failed restore's account of the drive (equal to the
+automatic backup, or which entries differ).
 
 Run: python bench/line_faults.py [--quick] [--tries N] [--seed S]
 Prints one row per fault kind, rate and operation (profiles summed): tries, ok, clean error, silent wrong,
@@ -28,7 +29,7 @@ from servotool.link.ports import LinkSettings
 from servotool.model.codec import words_to_raw
 from servotool.model.loader import load_profile
 from servotool.model.profile import Entry, Profile
-from servotool.ops import backup, monitor
+from servotool.ops import backup, monitor, restore
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.faults import KINDS, LineFaults, parse_rates
 from servotool.sim.firmware import build_drive
@@ -37,10 +38,11 @@ from servotool.sim.server import EmbeddedSim
 PROFILES = ("sd25", "is620p", "sdc", "dsx7e")
 FAULTS = (*KINDS, "mixed", "mixed+echo")
 RATES = (0.01, 0.05, 0.20)
-OPS = ("get", "set", "backup", "monitor")
+OPS = ("get", "set", "backup", "monitor", "restore")
 OUTCOMES = ("ok", "error", "WRONG", "traceback", "hang")
 TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.15, 30.0     # late replies come after the timeout, within the late window
 VERBOSE = False
+ACCOUNTS: Counter[str] = Counter()      # failed restores by the drive state they stated: equal, differ, unknown
 
 
 class Wrong(Exception):
@@ -97,6 +99,31 @@ class Bench:
             for r in drive.read_entries(self.monitors):
                 self.check(r.entry, r.raw)
 
+    def restore(self, drive: Drive) -> None:
+        """A backup that differs in a few entries, restored; a failed restore's account of the drive (equal to the
+        automatic backup, or which entries differ) is checked against the drive's true state."""
+        truth = {e.code: self.truth(e) for e in self.params}
+        values = dict(truth)
+        for e in self.rng.sample(self.settable, 4):
+            values[e.code] = self.rng.randint(e.min, e.max)
+        p = self.profile
+        b = backup.Backup(p.id, p.version, p.model, drive.unit, "", "", {}, values)
+        plan = restore.restore_changes(p, b, truth)
+        try:
+            restore.restore(drive, b, plan)
+        except restore.RestoreFailed as exc:
+            auto = backup.load(exc.auto_backup, p).values
+            differ = {c for c, v in auto.items() if self.truth(p.entry(c)) != v and not p.persistence.is_switch(c)}
+            if exc.equals_backup is None:
+                ACCOUNTS["unknown"] += 1
+            elif exc.equals_backup != (not differ) or (differ and set(exc.differ) != differ):
+                raise Wrong(f"restore account wrong: said {exc.facts()!r}; truly differ {sorted(differ)}") from None
+            else:
+                ACCOUNTS["equal" if not differ else "differ"] += 1
+            raise
+        for e, _, new in plan.changes:
+            self.check(e, new)
+
     def run(self, op: str, faults: LineFaults) -> str:
         """One try of op on a fresh link: its outcome (one of OUTCOMES)."""
         assert self.sim.proxy is not None
@@ -152,6 +179,7 @@ def main() -> None:
     global VERBOSE
     VERBOSE = args.verbose
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
+    os.environ.setdefault("SERVOTOOL_BACKUP_DIR", tempfile.mkdtemp())     # the restores' automatic backups
     rates = (0.20,) if args.quick else RATES
     counts: dict[tuple[str, float, str], Counter[str]] = {}
     t0 = time.monotonic()
@@ -180,6 +208,11 @@ def report(counts: dict[tuple[str, float, str], Counter[str]], elapsed: float) -
         print(f"{kind:<11} {rate:>5.0%} {op:<8} {sum(cell.values()):>5} " + " ".join(f"{cell[o]:>9}" for o in OUTCOMES))
     print(f"{'all':<11} {'':>5} {'':<8} {sum(total.values()):>5} " + " ".join(f"{total[o]:>9}" for o in OUTCOMES))
     print(f"silent wrong: {total['WRONG']} in {sum(total.values())} tries ({elapsed:.0f} s)")
+    if ACCOUNTS:
+        stated = ACCOUNTS["equal"] + ACCOUNTS["differ"]
+        print(f"failed restores: {stated + ACCOUNTS['unknown']}, drive state stated and true in {stated} "
+              f"(equal to the automatic backup {ACCOUNTS['equal']}, listed differences {ACCOUNTS['differ']}), "
+              f"'unknown' (no answer) in {ACCOUNTS['unknown']}; a wrong statement counts as WRONG above")
 
 
 if __name__ == "__main__":

@@ -47,7 +47,7 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
     try:
         drives = [Drive(link, resolved.profile, u, port=port) for u in units]
         for d in drives:      # what a killed servotool process left on these drives is put right first
-            recover_at_start(d, notice or _stderr)
+            recover_at_start(d, notice or _stderr, (sim_state_dir(),) if sim else ())
         yield drives
     finally:
         link.close()

@@ -56,6 +56,8 @@ def run(
     if not yes and any(st.name == "prompt" for st in plan.steps) and not sys.stdin.isatty():
         raise UsageError("the plan has operator prompts: run it in a terminal or pass --yes")
     report_path = report or plan_file.with_suffix(".report.json")
+    if str(report_path).startswith("-"):
+        raise UsageError(f"--report '{report_path}' looks like an option, not a file name")
     if not report_path.parent.is_dir() or not os.access(report_path.parent, os.W_OK):
         raise UsageError(f"cannot write the report into {report_path.parent}: no such folder or not writable")
     several = len(units) > 1

@@ -25,7 +25,7 @@ from typing import Any
 
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError
-from servotool.files import FileLock, backup_dir, sweep_temp, write_atomic
+from servotool.files import FileLock, backup_dir, load_yaml, sweep_temp, write_atomic
 from servotool.model.codec import format_value
 
 Notice = Callable[[str], None]
@@ -175,14 +175,14 @@ def _put_switch_back(drive: Drive, switch: dict[str, Any], pid: object) -> str:
 
 
 def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
-    from servotool.ops.backup import load
-
     auto = Path(str(op.get("auto_backup")))
     targets = op.get("targets") if isinstance(op.get("targets"), dict) else {}
-    try:
-        before = load(auto, drive.profile).values
-    except ServoError as exc:
-        return f"servotool: a {op.get('name')} (pid {pid}) was interrupted and its automatic backup is unusable: {exc}"
+    try:        # the values section of the backup this process wrote itself (ops.backup checks a user's file)
+        data = load_yaml(auto)
+        before = {str(c): v for c, v in data["values"].items() if isinstance(v, int)}
+    except (ServoError, TypeError, KeyError, AttributeError) as exc:
+        return f"servotool: a {op.get('name')} (pid {pid}) was interrupted and its automatic backup {auto} is " \
+            f"unusable ({exc})"
     entries = [e for e in (drive.profile.find(str(c)) for c in targets) if e is not None and e.readable]
     now = {r.entry.code: r.raw for r in drive.read_entries(entries)} if entries else {}
     written = [c for c, raw in now.items() if raw == targets.get(c) and before.get(c) != raw]
@@ -196,10 +196,11 @@ def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
             f"finish, or 'servotool param restore {auto}' to go back")
 
 
-def recover_at_start(drive: Drive, notice: Notice) -> None:
-    """At the start of a command: sweep temporary files a killed process left, and recover this drive's journal
+def recover_at_start(drive: Drive, notice: Notice, extra_folders: tuple[Path, ...] = ()) -> None:
+    """At the start of a command: sweep temporary files a killed process left (here and in extra_folders, e.g. the
+    simulator's), and recover this drive's journal
     when no live process holds its port (a holder is still at work and will put things back itself)."""
-    for folder in (backup_dir(), journal_dir()):
+    for folder in (backup_dir(), journal_dir(), *extra_folders):
         sweep_temp(folder)
     if not drive.port or not record_path(drive).exists():
         return

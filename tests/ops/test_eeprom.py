@@ -108,3 +108,53 @@ def test_tune_says_when_its_result_is_in_ram_only_and_save_stores_it(cli):
     ratio = get(cli, "is620p", "H08-15")["H08-15"]
     cli("sim", "reset", "--profile", "is620p", "--power-cycle")
     assert get(cli, "is620p", "H08-15", "H0C-13") == {"H08-15": ratio, "H0C-13": 0}   # kept; switch as it was
+
+
+def test_a_switch_left_changed_by_a_dead_process_is_put_back_by_the_next_command(cli, sim_dir):
+    """The host's journal says Po505 was d 1 1 (RAM only) before a process that died changed it to EEPROM."""
+    from servotool.files import sim_state_dir
+    from servotool.model.loader import load_profile
+    from servotool.ops import journal
+    from servotool.sim.device import SimulatedDrive
+
+    drive = SimulatedDrive(load_profile("sd25"), 1)
+    with drive.session():
+        drive.bank.ram["Po505"] = drive.bank.eeprom["Po505"] = 0x0100          # left on EEPROM
+        drive.bank.save()
+
+    class Port:                       # what the journal needs of a drive: its port name and unit
+        port, unit = f"sim:{sim_state_dir().resolve()}", 1
+        profile = load_profile("sd25")
+
+    journal.note_switch(Port(), "Po505", 0x0101)  # type: ignore[arg-type]
+    (journal.journal_dir() / ".x.json.999999999.abc.tmp").write_text("left by a kill")
+    r = cli("--port", "sim", "-P", "sd25", "param", "get", "Po505", "--json")
+    assert r.code == 0 and r.json()[0]["value"] == "d 1 1", r.err
+    assert "put Po505 back to d 1 1 (was d 1 0): a servotool process (pid" in r.err
+    assert not list(journal.journal_dir().glob("*.json")) and not list(journal.journal_dir().glob("*.tmp"))
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "Po110=30")
+    assert r.code == 0 and "not saved to EEPROM" in r.err and "put Po505" not in r.err
+
+
+def test_writes_of_one_drive_wait_for_another_process_that_has_its_port(cli, sim_dir):
+    """Serialised per port: a plain set cannot run while another process has the switch changed for --save."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    from servotool.files import sim_state_dir
+    from servotool.model.loader import load_profile
+    from servotool.ops import journal
+
+    class Port:
+        port, unit, profile = f"sim:{sim_state_dir().resolve()}", 1, load_profile("sd25")
+
+    with journal.port_lock(Port()):  # type: ignore[arg-type]
+        proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "-P", "sd25", "param", "set",
+                                 "Po110=30"], env=dict(os.environ), stderr=subprocess.PIPE, text=True)
+        time.sleep(4)
+        waiting = proc.poll() is None
+    assert proc.wait(60) == 0
+    assert waiting, "the write did not wait for the port's lock"
+    assert get(cli, "sd25", "Po110") == {"Po110": 30}
