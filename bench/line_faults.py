@@ -121,6 +121,13 @@ class Bench:
             else:
                 ACCOUNTS["equal" if not differ else "differ"] += 1
             raise
+        except ServoError as exc:       # before any write: it must say so, and be true
+            now = {e.code: self.truth(e) for e in self.params}
+            if "nothing was written" not in str(exc) or now != truth:
+                raise Wrong(f"restore failed before writing? said {exc}; changed "
+                            f"{sorted(c for c in now if now[c] != truth[c])}") from None
+            ACCOUNTS["nothing written"] += 1
+            raise
         for e, _, new in plan.changes:
             self.check(e, new)
 
@@ -209,10 +216,11 @@ def report(counts: dict[tuple[str, float, str], Counter[str]], elapsed: float) -
     print(f"{'all':<11} {'':>5} {'':<8} {sum(total.values()):>5} " + " ".join(f"{total[o]:>9}" for o in OUTCOMES))
     print(f"silent wrong: {total['WRONG']} in {sum(total.values())} tries ({elapsed:.0f} s)")
     if ACCOUNTS:
-        stated = ACCOUNTS["equal"] + ACCOUNTS["differ"]
+        stated = ACCOUNTS["equal"] + ACCOUNTS["differ"] + ACCOUNTS["nothing written"]
         print(f"failed restores: {stated + ACCOUNTS['unknown']}, drive state stated and true in {stated} "
-              f"(equal to the automatic backup {ACCOUNTS['equal']}, listed differences {ACCOUNTS['differ']}), "
-              f"'unknown' (no answer) in {ACCOUNTS['unknown']}; a wrong statement counts as WRONG above")
+              f"(nothing written {ACCOUNTS['nothing written']}, rolled back to equal the automatic backup "
+              f"{ACCOUNTS['equal']}, listed differences {ACCOUNTS['differ']}), 'unknown' (no answer) in "
+              f"{ACCOUNTS['unknown']}; a wrong statement counts as WRONG above")
 
 
 if __name__ == "__main__":

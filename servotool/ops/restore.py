@@ -120,7 +120,11 @@ def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
     from servotool.ops.params import write_one
 
     check_servo_off(drive, plan.needs_servo_off, "the restore")
-    before = take(drive)
+    try:
+        before = take(drive)
+    except ServoError as exc:
+        exc.args = (f"{exc}; nothing was written (the automatic backup comes first)",)
+        raise
     auto = save(before, drive.profile, auto_path(drive, "before-restore"))
     if notice:
         notice(f"automatic backup of the drive's current state: {auto}")
