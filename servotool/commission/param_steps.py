@@ -11,7 +11,7 @@ from servotool.errors import UsageError, VerifyError
 from servotool.model.codec import format_value, parse_value, raw_to_eng
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup, params, restore
-from servotool.ops.eeprom import persistence
+from servotool.ops.eeprom import check_power_cycle, persistence
 
 
 class SetStep(StepType):
@@ -36,6 +36,9 @@ class SetStep(StepType):
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         texts = [f"{e.code}={raw}" for e, raw in self.assignments(step, drive.profile)]
         plan = params.prepare_set(drive, texts, raw=True)
+        if not any(st.name == "save" and st.index > step.index for st in ctx.plan.steps):
+            # no later 'save:' stores it: a power-cycle parameter kept in RAM would be lost by that power cycle
+            check_power_cycle(drive, [e for e, _, _ in plan.changes], None)
         with persistence(drive, None):       # under the port's lock: no other process flips the switch meanwhile
             done = params.apply_set(drive, plan)
         for r in done:

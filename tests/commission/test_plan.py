@@ -236,3 +236,13 @@ def test_validation_reports_every_problem_of_a_plan_in_one_pass(cli, tmp_path):
     for text in ("Pn999", "unknown step", "wait takes seconds", "out of range", "takes no argument"):
         assert text in r.err
     assert len(r.err.strip().splitlines()) == 1
+
+
+def test_a_power_cycle_parameter_in_ram_mode_needs_a_later_save_step(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - set: {Po407: 26}\n")
+    r = cli("run", str(plan), "--json")
+    assert r.code == 2 and "lost by that power cycle" in r.json()["steps"][0]["detail"], r.out
+    plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - set: {Po407: 26}\n  - save:\n")
+    r = cli("run", str(plan), "--json")
+    assert r.code == 0 and r.json()["steps"][1]["stored"] == ["Po407"], r.err
