@@ -41,16 +41,29 @@ def _switched(drive: Drive, entry: Entry, current: int, wanted: int,
         yield
         failing = False
     finally:
+        _put_back(drive, entry, current, failing, state)
+
+
+def _put_back(drive: Drive, entry: Entry, raw: int, failing: bool, state: dict[str, bool] | None) -> None:
+    """The switch back, verified, tried a few times (an interrupted request may leave the line out of step);
+    the journal record goes once it is confirmed."""
+    from servotool.ops import journal
+
+    for attempt in range(3):
         try:
-            drive.write_verified(entry, current)
-            journal.clear_switch(drive)
-            if state is not None:
-                state["switch_back"] = True
+            drive.write_verified(entry, raw)
         except ServoError:
+            if attempt < 2:
+                continue
             if state is not None:
                 state["switch_back"] = False
             if not failing:
                 raise      # otherwise the first error is the one to report
+            return
+        journal.clear_switch(drive)
+        if state is not None:
+            state["switch_back"] = True
+        return
 
 
 @contextmanager
