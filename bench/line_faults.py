@@ -1,8 +1,7 @@
-"""Does servotool ever accept a wrong value on a bad line? Param get, set, backup, monitor-like reads and restore
+"""Does servotool ever accept a wrong value on a bad line? Param get, set, backup, restore and monitor-like reads
 through the real client path (ModbusLink + Drive, RTU over TCP) to simulated drives behind a fault-injecting line
 (servotool.sim.faults), at 1, 5 and 20 % of replies for each fault kind and mixed, on every profile. Every value is
-checked against the simulator's true state, and so is every failed restore's account of the drive (equal to the
-automatic backup, or which entries differ).
+checked against the simulator's true state; a restore that fails must not claim a state the drive is not in.
 
 Run: python bench/line_faults.py [--quick] [--tries N] [--seed S]
 Prints one row per fault kind, rate and operation (profiles summed): tries, ok, clean error, silent wrong,
@@ -38,7 +37,7 @@ from servotool.sim.server import EmbeddedSim
 PROFILES = ("sd25", "is620p", "sdc", "dsx7e")
 FAULTS = (*KINDS, "mixed", "mixed+echo")
 RATES = (0.01, 0.05, 0.20)
-OPS = ("get", "set", "backup", "monitor", "restore")
+OPS = ("get", "set", "backup", "restore", "monitor")
 OUTCOMES = ("ok", "error", "WRONG", "traceback", "hang")
 TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.15, 30.0     # late replies come after the timeout, within the late window
 VERBOSE = False

@@ -27,8 +27,9 @@ servotool \- commission and tune AC servo drives over Modbus RTU
 .RI [ arguments ]
 .SH DESCRIPTION
 .B servotool
-reads, writes, backs up and restores drive parameters, watches live values, jogs the motor, identifies the load
-inertia and sets gains, and runs whole commissioning plans, over Modbus RTU (RS485, CRC\-16), against a real
+reads, writes, backs up and restores drive parameters, watches live values, captures triggered traces and draws
+them, jogs the motor, identifies the load inertia and sets gains (with a report of charts), and runs whole
+commissioning plans, over Modbus RTU (RS485, CRC\-16), against a real
 drive or a built\-in simulated one.
 Each drive family is described by a YAML profile that keeps the vendor's own parameter codes
 (for example SD25 \fBPo109\fR, IS620P \fBH09\-06\fR, SDC \fBPN22\fR, DSX7E \fBPn004\fR).
@@ -44,6 +45,13 @@ before any motion.
 On drives whose Modbus motion route needs the drive set up for it (the profile's \fBmotion_setup\fR: SD25,
 IS620P, SDC) those settings are read first; when any differs nothing moves and the error names each one with the
 \fBservotool param set\fR command that fixes it (servotool never writes them itself).
+.PP
+Before a command's first request on a real port, servotool reads the profile's identity checks (firmware and
+model entries and a few signature addresses, one or two requests): a drive that answers otherwise is refused
+(exit 2) with what it answered and the shipped profile it matches, before anything is written; a check that
+cannot tell warns once.
+\fB\-\-no\-identity\-check\fR skips it.
+\fBservotool scan\fR finds the drives on a bus and the profile each one matches.
 """
 
 TAIL = r""".SH PLAN FILES
@@ -67,8 +75,9 @@ with several units a name without it gets \fB\-unit\fIN\fR before its suffix.
 A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBservotool jog\fR.
 .TP
 .B "tune inertia: {rigidity: N | bandwidth: HZ, travel: REV, max_speed: RPM, \
-accel_time: MS, direction: D, repeats: N, gains: BOOL}"
-Identify the load inertia and write it, then (unless \fBgains: false\fR) the matching gains.
+accel_time: MS, direction: D, repeats: N, gains: BOOL, report: DIR}"
+Identify the load inertia and write it, then (unless \fBgains: false\fR) the matching gains; \fBreport\fR
+writes the same folder of charts as \fBtune inertia \-\-report\fR (beside the plan, one per axis).
 .TP
 .BR "wait: S" ", " "alarm clear:" ", " "prompt: QUESTION"
 Pause; reset the alarm; ask the operator (answered yes by \fB\-\-yes\fR; refused without a terminal).
@@ -90,10 +99,14 @@ A run writes a JSON report (steps, values written, results, timing) next to the 
 SERVOTOOL_STOPBITS, SERVOTOOL_TIMEOUT, SERVOTOOL_RETRIES"
 Defaults for the global options of the same names; the command line wins.
 .TP
+.B SERVOTOOL_NO_IDENTITY_CHECK
+\fB1\fR (or \fBtrue\fR) skips the identity check, like \fB\-\-no\-identity\-check\fR.
+.TP
 .B SERVOTOOL_CONFIG
 Configuration file (default \fIconfig.yaml\fR in the user configuration folder: \fI~/.config/servotool\fR
 on Linux, following \fB$XDG_CONFIG_HOME\fR) with the keys \fBport\fR, \fBprofile\fR,
-\fBunit\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR, \fBretries\fR; used after the environment.
+\fBunit\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR, \fBretries\fR,
+\fBno_identity_check\fR; used after the environment.
 .TP
 .B SERVOTOOL_SIM_DIR
 Where simulated drives keep their parameters and machine settings (default \fIsim\fR in the user state folder:
@@ -114,7 +127,8 @@ Success.
 Device or I/O error: port, timeout, CRC, Modbus exception, a motion or identification that failed.
 .TP
 .B 2
-Usage or validation error: unknown code, value out of range, bad file or plan, missing confirmation.
+Usage or validation error: unknown code, value out of range, bad file or plan, missing confirmation, a drive
+that does not answer like its profile.
 Nothing is written to a drive before all values of a command are validated.
 .TP
 .B 3
@@ -130,12 +144,19 @@ servotool \-\-port sim param set Pn100=40.0 Pn101=25.0
 servotool \-\-port sim param backup \-o axis1.yaml
 servotool \-\-port sim param restore axis1.yaml \-\-dry\-run
 servotool \-\-port sim monitor \-\-rate 20 \-\-csv log.csv
+servotool \-\-port sim monitor Un000 Un002 \-\-plot
+servotool \-\-port tcp://127.0.0.1:5020 trace Un000 Un002 \-\-trigger 'Un000>100' \-\-pre 25 \-o start.csv
+servotool \-\-port sim trace 5E00h Un000 \-\-trigger 5E00h.moving=0 \-\-duration 0.5 \-\-repeat 3 \-\-plot
+servotool plot start.csv \-o start.png
 servotool \-\-port sim jog \-\-speed 300 \-\-time 2
 servotool \-\-port sim \-P sdc param set PN4=3 && servotool \-\-port sim \-P sdc jog \-s 100 \-t 1
 servotool sim config \-\-load\-ratio 5 \-\-friction 0.03
 servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13
+servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 13 \-\-step\-check \-\-report tune\-report
 servotool run examples/commission.yaml \-\-yes
 servotool sim serve \-\-port tcp://127.0.0.1:5020 \-\-unit 1 \-\-unit 2
+servotool scan \-\-port /dev/ttyUSB0 \-\-units 1\-10 \-\-baud 9600 \-\-format 8N1
+servotool \-\-profile sd25 doctor \-\-port /dev/ttyUSB0 \-u 1 \-\-count 200
 .fi
 .SH SEE ALSO
 .BR mbpoll (1),
@@ -179,7 +200,8 @@ def option_lines(cmd) -> list[str]:
 
 def command_sections(group, prefix: str) -> list[str]:
     out = []
-    for name, cmd in sorted(group.commands.items()):
+    for name in sorted(group.list_commands(None)):      # lazily loaded commands too
+        cmd = group.get_command(None, name)
         full = f"{prefix} {name}"
         if hasattr(cmd, "commands"):
             if any(p.name != "help" for p in cmd.params):

@@ -20,6 +20,10 @@ SIM_PORT = "sim"
 SIM_DEFAULT_PROFILE = "dsx7e"
 
 
+ECHO = {"auto": None, "on": True, "off": False}
+FLOATS = ("timeout", "turnaround_ms", "silence_ms")
+
+
 PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
 
 
@@ -35,6 +39,10 @@ class ConnectOptions:
     timeout: float | None = None
     retries: int | None = None
     profile: str | None = None
+    no_identity_check: bool | None = None
+    echo: str | None = None             # auto, on or off
+    turnaround_ms: float | None = None
+    silence_ms: float | None = None
 
 
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
@@ -43,11 +51,15 @@ ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
-    if name not in ("baud", "stopbits", "unit", "retries", "timeout"):
+    if name == "no_identity_check":
+        return _flag(value, where)
+    if name == "echo" and isinstance(value, bool):      # YAML reads a bare on/off as a boolean
+        return "on" if value else "off"
+    if name not in ("baud", "stopbits", "unit", "retries", *FLOATS):
         return str(value)
-    kind = "a number" if name == "timeout" else "a whole number"
+    kind = "a number" if name in FLOATS else "a whole number"
     try:
-        number = _number(value, whole=name != "timeout")
+        number = _number(value, whole=name not in FLOATS)
     except (TypeError, ValueError, OverflowError):
         raise UsageError(f"{where}: {name} must be {kind}, got {value!r}") from None
     if name == "retries" and not 0 <= number <= MAX_RETRIES:
@@ -72,6 +84,18 @@ def _number(value: Any, *, whole: bool) -> int | float:
     if not math.isfinite(number) or (whole and not number.is_integer()):
         raise ValueError
     return int(number) if whole else number
+
+
+def _flag(value: Any, where: str) -> bool:
+    """A yes/no option from the environment or a file."""
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("1", "true", "yes", "on"):
+        return True
+    if text in ("0", "false", "no", "off"):
+        return False
+    raise UsageError(f"{where}: expected true or false, got {value!r}")
 
 
 def _from_env() -> ConnectOptions:
@@ -112,15 +136,21 @@ class Resolved:
     profile: Profile
     settings: LinkSettings
     unit: int
+    identity_check: bool = True     # check the drive answering against the profile before any write
 
     @property
     def simulated(self) -> bool:
         return self.settings.port == SIM_PORT
 
 
+def effective(cli: ConnectOptions) -> ConnectOptions:
+    """The options in force: CLI > environment > config file (no profile defaults; nothing checked)."""
+    return merge(cli, _from_env(), _from_config())
+
+
 def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
     """Apply CLI > environment > config file > profile defaults, and check every value."""
-    opts = merge(cli, _from_env(), _from_config())
+    opts = effective(cli)
     port = opts.port
     if port is None:
         if need_port:
@@ -136,12 +166,29 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         port=port, line=line_format(opts, profile),
         timeout=opts.timeout if opts.timeout is not None else (0.5 if port == SIM_PORT else 1.0),
         retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else 2),
+        **rs485(opts),
     )
     if not (math.isfinite(settings.timeout) and 0 < settings.timeout <= 3600):
         raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
     if not 0 <= settings.retries <= MAX_RETRIES:
         raise UsageError(f"bad retries {settings.retries}: must be 0..{MAX_RETRIES}")
-    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit))
+    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit),
+                    identity_check=not opts.no_identity_check)
+
+
+def rs485(opts: ConnectOptions) -> dict[str, Any]:
+    """The line habits in LinkSettings' terms: echo (auto: find out), turnaround delay and frame-ending silence."""
+    echo = (opts.echo or "auto").lower()
+    if echo not in ECHO:
+        raise UsageError(f"bad echo '{opts.echo}': use auto, on or off")
+    out: dict[str, Any] = {"echo": ECHO[echo]}
+    for name, key in (("turnaround_ms", "turnaround"), ("silence_ms", "silence")):
+        ms = getattr(opts, name)
+        if ms is not None:
+            if not (math.isfinite(ms) and 0 <= ms <= 10_000):
+                raise UsageError(f"bad {name.replace('_', '-')} {ms:g}: must be 0..10000 ms")
+            out[key] = ms / 1000.0
+    return out
 
 
 def check_unit(unit: int) -> int:
@@ -153,13 +200,18 @@ def check_unit(unit: int) -> int:
 
 def line_format(opts: ConnectOptions, profile: Profile) -> LineSettings:
     """The line settings from the options, defaulting to the profile's factory settings; checked."""
-    baud = opts.baud if opts.baud is not None else profile.line.baud
-    stopbits = opts.stopbits if opts.stopbits is not None else profile.line.stopbits
-    parity = PARITIES.get((opts.parity or profile.line.parity).upper())
+    return line_settings(opts, profile.line)
+
+
+def line_settings(opts: ConnectOptions, defaults: LineSettings) -> LineSettings:
+    """The line settings from the options, defaulting to the given ones; checked."""
+    baud = opts.baud if opts.baud is not None else defaults.baud
+    stopbits = opts.stopbits if opts.stopbits is not None else defaults.stopbits
+    parity = PARITIES.get((opts.parity or defaults.parity).upper())
     if parity is None:
         raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
     if not 300 <= baud <= 4_000_000:
         raise UsageError(f"bad baud rate {baud}: must be 300..4000000")
     if stopbits not in (1, 2):
         raise UsageError(f"bad stop bits {stopbits}: must be 1 or 2")
-    return LineSettings(baud, parity, stopbits, profile.line.bytesize)
+    return LineSettings(baud, parity, stopbits, defaults.bytesize)

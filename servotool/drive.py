@@ -6,7 +6,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from itertools import pairwise
 
-from servotool.errors import DeviceError, UsageError, VerifyError
+from servotool.errors import DeviceError, ModbusException, UsageError, VerifyError
 from servotool.link.ports import Link
 from servotool.model.codec import (
     fields_json,
@@ -46,6 +46,8 @@ class Reading:
                                   "unit": e.unit}
         if (fields := fields_json(e, self.raw)) is not None:
             out["fields"] = fields
+        if self.raw in e.enum:
+            out["meaning"] = e.enum[self.raw]
         if e.default is not None:
             out["default"] = json_value(e, e.default)
             out["changed"] = self.changed
@@ -72,13 +74,27 @@ def _prefixed(exc: DeviceError, prefix: str) -> DeviceError:
     return exc
 
 
-def coalesce_reads(profile: Profile, entries: Iterable[Entry]) -> list[tuple[int, int, list[Entry]]]:
+ILLEGAL_ADDRESS = 2      # the Modbus exception of an address the drive does not have
+
+
+class NotOnDrive(ModbusException):
+    """Entries the profile lists but the drive lacks: it answers exception 02 (illegal data address) for them."""
+
+    def __init__(self, entries: list[Entry]) -> None:
+        DeviceError.__init__(self, f"{', '.join(e.code for e in entries)}: not on this drive (it answers Modbus "
+                                   f"exception 02, illegal data address, for "
+                                   f"{'its address' if len(entries) == 1 else 'their addresses'})")
+        self.code, self.entries = ILLEGAL_ADDRESS, entries
+
+
+def coalesce_reads(profile: Profile, entries: Iterable[Entry],
+                   holes: frozenset[int] = frozenset()) -> list[tuple[int, int, list[Entry]]]:
     """Group entries into as few FC03 requests as the profile allows: (address, count, entries).
 
     A request may span a gap only when every address in the gap belongs to a readable entry, since a real
-    drive answers exception 02 for unmapped addresses.
+    drive answers exception 02 for unmapped addresses, and none is a hole (an address the drive turned out to lack).
     """
-    readable = {a for e in profile.entries if e.readable for a in e.addresses}
+    readable = {a for e in profile.entries if e.readable for a in e.addresses} - holes
     wanted = sorted({e.code: e for e in entries}.values(), key=lambda e: e.address)
     plans: list[tuple[int, int, list[Entry]]] = []
     limit = profile.limits.max_read
@@ -99,6 +115,10 @@ def coalesce_reads(profile: Profile, entries: Iterable[Entry]) -> list[tuple[int
     return plans
 
 
+def _names(group: list[Entry]) -> str:
+    return ", ".join(e.code for e in group[:4]) + (" ..." if len(group) > 4 else "")
+
+
 class Drive:
     """One drive (unit) on a link, described by a profile."""
 
@@ -108,27 +128,55 @@ class Drive:
         self.profile = profile
         self.unit = unit
         self.port = port
+        self.missing: dict[str, Entry] = {}     # entries the drive answered exception 02 for, this run, by code
 
     # ----- reading -------------------------------------------------------------------------------------------
-    def read_entries(self, entries: Iterable[Entry], progress: Callable[[int], None] | None = None) -> list[Reading]:
-        """Read entries in coalesced requests; results in the order asked."""
+    def read_entries(self, entries: Iterable[Entry], progress: Callable[[int], None] | None = None, *,
+                     partial: bool = False) -> list[Reading]:
+        """Read entries in coalesced requests; results in the order asked.
+
+        An entry the drive lacks (exception 02) is found by splitting the request that met it, remembered in
+        `missing` (never asked for again) and raises NotOnDrive; with partial=True it is left out instead."""
         entries = list(entries)
         for e in entries:
             if not e.readable:
                 raise UsageError(f"{e.code} ({e.name}) is write-only and cannot be read")
         values: dict[str, int] = {}
-        for start, count, group in coalesce_reads(self.profile, entries):
-            try:
-                words = self.link.read(self.unit, start, count)
-            except DeviceError as exc:
-                names = ", ".join(e.code for e in group[:4]) + (" ..." if len(group) > 4 else "")
-                raise _prefixed(exc, f"reading {names}") from None
-            for e in group:
-                off = e.address - start
-                values[e.code] = words_to_raw(e, words[off: off + e.words])
-            if progress:
-                progress(len(group))
-        return [Reading(e, values[e.code]) for e in entries]
+        if partial or not any(e.code in self.missing for e in entries):
+            for start, count, group in coalesce_reads(self.profile, [e for e in entries if e.code not in
+                                                                     self.missing], self._holes()):
+                self._read_block(start, count, group, values)
+                if progress:
+                    progress(len(group))
+        lacking = [e for e in entries if e.code in self.missing]
+        if lacking and not partial:
+            raise NotOnDrive(list({e.code: e for e in lacking}.values()))
+        return [Reading(e, values[e.code]) for e in entries if e.code in values]
+
+    def _holes(self) -> frozenset[int]:
+        return frozenset(a for e in self.missing.values() for a in e.addresses)
+
+    def _read_block(self, start: int, count: int, group: list[Entry], values: dict[str, int]) -> None:
+        """Read one coalesced block into values; on exception 02, split it in two and read each half, down to the
+        single entry the drive lacks."""
+        try:
+            words = self.link.read(self.unit, start, count)
+        except ModbusException as exc:
+            if exc.code != ILLEGAL_ADDRESS:
+                raise _prefixed(exc, f"reading {_names(group)}") from None
+            if len(group) == 1:
+                self.missing[group[0].code] = group[0]
+                return
+            half = len(group) // 2
+            for part in (group[:half], group[half:]):
+                for s, c, g in coalesce_reads(self.profile, part, self._holes()):
+                    self._read_block(s, c, g, values)
+            return
+        except DeviceError as exc:
+            raise _prefixed(exc, f"reading {_names(group)}") from None
+        for e in group:
+            off = e.address - start
+            values[e.code] = words_to_raw(e, words[off: off + e.words])
 
     def read(self, *codes: str) -> list[Reading]:
         return self.read_entries(self.profile.entry(c) for c in codes)

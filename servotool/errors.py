@@ -23,10 +23,34 @@ class ProfileError(UsageError):
     """A profile is missing or broken."""
 
 
+class MissingRole(UsageError):
+    """A feature needs an entry by meaning (a role) that the drive's profile does not map."""
+
+    def __init__(self, feature: str, role: str, profile_id: str, message: str | None = None) -> None:
+        self.feature, self.role, self.profile_id = feature, role, profile_id
+        super().__init__(message or f"{feature} needs role '{role}', which profile {profile_id} does not map")
+
+
+class UnknownName(UsageError):
+    """A code, group, class or profile id that is not there; `suggestions` are the closest that are."""
+
+    def __init__(self, kind: str, name: str, profile_id: str | None, suggestions: Sequence[str] = (),
+                 known: Sequence[str] = ()) -> None:
+        self.kind, self.name, self.profile_id = kind, name, profile_id
+        self.suggestions, self.known = list(suggestions), list(known)
+        where = f" for profile {profile_id}" if profile_id else ""
+        hint = ""
+        if suggestions:
+            hint = "; did you mean " + (self.suggestions[0] if len(self.suggestions) == 1 else
+                                        ", ".join(self.suggestions[:-1]) + " or " + self.suggestions[-1]) + "?"
+        super().__init__(f"unknown {kind} '{name}'{where}{hint}")
+
+
 class DeviceError(ServoError):
     """The link or the drive failed: timeout, CRC error, Modbus exception."""
 
     exit_code = 1
+    fault = ""      # for a failed exchange: silent, garbled, stray or extra (what the last try met)
 
 
 class ModbusException(DeviceError):
@@ -89,3 +113,18 @@ class SetupRequired(UsageError):
         parts = [f"{s} = {want} (now {now})" for g in self.missing for s, want, now in g.differences]
         return parts + [f"{a.replace('=', ' = ')} (set, in effect after a power cycle)"
                         for g in self.waiting for a in g.assignments]
+
+
+class IdentityMismatch(UsageError):
+    """The drive answering contradicts its profile's identity checks; nothing was written.
+
+    `answers` say what the drive answered; `better` is (profile id, model) of a shipped profile it matches, or None.
+    """
+
+    def __init__(self, profile: str, model: str, unit: int, answers: Sequence[str],
+                 better: tuple[str, str] | None) -> None:
+        self.profile, self.model, self.unit, self.answers, self.better = profile, model, unit, tuple(answers), better
+        fit = (f"it answers like profile {better[0]} ({better[1]}): use --profile {better[0]}" if better else
+               "no shipped profile fits it")
+        super().__init__(f"unit {unit} is not the drive profile {profile} ({model}) describes: "
+                         f"{'; '.join(answers)}; {fit}; nothing was written (--no-identity-check skips this check)")

@@ -1,14 +1,14 @@
 """The files servotool keeps: user folders, atomic writes, YAML reading with one error format, a cross-process lock.
 
 Folders come from platformdirs (XDG on Linux, so XDG_CONFIG_HOME, XDG_STATE_HOME and XDG_DATA_HOME apply there;
-the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and SERVOTOOL_BACKUP_DIR override them.
+the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and SERVOTOOL_BACKUP_DIR override them
+(and SERVOTOOL_CACHE_DIR the cache folder).
 """
 
 from __future__ import annotations
 
 import glob
 import os
-import tempfile
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -16,14 +16,17 @@ from pathlib import Path
 from typing import IO, Any
 
 import platformdirs
-import yaml
 
 from servotool.errors import FileProblem
 
 APP = "servotool"
 
-# The C parser when PyYAML has it: a profile loads several times faster.
-_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+def _yaml() -> tuple[Any, Any]:
+    """PyYAML and its safe loader (the C one when PyYAML has it: several times faster), imported when a YAML file
+    is read: a command that reads none (a profile from the compiled cache) starts without it."""
+    import yaml
+
+    return yaml, getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 # Bounds checked before a document is built: the loaders recurse (a profile nested 100,000 deep crashed the C
 # loader), and no servotool file comes near them (profiles are ~150 kB and ~8 levels deep).
@@ -57,10 +60,17 @@ def backup_dir() -> Path:
     return platformdirs.user_data_path(APP, appauthor=False) / "backups"
 
 
+def cache_dir() -> Path:
+    """Where servotool keeps what it can rebuild (SERVOTOOL_CACHE_DIR, else the user cache folder)."""
+    if env := os.environ.get("SERVOTOOL_CACHE_DIR"):
+        return Path(env)
+    return platformdirs.user_cache_path(APP, appauthor=False)
+
+
 # ----- writing ---------------------------------------------------------------------------------------------------
 
-def write_atomic(path: Path, text: str, *, replace: bool = True, durable: bool = True) -> os.stat_result:
-    """Write text (UTF-8) so that readers see the old file or the new one, never half of one.
+def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable: bool = True) -> os.stat_result:
+    """Write text (UTF-8) or bytes so that readers see the old file or the new one, never half of one.
 
     The file is made as a private temporary file beside the target (mode 0600) and renamed over it. With
     replace=False an existing file is never replaced, not even one that appears meanwhile: FileExistsError.
@@ -68,10 +78,12 @@ def write_atomic(path: Path, text: str, *, replace: bool = True, durable: bool =
     Other failures are OSError, for the caller to word.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
+    import tempfile
+
     sweep_temp(path.parent, path.name)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        with (os.fdopen(fd, "wb") if isinstance(text, bytes) else os.fdopen(fd, "w", encoding="utf-8")) as fh:
             fh.write(text)
             fh.flush()
             if durable:
@@ -140,7 +152,7 @@ def read_text(path: Path) -> str:
         raise FileProblem(path, f"not UTF-8 text (byte {exc.start})") from None
 
 
-def _yaml_problem(path: Path, exc: yaml.YAMLError) -> FileProblem:
+def _yaml_problem(path: Path, exc: Any) -> FileProblem:
     mark = getattr(exc, "problem_mark", None)
     problem = " ".join(str(getattr(exc, "problem", None) or exc).split())     # one line, whatever the file held
     return FileProblem(path, f"invalid YAML: {problem}",
@@ -152,9 +164,10 @@ def check_yaml_bounds(text: str, path: Path) -> None:
     aliases (a recursive alias makes a structure that contains itself). Scanning events does not recurse."""
     if len(text) > MAX_YAML_BYTES:
         raise FileProblem(path, f"too large ({len(text)} characters; at most {MAX_YAML_BYTES})")
+    yaml, loader = _yaml()
     depth = 0
     try:
-        for event in yaml.parse(text, Loader=_SAFE_LOADER):
+        for event in yaml.parse(text, Loader=loader):
             if isinstance(event, yaml.CollectionStartEvent):
                 depth += 1
                 if depth > MAX_YAML_DEPTH:
@@ -172,17 +185,19 @@ def check_yaml_bounds(text: str, path: Path) -> None:
 def parse_yaml(text: str, path: Path) -> Any:
     """The data of a YAML document read from path; FileProblem (with the line) when it is not valid YAML."""
     check_yaml_bounds(text, path)
+    yaml, loader = _yaml()
     try:
-        return yaml.load(text, Loader=_SAFE_LOADER)
+        return yaml.load(text, Loader=loader)
     except yaml.YAMLError as exc:
         raise _yaml_problem(path, exc) from None
 
 
-def compose_yaml(text: str, path: Path) -> yaml.Node | None:
+def compose_yaml(text: str, path: Path) -> Any:
     """The node tree of a YAML document (for the line of each key); FileProblem when it is not valid YAML."""
     check_yaml_bounds(text, path)
+    yaml, loader = _yaml()
     try:
-        return yaml.compose(text, Loader=_SAFE_LOADER)
+        return yaml.compose(text, Loader=loader)
     except yaml.YAMLError as exc:
         raise _yaml_problem(path, exc) from None
 

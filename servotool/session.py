@@ -10,7 +10,10 @@ from dataclasses import replace
 from servotool.config import Resolved
 from servotool.drive import Drive
 from servotool.link.modbus import ModbusLink
-from servotool.link.ports import Trace
+from servotool.link.ports import Trace, latency_advice
+from servotool.ops.identity import confirm, warning_text
+
+_ADVISED: set[str] = set()
 
 
 def sim_notice(resolved: Resolved, units: list[int]) -> str:
@@ -38,6 +41,9 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
         sim = EmbeddedSim([build_drive(resolved.profile, u) for u in units])
         settings = replace(settings, port=sim.port)
         (notice or _stderr)(sim_notice(resolved, units))
+    elif (advice := latency_advice(settings.port)) and settings.port not in _ADVISED:
+        _ADVISED.add(settings.port)             # once a run, however many times the port opens
+        (notice or _stderr)(f"servotool: warning: {advice}")
     try:
         link = ModbusLink(settings, trace=trace)
     except Exception:
@@ -46,6 +52,11 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
         raise
     try:
         drives = [Drive(link, resolved.profile, u, port=port) for u in units]
+        # Before anything is written: the drive answering must be the one the profile describes. The embedded
+        # simulator is built from the profile itself.
+        if resolved.identity_check and not resolved.simulated:
+            if text := warning_text(confirm(drives)):
+                (notice or _stderr)(f"servotool: warning: {text}")
         for d in drives:      # what a killed servotool process left on these drives is put right first
             recover_at_start(d, notice or _stderr, (sim_state_dir(),) if sim else ())
         yield drives

@@ -24,6 +24,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("servotool.ops",),
     ("servotool.motion",),
     ("servotool.tuning",),
+    ("servotool.report",),      # pictures of measurements and tune results (plan steps write tune reports)
     ("servotool.commission",),
     ("servotool.session",),
     ("servotool.cli", "servotool.__main__"),
@@ -36,7 +37,8 @@ SIM = "servotool.sim"
 SIM_MAY_IMPORT = (*LAYERS[0], "servotool.model", "servotool.link.ports", SIM)
 SIM_IMPORTED_BY = ("servotool.session", "servotool.cli", SIM)
 CLIENT_SIDE = ("servotool.link.modbus", "servotool.drive", "servotool.ops", "servotool.motion", "servotool.tuning",
-               "servotool.commission", "servotool.config", "servotool.session", "servotool.cli", "pymodbus.client")
+               "servotool.report", "servotool.commission", "servotool.config",
+               "servotool.session", "servotool.cli", "pymodbus.client")
 
 
 def modules() -> dict[str, Path]:

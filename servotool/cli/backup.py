@@ -5,13 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import typer
-from rich.progress import Progress
 
 from servotool.cli.common import JSON_OPT, confirm, drive, state
-from servotool.cli.render import emit_json, err, info, out, table, warn
+from servotool.cli.render import count, emit_json, err, info, out, progress, table, warn
 from servotool.config import resolve
 from servotool.errors import ServoError, UsageError
-from servotool.model.codec import format_value
+from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
 from servotool.ops import backup, restore
@@ -30,40 +29,60 @@ def _where(text: str) -> None:
 @app.command("backup")
 def backup_cmd(
     ctx: typer.Context,
-    output: Path = typer.Option(None, "--output", "-o", help="Backup file (default: MODEL-unitN-DATE.yaml here)."),
+    output: Path = typer.Option(None, "--output", "-o", help="Backup file (default: MODEL-unitN-DATE.yaml here, "
+                                "or .csv)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing file."),
+    fmt: str = typer.Option(None, "--format", help="yaml (checksummed; the default) or csv (for a spreadsheet; "
+                            "restore reads it too). Default: from the file name's suffix."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Save every readable parameter (and the drive's identity) to a checksummed YAML file."""
-    backup.check_output(output or Path("new.yaml"), force=force)    # before reading the drive (24 s at 1200 Bd)
+    """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
+    kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
+    if kind not in ("yaml", "yml", "csv"):
+        raise UsageError(f"--format must be yaml or csv, not '{fmt or kind}'")
+    backup.check_output(output or Path(f"new.{kind}"), force=force)   # before reading the drive (24 s at 1200 Bd)
     with drive(ctx) as d:
         entries = select(d.profile)
-        with Progress(console=err, transient=True, disable=as_json) as progress:
-            task = progress.add_task("reading parameters", total=len(entries))
-            b = backup.take(d, progress=lambda n: progress.advance(task, n))
-        path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.yaml")
-        backup.save(b, d.profile, path, force=force)
+        with progress("reading parameters", len(entries), enabled=not as_json) as advance:
+            b = backup.take(d, progress=advance)
+        suffix = "csv" if kind == "csv" else "yaml"
+        path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
+        backup.save(b, d.profile, path, force=force, fmt=suffix)
     if as_json:
-        emit_json({"file": str(path), "entries": len(b.values), "checksum": b.checksum(), "identity": b.identity})
+        emit_json({"file": str(path), "format": "csv" if kind == "csv" else "yaml", "entries": len(b.values),
+                   "checksum": b.checksum(), "identity": b.identity, "missing": b.missing})
     else:
-        out.print(f"{len(b.values)} parameters saved to {path}", markup=False)
+        lacking = f" ({len(b.missing)} not on this drive, marked in the file)" if b.missing else ""
+        out.print(f"{count(len(b.values), 'parameter')} saved to {path}{lacking}", markup=False)
 
 
 @app.command("diff")
 def diff_cmd(
     ctx: typer.Context,
-    file: Path = typer.Argument(..., help="Backup file (compared with the drive, or with FILE2)."),
+    file: Path = typer.Argument(None, help="Backup file (compared with the drive, or with FILE2); none with --factory: "
+                                "the drive against its factory defaults."),
     file2: Path = typer.Argument(None, help="Second backup file: compare the two files, no drive needed."),
-    from_default: bool = typer.Option(False, "--changed-from-default", help="Compare with the factory defaults."),
+    from_default: bool = typer.Option(False, "--factory", "--changed-from-default", help="Compare with the factory "
+                                      "defaults (the drive's, or FILE's)."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Differences between the drive and a file, two files, or a file and the factory defaults.
+    """Differences between the drive and a file, two files, a file or the drive and the factory defaults.
 
     A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning.
     """
     opts = state(ctx).options
     if file2 is not None and from_default:
-        raise UsageError("give FILE2 or --changed-from-default, not both")
+        raise UsageError("give FILE2 or --factory, not both")
+    if file is None and not from_default:
+        raise UsageError("give a backup FILE to compare with, or --factory for the factory defaults")
+    if file is None:
+        with drive(ctx) as d:
+            profile = d.profile
+            current = {r.entry.code: r.raw for r in d.read_entries(select(profile), partial=True)}
+            missing = list(d.missing)
+        _show_diff(backup.diff(profile, current, backup.defaults(profile)), ("drive", "factory default"), missing,
+                   as_json)
+        return
 
     def load(path: Path, profile: Profile) -> backup.Backup:
         b = backup.load(path, profile, force=True)
@@ -71,6 +90,7 @@ def diff_cmd(
             warn(w)
         return b
 
+    missing: list[str] = []           # entries the drive lacks (a drive diff only)
     if file2 is not None or from_default:
         name = opts.profile or backup.profile_of(file)
         if name is None:
@@ -84,11 +104,16 @@ def diff_cmd(
         with drive(ctx) as d:
             profile = d.profile
             a = load(file, profile)
-            current = {r.entry.code: r.raw for r in d.read_entries(select(profile))}
+            current = {r.entry.code: r.raw for r in d.read_entries(select(profile), partial=True)}
+            missing = list(d.missing)
         labels = ("drive", str(file))
-        diffs = backup.diff(profile, current, a.values)
+        diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
+    _show_diff(diffs, labels, missing, as_json)
+
+
+def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing: list[str], as_json: bool) -> None:
     if as_json:
-        emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs]})
+        emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs], "missing": missing})
         return
     if not diffs:
         out.print(f"no differences between {labels[0]} and {labels[1]}", markup=False)
@@ -118,26 +143,34 @@ def restore_cmd(
     for w in b.warnings:
         warn(w)
     with drive(ctx) as d:
-        current = {r.entry.code: r.raw for r in d.read_entries(select(d.profile))}
+        entries = select(d.profile)
+        with progress("reading the drive", len(entries), enabled=not as_json) as advance:
+            current = {r.entry.code: r.raw for r in d.read_entries(entries, partial=True, progress=advance)}
         plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [])
         if not as_json:
             _show_plan(plan)
         if dry_run or not plan.changes:
             if as_json:
                 emit_json({"dry_run": dry_run, "changes": _changes_json(plan), "written": [],
-                           "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
+                           "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
+                           "missing": [e.code for e in plan.missing], "refused": []})
             elif not plan.changes:
                 out.print("nothing to restore: the drive already matches", markup=False)
             return
-        if not confirm(f"Write {len(plan.changes)} parameters?", yes):
+        if not confirm(f"Write {count(len(plan.changes), 'parameter')}?", yes):
             raise ServoError("restore cancelled: nothing was written")
-        report = restore.restore(d, b, plan, notice=_where)
+        with progress("writing", len(plan.changes), enabled=not as_json) as advance:
+            report = restore.restore(d, b, plan, progress=lambda _entry: advance(1), notice=_where)
     if as_json:
         emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
                    "auto_backup": str(report.auto_backup), "persisted": report.persisted,
-                   "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped]})
+                   "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
+                   "missing": [e.code for e in plan.missing],
+                   "refused": [{"code": e.code, "why": why} for e, why in report.refused]})
         return
-    out.print(f"{len(report.written)} parameters restored and verified by read-back", markup=False)
+    for e, why in report.refused:
+        warn(f"{e.code} ({e.name}) not restored: the drive refuses writes there ({why})")
+    out.print(f"{count(len(report.written), 'parameter')} restored and verified by read-back", markup=False)
     if not report.persisted:
         # restore asks for EEPROM, so this is a drive that cannot store over Modbus
         warn(f"the drive keeps these values in RAM only, lost at power-off: {d.profile.persistence.note}")
@@ -146,13 +179,14 @@ def restore_cmd(
 
 
 def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
-    return [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
+    return [{"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit,
              "effect": e.effect} for e, old, new in plan.changes]
 
 
 def _show_plan(plan: restore.RestoreChanges) -> None:
     if plan.changes:
-        t = table("Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{len(plan.changes)} changes, in order")
+        t = table("Code", "Name", "Drive", "Backup", "Unit", "Needs",
+                  title=f"{count(len(plan.changes), 'change')}, in order")
         for e, old, new in plan.changes:
             t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
         out.print(t)
@@ -171,8 +205,11 @@ def reset_cmd(
         d.profile.need_role("factory_reset", "param reset")
         if not confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):
             raise ServoError("factory reset cancelled: nothing was written")
-        auto = restore.factory_reset(d, notice=_where)
-        left = restore.not_at_default(d)
+        count_pn = len(select(d.profile))
+        with progress("automatic backup", count_pn, enabled=not as_json) as advance:
+            auto = restore.factory_reset(d, notice=_where, progress=advance)
+        with progress("checking the defaults", count_pn, enabled=not as_json) as advance:
+            left = restore.not_at_default(d, progress=advance)
         before = backup.load(auto, d.profile).values
     cycle = [e.code for e in d.profile.of_class("Pn")
              if e.effect == "power_cycle" and before.get(e.code, e.default) != e.default]

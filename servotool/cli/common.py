@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import typer
 
-from servotool.cli.render import Verbosity, notice, trace_frame
+from servotool.cli.render import Verbosity, info, trace_frame, warn
 from servotool.config import ConnectOptions, Resolved, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -34,15 +34,18 @@ def resolved(ctx: typer.Context) -> Resolved:
 
 @contextmanager
 def drive(ctx: typer.Context) -> Iterator[Drive]:
-    """The one drive the global options point at."""
-    with open_drives(resolved(ctx), trace=trace_frame if Verbosity.level > 0 else None, notice=notice) as drives:
+    """The one drive the global options point at; after a command that completed, names each entry the drive
+    turned out to lack (once, however often it was asked for)."""
+    with open_drives(resolved(ctx), trace=trace_frame if Verbosity.level > 0 else None, notice=info) as drives:
         yield drives[0]
+        for e in drives[0].missing.values():
+            warn(f"{e.code} ({e.name}): not on this drive (exception 02 for its address); left out")
 
 
 @contextmanager
 def drives(ctx: typer.Context, units: list[int]) -> Iterator[list[Drive]]:
     with open_drives(resolved(ctx), units, trace=trace_frame if Verbosity.level > 0 else None,
-                     notice=notice) as found:
+                     notice=info) as found:
         yield found
 
 

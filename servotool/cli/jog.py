@@ -2,76 +2,29 @@
 
 from __future__ import annotations
 
-import os
 import statistics
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import partial
+from pathlib import Path
 
 import typer
 
 from servotool.cli.common import confirm, drive, resolved
-from servotool.cli.render import Verbosity, emit_json, err, info
+from servotool.cli.keys import raw_keys
+from servotool.cli.render import Verbosity, caution, emit_json, err, info
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
 from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
+from servotool.ops.trace import Sampler, motion_entries
+from servotool.ops.trace_file import check_writable, write_trace
 from servotool.sim.state import effective_values
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
-
-
-POSIX_KEYS = {"\x1b[C": "fwd", "\x1b[D": "rev", "d": "fwd", "a": "rev", " ": "stop", "q": "quit", "\x1b": "quit"}
-WINDOWS_KEYS = {"\xe0M": "fwd", "\xe0K": "rev", "\x00M": "fwd", "\x00K": "rev", "d": "fwd", "a": "rev", " ": "stop",
-                "q": "quit", "\x1b": "quit"}
-
-
-@contextmanager
-def raw_keys() -> Iterator[Callable[[], str | None]]:
-    """Non-blocking single-key reader on the terminal: yields a function returning fwd/rev/stop/quit, "" for
-    another key, None when no key was pressed. The platform's terminal modules are imported only here, so the
-    CLI starts where they do not exist."""
-    if sys.platform == "win32":
-        yield _windows_key
-        return
-    with _posix_keys() as key:
-        yield key
-
-
-def _windows_key() -> str | None:
-    import msvcrt
-
-    if not msvcrt.kbhit():  # type: ignore[attr-defined]
-        return None
-    data = msvcrt.getwch()  # type: ignore[attr-defined]
-    if data in ("\x00", "\xe0"):           # an arrow key arrives as a prefix and its scan code
-        data += msvcrt.getwch()  # type: ignore[attr-defined]
-    return WINDOWS_KEYS.get(data, "")
-
-
-@contextmanager
-def _posix_keys() -> Iterator[Callable[[], str | None]]:
-    """cbreak mode on stdin; restores the terminal however we leave."""
-    import select
-    import termios
-    import tty
-
-    fd = sys.stdin.fileno()
-    saved = termios.tcgetattr(fd)
-    tty.setcbreak(fd)
-
-    def key() -> str | None:
-        if not select.select([fd], [], [], 0)[0]:
-            return None
-        return POSIX_KEYS.get(os.read(fd, 8).decode(errors="ignore"), "")
-
-    try:
-        yield key
-    finally:
-        termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 
 
 def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
@@ -83,12 +36,31 @@ def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATU
     if simulated:
         return
     caveats = motion_caveats(d.profile, feature)
-    for line in caveats.lines():
-        err.print(f"servotool: caution: {line}", markup=False)
+    caution(caveats.lines())
     if caveats.unverified:
         codes = ", ".join(e.code for _, e, _ in caveats.unverified)
         if not confirm(f"Move the motor through unverified entries ({codes})?", yes):
             raise ServoError("cancelled: nothing moved")
+
+
+@contextmanager
+def _traced(ctx: typer.Context, d: Drive, path: Path | None) -> Iterator[Sampler | None]:
+    """A recording of the JOG's own motion, written however the JOG ends (stopped, failed, interrupted)."""
+    if path is None:
+        yield None
+        return
+    from servotool.cli.trace import about_lines
+
+    sampler = Sampler(d, motion_entries(d.profile))
+    try:
+        yield sampler
+    finally:
+        if sampler.samples:
+            rec = sampler.recording()
+            about = about_lines(resolved(ctx), f"trigger: none (the JOG's own motion, sampled between keep-alive "
+                                f"beats); {sampler.requests_per_sample} request(s) per sample")
+            write_trace(path, [rec], sampler.entries, about, replace=True)
+            info(f"trace: {rec.timing.describe()} written to {path}")
 
 
 def jog(
@@ -100,14 +72,20 @@ def jog(
     as_json: bool = typer.Option(False, "--json", help="Print the plan and the result as JSON."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving through unverified entries "
                              "(real drives only; the simulator never asks)."),
+    trace_file: Path = typer.Option(None, "--trace", help="Record speed, torque and position between the "
+                                    "keep-alive beats, on the same port, to this CSV ('servotool plot' draws it)."),
 ) -> None:
     """JOG the motor; the drive stops by itself if this program goes quiet. Ctrl-C stops at once."""
     if (seconds is None) == (not interactive):
         raise UsageError("give exactly one of --time SECONDS or --interactive")
     if interactive and not sys.stdin.isatty():
         raise UsageError("--interactive needs a terminal")
-    with drive(ctx) as d:
+    if trace_file is not None:
+        check_writable(trace_file, replace=True)
+    with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
         jogger = Jogger(d)
+        if sampler is not None:
+            jogger.idle = sampler.sample_for
         plan = jogger.plan(speed, seconds, max_travel)
         confirm_motion(ctx, d, yes)
         info(plan.describe() + ("" if not interactive else f"  [{KEYS}]"))
@@ -141,9 +119,11 @@ def jog(
         if err.is_terminal:
             err.print("")
         final = jogger.speed()
+    sign = plan.direction if seconds is not None else 1      # a timed reverse JOG peaks at a negative speed
     if as_json:
-        emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds, "peak_speed_rpm": round(peak, 1),
-                   "median_speed_rpm": round(statistics.median(late), 1) if late else None,
+        emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds,
+                   "peak_speed_rpm": round(peak, 1) * sign,
+                   "median_speed_rpm": round(statistics.median(late), 1) * sign if late else None,
                    "final_speed_rpm": final})
     else:
-        info(f"JOG done: peak {peak:.1f} rpm, now {final if final is not None else '?'} rpm")
+        info(f"JOG done: peak {peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")

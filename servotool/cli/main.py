@@ -9,30 +9,40 @@ import sys
 import typer
 
 from servotool import __version__
-from servotool.cli import alarm, backup, jog, monitor, param, profiles, run, sim, tune
+from servotool.cli import complete, fastparse
+from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, state
-from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, err
+from servotool.cli.lazy import lazy, lazy_group
+from servotool.cli.messages import error_code, error_text
+from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.config import ConnectOptions
 from servotool.errors import ServoError
+
+fastparse.install()
+
+# Each command's module is imported when that command runs (a typer app or a command function, "module:name").
+COMMANDS = {
+    "param": lazy("servotool.cli.param:app", "servotool.cli.backup:app",
+                  help="Read, set, list, back up and restore drive parameters."),
+    "profiles": lazy("servotool.cli.profiles:app"),
+    "sim": lazy("servotool.cli.sim:app"),
+    "alarm": lazy("servotool.cli.alarm:app"),
+    "tune": lazy("servotool.cli.tune:app"),
+    "monitor": lazy("servotool.cli.monitor:monitor"),
+    "jog": lazy("servotool.cli.jog:jog"),
+    "run": lazy("servotool.cli.run:run"),
+    "raw": lazy("servotool.cli.raw:app"),
+    "scan": lazy("servotool.cli.scan:scan"),
+    "doctor": lazy("servotool.cli.doctor:doctor"),
+    "trace": lazy("servotool.cli.trace:trace"),
+    "plot": lazy("servotool.cli.plot:plot"),
+}
 
 app = typer.Typer(
     name="servotool", no_args_is_help=True, add_completion=True, pretty_exceptions_enable=False,
     help="Commission and tune AC servo drives over Modbus RTU (real or simulated).",
-    context_settings={"help_option_names": ["-h", "--help"]},
+    context_settings={"help_option_names": ["-h", "--help"]}, cls=lazy_group(COMMANDS),
 )
-# `param` is two groups of commands under one name: values (get, set, list) and files (backup, diff, restore, reset).
-param_group = typer.Typer(no_args_is_help=True, help="Read, set, list, back up and restore drive parameters.")
-param_group.add_typer(param.app)
-param_group.add_typer(backup.app)
-app.add_typer(param_group, name="param")
-app.add_typer(profiles.app, name="profiles")
-app.add_typer(sim.app, name="sim")
-app.add_typer(alarm.app, name="alarm")
-app.add_typer(tune.app, name="tune")
-app.command("monitor")(monitor.monitor)
-app.command("jog")(jog.jog)
-app.command("run")(run.run)
 
 
 def _version(value: bool) -> None:
@@ -53,10 +63,23 @@ def main(
                              "Env: SERVOTOOL_UNIT."),
     timeout: float = typer.Option(None, "--timeout", help="Response timeout in seconds. Env: SERVOTOOL_TIMEOUT."),
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
-    profile: str = typer.Option(None, "--profile", "-P", help="Drive profile id or YAML file (default for sim: "
+    echo: str = typer.Option(None, "--echo", help="auto|on|off: the RS485 adapter echoes what it sends (default auto: "
+                             "found out on the first exchange). Env: SERVOTOOL_ECHO."),
+    turnaround_ms: float = typer.Option(None, "--turnaround-ms", help="Quiet time after a reply before the next "
+                                        "request, for slow drives (default 0). Env: SERVOTOOL_TURNAROUND_MS."),
+    silence_ms: float = typer.Option(None, "--silence-ms", help="Silence that ends a frame (default: 3.5 characters "
+                                     "at the baud rate). Env: SERVOTOOL_SILENCE_MS."),
+    profile: str = typer.Option(
+        None, "--profile", "-P", autocompletion=complete.profiles,
+        help="Drive profile id or YAML file (default for sim: "
                                 "dsx7e). Env: SERVOTOOL_PROFILE."),
+    no_identity_check: bool = typer.Option(None, "--no-identity-check", help="Skip the check, made before "
+                                           "any write, that the drive answering is the one the profile describes. "
+                                           "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.", show_default=False),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
+    explain: bool = typer.Option(False, "--explain", help="Cautions in full (why an entry is not confirmed by the "
+                                 "manual, what a missing watchdog means), not one line each."),
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Show the version."),
 ) -> None:
     """Commission and tune AC servo drives over Modbus RTU (real or simulated).
@@ -65,30 +88,41 @@ def main(
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
     state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
-                                        timeout=timeout, retries=retries, profile=profile)
+                                        timeout=timeout, retries=retries, profile=profile, echo=echo,
+                                        turnaround_ms=turnaround_ms, silence_ms=silence_ms,
+                                        no_identity_check=no_identity_check or None)
     Verbosity.level = -1 if quiet else verbose
+    Verbosity.explain = explain
 
 
 def run() -> None:
-    """Console-script entry point: one clear line and an exit code for every failure."""
+    """Console-script entry point: one clear line (and with --json a JSON object) and an exit code for every
+    failure; Ctrl-C exits 130 after flushing what was produced."""
     given = State()       # the options given on the command line, filled in by main(); fix commands repeat them
     _interrupt_on_termination()
+    if hasattr(sys.stdout, "reconfigure"):
+        sys.stdout.reconfigure(line_buffering=True)       # streamed lines reach a pipe as they are made
+    root = typer.main.get_command(app)
+    args = hoist_globals(root, sys.argv[1:])
+    as_json = "--json" in args[:args.index("--")] if "--" in args else "--json" in args
     try:
-        result = app(prog_name="servotool", standalone_mode=False, obj=given)
+        result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
-        err.print(f"servotool: error: {error_text(exc, given.options)}", markup=False)
-        sys.exit(exc.exit_code)
+        sys.exit(_fail(error_code(exc), error_text(exc, given.options, Verbosity.level > 0), exc.exit_code,
+                       as_json))
     except (KeyboardInterrupt, typer.Abort):
-        err.print("servotool: interrupted", markup=False)
-        sys.exit(130)
+        sys.exit(_fail("interrupted", "interrupted", 130, as_json))
+    except BrokenPipeError:           # `| head` closed the pipe: nothing more to say, to anyone
+        sys.stderr.close()
+        os._exit(141)
     except Exception as exc:
-        if (code := _usage_error(exc)) is not None:
+        if (code := _usage_error(exc, as_json)) is not None:
             sys.exit(code)
         if os.environ.get("SERVOTOOL_DEBUG"):  # a bug: still one line for the user, the traceback on request
             raise
-        err.print(f"servotool: internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the traceback)",
-                  markup=False)
-        sys.exit(1)
+        sys.exit(_fail("internal", f"internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the "
+                       "traceback)", 1, as_json))
+    sys.stdout.flush()
     sys.exit(result if isinstance(result, int) else 0)
 
 
@@ -104,7 +138,16 @@ def _interrupt_on_termination() -> None:
             signal.signal(getattr(signal, name), _terminated)
 
 
-def _usage_error(exc: Exception) -> int | None:
+def _fail(code: str, message: str, status: int, as_json: bool) -> int:
+    """Say why on stderr (and as a JSON object on stdout for --json, unless the command printed its own)."""
+    sys.stdout.flush()
+    err.print(f"servotool: {'error: ' if code not in ('interrupted', 'internal') else ''}{message}", markup=False)
+    if as_json and not json_emitted():
+        emit_json({"error": {"code": code, "message": message, "exit_status": status}})
+    return status
+
+
+def _usage_error(exc: Exception, as_json: bool) -> int | None:
     """Report typer's own usage errors (bad option value, unknown option) in one line; None for other exceptions.
 
     Matched by shape: typer vendors click privately, so its exception classes are not importable API.
@@ -114,8 +157,8 @@ def _usage_error(exc: Exception) -> int | None:
         return None
     ctx = getattr(exc, "ctx", None)
     if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:
-        print(ctx.get_help())
+        if text := str(message()).strip():    # typer's rich help printed itself when the error was made
+            print(text)
         return code
     where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
-    err.print(f"servotool: error: {' '.join(str(message()).split())}{where}", markup=False)
-    return code
+    return _fail("usage", f"{' '.join(str(message()).split())}{where}", code, as_json)

@@ -4,18 +4,26 @@ from __future__ import annotations
 
 import json
 import sys
+import time
+from collections import deque
+from collections.abc import Iterator
 from pathlib import Path
 
 import typer
 from rich.live import Live
 from rich.table import Table
+from rich.text import Text
 
+from servotool.cli import complete
 from servotool.cli.common import drive, resolved
-from servotool.cli.render import info, out, table
+from servotool.cli.render import count, info, out, table
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
-from servotool.ops.monitor import CsvLog, CsvMode, Monitor, check_duration, check_rate, resolve_entries
+from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
+from servotool.ops.trace_file import Series, TimeTable
 
+PLOT_SAMPLES = 300   # the scrolling chart shows this many of the latest samples
+PLOT_REFRESH_S = 0.2
 TREND_MIN = 8       # a trend narrower than this says nothing: drop the column instead
 NAME_FLOOR = 16     # the name keeps at least this much room (or its full length) before the trend gets any
 
@@ -57,9 +65,51 @@ def monitor_table(mon: Monitor, width: int) -> Table:
     return t
 
 
+def _sample_json(mon: Monitor, s: Sample) -> dict[str, object]:
+    """One JSON line: values rounded to each entry's resolution, with their units."""
+    series = mon.series
+    values = {c: round(v, decimals(series[c].entry)) if isinstance(v, float) and c in series else v
+              for c, v in s.values.items()}
+    return {"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"), "values": values,
+            "units": {c: series[c].entry.unit for c in s.values if c in series}}
+
+
+def monitor_chart(mon: Monitor, history: deque[Sample], width: int, height: int) -> Text:
+    """The latest samples as a chart: one panel per unit, one series per entry, a legend with the units."""
+    from servotool.report.terminal import terminal_chart
+
+    table = TimeTable(Path("monitor"), "elapsed_s", [s.t for s in history],
+                      [Series(e.code, e.unit, [float(s.values[e.code]) for s in history]) for e in mon.entries])
+    chart = terminal_chart(table, width, height - 1, _title(mon))
+    rest = f"\nnot drawn (no room; name fewer entries): {', '.join(chart.left_out)}" if chart.left_out else ""
+    return Text.from_ansi(chart.text + rest)
+
+
+def _plain_line(mon: Monitor, s: Sample) -> str:
+    """One sample as a line: what --plot prints when the output is not a terminal."""
+    return f"{s.t:8.3f} s  " + "  ".join(f"{e.code} {s.values[e.code]:g}{' ' + e.unit if e.unit else ''}"
+                                          for e in mon.entries)
+
+
+def _plot_live(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None) -> None:
+    history: deque[Sample] = deque(maxlen=PLOT_SAMPLES)
+    drawn = 0.0
+    with Live(Text(""), console=out, auto_refresh=False, transient=False) as live:
+        for s in samples:
+            if log:
+                log.write(s)
+            history.append(s)
+            if time.monotonic() - drawn >= PLOT_REFRESH_S:
+                live.update(monitor_chart(mon, history, min(out.width, 160), out.height - 1), refresh=True)
+                drawn = time.monotonic()
+        live.update(monitor_chart(mon, history, min(out.width, 160), out.height - 1), refresh=True)
+
+
 def monitor(
     ctx: typer.Context,
-    codes: list[str] = typer.Argument(None, help="Entries to watch (default: the profile's key monitors)."),
+    codes: list[str] = typer.Argument(
+        None, autocompletion=complete.codes,
+        help="Entries to watch (default: the profile's key monitors)."),
     rate: float = typer.Option(10.0, "--rate", "-r", help="Samples per second, > 0 (a rate the link cannot keep up "
                                                           "with polls as fast as it can; the rate achieved is shown)."),
     duration: float = typer.Option(None, "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C)."),
@@ -70,6 +120,8 @@ def monitor(
                                                         "columns."),
     as_json: bool = typer.Option(False, "--json", help="One JSON object per sample, one per line."),
     once: bool = typer.Option(False, "--once", help="Print one sample and exit."),
+    plot: bool = typer.Option(False, "--plot", help="A scrolling chart instead of the table (one panel per unit); "
+                              "plain lines when the output is not a terminal."),
 ) -> None:
     """Watch live values with units, min/max and a trend; report the sample rate achieved."""
     check_rate(rate)
@@ -82,13 +134,21 @@ def monitor(
     entries = resolve_entries(resolved(ctx).profile, codes or [])
     mode: CsvMode = "replace" if force else "append" if append else "new"
     log = CsvLog(csv_file, entries, mode) if csv_file else None
+    interrupted = False
     try:
         with drive(ctx) as d:
             mon = Monitor(d, resolve_entries(d.profile, codes or []))
             live_view = not (as_json or once) and sys.stdout.isatty()
             samples = mon.run(rate, duration, samples=1 if once else None)
             try:
-                if live_view:
+                if plot and live_view:
+                    _plot_live(mon, samples, log)
+                elif plot and not (as_json or once):
+                    for s in samples:
+                        if log:
+                            log.write(s)
+                        print(_plain_line(mon, s), flush=True)
+                elif live_view:
                     with Live(monitor_table(mon, out.width), console=out, refresh_per_second=8,
                               transient=False) as live:
                         for s in samples:
@@ -100,16 +160,19 @@ def monitor(
                         if log:
                             log.write(s)
                         if as_json:
-                            print(json.dumps({"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"),
-                                              "values": s.values}), flush=True)
+                            print(json.dumps(_sample_json(mon, s)), flush=True)
                     if not as_json:
                         out.print(monitor_table(mon, out.width))
-            except KeyboardInterrupt:
-                pass
+            except KeyboardInterrupt:     # the samples so far are shown, then exit 130 as for any Ctrl-C
+                interrupted = True
+                if not (live_view or as_json or plot):
+                    out.print(monitor_table(mon, out.width))
     finally:
         if log:
             log.close()
     if not once:
         rate_text = f"{mon.achieved_rate:.1f} samples/s achieved" if mon.achieved_rate is not None else \
             "too few samples to measure a rate"
-        info(f"{mon.samples} sample{'' if mon.samples == 1 else 's'} in {mon.elapsed:.2f} s: {rate_text}")
+        info(f"{count(mon.samples, 'sample')} in {mon.elapsed:.2f} s: {rate_text}")
+    if interrupted:
+        raise typer.Exit(130)

@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import csv
+import sys
+
 import typer
 
-from servotool.cli.common import JSON_OPT, drive
-from servotool.cli.render import emit_json, info, out, table, warn
+from servotool.cli import complete
+from servotool.cli.common import JSON_OPT, drive, state
+from servotool.cli.render import count, emit_json, info, out, progress, table, warn
+from servotool.config import resolve
 from servotool.drive import Reading
-from servotool.model.codec import format_field, format_value, get_field, split_field
+from servotool.errors import UnknownName
+from servotool.model.codec import format_field, format_value, get_field, json_value, split_field
+from servotool.model.lookup import class_name, search, suggest
 from servotool.ops import eeprom, params
+from servotool.ops.backup_csv import value_text
 
 app = typer.Typer(help="Read, set and list drive parameters.")
 
@@ -16,7 +24,9 @@ app = typer.Typer(help="Read, set and list drive parameters.")
 @app.command("get")
 def get(
     ctx: typer.Context,
-    codes: list[str] = typer.Argument(..., help="Vendor codes (e.g. Pn004, Po109, H09-06), role names, or "
+    codes: list[str] = typer.Argument(
+        ..., autocompletion=complete.codes,
+        help="Vendor codes (e.g. Pn004, Po109, H09-06), role names, or "
                                       "CODE.FIELD for one field of a two-/four-parameter value (e.g. Po001.Y)."),
     as_json: bool = JSON_OPT,
 ) -> None:
@@ -50,7 +60,9 @@ def _field_json(r: Reading, field: str) -> dict[str, object]:
 @app.command("set")
 def set_(
     ctx: typer.Context,
-    assignments: list[str] = typer.Argument(..., help="CODE=VALUE in engineering units (e.g. Pn100=40.0); "
+    assignments: list[str] = typer.Argument(
+        ..., autocompletion=complete.assignments,
+        help="CODE=VALUE in engineering units (e.g. Pn100=40.0); "
                                             "two-/four-parameter values as the manual shows them (Po001='d 1 21', "
                                             "Po175=b1200) or one field at a time (Po001.Y=1)."),
     raw: bool = typer.Option(False, "--raw", help="Values are raw register integers, not engineering units."),
@@ -72,9 +84,9 @@ def set_(
     if as_json:
         emit_json({
             "dry_run": dry_run,
-            "changed": [{"code": e.code, "old": format_value(e, old), "new": format_value(e, new), "unit": e.unit,
+            "changed": [{"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit,
                          "effect": e.effect} for e, old, new in plan.changes],
-            "unchanged": [{"code": e.code, "value": format_value(e, v)} for e, v in plan.unchanged],
+            "unchanged": [{"code": e.code, "value": json_value(e, v), "unit": e.unit} for e, v in plan.unchanged],
             "persisted": persisted,
             "stored": [e.code for e in stored],
         })
@@ -96,23 +108,44 @@ def set_(
                   f"{format_value(r.entry, r.new)} {r.entry.unit}{note}".replace("  [", " [").rstrip(), markup=False)
 
 
+def _class(text: str) -> str:
+    """An entry class in any case ('un' -> 'Un')."""
+    found = class_name(text, LISTABLE)
+    if found is None:
+        raise UnknownName("class", text, None, suggest(text, LISTABLE), LISTABLE)
+    return found
+
+
+LISTABLE = ("Pn", "Un", "Sn")
+
+
 @app.command("list")
 def list_(
     ctx: typer.Context,
-    group: str = typer.Option(None, "--group", "-g", help="Only this group (see 'profiles show')."),
+    group: str = typer.Option(
+        None, "--group", "-g", autocompletion=complete.groups,
+        help="Only this group: the profile's own (see 'profiles "
+                              "show') or gain, speed, position, torque, io, comm, monitor on every profile."),
     changed: bool = typer.Option(False, "--changed", help="Only entries that differ from the factory default."),
-    cls: str = typer.Option("Pn", "--class", help="Entry class to list: Pn, Un or Sn."),
+    cls: str = typer.Option(None, "--class", help="Entry class to list: Pn, Un or Sn (default: Pn; with --group, "
+                            "every class in the group)."),
+    as_csv: bool = typer.Option(False, "--csv", help="CSV on stdout, for a spreadsheet."),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Read and show a whole group of entries, with defaults and a changed mark."""
-    if cls not in ("Pn", "Un", "Sn"):
-        raise typer.BadParameter("use Pn, Un or Sn", param_hint="--class")
+    classes = ("Pn",) if cls is None and group is None else ("Pn", "Un", "Sn") if cls is None else (_class(cls),)
     with drive(ctx) as d:
-        readings = d.read_entries(params.select(d.profile, group=group, classes=(cls,)))
+        entries = params.select(d.profile, group=group, classes=classes)
+        with progress("reading", len(entries), enabled=not (as_json or as_csv)) as advance:
+            readings = d.read_entries(entries, partial=True, progress=advance)
     if changed:
         readings = [r for r in readings if r.changed]
+    if as_csv:
+        _csv(readings)
+        return
     if as_json:
-        emit_json([r.as_json() for r in readings])
+        emit_json([r.as_json() for r in readings] + [{"code": e.code, "name": e.name, "value": None,
+                                                      "missing": "not on this drive"} for e in d.missing.values()])
         return
     t = table("Code", "Name", "Value", "Unit", "Default", "", title=f"{d.profile.model} unit {d.unit}")
     for r in readings:
@@ -120,3 +153,37 @@ def list_(
         default = format_value(e, e.default) if e.default is not None else ""
         t.add_row(e.code, e.name, r.text, e.unit, default, "*" if r.changed else "")
     out.print(t)
+
+
+@app.command("find")
+def find(
+    ctx: typer.Context,
+    words: list[str] = typer.Argument(..., help="Words to look for in codes, names, descriptions and groups "
+                                      "(every word must match; any case)."),
+    as_json: bool = JSON_OPT,
+) -> None:
+    """Search the profile's entries of every class; no drive needed (the profile from --profile or the port)."""
+    profile = resolve(state(ctx).options, need_port=False).profile
+    hits = search(profile.entries, words)
+    if as_json:
+        emit_json([{"code": e.code, "class": e.cls, "name": e.name, "unit": e.unit, "group": e.group,
+                    "description": e.description} for e in hits])
+        return
+    if not hits:
+        out.print(f"nothing in profile {profile.id} matches {' '.join(words)}", markup=False)
+        return
+    t = table("Code", "Class", "Name", "Unit", "Group", title=f"{count(len(hits), 'match', 'matches')} in "
+              f"{profile.model} profile '{profile.id}'")
+    for e in hits:
+        t.add_row(e.code, e.cls, e.name, e.unit, e.group)
+    out.print(t)
+
+
+def _csv(readings: list[Reading]) -> None:
+    """The table as CSV on stdout, for a spreadsheet."""
+    w = csv.writer(sys.stdout, lineterminator="\n")
+    w.writerow(["code", "name", "value", "unit", "meaning", "default", "changed", "raw"])
+    for r in readings:
+        e = r.entry
+        w.writerow([e.code, e.name, value_text(e, r.raw), e.unit, e.enum.get(r.raw, ""),
+                    "" if e.default is None else value_text(e, e.default), "yes" if r.changed else "", r.raw])

@@ -6,11 +6,14 @@ from pathlib import Path
 
 import typer
 
+from servotool.cli import complete
 from servotool.cli.common import JSON_OPT
-from servotool.cli.render import emit_json, out, table
-from servotool.errors import UsageError
-from servotool.model.codec import format_value
+from servotool.cli.render import count, emit_json, out, table
+from servotool.errors import UnknownName
+from servotool.model.codec import field_range, format_value
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
+from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
+from servotool.model.profile import Entry
 
 app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
 
@@ -36,26 +39,26 @@ def list_(as_json: bool = JSON_OPT) -> None:
 
 @app.command("show")
 def show(
-    profile: str = typer.Argument(..., help="Profile id or YAML file."),
+    profile: str = typer.Argument(..., autocompletion=complete.profiles, help="Profile id or YAML file."),
     unverified: bool = typer.Option(False, "--unverified", help="Only entries the manual leaves open, with why."),
-    group: str = typer.Option(None, "--group", "-g", help="Only this group."),
+    group: str = typer.Option(None, "--group", "-g", help="Only this group (its id, or a common name: gain, "
+                              "speed, position, torque, io, comm, monitor)."),
     as_json: bool = JSON_OPT,
 ) -> None:
     """A profile's settings, roles and entries."""
     p = load_profile(profile)
-    entries = [e for e in p.entries if (not unverified or e.unverified) and (group is None or e.group == group)]
-    if group is not None and group not in {e.group for e in p.entries}:
-        raise UsageError(f"unknown group '{group}' for profile {p.id}")
+    members = p.entries if group is None else group_members(p.entries, group)
+    if members is None:
+        known = sorted({e.group for e in p.entries if e.group} | set(COMMON_GROUPS))
+        raise UnknownName("group", str(group), p.id, suggest(str(group), known), known)
+    entries = [e for e in members if not unverified or e.unverified]
     if as_json:
         emit_json({
             "id": p.id, "model": p.model, "vendor": p.vendor, "version": p.version, "source": p.source,
             "address_rule": p.address_rule, "unverified_note": p.unverified_note,
             "serial": {**vars(p.line), "unit": p.default_unit}, "limits": vars(p.limits), "word_order": p.word_order,
             "persistence": vars(p.persistence), "roles": p.roles,
-            "entries": [{"code": e.code, "class": e.cls, "name": e.name, "address": e.address, "type": e.type,
-                         "unit": e.unit, "scale": e.scale, "min": e.min, "max": e.max, "default": e.default,
-                         "access": e.access, "effect": e.effect, "group": e.group, "source": e.source,
-                         "unverified": e.unverified} for e in entries],
+            "entries": [_entry_json(e) for e in entries],
         })
         return
     out.print(f"[bold]{p.model}[/bold] ({p.vendor}) profile '{p.id}' v{p.version}: {p.description}")
@@ -67,7 +70,8 @@ def show(
     if p.unverified_note:
         out.print(f"[yellow]note:[/yellow] {p.unverified_note}")
     if unverified:
-        t = table("Code", "Name", "Why unverified", title=f"{len(entries)} unverified entries")
+        t = table("Code", "Name", "Why unverified",
+                  title=count(len(entries), "unverified entry", "unverified entries"))
         for e in entries:
             t.add_row(e.code, e.name, e.unverified)
         out.print(t)
@@ -79,6 +83,31 @@ def show(
                   e.effect if e.cls == "Pn" else e.access, "?" if e.unverified else "")
     out.print(t)
     out.print("roles: " + ", ".join(f"{k}={v}" for k, v in sorted(p.roles.items())), markup=False)
+
+
+def _entry_json(e: Entry) -> dict[str, object]:
+    """Everything a third party needs to build the entry's registers: address, words and their order, how they
+    combine, and the layout of a multi-field value."""
+    out: dict[str, object] = {
+        "code": e.code, "class": e.cls, "name": e.name, "address": e.address, "words": e.words, "type": e.type,
+        "word_order": e.word_order, "combine": e.combine, "unit": e.unit, "scale": e.scale, "min": e.min,
+        "max": e.max, "default": e.default, "access": e.access, "effect": e.effect, "group": e.group,
+        "format": e.format, "copy": e.copy, "source": e.source, "unverified": e.unverified}
+    if e.combine == "decimal":
+        out["digits"] = e.digits           # decimal digits each word carries
+    if e.fields:
+        # field i holds bits [width*i, width*(i+1)) of the raw value (i = 0 lowest)
+        out["fields"] = [{"name": f, "bit_offset": e.field_width * i, "width": e.field_width,
+                          "range": list(field_range(e, f)),
+                          "enum": {str(k): v for k, v in e.field_enums.get(f.upper(), {}).items()}}
+                         for i, f in enumerate(e.fields)]
+    if e.bits:
+        out["bits"] = {str(k): v for k, v in e.bits.items()}
+    if e.enum:
+        out["enum"] = {str(k): v for k, v in e.enum.items()}
+    if e.cls == "Fn":
+        out["trigger"] = e.trigger
+    return out
 
 
 @app.command("check")

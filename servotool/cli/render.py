@@ -1,23 +1,64 @@
-"""Output helpers shared by the commands: rich tables on stdout, messages on stderr, JSON."""
+"""Output helpers shared by the commands: rich tables on stdout, messages on stderr, JSON.
+
+Every table printed on `out` is fitted to the width: text columns (names, descriptions) wrap but keep at least
+NAME_MIN columns, the least useful columns go first (DROP_ORDER, or the table's own `drop`), and a table that
+still does not fit is shown as one block per row. Piped output takes the width of the terminal the user looks at
+(COLUMNS, else stderr's terminal) and, with no terminal at all, is not wrapped.
+"""
 
 from __future__ import annotations
 
 import json
+import os
+import re
 import sys
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
-from rich.console import Console
+from rich.cells import cell_len
+from rich.console import Console, Group
 from rich.table import Table
+from rich.text import Text
 
-# Piped output must not wrap at rich's 80-column default: scripts grep it.
-out = Console(highlight=False, width=None if sys.stdout.isatty() else 200)
+NAME_MIN = 20           # a wrapped name or description keeps at least this many columns: readable
+UNLIMITED = 10_000      # "no width": nothing wraps
+WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note"}   # text columns: these wrap
+# Columns dropped first when a table is too wide, least useful first; tables may give their own order.
+DROP_ORDER = ("Address", "Type", "Class", "Version", "Vendor", "Unverified", "Effect", "Trend", "Min", "Max",
+              "Default", "Needs", "")
+RIGHT = ("Value", "Default", "Min", "Max", "Address")
+
+
+def _stdout_width() -> int | None:
+    """The width for stdout: None (rich asks the terminal) on a terminal; when piped, COLUMNS or stderr's
+    terminal, and no limit without any terminal (a file, a script's pipe)."""
+    if sys.stdout.isatty():
+        return None
+    if (columns := os.environ.get("COLUMNS", "")).isdigit() and int(columns) > 0:
+        return int(columns)
+    try:
+        return os.get_terminal_size(sys.stderr.fileno()).columns
+    except (OSError, ValueError, AttributeError):
+        return UNLIMITED
+
+
+class FittingConsole(Console):
+    """A console that fits every table it prints to its width."""
+
+    def print(self, *objects: Any, **kwargs: Any) -> None:  # type: ignore[override]
+        super().print(*(fit(o, self.width) if isinstance(o, Table) else o for o in objects), **kwargs)
+
+
+out = FittingConsole(highlight=False, width=_stdout_width())
 err = Console(stderr=True, highlight=False, soft_wrap=True)
 
 
 class Verbosity:
-    """Global -q/-v state."""
+    """Global -q/-v/--explain state."""
 
     level = 0  # -1 quiet, 0 normal, 1+ verbose
+    explain = False     # cautions in full
 
 
 def info(text: str) -> None:
@@ -31,21 +72,126 @@ def notice(text: str) -> None:
     err.print(text, markup=False)
 
 
+_UNVERIFIED = re.compile(r"(\S+) \((\w+)\): ")
+
+
+def caution(lines: Sequence[str]) -> None:
+    """Cautions before something acts on a real drive: one line each (what it is about), the full text with
+    --explain."""
+    for line in lines:
+        if not Verbosity.explain:
+            m = _UNVERIFIED.match(line)
+            line = (f"{m.group(1)} ({m.group(2).replace('_', ' ')}) is not confirmed by the manual" if m
+                    else line.split(": ", 1)[0])
+        err.print(f"servotool: caution: {line}", markup=False)
+    if lines and not Verbosity.explain:
+        err.print("servotool: (--explain shows why)", markup=False)
+
+
 def warn(text: str) -> None:
     err.print(f"servotool: warning: {text}", markup=False)
 
 
+_emitted = [False]
+
+
 def emit_json(data: Any) -> None:
+    _emitted[0] = True
     sys.stdout.write(json.dumps(data, indent=2, ensure_ascii=False, default=str) + "\n")
     sys.stdout.flush()
 
 
-def table(*columns: str, title: str | None = None) -> Table:
+def json_emitted() -> bool:
+    """Whether this command has printed a JSON document already (an error then adds none)."""
+    return _emitted[0]
+
+
+def count(n: int, noun: str, plural: str | None = None) -> str:
+    """'1 parameter', '2 parameters'."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
+def table(*columns: str, title: str | None = None, drop: Sequence[str] | None = None) -> Table:
+    """A table of text cells; `drop` names the columns to give up first when it is too wide (default
+    DROP_ORDER)."""
     t = Table(title=title, show_lines=False, header_style="bold", title_justify="left")
     for c in columns:
-        justify = "right" if c in ("Value", "Default", "Min", "Max", "Address") else "left"
-        t.add_column(c, justify=justify, overflow="fold")
+        t.add_column(c, justify="right" if c in RIGHT else "left", overflow="fold")
+    t.drop = tuple(drop) if drop is not None else DROP_ORDER   # type: ignore[attr-defined]
     return t
+
+
+def _cells(t: Table, i: int) -> list[str]:
+    return [str(c) for c in t.columns[i]._cells]
+
+
+def _span(widths: Sequence[int]) -> int:
+    """Width of a table with these column widths: one padding space either side, one rule between and around."""
+    return sum(widths) + 3 * len(widths) + 1
+
+
+def fit(t: Table, width: int) -> Table | Group:
+    """The table as it fits `width` columns: as is, with text columns wrapped, without its least useful columns,
+    or as one block per row."""
+    n = len(t.columns)
+    body = [max((cell_len(c) for c in _cells(t, i)), default=0) for i in range(n)]
+    head = [cell_len(str(c.header)) for c in t.columns]
+    desired = [max(b, h) for b, h in zip(body, head, strict=True)]
+    if _span(desired) <= width or n == 0:
+        return t
+    wraps = [str(c.header) in WRAP for c in t.columns]
+    least = [max(1, min(d, NAME_MIN)) if w else max(b, min(h, 12), 1)
+             for d, b, h, w in zip(desired, body, head, wraps, strict=True)]
+    keep = list(range(n))
+    order = getattr(t, "drop", DROP_ORDER)
+    for name in order:
+        if _span([least[i] for i in keep]) <= width:
+            break
+        keep = [i for i in keep if str(t.columns[i].header) != name or wraps[i]]
+    if _span([least[i] for i in keep]) > width:
+        return _vertical(t, width)
+    widths = {i: least[i] for i in keep}
+    spare = width - _span(list(widths.values()))
+    for i in sorted(keep, key=lambda i: not wraps[i]):      # text columns take the room first
+        more = min(spare, desired[i] - widths[i])
+        widths[i] += more
+        spare -= more
+    fitted = Table(title=t.title, show_lines=t.show_lines, header_style=t.header_style,
+                   title_justify=t.title_justify)
+    for i in keep:
+        c = t.columns[i]
+        fitted.add_column(c.header, justify=c.justify, overflow="fold", width=widths[i], no_wrap=False)
+    for row in zip(*(_cells(t, i) for i in keep), strict=True):
+        fitted.add_row(*row)
+    return fitted
+
+
+def _vertical(t: Table, width: int) -> Group:
+    """One block per row: the first cell, then 'Header: value' lines (for a table too wide for the screen)."""
+    heads = [str(c.header) for c in t.columns]
+    columns = [_cells(t, i) for i in range(len(heads))]
+    lines: list[Text] = [Text(str(t.title), style="bold")] if t.title else []
+    for r in range(len(columns[0]) if columns else 0):
+        lines.append(Text(columns[0][r], style="bold"))
+        for head, cells in zip(heads[1:], columns[1:], strict=True):
+            if cells[r]:
+                lines.append(Text(f"  {head or 'Mark'}: {cells[r]}"))
+    return Group(*lines)
+
+
+@contextmanager
+def progress(label: str, total: int, enabled: bool = True) -> Iterator[Any]:
+    """A progress bar with the rate and the time left on stderr (a terminal only, not with --quiet); yields a
+    function advancing it by n."""
+    if not enabled or Verbosity.level < 0 or not err.is_terminal:
+        yield lambda n=1: None
+        return
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  console=err, transient=True) as bar:
+        task = bar.add_task(label, total=total)
+        yield lambda n=1: bar.advance(task, n)
 
 
 def trace_frame(sending: bool, data: bytes) -> None:

@@ -10,7 +10,7 @@ import typer
 
 from servotool.cli.common import state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame
+from servotool.cli.render import Verbosity, count, emit_json, info, notice, out, trace_frame
 from servotool.commission.plan import load_plan
 from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
@@ -47,7 +47,7 @@ def run(
                                                   "would": line.split(": ", 1)[1]}
                                                  for st, line in zip(plan.steps, lines, strict=True)]})
         else:
-            out.print(f"plan {plan_file}: {len(plan.steps)} steps on {resolved.profile.model} unit(s) "
+            out.print(f"plan {plan_file}: {count(len(plan.steps), 'step')} on {resolved.profile.model} unit(s) "
                       f"{', '.join(map(str, units))}; valid. Would run:", markup=False)
             for line in lines:
                 out.print("  " + line, markup=False)
@@ -65,7 +65,7 @@ def run(
     def ask(unit: int, question: str) -> bool:
         return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
 
-    with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice) as drives:
+    with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=info) as drives:
         runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info,
                         word=lambda exc: error_text(exc, cli_opts))
         rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)

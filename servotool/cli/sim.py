@@ -122,15 +122,19 @@ def config(
     line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
     brake: str = typer.Option(None, "--brake", help="on|off: holding brake, closed while the servo is off "
                               "(default on; off lets a gravity load fall, held back only by friction)."),
+    missing: str = typer.Option(None, "--missing", help="CODE,...: entries this drive lacks (answered with "
+                                "exception 02, like a firmware without them); '' restores them all."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
     p, u = _target(ctx, profile, unit)
+    if missing is not None:
+        sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
     status = sim_state.configure(p, u, load_ratio=load_ratio, friction=friction, viscous=viscous,
                                  load_torque=load_torque, noise=noise, seed=seed, line_baud=line_baud, brake=brake_on)
     if as_json:
-        emit_json({"profile": p.id, "unit": u, "settings": status.settings})
+        emit_json({"profile": p.id, "unit": u, "settings": status.settings, "missing": list(status.missing)})
         return
     _print_settings(status)
 
@@ -148,7 +152,8 @@ def show(
     if as_json:
         emit_json({"profile": status.profile.id, "unit": status.unit, "state_file": str(status.state_file),
                    "settings": status.settings, "pending_power_cycle": status.pending_power_cycle,
-                   "eeprom_writes": status.eeprom_writes, "running": dataclasses.asdict(run) if run else None})
+                   "eeprom_writes": status.eeprom_writes, "running": dataclasses.asdict(run) if run else None,
+                   "missing": list(status.missing)})
         return
     _print_settings(status)
     if run is not None:
@@ -171,5 +176,7 @@ def _print_settings(status: sim_state.SimStatus) -> None:
         shown = ("on" if value else "off") if name == "brake" else f"{value:g}"
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
+    if status.missing:
+        out.print(f"entries this drive lacks (exception 02): {', '.join(status.missing)}", markup=False)
     if status.pending_power_cycle:
         out.print(f"waiting for a power cycle: {', '.join(status.pending_power_cycle)}", markup=False)

@@ -88,8 +88,10 @@ def inertia(
                                   "or --bandwidth is given)."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask: move, then write the results."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Identify and show results; write nothing."),
-    save_trace: Path = typer.Option(None, "--save-trace", help="Save the sampled speed/torque to this CSV "
-                                    "(also when the identification is refused)."),
+    save_trace: Path = typer.Option(None, "--save-trace", "--trace", help="Save the sampled speed/torque to this "
+                                    "CSV (also when the identification is refused); 'servotool plot' draws it."),
+    report: Path = typer.Option(None, "--report", help="Write a report folder: PNG charts of the motion, the fit, "
+                                "each move, the step response and the gains, with report.md (needs servotool[plot])."),
     step_check: bool = typer.Option(False, "--step-check", help="Measure a speed step (overshoot, settling) "
                                     "before and after; moves out and back inside --travel each time."),
     save: bool = typer.Option(None, "--save/--no-save", help="Store the written ratio and gains in EEPROM (or keep "
@@ -101,6 +103,10 @@ def inertia(
     Gains are changed only with --rigidity or --bandwidth.
     """
     _check_options(method, rigidity, bandwidth, no_gains, save_trace)
+    if report is not None:
+        from servotool.report.tune_report import check_folder
+
+        check_folder(report)
     request = tune.TuneRequest(
         method=method, max_speed=max_speed, accel_time_ms=accel_time, travel_rev=travel, direction=direction,
         repeats=repeats, gains=rigidity is not None or bandwidth is not None, rigidity=rigidity,
@@ -140,13 +146,25 @@ def inertia(
         except tune.TuneDeclined:
             raise typer.Exit(1) from None
         except ServoError as exc:   # refused, tripped, travel exceeded, link lost
+            refused = exc.result if isinstance(exc, identify.IdentificationRefused) else None
+            if report is not None and refused is not None:
+                _report(report, refused, d.profile, None, str(exc))
             if as_json and moving[0]:
-                refused = exc.result if isinstance(exc, identify.IdentificationRefused) else None
                 emit_json(_clean({"ok": False, "reason": str(exc), **(_estimate_json(refused) if refused else {}),
                                   "ratio": refused.new_ratio if refused else None, "written": False}))
             raise
         profile = d.profile
+    if report is not None:
+        _report(report, res.identified, profile, res)
     _render(res, profile, as_json)
+
+
+def _report(folder: Path, result: identify.Result, profile: Profile, res: tune.TuneResult | None,
+            reason: str = "") -> None:
+    from servotool.report.tune_report import write_tune_report
+
+    written = write_tune_report(folder, result, profile, res, reason)
+    info(f"report: {len(written.files)} files in {folder} (open {folder / 'report.md'})")
 
 
 def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
@@ -161,8 +179,8 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool) -> None:
             "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
                       for c in changes],
             "gains_written": res.gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
-            "step_before": vars(res.step_before) if res.step_before else None,
-            "step_after": vars(res.step_after) if res.step_after else None,
+            "step_before": res.step_before.summary() if res.step_before else None,
+            "step_after": res.step_after.summary() if res.step_after else None,
         }))
         return
     if res.persisted is False:

@@ -12,6 +12,9 @@ from servotool.model.codec import parse_value
 from servotool.model.profile import Profile
 from servotool.model.roles import motion_route
 from servotool.motion.jogger import Jogger
+from servotool.report.charts import need_matplotlib
+from servotool.report.tune_report import write_tune_report
+from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, check_request, tune_inertia
 
 
@@ -44,9 +47,21 @@ class JogStep(StepType):
         return Outcome(plan.describe())
 
 
+def _report_option(arg: Any) -> str | None:
+    """The step's `report: DIR` (charts need matplotlib: refused before the plan runs when it is missing)."""
+    report = (arg or {}).get("report") if isinstance(arg, dict) else None
+    if report is None:
+        return None
+    if not isinstance(report, str) or not report.strip():
+        raise UsageError("tune inertia report must be a folder name")
+    need_matplotlib()
+    return report
+
+
 class TuneInertiaStep(StepType):
-    """`tune inertia: {rigidity, bandwidth, travel, max_speed, accel_time, direction, repeats, gains}`: what
-    `servotool tune inertia --yes` does (host method), with the gains set unless `gains: false`."""
+    """`tune inertia: {rigidity, bandwidth, travel, max_speed, accel_time, direction, repeats, gains, report}`: what
+    `servotool tune inertia --yes` does (host method), with the gains set unless `gains: false`; `report: DIR`
+    writes the charts and report.md there (as `--report DIR`)."""
 
     name = "tune inertia"
 
@@ -81,13 +96,24 @@ class TuneInertiaStep(StepType):
     def describe(self, step: Step, profile: Profile) -> str:
         motion = self.request(step.arg, profile).nominal_motion(profile)
         gains = (step.arg or {}).get("gains", True)
+        report = _report_option(step.arg)
         reported = "" if profile.role("inertia_ratio") is not None else \
             f"; the ratio is reported, not written ({profile.id} maps no inertia-ratio parameter)"
-        return f"tune inertia: {motion.describe()}" + ("" if gains else "; gains left as they are") + reported
+        return f"tune inertia: {motion.describe()}" + ("" if gains else "; gains left as they are") + reported \
+            + (f"; report to {report}" if report else "")
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         request = self.request(step.arg, drive.profile)
-        res = tune_inertia(drive, request)
+        report = _report_option(step.arg)
+        folder = ctx.path(report, drive.unit) if report else None
+        try:
+            res = tune_inertia(drive, request)
+        except IdentificationRefused as exc:
+            if folder is not None:
+                write_tune_report(folder, exc.result, drive.profile, None, str(exc))
+            raise
+        if folder is not None:
+            write_tune_report(folder, res.identified, drive.profile, res)
         for entry, raw in res.written:
             ctx.wrote(drive, entry, raw)
         proposal = res.proposal
@@ -98,6 +124,8 @@ class TuneInertiaStep(StepType):
         if request.gains:
             data["gains"] = {c.entry.code: c.new for c in proposal.gain_changes}
         data["persisted"] = res.persisted
+        if folder is not None:
+            data["report"] = str(folder / "report.md")
         if entry is None:
             return Outcome(f"load ratio {res.ratio:.2f} (nothing to write: {drive.profile.id} maps no "
                            "inertia-ratio parameter)", data)

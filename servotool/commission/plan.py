@@ -21,7 +21,7 @@ TOP_KEYS = {"port", "profile", "units", "unit", "steps", "baud", "parity", "stop
 JOG_KEYS = {"speed", "time", "max_travel"}
 
 
-TUNE_KEYS = {"rigidity", "bandwidth", "travel", "max_speed", "accel_time", "direction", "repeats", "gains"}
+TUNE_KEYS = {"rigidity", "bandwidth", "travel", "max_speed", "accel_time", "direction", "repeats", "gains", "report"}
 
 
 @dataclass

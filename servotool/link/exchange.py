@@ -79,17 +79,23 @@ class _Op:
         else:
             text = (f"no reply that answers it after {tries}, last {fault.why} (a late or repeated reply, an "
                     f"echoing adapter, or two masters on the line)")
-        return DeviceError(f"{self.what}: {text}{'; ' + self.outcome if self.outcome else ''}")
+        error = DeviceError(f"{self.what}: {text}{'; ' + self.outcome if self.outcome else ''}")
+        error.fault = fault.kind
+        return error
 
 
 class Exchange:
     """Reads and writes over a Wire with reply matching, quiet-and-flush after faults, and confirmation."""
 
-    def __init__(self, wire: Wire, *, timeout: float, retries: int, settle: float = 0.0, echo: bool | None = False,
-                 trace: Trace | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, wire: Wire, *, timeout: float, retries: int, settle: float = 0.0, turnaround: float = 0.0,
+                 echo: bool | None = False, trace: Trace | None = None,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
         self.wire, self.timeout, self.retries, self.settle = wire, timeout, retries, settle
+        self.turnaround, self.sleep = turnaround, sleep     # quiet after the last byte heard, before a request
+        self._heard = -float("inf")                         # when the last byte came
         self.echo = echo                   # the adapter echoes what we send; None: find out
         self.late_window = timeout         # how long after its timeout a late reply may still come
+        self.flush_gap = FRAME_GAP         # the silence that ends what is left of a failed try
         self.trace, self.clock = trace, clock
         self.requests = 0
         self._suspect = False              # the last operation met a fault: confirm the next reads
@@ -112,6 +118,9 @@ class Exchange:
                    "it may or may not have run; not sent again, since running it twice is not safe")
         op = _Op(f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}", self.retries,
                  self.timeout, outcome)
+        if self.echo is None and fc == WRITE_ONE:
+            self._probe_echo(unit, address)
+        refused: int | None = None
         try:
             while True:
                 try:
@@ -120,22 +129,44 @@ class Exchange:
                 except LineFault as fault:
                     if not idempotent:
                         raise op.error(fault) from None
+                except ModbusException as exc:
+                    # After a fault, a stale exception reply could stand in for this write's: an idempotent
+                    # write is refused only when the drive says so twice in a row.
+                    if not idempotent or not (self._suspect or op.troubled) or exc.code == refused:
+                        raise
+                    refused = exc.code
+                    continue
                 if self._holds(req, op):
                     return
         finally:
             self._suspect = op.troubled
 
     def _read(self, req: Request, op: _Op) -> list[int]:
-        previous: list[int] | None = None
+        previous: list[int] | int | None = None
         while True:
             try:
                 words = self._attempt(req, op)
             except LineFault:
                 previous = None
                 continue
+            except ModbusException as exc:
+                # An exception reply names no address, so after a fault a stale one could stand in for this
+                # read's reply: believe it (an entry the drive lacks, say) only when it comes twice in a row.
+                if not (self._suspect or op.troubled) or exc.code == previous:
+                    raise
+                previous = exc.code
+                continue
             if not (self._suspect or op.troubled) or not self._ambiguous(req) or words == previous:
                 return words
             previous = words
+
+    def _probe_echo(self, unit: int, address: int) -> None:
+        """Find out whether the adapter echoes before a first FC06 write, whose reply repeats the request (one copy
+        alone cannot tell echo from reply): any answer to a one-register read tells, even an exception."""
+        try:
+            self._attempt(Request(unit, READ, address, 1), _Op("echo probe", 0, self.timeout))
+        except (LineFault, DeviceError):      # ModbusException too: the reply's head already told
+            pass
 
     def _holds(self, req: Request, op: _Op) -> bool:
         """Whether the drive already holds what a failed write sent (then sending it again is not needed)."""
@@ -161,6 +192,8 @@ class Exchange:
         op.begin()
         if self._take_pending(0.0):
             op.troubled = True          # bytes nobody asked for: a late or repeated reply
+        if (wait := self._heard + self.turnaround - self.clock()) > 0:
+            self.sleep(wait)
         self.requests += 1
         self._recent.append(req)
         sent_at = self.clock()
@@ -232,7 +265,7 @@ class Exchange:
             until = sent_at + self.timeout + (self.late_window if fault.kind == "silent" else 0.0)
             while (left := until - self.clock()) > 0:
                 self._recv(left)
-        self._take_pending(max(self.settle, FRAME_GAP))
+        self._take_pending(max(self.settle, self.flush_gap))
 
     def _take_pending(self, quiet: float, until: int = 0) -> bytes:
         """Bytes already waiting, and those that follow within `quiet` s of each other (or until `until` came)."""
@@ -245,8 +278,10 @@ class Exchange:
 
     def _recv(self, timeout: float) -> bytes:
         data = self.wire.recv(max(0.0, timeout))
-        if data and self.trace:
-            self.trace(False, data)
+        if data:
+            self._heard = self.clock()
+            if self.trace:
+                self.trace(False, data)
         return data
 
 

@@ -1,5 +1,6 @@
-"""The one adapter over pymodbus' client side: open a port (serial or RTU over TCP) and read/write registers over
-it, with servotool's own reply matching (link/exchange.py); decode an RTU reply frame.
+"""The client side of the link: open a port (serial or RTU over TCP) and read/write registers over it, with
+servotool's own reply matching (link/exchange.py); decode an RTU reply frame (pymodbus' framer, the one use of
+pymodbus on this side).
 
 Everything else in servotool talks to `Link`, never to pymodbus directly, because pymodbus' API churns."""
 
@@ -10,15 +11,13 @@ import select
 import socket
 from typing import TYPE_CHECKING
 
-from pymodbus import FramerType
-from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.framer import FramerRTU
 from pymodbus.pdu import DecodePDU, ExceptionResponse
 
 from servotool.errors import DeviceError
 from servotool.errors import ModbusException as DriveException
 from servotool.link.exchange import Exchange, Wire
-from servotool.link.ports import LinkSettings, Trace, parse_tcp
+from servotool.link.ports import LinkSettings, Trace, open_serial, open_tcp, parse_tcp
 from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, Request
 
 # pymodbus logs every dropped frame at error level; our own errors say what happened.
@@ -29,39 +28,34 @@ if TYPE_CHECKING:     # pyserial's platform module (serialposix imports fcntl) l
 
 
 class ModbusLink:
-    """RTU frames over a serial line or a TCP socket opened by pymodbus; every exchange goes through `Exchange`,
-    which accepts only replies that provably answer their request."""
+    """RTU frames over a serial line or a TCP socket; every exchange goes through `Exchange`, which accepts only
+    replies that provably answer their request. The port is opened here (pyserial, socket) so that an error names
+    its real cause (link.ports.port_problem)."""
 
     def __init__(self, settings: LinkSettings, trace: Trace | None = None) -> None:
         self.settings = settings
         tcp = parse_tcp(settings.port)
-        self._client: ModbusTcpClient | ModbusSerialClient
+        self._port: socket.socket | serial.Serial
+        wire: Wire
         if tcp:
-            self._client = ModbusTcpClient(tcp[0], port=tcp[1], framer=FramerType.RTU, timeout=settings.timeout,
-                                           retries=0, reconnect_delay=0)
+            self._port = open_tcp(settings.port, settings.timeout)
+            wire = _SocketWire(self._port)
         else:
-            self._client = ModbusSerialClient(
-                settings.port, framer=FramerType.RTU, baudrate=settings.line.baud, parity=settings.line.parity,
-                stopbits=settings.line.stopbits, bytesize=settings.line.bytesize, timeout=settings.timeout,
-                retries=0, reconnect_delay=0,
-            )
-        if not self._client.connect():
-            self._client.close()
-            raise DeviceError(f"cannot open port {settings.port}: {self._why_not_open()}")
-        wire: Wire = _SocketWire(self._client.socket) if tcp else _SerialWire(self._client.socket)
-        self._exchange = Exchange(wire, timeout=settings.timeout, retries=settings.retries,
-                                  settle=0.0 if tcp else _frame_gap(settings.line.baud), echo=settings.echo,
-                                  trace=trace)
-
-    def _why_not_open(self) -> str:
-        if parse_tcp(self.settings.port):
-            return "connection refused or host unreachable"
-        return "no such device, busy, or permission denied"
+            self._port = open_serial(settings.port, settings.line, settings.timeout)
+            wire = _SerialWire(self._port)
+        silence = settings.silence if settings.silence is not None else 0.0 if tcp else _frame_gap(settings.line.baud)
+        self._exchange = Exchange(wire, timeout=settings.timeout, retries=settings.retries, settle=silence,
+                                  turnaround=settings.turnaround, echo=settings.echo, trace=trace)
 
     @property
     def requests(self) -> int:
         """Frames sent so far (tries and confirming reads included)."""
         return self._exchange.requests
+
+    @property
+    def echo(self) -> bool | None:
+        """Whether the adapter echoes what it sends: as set, or as found out (None: not yet known)."""
+        return self._exchange.echo
 
     def read(self, unit: int, address: int, count: int) -> list[int]:
         return self._exchange.read(unit, address, count)
@@ -70,8 +64,14 @@ class ModbusLink:
               idempotent: bool = True) -> None:
         self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent)
 
+    def hurry(self) -> None:
+        """For a bus scan, where most ids are silent by design: after a silent try, neither wait for a late reply
+        nor for a long quiet gap (a late reply then shows up as a stray frame at the next id)."""
+        self._exchange.late_window = 0.0
+        self._exchange.flush_gap = 0.0
+
     def close(self) -> None:
-        self._client.close()
+        self._port.close()
 
 
 def _frame_gap(baud: int) -> float:

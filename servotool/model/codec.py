@@ -6,6 +6,7 @@ import math
 import re
 
 from servotool.errors import UsageError
+from servotool.model.lookup import did_you_mean, enum_value, split_unit, unit_matches
 from servotool.model.profile import Entry, Profile
 
 
@@ -105,6 +106,8 @@ def split_field(profile: Profile, text: str) -> tuple[Entry, str | None]:
     if profile.find(text) is not None or "." not in text:
         return profile.entry(text), None
     code, _, name = text.rpartition(".")
+    if profile.find(code) is None:
+        return profile.entry(text), None        # unknown as a whole ('H08.00' on a drive without H08-00)
     entry = profile.entry(code)
     return entry, entry.fields[field_index(entry, name)]
 
@@ -173,21 +176,36 @@ def parse_value(entry: Entry, text: str, *, raw: bool = False, current: int | No
     if not text:
         raise UsageError(f"{what}: empty value")
     value = _parse_encoded(entry, text, current) if not raw else None
+    if value is None and entry.enum and not raw:
+        value = enum_value(entry.enum, text)
     if value is None:
-        if entry.enum:
-            by_name = {v.lower(): k for k, v in entry.enum.items()}
-            if text.lower() in by_name:
-                value = by_name[text.lower()]
-        if value is None:
-            value = _parse_number(entry, text, raw=raw)
+        value = _parse_number(entry, _without_unit(entry, text) if not raw else text, raw=raw)
     lo, hi = entry.min, entry.max
     if not lo <= value <= hi:
         rng = f"{format_value(entry, lo)}..{format_value(entry, hi)}"
         raise UsageError(f"{what}: value {text} is out of range {rng}{' ' + entry.unit if entry.unit else ''}")
     if entry.enum and value not in entry.enum and entry.format == "dec":
-        choices = ", ".join(f"{k}={v}" for k, v in sorted(entry.enum.items()))
-        raise UsageError(f"{what}: {text} is not one of {choices}")
+        raise UsageError(f"{what}: {text} is not one of {_choices(entry)}")
     return value
+
+
+def _without_unit(entry: Entry, text: str) -> str:
+    """'3000rpm' -> '3000' for an entry in rpm; a unit that is not the entry's is refused, naming the right one."""
+    number, unit = split_unit(text, entry.unit)
+    if unit is None:
+        return text
+    if unit_matches(unit, entry.unit):
+        return number
+    what = f"{entry.code} ({entry.name})"
+    if entry.enum:
+        raise UsageError(f"{what}: '{text}' is none of {_choices(entry)}")
+    if not entry.unit:
+        raise UsageError(f"{what}: takes a plain number (no unit), not '{text}'")
+    raise UsageError(f"{what}: '{text}' is in {unit}, but {entry.code} is in {entry.unit} (e.g. {number}{entry.unit})")
+
+
+def _choices(entry: Entry) -> str:
+    return ", ".join(f"{k}={v}" for k, v in sorted(entry.enum.items()))
 
 
 def _parse_number(entry: Entry, text: str, *, raw: bool) -> int:
@@ -205,6 +223,9 @@ def _parse_number(entry: Entry, text: str, *, raw: bool) -> int:
             return int(text, 2)
         number = float(text)
     except ValueError:
+        if entry.enum and not raw:
+            hint = did_you_mean(text, entry.enum.values())
+            raise UsageError(f"{what}: '{text}' is none of {_choices(entry)}{hint}") from None
         raise UsageError(f"{what}: '{text}' is not a number") from None
     if not math.isfinite(number):
         raise UsageError(f"{what}: '{text}' is not a finite number")

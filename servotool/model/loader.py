@@ -1,13 +1,23 @@
-"""Loading profiles: built-in ids and files, parsed and validated once per process."""
+"""Loading profiles: built-in ids and files, parsed and validated once per process.
+
+A parsed profile is also kept in the user cache folder, compiled (pickled) and keyed by the file's content and the
+model code that parsed it, so that the next process loads it in a few milliseconds instead of parsing the YAML.
+"""
 
 from __future__ import annotations
 
+import hashlib
+import os
+import pickle
+import sys
+from functools import cache
 from pathlib import Path
 
-from servotool.errors import FileProblem, ProfileError
-from servotool.files import load_yaml
+from servotool import __version__
+from servotool.errors import FileProblem, ProfileError, UnknownName
+from servotool.files import cache_dir, parse_yaml, read_text, write_atomic
+from servotool.model.lookup import suggest
 from servotool.model.profile import Profile
-from servotool.model.schema import parse_profile
 
 
 def builtin_dir() -> Path:
@@ -21,13 +31,71 @@ def builtin_ids() -> list[str]:
     return sorted(p.stem for p in builtin_dir().glob("*.yaml"))
 
 
-def read_profile(path: Path) -> tuple[Profile | None, list[str]]:
-    """Parse a profile file; return it (or None) and the list of problems."""
+class UnknownProfile(UnknownName, ProfileError):
+    """No built-in profile by that id (a path to a .yaml file also works)."""
+
+
+@cache
+def _code_stamp() -> bytes:
+    """What a compiled profile depends on besides its file: this code (the model package) and the Python."""
+    digest = hashlib.sha256(f"{__version__} {sys.version_info[:2]}".encode())
+    here = Path(__file__).parent
+    for name in sorted(n for n in os.listdir(here) if n.endswith(".py")):     # no glob: its regex costs 10 ms
+        digest.update((here / name).read_bytes())
+    return digest.digest()
+
+
+def _cache_file(path: Path, text: str) -> Path:
+    key = hashlib.sha256(_code_stamp() + str(path.resolve()).encode() + b"\0" + text.encode()).hexdigest()[:32]
+    return cache_dir() / "profiles" / f"{path.stem}-{key}.pickle"
+
+
+def _cached(where: Path) -> tuple[Profile | None, list[str]] | None:
     try:
-        data = load_yaml(path)
+        found = pickle.loads(where.read_bytes())
+    except FileNotFoundError:
+        return None
+    except Exception:       # a damaged or foreign cache file is rebuilt, never trusted
+        return None
+    return found if isinstance(found, tuple) and len(found) == 2 else None
+
+
+def _store(where: Path, parsed: tuple[Profile | None, list[str]]) -> None:
+    """Keep the compiled profile (replacing those of older versions of the file); a cache that cannot be
+    written is no error."""
+    try:
+        stem = where.name.rsplit("-", 1)[0] + "-"
+        for old in os.listdir(where.parent) if where.parent.is_dir() else []:
+            if old.startswith(stem) and old.endswith(".pickle"):
+                (where.parent / old).unlink(missing_ok=True)
+        write_atomic(where, pickle.dumps(parsed, protocol=pickle.HIGHEST_PROTOCOL), durable=False)
+    except OSError:
+        pass
+
+
+def _parse(path: Path) -> tuple[Profile | None, list[str]]:
+    """The profile in a file and its problems, from the compiled cache when the file has not changed."""
+    try:
+        text = read_text(path)
     except FileProblem as exc:
         return None, [str(exc)]
-    profile, problems = parse_profile(data, str(path))
+    where = _cache_file(path, text)
+    if (hit := _cached(where)) is not None:
+        return hit
+    try:
+        data = parse_yaml(text, path)
+    except FileProblem as exc:
+        return None, [str(exc)]
+    from servotool.model.schema import parse_profile  # the parser only when the cache has not the profile
+
+    parsed = parse_profile(data, str(path))
+    _store(where, parsed)
+    return parsed
+
+
+def read_profile(path: Path) -> tuple[Profile | None, list[str]]:
+    """Parse a profile file; return it (or None) and the list of problems."""
+    profile, problems = _parse(path)
     if profile is not None:
         profile.path = path
         if profile.id != path.stem:
@@ -48,8 +116,7 @@ def load_profile(name_or_path: str | Path) -> Profile:
     if path.suffix not in (".yaml", ".yml") and "/" not in key and "\\" not in key:
         path = builtin_dir() / f"{key.lower()}.yaml"
         if not path.exists():
-            known = ", ".join(builtin_ids())
-            raise ProfileError(f"unknown profile '{key}' (built-in: {known}; or give a path to a .yaml file)")
+            raise UnknownProfile("profile", key, None, suggest(key, builtin_ids()), builtin_ids())
     profile, problems = read_profile(path)
     if profile is None:
         more = f" (and {len(problems) - 1} more; run 'servotool profiles check {path}')" if len(problems) > 1 else ""

@@ -5,7 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from servotool.errors import UsageError
+from servotool.errors import MissingRole, UnknownName
+from servotool.model.lookup import code_key, suggest
 
 CLASSES = ("Pn", "Un", "Sn", "Fn")
 
@@ -168,6 +169,34 @@ class SetupItem:
     unverified: str = ""
 
 
+@dataclass(frozen=True)
+class IdentityCheck:
+    """One read-only address a drive of this family answers in a known way (or, `absent`, refuses with exception
+    02): part of the profile's identity signature."""
+
+    address: int
+    words: int = 1
+    code: str = ""                         # the entry read there; "" for an address this map does not have
+    absent: bool = False
+    range: tuple[int, int] | None = None   # raw values a drive of this family answers; None: presence only
+    sim: int | None = None                 # what the simulated drive answers (non-Pn entries)
+    source: str = ""
+    unverified: str = ""
+
+    @property
+    def label(self) -> str:
+        return self.code or f"address {self.address} (0x{self.address:04X})"
+
+
+@dataclass(frozen=True)
+class Identity:
+    """What identifies a profile's drive: its firmware and model entries and the checks made before any write."""
+
+    checks: tuple[IdentityCheck, ...]
+    firmware: str = ""
+    model: str = ""
+
+
 @dataclass
 class Profile:
     """A loaded, validated drive profile."""
@@ -192,6 +221,7 @@ class Profile:
     conventions: dict[str, str] = field(default_factory=dict)
     motion_setup: list[SetupItem] = field(default_factory=list)
     unverified_note: str = ""
+    identity: Identity | None = None
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
 
@@ -199,17 +229,33 @@ class Profile:
         self._by_code = {e.code.upper(): e for e in self.entries}
 
     def entry(self, code: str) -> Entry:
-        """The entry with this vendor code (case-insensitive) or role name."""
+        """The entry with this vendor code (any of the manual's spellings, see model.lookup) or role name."""
         found = self.find(code)
         if found is None:
-            raise UsageError(f"unknown code '{code}' for profile {self.id} (see 'servotool param list')")
+            same = self._aliases().get(code_key(code) or "", [])
+            raise UnknownName("code", code, self.id, [e.code for e in same] if len(same) > 1 else
+                              suggest(code, [e.code for e in self.entries]))
         return found
 
     def find(self, code: str) -> Entry | None:
         hit = self._by_code.get(code.strip().upper())
         if hit is None and code in self.roles:
             hit = self._by_code.get(self.roles[code].upper())
+        if hit is None:
+            same = self._aliases().get(code_key(code) or "", [])
+            hit = same[0] if len(same) == 1 else None
         return hit
+
+    def _aliases(self) -> dict[str, list[Entry]]:
+        """Spelling-free code key -> the entries with it (built on first use; more than one: ambiguous)."""
+        index: dict[str, list[Entry]] | None = self.__dict__.get("_alias_index")
+        if index is None:
+            index = {}
+            for e in self.entries:
+                if (key := code_key(e.code)) is not None:
+                    index.setdefault(key, []).append(e)
+            self.__dict__["_alias_index"] = index
+        return index
 
     def role(self, name: str) -> Entry | None:
         """The entry a semantic role maps to, or None when the profile lacks it."""
@@ -220,7 +266,7 @@ class Profile:
         """The entry for a role a feature cannot do without."""
         hit = self.role(name)
         if hit is None:
-            raise UsageError(f"{feature} needs role '{name}', which profile {self.id} does not map")
+            raise MissingRole(feature, name, self.id)
         return hit
 
     def of_class(self, *classes: str) -> list[Entry]:

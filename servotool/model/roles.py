@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from servotool.errors import UsageError
+from servotool.errors import MissingRole
 from servotool.model.profile import Entry, Profile
 
 # Status-word bit names by meaning: servotool's own names and the vendors' DO-function mnemonics (SD25 SON-O,
@@ -71,6 +71,7 @@ def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
         kind = "speed"
         found.pop("jog", None)
     else:
-        raise UsageError(f"{feature} needs role 'jog' with 'jog_speed', or 'speed_reference' with 'servo_on', "
-                         f"which profile {profile.id} does not map")
+        raise MissingRole(feature, "motion_route", profile.id,
+                          f"{feature} needs role 'jog' with 'jog_speed', or 'speed_reference' with 'servo_on', "
+                          f"which profile {profile.id} does not map")
     return MotionRoute(kind, found)

@@ -7,6 +7,7 @@ from typing import Any
 
 from servotool.model.checker import Checker
 from servotool.model.entry_schema import check_overlaps, parse_entry
+from servotool.model.identity import parse_identity
 from servotool.model.profile import (
     ALARM_KINDS,
     CONVENTIONS,
@@ -25,7 +26,7 @@ from servotool.model.profile import (
 TOP_KEYS = {
     "schema", "id", "model", "vendor", "version", "description", "source", "address_rule", "serial", "limits",
     "word_order", "persistence", "motor", "unverified_note", "groups", "roles", "entries", "alarms", "conventions",
-    "motion_setup",
+    "motion_setup", "identity",
 }
 
 
@@ -93,6 +94,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         if key not in CONVENTIONS or value not in CONVENTIONS[key]:
             chk.bad(f"conventions.{key}", f"unknown convention {key}: {value!r}")
     motion_setup = _parse_motion_setup(chk, data.get("motion_setup"), {e.code.upper(): e for e in entries}, broken)
+    identity = parse_identity(chk, data.get("identity"), {e.code.upper(): e for e in entries}, limits)
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
     profile = Profile(
@@ -103,7 +105,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         entries=entries, roles={str(k): str(v) for k, v in roles.items()},
         groups={str(k): str(v) for k, v in groups.items()}, alarms=alarms,
         conventions={str(k): str(v) for k, v in conventions.items()}, motion_setup=motion_setup,
-        unverified_note=str(data.get("unverified_note", "")),
+        unverified_note=str(data.get("unverified_note", "")), identity=identity,
     )
     return profile, []
 

@@ -60,6 +60,8 @@ class Jogger:
         self.servo = self.route.entries.get("servo_on")
         self.speed_fb = self.profile.role("speed_feedback")
         self.clock = clock or RealClock()
+        # Waits between beats; a trace (ops.trace.Sampler.sample_for) fills them with samples on the same link.
+        self.idle: Callable[[float], None] = self.clock.sleep
         self.keepalive = KeepAlive(drive, keepalive_s, self.clock, resend=self._resend_command)
         self.direction = 0
         self.speed_rpm = 0.0
@@ -189,7 +191,7 @@ class Jogger:
             if speed is not None and abs(speed) < 3.0:
                 break
             self.beat()           # the watchdog keeps running while the drive ramps down
-            self.clock.sleep(min(0.05, self.keepalive_s))
+            self.idle(min(0.05, self.keepalive_s))
         self.leave()
 
     def run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
@@ -239,7 +241,7 @@ class Jogger:
                 self.check_tripped()
                 if on_sample is not None:
                     on_sample(elapsed, self.speed())
-                self.clock.sleep(self.keepalive_s)
+                self.idle(self.keepalive_s)
         except BaseException:
             self._emergency_stop()
             raise

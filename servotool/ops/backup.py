@@ -11,14 +11,13 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from servotool import __version__
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.files import backup_dir, load_yaml, write_atomic
-from servotool.model.codec import format_value
+from servotool.model.codec import format_value, json_value
 from servotool.model.profile import Entry, Profile
+from servotool.ops import backup_csv
 from servotool.ops.params import select
 
 FORMAT = 1
@@ -39,6 +38,7 @@ class Backup:
     values: dict[str, int]
     path: Path | None = None
     warnings: list[str] = field(default_factory=list)
+    missing: list[str] = field(default_factory=list)    # Pn entries the drive lacks (not in values)
 
     def checksum(self) -> str:
         canon = json.dumps({"profile": self.profile, "model": self.model, "unit": self.unit,
@@ -52,21 +52,31 @@ class Backup:
         doc = {"servotool_backup": FORMAT, "profile": self.profile, "profile_version": self.profile_version,
                "model": self.model, "unit": self.unit, "created": self.created, "tool_version": self.tool_version,
                "identity": self.identity, "checksum": self.checksum(), "values": self.values, "display": text}
+        if self.missing:
+            doc["missing"] = {code: "not on this drive" for code in self.missing}
         return "# servotool parameter backup; values are raw register integers, 'display' is for reading only\n" + \
-            yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
+            _dump(doc)
+
+
+def _dump(doc: dict[str, Any]) -> str:
+    import yaml  # only where a backup is written: `param get` starts without PyYAML
+
+    return yaml.safe_dump(doc, sort_keys=False, allow_unicode=True)
 
 
 def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
-    """Read every readable Pn (coalesced) and the identity entries."""
+    """Read every readable Pn (coalesced) and the identity entries; entries the drive lacks are left out and
+    listed in `missing`."""
     p = drive.profile
     entries = select(p)
-    readings = drive.read_entries(entries, progress=progress)
+    readings = drive.read_entries(entries, progress=progress, partial=True)
     identity: dict[str, str] = {}
     ident = [e for e in (p.role(r) for r in IDENTITY_ROLES) if e is not None and e.readable]
-    for r in drive.read_entries(ident) if ident else []:
+    for r in drive.read_entries(ident, partial=True) if ident else []:
         identity[r.entry.code] = r.text
     return Backup(p.id, p.version, p.model, drive.unit, datetime.now(UTC).isoformat(timespec="seconds"),
-                  __version__, identity, {r.entry.code: r.raw for r in readings})
+                  __version__, identity, {r.entry.code: r.raw for r in readings},
+                  missing=[e.code for e in entries if e.code in drive.missing])
 
 
 def check_output(path: Path, *, force: bool = False) -> None:
@@ -85,13 +95,17 @@ def check_output(path: Path, *, force: bool = False) -> None:
         raise UsageError(f"cannot write {path}: the folder {folder} is not writable")
 
 
-def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False) -> Path:
-    """Write atomically; never replace an existing file unless forced."""
+def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False, fmt: str = "yaml") -> Path:
+    """Write atomically (YAML, or with fmt="csv" a table for a spreadsheet); never replace an existing file unless
+    forced."""
     exists = UsageError(f"{path} exists; choose another name or pass --force to replace it")
     if path.exists() and not force:
         raise exists
+    meta = {"profile": backup.profile, "model": backup.model, "unit": str(backup.unit), "created": backup.created,
+            "tool_version": backup.tool_version}
+    text = backup_csv.to_csv(profile, meta, backup.values) if fmt == "csv" else backup.to_yaml(profile)
     try:
-        write_atomic(path, backup.to_yaml(profile), replace=force)
+        write_atomic(path, text, replace=force)
     except FileExistsError:
         raise exists from None
     except OSError as exc:
@@ -111,13 +125,19 @@ def auto_path(drive: Drive, reason: str) -> Path:
     return backup_dir() / f"{drive.profile.id}-unit{drive.unit}-{stamp}-{reason}.yaml"
 
 
-def auto_backup(drive: Drive, reason: str) -> Path:
+def auto_backup(drive: Drive, reason: str, progress: Callable[[int], None] | None = None) -> Path:
     """Save the drive's current state under backup_dir() (never replacing a file)."""
-    return write_backup(drive, auto_path(drive, reason))
+    return write_backup(drive, auto_path(drive, reason), progress=progress)
 
 
 def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
-    """Read and check a backup against the profile; every problem is a one-line UsageError, before any write."""
+    """Read and check a backup (YAML, or CSV from a spreadsheet) against the profile; every problem is a one-line
+    UsageError, before any write."""
+    if path.suffix.lower() == ".csv":
+        meta, values, warnings = backup_csv.read(path, profile, force=force)
+        unit = meta.get("unit", "")
+        return Backup(meta.get("profile", ""), "", meta.get("model", ""), int(unit) if unit.isdigit() else 0,
+                      meta.get("created", ""), meta.get("tool_version", ""), {}, values, path, warnings)
     what = str(path)
     data = load_yaml(path)
     if not isinstance(data, dict) or data.get("servotool_backup") != FORMAT:
@@ -144,9 +164,13 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
         if not entry.min <= raw <= entry.max:
             raise UsageError(f"{what}: {code}: value {raw} is outside {entry.min}..{entry.max}")
         values[entry.code] = raw
+    missing = data.get("missing") or {}
+    if not isinstance(missing, dict) or any(profile.find(str(c)) is None for c in missing):
+        raise UsageError(f"{what}: 'missing' must map this profile's codes to a note")
     b = Backup(data["profile"], str(data.get("profile_version", "")), data["model"], data["unit"],
                str(data.get("created", "")), str(data.get("tool_version", "")),
-               {str(k): str(v) for k, v in (data.get("identity") or {}).items()}, values, path, warnings)
+               {str(k): str(v) for k, v in (data.get("identity") or {}).items()}, values, path, warnings,
+               [profile.entry(str(c)).code for c in missing])
     if b.checksum() != data["checksum"]:
         msg = f"{what}: checksum mismatch: the values were edited or damaged"
         if not force:
@@ -157,6 +181,8 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
 
 def profile_of(path: Path) -> str | None:
     """The profile id a backup file names, or None when the file does not say (not a backup)."""
+    if path.suffix.lower() == ".csv":
+        return backup_csv.profile_of(path)
     data = load_yaml(path)
     return data.get("profile") if isinstance(data, dict) and isinstance(data.get("profile"), str) else None
 
@@ -169,9 +195,13 @@ class Difference:
 
     def as_json(self) -> dict[str, Any]:
         e = self.entry
-        return {"code": e.code, "name": e.name, "unit": e.unit, "effect": e.effect,
-                "a": None if self.a is None else format_value(e, self.a),
-                "b": None if self.b is None else format_value(e, self.b)}
+        out: dict[str, Any] = {"code": e.code, "name": e.name, "unit": e.unit, "effect": e.effect,
+                               "a": None if self.a is None else json_value(e, self.a),
+                               "b": None if self.b is None else json_value(e, self.b)}
+        for key, raw in (("a", self.a), ("b", self.b)):
+            if raw is not None and raw in e.enum:
+                out[f"{key}_meaning"] = e.enum[raw]
+        return out
 
 
 def diff(profile: Profile, a: dict[str, int], b: dict[str, int]) -> list[Difference]:

@@ -5,18 +5,23 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servotool.drive import Drive, WriteResult
-from servotool.errors import ServoError, UsageError
+from servotool.errors import ServoError, UnknownName, UsageError
 from servotool.model.codec import format_value, split_field
+from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
 from servotool.model.profile import Entry, Profile
 
 
 def select(profile: Profile, *, group: str | None = None, classes: tuple[str, ...] = ("Pn",)) -> list[Entry]:
-    """Readable entries of the given classes (and group), in profile order."""
-    if group is not None and group not in {e.group for e in profile.entries}:
-        known = ", ".join(sorted({e.group for e in profile.entries if e.group}))
-        raise UsageError(f"unknown group '{group}' for profile {profile.id} (groups: {known})")
-    return [e for e in profile.entries
-            if e.cls in classes and e.readable and (group is None or e.group == group)]
+    """Readable entries of the given classes (and group: its id in any case, or a common name such as gain or
+    speed, see model.lookup), in profile order."""
+    entries = profile.entries
+    if group is not None:
+        members = group_members(profile.entries, group)
+        if members is None:
+            known = sorted({e.group for e in profile.entries if e.group} | set(COMMON_GROUPS))
+            raise UnknownName("group", group, profile.id, suggest(group, known), known)
+        entries = members
+    return [e for e in entries if e.cls in classes and e.readable]
 
 
 @dataclass(frozen=True)

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
 
-from servotool.drive import Drive
+from servotool.drive import Drive, NotOnDrive
 from servotool.errors import DeviceError, ModbusException, ServoError, UsageError
 from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile
 from servotool.ops.backup import Backup, auto_backup, auto_path, load, save, take
 from servotool.ops.params import select
 
+# Exceptions by which a drive refuses writes at an address (illegal function, illegal data address): the entry is
+# reported and the restore goes on. Any other failure (a refused value, no answer) rolls the restore back.
+REFUSED_ADDRESS = (1, 2)
 EFFECT_ORDER = {"immediate": 0, "unknown": 1, "servo_off": 2, "power_cycle": 3}
 
 
@@ -21,6 +24,7 @@ EFFECT_ORDER = {"immediate": 0, "unknown": 1, "servo_off": 2, "power_cycle": 3}
 class RestoreChanges:
     changes: list[tuple[Entry, int, int]]       # entry, current, target (in write order)
     skipped: list[tuple[Entry, str]]
+    missing: list[Entry] = field(default_factory=list)   # in the backup, but the drive lacks them
 
     @property
     def needs_power_cycle(self) -> list[Entry]:
@@ -37,12 +41,15 @@ def restore_changes(profile: Profile, backup: Backup, current: dict[str, int], *
     named = {profile.entry(c).code for c in include or []}
     if only is not None and only not in {e.group for e in profile.entries}:
         raise UsageError(f"unknown group '{only}' for profile {profile.id}")
-    changes, skipped = [], []
+    changes, skipped, missing = [], [], []
     for code, target in backup.values.items():
         e = profile.entry(code)
         if only is not None and e.group != only and e.code not in named:
             continue
         if not e.writable:
+            continue
+        if code not in current:          # the drive lacks it (read_entries(partial=True) left it out)
+            missing.append(e)
             continue
         if profile.persistence.is_switch(e.code):
             # Writing it would change where every later value goes; the restore sets it for its own writes.
@@ -56,7 +63,7 @@ def restore_changes(profile: Profile, backup: Backup, current: dict[str, int], *
         if current.get(code) != target:
             changes.append((e, current[code], target))
     changes.sort(key=lambda c: EFFECT_ORDER.get(c[0].effect, 1))
-    return RestoreChanges(changes, skipped)
+    return RestoreChanges(changes, skipped, missing)
 
 
 @dataclass
@@ -65,6 +72,7 @@ class RestoreReport:
     written: list[Entry]
     plan: RestoreChanges
     persisted: bool = True      # False: the drive keeps the values in RAM only (lost at power-off)
+    refused: list[tuple[Entry, str]] = field(default_factory=list)   # the drive does not take writes there
 
 
 class RestoreFailed(ServoError):
@@ -130,6 +138,7 @@ def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
         notice(f"automatic backup of the drive's current state: {auto}")
     done: list[Entry] = []
     failed: tuple[str, ServoError, list[str], list[str]] | None = None
+    refused: list[tuple[Entry, str]] = []
     kept: dict[str, bool] = {}
     targets = {e.code: new for e, _, new in plan.changes}
     with journal.operation(drive, "restore", auto, targets):
@@ -141,6 +150,10 @@ def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
                     try:
                         write_one(drive, entry, new, before.values.get(entry.code, old))
                     except ServoError as exc:
+                        if isinstance(exc, ModbusException) and exc.code in REFUSED_ADDRESS and \
+                                not isinstance(exc, NotOnDrive):
+                            refused.append((entry, str(exc)))     # an exception reply: nothing was written; go on
+                            continue
                         # The failed entry too: a write that did not read back may still have changed it.
                         rolled, undo_failed = _roll_back(drive, [*done, entry], before.values)
                         failed = (entry.code, exc, rolled, undo_failed)
@@ -153,7 +166,7 @@ def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
                 failed = (drive.profile.persistence.switch_code or "the EEPROM switch", exc, [], [])
         if failed is not None:
             raise _account(drive, failed, [e.code for e in done], before.values, auto, kept, backup.path)
-    return RestoreReport(auto, done, plan, bool(kept["persisted"]))
+    return RestoreReport(auto, done, plan, bool(kept["persisted"]), refused)
 
 
 def _account(drive: Drive, failed: tuple[str, ServoError, list[str], list[str]], written: list[str],
@@ -198,7 +211,7 @@ def _read_all(drive: Drive) -> dict[str, int] | None:
     """Every parameter as read from the drive, None when it does not answer after a few tries."""
     for _ in range(ATTEMPTS):
         try:
-            return {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile))}
+            return {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True)}
         except ServoError:
             continue
     return None
@@ -233,26 +246,30 @@ def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> 
 def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
     """Plan step: restore a backup file completely (no prompts)."""
     b = load(path, drive.profile)
-    current = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile))}
+    current = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True)}
     rplan = restore_changes(drive.profile, b, current)
     if not rplan.changes:
         return "nothing to restore: the drive already matches"
     report = restore(drive, b, rplan, notice=notice)
-    return f"{len(report.written)} entries restored (automatic backup {report.auto_backup})"
+    left = [f"{e.code} not on this drive" for e in rplan.missing] + \
+        [f"{e.code} refused by the drive" for e, _ in report.refused]
+    return (f"{len(report.written)} entries restored (automatic backup {report.auto_backup})"
+            + (f"; left out: {', '.join(left)}" if left else ""))
 
 
-def factory_reset(drive: Drive, notice: Notice | None = None) -> Path:
-    """Automatic backup, then the profile's factory-reset function."""
+def factory_reset(drive: Drive, notice: Notice | None = None,
+                  progress: Callable[[int], None] | None = None) -> Path:
+    """Automatic backup (progress: entries read), then the profile's factory-reset function."""
     drive.profile.need_role("factory_reset", "param reset")
     check_servo_off(drive, [e for e in drive.profile.of_class("Pn") if e.effect == "servo_off"], "a factory reset")
-    auto = auto_backup(drive, "before-reset")
+    auto = auto_backup(drive, "before-reset", progress)
     if notice:
         notice(f"automatic backup of the drive's current state: {auto}")
     drive.trigger("factory_reset", "param reset")
     return auto
 
 
-def not_at_default(drive: Drive) -> list[tuple[Entry, int]]:
+def not_at_default(drive: Drive, progress: Callable[[int], None] | None = None) -> list[tuple[Entry, int]]:
     """Readable parameters whose value differs from the profile's factory default (entry, raw)."""
-    return [(r.entry, r.raw) for r in drive.read_entries(select(drive.profile))
+    return [(r.entry, r.raw) for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)
             if r.entry.default is not None and r.raw != r.entry.default]

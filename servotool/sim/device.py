@@ -7,7 +7,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from servotool.model.profile import Entry, Profile
-from servotool.sim.registers import ILLEGAL_VALUE, RegisterBank, SimRefusal
+from servotool.sim.registers import ILLEGAL_ADDRESS, ILLEGAL_VALUE, RegisterBank, SimRefusal
 
 FnHandler = Callable[["SimulatedDrive", Entry, int], None]
 
@@ -47,6 +47,8 @@ class SimulatedDrive:
     def _take_extra(self) -> None:
         self.settings = sim_settings(self.bank.extra.get("settings"))
         self.fault_injection: dict[str, int] = dict(self.bank.extra.get("inject", {}))
+        self.missing: list[str] = [c for c in self.bank.extra.get("missing", []) if self.profile.find(c)]
+        self._holes = {a for c in self.missing for a in self.profile.entry(c).addresses}
 
     @contextmanager
     def session(self) -> Iterator[None]:
@@ -79,6 +81,7 @@ class SimulatedDrive:
     def read(self, address: int, count: int) -> list[int]:
         """Registers for a read request; raises SimRefusal for a Modbus exception."""
         with self.session():
+            self._check_present(address, count)
             for hook in self.on_read:
                 hook(self)
             return self.bank.read(address, count)
@@ -88,7 +91,25 @@ class SimulatedDrive:
         with self.session():
             self._write(address, values)
 
+    def _check_present(self, address: int, count: int) -> None:
+        """Exception 02 for a request that touches an entry this drive lacks (set_missing), like an unmapped one."""
+        if self._holes and not self._holes.isdisjoint(range(address, address + count)):
+            raise SimRefusal(ILLEGAL_ADDRESS, f"address range {address}+{count} reaches an entry this drive lacks")
+
+    def set_missing(self, codes: list[str]) -> list[str]:
+        """Make the drive lack these entries (a firmware without addresses its manual lists): every request that
+        touches one is answered with exception 02. An empty list restores them all. Returns the codes."""
+        entries = [self.profile.entry(c) for c in codes]
+        with self.session():
+            self.bank.extra["missing"] = [e.code for e in entries]
+            if not entries:
+                self.bank.extra.pop("missing")
+            self.bank.save()
+            self._take_extra()
+        return self.missing
+
     def _write(self, address: int, values: list[int]) -> None:
+        self._check_present(address, len(values))
         changes = self.bank.decode_write(address, values)
         for entry, _raw in changes:
             if (code := self.fault_injection.get(entry.code.upper())) is not None:

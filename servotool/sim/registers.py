@@ -69,6 +69,10 @@ class RegisterBank:
         for layer in (self.eeprom, self.ram, self.effective):
             for code, value in defaults.items():
                 layer.setdefault(code, value)
+        if self.profile.identity:     # what the real drive answers for its version and type codes
+            for check in self.profile.identity.checks:
+                if check.code and check.sim is not None:
+                    self.live.setdefault(check.code, check.sim)
 
     # ----- persistence -------------------------------------------------------------------------------------
     # The state file is the drive: every process that serves or configures it (sim serve, --port sim, sim config)

@@ -7,26 +7,29 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import threading
 from collections.abc import Callable
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import NoSuchIdException
+from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 from pymodbus.simulator.simcore import SimCore
 
 from servotool.errors import DeviceError
-from servotool.link.ports import parse_tcp
+from servotool.link.ports import open_serial, parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.faults import FaultProxy, LineFaults
 from servotool.sim.firmware import build_drive
-from servotool.sim.registers import SimRefusal
+from servotool.sim.registers import ILLEGAL_FUNCTION, ILLEGAL_VALUE, SimRefusal
 from servotool.sim.virtual import READ_CODES, wire_time
 
 WRITE_CODES = (6, 16)
+MAX_READ, MAX_WRITE = 125, 123       # the specification's quantity limits (FC03/04 and FC16)
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
@@ -77,6 +80,41 @@ class _Line(SimCore):
         return await super().async_setValues(device_id, func_code, address, values)
 
 
+
+class _Refusal(ModbusPDU):
+    """A request the slave refuses before touching any register: answered with exception `code`."""
+
+    def __init__(self, function_code: int, code: int) -> None:
+        super().__init__()
+        self.function_code, self.code = function_code, code
+
+    async def datastore_update(self, context: _Line, device_id: int) -> ModbusPDU:  # type: ignore[override]
+        context._known(device_id)
+        return ExceptionResponse(self.function_code, self.code)
+
+
+class _SpecDecoder(DecodePDU):
+    """Request decoding as the Modbus specification has a slave do it: a function the drive lacks is exception
+    01 at any address, a quantity out of range (0, over 125 read, over 123 written, a byte count that disagrees)
+    exception 03. pymodbus 3.16 answers both with the malformed `ID 80 01`, or with 02 at unmapped addresses."""
+
+    def __init__(self) -> None:
+        super().__init__(True)
+
+    def decode(self, frame: bytes) -> ModbusPDU | None:
+        fc = frame[0] if frame else 0
+        if fc & 0x80:
+            return None
+        if fc not in READ_CODES + WRITE_CODES:
+            return _Refusal(fc, ILLEGAL_FUNCTION)
+        if fc != 6 and len(frame) >= 5:
+            count = int.from_bytes(frame[3:5], "big")
+            limit = MAX_READ if fc in READ_CODES else MAX_WRITE
+            if not 1 <= count <= limit or (fc == 16 and (len(frame) < 6 or frame[5] != 2 * count)):
+                return _Refusal(fc, ILLEGAL_VALUE)
+        return super().decode(frame)
+
+
 async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lock: threading.Lock,
                  trace: Callable[[bool, bytes], None] | None):
     devices = [_sim_device(d, lock) for d in drives]
@@ -89,20 +127,28 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
     tcp = parse_tcp(port)
     server: ModbusTcpServer | ModbusSerialServer
     if tcp:
+        try:       # pymodbus says only 'Could not start listen': bind once here, where the cause gets named
+            socket.create_server(tcp).close()
+        except OSError as exc:
+            raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
         # A real RS485 slave stays silent for other unit ids, so missing devices get no answer.
         server = ModbusTcpServer(devices, framer=FramerType.RTU, address=tcp, trace_packet=hook if trace else None,
-                                 ignore_missing_devices=True)
+                                 ignore_missing_devices=True, broadcast_enable=True)
     else:
+        # pymodbus would fail with a bare '(22, Invalid argument)' for, say, parity on a pty: open it once here,
+        # where the cause gets named.
+        open_serial(port, line, 0.1).close()
         server = ModbusSerialServer(
             devices, framer=FramerType.RTU, port=port, baudrate=line.baud, parity=line.parity,
             stopbits=line.stopbits, bytesize=line.bytesize, trace_packet=hook if trace else None,
-            ignore_missing_devices=True,
+            ignore_missing_devices=True, broadcast_enable=True,      # unit 0: applied by every drive, unanswered
         )
     server.context = _Line(devices)
+    server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
-    except (RuntimeError, OSError) as exc:
-        raise DeviceError(f"cannot serve on {port}: {exc}") from None
+    except Exception as exc:        # OSError, termios.error, pyserial's errors, RuntimeError
+        raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc, line)}") from None
     return server
 
 
@@ -129,7 +175,7 @@ def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | 
             try:
                 bound = await proxy.start(*tcp)
             except OSError as exc:
-                raise DeviceError(f"cannot serve on {port}: {exc}") from None
+                raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
         if ready:
             ready(f"{port[:-2]}:{bound}" if tcp and port.endswith(":0") else port)
         try:

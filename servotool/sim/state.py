@@ -25,6 +25,7 @@ class SimStatus:
     pending_power_cycle: list[str]     # codes whose new value waits for a power cycle
     eeprom_writes: int
     running: RunningSummary | None     # None: just powered on (nothing running to carry over)
+    missing: tuple[str, ...] = ()      # entries the drive lacks (answered with exception 02)
 
 
 def effective_values(profile: Profile, unit: int, entries: list[Entry]) -> list[int]:
@@ -41,6 +42,14 @@ def configure(profile: Profile, unit: int, **changes: float | int | None) -> Sim
     """Change the simulated machine's true properties (None: unchanged); UsageError for a value out of range."""
     drive = SimulatedDrive(profile, unit)
     drive.configure(**{k: v for k, v in changes.items() if v is not None})
+    return _status(drive)
+
+
+def set_missing(profile: Profile, unit: int, codes: list[str]) -> SimStatus:
+    """Make the simulated drive lack these entries (exception 02 for them); [] restores all. UsageError for an
+    unknown code."""
+    drive = SimulatedDrive(profile, unit)
+    drive.set_missing(codes)
     return _status(drive)
 
 
@@ -61,4 +70,4 @@ def _status(drive: SimulatedDrive) -> SimStatus:
     assert bank.path is not None
     return SimStatus(profile=drive.profile, unit=drive.unit, state_file=bank.path, settings=dict(drive.settings),
                      pending_power_cycle=bank.pending_power_cycle(), eeprom_writes=bank.eeprom_writes,
-                     running=running_summary(bank.extra))
+                     running=running_summary(bank.extra), missing=tuple(drive.missing))

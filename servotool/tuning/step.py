@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
@@ -23,6 +23,13 @@ class StepResponse:
     overshoot_pct: float
     settling_ms: float | None     # within 5 % of the target for good; None when it never settles
     samples: int
+    t_s: tuple[float, ...] = field(default=(), repr=False)       # the forward step's samples, for its chart
+    speed_rpm: tuple[float, ...] = field(default=(), repr=False)
+
+    def summary(self) -> dict[str, float | int | None]:
+        """The figures without the samples."""
+        return {"target_rpm": self.target_rpm, "overshoot_pct": self.overshoot_pct, "settling_ms": self.settling_ms,
+                "samples": self.samples}
 
     def describe(self) -> str:
         settle = f"{self.settling_ms:.0f} ms" if self.settling_ms is not None else "does not settle"
@@ -97,4 +104,5 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Cl
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
         (t[outside[-1] + 1] if outside else t[0]) * 1000
-    return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v))
+    return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v),
+                        tuple(t), tuple(v))

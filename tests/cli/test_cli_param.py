@@ -66,7 +66,7 @@ def test_bad_input_is_one_line_and_writes_nothing(cli, sim_dir):
         (("param", "set", "Pn100"), 2, "is not CODE=VALUE"),
         (("param", "get", "Pn999"), 2, "unknown code"),
         (("param", "list", "--group", "nosuch"), 2, "unknown group"),
-        (("param", "list", "--class", "Xn"), 2, "Invalid value for --class"),
+        (("param", "list", "--class", "Xn"), 2, "unknown class 'Xn' (classes: Pn, Un, Sn)"),
         (("--unit", "abc", "param", "list"), 2, "Invalid value for '--unit'"),
         (("--unit", "0", "param", "list"), 2, "bad unit id 0"),
         (("--timeout", "nan", "param", "list"), 2, "bad timeout nan"),
@@ -116,9 +116,11 @@ def test_options_from_environment_and_config_file(cli, tmp_path):
         assert r.code == 2 and why in r.err and len(r.err.splitlines()) == 1, r.err
 
 
-def test_quiet_still_says_the_drive_is_simulated(cli):
+def test_quiet_prints_only_results_and_errors(cli):
     r = cli("-q", "--port", "sim", "param", "get", "Pn004", "--json")
-    assert r.code == 0 and r.err.strip().startswith("servotool: SIMULATED drive")
+    assert r.code == 0 and r.err == "" and r.json()[0]["value"] == 250
+    r = cli("--port", "sim", "param", "get", "Pn004")
+    assert r.err.strip().startswith("servotool: SIMULATED drive")
 
 
 def test_profiles_list_show_check(cli, tmp_path):

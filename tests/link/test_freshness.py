@@ -153,3 +153,40 @@ def test_an_echoing_adapter_is_recognised_and_its_echo_never_taken_for_a_reply()
     line.script.append("lost")
     with pytest.raises(DeviceError, match="no response"):    # the echo alone is no acknowledgement
         ex.write(1, 10, [6], multiple=False)
+
+
+class QueuedLine:
+    """A Wire whose n-th request gets the n-th scripted reply (b"" for none), on virtual time."""
+
+    def __init__(self, replies: list[bytes]) -> None:
+        self.replies, self.now, self.sent = deque(replies), 0.0, 0
+        self._pending = b""
+
+    def clock(self) -> float:
+        return self.now
+
+    def send(self, frame: bytes) -> None:
+        self.sent += 1
+        self._pending = self.replies.popleft() if self.replies else b""
+
+    def recv(self, timeout: float) -> bytes:
+        data, self._pending = self._pending, b""
+        self.now += 0.001 if data else timeout
+        return data
+
+
+def test_after_a_fault_an_exception_reply_counts_only_when_repeated():
+    from servotool.errors import ModbusException
+
+    stale_02 = with_crc(bytes([1, 0x83, 2]))        # names no address: could answer any earlier read
+    data = with_crc(bytes([1, 3, 2, 0, 42]))
+    line = QueuedLine([b"", stale_02, data, data])      # after a fault, data is confirmed by a second read
+    ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=line.clock)
+    with pytest.raises(DeviceError, match="no response"):
+        ex.read(1, 0x10, 1)                          # silent: its reply may still come
+    assert ex.read(1, 0x20, 1) == [42]               # the exception that came first was not believed
+    line = QueuedLine([stale_02, stale_02])
+    ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=line.clock)
+    with pytest.raises(ModbusException):
+        ex.read(1, 0x20, 1)                          # a clean line: believed at once
+    assert line.sent == 1

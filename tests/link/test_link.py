@@ -74,7 +74,7 @@ def test_a_crc_error_is_reported_as_a_garbled_response_not_as_silence(cli, sim_d
     try:
         port = _garbling_proxy(int(sim.port.rsplit(":", 1)[1]))
         r = cli("--port", f"tcp://127.0.0.1:{port}", "-P", "dsx7e", "--timeout", "0.3", "--retries", "0",
-                "param", "get", "Pn004")
+                "--no-identity-check", "param", "get", "Pn004")
     finally:
         sim.close()
     assert r.code == 1 and len(r.err.strip().splitlines()) == 1

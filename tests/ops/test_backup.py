@@ -257,7 +257,7 @@ def test_cli_refuses_bad_files_before_connecting_or_writing(auto_dir, tmp_path, 
         assert not WRITE_FRAME.search(r.err) and not auto_dir.exists()
     r = cli("--port", "sim", "param", "restore", str(edited), "--yes", "--force")
     assert r.code == 0, r.err
-    assert "warning:" in r.err and "checksum mismatch" in r.err and "1 parameters restored" in r.out
+    assert "warning:" in r.err and "checksum mismatch" in r.err and "1 parameter restored" in r.out
     with sim() as d:
         assert d.read_one("Pn100").raw == 330
 
@@ -328,7 +328,7 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     assert r.code == 0, r.err
     rows = {x["code"]: x for x in r.json()["differences"]}
     assert set(rows) == {"Pn100", "Pn008"} and rows["Pn008"]["effect"] == "power_cycle"
-    assert rows["Pn100"]["a"] == "32.0" and rows["Pn100"]["b"] == "45.0"
+    assert rows["Pn100"]["a"] == 32.0 and rows["Pn100"]["b"] == 45.0
     r = cli("param", "diff", str(b), "--changed-from-default", "--json")
     assert {x["code"] for x in r.json()["differences"]} == {"Pn100", "Pn008"}
     r = cli("param", "diff", str(a), str(b), "--changed-from-default")
@@ -337,7 +337,7 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     edited.write_text(b.read_text().replace("Pn100: 450", "Pn100: 460"))
     r = cli("param", "diff", str(a), str(edited), "--json")           # a diff writes nothing: compared anyway
     assert r.code == 0 and "checksum mismatch" in r.err and "warning" in r.err
-    assert {x["code"]: x["b"] for x in r.json()["differences"]}["Pn100"] == "46.0"
+    assert {x["code"]: x["b"] for x in r.json()["differences"]}["Pn100"] == 46.0
     r = cli("--port", "sim", "param", "reset")                    # no --yes and stdin is not a terminal
     assert r.code == 2 and "pass --yes" in r.err
     r = cli("--port", "sim", "param", "reset", "--yes")

@@ -98,3 +98,83 @@ def test_servotool_client_over_the_same_line(pty_line, cli):
     assert r.code == 0 and r.json()[0]["value"] == 18.0
     r = cli(*base, "--unit", "7", "--timeout", "0.2", "--retries", "0", "param", "get", "Pn101")
     assert r.code == 1 and "no response within" in r.err
+
+
+# ----- the Modbus specification, as libmodbus (mbpoll's library) exercises it ---------------------------------------
+def _libmodbus(port: Path):
+    """A libmodbus RTU context on the master side (ctypes; libmodbus.so.5 comes with mbpoll)."""
+    import ctypes
+    import ctypes.util
+
+    lib = ctypes.CDLL(ctypes.util.find_library("modbus") or "libmodbus.so.5", use_errno=True)
+    lib.modbus_new_rtu.restype = ctypes.c_void_p
+    lib.modbus_new_rtu.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_char, ctypes.c_int, ctypes.c_int]
+    for name in ("modbus_set_slave", "modbus_connect", "modbus_write_register", "modbus_send_raw_request",
+                 "modbus_receive_confirmation", "modbus_set_response_timeout", "modbus_close", "modbus_free"):
+        getattr(lib, name).argtypes = [ctypes.c_void_p, *{
+            "modbus_set_slave": [ctypes.c_int], "modbus_write_register": [ctypes.c_int, ctypes.c_uint16],
+            "modbus_send_raw_request": [ctypes.c_char_p, ctypes.c_int], "modbus_receive_confirmation":
+            [ctypes.c_char_p], "modbus_set_response_timeout": [ctypes.c_uint32, ctypes.c_uint32]}.get(name, [])]
+    ctx = lib.modbus_new_rtu(str(port).encode(), 19200, b"N", 8, 1)
+    assert ctx and lib.modbus_connect(ctx) == 0
+    lib.modbus_set_response_timeout(ctx, 0, 300_000)
+    return lib, ctx
+
+
+def _raw_exchange(lib, ctx, unit: int, pdu: bytes) -> bytes:
+    """Send one request PDU through libmodbus (it adds the unit and CRC); the reply frame it receives."""
+    import ctypes
+
+    lib.modbus_set_slave(ctx, unit)
+    req = bytes([unit]) + pdu
+    assert lib.modbus_send_raw_request(ctx, req, len(req)) > 0
+    buf = ctypes.create_string_buffer(260)
+    n = lib.modbus_receive_confirmation(ctx, buf)
+    return buf.raw[:max(n, 0)]
+
+
+def test_libmodbus_broadcast_write_is_applied_by_every_drive_and_unanswered(pty_line):
+    _, master = pty_line
+    lib, ctx = _libmodbus(master)
+    try:
+        lib.modbus_set_slave(ctx, 0)
+        lib.modbus_write_register(ctx, 0x2004, 321)          # Pn004 on unit 0: every drive on the line
+        # The reply to a broadcast would be a frame from unit 0: nothing may come back.
+        assert _raw_exchange(lib, ctx, 0, bytes([6, 0x20, 0x04, 0x01, 0x41])) == b""
+    finally:
+        lib.modbus_close(ctx)
+        lib.modbus_free(ctx)
+    assert read(master, 0x2004, unit=1) == [321]
+    assert read(master, 0x2004, unit=2) == [321]
+
+
+SPEC_EXCEPTIONS = [
+    (bytes([3, 0x20, 0x04, 0, 0]), 3),                 # read 0 registers
+    (bytes([3, 0x20, 0x04, 0, 126]), 3),               # read 126
+    (bytes([4, 0x20, 0x04, 0, 200]), 3),               # FC04 likewise
+    (bytes([16, 0x20, 0x04, 0, 0, 0]), 3),             # write 0 registers
+    (bytes([16, 0x20, 0x04, 0, 124, 2, 0, 1]), 3),      # write 124 (an RTU frame cannot carry them all)
+    (bytes([1, 0, 100, 0, 1]), 1),                     # read coils: unsupported, at an unmapped address
+    (bytes([5, 0x20, 0x04, 0xFF, 0]), 1),              # write coil at a mapped address
+    (bytes([23, 0x20, 0x04, 0, 1, 0x20, 0x04, 0, 1, 2, 0, 5]), 1),   # read/write multiple
+]
+
+
+def test_libmodbus_gets_the_specified_exceptions(pty_line):
+    _, master = pty_line
+    lib, ctx = _libmodbus(master)
+    try:
+        replies = [(_raw_exchange(lib, ctx, 1, pdu), pdu, code) for pdu, code in SPEC_EXCEPTIONS]
+    finally:
+        lib.modbus_close(ctx)
+        lib.modbus_free(ctx)
+    for reply, pdu, code in replies:
+        assert reply[:3] == bytes([1, pdu[0] | 0x80, code]), (pdu.hex(" "), reply.hex(" "))
+
+
+def test_mbpoll_unsupported_function_is_illegal_function_at_any_address(pty_line):
+    _, master = pty_line
+    for ref in ("100", str(0x2004)):                   # unmapped and mapped
+        coils = subprocess.run(["mbpoll", "-m", "rtu", "-a", "1", "-b", "19200", "-P", "none", "-t", "0", "-0", "-1",
+                                "-o", "1", "-r", ref, str(master)], capture_output=True, text=True, timeout=30)
+        assert coils.returncode != 0 and "Illegal function" in coils.stderr, coils.stderr

@@ -94,3 +94,15 @@ def test_sim_reset_factory_removes_the_state_and_reports_it(sim_dir, cli):
                                         "state_file": str(sim_dir / "dsx7e-unit1.json")}
     assert not (sim_dir / "dsx7e-unit1.json").exists()
     assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
+
+
+def test_sim_config_missing_makes_the_drive_lack_entries_until_cleared(cli):
+    r = cli("sim", "config", "--missing", "Pn101,pn512", "--json")
+    assert r.code == 0 and r.json()["missing"] == ["Pn101", "Pn512"], r.err
+    assert cli("sim", "show", "--json").json()["missing"] == ["Pn101", "Pn512"]
+    r = cli("--port", "sim", "param", "get", "Pn512")
+    assert r.code == 1 and "Pn512: not on this drive" in r.err
+    assert cli("sim", "config", "--missing", "", "--json").json()["missing"] == []
+    assert cli("--port", "sim", "param", "get", "Pn512").code == 0
+    r = cli("sim", "config", "--missing", "Pn9999")
+    assert r.code == 2 and "Pn9999" in r.err

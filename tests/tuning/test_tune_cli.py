@@ -148,7 +148,7 @@ def test_refusals(cli):
         assert r.code == 1 and "no response" in r.err and len(r.err.strip().splitlines()) == 1, r.err
         assert time.monotonic() - start < 15
     r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--method", "drive")
-    assert r.code == 2 and "needs role 'inertia_ratio'" in r.err
+    assert r.code == 2 and "no way to reach the inertia ratio of this drive" in r.err
 
 
 def test_a_drive_without_an_inertia_ratio_parameter_is_identified_and_nothing_is_written(cli):

@@ -1,0 +1,102 @@
+"""Global options anywhere on the command line: `servotool param get Pn004 --port sim` as well as
+`servotool --port sim param get Pn004`.
+
+The global options are the root command's own (whatever main() declares, so an option added there is covered);
+those found after the sub-command are moved in front of it, unless the sub-command has an option of the same name
+(`sim serve --port` keeps its own).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def _options(command: Any) -> dict[str, bool]:
+    """A command's option names -> whether the option takes a value."""
+    names: dict[str, bool] = {}
+    for p in getattr(command, "params", []):
+        if getattr(p, "param_type_name", "") != "option":
+            continue
+        takes = not (getattr(p, "is_flag", False) or getattr(p, "count", False))
+        for name in [*p.opts, *p.secondary_opts]:
+            names[name] = takes
+    return names
+
+
+def _globals(root: Any) -> dict[str, bool]:
+    eager = {n for p in root.params if getattr(p, "is_eager", False) for n in [*p.opts, *p.secondary_opts]}
+    return {n: v for n, v in _options(root).items() if n not in eager}
+
+
+def _leaf(root: Any, args: list[str], known: dict[str, bool]) -> tuple[Any, int]:
+    """The sub-command the arguments name (loading it), and the index of the first argument after its name."""
+    command, i = root, 0
+    while i < len(args) and hasattr(command, "get_command"):
+        token = args[i]
+        if token == "--":
+            break
+        if token.startswith("-"):
+            i += 2 if known.get(token.split("=", 1)[0]) and "=" not in token else 1
+            continue
+        sub = command.get_command(None, token)
+        if sub is None:
+            break
+        command, i, known = sub, i + 1, _options(sub)
+    return command, i
+
+
+def hoist_globals(root: Any, args: list[str]) -> list[str]:
+    """The arguments with the global options given after the sub-command moved in front of it."""
+    glob = _globals(root)
+    try:
+        leaf, start = _leaf(root, args, glob)
+    except Exception:       # a broken sub-command is reported when it runs, with the arguments as given
+        return args
+    if leaf is root:
+        return args
+    own = _options(leaf)
+    moved: list[str] = []
+    # A flag of the sub-command given to its group (`alarm --json show`) goes to the sub-command.
+    first = next((k for k, a in enumerate(args) if not a.startswith("-") and a not in _values(args, glob)), start)
+    between = [k for k in range(first, start) if own.get(args[k]) is False and args[k] not in glob]
+    rest = [a for k, a in enumerate(args[:start]) if k not in between] + [args[k] for k in between]
+    i = start
+    while i < len(args):
+        token = args[i]
+        if token == "--":
+            rest += args[i:]
+            break
+        name = token.split("=", 1)[0]
+        if name in glob and name not in own:
+            takes = glob[name] and "=" not in token
+            moved += args[i:i + 1 + takes]
+            i += 1 + takes
+            continue
+        if _short_flags(token, glob, own):
+            moved.append(token)
+        else:
+            rest.append(token)
+            if own.get(name) and "=" not in token and i + 1 < len(args):
+                rest.append(args[i + 1])       # an option's value is never taken for an option
+                i += 1
+        i += 1
+    return moved + rest
+
+
+def _values(args: list[str], glob: dict[str, bool]) -> set[str]:
+    """The values of the leading global options (`--port sim`: 'sim' is no sub-command name)."""
+    found: set[str] = set()
+    for k, token in enumerate(args):
+        if not token.startswith("-"):
+            break
+        if glob.get(token) and k + 1 < len(args):
+            found.add(args[k + 1])
+    return found
+
+
+def _short_flags(token: str, glob: dict[str, bool], own: dict[str, bool]) -> bool:
+    """-vv, -qv: a cluster of global flags."""
+    if not token.startswith("-") or token.startswith("--") or len(token) < 3:
+        return False
+    flags = [f"-{c}" for c in token[1:]]
+    return all(f in glob and not glob[f] and f not in own for f in flags)

@@ -1,0 +1,108 @@
+"""Command groups whose sub-commands are imported when called: `servotool param get` does not load numpy for
+`tune`, nor any other command's module.
+
+A sub-command is registered by name as "module:attribute" (a typer app, or a command function); several targets
+under one name are merged into one group (`param` is the values app and the files app). Help and completion, which
+list every sub-command, import them all; commands registered the usual typer way still work beside these.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import typer
+from typer.core import TyperGroup
+
+
+@dataclass(frozen=True)
+class Lazy:
+    """One sub-command: where it lives, and the help of a merged group."""
+
+    targets: tuple[str, ...]
+    help: str | None = None
+
+
+def lazy(*targets: str, help: str | None = None) -> Lazy:
+    return Lazy(targets, help)
+
+
+def _load(target: str) -> Any:
+    module, _, attribute = target.partition(":")
+    return getattr(importlib.import_module(module), attribute)
+
+
+def build(name: str, spec: Lazy) -> Any:
+    """The click command for a registry entry (imports its modules; a group's sub-commands are built when
+    called)."""
+    objects = [_load(t) for t in spec.targets]
+    if len(objects) == 1 and not isinstance(objects[0], typer.Typer):
+        single = typer.Typer()
+        single.command(name)(objects[0])
+        command = typer.main.get_command(single)
+    else:
+        command = _app_group(objects)
+    command.name = name
+    if spec.help is not None:
+        command.help = spec.help
+    if hasattr(command, "commands") and not command.invoke_without_command:
+        command.no_args_is_help = True      # a bare group name shows its help, once
+    return command
+
+
+def _app_group(apps: list[typer.Typer]) -> Any:
+    """One group of the typer apps' commands, each built (typer reads its signature) only when asked for; an app
+    with sub-groups of its own is built whole, the usual typer way."""
+    if any(a.registered_groups for a in apps):
+        group = typer.main.get_group(apps[0])
+        for extra in apps[1:]:
+            for sub_name, sub in typer.main.get_group(extra).commands.items():
+                group.add_command(sub, sub_name)
+        return group
+    infos = {(i.name or typer.main.get_command_name(i.callback.__name__)): (i, a)
+             for a in apps for i in a.registered_commands if i.callback is not None}
+    shell = copy.copy(apps[0])
+    shell.registered_commands = []
+    shell.info = copy.copy(apps[0].info)
+    shell.info.cls = _OnDemand
+    group = typer.main.get_group(shell)
+    group.infos = infos
+    return group
+
+
+class _OnDemand(TyperGroup):
+    """A typer group whose commands are made from their CommandInfo on first use."""
+
+    infos: dict[str, tuple[Any, typer.Typer]]
+
+    def list_commands(self, ctx: Any) -> list[str]:
+        return [*super().list_commands(ctx), *(n for n in getattr(self, "infos", {}) if n not in self.commands)]
+
+    def get_command(self, ctx: Any, cmd_name: str) -> Any:
+        found = getattr(self, "infos", {}).get(cmd_name)
+        if cmd_name not in self.commands and found is not None:
+            info, app = found
+            self.commands[cmd_name] = typer.main.get_command_from_info(
+                info, pretty_exceptions_short=app.pretty_exceptions_short, rich_markup_mode=app.rich_markup_mode)
+        return super().get_command(ctx, cmd_name)
+
+
+def lazy_group(commands: dict[str, Lazy]) -> type[TyperGroup]:
+    """A TyperGroup class (for typer.Typer(cls=...)) that also offers these lazily imported sub-commands."""
+
+    class LazyGroup(TyperGroup):
+        registry: ClassVar[dict[str, Lazy]] = commands
+
+        def list_commands(self, ctx: Any) -> list[str]:
+            return [*super().list_commands(ctx), *(n for n in self.registry if n not in self.commands)]
+
+        def get_command(self, ctx: Any, cmd_name: str) -> Any:
+            if cmd_name not in self.commands and cmd_name in self.registry:
+                self.commands[cmd_name] = build(cmd_name, self.registry[cmd_name])
+            return super().get_command(ctx, cmd_name)
+
+    return LazyGroup
+
+

@@ -1,0 +1,95 @@
+"""Conventions of the ecosystem: options anywhere, help once, JSON errors, Ctrl-C 130, line-buffered pipes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import typer
+
+from servotool.cli.argv import hoist_globals
+from servotool.cli.main import app
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def root():
+    return typer.main.get_command(app)
+
+
+@pytest.mark.parametrize(("given", "hoisted"), [
+    (["param", "get", "Pn101", "--port", "sim"], ["--port", "sim", "param", "get", "Pn101"]),
+    (["param", "set", "Pn101=2", "-P", "is620p", "--save", "-vv"], ["-P", "is620p", "-vv", "param", "set",
+                                                                   "Pn101=2", "--save"]),
+    (["--port", "sim", "jog", "--speed", "-5", "--time", "1", "-q"], ["-q", "--port", "sim", "jog", "--speed", "-5",
+                                                                     "--time", "1"]),
+    (["sim", "serve", "--port", "tcp://127.0.0.1:0", "--unit", "3"], ["sim", "serve", "--port", "tcp://127.0.0.1:0",
+                                                                     "--unit", "3"]),      # serve's own options
+    (["alarm", "--json", "show", "--port", "sim"], ["--port", "sim", "alarm", "show", "--json"]),
+    (["param", "get", "--", "--port"], ["param", "get", "--", "--port"]),
+])
+def test_global_options_after_the_sub_command_are_moved_before_it(root, given, hoisted):
+    assert hoist_globals(root, given) == hoisted
+
+
+def test_options_after_the_sub_command_work_end_to_end(cli):
+    r = cli("param", "get", "Pn004", "--port", "sim", "--json")
+    assert r.code == 0 and r.json()[0]["value"] == 250
+    r = cli("alarm", "--json", "show", "--port", "sim")
+    assert r.code == 0 and r.json()["active"] is False
+
+
+@pytest.mark.parametrize("args", [(), ("param",), ("sim",), ("tune",)])
+def test_help_is_printed_once(cli, args):
+    r = cli(*args)
+    assert (r.out + r.err).count("Usage:") == 1
+
+
+def test_with_json_an_error_is_a_json_object_too(cli):
+    r = cli("--port", "sim", "param", "get", "Pn999", "--json")
+    assert r.code == 2
+    error = r.json()["error"]
+    assert error["code"] == "unknown_name" and "Pn999" in error["message"] and error["exit_status"] == 2
+    assert "servotool: error: unknown code 'Pn999'" in r.err
+    r = cli("--port", "sim", "param", "get", "Pn004", "--json", "--bogus")
+    assert r.code == 2 and r.json()["error"]["code"] == "usage" and "--bogus" in r.err
+
+
+def test_a_timeout_is_one_line_and_leaves_no_asyncio_noise(cli):
+    r = cli("--port", "sim", "--timeout", "0.001", "--retries", "0", "param", "list")
+    assert r.code == 1 and "no response" in r.err
+    assert "Task was destroyed" not in r.err and "Traceback" not in r.err
+
+
+def test_piped_monitor_streams_lines_and_ctrl_c_exits_130(sim_dir):
+    env = {**os.environ, "COLUMNS": "100"}
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "monitor", "--json", "Un000"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+    try:
+        first = proc.stdout.readline()          # arrives while the command still runs: line-buffered
+        assert '"Un000"' in first and '"units"' in first
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130
+
+
+def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "monitor", "Un000"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                            env={**os.environ, "COLUMNS": "100"})
+    try:
+        assert "SIMULATED" in proc.stderr.readline()
+        time.sleep(2)                           # sampling by now
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and "Un000" in out

@@ -1,0 +1,79 @@
+"""Everyday features: param find, diff --factory, CSV for spreadsheets (and back), raw registers."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+
+def test_find_searches_codes_names_and_descriptions_without_a_drive(cli):
+    r = cli("-P", "is620p", "param", "find", "speed", "loop", "--json")
+    assert r.code == 0, r.err
+    codes = [row["code"] for row in r.json()]
+    assert "H08-00" in codes and all("speed loop" in row["name"].lower() for row in r.json())
+    r = cli("-P", "is620p", "param", "find", "H0800", "--json")
+    assert [row["code"] for row in r.json()] == ["H08-00"]
+    r = cli("param", "find", "monitor", "speed", "--port", "sim", "--json")     # Un entries too
+    assert "Un000" in [row["code"] for row in r.json()]
+
+
+def test_diff_factory_compares_the_drive_with_its_defaults(cli):
+    assert cli("--port", "sim", "param", "diff", "--factory").out.startswith("no differences")
+    cli("--port", "sim", "param", "set", "Pn101=25")
+    r = cli("--port", "sim", "param", "diff", "--factory", "--json")
+    assert r.code == 0
+    assert r.json()["differences"] == [{"code": "Pn101", "name": "Speed loop gain", "unit": "Hz",
+                                        "effect": "unknown", "a": 25.0, "b": 18.0}]
+    assert cli("--port", "sim", "param", "diff").code == 2        # neither a file nor --factory
+
+
+def test_list_csv_is_a_spreadsheet_table(cli):
+    cli("--port", "sim", "param", "set", "Pn101=25")
+    r = cli("--port", "sim", "param", "list", "--group", "gain", "--csv")
+    rows = list(csv.DictReader(io.StringIO(r.out)))
+    pn101 = next(row for row in rows if row["code"] == "Pn101")
+    assert pn101["value"] == "25.0" and pn101["unit"] == "Hz" and pn101["changed"] == "yes" and pn101["raw"] == "250"
+
+
+def test_a_csv_backup_edited_in_a_spreadsheet_restores(cli, tmp_path):
+    path = tmp_path / "axis.csv"
+    r = cli("--port", "sim", "param", "backup", "-o", str(path))
+    assert r.code == 0 and "108 parameters saved" in r.out
+    lines = path.read_text().splitlines()
+    assert lines[0].startswith("servotool parameter backup,profile=dsx7e")
+    path.write_text("\n".join(line.replace("Pn101,Speed loop gain,18.0", "Pn101,Speed loop gain,22.5")
+                              for line in lines) + "\n")
+    r = cli("--port", "sim", "param", "restore", str(path), "--yes")
+    assert r.code == 0, r.err
+    assert "1 parameter restored" in r.out and "no checksum" in r.err
+    assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 22.5
+
+
+def test_a_bad_csv_value_is_refused_with_its_line_before_any_write(cli, tmp_path):
+    path = tmp_path / "axis.csv"
+    cli("--port", "sim", "param", "backup", "-o", str(path))
+    path.write_text(path.read_text().replace("Pn101,Speed loop gain,18.0", "Pn101,Speed loop gain,fast"))
+    r = cli("--port", "sim", "param", "restore", str(path), "--yes")
+    assert r.code == 2 and "line" in r.err and "Pn101" in r.err
+
+
+def test_raw_read_and_write_by_address(cli):
+    r = cli("--port", "sim", "raw", "write", "0x2004=300")
+    assert r.code == 0 and "Pn004" in r.out and "verified" in r.out
+    r = cli("--port", "sim", "raw", "read", "8196", "--json")
+    assert r.json() == [{"address": 8196, "value": 300, "signed": 300, "entry": "Pn004"}]
+    assert cli("--port", "sim", "raw", "write", "0x2004=70000").code == 2
+    assert cli("--port", "sim", "raw", "read", "banana").code == 2
+
+
+def _complete(cli, words: str) -> list[str]:
+    r = cli(env={"_SERVOTOOL_COMPLETE": "complete_bash", "COMP_WORDS": words,
+                 "COMP_CWORD": str(len(words.split()) - 1)})
+    return r.out.split()
+
+
+def test_shell_completion_of_codes_groups_and_profiles(cli):
+    assert "H08-00" in _complete(cli, "servotool -P is620p param get H08-0")
+    assert _complete(cli, "servotool -P s") == ["sd25", "sdc"]
+    assert "gain" in _complete(cli, "servotool param list --group g")
+    assert "Pn101=" in _complete(cli, "servotool param set Pn10")

@@ -1,0 +1,54 @@
+"""`profiles show --json` carries enough to build a drive's register image without servotool's code."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.model.codec import raw_to_words
+from servotool.model.loader import builtin_ids, load_profile
+
+
+def third_party_words(e: dict, raw: int) -> list[int]:
+    """Registers of a raw value, from the JSON alone (what another tool would write)."""
+    n = e["words"]
+    if e["combine"] == "decimal":
+        base, rest, parts = 10 ** e["digits"], abs(raw), []
+        for _ in range(n - 1):
+            parts.append(rest % base)
+            rest //= base
+        parts.append((-rest if raw < 0 else rest) & 0xFFFF)
+        low_first = [p & 0xFFFF for p in parts]
+    else:
+        value = raw & ((1 << (16 * n)) - 1)
+        low_first = [(value >> (16 * i)) & 0xFFFF for i in range(n)]
+    return low_first if e["word_order"] == "low_first" else low_first[::-1]
+
+
+def pack_fields(e: dict, values: dict[str, int]) -> int:
+    return sum(values[f["name"]] << f["bit_offset"] for f in e["fields"])
+
+
+@pytest.mark.parametrize("pid", builtin_ids())
+def test_every_entry_can_be_encoded_from_the_json(cli, pid):
+    r = cli("profiles", "show", pid, "--json")
+    assert r.code == 0, r.err
+    profile = load_profile(pid)
+    for e in r.json()["entries"]:
+        entry = profile.entry(e["code"])
+        assert {"word_order", "combine", "words"} <= set(e)
+        for raw in {e["min"], e["max"], e["default"] if e["default"] is not None else e["min"]}:
+            assert third_party_words(e, raw) == raw_to_words(entry, raw), e["code"]
+        if e.get("fields"):
+            lows = {f["name"]: f["range"][0] for f in e["fields"]}
+            highs = {f["name"]: f["range"][1] for f in e["fields"]}
+            assert pack_fields(e, lows) <= pack_fields(e, highs)
+            assert all(f["width"] in (4, 8) and set(f) >= {"name", "bit_offset", "range", "enum"}
+                       for f in e["fields"])
+
+
+def test_field_layout_matches_a_manual_example(cli):
+    """SD25 Po001 'control mode and direction' is a two-field value: X low byte, Y high byte."""
+    (po001,) = [e for e in cli("profiles", "show", "sd25", "--json").json()["entries"] if e["code"] == "Po001"]
+    assert [(f["name"], f["bit_offset"], f["width"]) for f in po001["fields"]] == [("X", 0, 8), ("Y", 8, 8)]
+    assert pack_fields(po001, {"X": 21, "Y": 1}) == po001["max"] == 0x0115
+    assert po001["fields"][0]["enum"]["21"] == "bus"

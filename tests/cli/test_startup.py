@@ -1,0 +1,41 @@
+"""Fast start: a one-shot command loads only what it uses (no numpy, pydantic or other commands' modules)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+PROBE = """
+import atexit, json, sys
+def report():
+    names = ("numpy", "pydantic", "yaml", "servotool.tuning", "servotool.commission", "servotool.cli.tune",
+             "servotool.cli.run", "servotool.cli.jog", "servotool.model.schema", "rich.progress")
+    sys.stderr.write("LOADED " + json.dumps([n for n in names if n in sys.modules]) + "\\n")
+atexit.register(report)
+sys.argv = ["servotool", *sys.argv[1:]]
+from servotool.cli.main import run
+run()
+"""
+
+
+def loaded(env: dict[str, str], *args: str) -> list[str]:
+    r = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, cwd=ROOT,
+                       env={**os.environ, **env}, timeout=120)
+    assert r.returncode == 0, r.stderr
+    line = next(x for x in r.stderr.splitlines() if x.startswith("LOADED "))
+    return json.loads(line.removeprefix("LOADED "))
+
+
+def test_param_get_loads_no_numpy_pydantic_yaml_or_other_commands(sim_dir, tmp_path):
+    env = {"SERVOTOOL_CACHE_DIR": str(tmp_path / "cache")}
+    loaded(env, "--port", "sim", "param", "get", "Pn004")          # the first run compiles the profile
+    assert loaded(env, "--port", "sim", "param", "get", "Pn004") == []
+
+
+def test_tune_help_loads_tuning_only_when_asked(sim_dir):
+    assert "servotool.tuning" in loaded({}, "tune", "inertia", "--help")

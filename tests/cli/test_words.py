@@ -1,0 +1,76 @@
+"""Plain words: what the user can do, fix commands with the user's connection options, details behind -v."""
+
+from __future__ import annotations
+
+from servotool.cli import render
+from servotool.cli.messages import error_text, plain
+from servotool.config import ConnectOptions
+from servotool.errors import MissingRole, ServoError
+
+
+def test_manual_line_references_only_with_verbose():
+    text = "needs H0C-09 = 1 (communication VDI, L3392) and H17-00 (is620p.md L1044); 2 stop bits (L2713-2719)"
+    assert plain(text) == "needs H0C-09 = 1 (communication VDI) and H17-00; 2 stop bits"
+    assert plain(text, verbose=True) == text
+
+
+def test_commands_a_library_message_suggests_get_the_users_connection_options():
+    given = ConnectOptions(port="COM3", profile="sd25")
+    text = error_text(ServoError("the drive is in alarm (see 'servotool alarm', clear it first)"), given)
+    assert "'servotool --port COM3 --profile sd25 alarm'" in text
+    already = "set it with 'servotool --port sim param set Pn4=1'"
+    assert error_text(ServoError(already), given) == already
+    serve = "start 'servotool sim serve --port tcp://127.0.0.1:0' and give its tcp:// port"
+    assert error_text(ServoError(serve), given) == serve
+
+
+def test_a_missing_role_is_worded_as_what_the_user_can_do():
+    exc = MissingRole("alarm clear", "alarm_reset", "sd25")
+    text = error_text(exc, ConnectOptions())
+    assert "role" not in text and "alarm reset" in text and "panel" in text
+    assert "role 'alarm_reset'" in error_text(exc, ConnectOptions(), verbose=True)
+
+
+def test_unknown_code_suggests_and_the_fix_command_keeps_the_connection_options(cli):
+    r = cli("--port", "sim", "-P", "is620p", "param", "get", "H08-0O")
+    assert r.code == 2
+    assert "did you mean H08-00" in r.err
+    assert "'servotool --port sim --profile is620p param find H08-0O'" in r.err
+
+
+def test_other_spellings_units_and_enum_names_end_to_end(cli):
+    r = cli("--port", "sim", "-P", "is620p", "param", "set", "H08.00=30Hz", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["changed"][0] == {"code": "H08-00", "old": 25.0, "new": 30.0, "unit": "Hz",
+                                      "effect": "unknown"}
+    r = cli("--port", "sim", "param", "set", "Pn027=3000Hz")
+    assert r.code == 2 and "is in rpm" in r.err
+    r = cli("--port", "sim", "-P", "sdc", "param", "set", "PN4=jog")
+    assert r.code == 0 and "(jog)" in r.out
+    r = cli("--port", "sim", "-P", "sdc", "param", "get", "PN4", "--json")
+    assert r.json()[0]["meaning"] == "jog"
+
+
+def test_groups_case_insensitive_and_did_you_mean(cli):
+    r = cli("--port", "sim", "param", "list", "--group", "GAIN", "--class", "pn", "--json")
+    assert r.code == 0 and "Pn101" in {row["code"] for row in r.json()}
+    r = cli("--port", "sim", "param", "list", "--group", "gian")
+    assert r.code == 2 and "did you mean gain" in r.err
+    r = cli("profiles", "show", "dsx7")
+    assert r.code == 2 and "did you mean dsx7e" in r.err
+
+
+def test_cautions_are_one_line_each_unless_explained(capsys):
+    lines = ["H06-02 (speed_reference): used as the speed reference: this volume documents no route (L3217)",
+             "this drive has no communication timeout: if this program dies the motor keeps running"]
+    render.caution(lines)
+    short = capsys.readouterr().err.splitlines()
+    assert short == ["servotool: caution: H06-02 (speed reference) is not confirmed by the manual",
+                     "servotool: caution: this drive has no communication timeout",
+                     "servotool: (--explain shows why)"]
+    render.Verbosity.explain = True
+    try:
+        render.caution(lines)
+    finally:
+        render.Verbosity.explain = False
+    assert "keeps running" in capsys.readouterr().err

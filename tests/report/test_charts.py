@@ -1,0 +1,149 @@
+"""Charts from known data: the plotted lines carry the data (checked on the figure before saving) and each file
+is a real, non-empty PNG; the terminal chart fits 80 columns; a missing matplotlib is one clear line."""
+
+from __future__ import annotations
+
+import math
+import struct
+import sys
+from pathlib import Path
+
+import pytest
+
+from servotool.errors import UsageError
+from servotool.ops.trace_file import Series, TimeTable, read_table
+from servotool.report.terminal import terminal_chart
+
+pytest.importorskip("matplotlib")
+
+from servotool.report import tune_report
+from servotool.report.charts import MISSING, PNG_SIGNATURE, need_matplotlib, save, table_figure
+from servotool.report.tune_facts import gain_rows, model_torque_pct, move_estimates
+
+
+def assert_png(path: Path) -> tuple[int, int]:
+    """A PNG by its signature and IHDR chunk, bigger than a blank; returns (width, height)."""
+    data = path.read_bytes()
+    assert data[:8] == PNG_SIGNATURE and data[12:16] == b"IHDR"
+    width, height = struct.unpack(">II", data[16:24])
+    assert width >= 300 and height >= 200 and len(data) > 5000
+    return width, height
+
+
+def lines_of(fig) -> dict[str, tuple[list[float], list[float]]]:
+    return {ln.get_label(): (list(ln.get_xdata()), list(ln.get_ydata())) for ax in fig.axes for ln in ax.get_lines()
+            if not ln.get_label().startswith("_")}
+
+
+def _table() -> TimeTable:
+    t = [i * 0.01 - 0.2 for i in range(100)]
+    return TimeTable(Path("known.csv"), "t_s", t, [
+        Series("Un000", "rpm", [3.0 * i for i in range(100)]), Series("Un001", "rpm", [2.0 * i for i in range(100)]),
+        Series("Un002", "%", [50.0 - i for i in range(100)])], capture=[1] * 100)
+
+
+def test_a_table_chart_has_one_panel_per_unit_and_each_column_s_data(tmp_path):
+    table = _table()
+    fig = table_figure(table)
+    assert len(fig.axes) == 2 and [ax.get_ylabel() for ax in fig.axes] == ["rpm", "%"]
+    lines = lines_of(fig)
+    assert set(lines) == {"Un000 [rpm]", "Un001 [rpm]", "Un002 [%]"}
+    assert lines["Un002 [%]"][1] == table.series[2].values and lines["Un000 [rpm]"][0] == table.t
+    assert_png(save(fig, tmp_path / "known.png"))
+
+
+def test_the_terminal_chart_fits_80_columns_with_a_legend_and_names_what_found_no_room():
+    chart = terminal_chart(_table(), 80, 30, "known", color=False)
+    lines = chart.text.splitlines()
+    assert max(len(line) for line in lines) <= 80 and "Un001 [rpm]" in chart.text and "Un002 [%]" in chart.text
+    short = terminal_chart(_table(), 80, 10, color=False)
+    assert short.left_out == ["Un002 [%]"] and "Un000 [rpm]" in short.text
+
+
+def test_reading_a_monitor_and_a_tune_csv(tmp_path):
+    mon = tmp_path / "mon.csv"
+    mon.write_text("timestamp,elapsed_s,Un000 [rpm],5E00h\n2026-01-01T00:00:00.000,0.0,1,3\n"
+                   "2026-01-01T00:00:00.100,0.1,2,3\n")
+    table = read_table(mon)
+    assert [s.label for s in table.series] == ["Un000 [rpm]", "5E00h"] and table.t == [0.0, 0.1]
+    tune = tmp_path / "tune.csv"
+    tune.write_text("t_s,speed_rpm,torque_pct,position_rev\n0.0,1.0,2.0,\n0.01,2.0,3.0,0.5\n")
+    table = read_table(tune)
+    assert [s.label for s in table.series] == ["speed [rpm]", "torque [%]", "position [rev]"]
+    assert math.isnan(table.series[2].values[0])
+    position = lines_of(table_figure(table))["position [rev]"]
+    assert position == ([0.01], [0.5])                          # drawn where it was read, no NaN gap
+    with pytest.raises(UsageError, match="no column Un999"):
+        table.select(["Un999"])
+    (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(UsageError, match="no time column"):
+        read_table(tmp_path / "bad.csv")
+
+
+def test_without_matplotlib_the_message_is_one_line(monkeypatch):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    with pytest.raises(UsageError) as exc:
+        need_matplotlib()
+    assert str(exc.value) == MISSING and "servotool[plot]" in MISSING
+
+
+def test_every_tune_chart_shows_the_tune_s_data(tuned, tmp_path):
+    profile, res = tuned
+    result = res.identified
+    trace = result.trace
+    motion = lines_of(tune_report.motion_figure(result))
+    assert motion["speed"] == (trace.t, trace.speed) and motion["torque"][1] == trace.torque
+    travel = [x - trace.position[0] for x in trace.position if x is not None]
+    assert motion["travel"][1] == pytest.approx(travel) and max(map(abs, travel)) > 0.2
+
+    fit = lines_of(tune_report.fit_figure(result, profile))
+    model = model_torque_pct(result, profile.motor.rated_torque_nm)
+    assert fit["model: J·dω/dt + friction + load"][1] == pytest.approx(list(model))
+    resid = [m - q for m, q in zip(trace.torque, model, strict=True)]
+    assert fit["measured − model"][1] == pytest.approx(resid)
+    # the fitted model explains the torque: the residual is small against the torque swing
+    assert (sum(r * r for r in resid) / len(resid)) ** 0.5 < 0.25 * (max(trace.torque) - min(trace.torque))
+
+    moves = move_estimates(result, profile)
+    assert len(moves) >= 4 and {m.direction for m in moves} == {1, -1}
+    assert all(abs(m.ratio - 3.0) < 0.5 for m in moves)          # the simulated load ratio is 3
+    fig = tune_report.moves_figure(result, moves)
+    assert list(fig.axes[0].collections[-1].get_offsets()[:, 1]) == pytest.approx([m.ratio for m in moves])
+
+    step = lines_of(tune_report.step_figure(res.step_before, res.step_after))
+    before = next(v for k, v in step.items() if k.startswith("before: overshoot"))
+    assert before == ([t * 1000 for t in res.step_before.t_s], list(res.step_before.speed_rpm))
+    assert step[f"after: settled at {res.step_after.settling_ms:.0f} ms"][0][0] == pytest.approx(
+        res.step_after.settling_ms)
+    assert res.step_after.overshoot_pct < res.step_before.overshoot_pct
+
+    rows = gain_rows(res)
+    assert [r.code for r in rows] == [c.entry.code for c in res.proposal.gain_changes]
+
+
+def test_the_report_folder_holds_valid_pngs_and_a_report_that_links_them(tuned, tmp_path):
+    profile, res = tuned
+    report = tune_report.write_tune_report(tmp_path / "rep", res.identified, profile, res)
+    names = [p.name for p in report.files]
+    assert names == ["motion.png", "fit.png", "moves.png", "step.png", "gains.png", "report.md"]
+    for p in report.files[:-1]:
+        assert_png(p)
+    md = (tmp_path / "rep" / "report.md").read_text()
+    for p in report.files[:-1]:
+        assert f"]({p.name})" in md
+    assert f"{res.ratio:.2f}" in md and "overshoot" in md and res.proposal.gain_changes[0].entry.code in md
+
+
+def test_a_report_folder_that_is_a_file_is_refused(tmp_path):
+    (tmp_path / "f").write_text("")
+    with pytest.raises(UsageError, match="it is a file"):
+        tune_report.check_folder(tmp_path / "f")
+
+
+def test_each_capture_of_a_repeated_trace_is_its_own_line():
+    table = _table()
+    table.capture = [1] * 50 + [2] * 50
+    lines = lines_of(table_figure(table))
+    assert lines["Un002 [%] #1"][1] == table.series[2].values[:50]
+    assert lines["Un002 [%] #2"][1] == table.series[2].values[50:]
+    assert "Un000 [rpm] #2" in terminal_chart(table, 100, 30, color=False).text
