@@ -41,6 +41,7 @@ OPS = ("get", "set", "backup", "restore", "monitor")
 OUTCOMES = ("ok", "error", "WRONG", "traceback", "hang")
 TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.15, 30.0     # late replies come after the timeout, within the late window
 VERBOSE = False
+ACCOUNTS: Counter[str] = Counter()      # failed restores by the drive state they stated: equal, differ, unknown
 
 
 class Wrong(Exception):
@@ -92,33 +93,42 @@ class Bench:
         for e in self.params:
             self.check(e, taken.values[e.code])
 
-    def restore(self, drive: Drive) -> None:
-        """Restore a backup that differs from the drive in a few entries; success must leave every planned entry
-        at its target, and a failure that says the drive equals the automatic backup must be true."""
-        values = {e.code: self.truth(e) for e in self.params}
-        for e in self.rng.sample(self.settable, 4):
-            values[e.code] = self.rng.randint(e.min, e.max)
-        p = self.profile
-        target = backup.Backup(p.id, p.version, p.model, drive.unit, "", "", {}, values)
-        current = {r.entry.code: r.raw for r in drive.read_entries(self.params, partial=True)}
-        plan = restore.restore_changes(p, target, current)
-        try:
-            restore.restore(drive, target, plan)
-        except restore.RestoreFailed as exc:
-            if "the drive equals the automatic backup" in str(exc):
-                before = backup.load(exc.auto_backup, p).values
-                for e in self.params:
-                    if not p.persistence.is_switch(e.code) and self.truth(e) != before[e.code]:
-                        raise Wrong(f"restore says rolled back, but {e.code} is {self.truth(e)}, "
-                                    f"was {before[e.code]}") from None
-            raise
-        for e, _old, new in plan.changes:
-            self.check(e, new)
-
     def monitor(self, drive: Drive) -> None:
         for _ in range(8):
             for r in drive.read_entries(self.monitors):
                 self.check(r.entry, r.raw)
+
+    def restore(self, drive: Drive) -> None:
+        """A backup that differs in a few entries, restored; a failed restore's account of the drive (equal to the
+        automatic backup, or which entries differ) is checked against the drive's true state."""
+        truth = {e.code: self.truth(e) for e in self.params}
+        values = dict(truth)
+        for e in self.rng.sample(self.settable, 4):
+            values[e.code] = self.rng.randint(e.min, e.max)
+        p = self.profile
+        b = backup.Backup(p.id, p.version, p.model, drive.unit, "", "", {}, values)
+        plan = restore.restore_changes(p, b, truth)
+        try:
+            restore.restore(drive, b, plan)
+        except restore.RestoreFailed as exc:
+            auto = backup.load(exc.auto_backup, p).values
+            differ = {c for c, v in auto.items() if self.truth(p.entry(c)) != v and not p.persistence.is_switch(c)}
+            if exc.equals_backup is None:
+                ACCOUNTS["unknown"] += 1
+            elif exc.equals_backup != (not differ) or (differ and set(exc.differ) != differ):
+                raise Wrong(f"restore account wrong: said {exc.facts()!r}; truly differ {sorted(differ)}") from None
+            else:
+                ACCOUNTS["equal" if not differ else "differ"] += 1
+            raise
+        except ServoError as exc:       # before any write: it must say so, and be true
+            now = {e.code: self.truth(e) for e in self.params}
+            if "nothing was written" not in str(exc) or now != truth:
+                raise Wrong(f"restore failed before writing? said {exc}; changed "
+                            f"{sorted(c for c in now if now[c] != truth[c])}") from None
+            ACCOUNTS["nothing written"] += 1
+            raise
+        for e, _, new in plan.changes:
+            self.check(e, new)
 
     def run(self, op: str, faults: LineFaults) -> str:
         """One try of op on a fresh link: its outcome (one of OUTCOMES)."""
@@ -204,6 +214,12 @@ def report(counts: dict[tuple[str, float, str], Counter[str]], elapsed: float) -
         print(f"{kind:<11} {rate:>5.0%} {op:<8} {sum(cell.values()):>5} " + " ".join(f"{cell[o]:>9}" for o in OUTCOMES))
     print(f"{'all':<11} {'':>5} {'':<8} {sum(total.values()):>5} " + " ".join(f"{total[o]:>9}" for o in OUTCOMES))
     print(f"silent wrong: {total['WRONG']} in {sum(total.values())} tries ({elapsed:.0f} s)")
+    if ACCOUNTS:
+        stated = ACCOUNTS["equal"] + ACCOUNTS["differ"] + ACCOUNTS["nothing written"]
+        print(f"failed restores: {stated + ACCOUNTS['unknown']}, drive state stated and true in {stated} "
+              f"(nothing written {ACCOUNTS['nothing written']}, rolled back to equal the automatic backup "
+              f"{ACCOUNTS['equal']}, listed differences {ACCOUNTS['differ']}), 'unknown' (no answer) in "
+              f"{ACCOUNTS['unknown']}; a wrong statement counts as WRONG above")
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -57,14 +58,33 @@ def _convert(name: str, value: Any, where: str) -> Any:
         return "on" if value else "off"
     if name not in ("baud", "stopbits", "unit", "retries", *FLOATS):
         return str(value)
+    kind = "a number" if name in FLOATS else "a whole number"
     try:
-        if isinstance(value, bool):       # YAML's 'yes'/'true' is no number
-            raise ValueError
-        number = float(value) if name in FLOATS else int(value)
-    except (TypeError, ValueError):
-        kind = "a number" if name in FLOATS else "a whole number"
+        number = _number(value, whole=name not in FLOATS)
+    except (TypeError, ValueError, OverflowError):
         raise UsageError(f"{where}: {name} must be {kind}, got {value!r}") from None
+    if name == "retries" and not 0 <= number <= MAX_RETRIES:
+        raise UsageError(f"{where}: retries must be 0..{MAX_RETRIES}, got {value!r}")
     return number
+
+
+MAX_RETRIES = 20
+
+
+def _number(value: Any, *, whole: bool) -> int | float:
+    """A finite number from a file or the environment: ASCII digits only ('٣' and '５' are not 3 and 5), no
+    YAML true/false, and a whole number exactly (3.7 retries is an error, not 3)."""
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        raise TypeError
+    if isinstance(value, str):
+        text = value.strip()
+        if not text.isascii() or (whole and not re.fullmatch(r"[+-]?[0-9]+", text)):
+            raise ValueError
+        value = float(text) if not whole else int(text)
+    number = float(value)
+    if not math.isfinite(number) or (whole and not number.is_integer()):
+        raise ValueError
+    return int(number) if whole else number
 
 
 def _flag(value: Any, where: str) -> bool:
@@ -152,8 +172,8 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
     )
     if not (math.isfinite(settings.timeout) and 0 < settings.timeout <= 3600):
         raise UsageError(f"bad timeout {settings.timeout:g}: must be > 0 and at most 3600 s")
-    if settings.retries < 0:
-        raise UsageError("retries must be >= 0")
+    if not 0 <= settings.retries <= MAX_RETRIES:
+        raise UsageError(f"bad retries {settings.retries}: must be 0..{MAX_RETRIES}")
     if opts.travel is not None and not (math.isfinite(opts.travel) and opts.travel > 0):
         raise UsageError(f"bad travel {opts.travel:g}: must be a number of revolutions > 0")
     return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit),

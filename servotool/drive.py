@@ -122,12 +122,14 @@ def _names(group: list[Entry]) -> str:
 class Drive:
     """One drive (unit) on a link, described by a profile."""
 
-    def __init__(self, link: Link, profile: Profile, unit: int) -> None:
+    def __init__(self, link: Link, profile: Profile, unit: int, *, port: str = "") -> None:
+        """port names the bus for the host's journal and write lock (ops/journal); "" for in-process links."""
         self.link = link
         # The user acknowledged host motion without a dead-man on this drive (--no-dead-man): see motion/deadman.
         self.dead_man_waived = False
         self.profile = profile
         self.unit = unit
+        self.port = port
         self.missing: dict[str, Entry] = {}     # entries the drive answered exception 02 for, this run, by code
 
     # ----- reading -------------------------------------------------------------------------------------------

@@ -7,7 +7,9 @@ the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and 
 
 from __future__ import annotations
 
+import glob
 import os
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,6 +27,14 @@ def _yaml() -> tuple[Any, Any]:
     import yaml
 
     return yaml, getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+# Bounds checked before a document is built: the loaders recurse (a profile nested 100,000 deep crashed the C
+# loader), and no servotool file comes near them (profiles are ~150 kB and ~8 levels deep).
+MAX_YAML_BYTES = 4 << 20
+MAX_YAML_DEPTH = 32
+
+# A temporary file of a process that no longer runs is swept after this long where its pid cannot be checked.
+STALE_TMP_S = 3600.0
 
 
 # ----- user folders ----------------------------------------------------------------------------------------------
@@ -70,7 +80,8 @@ def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable
     path.parent.mkdir(parents=True, exist_ok=True)
     import tempfile
 
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}", suffix=".tmp")
+    sweep_temp(path.parent, path.name)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp")
     try:
         with (os.fdopen(fd, "wb") if isinstance(text, bytes) else os.fdopen(fd, "w", encoding="utf-8")) as fh:
             fh.write(text)
@@ -78,6 +89,11 @@ def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable
             if durable:
                 os.fsync(fh.fileno())
             st = os.fstat(fh.fileno())
+        if replace and os.name == "posix":
+            try:      # a replaced file keeps its mode (a user's 0644 backup stays readable by others)
+                os.chmod(tmp, path.stat().st_mode & 0o7777)
+            except FileNotFoundError:
+                pass
         if replace:
             os.replace(tmp, path)
         else:
@@ -87,12 +103,49 @@ def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable
     return st
 
 
+def _alive(pid: int) -> bool | None:
+    """Whether a process runs; None where that cannot be asked safely (Windows' os.kill terminates)."""
+    if os.name != "posix":
+        return None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True          # exists, owned by someone else
+    return True
+
+
+def sweep_temp(folder: Path, name: str = "") -> int:
+    """Delete the temporary files write_atomic left in folder (for the target `name`, or all) when the process
+    that made them is gone (a kill -9 between write and rename). Returns how many were removed."""
+    removed = 0
+    try:
+        candidates = list(folder.glob(f".{glob.escape(name)}*.tmp"))
+    except OSError:
+        return 0
+    for tmp in candidates:
+        pid_text = tmp.name[:-len(".tmp")].rsplit(".", 2)[-2] if tmp.name.count(".") >= 3 else ""
+        alive = _alive(int(pid_text)) if pid_text.isascii() and pid_text.isdigit() else None
+        try:
+            if alive is False or (alive is None and time.time() - tmp.stat().st_mtime > STALE_TMP_S):
+                tmp.unlink()
+                removed += 1
+        except OSError:
+            pass
+    return removed
+
+
 # ----- reading ---------------------------------------------------------------------------------------------------
 
 def read_text(path: Path) -> str:
     """A text file's content; FileProblem when it cannot be read or is not UTF-8."""
     try:
-        return path.read_text(encoding="utf-8")
+        with path.open("rb") as fh:
+            data = fh.read(MAX_YAML_BYTES + 1)
+        if len(data) > MAX_YAML_BYTES:
+            raise FileProblem(path, f"too large (more than {MAX_YAML_BYTES} bytes)")
+        return data.decode("utf-8")
     except OSError as exc:
         raise FileProblem(path, f"cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError as exc:
@@ -101,12 +154,37 @@ def read_text(path: Path) -> str:
 
 def _yaml_problem(path: Path, exc: Any) -> FileProblem:
     mark = getattr(exc, "problem_mark", None)
-    return FileProblem(path, f"invalid YAML: {getattr(exc, 'problem', None) or exc}",
+    problem = " ".join(str(getattr(exc, "problem", None) or exc).split())     # one line, whatever the file held
+    return FileProblem(path, f"invalid YAML: {problem}",
                        line=mark.line + 1 if mark else None)
+
+
+def check_yaml_bounds(text: str, path: Path) -> None:
+    """Refuse, before anything is built, a document larger or deeper than any servotool file, or one with
+    aliases (a recursive alias makes a structure that contains itself). Scanning events does not recurse."""
+    if len(text) > MAX_YAML_BYTES:
+        raise FileProblem(path, f"too large ({len(text)} characters; at most {MAX_YAML_BYTES})")
+    yaml, loader = _yaml()
+    depth = 0
+    try:
+        for event in yaml.parse(text, Loader=loader):
+            if isinstance(event, yaml.CollectionStartEvent):
+                depth += 1
+                if depth > MAX_YAML_DEPTH:
+                    raise FileProblem(path, f"nested more than {MAX_YAML_DEPTH} levels deep",
+                                      line=event.start_mark.line + 1 if event.start_mark else None)
+            elif isinstance(event, yaml.CollectionEndEvent):
+                depth -= 1
+            elif isinstance(event, yaml.AliasEvent):
+                raise FileProblem(path, "YAML aliases (*name) are not accepted",
+                                  line=event.start_mark.line + 1 if event.start_mark else None)
+    except yaml.YAMLError as exc:
+        raise _yaml_problem(path, exc) from None
 
 
 def parse_yaml(text: str, path: Path) -> Any:
     """The data of a YAML document read from path; FileProblem (with the line) when it is not valid YAML."""
+    check_yaml_bounds(text, path)
     yaml, loader = _yaml()
     try:
         return yaml.load(text, Loader=loader)
@@ -116,6 +194,7 @@ def parse_yaml(text: str, path: Path) -> Any:
 
 def compose_yaml(text: str, path: Path) -> Any:
     """The node tree of a YAML document (for the line of each key); FileProblem when it is not valid YAML."""
+    check_yaml_bounds(text, path)
     yaml, loader = _yaml()
     try:
         return yaml.compose(text, Loader=loader)
@@ -140,16 +219,36 @@ class FileLock:
         self._fh: IO[str] | None = None
 
     @contextmanager
-    def held(self) -> Iterator[None]:
+    def held(self, poll_interval: float = 0.001) -> Iterator[None]:
         # Imported here, where a lock is used: filelock takes 40 ms to import.
         from filelock import lock_descriptor, unlock_descriptor
 
-        if self._fh is None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = self.path.open("a", encoding="utf-8")
-        fd = self._fh.fileno()
-        lock_descriptor(fd, poll_interval=0.001)     # holders keep it for milliseconds: poll often
+        fd = self._open()
+        lock_descriptor(fd, poll_interval=poll_interval)     # holders keep it for milliseconds: poll often
         try:
             yield
         finally:
             unlock_descriptor(fd)
+
+    def try_acquire(self) -> bool:
+        """Take the lock if nobody holds it (release() gives it back); False at once when another holder has it."""
+        from filelock import lock_descriptor
+
+        return bool(lock_descriptor(self._open(), blocking=False))
+
+    def release(self) -> None:
+        from filelock import unlock_descriptor
+
+        if self._fh is not None:
+            unlock_descriptor(self._fh.fileno())
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def _open(self) -> int:
+        if self._fh is None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = self.path.open("a", encoding="utf-8")
+        return self._fh.fileno()

@@ -26,9 +26,14 @@ def sim_notice(resolved: Resolved, units: list[int]) -> str:
 def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace | None = None,
                 notice: Callable[[str], None] | None = None) -> Iterator[list[Drive]]:
     """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit."""
+    from servotool.files import sim_state_dir
+    from servotool.ops.journal import recover_at_start
+
     units = units or [resolved.unit]
     sim = None
     settings = resolved.settings
+    # The name the host's journal and write lock know this bus by (a simulator by its state folder).
+    port = f"sim:{sim_state_dir().resolve()}" if resolved.simulated else settings.port
     if resolved.simulated:
         from servotool.sim.firmware import build_drive
         from servotool.sim.server import EmbeddedSim
@@ -46,12 +51,14 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
             sim.close()
         raise
     try:
-        drives = [Drive(link, resolved.profile, u) for u in units]
+        drives = [Drive(link, resolved.profile, u, port=port) for u in units]
         # Before anything is written: the drive answering must be the one the profile describes. The embedded
         # simulator is built from the profile itself.
         if resolved.identity_check and not resolved.simulated:
             if text := warning_text(confirm(drives)):
                 (notice or _stderr)(f"servotool: warning: {text}")
+        for d in drives:      # what a killed servotool process left on these drives is put right first
+            recover_at_start(d, notice or _stderr, (sim_state_dir(),) if sim else ())
         yield drives
     finally:
         link.close()

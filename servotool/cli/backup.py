@@ -40,6 +40,7 @@ def backup_cmd(
     kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
     if kind not in ("yaml", "yml", "csv"):
         raise UsageError(f"--format must be yaml or csv, not '{fmt or kind}'")
+    backup.check_output(output or Path(f"new.{kind}"), force=force)   # before reading the drive (24 s at 1200 Bd)
     with drive(ctx) as d:
         entries = select(d.profile)
         with progress("reading parameters", len(entries), enabled=not as_json) as advance:

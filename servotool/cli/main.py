@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 
 import typer
@@ -98,6 +99,7 @@ def run() -> None:
     """Console-script entry point: one clear line (and with --json a JSON object) and an exit code for every
     failure; Ctrl-C exits 130 after flushing what was produced."""
     given = State()       # the options given on the command line, filled in by main(); fix commands repeat them
+    _interrupt_on_termination()
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)       # streamed lines reach a pipe as they are made
     root = typer.main.get_command(app)
@@ -122,6 +124,18 @@ def run() -> None:
                        "traceback)", 1, as_json))
     sys.stdout.flush()
     sys.exit(result if isinstance(result, int) else 0)
+
+
+def _terminated(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def _interrupt_on_termination() -> None:
+    """A terminate or hang-up signal unwinds like Ctrl-C, so every `finally` puts back what it changed on a drive
+    (the EEPROM switch); only kill -9 skips them, and the host's journal covers that."""
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), _terminated)
 
 
 def _fail(code: str, message: str, status: int, as_json: bool) -> int:

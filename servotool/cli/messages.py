@@ -149,4 +149,7 @@ def restore_failed_text(exc: RestoreFailed, given: ConnectOptions) -> str:
                        f"that file if needed")
     if exc.next_step == "restore":
         return text + f"; run '{command(given, 'param', 'restore', auto)}' once the cause is fixed"
+    if exc.source is not None:
+        return text + f"; run '{command(given, 'param', 'restore', str(exc.source), '--yes')}' again once the cause " \
+            f"is fixed"
     return text

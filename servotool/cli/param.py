@@ -72,15 +72,15 @@ def set_(
     as_json: bool = JSON_OPT,
 ) -> None:
     """Validate every value against the profile, write the ones that differ, read back to verify."""
-    persisted = None
+    persisted, stored = None, []
     with drive(ctx) as d:
         eeprom.check_save_request(d.profile, save)
         plan = params.prepare_set(d, assignments, raw=raw)
         results = []
-        if not dry_run and plan.changes:
-            with eeprom.persistence(d, save) as outcome:
-                results = params.apply_set(d, plan)
-            persisted = outcome["persisted"]
+        if not dry_run:
+            outcome = params.set_values(d, plan, save)
+            results, stored = outcome.results, outcome.stored
+            persisted = outcome.persisted if plan.changes or save else None
     if as_json:
         emit_json({
             "dry_run": dry_run,
@@ -88,6 +88,7 @@ def set_(
                          "effect": e.effect} for e, old, new in plan.changes],
             "unchanged": [{"code": e.code, "value": json_value(e, v), "unit": e.unit} for e, v in plan.unchanged],
             "persisted": persisted,
+            "stored": [e.code for e in stored],
         })
         return
     for e, v in plan.unchanged:
@@ -99,6 +100,8 @@ def set_(
         return
     if persisted is False:
         warn(eeprom.ram_only_warning(d.profile))
+    if save:
+        out.print(f"{len(stored)} value{'s' if len(stored) != 1 else ''} stored in EEPROM", markup=False)
     for r in results:
         note = f"  [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
         out.print(f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "

@@ -4,19 +4,18 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from pathlib import Path
 
 import typer
 
 from servotool.cli.common import state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, count, emit_json, info, out, trace_frame
+from servotool.cli.render import Verbosity, count, emit_json, info, notice, out, trace_frame
 from servotool.commission.plan import load_plan
-from servotool.commission.runner import Runner, write_report
+from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
 from servotool.config import merge, options_from, resolve
-from servotool.errors import UsageError
+from servotool.errors import ServoError, UsageError
 from servotool.session import open_drives
 
 
@@ -57,6 +56,8 @@ def run(
     if not yes and any(st.name == "prompt" for st in plan.steps) and not sys.stdin.isatty():
         raise UsageError("the plan has operator prompts: run it in a terminal or pass --yes")
     report_path = report or plan_file.with_suffix(".report.json")
+    if str(report_path).startswith("-"):
+        raise UsageError(f"--report '{report_path}' looks like an option, not a file name")
     if not report_path.parent.is_dir() or not os.access(report_path.parent, os.W_OK):
         raise UsageError(f"cannot write the report into {report_path.parent}: no such folder or not writable")
     several = len(units) > 1
@@ -64,17 +65,22 @@ def run(
     def ask(unit: int, question: str) -> bool:
         return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
 
-    t0 = time.monotonic()
     with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=info) as drives:
         runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info,
                         word=lambda exc: error_text(exc, cli_opts))
-        runner.check_units()
-        ok = False
+        rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)
+        rep.write("running")
+        runner.after_step = lambda: rep.write("running")
+        ok: bool | None = None
         try:
+            runner.check_units()
+            runner.back_up(notice)
             ok = runner.run()
-        finally:  # also when interrupted: the report says what was written
-            data = write_report(report_path, plan, runner.results, ok, time.monotonic() - t0,
-                                      profile=resolved.profile.id, port=resolved.settings.port, units=units)
+        except ServoError:
+            ok = False
+            raise
+        finally:  # also when interrupted: the report says what was written and where it stopped
+            data = rep.final(ok)
     if as_json:
         emit_json(data)
     else:

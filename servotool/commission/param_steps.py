@@ -11,7 +11,7 @@ from servotool.errors import UsageError, VerifyError
 from servotool.model.codec import format_value, parse_value, raw_to_eng
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup, params, restore
-from servotool.ops.eeprom import persistence
+from servotool.ops.eeprom import check_power_cycle, persistence
 
 
 class SetStep(StepType):
@@ -36,9 +36,15 @@ class SetStep(StepType):
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         texts = [f"{e.code}={raw}" for e, raw in self.assignments(step, drive.profile)]
         plan = params.prepare_set(drive, texts, raw=True)
-        done = params.apply_set(drive, plan)
+        if not any(st.name == "save" and st.index > step.index for st in ctx.plan.steps):
+            # no later 'save:' stores it: a power-cycle parameter kept in RAM would be lost by that power cycle
+            check_power_cycle(drive, [e for e, _, _ in plan.changes], None)
+        with persistence(drive, None):       # under the port's lock: no other process flips the switch meanwhile
+            done = params.apply_set(drive, plan)
         for r in done:
             ctx.wrote(drive, r.entry, r.new)
+        for entry, raw in plan.unchanged:      # already in RAM, maybe not in EEPROM: 'save:' stores them too
+            ctx.wrote(drive, entry, raw)
         return Outcome(f"{len(done)} written, {len(plan.unchanged)} already set",
                        {"written": {r.entry.code: format_value(r.entry, r.new) for r in done}})
 
@@ -117,13 +123,36 @@ class _FileStep(StepType):
         return f"{self.name} {step.arg}"
 
 
-class BackupStep(_FileStep):
-    """`backup: FILE`: every parameter into a backup file ({unit} in the name for each axis)."""
+class BackupStep(StepType):
+    """`backup: FILE` or `backup: {file: FILE, overwrite: true}`: every parameter into a backup file ({unit} in the
+    name for each axis); an existing file is replaced only with overwrite: true."""
 
     name = "backup"
 
+    @staticmethod
+    def target(step: Step) -> tuple[str, bool]:
+        arg = step.arg
+        if isinstance(arg, dict):
+            if set(arg) - {"file", "overwrite"} or not isinstance(arg.get("file"), str) or \
+                    not isinstance(arg.get("overwrite", False), bool):
+                raise UsageError("backup takes a file name, or {file: NAME, overwrite: true|false}")
+            arg, overwrite = arg["file"], arg.get("overwrite", False)
+        else:
+            overwrite = False
+        if not isinstance(arg, str) or not arg:
+            raise UsageError("expected a file name")
+        return arg, overwrite
+
+    def describe(self, step: Step, profile: Profile) -> str:
+        name, overwrite = self.target(step)
+        return f"backup {name}" + (" (replacing an existing file)" if overwrite else "")
+
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
-        written = backup.write_backup(drive, ctx.path(step.arg, drive.unit), force=True)
+        name, overwrite = self.target(step)
+        path = ctx.path(name, drive.unit)
+        if path.exists() and not overwrite:     # before reading the drive: a refusal costs nothing
+            raise UsageError(f"{path} exists; the step must say 'overwrite: true' to replace it")
+        written = backup.write_backup(drive, path, force=overwrite)
         return Outcome(f"saved to {written}", {"file": str(written)})
 
 
@@ -155,13 +184,14 @@ class SaveStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         mode = drive.profile.persistence.mode
+        written = list(ctx.written.get(drive.unit, {}).values())
         if mode == "ram":
             drive.trigger("eeprom_save", "save")
-            return Outcome("parameters stored in EEPROM")
+            return Outcome("parameters stored in EEPROM", {"stored": [e.code for e, _ in written]})
         if mode == "immediate":
-            return Outcome("nothing to do: the drive stores every write")
-        written = list(ctx.written.get(drive.unit, {}).values())
+            return Outcome("nothing to do: the drive stores every write", {"stored": [e.code for e, _ in written]})
         with persistence(drive, save=True):
             for entry, raw in written:     # the same value again, now with the switch set to EEPROM
-                params.write_one(drive, entry, raw)
-        return Outcome(f"{len(written)} values stored in EEPROM", {"stored": [e.code for e, _ in written]})
+                params.write_one(drive, entry, raw, raw)
+        return Outcome(f"{len(written)} value{'s' if len(written) != 1 else ''} stored in EEPROM",
+                       {"stored": [e.code for e, _ in written]})

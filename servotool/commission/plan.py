@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +43,7 @@ class Plan:
     options: dict[str, Any]
     units: list[int]
     steps: list[Step]
+    problems: list[str] = field(default_factory=list)     # step errors found while loading, reported by validate
 
 
 def _fail(path: Path, line: int, msg: str) -> UsageError:
@@ -77,23 +78,29 @@ def load_plan(path: Path) -> Plan:
     raw_steps = data.get("steps")
     if not isinstance(raw_steps, list) or not raw_steps or steps_node is None:
         raise _fail(path, 1, "'steps:' must be a non-empty list")
-    steps = []
+    steps, problems = [], []
     for i, (raw, node) in enumerate(zip(raw_steps, steps_node.value, strict=True)):
-        line = node.start_mark.line + 1
-        if not isinstance(raw, dict):
-            raise _fail(path, line, f"step {i + 1}: expected '- NAME: ARGUMENT'")
-        names = [k for k in raw if k != "unit"]
-        if len(names) != 1 or names[0] not in STEP_NAMES:
-            raise _fail(path, line, f"step {i + 1}: unknown step {names or raw!r} "
-                                    f"(steps: {', '.join(STEP_NAMES)})")
-        step_units = _unit_list(raw.get("unit"))
-        if step_units is False:
-            raise _fail(path, line, f"step {i + 1}: unit must be an id or a list of different ids 1..247")
-        if step_units and not units:
-            raise _fail(path, line, f"step {i + 1}: 'unit:' on a step needs the plan's 'units:' list")
-        steps.append(Step(i, line, names[0], raw[names[0]], step_units))
+        try:
+            steps.append(_step(path, i, raw, node.start_mark.line + 1, units))
+        except UsageError as exc:        # every step's problem is reported, in one pass (validate raises)
+            problems.append(str(exc))
     options = {k: v for k, v in data.items() if k not in ("steps", "units", "unit")}
-    return Plan(path, options, units or [], steps)
+    return Plan(path, options, units or [], steps, problems)
+
+
+def _step(path: Path, i: int, raw: Any, line: int, units: list[int] | bool | None) -> Step:
+    if not isinstance(raw, dict):
+        raise _fail(path, line, f"step {i + 1}: expected '- NAME: ARGUMENT'")
+    names = [k for k in raw if k != "unit"]
+    if len(names) != 1 or names[0] not in STEP_NAMES:
+        raise _fail(path, line, f"step {i + 1}: unknown step {names or raw!r} "
+                                f"(steps: {', '.join(STEP_NAMES)})")
+    step_units = _unit_list(raw.get("unit"))
+    if step_units is False:
+        raise _fail(path, line, f"step {i + 1}: unit must be an id or a list of different ids 1..247")
+    if step_units and not units:
+        raise _fail(path, line, f"step {i + 1}: 'unit:' on a step needs the plan's 'units:' list")
+    return Step(i, line, names[0], raw[names[0]], step_units)
 
 
 def _unit_list(value: Any) -> list[int] | bool | None:

@@ -14,6 +14,9 @@ from servotool.commission.step_type import RunContext
 from servotool.commission.steps import step_type
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError, UsageError
+from servotool.files import write_atomic
+
+READ_ONLY_STEPS = ("expect", "backup", "wait", "prompt")
 
 
 @dataclass
@@ -41,6 +44,9 @@ class Runner:
         self.continue_on_error, self.log, self.word = continue_on_error, log, word
         self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives})
         self.results: list[StepResult] = []
+        self.current: Step | None = None         # the step running (or the last one run)
+        self.auto_backups: dict[int, str] = {}
+        self.after_step: Callable[[], None] = lambda: None     # e.g. rewrite the report
 
     def check_units(self) -> None:
         """Every axis answers before the first step writes anything."""
@@ -51,8 +57,19 @@ class Runner:
             except DeviceError as exc:
                 raise DeviceError(f"unit {d.unit} does not answer, so nothing was run: {exc}") from None
 
+    def back_up(self, notice: Callable[[str], None]) -> None:
+        """An automatic backup of every axis before the plan's first write (a plan that only reads needs none)."""
+        from servotool.ops.backup import auto_backup
+
+        if all(s.name in READ_ONLY_STEPS for s in self.plan.steps):
+            return
+        for d in self.drives:
+            self.auto_backups[d.unit] = str(auto_backup(d, "before-plan"))
+            notice(f"automatic backup of unit {d.unit} before the plan: {self.auto_backups[d.unit]}")
+
     def run(self) -> bool:
         for step in self.plan.steps:
+            self.current = step
             kind = step_type(step)
             for drive in self.drives:
                 if step.units and drive.unit not in step.units:
@@ -65,21 +82,46 @@ class Runner:
                     detail, data, ok = self.word(exc), {"error": type(exc).__name__, "exit_code": exc.exit_code}, False
                 result = StepResult(step, drive.unit, ok, detail, time.monotonic() - t0, data)
                 self.results.append(result)
+                self.after_step()
                 self.log(f"{'ok  ' if ok else 'FAIL'} unit {drive.unit} {step.where()}: {detail}")
                 if not ok and not self.continue_on_error:
                     return False
         return all(r.ok for r in self.results)
 
 
-def write_report(path: Path, plan: Plan, results: list[StepResult], ok: bool, seconds: float, *,
-                 profile: str, port: str, units: list[int]) -> dict[str, Any]:
-    from servotool import __version__
+class Report:
+    """The run's report file: written when the run starts (`running`), rewritten atomically after every step, and
+    ending `ok`, `failed at step N` or `interrupted at step N`, so a killed run never leaves an older report's
+    verdict behind."""
 
-    report = {"plan": str(plan.path), "ok": ok, "profile": profile, "port": port, "units": units,
-              "tool_version": __version__, "seconds": round(seconds, 2),
-              "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "steps": [r.as_json() for r in results]}
-    try:
-        path.write_text(json.dumps(report, indent=2, default=str) + "\n")
-    except OSError as exc:
-        raise UsageError(f"cannot write report {path}: {exc.strerror}") from None
-    return report
+    def __init__(self, path: Path, runner: Runner, *, profile: str, port: str, units: list[int]) -> None:
+        self.path, self.runner = path, runner
+        self.head = {"plan": str(runner.plan.path), "profile": profile, "port": port, "units": units}
+        self.t0 = time.monotonic()
+
+    def write(self, status: str) -> dict[str, Any]:
+        from servotool import __version__
+
+        r = self.runner
+        report = {**self.head, "status": status, "ok": status == "ok", "tool_version": __version__,
+                  "seconds": round(time.monotonic() - self.t0, 2), "auto_backups": r.auto_backups,
+                  "finished" if status != "running" else "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                  "steps": [x.as_json() for x in r.results]}
+        try:
+            write_atomic(self.path, json.dumps(report, indent=2, default=str) + "\n")
+        except OSError as exc:
+            raise UsageError(f"cannot write report {self.path}: {exc.strerror or exc}") from None
+        return report
+
+    def final(self, ok: bool | None) -> dict[str, Any]:
+        """ok None: interrupted (Ctrl-C, a terminate signal)."""
+        r = self.runner
+        where = r.current.index + 1 if r.current is not None else 0
+        if ok is None:
+            return self.write(f"interrupted at step {where}" if where else "interrupted before step 1")
+        if ok:
+            return self.write("ok")
+        failed = next((x for x in r.results if not x.ok), None)
+        if failed is None and r.current is None:
+            return self.write("failed before step 1")
+        return self.write(f"failed at step {failed.step.index + 1 if failed else where}")

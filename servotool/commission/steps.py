@@ -78,8 +78,9 @@ def step_type(step: Step) -> StepType:
 
 
 def validate(plan: Plan, profile: Profile) -> list[str]:
-    """Check every step against the profile before anything runs; returns a description per step."""
-    lines = []
+    """Check every step against the profile before anything runs; returns a description per step. Every problem
+    of the plan is reported at once (one line, '; ' between them), not one per run."""
+    lines, problems = [], list(plan.problems)
     for step in plan.steps:
         try:
             if step.units and plan.units and not set(step.units) <= set(plan.units):
@@ -89,5 +90,9 @@ def validate(plan: Plan, profile: Profile) -> list[str]:
             lines.append(kind.describe(step, profile))
         except UsageError as exc:
             msg = str(exc)
-            raise UsageError(msg if msg.startswith("step ") else f"{step.where()}: {msg}") from None
+            problems.append(msg if msg.startswith(("step ", str(plan.path))) else f"{step.where()}: {msg}")
+    if len(problems) == 1:
+        raise UsageError(problems[0])
+    if problems:
+        raise UsageError(f"{plan.path}: {len(problems)} problems: " + "; ".join(problems))
     return [f"{plan.path}:{s.line}: {d}" for s, d in zip(plan.steps, lines, strict=True)]

@@ -214,6 +214,8 @@ def _parse_number(entry: Entry, text: str, *, raw: bool) -> int:
         # A hex/binary literal is a register pattern; read as engineering units it would be off by the scale.
         raise UsageError(f"{what}: {text} reads as a raw register value; give the value in "
                          f"{entry.unit or 'units'} (resolution {entry.scale:g}) or use --raw")
+    if not text.isascii() or "_" in text:       # float() takes '٣', '５' and '1_0'; a drive value is plain digits
+        raise UsageError(f"{what}: '{text}' is not a number (plain ASCII digits, e.g. 3 or 2.5)")
     try:
         if re.fullmatch(r"[+-]?0[xX][0-9a-fA-F]+", text):
             return int(text, 16)
@@ -289,7 +291,8 @@ def _field_int(entry: Entry, idx: int, text: str) -> int:
     text = text.strip()
     try:
         # A four-param digit may be a hex letter on the panel; a two-param field is two decimal digits.
-        v = int(text) if text.isdigit() else (int(text, 16) if entry.field_width == 4 and len(text) == 1 else None)
+        plain = text.isascii() and text.isdigit()
+        v = int(text) if plain else (int(text, 16) if entry.field_width == 4 and len(text) == 1 else None)
     except ValueError:
         v = None
     if v is None:

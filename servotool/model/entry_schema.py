@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from servotool.model.checker import Checker, int_map
@@ -121,8 +122,9 @@ def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | 
         unverified = "unverified"
     if address is not None and not 0 <= address <= 0xFFFF:
         chk.bad(f"{loc}.address", f"{address} is outside 0..65535")
-    if scale is not None and scale <= 0:
-        chk.bad(f"{loc}.scale", "must be > 0")
+    if scale is not None and not (math.isfinite(scale) and 1e-9 <= scale <= 1e9):
+        chk.bad(f"{loc}.scale", "must be a finite number > 0 (1e-9..1e9)")
+        scale = 1.0
     if not lo <= vmin <= hi or not lo <= vmax <= hi:
         chk.bad(loc, f"min/max {vmin}..{vmax} outside the {type_name} range {lo}..{hi}")
     if vmin > vmax:

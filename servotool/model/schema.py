@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from servotool.model.checker import Checker
@@ -188,10 +189,16 @@ def _mappings(chk: Checker, raw: Any, name: str, shape: str = "") -> list[tuple[
     return items
 
 
+ALARM_KEYS = {"code", "name", "clearable", "display", "source", "kind"}
+SERIAL_KEYS = {"baud", "parity", "stopbits", "bytesize", "unit"}
+
+
 def _parse_alarms(chk: Checker, raw: Any) -> list[Alarm]:
     out: list[Alarm] = []
     seen: set[int] = set()
     for loc, item in _mappings(chk, raw, "alarms"):
+        for key in sorted(set(map(str, item)) - ALARM_KEYS):
+            chk.bad(loc, f"unknown key '{key}'")
         code = chk.need(item, "code", loc, int)
         name = chk.need(item, "name", loc, str)
         kind = chk.choice(item, "kind", loc, ALARM_KINDS, "other")
@@ -209,6 +216,8 @@ def _parse_serial(chk: Checker, raw: Any) -> tuple[LineSettings, int]:
     if not isinstance(raw, dict):
         chk.bad("serial", "missing or not a mapping")
         return LineSettings(), 1
+    for key in sorted(set(map(str, raw)) - SERIAL_KEYS):
+        chk.bad("serial", f"unknown key '{key}'")
     s = LineSettings(
         baud=chk.opt(raw, "baud", "serial", int, 9600),
         parity=chk.choice(raw, "parity", "serial", ("N", "E", "O"), "N"),
@@ -268,8 +277,9 @@ def _parse_motor(chk: Checker, raw: Any) -> Motor | None:
     vals = {}
     for key in ("rated_torque_nm", "rated_speed_rpm", "max_speed_rpm", "rotor_inertia_kgcm2"):
         v = chk.need(raw, key, "motor", (int, float))
-        if v is not None and v <= 0:
-            chk.bad(f"motor.{key}", "must be > 0")
+        if v is not None and not (math.isfinite(v) and 1e-9 <= v <= 1e9):
+            chk.bad(f"motor.{key}", "must be a finite number > 0 (1e-9..1e9)")
+            v = None
         vals[key] = float(v or 1.0)
     cpr = chk.need(raw, "counts_per_rev", "motor", int) or 131072
     return Motor(counts_per_rev=cpr, source=str(raw.get("source", "") or ""), **vals)

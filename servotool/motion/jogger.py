@@ -271,10 +271,27 @@ class Jogger:
         """Run a planned JOG; `command` (interactive) returns a new direction (+1/-1/0) or None to quit.
 
         Ctrl-C (KeyboardInterrupt) and any link error stop the motor before propagating. The JOG's own writes
-        stay out of EEPROM where the drive has a switch.
+        stay out of EEPROM where the drive has a switch, and a trigger route's JOG-speed parameter is put back
+        as it was found, so a JOG leaves no trace in the drive's settings.
         """
         with ram_writes(self.drive):
-            self._run(plan, on_sample, command)
+            found = self.drive.read_entries([self.speed_entry])[0].raw \
+                if self.route.kind == "trigger" and self.speed_entry.readable else None
+            failing = True
+            try:
+                self._run(plan, on_sample, command)
+                failing = False
+            finally:
+                if found is not None:
+                    self._put_back_speed(found, failing)
+
+    def _put_back_speed(self, raw: int, failing: bool) -> None:
+        try:
+            if self.drive.read_entries([self.speed_entry])[0].raw != raw:
+                write_one(self.drive, self.speed_entry, raw)
+        except ServoError:
+            if not failing:
+                raise         # otherwise the first error is the one to report
 
     def _run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
              command: Callable[[], int | None] | None = None) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -76,6 +77,22 @@ def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
     return Backup(p.id, p.version, p.model, drive.unit, datetime.now(UTC).isoformat(timespec="seconds"),
                   __version__, identity, {r.entry.code: r.raw for r in readings},
                   missing=[e.code for e in entries if e.code in drive.missing])
+
+
+def check_output(path: Path, *, force: bool = False) -> None:
+    """Refuse, before any drive I/O, an output the save would refuse after reading the whole drive: an existing
+    file without --force, a folder that is missing or not writable, a name that looks like an option."""
+    if str(path).startswith("-"):
+        raise UsageError(f"'{path}' looks like an option, not a file name (write ./{path} for such a file)")
+    if path.exists() and not force:
+        raise UsageError(f"{path} exists; choose another name or pass --force to replace it")
+    if path.is_dir():
+        raise UsageError(f"{path} is a folder; give a file name")
+    folder = path.parent
+    if not folder.is_dir():
+        raise UsageError(f"cannot write {path}: no folder {folder}")
+    if not os.access(folder, os.W_OK):
+        raise UsageError(f"cannot write {path}: the folder {folder} is not writable")
 
 
 def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False, fmt: str = "yaml") -> Path:

@@ -24,26 +24,61 @@ def switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
 
 
 @contextmanager
-def ram_writes(drive: Drive) -> Iterator[None]:
-    """Keep transient writes (a motion's speed, ramp, servo-on) out of EEPROM where the drive has a switch
-    (IS620P's factory H0C-13 = 1 stores every write); the switch is put back afterwards."""
-    if drive.profile.persistence.mode != "switchable":
+def _switched(drive: Drive, entry: Entry, current: int, wanted: int,
+              state: dict[str, bool] | None = None) -> Iterator[None]:
+    """Run the block with the switch at `wanted`, journaled on the host, and put it back (verified) on every exit
+    path; the journal record goes only once the switch is confirmed back, else the next command finishes it.
+    state['switch_back'] says whether it was put back."""
+    from servotool.ops import journal
+
+    if wanted == current:
         yield
         return
-    entry, current, _eeprom, ram = switch_state(drive)
-    if current != ram:
-        drive.write_raw(entry, ram)
+    journal.note_switch(drive, entry.code, current)
+    drive.write_raw(entry, wanted)
     failing = True
     try:
         yield
         failing = False
     finally:
-        if current != ram:
-            try:
-                drive.write_raw(entry, current)
-            except ServoError:
-                if not failing:
-                    raise      # otherwise the first error is the one to report
+        _put_back(drive, entry, current, failing, state)
+
+
+def _put_back(drive: Drive, entry: Entry, raw: int, failing: bool, state: dict[str, bool] | None) -> None:
+    """The switch back, verified, tried a few times (an interrupted request may leave the line out of step);
+    the journal record goes once it is confirmed."""
+    from servotool.ops import journal
+
+    for attempt in range(3):
+        try:
+            drive.write_verified(entry, raw)
+        except ServoError:
+            if attempt < 2:
+                continue
+            if state is not None:
+                state["switch_back"] = False
+            if not failing:
+                raise      # otherwise the first error is the one to report
+            return
+        journal.clear_switch(drive)
+        if state is not None:
+            state["switch_back"] = True
+        return
+
+
+@contextmanager
+def ram_writes(drive: Drive) -> Iterator[None]:
+    """Keep transient writes (a motion's speed, ramp, servo-on) out of EEPROM where the drive has a switch
+    (IS620P's factory H0C-13 = 1 stores every write); the switch is put back afterwards."""
+    from servotool.ops.journal import port_lock
+
+    if drive.profile.persistence.mode != "switchable":
+        yield
+        return
+    with port_lock(drive):
+        entry, current, _eeprom, ram = switch_state(drive)
+        with _switched(drive, entry, current, ram):
+            yield
 
 
 def ram_only_warning(profile: Profile) -> str:
@@ -58,28 +93,54 @@ def check_save_request(profile: Profile, save: bool | None) -> None:
         raise UsageError(f"{profile.model} cannot store parameters over Modbus: {profile.persistence.note}")
 
 
+def will_persist(drive: Drive, save: bool | None) -> bool:
+    """Whether writes made now with this --save choice survive a power cycle (reads the switch)."""
+    p = drive.profile.persistence
+    if p.mode == "immediate":
+        return True
+    if p.mode == "ram":
+        return bool(save) and can_save(drive.profile)
+    if save is not None:
+        return save
+    _entry, current, eeprom, _ram = switch_state(drive)
+    return current == eeprom
+
+
+def check_power_cycle(drive: Drive, entries: list[Entry], save: bool | None) -> None:
+    """Refuse, before any write, a parameter that takes effect only after a power cycle when the write would be
+    in RAM only: the power cycle that would apply it discards it."""
+    later = [e.code for e in entries if e.effect == "power_cycle"]
+    if not later or will_persist(drive, save):
+        return
+    codes = ", ".join(later)
+    how = ("store it with --save" if can_save(drive.profile) and save is not False
+           else "drop --no-save" if can_save(drive.profile) else drive.profile.persistence.note)
+    raise UsageError(f"{codes} take{'s' if len(later) == 1 else ''} effect only after a power cycle, and "
+                     f"written in RAM only {'it' if len(later) == 1 else 'they'} would be lost by that power "
+                     f"cycle: {how}")
+
+
 @contextmanager
 def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
     """Apply the drive's EEPROM rule around a batch of writes; yields {'persisted': bool} once the batch is done.
 
     save=None leaves the drive as it is (a RAM-only drive stays RAM-only); save=True makes the writes permanent
     with as few EEPROM writes as the drive allows; save=False keeps them out of EEPROM where the drive lets us.
+    The batch holds the port's lock, so no other servotool process writes while the switch is changed.
     """
+    from servotool.ops.journal import port_lock
+
     p = drive.profile.persistence
     state = {"persisted": p.mode == "immediate"}
-    if p.mode == "switchable":
-        entry, current, eeprom, ram = switch_state(drive)
-        wanted = current if save is None else (eeprom if save else ram)
-        if wanted != current:
-            drive.write_raw(entry, wanted)
-        try:
-            yield state
-        finally:
+    with port_lock(drive):
+        if p.mode == "switchable":
+            entry, current, eeprom, ram = switch_state(drive)
+            wanted = current if save is None else (eeprom if save else ram)
             state["persisted"] = wanted == eeprom
-            if wanted != current:
-                drive.write_raw(entry, current)   # leave the switch as the user had it
-        return
-    yield state
-    if p.mode == "ram" and save and can_save(drive.profile):
-        drive.trigger("eeprom_save", "--save")
-        state["persisted"] = True
+            with _switched(drive, entry, current, wanted, state):
+                yield state
+            return
+        yield state
+        if p.mode == "ram" and save and can_save(drive.profile):
+            drive.trigger("eeprom_save", "--save")
+            state["persisted"] = True

@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servotool.drive import Drive, WriteResult
-from servotool.errors import UnknownName, UsageError
-from servotool.model.codec import split_field
+from servotool.errors import ServoError, UnknownName, UsageError
+from servotool.model.codec import format_value, split_field
 from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
 from servotool.model.profile import Entry, Profile
 
@@ -96,13 +96,58 @@ def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list
 
 def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
     """Write the planned changes in order, adjacent ones in one FC16 request (as the manuals' multi-register
-    examples do), each verified by read-back."""
+    examples do), each verified by read-back. A failure names what was written before it."""
     results: list[WriteResult] = []
     for run in write_runs(drive, plan.changes):
-        if len(run) == 1:
-            entry, old, new = run[0]
-            results.append(write_one(drive, entry, new, old))
-        else:
-            results.extend(drive.write_block_verified([(e, new, old) for e, old, new in run]))
+        try:
+            if len(run) == 1:
+                entry, old, new = run[0]
+                results.append(write_one(drive, entry, new, old))
+            else:
+                results.extend(drive.write_block_verified([(e, new, old) for e, old, new in run]))
+        except ServoError as exc:
+            raise _naming_written(exc, results, [e for e, _, _ in run]) from None
     return results
 
+
+def _naming_written(exc: ServoError, written: list[WriteResult], unsure: list[Entry]) -> ServoError:
+    """The error of a set that stopped midway, its message extended by what was written before it (same type and
+    exit code); `exc.written` holds those results."""
+    done = ", ".join(f"{r.entry.code}={format_value(r.entry, r.new)}" for r in written)
+    text = f"{exc}; written and verified before it stopped: {done}" if written else \
+        f"{exc}; nothing was written before it"
+    if unsure:
+        text += f"; {', '.join(e.code for e in unsure)} may or may not have changed (read back with 'param get')"
+    exc.args = (text,)
+    exc.written = written  # type: ignore[attr-defined]
+    return exc
+
+
+@dataclass(frozen=True)
+class SetOutcome:
+    results: list[WriteResult]     # the changed entries, written and verified
+    stored: list[Entry]            # entries confirmed stored in EEPROM by this command (--save: all requested)
+    persisted: bool                # the values survive a power cycle
+
+
+def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome:
+    """Write a prepared set under the drive's EEPROM rule. save=True stores every requested value, also one RAM
+    already holds (RAM and EEPROM may differ, and only a write under the EEPROM setting or the drive's store
+    command puts it in EEPROM). A power-cycle parameter that would stay in RAM only is refused before writing."""
+    from servotool.ops.eeprom import check_power_cycle, persistence
+
+    check_power_cycle(drive, [e for e, _, _ in plan.changes], save)
+    again = plan.unchanged if save and drive.profile.persistence.mode == "switchable" else []
+    if not plan.changes and not again and not (save and drive.profile.persistence.mode == "ram"):
+        return SetOutcome([], [e for e, _ in plan.unchanged] if save else [],
+                          drive.profile.persistence.mode == "immediate")
+    with persistence(drive, save) as kept:
+        results = apply_set(drive, plan)
+        for entry, raw in again:      # the same value again, now with the switch on EEPROM
+            try:
+                write_one(drive, entry, raw, raw)
+            except ServoError as exc:
+                raise _naming_written(exc, results, []) from None
+    stored = ([r.entry for r in results] + ([e for e, _ in plan.unchanged] if save else [])) \
+        if kept["persisted"] else []
+    return SetOutcome(results, stored, kept["persisted"])

@@ -76,10 +76,11 @@ class RestoreReport:
 
 
 class RestoreFailed(ServoError):
-    """A write failed midway; the message says exactly what state the drive is in.
+    """A restore that stopped midway, with its account: where and why it stopped, which entries it wrote and rolled
+    back, how the drive compares with the automatic backup (read from it), and the EEPROM switch.
 
-    `next_step` is what the user should do with the automatic backup: "compare" (the drive stopped answering,
-    so its state is unknown), "restore" (the rollback left entries different) or None (rolled back fully).
+    `equals_backup` is True/False as read back, None when the drive stopped answering. `next_step` is what to do
+    with the automatic backup: "compare" (state unknown), "restore" (entries differ) or None (nothing to do).
     The exit code is the cause's: 1 when the drive or link refused, 3 when a value did not read back.
     """
 
@@ -88,15 +89,21 @@ class RestoreFailed(ServoError):
         "restore": "; restore the automatic backup {auto} once the cause is fixed",
     }
 
-    def __init__(self, code: str, cause: ServoError, state: str, auto_backup: Path, next_step: str | None) -> None:
+    def __init__(self, code: str, cause: ServoError, state: str, auto_backup: Path, next_step: str | None, *,
+                 written: list[str] | None = None, rolled_back: list[str] | None = None,
+                 equals_backup: bool | None = None, differ: list[str] | None = None,
+                 switch_note: str = "", source: Path | None = None) -> None:
         self.code, self.cause, self.state = code, cause, state
         self.auto_backup, self.next_step = auto_backup, next_step
+        self.written, self.rolled_back = written or [], rolled_back or []
+        self.equals_backup, self.differ, self.switch_note = equals_backup, differ or [], switch_note
+        self.source = source          # the backup file being restored: the way to finish once the cause is fixed
         self.exit_code = cause.exit_code
         super().__init__(self.facts() + self.ADVICE.get(next_step or "", "").format(auto=auto_backup))
 
     def facts(self) -> str:
         """Where it stopped, why, and the drive's state after the rollback (without the advice)."""
-        return f"restore stopped at {self.code}: {self.cause}; {self.state}"
+        return f"restore stopped at {self.code}: {self.cause}; {self.state}{self.switch_note}"
 
 
 Notice = Callable[[str], None]
@@ -114,67 +121,126 @@ def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
 
 def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
             progress: Callable[[Entry], None] | None = None, notice: Notice | None = None) -> RestoreReport:
-    """Automatic backup first, then write and verify each change; on failure, roll back what was changed."""
+    """Automatic backup first, then write and verify each change; on failure, roll back what was changed and
+    raise RestoreFailed with the account of the drive's state."""
+    from servotool.ops import journal
     from servotool.ops.eeprom import persistence
     from servotool.ops.params import write_one
 
     check_servo_off(drive, plan.needs_servo_off, "the restore")
-    before = take(drive)
+    try:
+        before = take(drive)
+    except ServoError as exc:
+        exc.args = (f"{exc}; nothing was written (the automatic backup comes first)",)
+        raise
     auto = save(before, drive.profile, auto_path(drive, "before-restore"))
     if notice:
         notice(f"automatic backup of the drive's current state: {auto}")
     done: list[Entry] = []
+    failed: tuple[str, ServoError, list[str], list[str]] | None = None
     refused: list[tuple[Entry, str]] = []
-    # A backup holds the drive's stored settings, so the restored values (and any rollback) go to EEPROM the
-    # way the profile says: at once, by flipping a RAM/EEPROM switch for the batch, or by one save at the end.
-    with persistence(drive, save=True) as kept:
-        for entry, old, new in plan.changes:
-            try:
-                write_one(drive, entry, new, before.values.get(entry.code, old))
-            except ServoError as exc:
-                if isinstance(exc, ModbusException) and exc.code in REFUSED_ADDRESS and not isinstance(exc, NotOnDrive):
-                    refused.append((entry, str(exc)))     # an exception reply: nothing was written; go on
-                    continue
-                # The failed entry too: a write that did not read back may still have changed it.
-                state, next_step = _roll_back(drive, [*done, entry], before.values, auto)
-                raise RestoreFailed(entry.code, exc, state, auto, next_step) from None
-            done.append(entry)
-            if progress:
-                progress(entry)
-    return RestoreReport(auto, done, plan, kept["persisted"], refused)
-
-
-def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int], auto: Path) -> tuple[str, str | None]:
-    """Put touched entries back to the snapshot, newest first, then say how the whole drive compares to it
-    (and the RestoreFailed.next_step that follows)."""
-    from servotool.ops.params import write_one
-
-    undo_failed: list[str] = []
-    for e in reversed(touched):
+    kept: dict[str, bool] = {}
+    targets = {e.code: new for e, _, new in plan.changes}
+    with journal.operation(drive, "restore", auto, targets):
+        # A backup holds the drive's stored settings, so the restored values (and any rollback) go to EEPROM the
+        # way the profile says: at once, by flipping a RAM/EEPROM switch for the batch, or by one save at the end.
         try:
-            now = drive.read_entries([e])[0].raw
-            if now != snapshot[e.code]:
-                write_one(drive, e, snapshot[e.code], now)
-        except ServoError as again:
-            undo_failed.append(f"{e.code} ({again})")
-            if isinstance(again, DeviceError) and not isinstance(again, ModbusException):
-                break                        # no answer at all: every further attempt would time out too
-    try:
-        after = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True)}
-    except ServoError as exc:
-        return f"the drive no longer answers ({exc}), so its state is unknown", "compare"
+            with persistence(drive, save=True) as kept:
+                for entry, old, new in plan.changes:
+                    try:
+                        write_one(drive, entry, new, before.values.get(entry.code, old))
+                    except ServoError as exc:
+                        if isinstance(exc, ModbusException) and exc.code in REFUSED_ADDRESS and \
+                                not isinstance(exc, NotOnDrive):
+                            refused.append((entry, str(exc)))     # an exception reply: nothing was written; go on
+                            continue
+                        # The failed entry too: a write that did not read back may still have changed it.
+                        rolled, undo_failed = _roll_back(drive, [*done, entry], before.values)
+                        failed = (entry.code, exc, rolled, undo_failed)
+                        break
+                    done.append(entry)
+                    if progress:
+                        progress(entry)
+        except ServoError as exc:           # the EEPROM switch could not be changed or put back
+            if failed is None:
+                failed = (drive.profile.persistence.switch_code or "the EEPROM switch", exc, [], [])
+        if failed is not None:
+            raise _account(drive, failed, [e.code for e in done], before.values, auto, kept, backup.path)
+    return RestoreReport(auto, done, plan, bool(kept["persisted"]), refused)
+
+
+def _account(drive: Drive, failed: tuple[str, ServoError, list[str], list[str]], written: list[str],
+             snapshot: dict[str, int], auto: Path, kept: dict[str, bool],
+             source: Path | None) -> RestoreFailed:
+    """The RestoreFailed for a stopped restore: the drive is read to say how it compares with the backup."""
+    code, cause, rolled, undo_failed = failed
+    after = _read_all(drive)
+    switch_note = ""
+    if kept.get("switch_back") is False:
+        p = drive.profile.persistence
+        switch_note = (f"; {p.switch_code} (the EEPROM switch) could not be put back: the next servotool command "
+                       f"on this drive puts it back, from the host's journal")
+    listed = ", ".join(written[:6]) + (" ..." if len(written) > 6 else "")
+    wrote = f"wrote {len(written)} of the planned entries" + (f" ({listed})" if written else "")
+
+    def failure(state: str, next_step: str | None, equal: bool | None, differ: list[str]) -> RestoreFailed:
+        return RestoreFailed(code, cause, state, auto, next_step, written=written, rolled_back=rolled,
+                             equals_backup=equal, differ=differ, switch_note=switch_note,
+                             source=source)
+
+    if after is None:
+        return failure(f"{wrote}; the drive no longer answers, so its state is unknown", "compare", None, [])
     # The EEPROM switch is flipped for the batch on purpose (and put back when it ends): not a difference.
-    differ = [code for code, raw in snapshot.items()
-              if after.get(code) != raw and not drive.profile.persistence.is_switch(code)]
+    differ = [c for c, raw in snapshot.items()
+              if after.get(c) != raw and not drive.profile.persistence.is_switch(c)]
     if not differ:
-        return (f"rolled back {len(touched) - 1} written entries; read back, the drive equals the automatic "
-                f"backup {auto}"), None
+        return failure(f"rolled back {len(written)} written entries; read back, the drive equals the automatic "
+                       f"backup {auto}", None, True, [])
     shown = ", ".join(f"{c} is {format_value(drive.profile.entry(c), after[c])}, was "
                       f"{format_value(drive.profile.entry(c), snapshot[c])}" for c in differ[:6])
     more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
     why = f" (could not undo {'; '.join(undo_failed)})" if undo_failed else ""
-    return f"rollback incomplete{why}: {len(differ)} entries differ from the automatic backup {auto}: {shown}{more}", \
-        "restore"
+    return failure(f"{wrote}; rollback incomplete{why}: {len(differ)} entries differ from the automatic backup "
+                   f"{auto}: {shown}{more}", "restore", False, differ)
+
+
+ATTEMPTS = 3        # a flaky line drops a request now and then: an account is worth a few more tries
+
+
+def _read_all(drive: Drive) -> dict[str, int] | None:
+    """Every parameter as read from the drive, None when it does not answer after a few tries."""
+    for _ in range(ATTEMPTS):
+        try:
+            return {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True)}
+        except ServoError:
+            continue
+    return None
+
+
+def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> tuple[list[str], list[str]]:
+    """Put touched entries back to the snapshot, newest first (each tried a few times); returns (the entries
+    written back, those that could not be undone with why)."""
+    from servotool.ops.params import write_one
+
+    rolled: list[str] = []
+    undo_failed: list[str] = []
+    dead = 0
+    for e in reversed(touched):
+        for attempt in range(ATTEMPTS):
+            try:
+                now = drive.read_entries([e])[0].raw
+                if now != snapshot[e.code]:
+                    write_one(drive, e, snapshot[e.code], now)
+                    rolled.append(e.code)
+                break
+            except ServoError as again:
+                if attempt == ATTEMPTS - 1:
+                    undo_failed.append(f"{e.code} ({again})")
+                    if isinstance(again, DeviceError) and not isinstance(again, ModbusException):
+                        dead += 1
+        if dead >= 2:
+            break                        # no answer at all, twice: every further attempt would time out too
+    return rolled, undo_failed
 
 
 def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:

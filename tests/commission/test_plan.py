@@ -196,3 +196,55 @@ def test_a_jog_step_on_a_drive_not_set_up_reports_the_fix_with_the_users_connect
     detail = r.json()["steps"][0]["detail"]
     assert "needs drive setup first: PN4 = 3" in detail
     assert "'servotool --port sim --profile sdc param set PN4=3'" in detail
+
+
+def test_a_plan_backs_up_every_axis_first_and_its_report_says_where_it_stopped(cli, tmp_path, sim_dir):
+    """Issue 14 defect 5: automatic backups before the first write; the report ends 'failed at step N' (an old
+    report's ok: true never survives a new run)."""
+    plan = tmp_path / "plan.yaml"
+    report = tmp_path / "plan.report.json"
+    report.write_text('{"ok": true}')
+    plan.write_text("port: sim\nunits: [1, 2]\nsteps:\n  - set: {Pn101: 25.0}\n  - expect: {Pn101: 99.0}\n")
+    r = cli("run", str(plan), "--json")
+    assert r.code == 3
+    data = json.loads(report.read_text())
+    assert data["status"] == "failed at step 2" and data["ok"] is False
+    autos = data["auto_backups"]
+    assert sorted(autos) == ["1", "2"] and all("before-plan" in f for f in autos.values())
+    r = cli("--port", "sim", "param", "diff", autos["1"], "--json")
+    assert [d["code"] for d in r.json()["differences"]] == ["Pn101"]     # taken before the set step
+
+
+def test_a_backup_step_never_overwrites_unless_the_step_says_so(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    kept = tmp_path / "keep.yaml"
+    kept.write_text("precious\n")
+    plan.write_text(f"port: sim\nsteps:\n  - backup: {kept}\n")
+    r = cli("run", str(plan))
+    assert r.code == 2 and "exists" in r.err and "overwrite: true" in r.err
+    assert kept.read_text() == "precious\n"
+    plan.write_text(f"port: sim\nsteps:\n  - backup: {{file: {kept}, overwrite: true}}\n")
+    r = cli("run", str(plan))
+    assert r.code == 0, r.err
+    assert "servotool_backup" in kept.read_text()
+
+
+def test_validation_reports_every_problem_of_a_plan_in_one_pass(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nsteps:\n  - set: {Pn999: 1}\n  - reboot: now\n  - wait: -1\n"
+                    "  - set: {Pn100: 99999}\n  - alarm clear: now\n")
+    r = cli("run", str(plan), "--yes")
+    assert r.code == 2 and "5 problems" in r.err, r.err
+    for text in ("Pn999", "unknown step", "wait takes seconds", "out of range", "takes no argument"):
+        assert text in r.err
+    assert len(r.err.strip().splitlines()) == 1
+
+
+def test_a_power_cycle_parameter_in_ram_mode_needs_a_later_save_step(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - set: {Po407: 26}\n")
+    r = cli("run", str(plan), "--json")
+    assert r.code == 2 and "lost by that power cycle" in r.json()["steps"][0]["detail"], r.out
+    plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - set: {Po407: 26}\n  - save:\n")
+    r = cli("run", str(plan), "--json")
+    assert r.code == 0 and r.json()["steps"][1]["stored"] == ["Po407"], r.err

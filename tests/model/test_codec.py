@@ -172,12 +172,12 @@ def test_backups_with_the_old_display_forms_still_diff_and_restore(cli, tmp_path
     """Backups written before the manual's forms carry '00 05' / '2 3 1 1' in their display section."""
     f = tmp_path / "old.yaml"
     sim = ("--profile", "sd25", "--port", "sim")
-    assert cli(*sim, "param", "set", "Po001=d 0 5", "Po175=b2311").code == 0
+    assert cli(*sim, "param", "set", "--save", "Po001=d 0 5", "Po175=b2311").code == 0
     assert cli(*sim, "param", "backup", "-o", str(f)).code == 0
     text = f.read_text()
     assert "Po001: d 0 5\n" in text and "Po175: b2311\n" in text
     f.write_text(text.replace("Po001: d 0 5\n", "Po001: 00 05\n").replace("Po175: b2311\n", "Po175: 2 3 1 1\n"))
-    assert cli(*sim, "param", "set", "Po001.X=21", "Po175.C=2").code == 0
+    assert cli(*sim, "param", "set", "--save", "Po001.X=21", "Po175.C=2").code == 0
     r = cli(*sim, "param", "diff", str(f), "--json")
     assert r.code in (0, 1), r.err
     assert "d 0 5" in r.out and "b2311" in r.out and "d 0 21" in r.out and "b2211" in r.out

@@ -102,7 +102,7 @@ def test_sd25_example_6_four_parameter_b1234_is_written_as_0x1234():
 
 
 def test_cli_writes_the_manual_forms_with_the_examples_frames(cli):
-    r = cli("--profile", "sd25", "--port", "sim", "-v", "param", "set", "Po001=d 1 10", "Po300=b1234")
+    r = cli("--profile", "sd25", "--port", "sim", "-v", "param", "set", "--save", "Po001=d 1 10", "Po300=b1234")
     assert r.code == 0, r.err
     assert ">> 01 06 00 01 01 0a 59 9d" in r.err and ">> 01 06 01 2c 12 34 44 88" in r.err
     assert "d 1 21 -> d 1 10" in r.out and "b1000 -> b1234" in r.out

@@ -46,7 +46,7 @@ def test_key_roles_point_at_the_right_class(pid):
 def test_display_encoded_sd25_values_read_and_write_in_the_manuals_form(cli):
     r = cli("--port", "sim", "--profile", "sd25", "param", "get", "Po001", "Po505")
     assert "d 1 21" in r.out and "d 1 1" in r.out
-    r = cli("--port", "sim", "--profile", "sd25", "param", "set", "Po001=X=20", "--json")
+    r = cli("--port", "sim", "--profile", "sd25", "param", "set", "--save", "Po001=X=20", "--json")
     assert r.code == 0, r.err
     assert r.json()["changed"][0]["new"] == "d 1 20"
     assert cli("--port", "sim", "--profile", "sd25", "param", "set", "Po001=X=100").code == 2

@@ -356,3 +356,20 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     assert "power-cycle the drive for: Pn008" in r.out
     r = cli("--port", "sim", "-v", "param", "restore", str(b), "--yes", "--json")
     assert r.code == 0 and r.json()["written"] == [] and not WRITE_FRAME.search(r.err)
+
+
+def test_backup_checks_its_output_before_any_drive_io(cli, tmp_path):
+    """Issue 14 defect 7: no port is opened (here: one that does not exist) before the output is known good."""
+    taken = tmp_path / "taken.yaml"
+    taken.write_text("precious\n")
+    taken.chmod(0o644)
+    nowhere = ("--port", str(tmp_path / "no-such-port"), "-P", "sd25")
+    r = cli(*nowhere, "param", "backup", "-o", str(taken))
+    assert r.code == 2 and "exists; choose another name or pass --force" in r.err, r.err
+    r = cli(*nowhere, "param", "backup", "-o", str(tmp_path / "no" / "dir.yaml"))
+    assert r.code == 2 and "no folder" in r.err
+    r = cli(*nowhere, "param", "backup", "-o", "--help")
+    assert r.code == 2 and "looks like an option" in r.err
+    assert not (Path(__file__).resolve().parents[2] / "--help").exists()
+    assert cli("--port", "sim", "param", "backup", "-o", str(taken), "--force").code == 0
+    assert taken.stat().st_mode & 0o777 == 0o644          # replaced, mode kept

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 # The IS620P segment route's setup (profiles/is620p.yaml motion_setup), as a user types it.
 IS620P_SETUP = ("H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1", "H17-02=28")
 
@@ -34,9 +36,39 @@ def test_is620p_stores_by_default_and_no_save_keeps_it_out(cli):
     assert get(cli, "is620p", "H08-00", "H08-02", "H0C-13") == {"H08-00": 30.0, "H08-02": 40.0, "H0C-13": 1}
 
 
-def test_unchanged_value_touches_neither_parameter_nor_switch(cli):
-    r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po109=200", "--save")
+def test_unchanged_value_touches_neither_parameter_nor_switch_unless_saved(cli):
+    r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po109=200")
     assert r.code == 0 and ">> 01 06" not in r.err
+    # --save cannot know what EEPROM holds, so it stores the value again under the EEPROM setting
+    r = cli("--port", "sim", "--profile", "sd25", "-v", "param", "set", "Po109=200", "--save")
+    assert r.code == 0 and ">> 01 06 01 f9 01 00" in r.err and "1 value stored in EEPROM" in r.out
+
+
+SWITCHED = [("sd25", "Po101", "80", "Po505", "d 1 1"), ("is620p", "H08-00", "30.0", "H0C-13", 0)]
+
+
+@pytest.mark.parametrize(("profile", "code", "value", "switch", "ram"), SWITCHED)
+def test_save_after_a_ram_only_write_survives_a_power_cycle(cli, profile, code, value, switch, ram):
+    """Defect 1 of issue 14: --save stored nothing when RAM already held the value."""
+    default = get(cli, profile, code)[code]
+    if profile == "is620p":
+        assert cli("--port", "sim", "-P", profile, "param", "set", f"{switch}={ram}").code == 0
+    r = cli("--port", "sim", "-P", profile, "param", "set", f"{code}={value}")
+    assert r.code == 0 and "not saved to EEPROM" in r.err, r.err
+    r = cli("--port", "sim", "-P", profile, "param", "set", "--save", f"{code}={value}", "--json")
+    assert r.code == 0 and r.json()["stored"] == [code] and r.json()["persisted"] is True, r.err
+    assert cli("sim", "reset", "-P", profile, "--power-cycle").code == 0
+    after = get(cli, profile, code, switch)
+    assert after[code] == float(value) != default and after[switch] == ram
+
+
+def test_a_power_cycle_parameter_in_ram_mode_is_refused_with_the_reason(cli):
+    before = get(cli, "sd25", "Po407")
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "Po407.X=26")
+    assert r.code == 2 and "lost by that power cycle" in r.err and "--save" in r.err
+    assert get(cli, "sd25", "Po407") == before                     # refused before any write
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po407.X=26", "--json")
+    assert r.code == 0 and r.json()["persisted"] is True, r.err
 
 
 def test_sdc_keeps_modbus_writes_in_ram_and_says_how_to_store_them(cli):
@@ -80,3 +112,53 @@ def test_tune_says_when_its_result_is_in_ram_only_and_save_stores_it(cli):
     ratio = get(cli, "is620p", "H08-15")["H08-15"]
     cli("sim", "reset", "--profile", "is620p", "--power-cycle")
     assert get(cli, "is620p", "H08-15", "H0C-13") == {"H08-15": ratio, "H0C-13": 0}   # kept; switch as it was
+
+
+def test_a_switch_left_changed_by_a_dead_process_is_put_back_by_the_next_command(cli, sim_dir):
+    """The host's journal says Po505 was d 1 1 (RAM only) before a process that died changed it to EEPROM."""
+    from servotool.files import sim_state_dir
+    from servotool.model.loader import load_profile
+    from servotool.ops import journal
+    from servotool.sim.device import SimulatedDrive
+
+    drive = SimulatedDrive(load_profile("sd25"), 1)
+    with drive.session():
+        drive.bank.ram["Po505"] = drive.bank.eeprom["Po505"] = 0x0100          # left on EEPROM
+        drive.bank.save()
+
+    class Port:                       # what the journal needs of a drive: its port name and unit
+        port, unit = f"sim:{sim_state_dir().resolve()}", 1
+        profile = load_profile("sd25")
+
+    journal.note_switch(Port(), "Po505", 0x0101)  # type: ignore[arg-type]
+    (journal.journal_dir() / ".x.json.999999999.abc.tmp").write_text("left by a kill")
+    r = cli("--port", "sim", "-P", "sd25", "param", "get", "Po505", "--json")
+    assert r.code == 0 and r.json()[0]["value"] == "d 1 1", r.err
+    assert "put Po505 back to d 1 1 (was d 1 0): a servotool process (pid" in r.err
+    assert not list(journal.journal_dir().glob("*.json")) and not list(journal.journal_dir().glob("*.tmp"))
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "Po110=30")
+    assert r.code == 0 and "not saved to EEPROM" in r.err and "put Po505" not in r.err
+
+
+def test_writes_of_one_drive_wait_for_another_process_that_has_its_port(cli, sim_dir):
+    """Serialised per port: a plain set cannot run while another process has the switch changed for --save."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    from servotool.files import sim_state_dir
+    from servotool.model.loader import load_profile
+    from servotool.ops import journal
+
+    class Port:
+        port, unit, profile = f"sim:{sim_state_dir().resolve()}", 1, load_profile("sd25")
+
+    with journal.port_lock(Port()):  # type: ignore[arg-type]
+        proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "-P", "sd25", "param", "set",
+                                 "Po110=30"], env=dict(os.environ), stderr=subprocess.PIPE, text=True)
+        time.sleep(4)
+        waiting = proc.poll() is None
+    assert proc.wait(60) == 0
+    assert waiting, "the write did not wait for the port's lock"
+    assert get(cli, "sd25", "Po110") == {"Po110": 30}

@@ -1,0 +1,224 @@
+"""The host's journal of what servotool is in the middle of changing on a drive, and the per-port write lock.
+
+Before the EEPROM switch is changed for a batch of writes (SD25 Po505, IS620P H0C-13), its original raw value is
+recorded here; a restore records its automatic backup and targets. A record outlives only a process that died
+(kill -9, power loss of the PC, a line that stopped answering): the next command on that drive finds it, puts the
+switch back and says what the interrupted operation left. Records live beside the automatic backups, one file per
+port and unit; every change of a drive's persistence happens under the port's lock, so a record found by whoever
+holds the lock belongs to a process that is gone, and a RAM-only write never runs while another process has the
+switch on EEPROM.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from servotool.drive import Drive
+from servotool.errors import DeviceError, ServoError
+from servotool.files import FileLock, backup_dir, load_yaml, sweep_temp, write_atomic
+from servotool.model.codec import format_value
+
+Notice = Callable[[str], None]
+LOCK_WAIT_S = 60.0
+
+
+def journal_dir() -> Path:
+    return backup_dir() / "journal"
+
+
+def port_key(port: str) -> str:
+    """A file-name-safe key for a port: readable, and unique by a short hash of the full name."""
+    slug = re.sub(r"[^A-Za-z0-9]+", "_", port).strip("_")[-40:] or "port"
+    return f"{slug}-{hashlib.sha256(port.encode()).hexdigest()[:10]}"
+
+
+def record_path(drive: Drive) -> Path:
+    return journal_dir() / f"{port_key(drive.port)}-unit{drive.unit}.json"
+
+
+def _stderr(text: str) -> None:
+    print(text, file=sys.stderr)
+
+
+# ----- the per-port lock (reentrant within a process) ------------------------------------------------------------
+
+@dataclass
+class _Held:
+    lock: FileLock
+    depth: int = 0
+
+
+_LOCKS: dict[str, _Held] = {}
+
+
+@contextmanager
+def port_lock(drive: Drive, notice: Notice | None = None) -> Iterator[None]:
+    """Hold the drive's port for a batch of writes; the first holder in this process also recovers what a dead
+    process left in the journal. Drives without a port name (in-process test links) are not locked."""
+    if not drive.port:
+        yield
+        return
+    key = port_key(drive.port)
+    held = _LOCKS.setdefault(key, _Held(FileLock(journal_dir() / f"{key}.lock")))
+    if held.depth == 0:
+        deadline = time.monotonic() + LOCK_WAIT_S
+        while not held.lock.try_acquire():
+            if time.monotonic() > deadline:
+                raise DeviceError(f"another servotool process has been writing to {drive.port} for "
+                                  f"{LOCK_WAIT_S:.0f} s; try again when it has finished")
+            time.sleep(0.01)
+    held.depth += 1
+    try:
+        if held.depth == 1:
+            recover(drive, notice or _stderr)
+        yield
+    finally:
+        held.depth -= 1
+        if held.depth == 0:
+            held.lock.release()
+
+
+# ----- records ---------------------------------------------------------------------------------------------------
+
+def read_record(drive: Drive) -> dict[str, Any] | None:
+    """This drive's journal record, None when there is none; a damaged one counts as empty (and is replaced)."""
+    try:
+        data = json.loads(record_path(drive).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _write(drive: Drive, data: dict[str, Any]) -> None:
+    path = record_path(drive)
+    if not data:
+        path.unlink(missing_ok=True)
+        return
+    write_atomic(path, json.dumps({**data, "pid": os.getpid(), "port": drive.port, "unit": drive.unit,
+                                   "profile": drive.profile.id}, indent=1))
+
+
+def _update(drive: Drive, **parts: Any) -> None:
+    if not drive.port:
+        return
+    data = {k: v for k, v in (read_record(drive) or {}).items() if k not in ("pid", "port", "unit", "profile")}
+    for k, v in parts.items():
+        if v is None:
+            data.pop(k, None)
+        else:
+            data[k] = v
+    _write(drive, data)
+
+
+@contextmanager
+def operation(drive: Drive, op: str, auto_backup: Path, targets: dict[str, int]) -> Iterator[None]:
+    """Record an operation that writes many values (a restore) with its automatic backup and targets, so that a
+    kill midway is reported by the next command with the drive's state read from it."""
+    _update(drive, op={"name": op, "auto_backup": str(auto_backup), "targets": targets, "since": time.time()})
+    try:
+        yield
+    except BaseException:
+        # A failure the caller accounts for itself (RestoreFailed) or an interrupt: the record served its purpose
+        # only when the process dies; an exception still reaches the user, so the record goes.
+        _update(drive, op=None)
+        raise
+    _update(drive, op=None)
+
+
+# ----- recovery --------------------------------------------------------------------------------------------------
+
+def recover(drive: Drive, notice: Notice) -> list[str]:
+    """Put right what a dead process left (call with the port lock held): the switch back to its journaled value,
+    and one line on an interrupted operation. Returns the lines given to notice."""
+    record = read_record(drive)
+    if record is None:
+        return []
+    lines: list[str] = []
+    pid = record.get("pid")
+    switch = record.get("switch")
+    if isinstance(switch, dict):
+        lines.append(_put_switch_back(drive, switch, pid))
+    op = record.get("op")
+    if isinstance(op, dict):
+        lines.append(_interrupted(drive, op, pid))
+    for line in lines:
+        notice(line)
+    _write(drive, {})
+    return lines
+
+
+def _put_switch_back(drive: Drive, switch: dict[str, Any], pid: object) -> str:
+    entry = drive.profile.find(str(switch.get("code")))
+    original = switch.get("original")
+    if entry is None or not isinstance(original, int) or isinstance(original, bool) \
+            or not entry.min <= original <= entry.max:
+        return f"servotool: ignored a damaged journal record for unit {drive.unit} ({record_path(drive)})"
+    now = drive.read_entries([entry])[0].raw
+    if now == original:
+        return (f"servotool: a servotool process (pid {pid}) ended while changing {entry.code}; it is "
+                f"{format_value(entry, now)} as before")
+    drive.write_verified(entry, original)
+    return (f"servotool: put {entry.code} back to {format_value(entry, original)} (was "
+            f"{format_value(entry, now)}): a servotool process (pid {pid}) ended with it changed")
+
+
+def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
+    auto = Path(str(op.get("auto_backup")))
+    targets = op.get("targets") if isinstance(op.get("targets"), dict) else {}
+    try:        # the values section of the backup this process wrote itself (ops.backup checks a user's file)
+        data = load_yaml(auto)
+        before = {str(c): v for c, v in data["values"].items() if isinstance(v, int)}
+    except (ServoError, TypeError, KeyError, AttributeError) as exc:
+        return f"servotool: a {op.get('name')} (pid {pid}) was interrupted and its automatic backup {auto} is " \
+            f"unusable ({exc})"
+    entries = [e for e in (drive.profile.find(str(c)) for c in targets) if e is not None and e.readable]
+    now = {r.entry.code: r.raw for r in drive.read_entries(entries)} if entries else {}
+    written = [c for c, raw in now.items() if raw == targets.get(c) and before.get(c) != raw]
+    differ = [c for c, raw in now.items() if before.get(c) is not None and raw != before[c]]
+    if not differ:
+        return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted before changing anything: "
+                f"read back, the drive equals the automatic backup {auto}")
+    return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted after writing {len(written)} of "
+            f"{len(targets)} entries; read back, the drive differs from the automatic backup {auto} in "
+            f"{len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): run it again to "
+            f"finish, or 'servotool param restore {auto}' to go back")
+
+
+def recover_at_start(drive: Drive, notice: Notice, extra_folders: tuple[Path, ...] = ()) -> None:
+    """At the start of a command: sweep temporary files a killed process left (here and in extra_folders, e.g. the
+    simulator's), and recover this drive's journal
+    when no live process holds its port (a holder is still at work and will put things back itself)."""
+    for folder in (backup_dir(), journal_dir(), *extra_folders):
+        sweep_temp(folder)
+    if not drive.port or not record_path(drive).exists():
+        return
+    key = port_key(drive.port)
+    held = _LOCKS.setdefault(key, _Held(FileLock(journal_dir() / f"{key}.lock")))
+    if held.depth or not held.lock.try_acquire():
+        return
+    try:
+        recover(drive, notice)
+    finally:
+        held.lock.release()
+
+
+def note_switch(drive: Drive, code: str, original: int) -> None:
+    """Record the switch's original raw value before it is changed."""
+    _update(drive, switch={"code": code, "original": original, "since": time.time()})
+
+
+def clear_switch(drive: Drive) -> None:
+    """The switch is confirmed back: the record goes."""
+    _update(drive, switch=None)
