@@ -36,6 +36,8 @@ def _convert(kind: type, value: Any) -> Any:
         except ValueError:
             pass
     else:           # str and Path
+        if text.startswith("--"):       # `-o --json`: the option's value was left out
+            raise ValueError(f"{value!r} looks like an option, not a value: give the value right after the option")
         return kind(value)
     raise ValueError(f"{value!r} is not a valid {_KIND[kind]}.")
 

@@ -93,3 +93,10 @@ def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
     finally:
         proc.kill()
     assert proc.returncode == 130 and "Un000" in out
+
+
+def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_runs(cli):
+    """`monitor --csv --json` would write a file named '--json': the value was left out."""
+    r = cli("--port", "sim", "monitor", "--once", "--csv", "--json")
+    assert r.code == 2 and "'--json' looks like an option" in r.err and "Traceback" not in r.err
+    assert not (Path(__file__).resolve().parents[2] / "--json").exists()     # the tests run in the repository
