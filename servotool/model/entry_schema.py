@@ -116,6 +116,9 @@ def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | 
     bits = int_map(chk, raw.get("bits"), f"{loc}.bits")
     enum = int_map(chk, raw.get("enum"), f"{loc}.enum")
     combine = chk.choice(raw, "combine", loc, ("binary", "decimal"), "binary")
+    digits = chk.opt(raw, "digits", loc, int, 5)
+    trigger = chk.opt(raw, "trigger", loc, int, 1)
+    copy = chk.opt(raw, "copy", loc, bool, True)
     unverified = raw.get("unverified", "")
     if unverified is True:
         chk.bad(f"{loc}.unverified", "give the reason as a string, not just 'true'")
@@ -156,12 +159,12 @@ def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | 
     return Entry(
         code=code, cls=cls, name=name, address=address, type=type_name,
         word_order=chk.choice(raw, "word_order", loc, WORD_ORDERS, word_order), combine=combine,
-        digits=int(raw.get("digits", 5)), scale=float(scale), unit=str(raw.get("unit", "") or ""),
+        digits=digits, scale=float(scale), unit=str(raw.get("unit", "") or ""),
         min=vmin, max=vmax, default=default, access=access, effect=effect, group=str(raw.get("group", "") or ""),
         description=str(raw.get("description", "") or ""), source=source, unverified=str(unverified or ""),
         format=fmt, fields=tuple(str(f) for f in fields), field_width=field_width, field_ranges=field_ranges,
         field_enums=field_enums, bits=bits, enum=enum,
-        trigger=int(raw.get("trigger", 1)), copy=bool(raw.get("copy", True)),
+        trigger=trigger, copy=copy,
     )
 
 

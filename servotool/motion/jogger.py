@@ -275,23 +275,41 @@ class Jogger:
         as it was found, so a JOG leaves no trace in the drive's settings.
         """
         with ram_writes(self.drive):
-            found = self.drive.read_entries([self.speed_entry])[0].raw \
-                if self.route.kind == "trigger" and self.speed_entry.readable else None
+            saved = self._snapshot()
             failing = True
             try:
                 self._run(plan, on_sample, command)
                 failing = False
             finally:
-                if found is not None:
-                    self._put_back_speed(found, failing)
+                self._put_back(saved, failing)
 
-    def _put_back_speed(self, raw: int, failing: bool) -> None:
+    def _written_settings(self) -> list[Entry]:
+        """The parameters this motion writes, to be put back as found: the JOG speed of a trigger or segment
+        route, a segment's displacement, and the ramp (role jog_accel), where the profile maps them."""
+        entries = [self.speed_entry] if self.route.kind in ("trigger", "segment") else []
+        if self.route.kind == "segment":
+            entries.append(self.route.entries["segment_distance"])
+        ramp = self.profile.role("jog_accel")
+        if ramp is not None:
+            entries.append(ramp)
+        return [e for e in entries if e.readable and e.cls == "Pn"]
+
+    def _snapshot(self) -> dict[str, int]:
+        entries = self._written_settings()
+        return {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
+
+    def _put_back(self, saved: dict[str, int], failing: bool) -> None:
+        """Write back what differs from `saved`; while failing, the first error stays the one reported."""
         try:
-            if self.drive.read_entries([self.speed_entry])[0].raw != raw:
-                write_one(self.drive, self.speed_entry, raw)
+            entries = [self.profile.entry(code) for code in saved]
+            for entry, reading in zip(entries, self.drive.read_entries(entries), strict=True):
+                if reading.raw != saved[entry.code]:
+                    write_one(self.drive, entry, saved[entry.code])
+            if self.segments is not None:
+                self.segments.forget_distance()     # the next move writes its displacement again
         except ServoError:
             if not failing:
-                raise         # otherwise the first error is the one to report
+                raise
 
     def _run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
              command: Callable[[], int | None] | None = None) -> None:
@@ -341,13 +359,11 @@ class Jogger:
 
     # ----- for motions that change the JOG settings (identification, step response) --------------------------
     def settings_to_restore(self) -> dict[str, int]:
-        """Raw values (code -> raw) of the settings a motion changes and puts back: the ramp (role jog_accel), and
-        a trigger route's JOG speed (a speed reference is put back by leave())."""
-        entries = [self._ramp_entry()]
-        if self.route.kind in ("trigger", "segment"):
-            entries.insert(0, self.speed_entry)
-        saved = {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
-        self._ramp_raw = saved[entries[-1].code]
+        """Raw values (code -> raw) of the settings a motion changes and puts back (see _written_settings); the
+        ramp (role jog_accel) is required."""
+        ramp = self._ramp_entry()
+        saved = self._snapshot()
+        self._ramp_raw = saved[ramp.code]
         return saved
 
     def _ramp_entry(self) -> Entry:
@@ -373,9 +389,6 @@ class Jogger:
         first one."""
         try:
             self.leave()
-            for code, raw in saved.items():
-                entry = self.profile.entry(code)
-                if self.drive.read_entries([entry])[0].raw != raw:
-                    write_one(self.drive, entry, raw)
         except ServoError:
-            pass
+            return
+        self._put_back(saved, failing=True)

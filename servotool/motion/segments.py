@@ -51,6 +51,10 @@ class SegmentMoves:
         self.drive.write_raw(start, 1 | self.start_bits)    # ... then on: the edge starts the move
         self.start_high = True
 
+    def forget_distance(self) -> None:
+        """The displacement parameter was put back: the next move writes its own again."""
+        self._raw = None
+
     def units_per_rev(self) -> float:
         """Displacement units per motor revolution (role segment_units_per_rev), read once."""
         if self._per_rev is None:

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import pytest
 
+# IS620P's segment route (profiles/is620p.yaml motion_setup)
+IS620P_SETUP = ["H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1", "H17-02=28"]
 
-@pytest.mark.parametrize(("profile", "setup"), [("dsx7e", []), ("is620p", ["H02-00=0", "H0C-09=1", "H17-00=1"])])
+
+@pytest.mark.parametrize(("profile", "setup"), [("dsx7e", []), ("is620p", IS620P_SETUP)])
 def test_a_jog_leaves_no_trace_in_the_drives_settings(cli, tmp_path, profile, setup):
     if setup:
         assert cli("--port", "sim", "-P", profile, "param", "set", *setup).code == 0
