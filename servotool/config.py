@@ -166,7 +166,9 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
     profile = load_profile(name)
     settings = LinkSettings(
         port=port, line=line_format(opts, profile),
-        timeout=opts.timeout if opts.timeout is not None else (0.5 if port == SIM_PORT else 1.0),
+        # the embedded simulator's only delay is this host's own CPU, which a loaded machine can hold up for
+        # longer than a real drive ever takes to answer
+        timeout=opts.timeout if opts.timeout is not None else (2.0 if port == SIM_PORT else 1.0),
         retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else 2),
         **rs485(opts),
     )

@@ -8,7 +8,7 @@ from servotool.commission.plan import Step
 from servotool.commission.step_type import Outcome, RunContext, StepType, no_argument
 from servotool.drive import Drive
 from servotool.errors import UsageError, VerifyError
-from servotool.model.codec import format_value, parse_value, raw_to_eng
+from servotool.model.codec import format_value, json_value, parse_value, raw_to_eng
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup, params, restore
 from servotool.ops.eeprom import check_power_cycle, persistence
@@ -46,7 +46,7 @@ class SetStep(StepType):
         for entry, raw in plan.unchanged:      # already in RAM, maybe not in EEPROM: 'save:' stores them too
             ctx.wrote(drive, entry, raw)
         return Outcome(f"{len(done)} written, {len(plan.unchanged)} already set",
-                       {"written": {r.entry.code: format_value(r.entry, r.new) for r in done}})
+                       {"written": {r.entry.code: json_value(r.entry, r.new) for r in done}})
 
 
 @dataclass(frozen=True)
