@@ -29,10 +29,9 @@ from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.errors import ServoError
 from servotool.model.loader import load_profile
-from servotool.model.setup import requirements
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import Plant
-from servotool.sim.virtual import VirtualLink
+from servotool.sim.virtual import VirtualLink, make_motion_setup
 from servotool.tuning.tune import TuneRequest, TuneResult, tune_inertia
 
 TRAVEL_REV = 2.0
@@ -55,18 +54,6 @@ def fit_brake(plant: Plant) -> None:
 FACTORY_BAUD = {"sd25": 9600, "sdc": 9600, "is620p": 57600, "dsx7e": 115200}
 
 
-def set_up(sim) -> None:  # type: ignore[no-untyped-def]
-    """The profile's motion setup, stored and power-cycled (SD25's DI functions act only after one)."""
-    for power_up in range(2):
-        for req in requirements(sim.profile):
-            now = sim.bank.effective_value(req.entry.code)
-            sim.bank.apply_parameter(req.entry, (now & ~req.mask) | (req.wanted & req.mask))
-        sim.bank.save_eeprom()
-        if power_up == 0:
-            sim.power_cycle()
-    sim.firmware.plant.set_gains(sim.firmware._gains())
-
-
 def identify_once(ratio: float, friction: float, gravity: float, noise: float, baud: int, seed: int,
                   brake: bool = True, profile_id: str = "dsx7e") -> TuneResult:
     """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine."""
@@ -75,7 +62,7 @@ def identify_once(ratio: float, friction: float, gravity: float, noise: float, b
     sim = build_drive(profile, 1, clock, persist=False)
     sim.settings.update(load_ratio=ratio, friction=friction, load_torque=gravity, noise=noise, seed=seed)
     sim.firmware.reconfigure()
-    set_up(sim)
+    make_motion_setup(sim)
     if brake:
         fit_brake(sim.firmware.plant)
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)

@@ -25,6 +25,16 @@ FEATURE = "jog"
 DIRECTION_NAMES = {1: "forward", -1: "reverse", 0: "stop"}
 
 
+def readable_by_role(profile: Profile, roles: tuple[str, ...]) -> list[Entry]:
+    """The readable entries the profile maps to these roles, in the roles' order, each once."""
+    found: list[Entry] = []
+    for role in roles:
+        e = profile.role(role)
+        if e is not None and e.readable and e not in found:
+            found.append(e)
+    return found
+
+
 def is_sim_extension(entry: Entry) -> bool:
     """An entry servotool added for its simulator (source "servotool ..."): not on the real drive."""
     return entry.source.strip().lower().startswith("servotool")

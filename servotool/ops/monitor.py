@@ -16,6 +16,7 @@ from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import Entry, Profile
+from servotool.model.roles import readable_by_role
 
 KEY_MONITOR_ROLES = ("speed_feedback", "speed_command", "torque_feedback", "position_feedback", "following_error",
                      "load_rate", "current_rms", "bus_voltage")
@@ -23,11 +24,7 @@ KEY_MONITOR_ROLES = ("speed_feedback", "speed_command", "torque_feedback", "posi
 
 def default_entries(profile: Profile) -> list[Entry]:
     """The profile's key monitors, by role."""
-    found: list[Entry] = []
-    for role in KEY_MONITOR_ROLES:
-        e = profile.role(role)
-        if e is not None and e.readable and e not in found:
-            found.append(e)
+    found = readable_by_role(profile, KEY_MONITOR_ROLES)
     if not found:
         found = [e for e in profile.of_class("Un") if e.readable][:6]
     if not found:

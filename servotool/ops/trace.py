@@ -21,6 +21,7 @@ from servotool.drive import Drive, coalesce_reads
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import Entry, Profile
+from servotool.model.roles import readable_by_role
 
 TRIGGER_FORMS = ("CODE>LEVEL (rises through LEVEL), CODE<LEVEL (falls through LEVEL), CODE.BIT (a bit of a "
                  "status word sets; BIT a number or the bit's name) or CODE.BIT=0 (it clears)")
@@ -100,11 +101,7 @@ MOTION_ROLES = ("speed_feedback", "speed_command", "torque_feedback", "position_
 
 def motion_entries(profile: Profile) -> list[Entry]:
     """What a motion's own trace records: the profile's speed, torque and position monitors, by role."""
-    found: list[Entry] = []
-    for role in MOTION_ROLES:
-        e = profile.role(role)
-        if e is not None and e.readable and e not in found:
-            found.append(e)
+    found = readable_by_role(profile, MOTION_ROLES)
     if not found:
         raise UsageError(f"profile {profile.id} maps no speed, torque or position monitor to trace")
     return found

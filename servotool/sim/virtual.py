@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from servotool.clock import VirtualClock
 from servotool.errors import DeviceError, ModbusException
+from servotool.model.setup import requirements
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.registers import SimRefusal
 
@@ -25,6 +26,19 @@ def wire_time(fc: int, count: int, baud: int) -> float:
     else:
         chars = 16
     return (chars + 7) * 11.0 / baud
+
+
+def make_motion_setup(sim: SimulatedDrive) -> None:
+    """The profile's motion setup made on a simulated drive, stored and power-cycled (SD25's DI functions act only
+    after a power cycle), then made again for what a power-up clears (SD25's So-58): as a user sets up the drive."""
+    for power_up in range(2):
+        for req in requirements(sim.profile):
+            now = sim.bank.effective_value(req.entry.code)
+            sim.bank.apply_parameter(req.entry, (now & ~req.mask) | (req.wanted & req.mask))
+        sim.bank.save_eeprom()
+        if power_up == 0:
+            sim.power_cycle()
+    sim.firmware.plant.set_gains(sim.firmware._gains())
 
 
 class VirtualLink:

@@ -17,26 +17,11 @@ from servotool.model.loader import load_profile
 from servotool.motion.deadman import route_of
 from servotool.session import open_drives
 
-from .test_motion import PROFILES, ROOT, _serve, set_up
+from .test_motion import PROFILES, ROOT, set_up
 
 BOUND_RE = re.compile(r"motor stops within ([0-9.]+) rev \(([0-9.]+) s\)")
 BOUNDED = [p for p in PROFILES if route_of(load_profile(p)).route != "none"]
 UNBOUNDED = [p for p in PROFILES if p not in BOUNDED]
-
-
-@pytest.fixture
-def served(sim_dir):
-    procs = []
-
-    def start(profile: str) -> str:
-        proc, port = _serve(profile)
-        procs.append(proc)
-        return port
-
-    yield start
-    for proc in procs:
-        proc.terminate()
-        proc.wait(timeout=10)
 
 
 def sample(port: str, profile: str) -> tuple[float, int | None]:
@@ -86,8 +71,8 @@ def kill_and_measure(proc: subprocess.Popen, port: str, profile: str, min_rpm: f
 
 
 @pytest.mark.parametrize("profile", BOUNDED)
-def test_kill_9_of_a_jog_stops_within_the_printed_bound(cli, served, profile):
-    port = served(profile)
+def test_kill_9_of_a_jog_stops_within_the_printed_bound(cli, served_as, profile):
+    port = served_as(profile)
     set_up(cli, profile, port)
     proc, rev, s = start_motion(port, profile, "jog", "--speed", "600", "--time", "30", "--yes")
     moved, speed = kill_and_measure(proc, port, profile, 500, s)
@@ -97,8 +82,8 @@ def test_kill_9_of_a_jog_stops_within_the_printed_bound(cli, served, profile):
 
 
 @pytest.mark.parametrize("profile", BOUNDED)
-def test_kill_9_of_an_identification_stops_within_the_printed_bound(cli, served, profile):
-    port = served(profile)
+def test_kill_9_of_an_identification_stops_within_the_printed_bound(cli, served_as, profile):
+    port = served_as(profile)
     set_up(cli, profile, port)
     proc, rev, s = start_motion(port, profile, "tune", "inertia", "--yes", "--dry-run", "--max-speed", "300")
     moved, speed = kill_and_measure(proc, port, profile, 100, s)
@@ -108,10 +93,10 @@ def test_kill_9_of_an_identification_stops_within_the_printed_bound(cli, served,
 
 
 @pytest.mark.parametrize("profile", UNBOUNDED)
-def test_a_drive_without_dead_man_refuses_and_a_killed_jog_runs_on_as_the_real_drive(cli, served, profile):
+def test_a_drive_without_dead_man_refuses_and_a_killed_jog_runs_on_as_the_real_drive(cli, served_as, profile):
     """No route stops the motor: without --no-dead-man nothing moves; with it, kill -9 leaves the (strict)
     simulated motor running, as the real drive would."""
-    port = served(profile)
+    port = served_as(profile)
     set_up(cli, profile, port)
     r = cli("--port", port, "--profile", profile, "jog", "--speed", "300", "--time", "1", "--yes")
     assert r.code == 2 and "no dead-man on this drive" in r.err and "--no-dead-man" in r.err

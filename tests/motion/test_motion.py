@@ -49,41 +49,6 @@ def set_up(cli, profile: str, port: str = "sim") -> None:
         assert r.code == 0, r.err
 
 
-def _serve(profile: str):
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0",
-                             "--profile", profile], cwd=ROOT, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ))
-    line = proc.stderr.readline()
-    m = re.search(r"(tcp://127\.0\.0\.1:\d+)", line)
-    assert m, line
-    return proc, m.group(1)
-
-
-@pytest.fixture
-def served(sim_dir):
-    """`servotool sim serve` (DSX7E) on a free loopback port; yields its tcp:// address."""
-    proc, port = _serve("dsx7e")
-    yield port
-    proc.terminate()
-    proc.wait(timeout=10)
-
-
-@pytest.fixture
-def served_as(sim_dir):
-    """Start `servotool sim serve --profile P`; returns its tcp:// address."""
-    procs = []
-
-    def start(profile: str) -> str:
-        proc, port = _serve(profile)
-        procs.append(proc)
-        return port
-
-    yield start
-    for proc in procs:
-        proc.terminate()
-        proc.wait(timeout=10)
-
-
 def read(port: str, *codes: str, profile: str = "dsx7e") -> list[float]:
     with open_drives(resolve(ConnectOptions(port=port, profile=profile)), notice=lambda _m: None) as (d,):
         return [r.eng for r in d.read(*codes)]

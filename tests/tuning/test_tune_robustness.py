@@ -9,9 +9,8 @@ import pytest
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.model.loader import load_profile
-from servotool.model.setup import requirements
 from servotool.sim.firmware import build_drive
-from servotool.sim.virtual import VirtualLink
+from servotool.sim.virtual import VirtualLink, make_motion_setup
 from servotool.tuning.friction import friction_report
 from servotool.tuning.gain_search import GainSearchFailed, search_gains
 from servotool.tuning.gain_writes import MarginRefused
@@ -26,14 +25,7 @@ def set_up(profile_id: str, baud: int = 115200, **machine: float):
     sim = build_drive(profile, 1, clock, persist=False)
     sim.settings.update(**machine)
     sim.firmware.reconfigure()
-    for _power_up in range(2):       # stored and power-cycled (SD25's DI functions act after a power cycle), then
-        for req in requirements(profile):   # once more for what a power-up clears (SD25's So-58)
-            now = sim.bank.effective_value(req.entry.code)
-            sim.bank.apply_parameter(req.entry, (now & ~req.mask) | (req.wanted & req.mask))
-        sim.bank.save_eeprom()
-        if _power_up == 0:
-            sim.power_cycle()
-    sim.firmware.plant.set_gains(sim.firmware._gains())
+    make_motion_setup(sim)
     d = Drive(VirtualLink([sim], clock, baud), profile, 1)
     d.dead_man_waived = True    # SD25 and SDC have no dead-man route (issue 15); these tests are about the estimate
     return sim, d, clock
