@@ -11,7 +11,6 @@ from servotool.config import Resolved
 from servotool.drive import Drive
 from servotool.link.modbus import ModbusLink
 from servotool.link.ports import Trace, latency_advice
-from servotool.ops.identity import confirm, warning_text
 
 _ADVISED: set[str] = set()
 
@@ -55,6 +54,8 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
         # Before anything is written: the drive answering must be the one the profile describes. The embedded
         # simulator is built from the profile itself.
         if resolved.identity_check and not resolved.simulated:
+            from servotool.ops.identity import confirm, warning_text
+
             if text := warning_text(confirm(drives)):
                 (notice or _stderr)(f"servotool: warning: {text}")
         for d in drives:      # what a killed servotool process left on these drives is put right first

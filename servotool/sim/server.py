@@ -10,6 +10,7 @@ import logging
 import socket
 import threading
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
@@ -23,10 +24,12 @@ from servotool.errors import DeviceError
 from servotool.link.ports import open_serial, parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
-from servotool.sim.faults import FaultProxy, LineFaults
 from servotool.sim.firmware import build_drive
 from servotool.sim.registers import ILLEGAL_FUNCTION, ILLEGAL_VALUE, SimRefusal
 from servotool.sim.virtual import READ_CODES, wire_time
+
+if TYPE_CHECKING:     # the bad-line proxy loads only when faults are asked for (not for a plain --port sim)
+    from servotool.sim.faults import FaultProxy, LineFaults
 
 WRITE_CODES = (6, 16)
 MAX_READ, MAX_WRITE = 125, 123       # the specification's quantity limits (FC03/04 and FC16)
@@ -143,7 +146,9 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
             stopbits=line.stopbits, bytesize=line.bytesize, trace_packet=hook if trace else None,
             ignore_missing_devices=True, broadcast_enable=True,      # unit 0: applied by every drive, unanswered
         )
-    server.context = _Line(devices)
+    # pymodbus built the datastore from `devices` (the register map over the whole address span: 5 ms for DSX7E,
+    # 20 ms for IS620P); the line serves that one, silent for unknown units, rather than building it again.
+    server.context.__class__ = _Line
     server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
@@ -171,6 +176,8 @@ def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | 
         server = await _start("tcp://127.0.0.1:0" if faults else port, drives, line or LineSettings(), lock, trace)
         bound = bound_port(server) if tcp else 0
         if faults is not None and tcp:
+            from servotool.sim.faults import FaultProxy
+
             proxy = FaultProxy(("127.0.0.1", bound), faults)
             try:
                 bound = await proxy.start(*tcp)
@@ -221,6 +228,8 @@ class EmbeddedSim:
         self._server = future.result(timeout=10)
         port = bound_port(self._server)
         if faults is not None:
+            from servotool.sim.faults import FaultProxy
+
             self.proxy = FaultProxy(("127.0.0.1", port), faults)
             port = asyncio.run_coroutine_threadsafe(self.proxy.start(), self._loop).result(timeout=10)
         self.port = f"tcp://127.0.0.1:{port}"
