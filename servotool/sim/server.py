@@ -24,35 +24,29 @@ from servotool.link.ports import open_serial, parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.firmware import build_drive
-from servotool.sim.registers import ILLEGAL_FUNCTION, ILLEGAL_VALUE, SimRefusal
-from servotool.sim.virtual import READ_CODES, wire_time
+from servotool.sim.line import WRITE_CODES, Line, refusal
 
 if TYPE_CHECKING:     # the bad-line proxy loads only when faults are asked for (not for a plain --port sim)
     from servotool.sim.faults import FaultProxy, LineFaults
 
-WRITE_CODES = (6, 16)
-MAX_READ, MAX_WRITE = 125, 123       # the specification's quantity limits (FC03/04 and FC16)
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
-class _Line:
-    """The drives on one line, as the server's datastore: every request goes to its simulated drive, which checks
-    addresses, quantities and access itself; a unit nobody serves stays silent, as on a real RS485 bus.
+class _Datastore:
+    """The line as the server's datastore (pymodbus calls it with each decoded request); a unit nobody serves stays
+    silent. pymodbus' own (SimCore) would first map every register between the lowest address and the highest (5 ms
+    of each DSX7E start, 20 ms of an IS620P one) for checks the drive makes anyway, and answers unknown ids with
+    exception 04."""
 
-    pymodbus' own datastore (SimCore) would first map every register between the lowest address and the highest
-    (5 ms of each DSX7E start, 20 ms of an IS620P one) for checks the drive makes anyway, and it answers unknown
-    ids with exception 04."""
-
-    def __init__(self, drives: list[SimulatedDrive], lock: threading.Lock) -> None:
-        self.drives = {d.unit: d for d in drives}
-        self.lock = lock
+    def __init__(self, line: Line) -> None:
+        self.line = line
         self._written: dict[tuple[int, int], list[int]] = {}
 
     def device_ids(self) -> list[int]:
-        return list(self.drives)
+        return list(self.line.drives)
 
     def _known(self, device_id: int) -> SimulatedDrive:
-        if (drive := self.drives.get(device_id)) is None:
+        if (drive := self.line.drives.get(device_id)) is None:
             raise NoSuchIdException(f"unit {device_id}")
         return drive
 
@@ -64,33 +58,21 @@ class _Line:
 
     async def async_setValues(self, device_id: int, func_code: int, address: int, values: list[int]):
         drive = self._known(device_id)
-        result = await self._serve(drive, func_code, address, len(values), [int(v) for v in values])
-        if isinstance(result, ExcCodes):
+        written = [int(v) for v in values]
+        if isinstance(result := await self._serve(drive, func_code, address, len(written), written), ExcCodes):
             return result
         if func_code == 6:
-            self._written[(device_id, address)] = [int(v) for v in values]
+            self._written[(device_id, address)] = written
         return None
 
     async def _serve(self, drive: SimulatedDrive, fc: int, address: int, count: int,
                      values: list[int] | None) -> list[int] | ExcCodes:
-        try:
-            with self.lock:
-                if fc not in READ_CODES + WRITE_CODES:
-                    return ExcCodes.ILLEGAL_FUNCTION
-                drive.bank.entries_in(address, count)      # an unmapped address is exception 02 before all else
-                if values is not None:
-                    drive.write(address, values)
-                    registers: list[int] = []
-                else:
-                    registers = drive.read(address, count)
-            if drive.line_baud:
-                await asyncio.sleep(wire_time(fc, count, drive.line_baud))
-            return registers
-        except SimRefusal as exc:
-            return ExcCodes(exc.code)
-        except Exception:  # a simulator bug must answer like a faulty slave, not kill the server
-            logging.getLogger("servotool.sim").exception("simulator failure")
-            return ExcCodes.DEVICE_FAILURE
+        result, delay = self.line.serve(drive, fc, address, count, values)
+        if isinstance(result, int):
+            return ExcCodes(result)
+        if delay:
+            await asyncio.sleep(delay)
+        return result
 
 
 class _Refusal(ModbusPDU):
@@ -100,15 +82,15 @@ class _Refusal(ModbusPDU):
         super().__init__()
         self.function_code, self.code = function_code, code
 
-    async def datastore_update(self, context: _Line, device_id: int) -> ModbusPDU:  # type: ignore[override]
+    async def datastore_update(self, context: _Datastore, device_id: int) -> ModbusPDU:  # type: ignore[override]
         context._known(device_id)
         return ExceptionResponse(self.function_code, self.code)
 
 
 class _SpecDecoder(DecodePDU):
-    """Request decoding as the Modbus specification has a slave do it: a function the drive lacks is exception
-    01 at any address, a quantity out of range (0, over 125 read, over 123 written, a byte count that disagrees)
-    exception 03. pymodbus 3.16 answers both with the malformed `ID 80 01`, or with 02 at unmapped addresses."""
+    """Request decoding as the Modbus specification has a slave do it (sim.line.refusal): pymodbus 3.16 answers
+    a function the drive lacks or a quantity out of range with the malformed `ID 80 01`, or with 02 at unmapped
+    addresses."""
 
     def __init__(self) -> None:
         super().__init__(True)
@@ -117,13 +99,8 @@ class _SpecDecoder(DecodePDU):
         fc = frame[0] if frame else 0
         if fc & 0x80:
             return None
-        if fc not in READ_CODES + WRITE_CODES:
-            return _Refusal(fc, ILLEGAL_FUNCTION)
-        if fc != 6 and len(frame) >= 5:
-            count = int.from_bytes(frame[3:5], "big")
-            limit = MAX_READ if fc in READ_CODES else MAX_WRITE
-            if not 1 <= count <= limit or (fc == 16 and (len(frame) < 6 or frame[5] != 2 * count)):
-                return _Refusal(fc, ILLEGAL_VALUE)
+        if (code := refusal(frame)) is not None:
+            return _Refusal(fc, code)
         return super().decode(frame)
 
 
@@ -156,7 +133,7 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
             stopbits=line.stopbits, bytesize=line.bytesize, trace_packet=hook if trace else None,
             ignore_missing_devices=True, broadcast_enable=True,      # unit 0: applied by every drive, unanswered
         )
-    server.context = _Line(drives, lock)  # type: ignore[assignment]
+    server.context = _Datastore(Line(drives, lock))  # type: ignore[assignment]
     server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
