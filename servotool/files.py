@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import glob
 import os
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import IO, Any
 
 import platformdirs
 
+from servotool.clock import RealClock
 from servotool.errors import FileProblem
 
 APP = "servotool"
@@ -128,7 +128,7 @@ def sweep_temp(folder: Path, name: str = "") -> int:
         pid_text = tmp.name[:-len(".tmp")].rsplit(".", 2)[-2] if tmp.name.count(".") >= 3 else ""
         alive = _alive(int(pid_text)) if pid_text.isascii() and pid_text.isdigit() else None
         try:
-            if alive is False or (alive is None and time.time() - tmp.stat().st_mtime > STALE_TMP_S):
+            if alive is False or (alive is None and RealClock().wall() - tmp.stat().st_mtime > STALE_TMP_S):
                 tmp.unlink()
                 removed += 1
         except OSError:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
@@ -93,15 +92,15 @@ def _plain_line(mon: Monitor, s: Sample) -> str:
 
 def _plot_live(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None) -> None:
     history: deque[Sample] = deque(maxlen=PLOT_SAMPLES)
-    drawn = 0.0
+    drawn = -float("inf")
     with Live(Text(""), console=out, auto_refresh=False, transient=False) as live:
         for s in samples:
             if log:
                 log.write(s)
             history.append(s)
-            if time.monotonic() - drawn >= PLOT_REFRESH_S:
+            if mon.clock.now() - drawn >= PLOT_REFRESH_S:
                 live.update(monitor_chart(mon, history, min(out.width, 160), out.height - 1), refresh=True)
-                drawn = time.monotonic()
+                drawn = mon.clock.now()
         live.update(monitor_chart(mon, history, min(out.width, 160), out.height - 1), refresh=True)
 
 
