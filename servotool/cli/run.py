@@ -10,7 +10,7 @@ import typer
 
 from servotool.cli.common import state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, count, emit_json, info, notice, out, trace_frame
+from servotool.cli.render import Verbosity, count, emit_json, info, notice, out, trace_frame, warn
 from servotool.commission.plan import load_plan
 from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
@@ -69,6 +69,10 @@ def run(
         runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info,
                         word=lambda exc: error_text(exc, cli_opts))
         rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)
+        if rep.previous is not None:
+            prev = rep.head["previous_run"]
+            warn(f"the last run of this plan (pid {prev['pid']}) ended without finishing, after "
+                 f"{count(prev['steps_done'], 'step')}: its report {report_path} said 'running'; this run replaces it")
         rep.write("running")
         runner.after_step = lambda: rep.write("running")
         ok: bool | None = None

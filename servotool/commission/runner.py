@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import socket
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,9 +16,10 @@ from servotool.commission.step_type import RunContext
 from servotool.commission.steps import step_type
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError, UsageError
-from servotool.files import write_atomic
+from servotool.files import process_alive, write_atomic
 
 READ_ONLY_STEPS = ("expect", "backup", "wait", "prompt")
+STALE = "interrupted (process ended without finishing)"
 
 
 @dataclass
@@ -90,14 +93,40 @@ class Runner:
         return all(r.ok for r in self.results)
 
 
+def read_report(path: Path) -> dict[str, Any] | None:
+    """A plan report as written, None when there is none (or it is not a report). A report still `running` whose
+    process is gone from this host (kill -9, power loss) says so: its status becomes STALE and ok false."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict) or "status" not in data:
+        return None
+    pid = data.get("pid")
+    if data["status"] == "running" and data.get("host") == socket.gethostname() and isinstance(pid, int) \
+            and not isinstance(pid, bool) and process_alive(pid) is False:
+        data = {**data, "status": STALE, "ok": False}
+    return data
+
+
 class Report:
-    """The run's report file: written when the run starts (`running`), rewritten atomically after every step, and
-    ending `ok`, `failed at step N` or `interrupted at step N`, so a killed run never leaves an older report's
-    verdict behind."""
+    """The run's report file: written when the run starts (`running`, with the process id and host, so a run
+    killed outright is told from one under way), rewritten atomically after every step, and ending `ok`, `failed
+    at step N` or `interrupted at step N`, so a killed run never leaves an older report's verdict behind.
+
+    `previous` is the report this run replaces when that run ended without finishing (its status STALE)."""
 
     def __init__(self, path: Path, runner: Runner, *, profile: str, port: str, units: list[int]) -> None:
         self.path, self.runner = path, runner
-        self.head = {"plan": str(runner.plan.path), "profile": profile, "port": port, "units": units}
+        self.head: dict[str, Any] = {"plan": str(runner.plan.path), "profile": profile, "port": port,
+                                     "units": units, "pid": os.getpid(), "host": socket.gethostname()}
+        old = read_report(path)
+        self.previous = old if old is not None and old["status"] == STALE else None
+        if self.previous is not None:
+            steps = self.previous.get("steps")
+            self.head["previous_run"] = {
+                "status": STALE, "pid": self.previous.get("pid"), "updated": self.previous.get("updated"),
+                "steps_done": len(steps) if isinstance(steps, list) else 0}
         self.t0 = runner.clock.now()
 
     def write(self, status: str) -> dict[str, Any]:
