@@ -206,20 +206,19 @@ def check_yaml_bounds(text: str, path: Path) -> None:
 
 def parse_yaml(text: str, path: Path) -> Any:
     """The data of a YAML document read from path; FileProblem (with the line) when it is not valid YAML."""
-    check_yaml_bounds(text, path)
-    yaml, loader = _yaml()
-    try:
-        return yaml.load(text, Loader=loader)
-    except yaml.YAMLError as exc:
-        raise _yaml_problem(path, exc) from None
+    return _read_yaml(text, path, "load")
 
 
 def compose_yaml(text: str, path: Path) -> Any:
     """The node tree of a YAML document (for the line of each key); FileProblem when it is not valid YAML."""
+    return _read_yaml(text, path, "compose")
+
+
+def _read_yaml(text: str, path: Path, how: str) -> Any:
     check_yaml_bounds(text, path)
     yaml, loader = _yaml()
     try:
-        return yaml.compose(text, Loader=loader)
+        return getattr(yaml, how)(text, Loader=loader)
     except yaml.YAMLError as exc:
         raise _yaml_problem(path, exc) from None
 

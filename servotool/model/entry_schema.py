@@ -91,9 +91,7 @@ def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | 
         return None
     if isinstance(raw.get("code"), str):
         loc = f"entries[{index}] ({raw['code']})"
-    for key in raw:
-        if key not in ENTRY_KEYS:
-            chk.bad(loc, f"unknown key '{key}'")
+    chk.known_keys(raw, ENTRY_KEYS, loc)
     before = len(chk.problems)
     code = chk.need(raw, "code", loc, str)
     cls = chk.choice(raw, "class", loc, CLASSES, "")

@@ -42,9 +42,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     if not isinstance(data, dict):
         chk.bad("top", "a profile must be a YAML mapping")
         return None, chk.problems
-    for key in data:
-        if key not in TOP_KEYS:
-            chk.bad("top", f"unknown key '{key}'")
+    chk.known_keys(data, TOP_KEYS, "top")
     if data.get("schema") != 1:
         chk.bad("schema", f"expected schema: 1, got {data.get('schema')!r}")
     pid = chk.need(data, "id", "top", str)
@@ -121,9 +119,7 @@ def _parse_dead_man(chk: Checker, raw: Any) -> DeadManRoute | None:
     if not isinstance(raw, dict):
         chk.bad("dead_man", "expected a mapping {route, reason, source, unverified, if_host_dies}")
         return None
-    for key in raw:
-        if key not in DEAD_MAN_KEYS:
-            chk.bad("dead_man", f"unknown key '{key}'")
+    chk.known_keys(raw, DEAD_MAN_KEYS, "dead_man")
     route = chk.choice(raw, "route", "dead_man", DEAD_MAN_ROUTES, "none")
     texts = {k: chk.opt(raw, k, "dead_man", str, "") for k in ("reason", "source", "unverified", "if_host_dies")}
     if not texts["reason"] or not texts["source"]:
@@ -140,9 +136,7 @@ def _parse_motion_setup(chk: Checker, raw: Any, entries: dict[str, Entry], broke
     out: list[SetupItem] = []
     seen: set[str] = set()
     for loc, item in _mappings(chk, raw, "motion_setup", "{code, value, reason, source}"):
-        for key in item:
-            if key not in SETUP_KEYS:
-                chk.bad(loc, f"unknown key '{key}'")
+        chk.known_keys(item, SETUP_KEYS, loc)
         code = chk.need(item, "code", loc, str)
         value = chk.need(item, "value", loc, (str, int, float))
         reason = chk.need(item, "reason", loc, str)
@@ -197,8 +191,7 @@ def _parse_alarms(chk: Checker, raw: Any) -> list[Alarm]:
     out: list[Alarm] = []
     seen: set[int] = set()
     for loc, item in _mappings(chk, raw, "alarms"):
-        for key in sorted(set(map(str, item)) - ALARM_KEYS):
-            chk.bad(loc, f"unknown key '{key}'")
+        chk.known_keys(item, ALARM_KEYS, loc)
         code = chk.need(item, "code", loc, int)
         name = chk.need(item, "name", loc, str)
         kind = chk.choice(item, "kind", loc, ALARM_KINDS, "other")
@@ -216,8 +209,7 @@ def _parse_serial(chk: Checker, raw: Any) -> tuple[LineSettings, int]:
     if not isinstance(raw, dict):
         chk.bad("serial", "missing or not a mapping")
         return LineSettings(), 1
-    for key in sorted(set(map(str, raw)) - SERIAL_KEYS):
-        chk.bad("serial", f"unknown key '{key}'")
+    chk.known_keys(raw, SERIAL_KEYS, "serial")
     s = LineSettings(
         baud=chk.opt(raw, "baud", "serial", int, 9600),
         parity=chk.choice(raw, "parity", "serial", ("N", "E", "O"), "N"),
