@@ -61,3 +61,17 @@ def test_scan_times_itself_on_the_clock_it_is_given():
     result = scan("/dev/virtual", [1], [LineSettings()], [d.profile], open_link=lambda _s: link, clock=clock)
     assert [f.unit for f in result.found] == [1]
     assert result.seconds == clock.now() - before > 0
+
+
+def test_doctor_times_the_link_on_the_clock_it_is_given():
+    from servotool.link.ports import LinkSettings as PortSettings
+    from servotool.ops.doctor import check
+    from servotool.sim.server import EmbeddedSim
+
+    profile = load_profile("dsx7e")
+    sim = EmbeddedSim([build_drive(profile, 1, persist=False)])
+    try:
+        health = check(PortSettings(sim.port, timeout=1.0, retries=1), 1, profile, 5, clock=VirtualClock(7.0))
+    finally:
+        sim.close()
+    assert len(health.rtts) == 5 and health.rtts == [0.0] * 5 and health.seconds == 0.0   # virtual time stood
