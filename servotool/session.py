@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import sys
-import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
+from servotool.clock import Clock, RealClock
 from servotool.config import Resolved
 from servotool.drive import Drive
 from servotool.link.modbus import ModbusLink
@@ -32,8 +32,9 @@ class SimWire:
     have carried it. A garbled request or a silent unit gets nothing: the exchange waits out its timeout, as on a
     real line. Frames, retries and the -v trace are the exchange's own, as with a port."""
 
-    def __init__(self, line: Line) -> None:
+    def __init__(self, line: Line, clock: Clock | None = None) -> None:
         self.line = line
+        self.clock = clock or RealClock()
         self._reply = b""
         self._ready = 0.0
 
@@ -43,15 +44,15 @@ class SimWire:
         reply, delay = self.line.answer(data[0], data[1:-2])
         if reply is not None:
             self._reply += with_crc(data[:1] + reply)
-            self._ready = time.monotonic() + delay
+            self._ready = self.clock.now() + delay
 
     def recv(self, timeout: float) -> bytes:
-        wait = self._ready - time.monotonic() if self._reply else timeout
+        wait = self._ready - self.clock.now() if self._reply else timeout
         if wait > timeout or not self._reply:
-            time.sleep(max(0.0, timeout))
+            self.clock.sleep(timeout)
             return b""
         if wait > 0:
-            time.sleep(wait)
+            self.clock.sleep(wait)
         data, self._reply = self._reply, b""
         return data
 

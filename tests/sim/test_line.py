@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import socket
-import time
 
 import pytest
 
+from servotool.clock import VirtualClock
 from servotool.link.rtu import with_crc
 from servotool.model.loader import load_profile
 from servotool.session import SimWire
 from servotool.sim.firmware import build_drive
 from servotool.sim.line import Line
 from servotool.sim.server import EmbeddedSim
+from servotool.sim.virtual import wire_time
 
 SILENT = 0.3        # s without an answer that counts as silence
 
@@ -75,9 +76,13 @@ def test_in_process_replies_equal_the_servers(sim_dir, monkeypatch, profile):
     assert served[0] and served[-4] == b"" and served[-1] == b""
 
 
-def test_a_silent_unit_costs_the_timeout(sim_dir):
-    wire = SimWire(Line([build_drive(load_profile("dsx7e"), 1)]))
+def test_a_silent_unit_costs_the_timeout_and_a_reply_its_line_time(sim_dir):
+    clock = VirtualClock(100.0)
+    drive = build_drive(load_profile("dsx7e"), 1, clock, persist=False)
+    drive.settings["line_baud"] = 9600
+    wire = SimWire(Line([drive]), clock)
     wire.send(with_crc(b"\x07\x03\x20\x04\x00\x01"))
-    t0 = time.monotonic()
-    assert wire.recv(0.05) == b""
-    assert time.monotonic() - t0 >= 0.05
+    assert wire.recv(0.5) == b"" and clock.now() == 100.5
+    wire.send(with_crc(b"\x01\x03\x20\x04\x00\x01"))
+    assert wire.recv(0.001) == b""             # not yet on the line at 9600 Bd
+    assert len(wire.recv(0.5)) == 7 and 100.5 + wire_time(3, 1, 9600) <= clock.now() < 100.6
