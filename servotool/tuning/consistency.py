@@ -59,17 +59,20 @@ class Verdict:
     j_std: float
     notes: tuple[str, ...]
     refuse: str = ""          # empty: usable (perhaps with a widened uncertainty)
+    widened: str = ""         # why the uncertainty was widened (words for a refusal it causes), empty if not
 
 
 def assess(fit: FitData) -> Verdict:
     """J and its uncertainty after the consistency checks, with the operator's words for what was found."""
     j, j_std, resid = float(fit.theta[0]), fit.j_std, fit.y - fit.x @ fit.theta
     notes: list[str] = []
+    why = ""
     extended = _position_model(fit)
     if extended is not None:
         j, j_std, resid, change_pct = extended
-        notes.append(f"off-model: load varies over the travel (load torque changes by {change_pct:.0f} % of rated "
-                     "torque, an arm or a gravity axis on a gear?); inertia fitted with a position-dependent load")
+        why = (f"load varies over the travel (load torque changes by {change_pct:.0f} % of rated torque: an arm or "
+               "a gravity axis on a gear?)")
+        notes.append(f"off-model: {why}; inertia fitted with a position-dependent load")
     dw = fit.x[:, 0]
     worst: tuple[float, float, str] = (1.0, 0.0, "")
     for name, labels in _groupings(fit, dw).items():
@@ -84,7 +87,8 @@ def assess(fit: FitData) -> Verdict:
             return Verdict(j, j_std, tuple(notes), refuse=f"{text}: {_cause(name)}")
         if birge > 1.5:
             notes.append(f"off-model: {text}; uncertainty widened to the spread ({_cause(name)})")
-    return Verdict(j, j_std, tuple(notes))
+            return Verdict(j, j_std, tuple(notes), widened=f"{text}; {_cause(name)}")
+    return Verdict(j, j_std, tuple(notes), widened=why)
 
 
 def _cause(name: str) -> str:

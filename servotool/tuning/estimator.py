@@ -289,6 +289,9 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
         return r.refuse(verdict.refuse)
     rel = r.j_std / j
     if rel > cfg.max_rel_uncertainty:
+        if verdict.widened:
+            return r.refuse(f"inertia too uncertain ({100 * rel:.1f} % of J_total > "
+                            f"{100 * cfg.max_rel_uncertainty:g} %): {verdict.widened}")
         return r.refuse(f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %); "
                         "repeat the motion more times or use stronger accelerations")
     return r.result(ok=True, reason="")

@@ -1,0 +1,64 @@
+"""Identification on mechanics outside the rigid model (issue 16 item 4): right, flagged or refused in words."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.tuning.identify import IdentificationRefused
+from servotool.tuning.tune import TuneRequest, tune_inertia
+from tests.tuning.test_tune_robustness import set_up
+
+
+def _outcome(sim, d, clock):
+    """('accepted', estimate) or ('refused', reason)."""
+    try:
+        res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    except IdentificationRefused as exc:
+        return "refused", str(exc)
+    return "accepted", res.identified.estimate
+
+
+def test_an_arm_on_a_gear_is_fitted_with_a_load_that_varies_over_the_travel(sim_dir):
+    """The constant-load model put J 14 % off with a 1 % uncertainty; now the load varies with position in the fit,
+    the result says so, and the truth is inside the stated 3 sigma."""
+    sim, d, clock = set_up("dsx7e", 19200, load_ratio=5.0, friction=0.02, noise=0.002, seed=6,
+                           arm_gravity=0.1, gear=10.0)
+    outcome, est = _outcome(sim, d, clock)
+    assert outcome == "accepted", est
+    assert any("load varies over the travel" in n for n in est.notes)
+    assert abs(est.load_ratio - 5.0) <= 3 * est.ratio_std
+
+
+@pytest.mark.parametrize("machine", [
+    {"arm_gravity": 0.4, "gear": 10.0, "arm_angle": 30.0, "seed": 7},
+    {"backlash_rad": 0.05, "seed": 4},
+])
+def test_an_off_model_load_is_refused_or_flagged_in_words_never_wrong_and_tight(sim_dir, machine):
+    sim, d, clock = set_up("dsx7e", 19200, load_ratio=5.0, friction=0.02, noise=0.002, **machine)
+    outcome, found = _outcome(sim, d, clock)
+    if outcome == "refused":
+        assert "load varies over the travel" in found or "inertia differs" in found, found
+    else:
+        assert abs(found.load_ratio - 5.0) <= 3 * found.ratio_std, found
+        if abs(found.load_ratio - 5.0) > 0.02 * 6:
+            assert any(n.startswith("off-model:") for n in found.notes)
+
+
+def test_a_rigid_load_gets_no_off_model_note(sim_dir):
+    sim, d, clock = set_up("dsx7e", 19200, load_ratio=5.0, friction=0.02, noise=0.002, seed=3)
+    outcome, est = _outcome(sim, d, clock)
+    assert outcome == "accepted" and not any(n.startswith("off-model:") for n in est.notes)
+
+
+def test_through_the_cli_an_arm_load_is_flagged_or_refused_with_its_reason(cli):
+    assert cli("sim", "config", "--load-ratio", "5", "--arm-gravity", "0.4", "--gear", "10", "--arm-angle", "30",
+               "--friction", "0.02").code == 0
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--json")
+    data = r.json()
+    if r.code == 0:
+        assert any("load varies over the travel" in n for n in data["notes"]), data
+        assert abs(data["ratio"] - 5.0) <= 3 * data["ratio_std"]
+    else:
+        assert r.code == 1 and data["ok"] is False
+        assert "load varies over the travel" in data["reason"] or "inertia differs" in data["reason"], data
+        assert "load varies over the travel" in r.err or "inertia differs" in r.err
