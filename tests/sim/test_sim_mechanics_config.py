@@ -20,7 +20,8 @@ def test_sim_config_sets_every_mechanics_option_and_sim_show_lists_them(cli):
 
 
 BAD = [(("--resonance-hz", "900"), "resonance_hz"), (("--backlash-rad", "-0.1"), "backlash_rad"),
-       (("--cogging-periods", "0"), "cogging_periods"), (("--load-ratio", "0", "--resonance-hz", "20"), "load_ratio > 0")]
+       (("--cogging-periods", "0"), "cogging_periods"),
+       (("--load-ratio", "0", "--resonance-hz", "20"), "load_ratio > 0")]
 
 
 def test_a_bad_mechanics_value_is_refused_in_one_line_and_nothing_changes(cli):
