@@ -31,6 +31,7 @@ from servotool.tuning.fit_numerics import corrected_lstsq, cumulative_hermite, j
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
 COMPLIANCE_SIGMA = 4.0    # a compliance term counts when beyond this many sigmas
+COMPLIANCE_MIN_SHIFT = 0.01  # ... and moves J by more than this fraction (and 2 sigma)
 MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behind a coupling to matter
 MIN_SUBSET_WINDOWS = 6
 BIRGE_REFUSE = 3.0        # refuse when the subsets disagree this many times beyond their uncertainties ...
@@ -184,6 +185,8 @@ def _compliance_model(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, float] |
     ratio = j / fit.jm - 1.0
     if not (b < -COMPLIANCE_SIGMA * std[-1] and ratio > MIN_COMPLIANT_RATIO and math.isfinite(std[0])):
         return None
+    if abs(j - fit.theta[0]) < max(2 * fit.j_std, COMPLIANCE_MIN_SHIFT * abs(j)):
+        return None                          # there, but too weak to move the inertia: the rigid answer stands
     return col[:, None], math.sqrt(ratio / -b) / (2 * math.pi)
 
 
