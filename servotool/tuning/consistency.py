@@ -8,7 +8,8 @@ the fit's noise-based uncertainty tight while the answer is wrong. Two checks se
   extended model's inertia is used (an arm on a gear: the constant-torque model biased J by 10-40 %).
 - compliance: the fit is repeated with a term for a spring between motor and load (the load's speed lags the
   motor's by the deflection's rate, which follows the torque's rate of change); where it is significant, the
-  result is refused with the resonance it implies ("resonance near N Hz").
+  extended model's inertia is used, flagged with the resonance it implies ("resonance near N Hz").
+  A correction by an extended model widens the uncertainty by a third of its size (the terms are approximate).
 - subsets: J is taken from each subset of the windows with the friction and load fitted on all of them
   (forward/reverse x accelerating/braking, and the start/middle/end of the travel). Where the subsets disagree
   more than their uncertainties allow, the uncertainty is widened by the Birge ratio sqrt(chi2/dof); where they
@@ -30,6 +31,7 @@ from servotool.tuning.fit_numerics import corrected_lstsq, cumulative_hermite, j
 
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
+MODEL_ERROR_DIVISOR = 3.0  # a correction by an extended model counts as uncertain by a third of its size
 COMPLIANCE_SIGMA = 4.0    # a compliance term counts when beyond this many sigmas
 COMPLIANCE_MIN_SHIFT = 0.01  # ... and moves J by more than this fraction (and 2 sigma)
 MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behind a coupling to matter
@@ -81,18 +83,16 @@ def assess(fit: FitData) -> Verdict:
         x = np.column_stack([x, position[0]])
         why.append(f"load varies over the travel (load torque changes by {position[1]:.0f} % of rated torque: an "
                    "arm or a gravity axis on a gear?)")
+        j, j_std, resid = _take(fit, x, (j, j_std, resid), 0.0)
     compliance = _compliance_model(fit, x)
     if compliance is not None:
-        # Detected, but not corrected: at 25-100 samples/s the quasi-static term caught only part of a 20 Hz
-        # coupling's bias (+23 % became +16 %), so the result is refused rather than flagged.
-        return Verdict(j, j_std, tuple(notes), refuse=f"resonance or torque ripple near {compliance[1]:.0f} Hz: the "
-                       "load does not follow the motor as one rigid inertia (a compliant coupling, a long shaft, "
-                       "cogging), so the inertia from this motion cannot be trusted")
-    if x is not fit.x:
-        found = _refit(fit, x)
-        if found is not None:
-            j, j_std, resid = float(found[0][0]), max(float(found[1][0]), fit.j_std), found[2]
-            notes.append(f"off-model: {'; '.join(why)}; inertia fitted with a model of it")
+        why.append(f"resonance or torque ripple near {compliance[1]:.0f} Hz: the load follows the motor through a "
+                   "compliant coupling (or a long shaft, cogging)")
+        # The quasi-static spring term is approximate: a third of its correction counts as uncertain (a 20 Hz
+        # coupling's correction left 2-5 % of a 7-28 % bias).
+        j, j_std, resid = _take(fit, np.column_stack([x, compliance[0]]), (j, j_std, resid), 1 / MODEL_ERROR_DIVISOR)
+    if why:
+        notes.append(f"off-model: {'; '.join(why)}; inertia fitted with a model of it")
     dw = fit.x[:, 0]
     worst: tuple[float, float, str] = (1.0, 0.0, "")
     for name, labels in _groupings(fit, dw).items():
@@ -109,6 +109,16 @@ def assess(fit: FitData) -> Verdict:
             notes.append(f"off-model: {text}; uncertainty widened to the spread ({_cause(name)})")
             return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {_cause(name)}"]))
     return Verdict(j, j_std, tuple(notes), widened="; ".join(why))
+
+
+def _take(fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], model_error: float
+          ) -> tuple[float, float, np.ndarray]:
+    """(J, sigma, residual) of the extended fit; sigma grows by model_error times the correction to J."""
+    found = _refit(fit, x)
+    if found is None:
+        return before
+    j = float(found[0][0])
+    return j, math.hypot(max(float(found[1][0]), before[1]), model_error * (j - before[0])), found[2]
 
 
 def _cause(name: str) -> str:
@@ -191,18 +201,11 @@ def _compliance_model(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, float] |
 
 
 def _torque_slope(fit: FitData) -> np.ndarray:
-    """dT/dt at each sample: central differences, one-sided next to a torque step (kink)."""
-    t, q, kink = fit.t, fit.torque, fit.kink
-    slope = np.zeros_like(q)
-    if q.size < 3:
-        return slope
-    fwd = np.diff(q) / np.diff(t)               # slope of interval i..i+1
-    slope[0], slope[-1] = fwd[0], fwd[-1]
-    left, right = fwd[:-1], fwd[1:]
-    central = (q[2:] - q[:-2]) / (t[2:] - t[:-2])
-    inner = np.where(kink[:-2], right, np.where(kink[2:], left, central))
-    slope[1:-1] = inner
-    return slope
+    """dT/dt at each sample (central differences on the uneven times). Across a torque step too: the slope there
+    is what the coupling's deflection follows (one-sided slopes at the steps caught only a third of the bias)."""
+    if fit.torque.size < 3:
+        return np.zeros_like(fit.torque)
+    return np.gradient(fit.torque, fit.t)
 
 
 def _groupings(fit: FitData, dw: np.ndarray) -> dict[str, np.ndarray]:
