@@ -33,6 +33,7 @@ POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond th
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
 MODEL_ERROR_DIVISOR = 3.0  # a correction by an extended model counts as uncertain by a third of its size
 COMPLIANCE_SIGMA = 4.0    # a compliance term counts when beyond this many sigmas
+COMPLIANCE_HINT_SIGMA = 2.0  # beyond this many it widens the uncertainty by what it would change
 COMPLIANCE_MIN_SHIFT = 0.01  # ... and moves J by more than this fraction (and 2 sigma)
 MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behind a coupling to matter
 MIN_SUBSET_WINDOWS = 6
@@ -77,6 +78,7 @@ def assess(fit: FitData) -> Verdict:
     j, j_std, resid = float(fit.theta[0]), fit.j_std, fit.y - fit.x @ fit.theta
     notes: list[str] = []
     why: list[str] = []
+    widened = ""
     x = fit.x
     position = _position_model(fit)
     if position is not None:
@@ -84,13 +86,19 @@ def assess(fit: FitData) -> Verdict:
         why.append(f"load varies over the travel (load torque changes by {position[1]:.0f} % of rated torque: an "
                    "arm or a gravity axis on a gear?)")
         j, j_std, resid = _take(fit, x, (j, j_std, resid), 0.0)
-    compliance = _compliance_model(fit, x)
-    if compliance is not None:
+    compliance = _compliance_model(fit, x, j, j_std)
+    if compliance is not None and compliance[2]:
         why.append(f"resonance or torque ripple near {compliance[1]:.0f} Hz: the load follows the motor through a "
                    "compliant coupling (or a long shaft, cogging)")
         # The quasi-static spring term is approximate: a third of its correction counts as uncertain (a 20 Hz
         # coupling's correction left 2-5 % of a 7-28 % bias).
         j, j_std, resid = _take(fit, np.column_stack([x, compliance[0]]), (j, j_std, resid), 1 / MODEL_ERROR_DIVISOR)
+    elif compliance is not None:
+        # A hint of a spring (a stiff coupling, 50-100 Hz): the rigid answer stands, uncertain by what the spring
+        # term would change.
+        hinted = _take(fit, np.column_stack([x, compliance[0]]), (j, j_std, resid), 0.0)
+        j_std = math.hypot(j_std, hinted[0] - j)
+        widened = f"perhaps a resonance near {compliance[1]:.0f} Hz (a compliant coupling)"
     if why:
         notes.append(f"off-model: {'; '.join(why)}; inertia fitted with a model of it")
     dw = fit.x[:, 0]
@@ -108,7 +116,7 @@ def assess(fit: FitData) -> Verdict:
         if birge > 1.5:
             notes.append(f"off-model: {text}; uncertainty widened to the spread ({_cause(name)})")
             return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {_cause(name)}"]))
-    return Verdict(j, j_std, tuple(notes), widened="; ".join(why))
+    return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why))
 
 
 def _take(fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], model_error: float
@@ -178,9 +186,10 @@ def _position_model(fit: FitData) -> tuple[np.ndarray, float] | None:
     return np.column_stack(cols), change_pct
 
 
-def _compliance_model(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """(the compliance column, the resonance it implies in Hz) when the motor runs ahead of or behind its load
-    through a spring significantly, else None.
+def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
+                      ) -> tuple[np.ndarray, float, bool] | None:
+    """(the compliance column, the resonance it implies in Hz, whether it is strong) when the motor runs ahead of
+    or behind its load through a spring, else None. Strong: significant and moving J; weak: a hint only.
 
     Through a spring k the load's speed differs from the motor's by the deflection's rate, about
     (J_load / J) * T' / k while the motion is slow against the resonance; the momentum balance over a window
@@ -193,11 +202,10 @@ def _compliance_model(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, float] |
     theta, std, _resid = found
     b, j = float(theta[-1]), float(theta[0])
     ratio = j / fit.jm - 1.0
-    if not (b < -COMPLIANCE_SIGMA * std[-1] and ratio > MIN_COMPLIANT_RATIO and math.isfinite(std[0])):
+    if not (b < -COMPLIANCE_HINT_SIGMA * std[-1] and ratio > MIN_COMPLIANT_RATIO and math.isfinite(std[0])):
         return None
-    if abs(j - fit.theta[0]) < max(2 * fit.j_std, COMPLIANCE_MIN_SHIFT * abs(j)):
-        return None                          # there, but too weak to move the inertia: the rigid answer stands
-    return col[:, None], math.sqrt(ratio / -b) / (2 * math.pi)
+    strong = b < -COMPLIANCE_SIGMA * std[-1] and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
+    return col[:, None], math.sqrt(ratio / -b) / (2 * math.pi), strong
 
 
 def _torque_slope(fit: FitData) -> np.ndarray:
