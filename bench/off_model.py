@@ -87,11 +87,13 @@ def main() -> None:
     print(f"{'load':<22} {'ratio':>5} {'baud':>6} {'outcome':<9} {'err%':>7} {'3sig%':>6}  reason / flags")
     violations = counted = 0
     n = 0
+    outcomes: dict[str, int] = {}
     for baud in bauds:
         for label, machine in loads:
             for ratio in ratios:
                 n += 1
                 outcome, est, why = identify(ratio, machine, baud, seed=n)
+                outcomes[outcome] = outcomes.get(outcome, 0) + 1
                 err = sig3 = float("nan")
                 if est is not None and est.j_total_kgm2 == est.j_total_kgm2:
                     err = (est.load_ratio - ratio) / (1.0 + ratio) * 100
@@ -104,7 +106,8 @@ def main() -> None:
                         bad = "  <-- outside 3 sigma"
                 print(f"{label:<22} {ratio:>5.1f} {baud:>6} {outcome:<9} {err:>7.2f} {sig3:>6.2f}  {why[:110]}{bad}",
                       flush=True)
-    print(f"\nno accepted result off by more than its stated 3 sigma: {violations} violation(s) in {counted} "
+    print("\n" + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+    print(f"no accepted result off by more than its stated 3 sigma: {violations} violation(s) in {counted} "
           f"accepted or flagged of {n} runs: {'met' if violations == 0 else 'MISSED'}")
 
 
