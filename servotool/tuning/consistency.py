@@ -1,15 +1,16 @@
 """Is the rigid model right for this load? Consistency checks on the inertia fit (tuning.estimator).
 
 Mechanics outside the model (a compliant coupling, backlash, gravity that changes with position, cogging) leave
-the fit's noise-based uncertainty tight while the answer is wrong. Two checks see them:
+the fit's noise-based uncertainty tight while the answer is wrong. Three checks see them:
 
 - the load torque over the travel: the fit is repeated with a load torque that varies (quadratically) with the
   position (integrated speed). Where the variation is significant, the load varies over the travel and the
   extended model's inertia is used (an arm on a gear: the constant-torque model biased J by 10-40 %).
 - compliance: the fit is repeated with a term for a spring between motor and load (the load's speed lags the
   motor's by the deflection's rate, which follows the torque's rate of change); where it is significant, the
-  extended model's inertia is used, flagged with the resonance it implies ("resonance near N Hz").
-  A correction by an extended model widens the uncertainty by a third of its size (the terms are approximate).
+  extended model's inertia is used, flagged with the resonance it implies ("resonance near N Hz"), and a third of
+  its correction is added to the uncertainty (the quasi-static term is approximate). A weaker hint of the term
+  keeps the rigid answer but adds the whole change it would make.
 - subsets: J is taken from each subset of the windows with the friction and load fitted on all of them
   (forward/reverse x accelerating/braking, and the start/middle/end of the travel). Where the subsets disagree
   more than their uncertainties allow, the uncertainty is widened by the Birge ratio sqrt(chi2/dof); where they
@@ -17,7 +18,8 @@ the fit's noise-based uncertainty tight while the answer is wrong. Two checks se
   Backlash shows as a lower J while braking (the motor crosses the gap alone), a compliant coupling as J that
   differs between the phases of a move.
 
-The returned words start with "off-model:" so reports can tell these notes from others.
+The returned notes start with "off-model:" so reports can tell them from others. Only J is corrected: the
+friction and load torque the estimator reports stay the rigid fit's.
 """
 
 from __future__ import annotations
@@ -54,8 +56,7 @@ class FitData:
     torque: np.ndarray        # N*m
     x: np.ndarray             # columns: J (dw), then friction and load terms
     y: np.ndarray
-    eiv: np.ndarray           # regressor-noise variance per row of the column-scaled x
-    scale: np.ndarray
+    eiv: np.ndarray           # regressor-noise variance per row of x scaled to unit column norms
     groups: np.ndarray        # move number of each window (for the jackknife)
     theta: np.ndarray
     j_std: float

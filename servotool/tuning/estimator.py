@@ -260,7 +260,7 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     est = dict(zip(names, theta, strict=True))
     err = dict(zip(names, std, strict=True))
     verdict = assess(FitData(t=t, w=w, kink=kink, position=cum_w, starts=starts, ends=ends, torque=torque, x=x, y=y,
-                             eiv=eiv, scale=scale, groups=move_ids(rpm, band)[starts], theta=theta,
+                             eiv=eiv, groups=move_ids(rpm, band)[starts], theta=theta,
                              j_std=float(std[0]), min_jackknife_moves=cfg.min_jackknife_moves,
                              rated_nm=rated_torque_nm, jm=jm))
     est["J"], err["J"] = verdict.j, verdict.j_std
