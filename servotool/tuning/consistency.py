@@ -39,6 +39,8 @@ COMPLIANCE_HINT_SIGMA = 0.5  # beyond this many it widens the uncertainty by wha
 COMPLIANCE_MIN_SHIFT = 0.01  # ... and moves J by more than this fraction (and 2 sigma)
 MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behind a coupling to matter
 MIN_SUBSET_WINDOWS = 6
+BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
+#                           chance: chi2/dof of 2.25 over 2-3 subsets happens one time in ten on a rigid load)
 BIRGE_REFUSE = 3.0        # refuse when the subsets disagree this many times beyond their uncertainties ...
 GROSS_SPREAD = 0.08       # ... and their spread exceeds this fraction of J
 
@@ -109,14 +111,13 @@ def assess(fit: FitData) -> Verdict:
         if birge > worst[0]:
             worst = (birge, spread, name)
     birge, spread, name = worst
-    if birge > 1.0:
+    if birge > BIRGE_WIDEN:
         j_std *= birge
         text = f"inertia differs {name} by {100 * spread:.0f} % ({birge:.1f}x its uncertainty)"
         if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
             return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {_cause(name)}"]))
-        if birge > 1.5:
-            notes.append(f"off-model: {text}; uncertainty widened to the spread ({_cause(name)})")
-            return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {_cause(name)}"]))
+        notes.append(f"off-model: {text}; uncertainty widened to the spread ({_cause(name)})")
+        return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {_cause(name)}"]))
     return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why))
 
 
