@@ -1,0 +1,143 @@
+"""The identification's sampling: speed and torque in as few requests as the profile allows, position when it is
+due, and the travel band the axis has covered."""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from servotool.clock import Clock
+from servotool.drive import Drive, coalesce_reads
+from servotool.errors import UsageError
+from servotool.model.codec import raw_to_eng
+from servotool.tuning.preflight import FEATURE
+
+# Position costs a request of its own on every profile (no profile maps it next to speed and torque with readable
+# registers between): it is read at most this share of the link's time, and at least every POSITION_MAX_GAP_S.
+# Between reads the travel is predicted from the speed. At 9600 baud a position read every 50 ms (the old pace)
+# took 60 % of the line: the samples the estimator needs came at half the rate the line carries.
+POSITION_SHARE = 0.12
+POSITION_MIN_GAP_S = 0.05
+POSITION_MAX_GAP_S = 0.4
+
+
+@dataclass
+class Trace:
+    t: list[float] = field(default_factory=list)
+    speed: list[float] = field(default_factory=list)
+    torque: list[float] = field(default_factory=list)
+    position: list[float | None] = field(default_factory=list)   # None where position was not read
+    # When speed and torque cannot share one request (SD25 reads at most 10 registers), the speed is read a
+    # request earlier: its own times, to bring it onto the torque's time base before the fit.
+    speed_t: list[float] = field(default_factory=list)
+
+    def aligned_speed(self) -> list[float]:
+        """Speed at the torque's sample times (linear between speed reads); the speed itself if read together."""
+        if len(self.speed_t) != len(self.t) or len(self.t) < 2:
+            return list(self.speed)
+        return [float(v) for v in np.interp(self.t, self.speed_t, self.speed)]
+
+    def save(self, path: Path) -> None:
+        try:
+            with path.open("w", newline="") as fh:
+                w = csv.writer(fh)
+                w.writerow(["t_s", "speed_rpm", "torque_pct", "position_rev"])
+                for t, v, q, x in zip(self.t, self.speed, self.torque, self.position, strict=True):
+                    w.writerow([f"{t:.5f}", f"{v:.2f}", f"{q:.2f}", "" if x is None else f"{x:.4f}"])
+        except OSError as exc:
+            raise UsageError(f"cannot write {path}: {exc.strerror}") from None
+
+
+class TravelLimitReached(Exception):
+    """Raised by Sampler.sample when the band covered exceeds the limit (the caller words it)."""
+
+
+class Sampler:
+    """One drive's identification samples and the travel band they show."""
+
+    def __init__(self, drive: Drive, timing: Clock, travel_limit_rev: float,
+                 beat: Callable[[], None] | None = None) -> None:
+        p = drive.profile
+        self.drive, self.timing, self.limit, self.beat = drive, timing, travel_limit_rev, beat
+        self.speed_e, self.torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
+        self.pos_e = p.role("position_feedback")
+        self.together = len(coalesce_reads(p, [self.speed_e, self.torque_e])) == 1    # one request carries both
+        # Position free with speed and torque (same number of requests): read it with every sample.
+        self.pos_free = self.pos_e is not None and len(coalesce_reads(p, [self.speed_e, self.torque_e, self.pos_e])) \
+            == len(coalesce_reads(p, [self.speed_e, self.torque_e]))
+        self.counts = p.motor.counts_per_rev if p.motor is not None else 1
+        self.trace = Trace()
+        self.t0 = timing.now()
+        self.pos: float | None = None
+        self.pos_t = self.t0
+        self.pos_every = POSITION_MIN_GAP_S
+        self.lo = self.hi = self.pred = 0.0
+
+    @property
+    def travel_rev(self) -> float:
+        return self.hi - self.lo
+
+    def elapsed(self) -> float:
+        return self.timing.now() - self.t0
+
+    def rate(self) -> float:
+        """Samples per second so far."""
+        elapsed = self.elapsed()
+        return (len(self.trace.t) - 1) / elapsed if elapsed > 0 and self.trace.t else 0.0
+
+    def interval(self) -> float:
+        """The last sampling interval (0 before the second sample)."""
+        t = self.trace.t
+        return t[-1] - t[-2] if len(t) > 1 else 0.0
+
+    def _read(self) -> tuple[float, float, int | None]:
+        d, trace = self.drive, self.trace
+        pos_raw = None
+        if self.together:
+            entries = [self.speed_e, self.torque_e] + ([self.pos_e] if self.pos_free and self.pos_e else [])
+            readings = d.read_entries(entries)
+            if len(readings) > 2:
+                pos_raw = readings[2].raw
+        else:
+            readings = d.read_entries([self.speed_e])
+            trace.speed_t.append(self.timing.now() - self.t0)
+            readings += d.read_entries([self.torque_e])
+        return float(raw_to_eng(self.speed_e, readings[0].raw)), float(raw_to_eng(self.torque_e, readings[1].raw)), \
+            pos_raw
+
+    def sample(self) -> None:
+        """One sample of speed and torque (and position when due); raises TravelLimitReached past the limit."""
+        trace = self.trace
+        speed, torque, pos_raw = self._read()
+        now = self.timing.now()
+        if trace.t:   # travel between position reads, from the speed (checked before it is reached)
+            self.pred += 0.5 * (speed + trace.speed[-1]) / 60.0 * (now - self.t0 - trace.t[-1])
+        trace.t.append(now - self.t0)
+        trace.speed.append(speed)
+        trace.torque.append(torque)
+        trace.position.append(None)
+        if pos_raw is not None:
+            self._position(pos_raw / self.counts, now)
+        elif self.pos_e is not None and (self.pos is None or now - self.pos_t >= self.pos_every):
+            start = self.timing.now()
+            x = self.drive.read_entries([self.pos_e])[0].raw / self.counts
+            took = self.timing.now() - start
+            self.pos_every = min(POSITION_MAX_GAP_S, max(POSITION_MIN_GAP_S, took / POSITION_SHARE))
+            self._position(x, self.timing.now())
+        # Travel from the position reads, predicted from the speed between them (from the speed alone where the
+        # profile has no usable position feedback).
+        self.lo, self.hi = min(self.lo, self.pred), max(self.hi, self.pred)
+        if self.hi - self.lo > self.limit:
+            raise TravelLimitReached
+        if self.beat is not None:
+            self.beat()
+
+    def _position(self, x: float, now: float) -> None:
+        self.trace.position[-1] = x
+        self.pos, self.pos_t, self.pred = x, now, x
+        first = len(self.trace.t) == 1
+        self.lo, self.hi = (x, x) if first else (min(self.lo, x), max(self.hi, x))
