@@ -20,9 +20,9 @@ from servotool.tuning.preflight import FEATURE
 # registers between): it is read at most this share of the link's time, and at least every POSITION_MAX_GAP_S.
 # Between reads the travel is predicted from the speed. At 9600 baud a position read every 50 ms (the old pace)
 # took 60 % of the line: the samples the estimator needs came at half the rate the line carries.
-POSITION_SHARE = 0.12
+POSITION_SHARE = 0.06
 POSITION_MIN_GAP_S = 0.05
-POSITION_MAX_GAP_S = 0.4
+POSITION_MAX_GAP_S = 0.5
 
 
 @dataclass
@@ -85,9 +85,9 @@ class Sampler:
         return self.timing.now() - self.t0
 
     def rate(self) -> float:
-        """Samples per second so far."""
-        elapsed = self.elapsed()
-        return (len(self.trace.t) - 1) / elapsed if elapsed > 0 and self.trace.t else 0.0
+        """Samples per second so far, first to last (the motion's own set-up and put-back writes left out)."""
+        t = self.trace.t
+        return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else 0.0
 
     def interval(self) -> float:
         """The last sampling interval (0 before the second sample)."""
