@@ -36,10 +36,21 @@ class Trace:
     speed_t: list[float] = field(default_factory=list)
 
     def aligned_speed(self) -> list[float]:
-        """Speed at the torque's sample times (linear between speed reads); the speed itself if read together."""
+        """Speed at the torque's sample times; the speed itself if read together.
+
+        Cubic (Hermite, slopes from the neighbours) between speed reads, held after the last: a straight line
+        between reads half an interval away misplaces a curving speed (a sluggish loop rings through its ramps), and
+        SD25 at 19200 gave J 2-3 % high, outside its 3 sigma, with it (the cubic: within 1 %)."""
         if len(self.speed_t) != len(self.t) or len(self.t) < 2:
             return list(self.speed)
-        return [float(v) for v in np.interp(self.t, self.speed_t, self.speed)]
+        ts, v, t = np.asarray(self.speed_t), np.asarray(self.speed), np.asarray(self.t)
+        slope = np.gradient(v, ts)
+        i = np.clip(np.searchsorted(ts, t) - 1, 0, ts.size - 2)
+        h = ts[i + 1] - ts[i]
+        x = np.clip((t - ts[i]) / h, 0.0, 1.0)
+        out = ((2 * x**3 - 3 * x**2 + 1) * v[i] + (x**3 - 2 * x**2 + x) * h * slope[i]
+               + (3 * x**2 - 2 * x**3) * v[i + 1] + (x**3 - x**2) * h * slope[i + 1])
+        return [float(s) for s in out]
 
     def save(self, path: Path) -> None:
         try:
@@ -141,3 +152,4 @@ class Sampler:
         self.pos, self.pos_t, self.pred = x, now, x
         first = len(self.trace.t) == 1
         self.lo, self.hi = (x, x) if first else (min(self.lo, x), max(self.hi, x))
+
