@@ -62,7 +62,7 @@ def drive_method_dead_man(drive: Drive) -> DeadManBound:
     route stops nothing moves only with the user's acknowledgement (drive.dead_man_waived), and the link must keep
     the beat. No manual gives the identification's speed: the bound is taken at the motor's rated speed.
     unverified: whether a drive's communication timeout also stops its own identification (no manual says; the
-    simulated DSX7E's does)."""
+    simulated DSX7E's watchdog does not watch it, its identification ends by itself within Pn515 revolutions)."""
     motor = drive.profile.motor
     speed = motor.rated_speed_rpm if motor is not None else 3000.0
     bound = deadman.bound(drive, speed, min(0.1, keepalive_interval_s(drive)), None, drive.dead_man_waived)
