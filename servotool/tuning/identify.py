@@ -18,7 +18,7 @@ from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.planning import PILOT_SHARE, TIME_BUDGET_S, TORQUE_SHARE, MotionPlan
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
-from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached
+from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
 
 __all__ = ["IdentificationFailed", "IdentificationRefused", "Identifier", "Result", "Trace", "TravelExceeded"]
 
@@ -93,9 +93,11 @@ class Identifier:
         assert motor is not None
         # Fast links give many samples per ramp: allow windows long enough to span ~1/5 s.
         cfg = replace(settings, max_window_intervals=max(6, int(rate / 5)))
-        return estimate_inertia(self.trace.t, self.trace.aligned_speed(), self.trace.torque,
-                                rated_torque_nm=motor.rated_torque_nm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
-                                torque_limit_pct=torque_limit, settings=cfg)
+        est = estimate_inertia(self.trace.t, self.trace.aligned_speed(), self.trace.torque,
+                               rated_torque_nm=motor.rated_torque_nm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
+                               torque_limit_pct=torque_limit, settings=cfg)
+        return quantization_floor(est, self.trace, self.p.need_role("torque_feedback", FEATURE).scale,
+                                  motor.rated_torque_nm, cfg.max_rel_uncertainty)
 
     # ----- drive method --------------------------------------------------------------------------------------
     def run_drive(self, timeout_s: float = 30.0, keep: bool = True) -> Result:

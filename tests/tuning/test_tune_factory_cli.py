@@ -26,8 +26,10 @@ SD25_AT_9600 = ("issue 16 item 1 unmet on SD25 at 9600: speed and torque take tw
 @pytest.mark.parametrize("profile", [
     pytest.param("sd25", marks=pytest.mark.xfail(reason=SD25_AT_9600, strict=False)), "sdc", "is620p", "dsx7e"])
 def test_identification_through_the_cli_at_the_factory_line_speed(cli, profile):
+    """A load of 20 (under about 10 the 1 % torque steps of SD25, SDC and IS620P make the result too uncertain
+    within 2 rev at these line speeds: refused, as the bench counts)."""
     p = load_profile(profile)
-    assert cli("sim", "config", "--profile", profile, "--load-ratio", "10", "--friction", "0.05",
+    assert cli("sim", "config", "--profile", profile, "--load-ratio", "20", "--friction", "0.05",
                "--line-baud", str(p.line.baud)).code == 0
     for args in SETUP[profile]:
         cmd = ("sim", "reset", "-P", profile, "--power-cycle") if args is None else \
@@ -37,5 +39,5 @@ def test_identification_through_the_cli_at_the_factory_line_speed(cli, profile):
     r = cli("--port", "sim", "--profile", profile, "tune", "inertia", "--yes", "--json", "--dry-run", *ack)
     assert r.code == 0, r.err
     res = r.json()
-    assert res["ratio"] == pytest.approx(10.0, abs=max(3 * res["ratio_std"], 0.03 * 11))
+    assert res["ratio"] == pytest.approx(20.0, abs=max(3 * res["ratio_std"], 0.03 * 21))
     assert res["travel_rev"] <= 2.0
