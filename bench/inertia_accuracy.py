@@ -42,10 +42,26 @@ from servotool.drive import Drive, coalesce_reads
 from servotool.errors import ServoError
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
+from servotool.sim.plant import Plant
 from servotool.sim.virtual import TURNAROUND_S, VirtualLink, make_motion_setup, wire_time
 from servotool.tuning.tune import TuneRequest, TuneResult, tune_inertia
 
 TRAVEL_REV = 2.0
+
+
+def fit_brake(plant: Plant) -> None:
+    """A holding brake that also stops the axis the instant the servo goes off (bench/off_model.py's loads; the
+    --profiles table uses the simulator's own brake, as the CLI sees it)."""
+    step = plant._step
+
+    def braked() -> None:
+        if plant.mode == "off":
+            plant.w = plant._w_meas = 0.0
+            plant._t_applied = plant._t_filtered = plant._t_cmd = plant._t_delayed = 0.0
+            return
+        step()
+
+    plant._step = braked  # type: ignore[method-assign]
 
 
 FACTORY_BAUD = {"sd25": 9600, "sdc": 9600, "is620p": 57600, "dsx7e": 115200}
