@@ -12,33 +12,46 @@ Targets: median |error| <= 2 %, worst <= 5 %, travel <= 2 rev, time <= 10 s, no 
 uncertainty should bound the error (|error| <= 3 sigma).
 
 Run: python bench/inertia_accuracy.py [--quick]
-     python bench/inertia_accuracy.py --profiles [--quick]   all four profiles at their factory line speed and 19200
-     (SD25 9600, SDC 9600, IS620P 57600, DSX7E 115200; issue 16's targets: accepted >= 95 %, median <= 1 %, worst
-     <= 3 %, true value within 3 sigma in >= 95 %)
+     python bench/inertia_accuracy.py --profiles [--quick]
+--profiles: all four profiles at their factory line speed (SD25 9600 8N1, SDC 9600 8O1, IS620P 57600, DSX7E 115200)
+and at 19200, through tune_inertia as the CLI runs it (its motion route, hold and keep-alive; drives without a
+dead-man route moved as with --no-dead-man), over a seeded sample of issue 16's machines (loads 0-50, Coulomb up to
+30 % of rated, viscous, gravity +-40 % on a braked axis, noise up to 1 %); --quick: 14 machines per row, a few
+minutes; else 60. Targets per row (issue 16): accepted >= 95 % (a refusal is a miss; reasons are printed grouped),
+median |error of J_total| <= 1 %, worst <= 3 %, the true value within the reported 3 sigma in >= 95 %, each run
+within 2 rev and 10 s; and the identification samples at >= 0.8x what the line carries for speed and torque back
+to back ('share'). The wire time counts 11 bits a character whatever the format (8N1 is 10: a real 8N1 line is
+about 10 % faster than modelled).
 """
 
 from __future__ import annotations
 
 import argparse
 import itertools
+import math
 import os
+import random
+import re
 import statistics
 import tempfile
+from collections import Counter
+from dataclasses import dataclass, field
 
 from servotool.clock import VirtualClock
-from servotool.drive import Drive
+from servotool.drive import Drive, coalesce_reads
 from servotool.errors import ServoError
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import Plant
-from servotool.sim.virtual import VirtualLink, make_motion_setup
+from servotool.sim.virtual import TURNAROUND_S, VirtualLink, make_motion_setup, wire_time
 from servotool.tuning.tune import TuneRequest, TuneResult, tune_inertia
 
 TRAVEL_REV = 2.0
 
 
 def fit_brake(plant: Plant) -> None:
-    """A holding brake: the axis stays put while the servo is off (released instantly when it comes on)."""
+    """A holding brake that also stops the axis the instant the servo goes off (bench/off_model.py's loads; the
+    --profiles table uses the simulator's own brake, as the CLI sees it)."""
     step = plant._step
 
     def braked() -> None:
@@ -53,54 +66,124 @@ def fit_brake(plant: Plant) -> None:
 
 FACTORY_BAUD = {"sd25": 9600, "sdc": 9600, "is620p": 57600, "dsx7e": 115200}
 
+# Issue 16's machines: loads 0-50, Coulomb friction up to 30 % of rated, viscous friction, gravity +-40 %, noise up
+# to 1 %. A run draws one level of each (seeded); gravity runs on a braked axis, as the sim's brake does by default.
+LOADS = [0.0, 1.0, 5.0, 10.0, 20.0, 37.0, 50.0]
+COULOMB = [0.01, 0.05, 0.1, 0.2, 0.3]
+VISCOUS = [0.0, 0.0005, 0.001]           # fraction of rated torque per rad/s
+GRAVITY = [-0.4, -0.2, 0.0, 0.2, 0.4]
+NOISE = [0.0, 0.002, 0.005, 0.01]
+
 
 def identify_once(ratio: float, friction: float, gravity: float, noise: float, baud: int, seed: int,
-                  brake: bool = True, profile_id: str = "dsx7e") -> TuneResult:
-    """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine."""
+                  brake: bool = True, profile_id: str = "dsx7e", viscous: float = 0.0005) -> TuneResult:
+    """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine; a drive
+    without a dead-man route is moved as the CLI moves it with --no-dead-man."""
     profile = load_profile(profile_id)
     clock = VirtualClock(1000.0)
     sim = build_drive(profile, 1, clock, persist=False)
-    sim.settings.update(load_ratio=ratio, friction=friction, load_torque=gravity, noise=noise, seed=seed)
+    sim.settings.update(load_ratio=ratio, friction=friction, viscous=viscous, load_torque=gravity, noise=noise,
+                        seed=seed, brake=1 if brake else 0)
     sim.firmware.reconfigure()
     make_motion_setup(sim)
-    if brake:
-        fit_brake(sim.firmware.plant)
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
+    drive.dead_man_waived = True
     return tune_inertia(drive, TuneRequest(travel_rev=TRAVEL_REV, dry_run=True), clock=clock)
 
 
-def profiles_table(quick: bool) -> None:
-    """Every profile at its factory line speed and at 19200, over loads, friction, gravity and noise."""
-    loads = [0.0, 5.0, 20.0, 50.0] if quick else [0.0, 1.0, 5.0, 10.0, 20.0, 37.0, 50.0]
-    frictions = [0.02, 0.3] if quick else [0.01, 0.1, 0.3]
-    gravities = [0.0, 0.4] if quick else [-0.4, 0.0, 0.2, 0.4]
-    noises = [0.002] if quick else [0.002, 0.01]
-    print(f"{'profile':>7} {'baud':>6} {'runs':>5} {'accepted':>9} {'median%':>8} {'worst%':>7} {'in3sig':>7} "
-          f"{'samp/s':>7}  refusals")
+def line_rate(profile_id: str, baud: int) -> float:
+    """Samples/s the line carries for the estimator's entries (speed and torque, in as few requests as the profile
+    allows), back to back with nothing else on the line."""
+    p = load_profile(profile_id)
+    entries = [p.need_role("speed_feedback", "bench"), p.need_role("torque_feedback", "bench")]
+    return 1.0 / sum(wire_time(3, count, baud) + TURNAROUND_S for _a, count, _g in coalesce_reads(p, entries))
+
+
+def reason_of(exc: ServoError) -> str:
+    """A refusal's reason without its figures, to group them."""
+    text = str(exc).removeprefix("identification refused: ")
+    return re.sub(r"[-+]?\d+(\.\d+)?", "N", text.split(";")[0].split(": use")[0])[:90]
+
+
+@dataclass
+class Cell:
+    """The runs of one profile at one baud."""
+
+    profile: str
+    baud: int
+    runs: int = 0
+    errors: list[float] = field(default_factory=list)       # |error| % of J_total, accepted runs
+    within: int = 0                                          # true value within the reported 3 sigma
+    over: int = 0                                            # over 2 rev or 10 s
+    rates: list[float] = field(default_factory=list)
+    reasons: Counter[str] = field(default_factory=Counter)
+
+    def add(self, ratio: float, run: TuneResult | ServoError) -> None:
+        self.runs += 1
+        if isinstance(run, ServoError):
+            self.reasons[reason_of(run)] += 1
+            return
+        est = run.identified.estimate
+        assert est is not None
+        err = abs(run.ratio - ratio) / (1.0 + ratio) * 100
+        self.errors.append(err)
+        self.within += abs(run.ratio - ratio) <= 3 * est.ratio_std + 1e-9
+        self.over += (run.identified.travel_used_rev or 0.0) > TRAVEL_REV or run.seconds > 10.0
+        self.rates.append(run.identified.samples_per_s)
+
+    def targets(self) -> dict[str, bool]:
+        n, ok = self.runs, len(self.errors)
+        return {"accepted >= 95 %": ok >= 0.95 * n, "median <= 1 %": ok > 0 and statistics.median(self.errors) <= 1,
+                "worst <= 3 %": ok > 0 and max(self.errors) <= 3, "in 3 sigma >= 95 %": ok > 0 and self.within >= 0.95
+                * ok, "2 rev, 10 s": ok > 0 and self.over == 0}
+
+    def row(self) -> str:
+        ok, e = len(self.errors), self.errors
+        line = line_rate(self.profile, self.baud)
+        rate = statistics.median(self.rates) if self.rates else 0.0
+        unmet = [k for k, v in self.targets().items() if not v]
+        return (f"{self.profile:>7} {self.baud:>6} {self.runs:>4} {ok:>4} {ok / self.runs:>4.0%} "
+                f"{statistics.median(e) if e else math.nan:>7.2f} {max(e) if e else math.nan:>7.2f} "
+                f"{self.within:>3}/{ok:<3} {self.over:>4} {rate:>6.0f} {line:>6.0f} {rate / line:>5.2f}  "
+                + ("met" if not unmet else "UNMET: " + ", ".join(unmet)))
+
+
+def draws(quick: bool, seed: int = 16) -> list[tuple[float, float, float, float, float]]:
+    """The machines of one cell: a seeded sample of the grid (the same for every profile and baud)."""
+    rng = random.Random(seed)
+    grid = list(itertools.product(LOADS, COULOMB, VISCOUS, GRAVITY, NOISE))
+    return rng.sample(grid, 14 if quick else 60)
+
+
+def profiles_table(quick: bool) -> bool:
+    """Every profile at its factory line speed and at 19200 through tune_inertia; returns whether all targets met."""
+    machines = draws(quick)
+    print(f"{len(machines)} machines per row (seeded sample of loads {LOADS}, Coulomb {COULOMB} x rated, viscous "
+          f"{VISCOUS} x rated per rad/s, gravity {GRAVITY} x rated, noise {NOISE})")
+    print(f"{'profile':>7} {'baud':>6} {'runs':>4} {'accepted':>9} {'median%':>7} {'worst%':>7} {'in3sig':>7} "
+          f"{'>2rev':>4} {'samp/s':>6} {'line/s':>6} {'share':>5}  targets")
+    cells = []
     for pid, factory in FACTORY_BAUD.items():
-        for baud in sorted({factory, 19200}):
-            errs, within, rates, reasons = [], 0, [], []
-            grid = list(itertools.product(loads, frictions, gravities, noises))
-            for n, (ratio, fr, gr, nz) in enumerate(grid):
+        for baud in sorted({factory, 19200}, reverse=True):
+            cell = Cell(pid, baud)
+            for n, (ratio, fr, visc, gr, nz) in enumerate(machines):
                 try:
-                    r = identify_once(ratio, fr, gr, nz, baud, seed=n + 1, profile_id=pid)
+                    run: TuneResult | ServoError = identify_once(ratio, fr, gr, nz, baud, seed=n + 1, profile_id=pid,
+                                                                 viscous=visc)
                 except ServoError as exc:
-                    reasons.append(str(exc).split(":")[0] if "refused" not in str(exc) else
-                                   str(exc).split(": ", 1)[1].split(" (")[0].split(";")[0])
-                    continue
-                est = r.identified.estimate
-                assert est is not None
-                err = abs(r.ratio - ratio) / (1.0 + ratio) * 100
-                errs.append(err)
-                within += err <= 3 * est.ratio_std / (1.0 + r.ratio) * 100 + 1e-9
-                rates.append(r.identified.samples_per_s)
-            common = statistics.mode(reasons) if reasons else ""
-            med = f"{statistics.median(errs):.2f}" if errs else "-"
-            worst = f"{max(errs):.2f}" if errs else "-"
-            rate = f"{statistics.median(rates):.0f}" if rates else "-"
-            print(f"{pid:>7} {baud:>6} {len(grid):>5} {len(errs):>4} {len(errs) / len(grid):>4.0%} {med:>8} "
-                  f"{worst:>7} {within:>3}/{len(errs):<3} {rate:>7}  {len(reasons)}"
-                  + (f" (most: {common})" if common else ""), flush=True)
+                    run = exc
+                cell.add(ratio, run)
+            print(cell.row(), flush=True)
+            cells.append(cell)
+    print("\nrefusals (each counts as a miss):")
+    for cell in cells:
+        for reason, count in cell.reasons.most_common():
+            print(f"  {cell.profile:>7} {cell.baud:>6} {count:>3} x {reason}")
+    met = all(all(c.targets().values()) for c in cells)
+    print("targets (accepted >= 95 %, median <= 1 %, worst <= 3 %, in 3 sigma >= 95 %, <= 2 rev and 10 s; "
+          "'share': identification samples/s over what the line carries for speed and torque, target >= 0.8): "
+          + ("all met" if met else "NOT all met"))
+    return met
 
 
 def main() -> None:

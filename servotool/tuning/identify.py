@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
-from pathlib import Path
-
-import numpy as np
+from dataclasses import dataclass, replace
 
 from servotool.clock import Clock, RealClock
-from servotool.drive import Drive, coalesce_reads
-from servotool.errors import ServoError, UsageError
+from servotool.drive import Drive
+from servotool.errors import ServoError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry
 from servotool.model.roles import status_bit
@@ -22,6 +18,9 @@ from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.planning import PILOT_SHARE, TIME_BUDGET_S, TORQUE_SHARE, MotionPlan
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
+from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
+
+__all__ = ["IdentificationFailed", "IdentificationRefused", "Identifier", "Result", "Trace", "TravelExceeded"]
 
 
 class IdentificationFailed(ServoError):
@@ -32,33 +31,6 @@ class IdentificationFailed(ServoError):
 
 class TravelExceeded(IdentificationFailed):
     """The axis moved further than the travel limit; the motion was stopped."""
-
-
-@dataclass
-class Trace:
-    t: list[float] = field(default_factory=list)
-    speed: list[float] = field(default_factory=list)
-    torque: list[float] = field(default_factory=list)
-    position: list[float | None] = field(default_factory=list)   # None where position was not read
-    # When speed and torque cannot share one request (SD25 reads at most 10 registers), the speed is read a
-    # request earlier: its own times, to bring it onto the torque's time base before the fit.
-    speed_t: list[float] = field(default_factory=list)
-
-    def aligned_speed(self) -> list[float]:
-        """Speed at the torque's sample times (linear between speed reads); the speed itself if read together."""
-        if len(self.speed_t) != len(self.t) or len(self.t) < 2:
-            return list(self.speed)
-        return [float(v) for v in np.interp(self.t, self.speed_t, self.speed)]
-
-    def save(self, path: Path) -> None:
-        try:
-            with path.open("w", newline="") as fh:
-                w = csv.writer(fh)
-                w.writerow(["t_s", "speed_rpm", "torque_pct", "position_rev"])
-                for t, v, q, x in zip(self.t, self.speed, self.torque, self.position, strict=True):
-                    w.writerow([f"{t:.5f}", f"{v:.2f}", f"{q:.2f}", "" if x is None else f"{x:.4f}"])
-        except OSError as exc:
-            raise UsageError(f"cannot write {path}: {exc.strerror}") from None
 
 
 @dataclass
@@ -112,173 +84,20 @@ class Identifier:
 
     def _run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None,
                   rest: RestCheck | None) -> Result:
-        p, d = self.p, self.drive
-        beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
-        jogger = Jogger(d, beat_s, FEATURE, self.timing)
-        saved = jogger.settings_to_restore()
-        speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
-        pos_e = p.role("position_feedback")
-        jog_accel = p.need_role("jog_accel", FEATURE)
-        motor = p.motor
-        assert motor is not None
-        limit_e = p.role("torque_limit_fwd")
-        torque_limit = self._eng(limit_e) if limit_e is not None else None
-        old_ratio = self.current_ratio()
-        noise = rest.speed_noise_rpm if rest is not None else 0.0
-        stop_band = max(3.0, 4.0 * noise)
-        trace = self.trace = Trace()
-        t0 = self.timing.now()
-        counts = motor.counts_per_rev
-        state = {"pos": None, "pos_t": t0, "lo": 0.0, "hi": 0.0, "pred": 0.0}
-        guard: dict[str, float | None] = {"lo": None, "hi": None, "stretch": 1.0}
-        # The loop's lag (s): how much further than its ramp the axis coasted after a stop command, per speed. A
-        # speed loop configured for a fraction of the real inertia lags its ramps by tens of ms, more with high
-        # friction (the integral winds up at breakaway); the stop guard adds the travel of that lag.
-        lag = {"s": 0.0}
-        pos_every = 0.05   # position costs a request of its own: read it at 20 Hz, predict from speed between
-
-        together = len(coalesce_reads(p, [speed_e, torque_e])) == 1     # one request carries both
-
-        def sample() -> None:
-            if together:
-                readings = d.read_entries([speed_e, torque_e])
-            else:
-                readings = d.read_entries([speed_e])
-                trace.speed_t.append(self.timing.now() - t0)
-                readings += d.read_entries([torque_e])
-            now = self.timing.now()
-            speed = float(raw_to_eng(speed_e, readings[0].raw))
-            if trace.t:   # travel between position reads, from the speed (checked before it is reached)
-                state["pred"] += 0.5 * (speed + trace.speed[-1]) / 60.0 * (now - t0 - trace.t[-1])
-            trace.t.append(now - t0)
-            trace.speed.append(speed)
-            trace.torque.append(float(raw_to_eng(torque_e, readings[1].raw)))
-            trace.position.append(None)
-            if pos_e is not None and (state["pos"] is None or now - state["pos_t"] >= pos_every):
-                x = d.read_entries([pos_e])[0].raw / counts
-                trace.position[-1] = x
-                state["pos"], state["pos_t"], state["pred"] = x, self.timing.now(), x
-                state["lo"] = min(state["lo"], x) if len(trace.t) > 1 else x
-                state["hi"] = max(state["hi"], x) if len(trace.t) > 1 else x
-            # Travel from the position reads, predicted from the speed between them (from the speed alone where
-            # the profile has no usable position feedback).
-            x = state["pred"]
-            state["lo"], state["hi"] = min(state["lo"], x), max(state["hi"], x)
-            if state["hi"] - state["lo"] > plan.travel_limit_rev:
-                raise TravelExceeded(f"travel limit {plan.travel_limit_rev:g} rev reached: motion stopped; the "
-                                     "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel")
-            jogger.keepalive.beat_if_due()
-
-        ramp = plan.ramp_s
-
-        def move(direction: int, speed: float) -> tuple[float, float]:
-            """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
-            first = len(trace.t)
-            jogger.set_speed(speed)
-            jogger.set_ramp(eng_to_raw(jog_accel, ramp * 1000.0 * motor.rated_speed_rpm / speed))
-            jogger.command(direction)
-            start = self.timing.now()
-            while self.timing.now() - start < ramp:   # the drive's ramp reaches the speed in ramp_s
-                sample()
-                if guard["lo"] is not None:
-                    # Stop early where the stopping distance (the ramp's, stretched as the pilot showed) would
-                    # carry the axis out of its band: drift (gravity, overshoot) must not add up to the limit.
-                    v = abs(trace.speed[-1])
-                    stop_rev = guard["stretch"] * v * v * ramp / (2 * speed) / 60.0
-                    # ... plus the travel until the stop command can act: the next sample and the write
-                    stop_rev += v / 60.0 * 2.0 * (trace.t[-1] - trace.t[-2] if len(trace.t) > 1 else 0.0)
-                    stop_rev += v / 60.0 * lag["s"]
-                    if (state["pred"] + stop_rev > guard["hi"]) if direction > 0 else \
-                            (state["pred"] - stop_rev < guard["lo"]):
-                        break
-            jogger.command(0)
-            stop = self.timing.now()
-            at_stop, v_stop = state["pred"], abs(trace.speed[-1]) if trace.speed else 0.0
-            while self.timing.now() - stop < 3 * ramp + 0.5:
-                sample()
-                if self.timing.now() - stop >= ramp and abs(trace.speed[-1]) < stop_band:
-                    break
-            sample()
-            sample()                      # two samples at rest separate this move from the next
-            if v_stop > stop_band:
-                coast = abs(state["pred"] - at_stop) - v_stop * v_stop * ramp / (2 * speed) / 60.0
-                lag["s"] = max(lag["s"], coast / (v_stop / 60.0))
-            active = active_alarm(d)
-            if active:
-                raise IdentificationFailed(f"the drive stopped the identification with alarm {active}")
-            peak = max((abs(q) for q in trace.torque[first:]), default=0.0)
-            return state["hi"] - state["lo"], peak
-
-        both = len(plan.directions) > 1
-        settings = EstimatorSettings(fit_load_torque=both)
-        est: InertiaEstimate | None = None
-        cycles = 0
-        try:
-            # Pilot cycle at reduced speed: how far the axis really goes per nominal revolution (a badly matched
-            # speed loop overshoots) and how much torque the acceleration takes, before the full test.
-            pilot = plan.speed_rpm * PILOT_SHARE
-            if progress:
-                progress(f"pilot move at {pilot:.0f} rpm")
-            excursion, peak = 0.0, 0.0
-            sample()                      # the axis's real position: the travel band is around it, not around 0
-            origin = state["pred"]
-            for direction in plan.directions:
-                excursion, pk = move(direction, pilot)
-                peak = max(peak, pk)
-            nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
-            limit_rev = plan.travel_limit_rev
-            lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
-            guard.update(lo=lo, hi=lo + 0.9 * limit_rev, stretch=max(1.0, excursion / nominal))
-            # Excursion and torque grow in proportion to the speed at a fixed ramp time.
-            speed = plan.speed_rpm
-            stretch = float(guard["stretch"] or 1.0)
-            if stretch > 1.5:
-                # The loop cannot follow the ramps (far-off inertia ratio: an under-damped loop): slower ramps at
-                # a lower speed (the same travel) keep its swing inside the travel band.
-                factor = min(2.0, stretch / 1.5, 0.5 / ramp)
-                ramp, speed = ramp * factor, speed / factor
-                guard["stretch"] = stretch / factor
-            if excursion > 0:
-                room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
-                speed = min(speed, pilot * plan.ramp_s / ramp * room / (excursion * (plan.repeats if not both else 1)))
-            if torque_limit is not None and peak > 0:
-                speed = min(speed, pilot * TORQUE_SHARE * torque_limit / peak)
-            cycle_s = (self.timing.now() - t0) * 1.1
-            for rep in range(plan.repeats):
-                if plan.adaptive and rep >= 2:
-                    if self.timing.now() - t0 + cycle_s > TIME_BUDGET_S:
-                        break
-                    est = self._estimate(settings, torque_limit, rate=len(trace.t) / (self.timing.now() - t0))
-                    if est.ok and est.j_std_kgm2 <= 0.5 * settings.max_rel_uncertainty * est.j_total_kgm2:
-                        break
-                for direction in plan.directions:
-                    if progress:
-                        progress(f"move {rep + 1}/{plan.repeats} {'forward' if direction > 0 else 'reverse'} "
-                                 f"at {speed:.0f} rpm")
-                    move(direction, speed)
-                cycles += 1
-        except BaseException:
-            jogger.stop_quietly()
-            raise
-        finally:
-            jogger.leave_and_restore(saved)
-        elapsed = self.timing.now() - t0
-        rate = (len(trace.t) - 1) / elapsed if elapsed > 0 else 0.0
-        est = self._estimate(settings, torque_limit, rate)
-        result = Result("host", old_ratio, est.load_ratio, est, trace, plan, state["hi"] - state["lo"], elapsed,
-                        rate, cycles)
-        if not est.ok:
-            raise IdentificationRefused(f"identification refused: {est.reason}", result)
-        return result
+        run = _HostRun(self, plan, progress, rest)
+        self.trace = run.sampler.trace
+        return run.run()
 
     def _estimate(self, settings: EstimatorSettings, torque_limit: float | None, rate: float) -> InertiaEstimate:
         motor = self.p.motor
         assert motor is not None
         # Fast links give many samples per ramp: allow windows long enough to span ~1/5 s.
         cfg = replace(settings, max_window_intervals=max(6, int(rate / 5)))
-        return estimate_inertia(self.trace.t, self.trace.aligned_speed(), self.trace.torque,
-                                rated_torque_nm=motor.rated_torque_nm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
-                                torque_limit_pct=torque_limit, settings=cfg)
+        est = estimate_inertia(self.trace.t, self.trace.aligned_speed(), self.trace.torque,
+                               rated_torque_nm=motor.rated_torque_nm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
+                               torque_limit_pct=torque_limit, settings=cfg)
+        return quantization_floor(est, self.trace, self.p.need_role("torque_feedback", FEATURE).scale,
+                                  motor.rated_torque_nm, cfg.max_rel_uncertainty)
 
     # ----- drive method --------------------------------------------------------------------------------------
     def run_drive(self, timeout_s: float = 30.0, keep: bool = True) -> Result:
@@ -320,3 +139,166 @@ class Identifier:
         if not keep and new_raw != old_raw:
             write_one(d, ratio_e, old_raw)
         return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)
+
+
+class _HostRun:
+    """One host identification: the pilot, the planned cycles and the fit, on one Jogger and one Sampler."""
+
+    def __init__(self, ident: Identifier, plan: MotionPlan, progress: Callable[[str], None] | None,
+                 rest: RestCheck | None) -> None:
+        p, d = ident.p, ident.drive
+        self.ident, self.plan, self.progress, self.timing = ident, plan, progress, ident.timing
+        beat_s = ident.keepalive_s if ident.keepalive_s is not None else keepalive_interval_s(d)
+        self.jogger = Jogger(d, beat_s, FEATURE, self.timing)
+        self.jog_accel = p.need_role("jog_accel", FEATURE)
+        assert p.motor is not None
+        self.rated_rpm = p.motor.rated_speed_rpm
+        limit_e = p.role("torque_limit_fwd")
+        self.torque_limit = ident._eng(limit_e) if limit_e is not None else None
+        self.old_ratio = ident.current_ratio()
+        self.stop_band = max(3.0, 4.0 * (rest.speed_noise_rpm if rest is not None else 0.0))
+        self.sampler = Sampler(d, self.timing, plan.travel_limit_rev, self._beat)
+        self.ramp = plan.ramp_s
+        # Stop early where the stopping distance would leave the band [lo, hi] (set after the pilot).
+        self.band: tuple[float, float] | None = None
+        self.stretch = 1.0
+        # The loop's lag (s): how much further than its ramp the axis coasted after a stop command, per speed. A
+        # speed loop configured for a fraction of the real inertia lags its ramps by tens of ms, more with high
+        # friction (the integral winds up at breakaway); the stop guard adds the travel of that lag.
+        self.lag_s = 0.0
+
+    def _beat(self) -> None:
+        # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
+        # take samples' time on a slow line.
+        bound = self.jogger.dead_man
+        if bound is None or bound.bounded:
+            self.jogger.keepalive.beat_if_due()
+
+    def sample(self) -> None:
+        try:
+            self.sampler.sample()
+        except TravelLimitReached:
+            raise TravelExceeded(f"travel limit {self.plan.travel_limit_rev:g} rev reached: motion stopped; the "
+                                 "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel"
+                                 ) from None
+
+    def _must_stop(self, direction: int, speed: float) -> bool:
+        """Whether the stopping distance (the ramp's, stretched as the pilot showed, plus the travel until a stop
+        command can act and the loop's lag) would carry the axis out of its band: drift (gravity, overshoot) must
+        not add up to the limit."""
+        if self.band is None:
+            return False
+        s = self.sampler
+        v = abs(s.trace.speed[-1])
+        stop_rev = self.stretch * v * v * self.ramp / (2 * speed) / 60.0
+        stop_rev += v / 60.0 * (2.0 * s.interval() + self.lag_s)
+        lo, hi = self.band
+        return s.pred + stop_rev > hi if direction > 0 else s.pred - stop_rev < lo
+
+    def move(self, direction: int, speed: float) -> tuple[float, float]:
+        """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
+        s, jogger, trace = self.sampler, self.jogger, self.sampler.trace
+        first = len(trace.t)
+        jogger.set_speed(speed)
+        jogger.set_ramp(eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed))
+        jogger.command(direction)
+        start = self.timing.now()
+        while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
+            self.sample()
+            if self._must_stop(direction, speed):
+                break
+        jogger.command(0)
+        stop = self.timing.now()
+        at_stop, v_stop = s.pred, abs(trace.speed[-1]) if trace.speed else 0.0
+        while self.timing.now() - stop < 3 * self.ramp + 0.5:
+            self.sample()
+            if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
+                break
+        self.sample()
+        self.sample()                      # two samples at rest separate this move from the next
+        if v_stop > self.stop_band:
+            coast = abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0
+            self.lag_s = max(self.lag_s, coast / (v_stop / 60.0))
+        active = active_alarm(self.ident.drive)
+        if active:
+            raise IdentificationFailed(f"the drive stopped the identification with alarm {active}")
+        peak = max((abs(q) for q in trace.torque[first:]), default=0.0)
+        return s.travel_rev, peak
+
+    def pilot(self) -> float:
+        """Pilot cycle at reduced speed: how far the axis really goes per nominal revolution (a badly matched speed
+        loop overshoots) and how much torque the acceleration takes, before the full test; returns its speed."""
+        plan = self.plan
+        both = len(plan.directions) > 1
+        pilot = plan.speed_rpm * PILOT_SHARE
+        if self.progress:
+            self.progress(f"pilot move at {pilot:.0f} rpm")
+        excursion, peak = 0.0, 0.0
+        self.sample()                      # the axis's real position: the travel band is around it, not around 0
+        origin = self.sampler.pred
+        for direction in plan.directions:
+            excursion, pk = self.move(direction, pilot)
+            peak = max(peak, pk)
+        nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
+        limit_rev = plan.travel_limit_rev
+        lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
+        self.band, self.stretch = (lo, lo + 0.9 * limit_rev), max(1.0, excursion / nominal)
+        return self._test_speed(pilot, excursion, peak)
+
+    def _test_speed(self, pilot: float, excursion: float, peak: float) -> float:
+        """The planned speed, within the travel band and the torque share the pilot extrapolates to."""
+        plan = self.plan
+        both = len(plan.directions) > 1
+        speed = plan.speed_rpm     # excursion and torque grow in proportion to the speed at a fixed ramp time
+        if self.stretch > 1.5:
+            # The loop cannot follow the ramps (far-off inertia ratio: an under-damped loop): slower ramps at
+            # a lower speed (the same travel) keep its swing inside the travel band.
+            factor = min(2.0, self.stretch / 1.5, 0.5 / self.ramp)
+            self.ramp, speed = self.ramp * factor, speed / factor
+            self.stretch /= factor
+        if excursion > 0:
+            room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
+            speed = min(speed, pilot * plan.ramp_s / self.ramp * room / (excursion * (plan.repeats if not both else 1)))
+        if self.torque_limit is not None and peak > 0:
+            speed = min(speed, pilot * TORQUE_SHARE * self.torque_limit / peak)
+        return speed
+
+    def cycles(self, speed: float, settings: EstimatorSettings) -> int:
+        """The planned cycles (adaptive: until the estimate is precise enough, within the time budget)."""
+        plan, s = self.plan, self.sampler
+        cycle_s = s.elapsed() * 1.1
+        done = 0
+        for rep in range(plan.repeats):
+            if plan.adaptive and rep >= 2:
+                if s.elapsed() + cycle_s > TIME_BUDGET_S:
+                    break
+                est = self.ident._estimate(settings, self.torque_limit, rate=s.rate())
+                if est.ok and est.j_std_kgm2 <= 0.5 * settings.max_rel_uncertainty * est.j_total_kgm2:
+                    break
+            for direction in plan.directions:
+                if self.progress:
+                    self.progress(f"move {rep + 1}/{plan.repeats} {'forward' if direction > 0 else 'reverse'} "
+                                  f"at {speed:.0f} rpm")
+                self.move(direction, speed)
+            done += 1
+        return done
+
+    def run(self) -> Result:
+        settings = EstimatorSettings(fit_load_torque=len(self.plan.directions) > 1)
+        jogger = self.jogger
+        saved = jogger.settings_to_restore()
+        try:
+            cycles = self.cycles(self.pilot(), settings)
+        except BaseException:
+            jogger.stop_quietly()
+            raise
+        finally:
+            jogger.leave_and_restore(saved)
+        s = self.sampler
+        rate = s.rate()
+        est = self.ident._estimate(settings, self.torque_limit, rate)
+        result = Result("host", self.old_ratio, est.load_ratio, est, s.trace, self.plan, s.travel_rev, s.elapsed(),
+                        rate, cycles)
+        if not est.ok:
+            raise IdentificationRefused(f"identification refused: {est.reason}", result)
+        return result

@@ -12,7 +12,10 @@ from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import Profile
 from servotool.model.roles import motion_route, status_bit
+from servotool.motion import deadman
+from servotool.motion.deadman import DeadManBound
 from servotool.motion.jogger import Jogger
+from servotool.motion.keepalive import keepalive_interval_s
 from servotool.ops import alarms
 from servotool.ops.status import servo_is_on
 
@@ -43,13 +46,28 @@ def check_profile(profile: Profile, method: str, feature: str | None = None) -> 
 
 
 def preflight(drive: Drive, method: str) -> None:
-    """Profile, link, alarm and servo state; raises with one clear line."""
+    """Profile, link, alarm and servo state, and the dead-man; raises with one clear line."""
     check_profile(drive.profile, method)
+    if method == "drive":
+        drive_method_dead_man(drive)
     active = active_alarm(drive)
     if active:
         raise UsageError(f"refusing to move: alarm {active} is active (clear it first)")
     if servo_is_on(drive) or (method == "host" and Jogger(drive, feature=FEATURE).servo_already_on()):
         raise UsageError("refusing to move: the servo is on (enabled from elsewhere); switch it off first")
+
+
+def drive_method_dead_man(drive: Drive) -> DeadManBound:
+    """The dead-man of the drive's own identification, by the host method's rule (motion/deadman): a drive whose
+    route stops nothing moves only with the user's acknowledgement (drive.dead_man_waived), and the link must keep
+    the beat. No manual gives the identification's speed: the bound is taken at the motor's rated speed.
+    unverified: whether a drive's communication timeout also stops its own identification (no manual says; the
+    simulated DSX7E's watchdog does not watch it, its identification ends by itself within Pn515 revolutions)."""
+    motor = drive.profile.motor
+    speed = motor.rated_speed_rpm if motor is not None else 3000.0
+    bound = deadman.bound(drive, speed, min(0.1, keepalive_interval_s(drive)), None, drive.dead_man_waived)
+    deadman.check(bound, drive.dead_man_waived)
+    return bound
 
 
 def active_alarm(drive: Drive) -> str | None:

@@ -152,3 +152,18 @@ def test_a_profile_without_an_inertia_ratio_parameter_is_measured_and_nothing_wr
     res = tune_inertia(d, TuneRequest(), clock=clock)
     assert res.ratio == pytest.approx(5.0, rel=0.05) and res.identified.old_ratio is None
     assert res.proposal.parameter is None and res.written == [] and res.persisted is None
+
+
+def test_the_drive_method_keeps_the_dead_man_rule_of_the_host_method(sim_dir):
+    """The drive's own identification moves the axis too: on a drive whose dead-man route stops nothing it needs the
+    same acknowledgement (--no-dead-man) as the host method, and nothing moves without it."""
+    from servotool.model.profile import DeadManRoute
+
+    sim_drive, d, clock = _virtual(ratio=3.0)
+    d.profile = replace(d.profile, dead_man=DeadManRoute(route="none", reason="no watchdog here", source="test"))
+    with pytest.raises(UsageError, match="no dead-man on this drive"):
+        tune_inertia(d, TuneRequest(method="drive", dry_run=True), clock=clock)
+    assert sim_drive.firmware.plant.position_rev == 0.0 and sim_drive.firmware.ident is None     # nothing moved
+    d.dead_man_waived = True
+    res = tune_inertia(d, TuneRequest(method="drive", dry_run=True), clock=clock)
+    assert res.ratio == pytest.approx(3.0, rel=0.1)

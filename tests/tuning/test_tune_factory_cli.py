@@ -1,0 +1,43 @@
+"""Identification through the CLI at each drive's factory line settings (issue 16): `sim config --line-baud` makes
+the simulator answer at the wire time of the drive's factory baud, and `tune inertia` runs as a user runs it."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.model.loader import load_profile
+from servotool.motion.deadman import route_of
+
+# The drive setup each profile's motion_setup asks for, as a user does it (None: a power cycle).
+SETUP = {
+    "dsx7e": [],
+    "is620p": [["param", "set", "H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1",
+                "H17-02=28"]],
+    "sdc": [["param", "set", "PN4=3"]],
+    "sd25": [["param", "set", "--save", "Po407.X=26", "Po408.X=27"], None, ["param", "set", "So-58.X=1"]],
+}
+
+SD25_AT_9600 = ("issue 16 item 1 unmet on SD25 at 9600: speed and torque take two requests (10-register limit, "
+                "L904 and L916 are 14 apart), 18 samples/s at most, and its torque reads in 1 % steps while 2 rev of "
+                "travel allow a few % of rated torque: too uncertain at low and medium loads "
+                "(bench/inertia_accuracy.py --profiles)")
+
+
+@pytest.mark.parametrize("profile", [
+    pytest.param("sd25", marks=pytest.mark.xfail(reason=SD25_AT_9600, strict=False)), "sdc", "is620p", "dsx7e"])
+def test_identification_through_the_cli_at_the_factory_line_speed(cli, profile):
+    """A load of 20 (under about 10 the 1 % torque steps of SD25, SDC and IS620P make the result too uncertain
+    within 2 rev at these line speeds: refused, as the bench counts)."""
+    p = load_profile(profile)
+    assert cli("sim", "config", "--profile", profile, "--load-ratio", "20", "--friction", "0.05",
+               "--line-baud", str(p.line.baud)).code == 0
+    for args in SETUP[profile]:
+        cmd = ("sim", "reset", "-P", profile, "--power-cycle") if args is None else \
+            ("--port", "sim", "--profile", profile, *args)
+        assert cli(*cmd).code == 0
+    ack = ["--no-dead-man"] if route_of(p).route == "none" else []
+    r = cli("--port", "sim", "--profile", profile, "tune", "inertia", "--yes", "--json", "--dry-run", *ack)
+    assert r.code == 0, r.err
+    res = r.json()
+    assert res["ratio"] == pytest.approx(20.0, abs=max(3 * res["ratio_std"], 0.03 * 21))
+    assert res["travel_rev"] <= 2.0
