@@ -4,7 +4,8 @@ Runs `servotool --port sim param get Pn004` (a new process each time, on the emb
 `python -c "import pymodbus.client"` alternately, 7 times each by default, and prints the medians and their ratio
 (target: at most 2x). Both run with their bytecode cached (PYTHONPYCACHEPREFIX in a temporary folder, even where
 PYTHONDONTWRITEBYTECODE is set: an installed package has its .pyc files), after one warm-up run of each, so that both
-find their files in the OS cache and servotool its compiled profile in the user cache.
+find their files in the OS cache and servotool its compiled profile in the cache (a temporary one: the user's is
+shared with every other copy of servotool, whose different model code replaces the entry).
 
     python bench/startup.py [--runs N]
 """
@@ -38,6 +39,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "SERVOTOOL_SIM_DIR": str(Path(tmp) / "sim"),
                "SERVOTOOL_CONFIG": str(Path(tmp) / "none.yaml"), "PYTHONPYCACHEPREFIX": str(Path(tmp) / "pyc"),
+               "SERVOTOOL_CACHE_DIR": str(Path(tmp) / "cache"),
                "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
         env.pop("PYTHONDONTWRITEBYTECODE", None)
         seconds(SERVOTOOL, env)

@@ -35,8 +35,8 @@ Each drive family is described by a YAML profile that keeps the vendor's own par
 (for example SD25 \fBPo109\fR, IS620P \fBH09\-06\fR, SDC \fBPN22\fR, DSX7E \fBPn004\fR).
 .PP
 The port is a serial device (\fB/dev/ttyUSB0\fR, \fBCOM3\fR), \fBtcp://\fIHOST\fB:\fIPORT\fR (RTU framing over a
-TCP serial gateway) or \fBsim\fR (a simulated drive served in\-process on a loopback socket; the client still
-speaks real RTU frames with CRC).
+TCP serial gateway) or \fBsim\fR (a simulated drive answering in the same process, as \fBsim serve\fR answers on a
+port; the client still speaks real RTU frames with CRC).
 Output that comes from a simulated drive says so once on standard error.
 .PP
 Anything that moves the motor first prints what stops the motor if this program stops (kill, crash, pulled

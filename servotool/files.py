@@ -7,7 +7,6 @@ the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and 
 
 from __future__ import annotations
 
-import glob
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -142,8 +141,9 @@ def sweep_temp(folder: Path, name: str = "") -> int:
     """Delete the temporary files write_atomic left in folder (for the target `name`, or all) when the process
     that made them is gone (a kill -9 between write and rename). Returns how many were removed."""
     removed = 0
-    try:
-        candidates = list(folder.glob(f".{glob.escape(name)}*.tmp"))
+    try:      # a plain listing: pathlib's glob compiles a pattern each time (3 folders at each command's start)
+        with os.scandir(folder) as listing:
+            candidates = [folder / e.name for e in listing if e.name.startswith(f".{name}") and e.name.endswith(".tmp")]
     except OSError:
         return 0
     for tmp in candidates:

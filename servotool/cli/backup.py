@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
@@ -13,8 +14,10 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
-from servotool.ops import backup, restore
 from servotool.ops.params import select
+
+if TYPE_CHECKING:     # imported by the commands that use them: `param get` and `set` share this group
+    from servotool.ops import backup, restore
 
 app = typer.Typer(help="Back up, compare and restore drive parameters; factory reset.")
 
@@ -37,6 +40,8 @@ def backup_cmd(
     as_json: bool = JSON_OPT,
 ) -> None:
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
+    from servotool.ops import backup
+
     kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
     if kind not in ("yaml", "yml", "csv"):
         raise UsageError(f"--format must be yaml or csv, not '{fmt or kind}'")
@@ -70,6 +75,8 @@ def diff_cmd(
 
     A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning.
     """
+    from servotool.ops import backup
+
     opts = state(ctx).options
     if file2 is not None and from_default:
         raise UsageError("give FILE2 or --factory, not both")
@@ -138,6 +145,8 @@ def restore_cmd(
     as_json: bool = JSON_OPT,
 ) -> None:
     """Write only the differing entries, verified, after an automatic backup; roll back on failure."""
+    from servotool.ops import backup, restore
+
     profile = resolve(state(ctx).options).profile
     b = backup.load(file, profile, force=force)       # every file problem is refused before connecting
     for w in b.warnings:
@@ -201,6 +210,8 @@ def reset_cmd(
     as_json: bool = JSON_OPT,
 ) -> None:
     """Factory defaults through the drive's own function, after an automatic backup."""
+    from servotool.ops import backup, restore
+
     with drive(ctx) as d:
         d.profile.need_role("factory_reset", "param reset")
         if not confirm(f"Reset {d.profile.model} unit {d.unit} to factory defaults?", yes):

@@ -13,7 +13,6 @@ from servotool.cli import complete, fastparse
 from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, state
 from servotool.cli.lazy import lazy, lazy_group
-from servotool.cli.messages import error_code, error_text
 from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.config import ConnectOptions
 from servotool.errors import ServoError
@@ -108,6 +107,8 @@ def run() -> None:
     try:
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
+        from servotool.cli.messages import error_code, error_text  # words for a failure, loaded on one
+
         sys.exit(_fail(error_code(exc), error_text(exc, given.options, Verbosity.level > 0), exc.exit_code,
                        as_json))
     except (KeyboardInterrupt, typer.Abort):

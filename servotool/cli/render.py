@@ -1,9 +1,12 @@
-"""Output helpers shared by the commands: rich tables on stdout, messages on stderr, JSON.
+"""Output helpers shared by the commands: tables on stdout, messages on stderr, JSON.
 
 Every table printed on `out` is fitted to the width: text columns (names, descriptions) wrap but keep at least
 NAME_MIN columns, the least useful columns go first (DROP_ORDER, or the table's own `drop`), and a table that
 still does not fit is shown as one block per row. Piped output takes the width of the terminal the user looks at
 (COLUMNS, else stderr's terminal) and, with no terminal at all, is not wrapped.
+
+rich draws what needs it (a terminal's styles, a table to fit, live views, progress) and is imported then; plain
+lines and plain tables (cli/grid.py) are written as they are, so that a one-shot command starts without it.
 """
 
 from __future__ import annotations
@@ -14,12 +17,14 @@ import re
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any
+from functools import cache
+from typing import IO, TYPE_CHECKING, Any
 
-from rich.cells import cell_len
-from rich.console import Console, Group
-from rich.table import Table
-from rich.text import Text
+from servotool.cli.grid import Grid
+
+if TYPE_CHECKING:
+    from rich.console import Console, Group
+    from rich.table import Table
 
 NAME_MIN = 20           # a wrapped name or description keeps at least this many columns: readable
 UNLIMITED = 10_000      # "no width": nothing wraps
@@ -43,15 +48,112 @@ def _stdout_width() -> int | None:
         return UNLIMITED
 
 
-class FittingConsole(Console):
-    """A console that fits every table it prints to its width."""
+def _is_terminal(file: IO[str]) -> bool:
+    """Whether rich would style what goes to `file` (its rule: TTY_COMPATIBLE, FORCE_COLOR, else isatty)."""
+    if (compatible := os.environ.get("TTY_COMPATIBLE", "")) in ("0", "1"):
+        return compatible == "1"
+    if (force := os.environ.get("FORCE_COLOR")) is not None:
+        return force != ""
+    isatty = getattr(file, "isatty", None)
+    try:
+        return bool(isatty and isatty())
+    except ValueError:      # closed
+        return False
 
-    def print(self, *objects: Any, **kwargs: Any) -> None:  # type: ignore[override]
-        super().print(*(fit(o, self.width) if isinstance(o, Table) else o for o in objects), **kwargs)
+
+@cache
+def _fitting_console() -> type[Console]:
+    from rich.console import Console
+    from rich.table import Table
+
+    class FittingConsole(Console):
+        """A console that fits every table it prints to its width."""
+
+        def print(self, *objects: Any, **kwargs: Any) -> None:  # type: ignore[override]
+            super().print(*(fit(o, self.width) if isinstance(o, Grid | Table) else o for o in objects), **kwargs)
+
+    return FittingConsole
 
 
-out = FittingConsole(highlight=False, width=_stdout_width())
-err = Console(stderr=True, highlight=False, soft_wrap=True)
+def __getattr__(name: str) -> Any:
+    """rich's classes as this module's attributes (render.Console, render.FittingConsole), loaded when asked for."""
+    if name == "FittingConsole":
+        return _fitting_console()
+    if name == "Console":
+        from rich.console import Console
+
+        return Console
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+class _Stream:
+    """stdout (`out`) or stderr (`err`) as a rich console whose console is made when first needed: until then a
+    plain line or a plain table (cli/grid.py) that rich would print unchanged is written as it is. Once the console
+    exists (a terminal's styles, a live view, progress), everything goes through it, in order."""
+
+    def __init__(self, stderr: bool) -> None:
+        self._stderr = stderr
+        self._console: Console | None = None
+
+    @property
+    def console(self) -> Console:
+        if self._console is None:
+            if self._stderr:
+                from rich.console import Console
+
+                self._console = Console(stderr=True, highlight=False, soft_wrap=True, emoji=False)
+            else:
+                self._console = _fitting_console()(highlight=False, emoji=False, width=_stdout_width())
+        return self._console
+
+    @property
+    def is_terminal(self) -> bool:
+        return self._console.is_terminal if self._console is not None else _is_terminal(self._file())
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.console, name)
+
+    def __enter__(self) -> Console:
+        return self.console.__enter__()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.console.__exit__(*exc)
+
+    def _file(self) -> IO[str]:
+        return sys.stderr if self._stderr else sys.stdout
+
+    def print(self, *objects: Any, **kwargs: Any) -> None:
+        text = self._plain(objects, kwargs) if self._console is None else None
+        if text is None:
+            self.console.print(*objects, **kwargs)
+            return
+        file = self._file()
+        file.write(text)
+        file.flush()
+
+    def _plain(self, objects: tuple[Any, ...], kwargs: dict[str, Any]) -> str | None:
+        """What rich would print for these, when it is plain text; None when rich must print it."""
+        if len(objects) != 1 or set(kwargs) - {"markup", "style"}:
+            return None
+        file, (o,) = self._file(), objects
+        if _is_terminal(file) and (not self._stderr or kwargs.get("style") or isinstance(o, Grid)):
+            return None        # styles show, and stdout's width is the terminal's: rich's
+        width = UNLIMITED if self._stderr else _stdout_width() or UNLIMITED
+        if isinstance(o, Grid):
+            utf = (getattr(file, "encoding", None) or "utf-8").lower().startswith("utf")   # else rich draws ASCII
+            return o.plain(width) if utf else None
+        if type(o) is not str or ("[" in o and kwargs.get("markup", True) is not False):
+            return None
+        lines = o.split("\n")
+        if not all(line.isprintable() for line in lines):
+            return None
+        if width != UNLIMITED and not all(line.isascii() and len(line) <= width for line in lines):
+            return None        # it would wrap
+        return o + "\n"
+
+
+out: Any = _Stream(stderr=False)
+err: Any = _Stream(stderr=True)
 
 
 class Verbosity:
@@ -111,17 +213,16 @@ def count(n: int, noun: str, plural: str | None = None) -> str:
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
 
 
-def table(*columns: str, title: str | None = None, drop: Sequence[str] | None = None) -> Table:
-    """A table of text cells; `drop` names the columns to give up first when it is too wide (default
-    DROP_ORDER)."""
-    t = Table(title=title, show_lines=False, header_style="bold", title_justify="left")
+def table(*columns: str, title: str | None = None, drop: Sequence[str] | None = None) -> Grid:
+    """A table of text cells (a rich Table where rich draws it); `drop` names the columns to give up first when it
+    is too wide (default DROP_ORDER)."""
+    t = Grid(title=title, drop=tuple(drop) if drop is not None else DROP_ORDER)
     for c in columns:
         t.add_column(c, justify="right" if c in RIGHT else "left", overflow="fold")
-    t.drop = tuple(drop) if drop is not None else DROP_ORDER   # type: ignore[attr-defined]
     return t
 
 
-def _cells(t: Table, i: int) -> list[str]:
+def _cells(t: Grid | Table, i: int) -> list[str]:
     return [str(c) for c in t.columns[i]._cells]
 
 
@@ -130,9 +231,12 @@ def _span(widths: Sequence[int]) -> int:
     return sum(widths) + 3 * len(widths) + 1
 
 
-def fit(t: Table, width: int) -> Table | Group:
+def fit(t: Grid | Table, width: int) -> Grid | Table | Group:
     """The table as it fits `width` columns: as is, with text columns wrapped, without its least useful columns,
     or as one block per row."""
+    from rich.cells import cell_len
+    from rich.table import Table
+
     n = len(t.columns)
     body = [max((cell_len(c) for c in _cells(t, i)), default=0) for i in range(n)]
     head = [cell_len(str(c.header)) for c in t.columns]
@@ -166,8 +270,11 @@ def fit(t: Table, width: int) -> Table | Group:
     return fitted
 
 
-def _vertical(t: Table, width: int) -> Group:
+def _vertical(t: Grid | Table, width: int) -> Group:
     """One block per row: the first cell, then 'Header: value' lines (for a table too wide for the screen)."""
+    from rich.console import Group
+    from rich.text import Text
+
     heads = [str(c.header) for c in t.columns]
     columns = [_cells(t, i) for i in range(len(heads))]
     lines: list[Text] = [Text(str(t.title), style="bold")] if t.title else []

@@ -1,27 +1,20 @@
 """The client side of the link: open a port (serial or RTU over TCP) and read/write registers over it, with
 servotool's own reply matching (link/exchange.py); decode an RTU reply frame (pymodbus' framer, the one use of
-pymodbus on this side).
+pymodbus on this side, imported there: a command talking to a drive needs no pymodbus).
 
 Everything else in servotool talks to `Link`, never to pymodbus directly, because pymodbus' API churns."""
 
 from __future__ import annotations
 
-import logging
 import select
 import socket
 from typing import TYPE_CHECKING
-
-from pymodbus.framer import FramerRTU
-from pymodbus.pdu import DecodePDU, ExceptionResponse
 
 from servotool.errors import DeviceError
 from servotool.errors import ModbusException as DriveException
 from servotool.link.exchange import Exchange, Wire
 from servotool.link.ports import LinkSettings, Trace, open_serial, open_tcp, parse_tcp
 from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, Request
-
-# pymodbus logs every dropped frame at error level; our own errors say what happened.
-logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 if TYPE_CHECKING:     # pyserial's platform module (serialposix imports fcntl) loads only with a real port
     import serial
@@ -30,20 +23,21 @@ if TYPE_CHECKING:     # pyserial's platform module (serialposix imports fcntl) l
 class ModbusLink:
     """RTU frames over a serial line or a TCP socket; every exchange goes through `Exchange`, which accepts only
     replies that provably answer their request. The port is opened here (pyserial, socket) so that an error names
-    its real cause (link.ports.port_problem)."""
+    its real cause (link.ports.port_problem). A `wire` given (the embedded simulator's, in this process) takes the
+    place of the port, as a line without gaps."""
 
-    def __init__(self, settings: LinkSettings, trace: Trace | None = None) -> None:
+    def __init__(self, settings: LinkSettings, trace: Trace | None = None, wire: Wire | None = None) -> None:
         self.settings = settings
-        tcp = parse_tcp(settings.port)
-        self._port: socket.socket | serial.Serial
-        wire: Wire
-        if tcp:
-            self._port = open_tcp(settings.port, settings.timeout)
-            wire = _SocketWire(self._port)
-        else:
+        serial_line = wire is None and not parse_tcp(settings.port)
+        self._port: socket.socket | serial.Serial | None = None
+        if serial_line:
             self._port = open_serial(settings.port, settings.line, settings.timeout)
             wire = _SerialWire(self._port)
-        silence = settings.silence if settings.silence is not None else 0.0 if tcp else _frame_gap(settings.line.baud)
+        elif wire is None:
+            self._port = open_tcp(settings.port, settings.timeout)
+            wire = _SocketWire(self._port)
+        silence = settings.silence if settings.silence is not None else \
+            _frame_gap(settings.line.baud) if serial_line else 0.0
         self._exchange = Exchange(wire, timeout=settings.timeout, retries=settings.retries, settle=silence,
                                   turnaround=settings.turnaround, echo=settings.echo, trace=trace)
 
@@ -71,7 +65,8 @@ class ModbusLink:
         self._exchange.flush_gap = 0.0
 
     def close(self) -> None:
-        self._port.close()
+        if self._port is not None:
+            self._port.close()
 
 
 def _frame_gap(baud: int) -> float:
@@ -126,6 +121,12 @@ def write_request_frame(unit: int, address: int, values: list[int], *, multiple:
 
 def parse_response_frame(frame: bytes) -> tuple[int, int, list[int]]:
     """(unit, function code, registers) of a response frame; DeviceError on a bad CRC or an exception reply."""
+    import logging
+
+    from pymodbus.framer import FramerRTU
+    from pymodbus.pdu import DecodePDU, ExceptionResponse
+
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # it logs a dropped frame as an error; ours says why
     _used, pdu = FramerRTU(DecodePDU(is_server=False)).handleFrame(frame, 0, 0)
     if pdu is None:
         raise DeviceError(f"not a valid RTU response frame (CRC or length): {frame.hex(' ')}")

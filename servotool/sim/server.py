@@ -10,6 +10,7 @@ import logging
 import socket
 import threading
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
@@ -17,68 +18,61 @@ from pymodbus.exceptions import NoSuchIdException
 from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
-from pymodbus.simulator.simcore import SimCore
 
 from servotool.errors import DeviceError
 from servotool.link.ports import open_serial, parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
-from servotool.sim.faults import FaultProxy, LineFaults
 from servotool.sim.firmware import build_drive
-from servotool.sim.registers import ILLEGAL_FUNCTION, ILLEGAL_VALUE, SimRefusal
-from servotool.sim.virtual import READ_CODES, wire_time
+from servotool.sim.line import WRITE_CODES, Line, refusal
 
-WRITE_CODES = (6, 16)
-MAX_READ, MAX_WRITE = 125, 123       # the specification's quantity limits (FC03/04 and FC16)
+if TYPE_CHECKING:     # the bad-line proxy loads only when faults are asked for (not for a plain --port sim)
+    from servotool.sim.faults import FaultProxy, LineFaults
+
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
-def _sim_device(drive: SimulatedDrive, lock: threading.Lock) -> SimDevice:
-    """A pymodbus SimDevice whose every access goes through the simulated drive."""
-    blocks: list[SimData] = []
-    for entry in sorted(drive.profile.entries, key=lambda e: e.address):
-        blocks.append(SimData(address=entry.address, count=entry.words, values=0, datatype=DataType.UINT16))
+class _Datastore:
+    """The line as the server's datastore (pymodbus calls it with each decoded request); a unit nobody serves stays
+    silent. pymodbus' own (SimCore) would first map every register between the lowest address and the highest (5 ms
+    of each DSX7E start, 20 ms of an IS620P one) for checks the drive makes anyway, and answers unknown ids with
+    exception 04."""
 
-    async def action(fc: int, start: int, address: int, count: int, regs: list[int], values: object) -> ExcCodes | None:
-        try:
-            with lock:
-                if fc not in READ_CODES + WRITE_CODES:
-                    return ExcCodes.ILLEGAL_FUNCTION
-                if values is not None:
-                    drive.write(address, [int(v) for v in values])  # type: ignore[union-attr]
-                elif fc in READ_CODES:
-                    regs[address - start: address - start + count] = drive.read(address, count)
-                # pymodbus also reads the block while serving a write; nothing to refresh then.
-            if drive.line_baud and (values is not None or fc in READ_CODES):
-                await asyncio.sleep(wire_time(fc, count, drive.line_baud))
-            return None
-        except SimRefusal as exc:
-            return ExcCodes(exc.code)
-        except Exception:  # a simulator bug must answer like a faulty slave, not kill the server
-            logging.getLogger("servotool.sim").exception("simulator failure")
-            return ExcCodes.DEVICE_FAILURE
+    def __init__(self, line: Line) -> None:
+        self.line = line
+        self._written: dict[tuple[int, int], list[int]] = {}
 
-    return SimDevice(id=drive.unit, simdata=blocks, action=action)
+    def device_ids(self) -> list[int]:
+        return list(self.line.drives)
 
-
-class _Line(SimCore):
-    """The drives on one line; a unit nobody serves stays silent, as on a real RS485 bus.
-
-    pymodbus 3.16's SimCore answers unknown ids with exception 04 instead; this restores silence.
-    """
-
-    def _known(self, device_id: int) -> None:
-        if device_id not in self.devices:
+    def _known(self, device_id: int) -> SimulatedDrive:
+        if (drive := self.line.drives.get(device_id)) is None:
             raise NoSuchIdException(f"unit {device_id}")
+        return drive
 
-    async def async_getValues(self, device_id: int, func_code: int, address: int, count: int = 1):  # type: ignore[override]
-        self._known(device_id)
-        return await super().async_getValues(device_id, func_code, address, count)
+    async def async_getValues(self, device_id: int, func_code: int, address: int, count: int = 1):
+        drive = self._known(device_id)
+        if func_code in WRITE_CODES:        # pymodbus reads a single write back for its reply: what was written
+            return self._written.pop((device_id, address), [0] * count)
+        return await self._serve(drive, func_code, address, count, None)
 
-    async def async_setValues(self, device_id: int, func_code: int, address: int, values):  # type: ignore[override]
-        self._known(device_id)
-        return await super().async_setValues(device_id, func_code, address, values)
+    async def async_setValues(self, device_id: int, func_code: int, address: int, values: list[int]):
+        drive = self._known(device_id)
+        written = [int(v) for v in values]
+        if isinstance(result := await self._serve(drive, func_code, address, len(written), written), ExcCodes):
+            return result
+        if func_code == 6:
+            self._written[(device_id, address)] = written
+        return None
 
+    async def _serve(self, drive: SimulatedDrive, fc: int, address: int, count: int,
+                     values: list[int] | None) -> list[int] | ExcCodes:
+        result, delay = self.line.serve(drive, fc, address, count, values)
+        if isinstance(result, int):
+            return ExcCodes(result)
+        if delay:
+            await asyncio.sleep(delay)
+        return result
 
 
 class _Refusal(ModbusPDU):
@@ -88,15 +82,15 @@ class _Refusal(ModbusPDU):
         super().__init__()
         self.function_code, self.code = function_code, code
 
-    async def datastore_update(self, context: _Line, device_id: int) -> ModbusPDU:  # type: ignore[override]
+    async def datastore_update(self, context: _Datastore, device_id: int) -> ModbusPDU:  # type: ignore[override]
         context._known(device_id)
         return ExceptionResponse(self.function_code, self.code)
 
 
 class _SpecDecoder(DecodePDU):
-    """Request decoding as the Modbus specification has a slave do it: a function the drive lacks is exception
-    01 at any address, a quantity out of range (0, over 125 read, over 123 written, a byte count that disagrees)
-    exception 03. pymodbus 3.16 answers both with the malformed `ID 80 01`, or with 02 at unmapped addresses."""
+    """Request decoding as the Modbus specification has a slave do it (sim.line.refusal): pymodbus 3.16 answers
+    a function the drive lacks or a quantity out of range with the malformed `ID 80 01`, or with 02 at unmapped
+    addresses."""
 
     def __init__(self) -> None:
         super().__init__(True)
@@ -105,19 +99,15 @@ class _SpecDecoder(DecodePDU):
         fc = frame[0] if frame else 0
         if fc & 0x80:
             return None
-        if fc not in READ_CODES + WRITE_CODES:
-            return _Refusal(fc, ILLEGAL_FUNCTION)
-        if fc != 6 and len(frame) >= 5:
-            count = int.from_bytes(frame[3:5], "big")
-            limit = MAX_READ if fc in READ_CODES else MAX_WRITE
-            if not 1 <= count <= limit or (fc == 16 and (len(frame) < 6 or frame[5] != 2 * count)):
-                return _Refusal(fc, ILLEGAL_VALUE)
+        if (code := refusal(frame)) is not None:
+            return _Refusal(fc, code)
         return super().decode(frame)
 
 
 async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lock: threading.Lock,
                  trace: Callable[[bool, bytes], None] | None):
-    devices = [_sim_device(d, lock) for d in drives]
+    # The server wants a datastore to start with; the line takes its place below.
+    devices = [SimDevice(id=d.unit, simdata=[SimData(address=0, datatype=DataType.UINT16)]) for d in drives]
 
     def hook(sending: bool, data: bytes) -> bytes:
         if trace:
@@ -143,7 +133,7 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
             stopbits=line.stopbits, bytesize=line.bytesize, trace_packet=hook if trace else None,
             ignore_missing_devices=True, broadcast_enable=True,      # unit 0: applied by every drive, unanswered
         )
-    server.context = _Line(devices)
+    server.context = _Datastore(Line(drives, lock))  # type: ignore[assignment]
     server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
@@ -171,6 +161,8 @@ def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | 
         server = await _start("tcp://127.0.0.1:0" if faults else port, drives, line or LineSettings(), lock, trace)
         bound = bound_port(server) if tcp else 0
         if faults is not None and tcp:
+            from servotool.sim.faults import FaultProxy
+
             proxy = FaultProxy(("127.0.0.1", bound), faults)
             try:
                 bound = await proxy.start(*tcp)
@@ -221,6 +213,8 @@ class EmbeddedSim:
         self._server = future.result(timeout=10)
         port = bound_port(self._server)
         if faults is not None:
+            from servotool.sim.faults import FaultProxy
+
             self.proxy = FaultProxy(("127.0.0.1", port), faults)
             port = asyncio.run_coroutine_threadsafe(self.proxy.start(), self._loop).result(timeout=10)
         self.port = f"tcp://127.0.0.1:{port}"

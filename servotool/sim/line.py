@@ -1,0 +1,93 @@
+"""The simulated drives on one line as a Modbus slave answers: request PDUs in, reply PDUs out.
+
+One home for what the slave does with a request, whichever way it came: pymodbus' server (sim/server.py: `sim
+serve`, tests' EmbeddedSim) hands it each request it decoded, and `--port sim` hands it request frames in this
+process (session.py), which needs neither pymodbus nor a thread nor a socket (a third of a one-shot command's
+start). As on a real RS485 bus a unit nobody serves stays silent, and so does every drive for a broadcast (unit 0)
+they all apply.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+from servotool.sim.device import SimulatedDrive
+from servotool.sim.registers import DEVICE_FAILURE, ILLEGAL_FUNCTION, ILLEGAL_VALUE, SimRefusal
+from servotool.sim.virtual import READ_CODES, wire_time
+
+WRITE_CODES = (6, 16)
+MAX_READ, MAX_WRITE = 125, 123       # the specification's quantity limits (FC03/04 and FC16)
+
+
+def refusal(pdu: bytes) -> int | None:
+    """The exception a slave answers before touching any register, as the Modbus specification has it: 01 for a
+    function the drive lacks (at any address), 03 for a quantity out of range (0, over 125 read, over 123
+    written, a byte count that disagrees); None for a request to serve."""
+    fc = pdu[0] if pdu else 0
+    if fc not in READ_CODES + WRITE_CODES:
+        return ILLEGAL_FUNCTION
+    if fc != 6 and len(pdu) >= 5:
+        count = int.from_bytes(pdu[3:5], "big")
+        limit = MAX_READ if fc in READ_CODES else MAX_WRITE
+        if not 1 <= count <= limit or (fc == 16 and (len(pdu) < 6 or pdu[5] != 2 * count)):
+            return ILLEGAL_VALUE
+    return None
+
+
+class Line:
+    """The drives on one line, by unit; `lock` serialises requests (a server's thread and others touching the
+    drives)."""
+
+    def __init__(self, drives: list[SimulatedDrive], lock: threading.Lock | None = None) -> None:
+        self.drives = {d.unit: d for d in drives}
+        self.lock = lock or threading.Lock()
+
+    def serve(self, drive: SimulatedDrive, fc: int, address: int, count: int,
+              values: list[int] | None) -> tuple[list[int] | int, float]:
+        """Registers read (none for a write) or the exception code, and the seconds the drive's emulated line
+        takes to answer (its `line_baud`; 0 without)."""
+        try:
+            with self.lock:
+                drive.bank.entries_in(address, count)      # an unmapped address is exception 02 before all else
+                if values is not None:
+                    drive.write(address, values)
+                    registers: list[int] = []
+                else:
+                    registers = drive.read(address, count)
+        except SimRefusal as exc:
+            return exc.code, 0.0
+        except Exception:  # a simulator bug must answer like a faulty slave, not kill the server
+            logging.getLogger("servotool.sim").exception("simulator failure")
+            return DEVICE_FAILURE, 0.0
+        return registers, wire_time(fc, count, drive.line_baud) if drive.line_baud else 0.0
+
+    def answer(self, unit: int, pdu: bytes) -> tuple[bytes | None, float]:
+        """The reply PDU to a request PDU for `unit` (None: silence) and the seconds before it is on the line."""
+        drive = self.drives.get(unit)
+        fc = pdu[0] if pdu else 0
+        if (drive is None and unit != 0) or fc & 0x80 or len(pdu) < 5:
+            return None, 0.0
+        if (code := refusal(pdu)) is not None:
+            return (bytes([fc | 0x80, code]) if unit else None), 0.0
+        address = int.from_bytes(pdu[1:3], "big")
+        if fc in READ_CODES:
+            count, values = int.from_bytes(pdu[3:5], "big"), None
+        elif fc == 6:
+            count, values = 1, [int.from_bytes(pdu[3:5], "big")]
+        else:
+            count = int.from_bytes(pdu[3:5], "big")
+            values = [int.from_bytes(pdu[6 + 2 * i: 8 + 2 * i], "big") for i in range(count)]
+            if len(pdu) != 6 + 2 * count:
+                return (bytes([fc | 0x80, ILLEGAL_VALUE]) if unit else None), 0.0
+        if unit == 0:       # a broadcast: every drive applies it, none answers
+            for each in self.drives.values():
+                self.serve(each, fc, address, count, values)
+            return None, 0.0
+        assert drive is not None
+        result, delay = self.serve(drive, fc, address, count, values)
+        if isinstance(result, int):
+            return bytes([fc | 0x80, result]), delay
+        if fc in READ_CODES:
+            return bytes([fc, 2 * count]) + b"".join(r.to_bytes(2, "big") for r in result), delay
+        return pdu[:5], delay       # FC06 repeats the request, FC16 gives the address and quantity
