@@ -23,21 +23,20 @@ if TYPE_CHECKING:     # pyserial's platform module (serialposix imports fcntl) l
 class ModbusLink:
     """RTU frames over a serial line or a TCP socket; every exchange goes through `Exchange`, which accepts only
     replies that provably answer their request. The port is opened here (pyserial, socket) so that an error names
-    its real cause (link.ports.port_problem). A `wire` given (the embedded simulator's, in this process) takes the
-    place of the port, as a line without gaps."""
+    its real cause (link.ports.port_problem)."""
 
-    def __init__(self, settings: LinkSettings, trace: Trace | None = None, wire: Wire | None = None) -> None:
+    def __init__(self, settings: LinkSettings, trace: Trace | None = None) -> None:
         self.settings = settings
-        serial_line = wire is None and not parse_tcp(settings.port)
-        self._port: socket.socket | serial.Serial | None = None
-        if serial_line:
-            self._port = open_serial(settings.port, settings.line, settings.timeout)
-            wire = _SerialWire(self._port)
-        elif wire is None:
+        tcp = parse_tcp(settings.port)
+        self._port: socket.socket | serial.Serial
+        wire: Wire
+        if tcp:
             self._port = open_tcp(settings.port, settings.timeout)
             wire = _SocketWire(self._port)
-        silence = settings.silence if settings.silence is not None else \
-            _frame_gap(settings.line.baud) if serial_line else 0.0
+        else:
+            self._port = open_serial(settings.port, settings.line, settings.timeout)
+            wire = _SerialWire(self._port)
+        silence = settings.silence if settings.silence is not None else 0.0 if tcp else _frame_gap(settings.line.baud)
         self._exchange = Exchange(wire, timeout=settings.timeout, retries=settings.retries, settle=silence,
                                   turnaround=settings.turnaround, echo=settings.echo, trace=trace)
 
@@ -65,8 +64,7 @@ class ModbusLink:
         self._exchange.flush_gap = 0.0
 
     def close(self) -> None:
-        if self._port is not None:
-            self._port.close()
+        self._port.close()
 
 
 def _frame_gap(baud: int) -> float:

@@ -1,10 +1,8 @@
-"""The simulated drives on one line as a Modbus slave answers: request PDUs in, reply PDUs out.
+"""The simulated drives on one line as a Modbus slave serves them: a decoded request in, registers or an exception out.
 
-One home for what the slave does with a request, whichever way it came: pymodbus' server (sim/server.py: `sim
-serve`, tests' EmbeddedSim) hands it each request it decoded, and `--port sim` hands it request frames in this
-process (session.py), which needs neither pymodbus nor a thread nor a socket (a third of a one-shot command's
-start). As on a real RS485 bus a unit nobody serves stays silent, and so does every drive for a broadcast (unit 0)
-they all apply.
+One home for what the slave does with a request: pymodbus' server (sim/server.py: `sim serve`, and the embedded
+simulator behind `--port sim`) hands it each request it decoded. As on a real RS485 bus a unit nobody serves stays
+silent, and so does every drive for a broadcast (unit 0) they all apply.
 """
 
 from __future__ import annotations
@@ -61,33 +59,3 @@ class Line:
             logging.getLogger("servotool.sim").exception("simulator failure")
             return DEVICE_FAILURE, 0.0
         return registers, wire_time(fc, count, drive.line_baud) if drive.line_baud else 0.0
-
-    def answer(self, unit: int, pdu: bytes) -> tuple[bytes | None, float]:
-        """The reply PDU to a request PDU for `unit` (None: silence) and the seconds before it is on the line."""
-        drive = self.drives.get(unit)
-        fc = pdu[0] if pdu else 0
-        if (drive is None and unit != 0) or fc & 0x80 or len(pdu) < 5:
-            return None, 0.0
-        if (code := refusal(pdu)) is not None:
-            return (bytes([fc | 0x80, code]) if unit else None), 0.0
-        address = int.from_bytes(pdu[1:3], "big")
-        if fc in READ_CODES:
-            count, values = int.from_bytes(pdu[3:5], "big"), None
-        elif fc == 6:
-            count, values = 1, [int.from_bytes(pdu[3:5], "big")]
-        else:
-            count = int.from_bytes(pdu[3:5], "big")
-            values = [int.from_bytes(pdu[6 + 2 * i: 8 + 2 * i], "big") for i in range(count)]
-            if len(pdu) != 6 + 2 * count:
-                return (bytes([fc | 0x80, ILLEGAL_VALUE]) if unit else None), 0.0
-        if unit == 0:       # a broadcast: every drive applies it, none answers
-            for each in self.drives.values():
-                self.serve(each, fc, address, count, values)
-            return None, 0.0
-        assert drive is not None
-        result, delay = self.serve(drive, fc, address, count, values)
-        if isinstance(result, int):
-            return bytes([fc | 0x80, result]), delay
-        if fc in READ_CODES:
-            return bytes([fc, 2 * count]) + b"".join(r.to_bytes(2, "big") for r in result), delay
-        return pdu[:5], delay       # FC06 repeats the request, FC16 gives the address and quantity

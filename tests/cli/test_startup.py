@@ -1,5 +1,5 @@
-"""Fast start: a one-shot command loads only what it uses (no numpy, pydantic or other commands' modules; on the
-embedded simulator neither pymodbus nor asyncio; piped, no rich)."""
+"""Fast start: a one-shot command loads only what it uses (no numpy, pydantic or other commands' modules;
+piped, no rich)."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ PROBE = """
 import atexit, json, sys
 def report():
     names = ("numpy", "pydantic", "yaml", "servotool.tuning", "servotool.commission", "servotool.cli.tune",
-             "servotool.cli.run", "servotool.cli.jog", "servotool.model.schema", "rich", "pymodbus", "asyncio",
-             "servotool.sim.server", "servotool.cli.messages", "servotool.ops.identity", "servotool.ops.restore")
+             "servotool.cli.run", "servotool.cli.jog", "servotool.model.schema", "rich",
+             "servotool.cli.messages", "servotool.ops.identity", "servotool.ops.restore")
     sys.stderr.write("LOADED " + json.dumps([n for n in names if n in sys.modules]) + "\\n")
 atexit.register(report)
 sys.argv = ["servotool", *sys.argv[1:]]

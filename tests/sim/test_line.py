@@ -1,4 +1,4 @@
-"""The simulator answers --port sim in this process exactly as its pymodbus server answers on a port."""
+"""The simulated slave answers as the Modbus specification has it, through pymodbus' server."""
 
 from __future__ import annotations
 
@@ -6,14 +6,10 @@ import socket
 
 import pytest
 
-from servotool.clock import VirtualClock
 from servotool.link.rtu import with_crc
 from servotool.model.loader import load_profile
-from servotool.session import SimWire
 from servotool.sim.firmware import build_drive
-from servotool.sim.line import Line
 from servotool.sim.server import EmbeddedSim
-from servotool.sim.virtual import wire_time
 
 SILENT = 0.3        # s without an answer that counts as silence
 
@@ -52,37 +48,28 @@ def _over_tcp(port: str, frames: list[bytes]) -> list[bytes]:
     return replies
 
 
-def _in_process(wire: SimWire, frames: list[bytes]) -> list[bytes]:
-    replies = []
-    for frame in frames:
-        wire.send(frame)
-        replies.append(wire.recv(SILENT))
-    return replies
+def _exception(fc: int, code: int) -> bytes:
+    return with_crc(bytes([1, fc | 0x80, code]))
 
 
 @pytest.mark.parametrize("profile", ["dsx7e", "is620p"])
-def test_in_process_replies_equal_the_servers(sim_dir, monkeypatch, profile):
+def test_the_servers_replies_follow_the_specification(sim_dir, profile):
+    """Each request gets what a Modbus slave owes it: data, the exception the specification names, or silence."""
     p = load_profile(profile)
     entry = p.entry(p.roles["inertia_ratio"])
     frames = _frames(entry.address)
-    monkeypatch.setenv("SERVOTOOL_SIM_DIR", str(sim_dir / "served"))
+    a = entry.address.to_bytes(2, "big")
     sim = EmbeddedSim([build_drive(p, 1)])
     try:
-        served = _over_tcp(sim.port, frames)
+        r = _over_tcp(sim.port, frames)
     finally:
         sim.close()
-    monkeypatch.setenv("SERVOTOOL_SIM_DIR", str(sim_dir / "in-process"))
-    assert _in_process(SimWire(Line([build_drive(p, 1)])), frames) == served
-    assert served[0] and served[-4] == b"" and served[-1] == b""
-
-
-def test_a_silent_unit_costs_the_timeout_and_a_reply_its_line_time(sim_dir):
-    clock = VirtualClock(100.0)
-    drive = build_drive(load_profile("dsx7e"), 1, clock, persist=False)
-    drive.settings["line_baud"] = 9600
-    wire = SimWire(Line([drive]), clock)
-    wire.send(with_crc(b"\x07\x03\x20\x04\x00\x01"))
-    assert wire.recv(0.5) == b"" and clock.now() == 100.5
-    wire.send(with_crc(b"\x01\x03\x20\x04\x00\x01"))
-    assert wire.recv(0.001) == b""             # not yet on the line at 9600 Bd
-    assert len(wire.recv(0.5)) == 7 and 100.5 + wire_time(3, 1, 9600) <= clock.now() < 100.6
+    assert r[0][:3] == b"\x01\x03\x02" and r[1][:3] == b"\x01\x04\x02" and r[1][3:5] == r[0][3:5]
+    assert r[2:6] == [_exception(3, 2), _exception(3, 3), _exception(3, 3), _exception(5, 1)]
+    assert r[6] == frames[6]                                    # a single write is answered by its own frame
+    assert r[7] == _exception(6, 3)
+    assert r[8] == with_crc(b"\x01\x10" + a + b"\x00\x01")
+    assert r[9] == _exception(16, 3)
+    assert r[10:12] == [b"", b""]                               # unknown unit, broadcast: silence
+    assert r[12] == with_crc(b"\x01\x03\x02\x00\xc8")        # the broadcast was applied
+    assert r[13] == b""                                         # a bad CRC: silence
