@@ -22,6 +22,7 @@ from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.planning import PILOT_SHARE, TIME_BUDGET_S, TORQUE_SHARE, MotionPlan
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
+from servotool.tuning.stable_hold import StableHold, pilot_settings
 
 
 class IdentificationFailed(ServoError):
@@ -116,6 +117,7 @@ class Identifier:
         beat_s = self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d)
         jogger = Jogger(d, beat_s, FEATURE, self.timing)
         saved = jogger.settings_to_restore()
+        hold = StableHold(d, jogger.route.kind, saved)    # a position hold stable for the unknown load
         speed_e, torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
         pos_e = p.role("position_feedback")
         jog_accel = p.need_role("jog_accel", FEATURE)
@@ -217,6 +219,7 @@ class Identifier:
             # Pilot cycle at reduced speed: how far the axis really goes per nominal revolution (a badly matched
             # speed loop overshoots) and how much torque the acceleration takes, before the full test.
             pilot = plan.speed_rpm * PILOT_SHARE
+            hold.before_pilot()
             if progress:
                 progress(f"pilot move at {pilot:.0f} rpm")
             excursion, peak = 0.0, 0.0
@@ -225,6 +228,9 @@ class Identifier:
             for direction in plan.directions:
                 excursion, pk = move(direction, pilot)
                 peak = max(peak, pk)
+            if hold.active:   # the pilot's rough estimate configures the loop for the main moves
+                rate = len(trace.t) / (self.timing.now() - t0)
+                hold.after_pilot(self._estimate(pilot_settings(settings), torque_limit, rate))
             nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
             limit_rev = plan.travel_limit_rev
             lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
