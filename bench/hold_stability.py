@@ -13,7 +13,7 @@ ratio, the position loop and the speed integral stay fast) until the travel guar
   alarm  runs the drive stopped with an alarm (following error, overload, overspeed)
   refused  other refusals (the estimate not trusted)
 
-Run: python bench/hold_stability.py [--quick] [--profiles is620p,sd25] [--seeds N]
+Run: python bench/hold_stability.py [--quick] [--profiles is620p,sd25] [--seeds N] [--baud 115200]
 """
 
 from __future__ import annotations
@@ -93,12 +93,12 @@ def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed:
 
 
 def sweep(profiles: list[str], loads: list[float], frictions: list[float], noises: list[float],
-          seeds: int) -> dict[tuple[str, float], Cell]:
+          seeds: int, baud: int | None = None) -> dict[tuple[str, float], Cell]:
     cells: dict[tuple[str, float], Cell] = {}
     for pid, load in itertools.product(profiles, loads):
         cell = cells.setdefault((pid, load), Cell())
         for n, (fr, nz, seed) in enumerate(itertools.product(frictions, noises, range(1, seeds + 1))):
-            cell.runs.append(run_once(pid, load, fr, nz, seed + 7 * n))
+            cell.runs.append(run_once(pid, load, fr, nz, seed + 7 * n, baud))
     return cells
 
 
@@ -123,13 +123,14 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="fewer loads, one friction, one seed")
     ap.add_argument("--profiles", default=",".join(FACTORY_BAUD), help="comma-separated profile ids")
     ap.add_argument("--seeds", type=int, default=None, help="seeds per (friction, noise)")
+    ap.add_argument("--baud", type=int, default=None, help="line speed (default: each drive's factory setting)")
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     loads = [0.0, 5.0, 20.0, 37.0, 49.0] if args.quick else [0.0, 2.0, 5.0, 10.0, 20.0, 30.0, 37.0, 43.0, 50.0]
     frictions = [0.05] if args.quick else [0.02, 0.1, 0.3]
     noises = [0.002] if args.quick else [0.002, 0.01]
     seeds = args.seeds if args.seeds is not None else (1 if args.quick else 2)
-    print_table(sweep([p for p in args.profiles.split(",") if p], loads, frictions, noises, seeds))
+    print_table(sweep([p for p in args.profiles.split(",") if p], loads, frictions, noises, seeds, args.baud))
 
 
 if __name__ == "__main__":

@@ -4,20 +4,25 @@ IS620P's segment route (issue 15) ends every move in the drive's position hold. 
 gain from the *configured* inertia ratio (H08-00 is a bandwidth in Hz, which it only is for the inertia H08-15
 describes), while the position gain H08-02 and the speed integral H08-01 are absolute. With a load far above the
 configured ratio the speed loop is slow, the position loop and the integral are not, and the hold swings with
-growing amplitude: at the factory gains (25 Hz, 31.83 ms, 40.0) and ratio 1.00 the margins model (tuning.margins)
-leaves the position loop no phase margin beyond a load of about 17; issue 16 saw 37 and 49 run into the travel
-guard. The CANopen manual prints the gains and H08-15 (0.00~120.00, default 1.00; L3260-3272) but no formula for
-how the ratio enters the speed loop, and its commissioning runs velocity mode at low speed before gains are adjusted
-(section 4.4 steps 8-9, L1447-1448); the drive's own offline identification (H09-05..H09-09) is a speed profile.
+growing amplitude: at the factory gains (25.0 Hz, 31.83 ms, 40.0) and ratio 1.00 the closed loop's poles
+(tuning.margins.least_damping) grow for any load above about 16; issue 16 saw 37 and 49 run into the travel guard.
+The CANopen manual prints the gains and H08-15 (0.00~120.00, default 1.00, "load moment-of-inertia ratio";
+L3260-3272) but no formula for how the ratio enters the speed loop (the usual Kp = 2 pi f J_motor (1 + ratio) is
+assumed, as in the simulator); its commissioning runs velocity mode at low speed before the gains are adjusted
+(section 4.4 steps 8-9, L1447-1448), and the drive's own offline identification (H09-05..H09-09) runs a speed
+profile, not a position hold.
 
 So, on a route that holds position, the identification
-  - before the pilot: lengthens the speed integral and then lowers the position gain as far as the margins need
-    for any load up to the ratio parameter's maximum at the configured ratio (never raising either);
-  - after the pilot: writes the pilot's rough estimate as the inertia ratio (the speed loop then has the bandwidth
-    its gain says) and takes the integral and position gain back towards the drive's own as far as the margins
-    allow for a load within PILOT_SPREAD of that estimate.
-Each change is a parameter written through ops.params.write_one, its original value recorded in the motion's
-settings to put back (motion.jogger.Jogger.leave_and_restore), so the drive ends as it was found.
+  - before the pilot: raises the ratio as far as an unloaded motor stays well damped (PILOT_LIGHT_DAMPING: a
+    stiffer loop breaks a heavy load away against friction), then lowers the position gain and, if that is not
+    enough, lengthens the speed integral until the hold and the speed loop stay damped (HOLD_MIN_DAMPING) for any
+    load up to the ratio parameter's maximum;
+  - after the pilot: writes the pilot's rough estimate as the ratio (never below the pilot's: the pilot measured
+    how far the loop lags its ramps, which a slower loop would exceed) and takes the position gain and integral
+    back to the drive's own as far as a load within PILOT_SPREAD of that estimate allows.
+Each change is a parameter written through ops.params.write_one (RAM only where the drive has a switch: the
+identification runs inside ops.eeprom.ram_writes), its original value recorded in the motion's settings to put
+back (motion.jogger.Jogger.leave_and_restore), so the drive ends as it was found.
 """
 
 from __future__ import annotations
@@ -32,17 +37,20 @@ from servotool.model.profile import Entry
 from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate
 from servotool.tuning.gains import LoopGains, rigidity_scale
-from servotool.tuning.margins import margins
+from servotool.tuning.margins import least_damping
 
-HOLD_MIN_PHASE_DEG = 35.0   # a temporary hold: well damped (a few % overshoot), not the 45° gains are written with
-HOLD_MIN_GAIN_DB = 4.0
+# The least damping ratio the loops' poles may have: a swing shrinks to 40 % or less each cycle (exp(-2 pi z)).
+HOLD_MIN_DAMPING = 0.15
+PILOT_LIGHT_DAMPING = 0.3  # the pilot's raised ratio keeps an unloaded motor's loops at least this damped
+PILOT_RATIO_STEP = 1.25
 HEAVIEST_WITHOUT_PARAMETER = 100.0   # the heaviest load assumed where the profile maps no inertia-ratio parameter
 PILOT_SPREAD = 2.0          # after the pilot: stable for a true J_total within [J/2, 2 J] of its estimate
 PILOT_MAX_REL_STD = 0.25    # a pilot estimate with a larger relative uncertainty of J_total is not used
 # The pilot's fit may use smaller speed changes than the final one: a sluggish loop (the ratio far below the load)
 # hardly follows the pilot's ramps, and a rough value (biased low by about 1/excitation^2 before the fit's noise
 # correction) is all the ratio needs.
-PILOT_MIN_EXCITATION = 3.0
+PILOT_MIN_EXCITATION = 1.5
+PILOT_MIN_WINDOWS = 4
 INTEGRAL_STEP = 1.5
 POSITION_STEP = 1.5
 MIN_POSITION_PER_S = 1.0    # never below: the hold must still pull the axis back where its move ended
@@ -109,9 +117,26 @@ class StableHold:
             return None
         self._read()
         assert self.original is not None
-        chosen = self.safe(self.original, 0.0, self.heaviest(), self.original)
+        start = HoldSetting(self._pilot_ratio(), self.original.integral_ms, self.original.position_per_s)
+        chosen = self.safe(start, 0.0, self.heaviest(), self.original)
         self._apply(chosen)
         return chosen
+
+    def _pilot_ratio(self) -> float:
+        """The highest ratio (never below the configured one) that keeps an unloaded motor's loops damped by
+        PILOT_LIGHT_DAMPING: a stiffer speed loop breaks a heavy load away against friction in the pilot."""
+        assert self.original is not None
+        e = self.entries.get("inertia_ratio")
+        if e is None:
+            return self.original.ratio
+        top = self.drive.profile.load_ratio_from_param(float(raw_to_eng(e, e.max)))
+        ratio = self.original.ratio
+        while True:
+            bigger = self._fit_ratio(min(top, (1.0 + ratio) * PILOT_RATIO_STEP - 1.0))
+            if bigger <= ratio or self.damping(HoldSetting(bigger, self.original.integral_ms,
+                                                           self.original.position_per_s), 0.0) < PILOT_LIGHT_DAMPING:
+                return ratio
+            ratio = bigger
 
     def after_pilot(self, estimate: InertiaEstimate | None) -> HoldSetting | None:
         """The pilot's rough estimate as the configured ratio, the hold as near the drive's own as is safe for a load
@@ -121,8 +146,8 @@ class StableHold:
         assert estimate is not None
         ratio_e = self.entries.get("inertia_ratio")
         # Only ever raised: the pilot measured how far the loop lags its ramps, which a slower loop would exceed.
-        ratio = max(self.original.ratio, self._fit_ratio(estimate.load_ratio)) if ratio_e is not None else \
-            self.original.ratio
+        pilot_ratio = (self.setting or self.original).ratio
+        ratio = max(pilot_ratio, self._fit_ratio(estimate.load_ratio)) if ratio_e is not None else pilot_ratio
         j = 1.0 + estimate.load_ratio
         lo, hi = max(0.0, j / PILOT_SPREAD - 1.0), j * PILOT_SPREAD - 1.0
         start = HoldSetting(ratio, self.original.integral_ms, self.original.position_per_s)
@@ -137,34 +162,36 @@ class StableHold:
         return max(0.0, p.load_ratio_from_param(float(raw_to_eng(e, raw))))
 
     # ----- the margins ---------------------------------------------------------------------------------------
-    def stable(self, setting: HoldSetting, lo: float, hi: float) -> bool:
-        """Whether the hold keeps its minimum margins for every load ratio in [lo, hi] (checked at both ends and
-        in between on a log grid of J_total)."""
+    def damping(self, setting: HoldSetting, load_ratio: float) -> float:
+        """The least damping of the hold and the speed loop on this load with this setting."""
         assert self.loop is not None and self.drive.profile.motor is not None
         jm = self.drive.profile.motor.rotor_inertia_kgcm2 * 1e-4
         loop = LoopGains(self.loop.speed_hz, setting.integral_ms, setting.position_per_s, self.loop.filter_ms)
-        j_conf = jm * (1.0 + setting.ratio)
+        j, j_conf = jm * (1.0 + load_ratio), jm * (1.0 + setting.ratio)
+        return min(least_damping(loop, j, j_conf), least_damping(loop, j, j_conf, position=False))
+
+    def stable(self, setting: HoldSetting, lo: float, hi: float) -> bool:
+        """Whether the hold and the speed loop keep HOLD_MIN_DAMPING for every load ratio in [lo, hi] (checked at
+        both ends and in between on a log grid of J_total)."""
         steps = max(1, math.ceil(math.log((1.0 + hi) / (1.0 + lo)) / math.log(2.0)))
-        for k in range(steps + 1):
-            j = jm * (1.0 + lo) * ((1.0 + hi) / (1.0 + lo)) ** (k / steps)
-            if not margins(loop, j, j_conf).ok(HOLD_MIN_PHASE_DEG, HOLD_MIN_GAIN_DB):
-                return False
-        return True
+        return all(self.damping(setting, (1.0 + lo) * ((1.0 + hi) / (1.0 + lo)) ** (k / steps) - 1.0)
+                   >= HOLD_MIN_DAMPING for k in range(steps + 1))
 
     def safe(self, start: HoldSetting, lo: float, hi: float, fallback: HoldSetting) -> HoldSetting:
-        """The setting nearest `start` that is stable over [lo, hi]: the integral lengthened first (up to its
-        parameter's maximum), then the position gain lowered; `fallback` when none is (a light-load limit no
-        softer hold can help, such as a ratio configured far above the load)."""
+        """The setting nearest `start` that is stable over [lo, hi]: the position gain lowered first (down to
+        MIN_POSITION_PER_S), then the integral lengthened (up to its parameter's maximum: a long integral is slow to
+        break the axis away against friction); `fallback` when none is (a light-load limit no softer hold can help,
+        such as a ratio configured far above the load)."""
         integral_max = self._limit("speed_loop_integral", high=True)
         position_min = max(MIN_POSITION_PER_S, self._limit("position_loop_gain", high=False))
         setting = start
         while not self.stable(setting, lo, hi):
-            if setting.integral_ms < integral_max:
-                setting = HoldSetting(setting.ratio, min(integral_max, setting.integral_ms * INTEGRAL_STEP),
-                                      setting.position_per_s)
-            elif setting.position_per_s > position_min:
+            if setting.position_per_s > position_min:
                 setting = HoldSetting(setting.ratio, setting.integral_ms,
                                       max(position_min, setting.position_per_s / POSITION_STEP))
+            elif setting.integral_ms < integral_max:
+                setting = HoldSetting(setting.ratio, min(integral_max, setting.integral_ms * INTEGRAL_STEP),
+                                      setting.position_per_s)
             else:
                 return fallback if self.stable(fallback, lo, hi) else setting
         return setting
@@ -194,7 +221,8 @@ class StableHold:
 
 def pilot_settings(settings: EstimatorSettings) -> EstimatorSettings:
     """The estimator's settings for the pilot's rough estimate."""
-    return replace(settings, min_excitation=min(settings.min_excitation, PILOT_MIN_EXCITATION))
+    return replace(settings, min_excitation=min(settings.min_excitation, PILOT_MIN_EXCITATION),
+                   min_windows=min(settings.min_windows, PILOT_MIN_WINDOWS))
 
 
 def usable(estimate: InertiaEstimate | None) -> bool:
