@@ -122,6 +122,18 @@ class StableHold:
         self._apply(chosen)
         return chosen
 
+    def soften_position(self) -> HoldSetting | None:
+        """Only the position gain lowered, as far as the heaviest load needs (best effort: the ratio and integral
+        stay as configured), for a motion that must show the drive's own speed loop (the step check before
+        identification); the setting (None: inactive)."""
+        if not self.active:
+            return None
+        self._read()
+        assert self.original is not None
+        chosen = self.safe(self.original, 0.0, self.heaviest(), self.original, integral=False)
+        self._apply(chosen)
+        return chosen
+
     def _pilot_ratio(self) -> float:
         """The highest ratio (never below the configured one) that keeps an unloaded motor's loops damped by
         PILOT_LIGHT_DAMPING: a stiffer speed loop breaks a heavy load away against friction in the pilot."""
@@ -177,11 +189,13 @@ class StableHold:
         return all(self.damping(setting, (1.0 + lo) * ((1.0 + hi) / (1.0 + lo)) ** (k / steps) - 1.0)
                    >= HOLD_MIN_DAMPING for k in range(steps + 1))
 
-    def safe(self, start: HoldSetting, lo: float, hi: float, fallback: HoldSetting) -> HoldSetting:
+    def safe(self, start: HoldSetting, lo: float, hi: float, fallback: HoldSetting, integral: bool = True
+             ) -> HoldSetting:
         """The setting nearest `start` that is stable over [lo, hi]: the position gain lowered first (down to
         MIN_POSITION_PER_S), then the integral lengthened (up to its parameter's maximum: a long integral is slow to
-        break the axis away against friction); `fallback` when none is (a light-load limit no softer hold can help,
-        such as a ratio configured far above the load)."""
+        break the axis away against friction; integral=False leaves it); `fallback` when none is and the fallback is
+        stable (a light-load limit no softer hold can help, such as a ratio configured far above the load), else the
+        softest setting tried."""
         integral_max = self._limit("speed_loop_integral", high=True)
         position_min = max(MIN_POSITION_PER_S, self._limit("position_loop_gain", high=False))
         setting = start
@@ -189,7 +203,7 @@ class StableHold:
             if setting.position_per_s > position_min:
                 setting = HoldSetting(setting.ratio, setting.integral_ms,
                                       max(position_min, setting.position_per_s / POSITION_STEP))
-            elif setting.integral_ms < integral_max:
+            elif integral and setting.integral_ms < integral_max:
                 setting = HoldSetting(setting.ratio, min(integral_max, setting.integral_ms * INTEGRAL_STEP),
                                       setting.position_per_s)
             else:

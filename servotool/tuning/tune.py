@@ -165,7 +165,7 @@ def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = No
         motion, rest = request.host_motion(drive, clock)
     if approve_motion is not None and not approve_motion(motion):
         raise TuneDeclined("nothing moved")
-    before = _step(drive, step_s, clock)
+    before = _step(drive, step_s, clock, load_unknown=True)
     try:
         result = ident.run_host(motion, progress=progress, rest=rest) if motion is not None else \
             ident.run_drive(keep=not request.dry_run)
@@ -258,5 +258,6 @@ def _write(drive: Drive, proposal: Proposal, approved: bool, save: bool | None
     return writes, outcome["persisted"]
 
 
-def _step(drive: Drive, seconds: float | None, clock: Clock) -> StepResponse | None:
-    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock) if seconds is not None else None
+def _step(drive: Drive, seconds: float | None, clock: Clock, load_unknown: bool = False) -> StepResponse | None:
+    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock, load_unknown) if seconds is not None \
+        else None

@@ -18,6 +18,7 @@ from servotool.tuning.estimator import estimate_inertia
 from servotool.tuning.gains import LoopGains
 from servotool.tuning.margins import least_damping
 from servotool.tuning.stable_hold import HOLD_MIN_DAMPING, StableHold
+from servotool.tuning.tune import TuneRequest, tune_inertia
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 from hold_stability import GROWTH, run_once
@@ -34,12 +35,14 @@ def test_the_factory_hold_grows_beyond_a_load_of_16_at_the_factory_ratio():
     assert least_damping(FACTORY, JM * 50, JM * 2.0, position=False) > 0     # the speed loop alone is stable
 
 
-def _drive(profile_id: str):
+def _drive(profile_id: str, baud: int = 115200, **machine: float):
     profile = load_profile(profile_id)
     clock = VirtualClock(100.0)
     sim = build_drive(profile, 1, clock, persist=False)
+    sim.settings.update(**machine)
+    sim.firmware.reconfigure()
     make_motion_setup(sim)
-    return Drive(VirtualLink([sim], clock), profile, 1)
+    return Drive(VirtualLink([sim], clock, baud), profile, 1)
 
 
 def _raws(d: Drive, codes: tuple[str, ...]) -> list[int]:
@@ -107,3 +110,18 @@ def test_a_seeded_sample_of_the_sweep_neither_swings_nor_trips(sim_dir, profile_
     run = run_once(profile_id, load, friction, 0.002, seed, baud=57600 if profile_id == "is620p" else 115200)
     assert run.outcome == "ok", run.reason
     assert run.peak < GROWTH
+
+
+def test_the_step_check_before_tuning_shows_the_slow_loop_without_the_hold_swinging_up(sim_dir):
+    """IS620P at load 37 and the factory ratio: the step check before identification used to end in the overload
+    alarm (the hold after the step swung up to 2000 rpm); now it shows the loop as it is and the tune goes on."""
+    d = _drive("is620p", 57600, load_ratio=37.0, friction=0.02, noise=0.002, seed=1)
+    sim = d.link.drives[1]
+    gains = _raws(d, ("H08-00", "H08-01", "H08-02"))
+    peak = [0.0]
+    sim.on_read.append(lambda _d: peak.__setitem__(0, max(peak[0], abs(sim.firmware.plant.true_speed_rpm))))
+    res = tune_inertia(d, TuneRequest(step_check=True), clock=d.link.clock)
+    assert res.step_before is not None and res.step_before.failure() is not None      # the slow loop, seen
+    assert res.step_after is not None and res.step_after.failure() is None            # ... and fixed by the ratio
+    assert peak[0] < 1.3 * res.identified.plan.speed_rpm
+    assert _raws(d, ("H08-00", "H08-01", "H08-02")) == gains and res.ratio == pytest.approx(37.0, rel=0.05)
