@@ -34,6 +34,7 @@ from servotool.drive import Drive
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import from_canonical, to_canonical
 from servotool.model.profile import Entry
+from servotool.motion.jogger import Jogger
 from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate
 from servotool.tuning.gains import LoopGains, rigidity_scale
@@ -231,6 +232,14 @@ class StableHold:
                 self.saved.setdefault(e.code, r.raw)
                 write_one(self.drive, e, raw)
         self.setting = setting
+
+
+def guard_hold(jogger: Jogger) -> Jogger:
+    """The jogger, its JOGs made with the position gain lowered as the step check's (StableHold.soften_position)
+    where its route holds position: IS620P at the factory ratio with a load of 37 swung from a 100 rpm JOG up to
+    1250 rpm after the stop. The gain is put back with the JOG's other settings."""
+    jogger.prepare = lambda saved: StableHold(jogger.drive, jogger.route.kind, saved).soften_position()
+    return jogger
 
 
 def pilot_settings(settings: EstimatorSettings) -> EstimatorSettings:

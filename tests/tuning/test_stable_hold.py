@@ -12,12 +12,13 @@ import pytest
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.model.loader import load_profile
+from servotool.motion.jogger import Jogger
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
 from servotool.tuning.estimator import estimate_inertia
 from servotool.tuning.gains import LoopGains
 from servotool.tuning.margins import least_damping
-from servotool.tuning.stable_hold import HOLD_MIN_DAMPING, StableHold
+from servotool.tuning.stable_hold import HOLD_MIN_DAMPING, StableHold, guard_hold
 from servotool.tuning.tune import TuneRequest, tune_inertia
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
@@ -125,3 +126,17 @@ def test_the_step_check_before_tuning_shows_the_slow_loop_without_the_hold_swing
     assert res.step_after is not None and res.step_after.failure() is None            # ... and fixed by the ratio
     assert peak[0] < 1.3 * res.identified.plan.speed_rpm
     assert _raws(d, ("H08-00", "H08-01", "H08-02")) == gains and res.ratio == pytest.approx(37.0, rel=0.05)
+
+
+def test_a_jog_on_a_heavy_load_stops_without_swinging_up_and_leaves_the_gains(sim_dir):
+    """A 100 rpm JOG of IS620P at load 37 and the factory ratio swung up to 1250 rpm after its stop (the position
+    hold); guarded, only the slow speed loop's own overshoot is left."""
+    d = _drive("is620p", 57600, load_ratio=37.0, friction=0.02, noise=0.002, seed=1)
+    sim = d.link.drives[1]
+    gains = _raws(d, HOLD_CODES)
+    peak = [0.0]
+    sim.on_read.append(lambda _d: peak.__setitem__(0, max(peak[0], abs(sim.firmware.plant.true_speed_rpm))))
+    jogger = guard_hold(Jogger(d, 0.1, "jog", d.link.clock))
+    jogger.run(jogger.plan(100.0, 1.0))
+    assert peak[0] < 200.0 and sim.firmware.plant.alarm is None
+    assert _raws(d, HOLD_CODES) == gains
