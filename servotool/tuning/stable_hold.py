@@ -13,10 +13,10 @@ assumed, as in the simulator); its commissioning runs velocity mode at low speed
 profile, not a position hold.
 
 So, on a route that holds position, the identification
-  - before the pilot: raises the ratio as far as an unloaded motor stays well damped (PILOT_LIGHT_DAMPING: a
-    stiffer loop breaks a heavy load away against friction), then lowers the position gain and, if that is not
-    enough, lengthens the speed integral until the hold and the speed loop stay damped (HOLD_MIN_DAMPING) for any
-    load up to the ratio parameter's maximum;
+  - before the pilot: sets the ratio as high as an unloaded motor stays well damped (PILOT_LIGHT_DAMPING: a
+    stiffer loop breaks a heavy load away against friction; a ratio configured far above a light load comes down),
+    then lowers the position gain and, if that is not enough, lengthens the speed integral until the hold and the
+    speed loop stay damped (HOLD_MIN_DAMPING) for any load up to the ratio parameter's maximum;
   - after the pilot: writes the pilot's rough estimate as the ratio (never below the pilot's: the pilot measured
     how far the loop lags its ramps, which a slower loop would exceed) and takes the position gain and integral
     back to the drive's own as far as a load within PILOT_SPREAD of that estimate allows.
@@ -136,18 +136,26 @@ class StableHold:
         return chosen
 
     def _pilot_ratio(self) -> float:
-        """The highest ratio (never below the configured one) that keeps an unloaded motor's loops damped by
-        PILOT_LIGHT_DAMPING: a stiffer speed loop breaks a heavy load away against friction in the pilot."""
+        """The highest ratio that keeps an unloaded motor's loops damped by PILOT_LIGHT_DAMPING: raised from the
+        configured one (a stiffer speed loop breaks a heavy load away against friction in the pilot), or lowered
+        where the configured one is far above a light load (H08-15 = 30 on a bare motor ended in the overload
+        alarm)."""
         assert self.original is not None
         e = self.entries.get("inertia_ratio")
         if e is None:
             return self.original.ratio
         top = self.drive.profile.load_ratio_from_param(float(raw_to_eng(e, e.max)))
+
+        def damped(ratio: float) -> bool:
+            setting = HoldSetting(ratio, self.original.integral_ms, self.original.position_per_s)
+            return self.damping(setting, 0.0) >= PILOT_LIGHT_DAMPING
+
         ratio = self.original.ratio
+        while ratio > 0.0 and not damped(ratio):
+            ratio = self._fit_ratio((1.0 + ratio) / PILOT_RATIO_STEP - 1.0)
         while True:
             bigger = self._fit_ratio(min(top, (1.0 + ratio) * PILOT_RATIO_STEP - 1.0))
-            if bigger <= ratio or self.damping(HoldSetting(bigger, self.original.integral_ms,
-                                                           self.original.position_per_s), 0.0) < PILOT_LIGHT_DAMPING:
+            if bigger <= ratio or not damped(bigger):
                 return ratio
             ratio = bigger
 

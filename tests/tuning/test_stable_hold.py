@@ -13,6 +13,7 @@ from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.model.loader import load_profile
 from servotool.motion.jogger import Jogger
+from servotool.ops.params import write_one
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
 from servotool.tuning.estimator import estimate_inertia
@@ -140,3 +141,13 @@ def test_a_jog_on_a_heavy_load_stops_without_swinging_up_and_leaves_the_gains(si
     jogger.run(jogger.plan(100.0, 1.0))
     assert peak[0] < 200.0 and sim.firmware.plant.alarm is None
     assert _raws(d, HOLD_CODES) == gains
+
+
+def test_a_ratio_configured_far_above_a_bare_motor_comes_down_for_the_identification(sim_dir):
+    """H08-15 = 30 on an unloaded motor: the speed loop at 31x its bandwidth ended the identification in the
+    overload alarm; the pilot now runs at a ratio an unloaded motor stands, and 30 is put back (a dry run)."""
+    d = _drive("is620p", 57600, load_ratio=0.0, friction=0.02, noise=0.002, seed=1)
+    write_one(d, d.profile.entry("H08-15"), 3000)
+    res = tune_inertia(d, TuneRequest(dry_run=True), clock=d.link.clock)
+    assert res.ratio == pytest.approx(0.0, abs=0.1)
+    assert _raws(d, ("H08-15",)) == [3000]
