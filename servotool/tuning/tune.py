@@ -235,7 +235,8 @@ def check_drive_result(drive: Drive, result: identify.Result, request: TuneReque
 
 def propose(drive: Drive, result: identify.Result, request: TuneRequest) -> Proposal:
     """The ratio parameter value (where the profile maps one; SDC does not) and the gains for the result."""
-    entry, raw = gain_writes.ratio_raw(drive, result.new_ratio) if drive.profile.role("inertia_ratio") else \
+    std = result.estimate.ratio_std if result.estimate is not None else 0.0
+    entry, raw = gain_writes.ratio_raw(drive, result.new_ratio, std) if drive.profile.role("inertia_ratio") else \
         (None, None)
     if not request.gains:
         return Proposal(result, entry, raw, None, [], None, drive.profile)
