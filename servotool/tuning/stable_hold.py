@@ -20,6 +20,8 @@ So, on a route that holds position, the identification
   - after the pilot: writes the pilot's rough estimate as the ratio (never below the pilot's: the pilot measured
     how far the loop lags its ramps, which a slower loop would exceed) and takes the position gain and integral
     back to the drive's own as far as a load within PILOT_SPREAD of that estimate allows.
+A motion that must show or keep the drive's own speed loop while the load is unknown (the step check before
+identification, a JOG: guard_hold) lowers only the position gain (soften_position).
 Each change is a parameter written through ops.params.write_one (RAM only where the drive has a switch: the
 identification runs inside ops.eeprom.ram_writes), its original value recorded in the motion's settings to put
 back (motion.jogger.Jogger.leave_and_restore), so the drive ends as it was found.
