@@ -13,7 +13,10 @@ ratio, the position loop and the speed integral stay fast) until the travel guar
   alarm  runs the drive stopped with an alarm (following error, overload, overspeed)
   refused  other refusals (the estimate not trusted)
 
-Run: python bench/hold_stability.py [--quick] [--profiles is620p,sd25] [--seeds N] [--baud 115200]
+With --jog, a 1 s JOG (as `servotool jog` runs it) at 100 and 1000 rpm instead of the identification: peak is the
+largest |true speed| over the JOG speed.
+
+Run: python bench/hold_stability.py [--quick] [--profiles is620p,sd25] [--seeds N] [--baud 115200] [--jog]
 """
 
 from __future__ import annotations
@@ -28,9 +31,11 @@ from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.errors import ServoError
 from servotool.model.loader import load_profile
+from servotool.motion.jogger import Jogger
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
 from servotool.tuning.identify import TravelExceeded
+from servotool.tuning.stable_hold import guard_hold
 from servotool.tuning.tune import TuneRequest, tune_inertia
 
 FACTORY_BAUD = {"sd25": 9600, "sdc": 9600, "is620p": 57600, "dsx7e": 115200}
@@ -59,9 +64,10 @@ class Cell:
         return sum(r.peak > GROWTH for r in self.runs)
 
 
-def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed: int,
-             baud: int | None = None) -> Run:
-    """`tune inertia` (dry run) on one machine, watching the true speed at every read."""
+def machine(profile_id: str, ratio: float, friction: float, noise: float, seed: int, baud: int | None = None
+            ) -> tuple[Drive, VirtualClock, dict[str, float]]:
+    """A simulated drive with its motion setup on virtual time, and the largest |true speed| and |commanded
+    speed| seen at any read so far."""
     profile = load_profile(profile_id)
     clock = VirtualClock(100.0)
     sim = build_drive(profile, 1, clock, persist=False)
@@ -78,6 +84,13 @@ def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed:
         seen["command"] = max(seen["command"], abs(plant.target_rpm))
 
     sim.on_read.append(watch)
+    return drive, clock, seen
+
+
+def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed: int,
+             baud: int | None = None) -> Run:
+    """`tune inertia` (dry run) on one machine, watching the true speed at every read."""
+    drive, clock, seen = machine(profile_id, ratio, friction, noise, seed, baud)
     run = Run()
     try:
         res = tune_inertia(drive, TuneRequest(dry_run=True), clock=clock)
@@ -92,13 +105,31 @@ def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed:
     return run
 
 
+def run_jog(profile_id: str, ratio: float, friction: float, noise: float, seed: int, speed_rpm: float,
+            baud: int | None = None) -> Run:
+    """A 1 s JOG at speed_rpm as `servotool jog` runs it (guard_hold), watching the true speed."""
+    drive, clock, seen = machine(profile_id, ratio, friction, noise, seed, baud)
+    run = Run()
+    try:
+        jogger = guard_hold(Jogger(drive, clock=clock))
+        jogger.run(jogger.plan(speed_rpm, 1.0))
+    except ServoError as exc:
+        run.outcome = "alarm" if "alarm" in str(exc) else "refused"
+        run.reason = str(exc)[:60]
+    run.peak = seen["speed"] / speed_rpm
+    return run
+
+
 def sweep(profiles: list[str], loads: list[float], frictions: list[float], noises: list[float],
-          seeds: int, baud: int | None = None) -> dict[tuple[str, float], Cell]:
+          seeds: int, baud: int | None = None, jog: bool = False) -> dict[tuple[str, float], Cell]:
     cells: dict[tuple[str, float], Cell] = {}
     for pid, load in itertools.product(profiles, loads):
         cell = cells.setdefault((pid, load), Cell())
         for n, (fr, nz, seed) in enumerate(itertools.product(frictions, noises, range(1, seeds + 1))):
-            cell.runs.append(run_once(pid, load, fr, nz, seed + 7 * n, baud))
+            if jog:
+                cell.runs += [run_jog(pid, load, fr, nz, seed + 7 * n, rpm, baud) for rpm in (100.0, 1000.0)]
+            else:
+                cell.runs.append(run_once(pid, load, fr, nz, seed + 7 * n, baud))
     return cells
 
 
@@ -124,13 +155,14 @@ def main() -> None:
     ap.add_argument("--profiles", default=",".join(FACTORY_BAUD), help="comma-separated profile ids")
     ap.add_argument("--seeds", type=int, default=None, help="seeds per (friction, noise)")
     ap.add_argument("--baud", type=int, default=None, help="line speed (default: each drive's factory setting)")
+    ap.add_argument("--jog", action="store_true", help="JOGs at 100 and 1000 rpm instead of the identification")
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     loads = [0.0, 5.0, 20.0, 37.0, 49.0] if args.quick else [0.0, 2.0, 5.0, 10.0, 20.0, 30.0, 37.0, 43.0, 50.0]
     frictions = [0.05] if args.quick else [0.02, 0.1, 0.3]
     noises = [0.002] if args.quick else [0.002, 0.01]
     seeds = args.seeds if args.seeds is not None else (1 if args.quick else 2)
-    print_table(sweep([p for p in args.profiles.split(",") if p], loads, frictions, noises, seeds, args.baud))
+    print_table(sweep([p for p in args.profiles.split(",") if p], loads, frictions, noises, seeds, args.baud, args.jog))
 
 
 if __name__ == "__main__":
