@@ -84,6 +84,7 @@ class StableHold:
         self.active = route_kind == "segment" and p.motor is not None and \
             "position_loop_gain" in self.entries and "speed_loop_integral" in self.entries
         self.loop: LoopGains | None = None
+        self.raws: dict[str, int] = {}       # what the drive holds now (read once, then as written): requests count
         self.original: HoldSetting | None = None
         self.setting: HoldSetting | None = None
 
@@ -96,6 +97,7 @@ class StableHold:
         entries = list(self.entries.items())
         ratio = 0.0
         for (role, e), r in zip(entries, self.drive.read_entries([e for _, e in entries]), strict=True):
+            self.raws[e.code] = r.raw
             eng = float(raw_to_eng(e, r.raw))
             if role == "inertia_ratio":
                 ratio = max(0.0, p.load_ratio_from_param(eng))
@@ -234,13 +236,14 @@ class StableHold:
                                            ("position_loop_gain", setting.position_per_s)]
         if "inertia_ratio" in self.entries:
             wanted.insert(0, ("inertia_ratio", p.param_from_load_ratio(setting.ratio)))
-        entries = [self.entries[role] for role, _ in wanted]
-        for (role, value), e, r in zip(wanted, entries, self.drive.read_entries(entries), strict=True):
+        for role, value in wanted:
+            e = self.entries[role]
             eng = value if role == "inertia_ratio" else from_canonical(role, e, value)
             raw = eng_to_raw(e, eng, clamp=True)
-            if raw != r.raw:
-                self.saved.setdefault(e.code, r.raw)
-                write_one(self.drive, e, raw)
+            if raw != self.raws[e.code]:
+                self.saved.setdefault(e.code, self.raws[e.code])
+                write_one(self.drive, e, raw, self.raws[e.code])
+                self.raws[e.code] = raw
         self.setting = setting
 
 
