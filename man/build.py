@@ -168,6 +168,8 @@ servotool \-\-port sim \-P sdc param set PN4=3 && servotool \-\-port sim \-P sdc
 servotool sim config \-\-load\-ratio 5 \-\-friction 0.03
 servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 16
 servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 16 \-\-step\-check \-\-report tune\-report
+servotool sim config \-\-load\-ratio 5 \-\-resonance\-hz 20 \-\-arm\-gravity 0.2 \-\-gear 10
+servotool \-\-port sim tune inertia \-\-yes \-\-dry\-run
 servotool run examples/commission.yaml \-\-yes
 servotool sim serve \-\-port tcp://127.0.0.1:5020 \-\-unit 1 \-\-unit 2
 servotool scan \-\-port /dev/ttyUSB0 \-\-units 1\-10 \-\-baud 9600 \-\-format 8N1

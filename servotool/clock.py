@@ -7,6 +7,7 @@ on a real line.
 from __future__ import annotations
 
 import time
+from datetime import UTC, datetime
 from typing import Protocol
 
 
@@ -51,3 +52,8 @@ class VirtualClock:
     def advance(self, dt: float) -> float:
         self.t += dt
         return self.t
+
+
+def utc_now(clock: Clock | None = None) -> datetime:
+    """The clock's wall time as an aware UTC datetime (for time stamps in files and reports)."""
+    return datetime.fromtimestamp((clock or RealClock()).wall(), UTC)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import glob
 import os
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -17,6 +16,7 @@ from typing import IO, Any
 
 import platformdirs
 
+from servotool.clock import RealClock
 from servotool.errors import FileProblem
 
 APP = "servotool"
@@ -103,17 +103,39 @@ def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable
     return st
 
 
-def _alive(pid: int) -> bool | None:
-    """Whether a process runs; None where that cannot be asked safely (Windows' os.kill terminates)."""
-    if os.name != "posix":
+def process_alive(pid: int) -> bool | None:
+    """Whether a process of this host runs; None where that cannot be told."""
+    if pid <= 0:
         return None
+    if os.name == "nt":
+        return _windows_process_alive(pid)
     try:
-        os.kill(pid, 0)
+        os.kill(pid, 0)      # signal 0: only asks (on Windows os.kill would terminate it)
     except ProcessLookupError:
         return False
     except OSError:
         return True          # exists, owned by someone else
     return True
+
+
+def _windows_process_alive(pid: int) -> bool | None:
+    """OpenProcess and GetExitCodeProcess (kernel32): still running while the exit code is STILL_ACTIVE."""
+    try:
+        import ctypes
+
+        kernel32 = ctypes.windll.kernel32  # type: ignore[attr-defined]
+        handle = kernel32.OpenProcess(0x1000, False, pid)      # PROCESS_QUERY_LIMITED_INFORMATION
+        if not handle:
+            return False if kernel32.GetLastError() == 87 else None     # ERROR_INVALID_PARAMETER: no such pid
+        try:
+            code = ctypes.c_ulong()
+            if not kernel32.GetExitCodeProcess(handle, ctypes.byref(code)):
+                return None
+            return code.value == 259                                     # STILL_ACTIVE
+        finally:
+            kernel32.CloseHandle(handle)
+    except (AttributeError, OSError):
+        return None
 
 
 def sweep_temp(folder: Path, name: str = "") -> int:
@@ -126,9 +148,9 @@ def sweep_temp(folder: Path, name: str = "") -> int:
         return 0
     for tmp in candidates:
         pid_text = tmp.name[:-len(".tmp")].rsplit(".", 2)[-2] if tmp.name.count(".") >= 3 else ""
-        alive = _alive(int(pid_text)) if pid_text.isascii() and pid_text.isdigit() else None
+        alive = process_alive(int(pid_text)) if pid_text.isascii() and pid_text.isdigit() else None
         try:
-            if alive is False or (alive is None and time.time() - tmp.stat().st_mtime > STALE_TMP_S):
+            if alive is False or (alive is None and RealClock().wall() - tmp.stat().st_mtime > STALE_TMP_S):
                 tmp.unlink()
                 removed += 1
         except OSError:
@@ -184,20 +206,19 @@ def check_yaml_bounds(text: str, path: Path) -> None:
 
 def parse_yaml(text: str, path: Path) -> Any:
     """The data of a YAML document read from path; FileProblem (with the line) when it is not valid YAML."""
-    check_yaml_bounds(text, path)
-    yaml, loader = _yaml()
-    try:
-        return yaml.load(text, Loader=loader)
-    except yaml.YAMLError as exc:
-        raise _yaml_problem(path, exc) from None
+    return _read_yaml(text, path, "load")
 
 
 def compose_yaml(text: str, path: Path) -> Any:
     """The node tree of a YAML document (for the line of each key); FileProblem when it is not valid YAML."""
+    return _read_yaml(text, path, "compose")
+
+
+def _read_yaml(text: str, path: Path, how: str) -> Any:
     check_yaml_bounds(text, path)
     yaml, loader = _yaml()
     try:
-        return yaml.compose(text, Loader=loader)
+        return getattr(yaml, how)(text, Loader=loader)
     except yaml.YAMLError as exc:
         raise _yaml_problem(path, exc) from None
 

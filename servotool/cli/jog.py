@@ -20,7 +20,7 @@ from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
 from servotool.motion.deadman import sentence
 from servotool.motion.hold import HoldToRun
-from servotool.motion.jogger import Jogger
+from servotool.motion.jogger import Jogger, JogPlan
 from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelLimit
 from servotool.ops.trace import Sampler, motion_entries
@@ -96,14 +96,7 @@ def jog(
                                     "keep-alive beats, on the same port, to this CSV ('servotool plot' draws it)."),
 ) -> None:
     """JOG the motor. Before moving it prints what stops the motor if this program stops, and the bound."""
-    if (seconds is None) == (not interactive):
-        raise UsageError("give exactly one of --time SECONDS or --interactive")
-    if toggle and not interactive:
-        raise UsageError("--toggle goes with --interactive")
-    if interactive and not sys.stdin.isatty():
-        raise UsageError("--interactive needs a terminal")
-    if trace_file is not None:
-        check_writable(trace_file, replace=True)
+    _check_options(seconds, interactive, toggle, trace_file)
     with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
         d.dead_man_waived = no_dead_man
         jogger = guard_hold(Jogger(d))
@@ -115,19 +108,7 @@ def jog(
                                 f"  [{'toggle' if toggle else 'hold a key to move'}: {KEYS}]"))
         if plan.dead_man is not None:
             info(sentence(plan.dead_man))
-        peak = 0.0
-        late: list[float] = []    # speeds over the second half of a timed JOG: the speed it settled at
-
-        def show(t: float, rpm: float | None) -> None:
-            nonlocal peak
-            if rpm is not None:
-                peak = max(peak, abs(rpm))
-                if seconds is None or t >= seconds / 2:
-                    late.append(abs(rpm))
-            if Verbosity.level >= 0 and err.is_terminal:
-                sys.stderr.write(f"\r t={t:5.1f} s  speed={rpm if rpm is not None else float('nan'):8.1f} rpm ")
-                sys.stderr.flush()
-
+        show = _Speeds(seconds)
         try:
             if interactive:
                 hold = None if toggle else HoldToRun(jogger.clock, jogger.keepalive_s)
@@ -149,12 +130,45 @@ def jog(
         if err.is_terminal:
             err.print("")
         final = jogger.speed()
+    _result(plan, seconds, show, final, as_json)
+
+
+def _result(plan: JogPlan, seconds: float | None, show: _Speeds, final: float | None, as_json: bool) -> None:
     sign = plan.direction if seconds is not None else 1      # a timed reverse JOG peaks at a negative speed
     if as_json:
         emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds,
-                   "peak_speed_rpm": round(peak, 1) * sign,
-                   "median_speed_rpm": round(statistics.median(late), 1) * sign if late else None,
+                   "peak_speed_rpm": round(show.peak, 1) * sign,
+                   "median_speed_rpm": round(statistics.median(show.late), 1) * sign if show.late else None,
                    "final_speed_rpm": final,
                    "dead_man": plan.dead_man.as_json() if plan.dead_man is not None else None})
     else:
-        info(f"JOG done: peak {peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")
+        info(f"JOG done: peak {show.peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")
+
+
+def _check_options(seconds: float | None, interactive: bool, toggle: bool, trace_file: Path | None) -> None:
+    if (seconds is None) == (not interactive):
+        raise UsageError("give exactly one of --time SECONDS or --interactive")
+    if toggle and not interactive:
+        raise UsageError("--toggle goes with --interactive")
+    if interactive and not sys.stdin.isatty():
+        raise UsageError("--interactive needs a terminal")
+    if trace_file is not None:
+        check_writable(trace_file, replace=True)
+
+
+class _Speeds:
+    """The JOG's speed as it runs: shown on a terminal, its peak, and the speeds over the second half of a timed
+    JOG (the speed it settled at)."""
+
+    def __init__(self, seconds: float | None) -> None:
+        self.seconds, self.peak = seconds, 0.0
+        self.late: list[float] = []
+
+    def __call__(self, t: float, rpm: float | None) -> None:
+        if rpm is not None:
+            self.peak = max(self.peak, abs(rpm))
+            if self.seconds is None or t >= self.seconds / 2:
+                self.late.append(abs(rpm))
+        if Verbosity.level >= 0 and err.is_terminal:
+            sys.stderr.write(f"\r t={t:5.1f} s  speed={rpm if rpm is not None else float('nan'):8.1f} rpm ")
+            sys.stderr.flush()

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
@@ -93,16 +92,49 @@ def _plain_line(mon: Monitor, s: Sample) -> str:
 
 def _plot_live(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None) -> None:
     history: deque[Sample] = deque(maxlen=PLOT_SAMPLES)
-    drawn = 0.0
+    drawn = -float("inf")
     with Live(Text(""), console=out, auto_refresh=False, transient=False) as live:
         for s in samples:
             if log:
                 log.write(s)
             history.append(s)
-            if time.monotonic() - drawn >= PLOT_REFRESH_S:
+            if mon.clock.now() - drawn >= PLOT_REFRESH_S:
                 live.update(monitor_chart(mon, history, min(out.width, 160), out.height - 1), refresh=True)
-                drawn = time.monotonic()
+                drawn = mon.clock.now()
         live.update(monitor_chart(mon, history, min(out.width, 160), out.height - 1), refresh=True)
+
+
+def _csv_mode(csv_file: Path | None, force: bool, append: bool) -> CsvMode:
+    if force and append:
+        raise UsageError("--force and --append exclude each other")
+    if (force or append) and csv_file is None:
+        raise UsageError(f"{'--force' if force else '--append'} only applies to --csv FILE")
+    return "replace" if force else "append" if append else "new"
+
+
+def _show(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None, *, plot: bool, live_view: bool,
+          lines: bool, as_json: bool) -> None:
+    """Samples as they come: a live chart or table on a terminal, else plain or JSON lines (lines: --json or
+    --once), each also logged to the CSV."""
+    if plot and live_view:
+        _plot_live(mon, samples, log)
+        return
+    if live_view:
+        with Live(monitor_table(mon, out.width), console=out, refresh_per_second=8, transient=False) as live:
+            for s in samples:
+                if log:
+                    log.write(s)
+                live.update(monitor_table(mon, out.width))
+        return
+    for s in samples:
+        if log:
+            log.write(s)
+        if plot and not lines:
+            print(_plain_line(mon, s), flush=True)
+        elif as_json:
+            print(json.dumps(_sample_json(mon, s)), flush=True)
+    if not as_json and not (plot and not lines):
+        out.print(monitor_table(mon, out.width))
 
 
 def monitor(
@@ -126,13 +158,9 @@ def monitor(
     """Watch live values with units, min/max and a trend; report the sample rate achieved."""
     check_rate(rate)
     check_duration(duration)
-    if force and append:
-        raise UsageError("--force and --append exclude each other")
-    if (force or append) and csv_file is None:
-        raise UsageError(f"{'--force' if force else '--append'} only applies to --csv FILE")
+    mode = _csv_mode(csv_file, force, append)
     # Everything the user typed is checked before the port is opened: codes against the profile, the CSV path.
     entries = resolve_entries(resolved(ctx).profile, codes or [])
-    mode: CsvMode = "replace" if force else "append" if append else "new"
     log = CsvLog(csv_file, entries, mode) if csv_file else None
     interrupted = False
     try:
@@ -141,28 +169,7 @@ def monitor(
             live_view = not (as_json or once) and sys.stdout.isatty()
             samples = mon.run(rate, duration, samples=1 if once else None)
             try:
-                if plot and live_view:
-                    _plot_live(mon, samples, log)
-                elif plot and not (as_json or once):
-                    for s in samples:
-                        if log:
-                            log.write(s)
-                        print(_plain_line(mon, s), flush=True)
-                elif live_view:
-                    with Live(monitor_table(mon, out.width), console=out, refresh_per_second=8,
-                              transient=False) as live:
-                        for s in samples:
-                            if log:
-                                log.write(s)
-                            live.update(monitor_table(mon, out.width))
-                else:
-                    for s in samples:
-                        if log:
-                            log.write(s)
-                        if as_json:
-                            print(json.dumps(_sample_json(mon, s)), flush=True)
-                    if not as_json:
-                        out.print(monitor_table(mon, out.width))
+                _show(mon, samples, log, plot=plot, live_view=live_view, lines=as_json or once, as_json=as_json)
             except KeyboardInterrupt:     # the samples so far are shown, then exit 130 as for any Ctrl-C
                 interrupted = True
                 if not (live_view or as_json or plot):

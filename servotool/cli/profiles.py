@@ -13,7 +13,7 @@ from servotool.errors import UnknownName
 from servotool.model.codec import field_range, format_value
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
 from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
-from servotool.model.profile import Entry, Profile
+from servotool.model.profile import Entry, IdentityCheck, Profile
 from servotool.model.roles import sim_extensions
 
 app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
@@ -60,7 +60,7 @@ def show(
             "serial": {**vars(p.line), "unit": p.default_unit}, "limits": vars(p.limits), "word_order": p.word_order,
             "persistence": vars(p.persistence), "roles": p.roles,
             "entries": [_entry_json(e) for e in entries],
-            "dead_man": vars(p.dead_man) if p.dead_man is not None else None,
+            "dead_man": vars(p.dead_man) if p.dead_man is not None else None, "identity": _identity_json(p),
             "sim_extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(p)],
         })
         return
@@ -79,6 +79,7 @@ def show(
             t.add_row(e.code, e.name, e.unverified)
         out.print(t)
         _print_dead_man(p)
+        _print_identity(p, only_unverified=True)
         found = sim_extensions(p)
         if found:
             out.print("simulator extensions (not in the manual):", markup=False)
@@ -92,6 +93,45 @@ def show(
                   e.effect if e.cls == "Pn" else e.access, "?" if e.unverified else "")
     out.print(t)
     out.print("roles: " + ", ".join(f"{k}={v}" for k, v in sorted(p.roles.items())), markup=False)
+    _print_identity(p)
+
+
+def _identity_json(p: Profile) -> dict[str, object] | None:
+    """The identity section: the firmware and model entries, and every check read before the first write."""
+    ident = p.identity
+    if ident is None:
+        return None
+    return {"firmware": ident.firmware or None, "model": ident.model or None,
+            "checks": [{"code": c.code or None, "address": c.address, "words": c.words, "absent": c.absent,
+                        "range": list(c.range) if c.range else None, "sim": c.sim, "source": c.source,
+                        "unverified": c.unverified or None} for c in ident.checks]}
+
+
+def _answers(c: IdentityCheck) -> str:
+    """What a drive of this family answers for one check."""
+    if c.absent:
+        return "exception 02 (no register)"
+    text = f"{c.range[0]}..{c.range[1]}" if c.range else "present (any value)"
+    return text + (f" (sim {c.sim})" if c.sim is not None else "")
+
+
+def _print_identity(p: Profile, *, only_unverified: bool = False) -> None:
+    """The identity checks as a table that wraps its notes (readable at 80 columns)."""
+    ident = p.identity
+    if ident is None:
+        if not only_unverified:
+            out.print("identity: none (a drive is not checked before writing)", markup=False)
+        return
+    checks = [c for c in ident.checks if c.unverified or not only_unverified]
+    if not checks:
+        return
+    named = ", ".join(f"{k} {v}" for k, v in (("firmware", ident.firmware), ("model", ident.model)) if v)
+    t = table("Check", "Address", "Answers", "Note", drop=("Address",),
+              title=f"identity, checked before the first write{f' ({named})' if named else ''}")
+    for c in checks:
+        note = c.source + (f"; unverified: {c.unverified}" if c.unverified else "")
+        t.add_row(c.code or "-", f"{c.address} (0x{c.address:04X})", _answers(c), note)
+    out.print(t)
 
 
 def _entry_json(e: Entry) -> dict[str, object]:

@@ -10,11 +10,11 @@ import typer
 
 from servotool.cli.common import state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, count, emit_json, info, notice, out, trace_frame
-from servotool.commission.plan import load_plan
+from servotool.cli.render import Verbosity, count, emit_json, info, notice, out, trace_frame, warn
+from servotool.commission.plan import Plan, load_plan
 from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
-from servotool.config import merge, options_from, resolve
+from servotool.config import Resolved, merge, options_from, resolve
 from servotool.errors import ServoError, UsageError
 from servotool.session import open_drives
 
@@ -34,32 +34,15 @@ def run(
     plan = load_plan(plan_file)
     cli_opts = state(ctx).options
     resolved = resolve(merge(cli_opts, options_from(plan.options, str(plan_file))))
-    units = plan.units or [resolved.unit]
-    if cli_opts.unit is not None and plan.units:
-        if cli_opts.unit not in plan.units:
-            raise UsageError(f"--unit {cli_opts.unit} is not among the plan's units {plan.units}")
-        units = [cli_opts.unit]
+    units = _units(plan, cli_opts.unit, resolved.unit)
     lines = validate(plan, resolved.profile)
     if dry_run:
-        if as_json:
-            emit_json({"plan": str(plan_file), "dry_run": True, "ok": True, "profile": resolved.profile.id,
-                       "units": units, "steps": [{"step": st.index + 1, "line": st.line, "name": st.name,
-                                                  "would": line.split(": ", 1)[1]}
-                                                 for st, line in zip(plan.steps, lines, strict=True)]})
-        else:
-            out.print(f"plan {plan_file}: {count(len(plan.steps), 'step')} on {resolved.profile.model} unit(s) "
-                      f"{', '.join(map(str, units))}; valid. Would run:", markup=False)
-            for line in lines:
-                out.print("  " + line, markup=False)
+        _show_dry_run(plan, plan_file, resolved, units, lines, as_json)
         return
     # Everything that can be known before the first write is checked now.
     if not yes and any(st.name == "prompt" for st in plan.steps) and not sys.stdin.isatty():
         raise UsageError("the plan has operator prompts: run it in a terminal or pass --yes")
-    report_path = report or plan_file.with_suffix(".report.json")
-    if str(report_path).startswith("-"):
-        raise UsageError(f"--report '{report_path}' looks like an option, not a file name")
-    if not report_path.parent.is_dir() or not os.access(report_path.parent, os.W_OK):
-        raise UsageError(f"cannot write the report into {report_path.parent}: no such folder or not writable")
+    report_path = _report_path(plan_file, report)
     several = len(units) > 1
 
     def ask(unit: int, question: str) -> bool:
@@ -69,6 +52,10 @@ def run(
         runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info,
                         word=lambda exc: error_text(exc, cli_opts))
         rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)
+        if rep.previous is not None:
+            prev = rep.head["previous_run"]
+            warn(f"the last run of this plan (pid {prev['pid']}) ended without finishing, after "
+                 f"{count(prev['steps_done'], 'step')}: its report {report_path} said 'running'; this run replaces it")
         rep.write("running")
         runner.after_step = lambda: rep.write("running")
         ok: bool | None = None
@@ -89,3 +76,36 @@ def run(
     if not ok:
         failed = next(r for r in runner.results if not r.ok)
         raise typer.Exit(int(failed.data.get("exit_code", 1)))
+
+
+def _units(plan: Plan, given: int | None, default: int) -> list[int]:
+    """The axes to run: the plan's (or the resolved unit), narrowed to one of them by --unit."""
+    if given is None or not plan.units:
+        return plan.units or [default]
+    if given not in plan.units:
+        raise UsageError(f"--unit {given} is not among the plan's units {plan.units}")
+    return [given]
+
+
+def _show_dry_run(plan: Plan, plan_file: Path, resolved: Resolved, units: list[int], lines: list[str],
+                  as_json: bool) -> None:
+    if as_json:
+        emit_json({"plan": str(plan_file), "dry_run": True, "ok": True, "profile": resolved.profile.id,
+                   "units": units, "steps": [{"step": st.index + 1, "line": st.line, "name": st.name,
+                                              "would": line.split(": ", 1)[1]}
+                                             for st, line in zip(plan.steps, lines, strict=True)]})
+        return
+    out.print(f"plan {plan_file}: {count(len(plan.steps), 'step')} on {resolved.profile.model} unit(s) "
+              f"{', '.join(map(str, units))}; valid. Would run:", markup=False)
+    for line in lines:
+        out.print("  " + line, markup=False)
+
+
+def _report_path(plan_file: Path, report: Path | None) -> Path:
+    """--report, else PLAN.report.json beside the plan; refused before anything runs if it cannot be written."""
+    path = report or plan_file.with_suffix(".report.json")
+    if str(path).startswith("-"):
+        raise UsageError(f"--report '{path}' looks like an option, not a file name")
+    if not path.parent.is_dir() or not os.access(path.parent, os.W_OK):
+        raise UsageError(f"cannot write the report into {path.parent}: no such folder or not writable")
+    return path

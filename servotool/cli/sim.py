@@ -121,6 +121,14 @@ def config(
     noise: float = typer.Option(None, "--noise", help=SIM_SETTINGS["noise"][4]),
     seed: int = typer.Option(None, "--seed", help=SIM_SETTINGS["seed"][4]),
     line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
+    resonance_hz: float = typer.Option(None, "--resonance-hz", help=SIM_SETTINGS["resonance_hz"][4]),
+    resonance_damping: float = typer.Option(None, "--resonance-damping", help=SIM_SETTINGS["resonance_damping"][4]),
+    backlash_rad: float = typer.Option(None, "--backlash-rad", help=SIM_SETTINGS["backlash_rad"][4]),
+    arm_gravity: float = typer.Option(None, "--arm-gravity", help=SIM_SETTINGS["arm_gravity"][4]),
+    arm_angle: float = typer.Option(None, "--arm-angle", help=SIM_SETTINGS["arm_angle"][4]),
+    gear: float = typer.Option(None, "--gear", help=SIM_SETTINGS["gear"][4]),
+    cogging: float = typer.Option(None, "--cogging", help=SIM_SETTINGS["cogging"][4]),
+    cogging_periods: int = typer.Option(None, "--cogging-periods", help=SIM_SETTINGS["cogging_periods"][4]),
     brake: str = typer.Option(None, "--brake", help="on|off: holding brake, closed while the servo is off "
                               "(default on; off lets a gravity load fall, held back only by friction)."),
     fake_watchdog: str = typer.Option(None, "--fake-watchdog", help="on|off, NOT REAL (default off): stop host "
@@ -138,7 +146,10 @@ def config(
         sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
     status = sim_state.configure(p, u, load_ratio=load_ratio, friction=friction, viscous=viscous,
                                  load_torque=load_torque, noise=noise, seed=seed, line_baud=line_baud, brake=brake_on,
-                                 fake_watchdog=fake_on)
+                                 fake_watchdog=fake_on, resonance_hz=resonance_hz,
+                                 resonance_damping=resonance_damping, backlash_rad=backlash_rad,
+                                 arm_gravity=arm_gravity, arm_angle=arm_angle, gear=gear, cogging=cogging,
+                                 cogging_periods=cogging_periods)
     if as_json:
         emit_json({"profile": p.id, "unit": u, "settings": status.settings, "missing": list(status.missing)})
         return

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 import sys
-from datetime import UTC, datetime
 from pathlib import Path
 
 import typer
 
 from servotool.cli.common import drive, resolved
 from servotool.cli.render import info, out
+from servotool.clock import utc_now
 from servotool.config import Resolved
 from servotool.errors import ServoError, UsageError
 from servotool.ops.monitor import resolve_entries
@@ -23,7 +23,7 @@ def about_lines(res: Resolved, detail: str) -> list[str]:
     s, p = res.settings, res.profile
     return [f"servotool trace: {p.model} (profile {p.id}) unit {res.unit}",
             f"line: {s.port}, {s.line.describe()}, timeout {s.timeout:g} s", detail,
-            f"started: {datetime.now(UTC).isoformat(timespec='seconds')}"]
+            f"started: {utc_now().isoformat(timespec='seconds')}"]
 
 
 def _about(res: Resolved, tracer: Tracer, expr: str | None, window: Window) -> list[str]:

@@ -12,6 +12,7 @@ import typer
 from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
+from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.profile import Profile
 from servotool.motion import deadman
@@ -117,58 +118,68 @@ def inertia(
     if step_check:
         step.step_duration_s(travel)     # refused before the drive is opened
 
-    moving = [False]     # identifying: a failure now reports what was measured
-    dead_man: list[deadman.DeadManBound | None] = [None]
-
-    def approve_motion(motion: planning.MotionPlan | None) -> bool:
-        if method == "host" or step_check:
-            confirm_motion(ctx, d, yes, preflight.FEATURE)
-        info(f"motion: {motion.describe()}" if motion is not None else
-             "motion: the drive's own identification (its parameters set torque and travel), then host "
-             "moves that check its result")
-        if step_check:
-            info(f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(travel):.2f} s forward and "
-                 "back, before and after")
-        if method == "host" and motion is not None:
-            dead_man[0] = deadman.motion_bound(d, motion.speed_rpm, motion.ramp_s)
-        elif step_check:
-            dead_man[0] = deadman.motion_bound(d, step.STEP_SPEED_RPM, 0.0)
-        if dead_man[0] is not None:
-            info(deadman.sentence(dead_man[0]))
-        moving[0] = confirm("Move the axis now?", yes)
-        return moving[0]
-
-    def show(proposal: tune.Proposal) -> None:
-        moving[0] = False
-        if not as_json:
-            _show(proposal)
-
-    def approve_write(proposal: tune.Proposal) -> bool:
-        entry = proposal.parameter
-        question = (f"Write {entry.code} = {proposal.parameter_value:g} {entry.unit}"
-                    + (" and the gains" if proposal.gain_changes else "") + "?") \
-            if proposal.writes_ratio and entry is not None else "Write the gains?"
-        return confirm(question, yes)
-
     with drive(ctx) as d:
         d.dead_man_waived = no_dead_man
+        ask = _Dialog(ctx, d, yes=yes, method=method, step_check=step_check, travel=travel, as_json=as_json)
         try:
-            res = tune.tune_inertia(d, request, progress=info, approve_motion=approve_motion,
-                                    on_proposal=show, approve_write=approve_write)
+            res = tune.tune_inertia(d, request, progress=info, approve_motion=ask.approve_motion,
+                                    on_proposal=ask.show, approve_write=ask.approve_write)
         except tune.TuneDeclined:
             raise typer.Exit(1) from None
         except ServoError as exc:   # refused, tripped, travel exceeded, link lost
             refused = exc.result if isinstance(exc, identify.IdentificationRefused) else None
             if report is not None and refused is not None:
                 _report(report, refused, d.profile, None, str(exc))
-            if as_json and moving[0]:
+            if as_json and ask.moving:
                 emit_json(_clean({"ok": False, "reason": str(exc), **(_estimate_json(refused) if refused else {}),
                                   "ratio": refused.new_ratio if refused else None, "written": False}))
             raise
         profile = d.profile
     if report is not None:
         _report(report, res.identified, profile, res)
-    _render(res, profile, as_json, dead_man[0])
+    _render(res, profile, as_json, ask.dead_man)
+
+
+class _Dialog:
+    """What `tune inertia` asks and tells the user while the use case runs: before moving (the motion, the
+    dead-man bound), the proposal, before writing."""
+
+    def __init__(self, ctx: typer.Context, d: Drive, *, yes: bool, method: str, step_check: bool, travel: float,
+                 as_json: bool) -> None:
+        self.ctx, self.d, self.yes, self.method = ctx, d, yes, method
+        self.step_check, self.travel, self.as_json = step_check, travel, as_json
+        self.moving = False         # identifying: a failure now reports what was measured
+        self.dead_man: deadman.DeadManBound | None = None
+
+    def approve_motion(self, motion: planning.MotionPlan | None) -> bool:
+        if self.method == "host" or self.step_check:
+            confirm_motion(self.ctx, self.d, self.yes, preflight.FEATURE)
+        info(f"motion: {motion.describe()}" if motion is not None else
+             "motion: the drive's own identification (its parameters set torque and travel), then host "
+             "moves that check its result")
+        if self.step_check:
+            info(f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(self.travel):.2f} s forward "
+                 "and back, before and after")
+        if self.method == "host" and motion is not None:
+            self.dead_man = deadman.motion_bound(self.d, motion.speed_rpm, motion.ramp_s)
+        elif self.step_check:
+            self.dead_man = deadman.motion_bound(self.d, step.STEP_SPEED_RPM, 0.0)
+        if self.dead_man is not None:
+            info(deadman.sentence(self.dead_man))
+        self.moving = confirm("Move the axis now?", self.yes)
+        return self.moving
+
+    def show(self, proposal: tune.Proposal) -> None:
+        self.moving = False
+        if not self.as_json:
+            _show(proposal)
+
+    def approve_write(self, proposal: tune.Proposal) -> bool:
+        entry = proposal.parameter
+        question = (f"Write {entry.code} = {proposal.parameter_value:g} {entry.unit}"
+                    + (" and the gains" if proposal.gain_changes else "") + "?") \
+            if proposal.writes_ratio and entry is not None else "Write the gains?"
+        return confirm(question, self.yes)
 
 
 def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:

@@ -3,20 +3,23 @@
 from __future__ import annotations
 
 import json
-import time
+import os
+import socket
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from servotool.clock import Clock, RealClock, utc_now
 from servotool.commission.plan import Plan, Step
 from servotool.commission.step_type import RunContext
 from servotool.commission.steps import step_type
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError, UsageError
-from servotool.files import write_atomic
+from servotool.files import process_alive, write_atomic
 
 READ_ONLY_STEPS = ("expect", "backup", "wait", "prompt")
+STALE = "interrupted (process ended without finishing)"
 
 
 @dataclass
@@ -38,11 +41,12 @@ class Runner:
 
     def __init__(self, plan: Plan, drives: list[Drive], *, yes: bool, continue_on_error: bool,
                  ask: Callable[[int, str], bool], log: Callable[[str], None],
-                 word: Callable[[ServoError], str] = str) -> None:
+                 word: Callable[[ServoError], str] = str, clock: Clock | None = None) -> None:
         """word turns a failed step's error into its report line (the CLI adds fix commands)."""
         self.plan, self.drives = plan, drives
+        self.clock = clock or RealClock()
         self.continue_on_error, self.log, self.word = continue_on_error, log, word
-        self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives})
+        self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives}, self.clock)
         self.results: list[StepResult] = []
         self.current: Step | None = None         # the step running (or the last one run)
         self.auto_backups: dict[int, str] = {}
@@ -74,13 +78,13 @@ class Runner:
             for drive in self.drives:
                 if step.units and drive.unit not in step.units:
                     continue
-                t0 = time.monotonic()
+                t0 = self.clock.now()
                 try:
                     outcome = kind.run(step, drive, self.context)
                     detail, data, ok = outcome.detail, outcome.data, True
                 except ServoError as exc:
                     detail, data, ok = self.word(exc), {"error": type(exc).__name__, "exit_code": exc.exit_code}, False
-                result = StepResult(step, drive.unit, ok, detail, time.monotonic() - t0, data)
+                result = StepResult(step, drive.unit, ok, detail, self.clock.now() - t0, data)
                 self.results.append(result)
                 self.after_step()
                 self.log(f"{'ok  ' if ok else 'FAIL'} unit {drive.unit} {step.where()}: {detail}")
@@ -89,23 +93,50 @@ class Runner:
         return all(r.ok for r in self.results)
 
 
+def read_report(path: Path) -> dict[str, Any] | None:
+    """A plan report as written, None when there is none (or it is not a report). A report still `running` whose
+    process is gone from this host (kill -9, power loss) says so: its status becomes STALE and ok false."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict) or "status" not in data:
+        return None
+    pid = data.get("pid")
+    if data["status"] == "running" and data.get("host") == socket.gethostname() and isinstance(pid, int) \
+            and not isinstance(pid, bool) and process_alive(pid) is False:
+        data = {**data, "status": STALE, "ok": False}
+    return data
+
+
 class Report:
-    """The run's report file: written when the run starts (`running`), rewritten atomically after every step, and
-    ending `ok`, `failed at step N` or `interrupted at step N`, so a killed run never leaves an older report's
-    verdict behind."""
+    """The run's report file: written when the run starts (`running`, with the process id and host, so a run
+    killed outright is told from one under way), rewritten atomically after every step, and ending `ok`, `failed
+    at step N` or `interrupted at step N`, so a killed run never leaves an older report's verdict behind.
+
+    `previous` is the report this run replaces when that run ended without finishing (its status STALE)."""
 
     def __init__(self, path: Path, runner: Runner, *, profile: str, port: str, units: list[int]) -> None:
         self.path, self.runner = path, runner
-        self.head = {"plan": str(runner.plan.path), "profile": profile, "port": port, "units": units}
-        self.t0 = time.monotonic()
+        self.head: dict[str, Any] = {"plan": str(runner.plan.path), "profile": profile, "port": port,
+                                     "units": units, "pid": os.getpid(), "host": socket.gethostname()}
+        old = read_report(path)
+        self.previous = old if old is not None and old["status"] == STALE else None
+        if self.previous is not None:
+            steps = self.previous.get("steps")
+            self.head["previous_run"] = {
+                "status": STALE, "pid": self.previous.get("pid"), "updated": self.previous.get("updated"),
+                "steps_done": len(steps) if isinstance(steps, list) else 0}
+        self.t0 = runner.clock.now()
 
     def write(self, status: str) -> dict[str, Any]:
         from servotool import __version__
 
         r = self.runner
+        stamp = utc_now(r.clock).astimezone().strftime("%Y-%m-%dT%H:%M:%S%z")
         report = {**self.head, "status": status, "ok": status == "ok", "tool_version": __version__,
-                  "seconds": round(time.monotonic() - self.t0, 2), "auto_backups": r.auto_backups,
-                  "finished" if status != "running" else "updated": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                  "seconds": round(r.clock.now() - self.t0, 2), "auto_backups": r.auto_backups,
+                  "finished" if status != "running" else "updated": stamp,
                   "steps": [x.as_json() for x in r.results]}
         try:
             write_atomic(self.path, json.dumps(report, indent=2, default=str) + "\n")

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
+from servotool.clock import Clock, RealClock
 from servotool.commission.plan import Plan, Step
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -15,13 +16,14 @@ from servotool.model.profile import Entry, Profile
 
 @dataclass
 class RunContext:
-    """The plan run around one step: operator answers, and what the plan wrote so far (for 'save')."""
+    """The plan run around one step: operator answers, what the plan wrote so far (for 'save'), the clock."""
 
     plan: Plan
     several: bool                                # more than one axis: file names get the unit
     yes: bool
     ask: Callable[[int, str], bool]
     written: dict[int, dict[str, tuple[Entry, int]]] = field(default_factory=dict)
+    clock: Clock = field(default_factory=RealClock)
 
     def wrote(self, drive: Drive, entry: Entry, raw: int) -> None:
         self.written.setdefault(drive.unit, {})[entry.code] = (entry, raw)

@@ -3,8 +3,6 @@ whole plan before anything is written."""
 
 from __future__ import annotations
 
-import time
-
 from servotool.commission.motion_steps import JogStep, TuneInertiaStep
 from servotool.commission.param_steps import BackupStep, ExpectStep, RestoreStep, SaveStep, SetStep
 from servotool.commission.plan import Plan, Step
@@ -27,7 +25,7 @@ class WaitStep(StepType):
         return f"wait {arg:g} s"
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
-        time.sleep(float(step.arg))
+        ctx.clock.sleep(float(step.arg))
         return Outcome(f"waited {step.arg:g} s")
 
 

@@ -13,11 +13,10 @@ is caught only when it stands in for a read that confirmation checks, so a drive
 
 from __future__ import annotations
 
-import time
 from collections import deque
-from collections.abc import Callable
 from typing import Protocol
 
+from servotool.clock import Clock, RealClock
 from servotool.errors import DeviceError, ModbusException
 from servotool.link.ports import Trace
 from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, NotAnswer, Request
@@ -89,14 +88,14 @@ class Exchange:
 
     def __init__(self, wire: Wire, *, timeout: float, retries: int, settle: float = 0.0, turnaround: float = 0.0,
                  echo: bool | None = False, trace: Trace | None = None,
-                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
+                 clock: Clock | None = None) -> None:
         self.wire, self.timeout, self.retries, self.settle = wire, timeout, retries, settle
-        self.turnaround, self.sleep = turnaround, sleep     # quiet after the last byte heard, before a request
+        self.turnaround = turnaround         # quiet after the last byte heard, before a request
         self._heard = -float("inf")                         # when the last byte came
         self.echo = echo                   # the adapter echoes what we send; None: find out
         self.late_window = timeout         # how long after its timeout a late reply may still come
         self.flush_gap = FRAME_GAP         # the silence that ends what is left of a failed try
-        self.trace, self.clock = trace, clock
+        self.trace, self.clock = trace, clock or RealClock()
         self.requests = 0
         self._suspect = False              # the last operation met a fault: confirm the next reads
         self._recent: deque[Request] = deque(maxlen=8)
@@ -192,11 +191,11 @@ class Exchange:
         op.begin()
         if self._take_pending(0.0):
             op.troubled = True          # bytes nobody asked for: a late or repeated reply
-        if (wait := self._heard + self.turnaround - self.clock()) > 0:
-            self.sleep(wait)
+        if (wait := self._heard + self.turnaround - self.clock.now()) > 0:
+            self.clock.sleep(wait)
         self.requests += 1
         self._recent.append(req)
-        sent_at = self.clock()
+        sent_at = self.clock.now()
         if self.trace:
             self.trace(True, req.frame)
         self.wire.send(req.frame)
@@ -226,7 +225,7 @@ class Exchange:
                 raise _fault(exc, len(buf)) from None
             if n is not None and len(buf) >= n:
                 return buf[:n], buf[n:] + self._take_pending(self.settle)
-            left = deadline - self.clock()
+            left = deadline - self.clock.now()
             if left <= 0:
                 raise LineFault("garbled" if buf else "silent", len(buf), "a partial reply")
             chunk = self._recv(min(left, FRAME_GAP) if buf else left)
@@ -240,7 +239,7 @@ class Exchange:
             return b""
         sent, buf = req.frame, b""
         while len(buf) < len(sent) and sent.startswith(buf):
-            left = deadline - self.clock()
+            left = deadline - self.clock.now()
             if left <= 0:
                 return buf
             buf += self._recv(left)
@@ -250,7 +249,7 @@ class Exchange:
             return buf
         if self.echo is None and req.fc == WRITE_ONE:
             # An FC06 reply repeats the request: one copy alone is the echo or the reply, which cannot be told.
-            buf += self._take_pending(max(0.0, deadline - self.clock()), until=len(sent) * 2 - len(buf))
+            buf += self._take_pending(max(0.0, deadline - self.clock.now()), until=len(sent) * 2 - len(buf))
             if len(buf) < 2 * len(sent):
                 raise LineFault("stray", len(buf), "one copy of a write that may be an echo")
         self.echo = True
@@ -263,7 +262,7 @@ class Exchange:
         (until the late-reply window has passed)."""
         if fault.kind in ("silent", "stray"):
             until = sent_at + self.timeout + (self.late_window if fault.kind == "silent" else 0.0)
-            while (left := until - self.clock()) > 0:
+            while (left := until - self.clock.now()) > 0:
                 self._recv(left)
         self._take_pending(max(self.settle, self.flush_gap))
 
@@ -279,7 +278,7 @@ class Exchange:
     def _recv(self, timeout: float) -> bytes:
         data = self.wire.recv(max(0.0, timeout))
         if data:
-            self._heard = self.clock()
+            self._heard = self.clock.now()
             if self.trace:
                 self.trace(False, data)
         return data

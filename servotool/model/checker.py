@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from typing import Any
 
 
@@ -14,6 +15,12 @@ class Checker:
 
     def bad(self, loc: str, msg: str) -> None:
         self.problems.append(f"{self.where}: {loc}: {msg}")
+
+    def known_keys(self, data: dict[Any, Any], allowed: Collection[str], loc: str) -> None:
+        """Every key of a mapping that is not an allowed one is a problem."""
+        for key in data:
+            if key not in allowed:
+                self.bad(loc, f"unknown key '{key}'")
 
     def need(self, data: dict[str, Any], key: str, loc: str, kind: type | tuple[type, ...]) -> Any:
         if key not in data or data[key] is None:

@@ -91,9 +91,7 @@ def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | 
         return None
     if isinstance(raw.get("code"), str):
         loc = f"entries[{index}] ({raw['code']})"
-    for key in raw:
-        if key not in ENTRY_KEYS:
-            chk.bad(loc, f"unknown key '{key}'")
+    chk.known_keys(raw, ENTRY_KEYS, loc)
     before = len(chk.problems)
     code = chk.need(raw, "code", loc, str)
     cls = chk.choice(raw, "class", loc, CLASSES, "")
@@ -119,34 +117,13 @@ def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | 
     digits = chk.opt(raw, "digits", loc, int, 5)
     trigger = chk.opt(raw, "trigger", loc, int, 1)
     copy = chk.opt(raw, "copy", loc, bool, True)
-    unverified = raw.get("unverified", "")
-    if unverified is True:
-        chk.bad(f"{loc}.unverified", "give the reason as a string, not just 'true'")
-        unverified = "unverified"
+    unverified = _reason(chk, raw, loc)
     if address is not None and not 0 <= address <= 0xFFFF:
         chk.bad(f"{loc}.address", f"{address} is outside 0..65535")
-    if scale is not None and not (math.isfinite(scale) and 1e-9 <= scale <= 1e9):
-        chk.bad(f"{loc}.scale", "must be a finite number > 0 (1e-9..1e9)")
-        scale = 1.0
-    if not lo <= vmin <= hi or not lo <= vmax <= hi:
-        chk.bad(loc, f"min/max {vmin}..{vmax} outside the {type_name} range {lo}..{hi}")
-    if vmin > vmax:
-        chk.bad(loc, f"min {vmin} > max {vmax}")
-    if default is not None and not vmin <= default <= vmax:
-        chk.bad(f"{loc}.default", f"{default} outside min..max {vmin}..{vmax}")
-    if cls == "Pn":
-        if default is None:
-            chk.bad(loc, "Pn entry needs 'default'")
-        if "effect" not in raw:
-            chk.bad(loc, "Pn entry needs 'effect'")
-    if cls in ("Un", "Sn") and access != "ro" and cls == "Un":
-        chk.bad(f"{loc}.access", "Un entries are read-only")
-    if fmt == "digits" and not fields:
-        chk.bad(loc, "format: digits needs 'fields'")
-    if fmt == "digits" and field_width not in (4, 8):
-        chk.bad(f"{loc}.field_width", "must be 4 or 8")
-    if fmt == "bits" and not bits:
-        chk.bad(loc, "format: bits needs 'bits'")
+    scale = _check_scale(chk, loc, scale)
+    _check_range(chk, loc, type_name, vmin, vmax, default)
+    _check_kind(chk, loc, raw, cls, access, default)
+    _check_format(chk, loc, fmt, fields, field_width, bits)
     field_ranges, field_enums = _parse_fields(chk, raw, loc, fmt, [str(f) for f in fields], field_width, default)
     if fmt == "digits" and field_width in (4, 8) and fields:
         _check_packed_range(chk, loc, [str(f) for f in fields], field_width, field_ranges, vmin, vmax)
@@ -161,11 +138,59 @@ def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | 
         word_order=chk.choice(raw, "word_order", loc, WORD_ORDERS, word_order), combine=combine,
         digits=digits, scale=float(scale), unit=str(raw.get("unit", "") or ""),
         min=vmin, max=vmax, default=default, access=access, effect=effect, group=str(raw.get("group", "") or ""),
-        description=str(raw.get("description", "") or ""), source=source, unverified=str(unverified or ""),
+        description=str(raw.get("description", "") or ""), source=source, unverified=unverified,
         format=fmt, fields=tuple(str(f) for f in fields), field_width=field_width, field_ranges=field_ranges,
         field_enums=field_enums, bits=bits, enum=enum,
         trigger=trigger, copy=copy,
     )
+
+
+def _reason(chk: Checker, raw: dict[str, Any], loc: str) -> str:
+    """Why an entry is unverified ("" when it is not)."""
+    unverified = raw.get("unverified", "")
+    if unverified is True:
+        chk.bad(f"{loc}.unverified", "give the reason as a string, not just 'true'")
+        return "unverified"
+    return str(unverified or "")
+
+
+def _check_scale(chk: Checker, loc: str, scale: float) -> float:
+    if not (math.isfinite(scale) and 1e-9 <= scale <= 1e9):
+        chk.bad(f"{loc}.scale", "must be a finite number > 0 (1e-9..1e9)")
+        return 1.0
+    return scale
+
+
+def _check_range(chk: Checker, loc: str, type_name: str, vmin: int, vmax: int, default: int | None) -> None:
+    lo, hi = _typed_range(type_name)
+    if not lo <= vmin <= hi or not lo <= vmax <= hi:
+        chk.bad(loc, f"min/max {vmin}..{vmax} outside the {type_name} range {lo}..{hi}")
+    if vmin > vmax:
+        chk.bad(loc, f"min {vmin} > max {vmax}")
+    if default is not None and not vmin <= default <= vmax:
+        chk.bad(f"{loc}.default", f"{default} outside min..max {vmin}..{vmax}")
+
+
+def _check_kind(chk: Checker, loc: str, raw: dict[str, Any], cls: str, access: str, default: int | None) -> None:
+    """What an entry's class asks of it."""
+    if cls == "Pn":
+        if default is None:
+            chk.bad(loc, "Pn entry needs 'default'")
+        if "effect" not in raw:
+            chk.bad(loc, "Pn entry needs 'effect'")
+    if cls == "Un" and access != "ro":
+        chk.bad(f"{loc}.access", "Un entries are read-only")
+
+
+def _check_format(chk: Checker, loc: str, fmt: str, fields: list[Any], field_width: int,
+                  bits: dict[int, str]) -> None:
+    """What an entry's display format asks of it."""
+    if fmt == "digits" and not fields:
+        chk.bad(loc, "format: digits needs 'fields'")
+    if fmt == "digits" and field_width not in (4, 8):
+        chk.bad(f"{loc}.field_width", "must be 4 or 8")
+    if fmt == "bits" and not bits:
+        chk.bad(loc, "format: bits needs 'bits'")
 
 
 def check_overlaps(chk: Checker, entries: list[tuple[int, Entry]]) -> None:

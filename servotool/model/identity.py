@@ -34,9 +34,7 @@ def parse_identity(chk: Checker, raw: Any, entries: dict[str, Entry], limits: Li
     if not isinstance(raw, dict):
         chk.bad("identity", "expected a mapping {firmware, model, checks}")
         return None
-    for key in raw:
-        if key not in ("firmware", "model", "checks"):
-            chk.bad("identity", f"unknown key '{key}'")
+    chk.known_keys(raw, ("firmware", "model", "checks"), "identity")
     items = raw.get("checks")
     if not isinstance(items, list) or not items:
         chk.bad("identity.checks", "expected a non-empty list of {code|address, range, sim, source}")
@@ -67,9 +65,7 @@ def _parse_check(chk: Checker, item: Any, loc: str, entries: dict[str, Entry]) -
     if not isinstance(item, dict):
         chk.bad(loc, "expected a mapping")
         return None
-    for key in item:
-        if key not in CHECK_KEYS:
-            chk.bad(loc, f"unknown key '{key}'")
+    chk.known_keys(item, CHECK_KEYS, loc)
     before = len(chk.problems)
     source = chk.need(item, "source", loc, str)
     unverified = chk.opt(item, "unverified", loc, str, "")

@@ -42,9 +42,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     if not isinstance(data, dict):
         chk.bad("top", "a profile must be a YAML mapping")
         return None, chk.problems
-    for key in data:
-        if key not in TOP_KEYS:
-            chk.bad("top", f"unknown key '{key}'")
+    chk.known_keys(data, TOP_KEYS, "top")
     if data.get("schema") != 1:
         chk.bad("schema", f"expected schema: 1, got {data.get('schema')!r}")
     pid = chk.need(data, "id", "top", str)
@@ -61,41 +59,19 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     if not isinstance(groups, dict):
         chk.bad("groups", "expected a mapping of group id -> title")
         groups = {}
-    raw_entries = data.get("entries")
-    if not isinstance(raw_entries, list) or not raw_entries:
-        chk.bad("entries", "expected a non-empty list")
-        raw_entries = []
-    parsed = [(i, e) for i, raw in enumerate(raw_entries) if (e := parse_entry(chk, raw, i, word_order))]
-    check_overlaps(chk, parsed)
-    entries = [e for _, e in parsed]
+    entries, broken = _parse_entries(chk, data.get("entries"), word_order)
     codes = {e.code.upper() for e in entries}
-    # Codes of entries that are present but broken: references to them are not 'unknown'.
-    broken = {str(raw["code"]).upper() for raw in raw_entries if isinstance(raw, dict) and "code" in raw} - codes
     if groups:
         for e in entries:
             if e.group and e.group not in groups:
                 chk.bad(f"entry {e.code}", f"group '{e.group}' is not declared in 'groups'")
-    roles = data.get("roles") or {}
-    if not isinstance(roles, dict):
-        chk.bad("roles", "expected a mapping of role -> code")
-        roles = {}
-    for role, code in roles.items():
-        if isinstance(code, str) and code.upper() in broken:
-            chk.bad(f"roles.{role}", f"names broken entry {code!r} (see its own problem)")
-        elif not isinstance(code, str) or code.upper() not in codes:
-            chk.bad(f"roles.{role}", f"names unknown entry {code!r}")
+    roles = _parse_roles(chk, data.get("roles"), codes, broken)
     if persistence.mode == "switchable" and persistence.switch_code.upper() not in codes:
         chk.bad("persistence.switch.code", f"names unknown entry {persistence.switch_code!r}")
     if persistence.mode == "ram" and "eeprom_save" not in roles and not persistence.note:
         chk.bad("persistence.note", "mode 'ram' without role 'eeprom_save' must say how the drive stores values")
     alarms = _parse_alarms(chk, data.get("alarms"))
-    conventions = data.get("conventions") or {}
-    if not isinstance(conventions, dict):
-        chk.bad("conventions", "expected a mapping")
-        conventions = {}
-    for key, value in conventions.items():
-        if key not in CONVENTIONS or value not in CONVENTIONS[key]:
-            chk.bad(f"conventions.{key}", f"unknown convention {key}: {value!r}")
+    conventions = _parse_conventions(chk, data.get("conventions"))
     motion_setup = _parse_motion_setup(chk, data.get("motion_setup"), {e.code.upper(): e for e in entries}, broken)
     dead_man = _parse_dead_man(chk, data.get("dead_man"))
     identity = parse_identity(chk, data.get("identity"), {e.code.upper(): e for e in entries}, limits)
@@ -114,6 +90,44 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     return profile, []
 
 
+def _parse_entries(chk: Checker, raw_entries: Any, word_order: str) -> tuple[list[Entry], set[str]]:
+    """The entries that parse, and the codes of those present but broken (references to them are not
+    'unknown')."""
+    if not isinstance(raw_entries, list) or not raw_entries:
+        chk.bad("entries", "expected a non-empty list")
+        raw_entries = []
+    parsed = [(i, e) for i, raw in enumerate(raw_entries) if (e := parse_entry(chk, raw, i, word_order))]
+    check_overlaps(chk, parsed)
+    entries = [e for _, e in parsed]
+    codes = {e.code.upper() for e in entries}
+    broken = {str(raw["code"]).upper() for raw in raw_entries if isinstance(raw, dict) and "code" in raw} - codes
+    return entries, broken
+
+
+def _parse_roles(chk: Checker, raw: Any, codes: set[str], broken: set[str]) -> dict[Any, Any]:
+    roles = raw or {}
+    if not isinstance(roles, dict):
+        chk.bad("roles", "expected a mapping of role -> code")
+        return {}
+    for role, code in roles.items():
+        if isinstance(code, str) and code.upper() in broken:
+            chk.bad(f"roles.{role}", f"names broken entry {code!r} (see its own problem)")
+        elif not isinstance(code, str) or code.upper() not in codes:
+            chk.bad(f"roles.{role}", f"names unknown entry {code!r}")
+    return roles
+
+
+def _parse_conventions(chk: Checker, raw: Any) -> dict[Any, Any]:
+    conventions = raw or {}
+    if not isinstance(conventions, dict):
+        chk.bad("conventions", "expected a mapping")
+        return {}
+    for key, value in conventions.items():
+        if key not in CONVENTIONS or value not in CONVENTIONS[key]:
+            chk.bad(f"conventions.{key}", f"unknown convention {key}: {value!r}")
+    return conventions
+
+
 def _parse_dead_man(chk: Checker, raw: Any) -> DeadManRoute | None:
     """dead_man: what stops host motion on this drive when the host dies (route, reason, source, unverified)."""
     if raw is None:
@@ -121,9 +135,7 @@ def _parse_dead_man(chk: Checker, raw: Any) -> DeadManRoute | None:
     if not isinstance(raw, dict):
         chk.bad("dead_man", "expected a mapping {route, reason, source, unverified, if_host_dies}")
         return None
-    for key in raw:
-        if key not in DEAD_MAN_KEYS:
-            chk.bad("dead_man", f"unknown key '{key}'")
+    chk.known_keys(raw, DEAD_MAN_KEYS, "dead_man")
     route = chk.choice(raw, "route", "dead_man", DEAD_MAN_ROUTES, "none")
     texts = {k: chk.opt(raw, k, "dead_man", str, "") for k in ("reason", "source", "unverified", "if_host_dies")}
     if not texts["reason"] or not texts["source"]:
@@ -140,9 +152,7 @@ def _parse_motion_setup(chk: Checker, raw: Any, entries: dict[str, Entry], broke
     out: list[SetupItem] = []
     seen: set[str] = set()
     for loc, item in _mappings(chk, raw, "motion_setup", "{code, value, reason, source}"):
-        for key in item:
-            if key not in SETUP_KEYS:
-                chk.bad(loc, f"unknown key '{key}'")
+        chk.known_keys(item, SETUP_KEYS, loc)
         code = chk.need(item, "code", loc, str)
         value = chk.need(item, "value", loc, (str, int, float))
         reason = chk.need(item, "reason", loc, str)
@@ -197,8 +207,7 @@ def _parse_alarms(chk: Checker, raw: Any) -> list[Alarm]:
     out: list[Alarm] = []
     seen: set[int] = set()
     for loc, item in _mappings(chk, raw, "alarms"):
-        for key in sorted(set(map(str, item)) - ALARM_KEYS):
-            chk.bad(loc, f"unknown key '{key}'")
+        chk.known_keys(item, ALARM_KEYS, loc)
         code = chk.need(item, "code", loc, int)
         name = chk.need(item, "name", loc, str)
         kind = chk.choice(item, "kind", loc, ALARM_KINDS, "other")
@@ -216,8 +225,7 @@ def _parse_serial(chk: Checker, raw: Any) -> tuple[LineSettings, int]:
     if not isinstance(raw, dict):
         chk.bad("serial", "missing or not a mapping")
         return LineSettings(), 1
-    for key in sorted(set(map(str, raw)) - SERIAL_KEYS):
-        chk.bad("serial", f"unknown key '{key}'")
+    chk.known_keys(raw, SERIAL_KEYS, "serial")
     s = LineSettings(
         baud=chk.opt(raw, "baud", "serial", int, 9600),
         parity=chk.choice(raw, "parity", "serial", ("N", "E", "O"), "N"),

@@ -7,11 +7,11 @@ import json
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from servotool import __version__
+from servotool.clock import utc_now
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.files import backup_dir, load_yaml, write_atomic
@@ -21,9 +21,6 @@ from servotool.ops import backup_csv
 from servotool.ops.params import select
 
 FORMAT = 1
-
-
-IDENTITY_ROLES = ("firmware", "drive_type")
 
 
 @dataclass
@@ -65,18 +62,27 @@ def _dump(doc: dict[str, Any]) -> str:
 
 
 def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
-    """Read every readable Pn (coalesced) and the identity entries; entries the drive lacks are left out and
-    listed in `missing`."""
+    """Read every readable Pn (coalesced) and the entries of the profile's identity section; entries the drive
+    lacks are left out and listed in `missing` (Pn only)."""
     p = drive.profile
     entries = select(p)
     readings = drive.read_entries(entries, progress=progress, partial=True)
     identity: dict[str, str] = {}
-    ident = [e for e in (p.role(r) for r in IDENTITY_ROLES) if e is not None and e.readable]
+    ident = identity_entries(p)
     for r in drive.read_entries(ident, partial=True) if ident else []:
         identity[r.entry.code] = r.text
-    return Backup(p.id, p.version, p.model, drive.unit, datetime.now(UTC).isoformat(timespec="seconds"),
+    return Backup(p.id, p.version, p.model, drive.unit, utc_now().isoformat(timespec="seconds"),
                   __version__, identity, {r.entry.code: r.raw for r in readings},
                   missing=[e.code for e in entries if e.code in drive.missing])
+
+
+def identity_entries(profile: Profile) -> list[Entry]:
+    """The entries a backup records as the drive's identity: those the profile's identity section checks (its
+    firmware and model entries among them), in the section's order."""
+    if profile.identity is None:
+        return []
+    codes = [c.code for c in profile.identity.checks if c.code]
+    return [e for e in (profile.find(c) for c in codes) if e is not None and e.readable]
 
 
 def check_output(path: Path, *, force: bool = False) -> None:
@@ -121,7 +127,7 @@ def write_backup(drive: Drive, path: Path, *, force: bool = False,
 
 def auto_path(drive: Drive, reason: str) -> Path:
     """A new file name under backup_dir() for an automatic backup taken for a reason ('before-restore')."""
-    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S%fZ")
+    stamp = utc_now().strftime("%Y%m%dT%H%M%S%fZ")
     return backup_dir() / f"{drive.profile.id}-unit{drive.unit}-{stamp}-{reason}.yaml"
 
 

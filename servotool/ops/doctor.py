@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import os
 import statistics
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from servotool.clock import Clock, RealClock
 from servotool.config import SIM_PORT, ConnectOptions, check_unit, effective, line_settings
 from servotool.errors import DeviceError, ModbusException, UsageError
 from servotool.link.modbus import ModbusLink
@@ -100,7 +100,7 @@ def link_settings(options: ConnectOptions) -> tuple[LinkSettings, int, Profile |
 
 
 def check(settings: LinkSettings, unit: int, profile: Profile | None, count: int,
-          progress: Callable[[int], None] | None = None) -> Health:
+          progress: Callable[[int], None] | None = None, clock: Clock | None = None) -> Health:
     """Send `count` reads to the unit and measure. The read is the profile's first identity block (what a drive
     of that family has), else one register at address 0; an exception answer is an answer."""
     if count < 1:
@@ -111,16 +111,17 @@ def check(settings: LinkSettings, unit: int, profile: Profile | None, count: int
     tcp = parse_tcp(settings.port) is not None
     health = Health(settings.port, None if tcp else settings.line, unit, address, registers, count,
                     latency=None if tcp else latency_timer(settings.port))
+    clock = clock or RealClock()
     link = ModbusLink(settings)
     try:
-        start = time.monotonic()
+        start = clock.now()
         for i in range(count):
-            t0 = time.monotonic()
+            t0 = clock.now()
             try:
                 link.read(unit, address, registers)
-                health.rtts.append(time.monotonic() - t0)
+                health.rtts.append(clock.now() - t0)
             except ModbusException:
-                health.rtts.append(time.monotonic() - t0)
+                health.rtts.append(clock.now() - t0)
                 health.exceptions += 1
             except DeviceError as exc:
                 if not exc.fault:
@@ -128,7 +129,7 @@ def check(settings: LinkSettings, unit: int, profile: Profile | None, count: int
                 health.failures += 1
             if progress:
                 progress(i + 1)
-        health.seconds = time.monotonic() - start
+        health.seconds = clock.now() - start
         health.frames, health.echo = link.requests, link.echo
     finally:
         link.close()

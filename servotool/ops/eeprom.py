@@ -34,10 +34,11 @@ def _switched(drive: Drive, entry: Entry, current: int, wanted: int,
     if wanted == current:
         yield
         return
-    journal.note_switch(drive, entry.code, current)
-    drive.write_raw(entry, wanted)
     failing = True
     try:
+        # Inside the try: a Ctrl-C that lands while the switch is being written still puts it back.
+        journal.note_switch(drive, entry.code, current)
+        drive.write_raw(entry, wanted)
         yield
         failing = False
     finally:
@@ -46,23 +47,31 @@ def _switched(drive: Drive, entry: Entry, current: int, wanted: int,
 
 def _put_back(drive: Drive, entry: Entry, raw: int, failing: bool, state: dict[str, bool] | None) -> None:
     """The switch back, verified, tried a few times (an interrupted request may leave the line out of step);
-    the journal record goes once it is confirmed."""
+    the journal record goes once it is confirmed. A Ctrl-C during the put-back does not stop it while the drive
+    answers: it is raised once the switch is back."""
     from servotool.ops import journal
 
+    interrupt: KeyboardInterrupt | None = None
     for attempt in range(3):
         try:
             drive.write_verified(entry, raw)
-        except ServoError:
+            journal.clear_switch(drive)
+        except (ServoError, KeyboardInterrupt) as exc:
+            if isinstance(exc, KeyboardInterrupt):
+                interrupt = exc
             if attempt < 2:
                 continue
             if state is not None:
                 state["switch_back"] = False
+            if interrupt is not None:
+                raise interrupt from None
             if not failing:
                 raise      # otherwise the first error is the one to report
             return
-        journal.clear_switch(drive)
         if state is not None:
             state["switch_back"] = True
+        if interrupt is not None:
+            raise interrupt
         return
 
 

@@ -16,13 +16,13 @@ import json
 import os
 import re
 import sys
-import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError
 from servotool.files import FileLock, backup_dir, load_yaml, sweep_temp, write_atomic
@@ -62,7 +62,7 @@ _LOCKS: dict[str, _Held] = {}
 
 
 @contextmanager
-def port_lock(drive: Drive, notice: Notice | None = None) -> Iterator[None]:
+def port_lock(drive: Drive, notice: Notice | None = None, clock: Clock | None = None) -> Iterator[None]:
     """Hold the drive's port for a batch of writes; the first holder in this process also recovers what a dead
     process left in the journal. Drives without a port name (in-process test links) are not locked."""
     if not drive.port:
@@ -71,12 +71,13 @@ def port_lock(drive: Drive, notice: Notice | None = None) -> Iterator[None]:
     key = port_key(drive.port)
     held = _LOCKS.setdefault(key, _Held(FileLock(journal_dir() / f"{key}.lock")))
     if held.depth == 0:
-        deadline = time.monotonic() + LOCK_WAIT_S
+        clock = clock or RealClock()
+        deadline = clock.now() + LOCK_WAIT_S
         while not held.lock.try_acquire():
-            if time.monotonic() > deadline:
+            if clock.now() > deadline:
                 raise DeviceError(f"another servotool process has been writing to {drive.port} for "
                                   f"{LOCK_WAIT_S:.0f} s; try again when it has finished")
-            time.sleep(0.01)
+            clock.sleep(0.01)
     held.depth += 1
     try:
         if held.depth == 1:
@@ -126,7 +127,7 @@ def _update(drive: Drive, **parts: Any) -> None:
 def operation(drive: Drive, op: str, auto_backup: Path, targets: dict[str, int]) -> Iterator[None]:
     """Record an operation that writes many values (a restore) with its automatic backup and targets, so that a
     kill midway is reported by the next command with the drive's state read from it."""
-    _update(drive, op={"name": op, "auto_backup": str(auto_backup), "targets": targets, "since": time.time()})
+    _update(drive, op={"name": op, "auto_backup": str(auto_backup), "targets": targets, "since": RealClock().wall()})
     try:
         yield
     except BaseException:
@@ -216,7 +217,7 @@ def recover_at_start(drive: Drive, notice: Notice, extra_folders: tuple[Path, ..
 
 def note_switch(drive: Drive, code: str, original: int) -> None:
     """Record the switch's original raw value before it is changed."""
-    _update(drive, switch={"code": code, "original": original, "since": time.time()})
+    _update(drive, switch={"code": code, "original": original, "since": RealClock().wall()})
 
 
 def clear_switch(drive: Drive) -> None:

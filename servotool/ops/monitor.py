@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import csv
 import math
-import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import datetime
 from pathlib import Path
 from typing import IO, Literal
 
+from servotool.clock import Clock, RealClock, utc_now
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
@@ -95,8 +95,9 @@ class Sample:
 class Monitor:
     """Polls entries of one drive; each sample is one or a few coalesced requests."""
 
-    def __init__(self, drive: Drive, entries: list[Entry]) -> None:
+    def __init__(self, drive: Drive, entries: list[Entry], clock: Clock | None = None) -> None:
         self.drive = drive
+        self.clock = clock or RealClock()
         self.entries = entries
         self.series = {e.code: Series(e) for e in entries}
         self.samples = 0
@@ -104,7 +105,7 @@ class Monitor:
         self.elapsed = 0.0
 
     def sample(self) -> Sample:
-        now = time.monotonic()
+        now, wall = self.clock.now(), utc_now(self.clock)
         if self._t0 is None:
             self._t0 = now
         readings = self.drive.read_entries(self.entries)
@@ -113,7 +114,7 @@ class Monitor:
             self.series[code].add(float(v))
         self.samples += 1
         self.elapsed = now - self._t0
-        return Sample(self.elapsed, datetime.now(UTC), values)
+        return Sample(self.elapsed, wall, values)
 
     @property
     def achieved_rate(self) -> float | None:
@@ -126,7 +127,7 @@ class Monitor:
         duration/samples/stop."""
         period = 1.0 / check_rate(rate_hz)
         check_duration(duration_s)
-        start = time.monotonic()
+        start = self.clock.now()
         n = 0
         while True:
             yield self.sample()
@@ -136,11 +137,11 @@ class Monitor:
             if stop is not None and stop():
                 return
             next_at = start + n * period
-            now = time.monotonic()
+            now = self.clock.now()
             if duration_s is not None and (max(next_at, now) - start) >= duration_s:
                 return
             if next_at > now:
-                time.sleep(next_at - now)
+                self.clock.sleep(next_at - now)
 
 
 CsvMode = Literal["new", "replace", "append"]

@@ -4,10 +4,10 @@ id, and the profile each answering drive matches (ops.identity)."""
 from __future__ import annotations
 
 import re
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from servotool.clock import Clock, RealClock
 from servotool.config import PARITIES, SIM_PORT, ConnectOptions, effective
 from servotool.errors import DeviceError, ModbusException, UsageError
 from servotool.link.modbus import ModbusLink
@@ -117,14 +117,15 @@ Progress = Callable[[int, int, str], None]      # (probes done, probes in all, t
 
 def scan(port: str, units: list[int], settings: list[LineSettings], profiles: list[Profile], *,
          timeout: float = SCAN_TIMEOUT, progress: Progress | None = None,
-         open_link: Callable[[LinkSettings], Link] | None = None) -> ScanResult:
+         open_link: Callable[[LinkSettings], Link] | None = None, clock: Clock | None = None) -> ScanResult:
     """Probe every unit id at every line setting (one setting over tcp://), and identify each unit that answers.
 
     A unit found at one setting is not probed again at the others (a drive has one setting)."""
     tcp = parse_tcp(port) is not None
     lines: list[LineSettings | None] = [None] if tcp else list(settings)
     result = ScanResult(port, tried=lines)
-    total, done, start = len(lines) * len(units), 0, time.monotonic()
+    clock = clock or RealClock()
+    total, done, start = len(lines) * len(units), 0, clock.now()
     seen: set[int] = set()
     for line in lines:
         try:
@@ -150,7 +151,7 @@ def scan(port: str, units: list[int], settings: list[LineSettings], profiles: li
             link.close()
     if progress:
         progress(total, total, "")
-    result.seconds = time.monotonic() - start
+    result.seconds = clock.now() - start
     return result
 
 

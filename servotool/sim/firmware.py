@@ -33,6 +33,7 @@ from servotool.sim.alarms import AlarmLog
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.handover import Handover, MachineState
 from servotool.sim.identification import Identification, Progress
+from servotool.sim.mechanics import MechanicsSettings
 from servotool.sim.plant import (
     BRAKE_HOLD_X_RATED,
     FOLLOWING_LIMIT_REV,
@@ -122,7 +123,7 @@ class Firmware:
             load_ratio=float(s["load_ratio"]), coulomb_nm=float(s["friction"]) * rated,
             viscous_nm_per_rad_s=float(s["viscous"]) * rated, load_torque_nm=float(s["load_torque"]) * rated,
             noise=float(s["noise"]), seed=int(s["seed"]),
-            brake_nm=BRAKE_HOLD_X_RATED * rated if s["brake"] else 0.0)
+            brake_nm=BRAKE_HOLD_X_RATED * rated if s["brake"] else 0.0, mechanics=MechanicsSettings.from_sim(s, rated))
 
     def _eng(self, role: str, default: float) -> float:
         entry = self.profile.role(role)

@@ -1,7 +1,9 @@
 """Physics and servo control loops behind the simulated drive (no Modbus here).
 
 Rigid motor + load: J = Jm * (1 + load_ratio), with Coulomb friction (and stiction at rest), viscous friction and a
-constant load torque (gravity axis). Sign convention: J dw/dt = T - Tc*sign(w) - B*w - Tg.
+constant load torque (gravity axis). Sign convention: J dw/dt = T - Tc*sign(w) - B*w - Tg. Mechanics outside that
+model (a compliant coupling, backlash, an arm's position-dependent gravity, cogging) are in sim.mechanics, off by
+default.
 An optional holding brake adds BRAKE_HOLD_X_RATED x rated torque of friction while it is closed: the drive closes it
 after servo off once the motor is below BRAKE_ENGAGE_RPM or BRAKE_DELAY_S after servo off (IS620P H02-11/H02-12
 defaults), and opens it at servo on. Without a brake a gravity load falls with servo off, limited only by friction.
@@ -20,9 +22,10 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 from servotool.model.profile import Motor as MotorData
+from servotool.sim.mechanics import Friction, Mechanics, MechanicsSettings, MotorState, friction_step
 
 TS = 125e-6                 # control period, s
 SPEED_FILTER_S = 0.25e-3    # speed feedback low-pass
@@ -38,7 +41,7 @@ ESTOP_MAX_S = 0.5           # an alarm stop at the torque limit lasts at most th
 # The plant's dynamic state, as persisted between processes serving one simulated drive (the drive stays powered).
 STATE_FIELDS = ("time", "w", "theta", "mode", "alarm", "_w_meas", "_theta_prev_counts", "_integral", "_t_cmd",
                 "_t_filtered", "_t_applied", "_t_delayed", "_ref", "_loop_ref", "_target", "_torque_target",
-                "_pos_ref", "_heat", "_load", "_off_s", "_estop_s")
+                "_pos_ref", "_heat", "_load", "_off_s", "_estop_s", "_defl", "_defl_rate")
 
 
 @dataclass(frozen=True)
@@ -52,6 +55,7 @@ class PlantSettings:
     noise: float = 0.0       # speed std = noise * 1000 rpm, torque std = noise * 100 % of rated
     seed: int = 1
     brake_nm: float = 0.0    # holding brake torque; 0 = no brake
+    mechanics: MechanicsSettings = field(default_factory=MechanicsSettings)   # beyond the rigid load (off by default)
 
 
 @dataclass(frozen=True)
@@ -95,6 +99,8 @@ class Plant:
         self._load = 0.0
         self._off_s = math.inf     # time since servo off (brake timing)
         self._estop_s = 0.0        # time in the alarm stop
+        self._defl = 0.0           # a compliant coupling's deflection (motor minus load angle), rad; 0 when rigid
+        self._defl_rate = 0.0      # and its rate, rad/s
         self.set_settings(settings)
         self.set_gains(gains)
 
@@ -102,6 +108,9 @@ class Plant:
     def set_settings(self, settings: PlantSettings) -> None:
         self.settings = settings
         self.j = self.motor.jm * (1.0 + settings.load_ratio)
+        self.mech = Mechanics(self.motor.jm, settings.load_ratio, settings.mechanics)
+        if not self.mech.coupled:
+            self._defl = self._defl_rate = 0.0
         self._rng = random.Random(settings.seed)
 
     def set_gains(self, gains: DriveGains) -> None:
@@ -217,7 +226,14 @@ class Plant:
             self._off_s >= BRAKE_DELAY_S or abs(self.w) < BRAKE_ENGAGE_RPM * RAD_S_PER_RPM)
 
     def _friction_nm(self) -> float:
-        return self.settings.coulomb_nm + (self.settings.brake_nm if self.brake_closed else 0.0)
+        return self.settings.coulomb_nm + self._brake_nm()
+
+    def _brake_nm(self) -> float:
+        return self.settings.brake_nm if self.brake_closed else 0.0
+
+    def _load_friction(self) -> Friction:
+        s = self.settings
+        return Friction(s.coulomb_nm, s.viscous_nm_per_rad_s, s.load_torque_nm)
 
     # ----- integration ---------------------------------------------------------------------------------------
     def advance_to(self, t: float) -> None:
@@ -228,7 +244,8 @@ class Plant:
         if dt_total > MAX_GAP_S:
             self._cool(dt_total - MAX_GAP_S)
             self.time = t - MAX_GAP_S  # an idle gap: the state carries over, only the recent part is integrated
-        if self.mode == "off" and self.w == 0.0 and abs(self.settings.load_torque_nm) <= self._friction_nm():
+        if self.mode == "off" and self.w == 0.0 and self.mech.at_rest(self._motion_state(), self._brake_nm(),
+                                                                      self._load_friction()):
             self._cool(t - self.time)
             self._off_s += t - self.time
             self.time = t              # at rest, nothing acting: nothing to integrate
@@ -281,21 +298,16 @@ class Plant:
             self._t_filtered = applied_target
         self._t_applied += (self._t_filtered - self._t_applied) * (TS / (CURRENT_LOOP_S + TS))
         s = self.settings
-        torque = self._t_applied - s.load_torque_nm - s.viscous_nm_per_rad_s * self.w
-        coulomb = self._friction_nm()
-        w = self.w
-        if w == 0.0:
-            if abs(torque) <= coulomb:
-                torque = 0.0                               # stiction (or the brake) holds
-            else:
-                torque -= math.copysign(coulomb, torque)
-            w_new = w + torque / self.j * TS
+        if self.mech.coupled:
+            state = self._motion_state()
+            self.mech.step_coupled(state, self._t_applied, self._brake_nm(), self._load_friction(), TS)
+            self.w, self.theta, self._defl, self._defl_rate = state.w, state.theta, state.defl, state.defl_rate
         else:
-            w_new = w + (torque - math.copysign(coulomb, w)) / self.j * TS
-            if (w_new > 0) != (w > 0):                     # friction stops the motor, it does not reverse it
-                w_new = 0.0 if abs(torque) <= coulomb else w_new
-        self.w = w_new
-        self.theta += w_new * TS
+            torque = self._t_applied - s.load_torque_nm - s.viscous_nm_per_rad_s * self.w
+            if s.mechanics.arm_nm or s.mechanics.cogging_nm:
+                torque -= self.mech.rigid_extra_nm(self.theta)
+            self.w = friction_step(self.w, torque, self._friction_nm(), self.j, TS)
+            self.theta += self.w * TS
         counts = math.floor(self.theta / (2 * math.pi) * self.motor.counts_per_rev)
         w_enc = (counts - self._theta_prev_counts) * 2 * math.pi / self.motor.counts_per_rev / TS
         self._theta_prev_counts = counts
@@ -323,6 +335,9 @@ class Plant:
             self.raise_alarm("overload")
         elif self.mode == "position" and abs(self._pos_ref - self.theta) > self.gains.following_limit_rev * 2 * math.pi:
             self.raise_alarm("following_error")
+
+    def _motion_state(self) -> MotorState:
+        return MotorState(self.w, self.theta, self._defl, self._defl_rate)
 
     # ----- persistence ---------------------------------------------------------------------------------------
     def snapshot(self) -> dict[str, object]:

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from servotool.tuning.consistency import FitData, assess
 from servotool.tuning.fit_numerics import (
     corrected_lstsq,
     cumulative_hermite,
@@ -258,6 +259,11 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     std = np.maximum(std, jk)
     est = dict(zip(names, theta, strict=True))
     err = dict(zip(names, std, strict=True))
+    verdict = assess(FitData(t=t, w=w, kink=kink, position=cum_w, starts=starts, ends=ends, torque=torque, x=x, y=y,
+                             eiv=eiv, groups=move_ids(rpm, band)[starts], theta=theta,
+                             j_std=float(std[0]), min_jackknife_moves=cfg.min_jackknife_moves,
+                             rated_nm=rated_torque_nm, jm=jm))
+    est["J"], err["J"] = verdict.j, verdict.j_std
 
     j = float(est["J"])
     r.j, r.j_std = j, float(err["J"])
@@ -274,13 +280,19 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     if r.tc < -3 * r.tc_std:
         r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
 
+    r.notes.extend(verdict.notes)
     if j <= 0:
         return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")
     if r.res_rel > cfg.max_rel_residual:
         return r.refuse(f"model does not fit the data (relative residual {r.res_rel:.2f} > {cfg.max_rel_residual:g}): "
                         "backlash, compliance or a torque reading that is not shaft torque")
+    if verdict.refuse:
+        return r.refuse(verdict.refuse)
     rel = r.j_std / j
     if rel > cfg.max_rel_uncertainty:
+        if verdict.widened:
+            return r.refuse(f"inertia too uncertain ({100 * rel:.1f} % of J_total > "
+                            f"{100 * cfg.max_rel_uncertainty:g} %): {verdict.widened}")
         return r.refuse(f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %); "
                         "repeat the motion more times or use stronger accelerations")
     return r.result(ok=True, reason="")

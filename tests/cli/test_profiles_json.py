@@ -52,3 +52,16 @@ def test_field_layout_matches_a_manual_example(cli):
     assert [(f["name"], f["bit_offset"], f["width"]) for f in po001["fields"]] == [("X", 0, 8), ("Y", 8, 8)]
     assert pack_fields(po001, {"X": 21, "Y": 1}) == po001["max"] == 0x0115
     assert po001["fields"][0]["enum"]["21"] == "bus"
+
+
+def test_show_gives_the_identity_section_in_json_and_as_text_at_80_columns(cli):
+    ident = cli("profiles", "show", "dsx7e", "--json").json()["identity"]
+    assert (ident["firmware"], ident["model"]) == ("Un202", "Un200")
+    first = ident["checks"][0]
+    assert first["code"] == "Un200" and first["range"] == [0, 0x31] and first["sim"] == 0x31 and first["source"]
+    r = cli("profiles", "show", "sd25", env={"COLUMNS": "80"})
+    assert r.code == 0 and max(len(line) for line in r.out.splitlines()) <= 80
+    assert "identity, checked before the first write (firmware So-00)" in r.out
+    assert "So-46" in r.out and "100..9999 (sim 100)" in r.out
+    r = cli("profiles", "show", "sd25", "--unverified", env={"COLUMNS": "80"})
+    assert "So-46" in r.out and "unverified: encoding" in r.out

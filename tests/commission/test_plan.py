@@ -3,8 +3,16 @@
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from unittest.mock import ANY
 
 import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
 
 PLAN = """\
 port: sim
@@ -251,3 +259,28 @@ def test_a_power_cycle_parameter_in_ram_mode_needs_a_later_save_step(cli, tmp_pa
     plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - set: {Po407: 26}\n  - save:\n")
     r = cli("run", str(plan), "--json")
     assert r.code == 0 and r.json()["steps"][1]["stored"] == ["Po407"], r.err
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="kill -9 is POSIX")
+def test_after_kill_9_the_report_reads_interrupted_and_the_next_run_says_so(cli, tmp_path, sim_dir):
+    """Issue 14 leftover: a run killed outright left its report 'running' forever."""
+    from servotool.commission.runner import STALE, read_report
+
+    plan, report = tmp_path / "plan.yaml", tmp_path / "plan.report.json"
+    plan.write_text("port: sim\nsteps:\n  - expect: {Un100: 0}\n  - wait: 60\n")
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "run", str(plan)], cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        while not (report.exists() and json.loads(report.read_text())["steps"]) and time.monotonic() < deadline:
+            time.sleep(0.1)                       # the first step is done: the run waits in step 2
+        assert read_report(report)["status"] == "running"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert json.loads(report.read_text())["status"] == "running"       # what the killed process left
+    assert read_report(report)["status"] == STALE
+    plan.write_text("port: sim\nsteps:\n  - expect: {Un100: 0}\n")
+    r = cli("run", str(plan), "--json")
+    assert r.code == 0 and "the last run of this plan (pid" in r.err and "ended without finishing" in r.err
+    assert r.json()["previous_run"] == {"status": STALE, "pid": proc.pid, "updated": ANY, "steps_done": 1}

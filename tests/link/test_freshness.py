@@ -26,9 +26,6 @@ class ScriptedLine:
         self.sent: list[bytes] = []
         self._due: list[tuple[float, bytes]] = []
 
-    def clock(self) -> float:
-        return self.now
-
     def writes(self) -> int:
         return sum(1 for f in self.sent if f[1] in (6, 16))
 
@@ -72,8 +69,24 @@ class ScriptedLine:
         return with_crc(frame[:6])
 
 
+class LineClock:
+    """A scripted line's virtual time as the one Clock: sleeping moves it on."""
+
+    def __init__(self, line: ScriptedLine | QueuedLine) -> None:
+        self.line = line
+
+    def now(self) -> float:
+        return self.line.now
+
+    def wall(self) -> float:
+        return self.line.now
+
+    def sleep(self, seconds: float) -> None:
+        self.line.now += max(0.0, seconds)
+
+
 def exchange(line: ScriptedLine, retries: int = 2) -> Exchange:
-    return Exchange(line, timeout=TIMEOUT, retries=retries, clock=line.clock)
+    return Exchange(line, timeout=TIMEOUT, retries=retries, clock=LineClock(line))
 
 
 def test_a_late_reply_is_not_taken_for_the_answer_to_the_next_read():
@@ -146,7 +159,7 @@ def test_an_echoing_adapter_is_recognised_and_its_echo_never_taken_for_a_reply()
             super().send(frame)
 
     line = EchoLine({10: 111}, [])
-    ex = Exchange(line, timeout=TIMEOUT, retries=0, echo=None, clock=line.clock)
+    ex = Exchange(line, timeout=TIMEOUT, retries=0, echo=None, clock=LineClock(line))
     assert ex.read(1, 10, 1) == [111]
     ex.write(1, 10, [5], multiple=False)
     assert line.regs[10] == 5 and ex.echo is True
@@ -161,9 +174,6 @@ class QueuedLine:
     def __init__(self, replies: list[bytes]) -> None:
         self.replies, self.now, self.sent = deque(replies), 0.0, 0
         self._pending = b""
-
-    def clock(self) -> float:
-        return self.now
 
     def send(self, frame: bytes) -> None:
         self.sent += 1
@@ -181,12 +191,12 @@ def test_after_a_fault_an_exception_reply_counts_only_when_repeated():
     stale_02 = with_crc(bytes([1, 0x83, 2]))        # names no address: could answer any earlier read
     data = with_crc(bytes([1, 3, 2, 0, 42]))
     line = QueuedLine([b"", stale_02, data, data])      # after a fault, data is confirmed by a second read
-    ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=line.clock)
+    ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=LineClock(line))
     with pytest.raises(DeviceError, match="no response"):
         ex.read(1, 0x10, 1)                          # silent: its reply may still come
     assert ex.read(1, 0x20, 1) == [42]               # the exception that came first was not believed
     line = QueuedLine([stale_02, stale_02])
-    ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=line.clock)
+    ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=LineClock(line))
     with pytest.raises(ModbusException):
         ex.read(1, 0x20, 1)                          # a clean line: believed at once
     assert line.sent == 1

@@ -155,10 +155,17 @@ def test_turnaround_keeps_the_line_quiet_after_each_reply():
             now[0] += timeout
             return b""
 
-    def sleep(s: float) -> None:
-        now[0] += s
+    class Clock:
+        def now(self) -> float:
+            return now[0]
 
-    ex = Exchange(Line(), timeout=0.1, retries=0, turnaround=0.02, clock=lambda: now[0], sleep=sleep)
+        def wall(self) -> float:
+            return now[0]
+
+        def sleep(self, s: float) -> None:
+            now[0] += s
+
+    ex = Exchange(Line(), timeout=0.1, retries=0, turnaround=0.02, clock=Clock())
     assert ex.read(1, 0, 1) == [7] and ex.read(1, 1, 1) == [7]
     assert sent_at[1] - sent_at[0] >= 0.021
 

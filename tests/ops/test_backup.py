@@ -284,9 +284,23 @@ def test_backup_file_has_the_metadata_and_a_checksum_of_the_values(auto_dir, tmp
     data = yaml.safe_load(f.read_text())
     assert data["profile"] == "dsx7e" and data["profile_version"] == "1.0" and data["model"] == "DSX7E"
     assert data["unit"] == 1 and data["tool_version"] and data["created"].endswith("+00:00")
-    assert set(data["identity"]) == {"Un200", "Un202"}            # the drive_type and firmware roles
+    assert list(data["identity"]) == ["Un200", "Un201", "Un202", "Un203", "Un204", "Un205"]   # the identity checks
     assert len(data["values"]) == 108 and data["display"]["Pn100"] == "32.0 1/s"
     assert re.fullmatch(r"[0-9a-f]{64}", data["checksum"])
+
+
+def test_a_backup_records_identity_from_the_profiles_identity_section(auto_dir, tmp_path):
+    """One home for identity: IS620P's model entry H01-02 is in its identity section (no role names it)."""
+    f = tmp_path / "b.yaml"
+    with open_drives(resolve(ConnectOptions(port="sim", profile="is620p")), notice=lambda _m: None) as (d,):
+        backup.write_backup(d, f)
+        profile = d.profile
+    data = yaml.safe_load(f.read_text())
+    assert list(data["identity"]) == ["H01-00", "H01-01", "H01-02"]
+    # A file written before (identity by the old roles) still loads, its identity as written.
+    data["identity"] = {"H01-00": "101.0"}
+    f.write_text(yaml.safe_dump(data, sort_keys=False))
+    assert backup.load(f, profile).identity == {"H01-00": "101.0"}
 
 
 def test_axis_specific_entries_groups_and_include(auto_dir, tmp_path):

@@ -164,3 +164,43 @@ def test_writes_of_one_drive_wait_for_another_process_that_has_its_port(cli, sim
     assert proc.wait(60) == 0
     assert waiting, "the write did not wait for the port's lock"
     assert get(cli, "sd25", "Po110") == {"Po110": 30}
+
+
+def _switch_drive(fail_on: int):
+    """An IS620P on virtual time, named by a port (so the journal is kept), whose link raises KeyboardInterrupt
+    (Ctrl-C) once, right after the drive took the first write of `fail_on` to the switch H0C-13."""
+    from servotool.clock import VirtualClock
+    from servotool.drive import Drive
+    from servotool.model.loader import load_profile
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.virtual import VirtualLink
+
+    profile = load_profile("is620p")
+    clock = VirtualClock()
+    link = VirtualLink([build_drive(profile, 1, clock, persist=False)], clock)
+    address = profile.entry("H0C-13").address
+    real, pending = link.write, [True]
+
+    def write(unit, addr, values, **kw):
+        real(unit, addr, values, **kw)
+        if addr == address and values == [fail_on] and pending:
+            pending.clear()
+            raise KeyboardInterrupt       # the reply never read: Ctrl-C came while it was on the line
+
+    link.write = write  # type: ignore[method-assign]
+    return Drive(link, profile, 1, port="virtual-line")
+
+
+@pytest.mark.parametrize(("fail_on", "when"), [(0, "while the switch is changed"), (1, "while it is put back")])
+def test_ctrl_c_puts_the_switch_back_and_leaves_no_journal_record(sim_dir, fail_on, when):
+    """Issue 14 leftover: Ctrl-C during a --no-save batch left H0C-13 to the journal; now it is put back at once
+    while the drive answers, and the interrupt still ends the command."""
+    from servotool.ops import eeprom, journal
+
+    d = _switch_drive(fail_on)
+    entry = d.profile.entry("H0C-13")
+    with pytest.raises(KeyboardInterrupt):
+        with eeprom.persistence(d, save=False):
+            raise KeyboardInterrupt(when)     # the batch itself is interrupted too (a no-op if already)
+    assert d.read_entries([entry])[0].raw == 1, when
+    assert journal.read_record(d) is None, when

@@ -1,0 +1,250 @@
+"""Is the rigid model right for this load? Consistency checks on the inertia fit (tuning.estimator).
+
+Mechanics outside the model (a compliant coupling, backlash, gravity that changes with position, cogging) leave
+the fit's noise-based uncertainty tight while the answer is wrong. Three checks see them:
+
+- the load torque over the travel: the fit is repeated with a load torque that varies (quadratically) with the
+  position (integrated speed). Where the variation is significant, the load varies over the travel and the
+  extended model's inertia is used (an arm on a gear: the constant-torque model biased J by 10-40 %).
+- compliance: the fit is repeated with a term for a spring between motor and load (the load's speed lags the
+  motor's by the deflection's rate, which follows the torque's rate of change); where it is significant, the
+  extended model's inertia is used, flagged with the resonance it implies ("resonance near N Hz"), and a third of
+  its correction is added to the uncertainty (the quasi-static term is approximate). A weaker hint of the term
+  keeps the rigid answer but adds the whole change it would make.
+- subsets: J is taken from each subset of the windows with the friction and load fitted on all of them
+  (forward/reverse x accelerating/braking, and the start/middle/end of the travel). Where the subsets disagree
+  more than their uncertainties allow, the uncertainty is widened by the Birge ratio sqrt(chi2/dof); where they
+  disagree grossly (by more than GROSS_SPREAD of J, well beyond their uncertainties) the result is refused.
+  Backlash shows as a lower J while braking (the motor crosses the gap alone), a compliant coupling as J that
+  differs between the phases of a move.
+
+The returned notes start with "off-model:" so reports can tell them from others. Only J is corrected: the
+friction and load torque the estimator reports stay the rigid fit's.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from servotool.tuning.fit_numerics import corrected_lstsq, cumulative_hermite, jackknife_std
+
+POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
+POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
+MODEL_ERROR_DIVISOR = 3.0  # a correction by an extended model counts as uncertain by a third of its size
+COMPLIANCE_SIGMA = 4.0    # a compliance term counts when beyond this many sigmas
+COMPLIANCE_HINT_SIGMA = 0.5  # beyond this many it widens the uncertainty by what it would change J
+COMPLIANCE_MIN_SHIFT = 0.01  # ... and moves J by more than this fraction (and 2 sigma)
+MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behind a coupling to matter
+MIN_SUBSET_WINDOWS = 6
+BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
+#                           chance: chi2/dof of 2.25 over 2-3 subsets happens one time in ten on a rigid load)
+BIRGE_REFUSE = 3.0        # refuse when the subsets disagree this many times beyond their uncertainties ...
+GROSS_SPREAD = 0.08       # ... and their spread exceeds this fraction of J
+
+
+@dataclass(frozen=True)
+class FitData:
+    """What the estimator's fit saw: samples, windows, the regression and its solution (unscaled)."""
+
+    t: np.ndarray
+    w: np.ndarray             # rad/s
+    kink: np.ndarray
+    position: np.ndarray      # rad, integral of w at each sample
+    starts: np.ndarray
+    ends: np.ndarray
+    torque: np.ndarray        # N*m
+    x: np.ndarray             # columns: J (dw), then friction and load terms
+    y: np.ndarray
+    eiv: np.ndarray           # regressor-noise variance per row of x scaled to unit column norms
+    groups: np.ndarray        # move number of each window (for the jackknife)
+    theta: np.ndarray
+    j_std: float
+    min_jackknife_moves: int
+    rated_nm: float
+    jm: float                 # the motor's inertia, kg*m^2
+
+
+@dataclass(frozen=True)
+class Verdict:
+    j: float
+    j_std: float
+    notes: tuple[str, ...]
+    refuse: str = ""          # empty: usable (perhaps with a widened uncertainty)
+    widened: str = ""         # why the uncertainty was widened (words for a refusal it causes), empty if not
+
+
+def assess(fit: FitData) -> Verdict:
+    """J and its uncertainty after the consistency checks, with the operator's words for what was found."""
+    j, j_std, resid = float(fit.theta[0]), fit.j_std, fit.y - fit.x @ fit.theta
+    notes: list[str] = []
+    why: list[str] = []
+    widened = ""
+    x = fit.x
+    position = _position_model(fit)
+    if position is not None:
+        x = np.column_stack([x, position[0]])
+        why.append(f"load varies over the travel (load torque changes by {position[1]:.0f} % of rated torque: an "
+                   "arm or a gravity axis on a gear?)")
+        j, j_std, resid = _take(fit, x, (j, j_std, resid), 0.0)
+    compliance = _compliance_model(fit, x, j, j_std)
+    if compliance is not None and compliance[2]:
+        why.append(f"resonance or torque ripple near {compliance[1]:.0f} Hz: the load follows the motor through a "
+                   "compliant coupling (or a long shaft, cogging)")
+        # The quasi-static spring term is approximate: a third of its correction counts as uncertain (a 20 Hz
+        # coupling's correction left 2-5 % of a 7-28 % bias).
+        j, j_std, resid = _take(fit, np.column_stack([x, compliance[0]]), (j, j_std, resid), 1 / MODEL_ERROR_DIVISOR)
+    elif compliance is not None:
+        # A hint of a spring (a stiff coupling, 50-100 Hz): the rigid answer stands, uncertain by what the spring
+        # term would change.
+        hinted = _take(fit, np.column_stack([x, compliance[0]]), (j, j_std, resid), 0.0)
+        j_std = math.hypot(j_std, hinted[0] - j)
+        widened = f"perhaps a resonance near {compliance[1]:.0f} Hz (a compliant coupling)"
+    if why:
+        notes.append(f"off-model: {'; '.join(why)}; inertia fitted with a model of it")
+    dw = fit.x[:, 0]
+    worst: tuple[float, float, str] = (1.0, 0.0, "")
+    for name, labels in _groupings(fit, dw).items():
+        birge, spread = _birge(j, j_std, dw, resid, labels)
+        if birge > worst[0]:
+            worst = (birge, spread, name)
+    birge, spread, name = worst
+    if birge > BIRGE_WIDEN:
+        j_std *= birge
+        text = f"inertia differs {name} by {100 * spread:.0f} % ({birge:.1f}x its uncertainty)"
+        if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
+            return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {_cause(name)}"]))
+        notes.append(f"off-model: {text}; uncertainty widened to the spread ({_cause(name)})")
+        return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {_cause(name)}"]))
+    return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why))
+
+
+def _take(fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], model_error: float
+          ) -> tuple[float, float, np.ndarray]:
+    """(J, sigma, residual) of the extended fit; sigma grows by model_error times the correction to J."""
+    found = _refit(fit, x)
+    if found is None:
+        return before
+    j = float(found[0][0])
+    return j, math.hypot(max(float(found[1][0]), before[1]), model_error * (j - before[0])), found[2]
+
+
+def _cause(name: str) -> str:
+    if "braking" in name:
+        return "backlash (lost motion at reversals) or a compliant coupling (resonance) outside the rigid model"
+    if "travel" in name:
+        return "the load varies over the travel (gravity on an arm, cogging, a binding guide)"
+    return "the load is not one rigid inertia (compliance, backlash or a load that varies)"
+
+
+def _refit(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(parameters, their sigmas, residual) of the fit with extra columns after the estimator's; None if singular."""
+    scale = np.linalg.norm(x, axis=0)
+    scale[scale == 0] = 1.0
+    xs = x / scale
+    eiv = np.concatenate([fit.eiv, np.zeros(x.shape[1] - fit.eiv.size)])
+    try:
+        theta = corrected_lstsq(xs, fit.y, eiv) / scale
+        resid = fit.y - x @ theta
+        dof = max(1, x.shape[0] - x.shape[1])
+        cov = float(resid @ resid) / dof * np.linalg.inv(xs.T @ xs - xs.shape[0] * np.diag(eiv))
+    except np.linalg.LinAlgError:
+        return None
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / scale
+    std = np.maximum(std, jackknife_std(xs, fit.y, eiv, fit.groups, fit.min_jackknife_moves) / scale)
+    return theta, std, resid
+
+
+def _position_columns(fit: FitData) -> list[np.ndarray]:
+    """Window integrals of the position (scaled to -1..1 over the travel) and its square."""
+    pos = fit.position
+    lo, hi = float(np.min(pos)), float(np.max(pos))
+    u = (pos - 0.5 * (lo + hi)) / (0.5 * (hi - lo)) if hi > lo else np.zeros_like(pos)
+    cols = []
+    for p in (u, u * u):
+        cum = cumulative_hermite(fit.t, p, fit.kink)
+        cols.append(cum[fit.ends] - cum[fit.starts])
+    return cols
+
+
+def _position_model(fit: FitData) -> tuple[np.ndarray, float] | None:
+    """(the two position columns, the load's change over the travel in % of rated) when the load torque varies
+    significantly with position, else None."""
+    cols = _position_columns(fit)
+    if not np.any(cols[0]):
+        return None
+    found = _refit(fit, np.column_stack([fit.x, *cols]))
+    if found is None:
+        return None
+    theta, std, _resid = found
+    a1, a2 = theta[-2], theta[-1]
+    significant = abs(a1) > POSITION_SIGMA * std[-2] or abs(a2) > POSITION_SIGMA * std[-1]
+    grid = np.linspace(-1.0, 1.0, 21)
+    change_pct = float(np.ptp(a1 * grid + a2 * grid * grid)) / fit.rated_nm * 100
+    if not significant or change_pct < POSITION_MIN_PCT or not math.isfinite(std[0]):
+        return None
+    return np.column_stack(cols), change_pct
+
+
+def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
+                      ) -> tuple[np.ndarray, float, bool] | None:
+    """(the compliance column, the resonance it implies in Hz, whether it is strong) when the motor runs ahead of
+    or behind its load through a spring, else None. Strong: significant and moving J; weak: a hint only.
+
+    Through a spring k the load's speed differs from the motor's by the deflection's rate, about
+    (J_load / J) * T' / k while the motion is slow against the resonance; the momentum balance over a window
+    then gains the term -J_load^2 / (J k) * (T'(end) - T'(start)) = -(ratio / omega_r^2) * delta T'."""
+    slope = _torque_slope(fit)
+    col = slope[fit.ends] - slope[fit.starts]
+    found = _refit(fit, np.column_stack([x, col]))
+    if found is None:
+        return None
+    theta, std, _resid = found
+    b, j = float(theta[-1]), float(theta[0])
+    ratio = j / fit.jm - 1.0
+    if not (b < -COMPLIANCE_HINT_SIGMA * std[-1] and ratio > MIN_COMPLIANT_RATIO and math.isfinite(std[0])):
+        return None
+    strong = b < -COMPLIANCE_SIGMA * std[-1] and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
+    return col[:, None], math.sqrt(ratio / -b) / (2 * math.pi), strong
+
+
+def _torque_slope(fit: FitData) -> np.ndarray:
+    """dT/dt at each sample (central differences on the uneven times). Across a torque step too: the slope there
+    is what the coupling's deflection follows (one-sided slopes at the steps caught only a third of the bias)."""
+    if fit.torque.size < 3:
+        return np.zeros_like(fit.torque)
+    return np.gradient(fit.torque, fit.t)
+
+
+def _groupings(fit: FitData, dw: np.ndarray) -> dict[str, np.ndarray]:
+    """Subsets of the windows to compare J across, by name (as in 'inertia differs NAME')."""
+    sgn = np.sign(fit.w[fit.starts])
+    phase = np.where(sgn * dw > 0, 0, 1)                      # accelerating, braking
+    mid = 0.5 * (fit.position[fit.starts] + fit.position[fit.ends])
+    edges = np.quantile(mid, [1 / 3, 2 / 3]) if mid.size else np.zeros(2)
+    return {
+        "between accelerating and braking, forward and reverse": (sgn > 0) * 2 + phase,
+        "over the travel (start, middle, end)": np.searchsorted(edges, mid),
+    }
+
+
+def _birge(j: float, j_std: float, dw: np.ndarray, resid: np.ndarray, labels: np.ndarray) -> tuple[float, float]:
+    """(Birge ratio, relative spread) of J taken from each subset with the other parameters held."""
+    total = float(dw @ dw)
+    js, sig = [], []
+    for label in np.unique(labels):
+        m = labels == label
+        info = float(dw[m] @ dw[m])
+        if np.count_nonzero(m) < MIN_SUBSET_WINDOWS or info <= 0.02 * total:
+            continue
+        js.append(j + float(dw[m] @ resid[m]) / info)
+        sig.append(j_std * math.sqrt(total / info))
+    if len(js) < 2 or j_std <= 0:
+        return 1.0, 0.0
+    a, s = np.asarray(js), np.asarray(sig)
+    wts = 1.0 / s**2
+    mean = float(np.sum(wts * a) / np.sum(wts))
+    chi2 = float(np.sum(wts * (a - mean) ** 2))
+    return math.sqrt(chi2 / (a.size - 1)), float(np.ptp(a)) / abs(j)

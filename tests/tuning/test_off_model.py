@@ -1,0 +1,75 @@
+"""Identification on mechanics outside the rigid model (issue 16 item 4): right, flagged or refused in words."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.tuning.identify import IdentificationRefused
+from servotool.tuning.tune import TuneRequest, tune_inertia
+from tests.tuning.test_tune_robustness import set_up
+
+OFF_MODEL_WORDS = ("load varies over the travel", "inertia differs", "resonance")
+
+
+def _outcome(sim, d, clock):
+    """('accepted', estimate) or ('refused', reason)."""
+    try:
+        res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    except IdentificationRefused as exc:
+        return "refused", str(exc)
+    return "accepted", res.identified.estimate
+
+
+def test_an_arm_on_a_gear_is_fitted_with_a_load_that_varies_over_the_travel(sim_dir):
+    """The constant-load model put J 14 % off with a 1 % uncertainty; now the load varies with position in the fit,
+    the result says so, and the truth is inside the stated 3 sigma."""
+    sim, d, clock = set_up("dsx7e", 19200, load_ratio=5.0, friction=0.02, noise=0.002, seed=6,
+                           arm_gravity=0.1, gear=10.0)
+    outcome, est = _outcome(sim, d, clock)
+    assert outcome == "accepted", est
+    assert any("load varies over the travel" in n for n in est.notes)
+    assert abs(est.load_ratio - 5.0) <= 3 * est.ratio_std
+
+
+@pytest.mark.parametrize("machine", [
+    {"arm_gravity": 0.4, "gear": 10.0, "arm_angle": 30.0, "seed": 7},
+    {"backlash_rad": 0.05, "seed": 4},
+    {"resonance_hz": 20.0, "seed": 3},        # was accepted 15-24 % off with a 1 % uncertainty
+    {"resonance_hz": 50.0, "seed": 12, "load_ratio": 10.0},
+])
+def test_an_off_model_load_is_refused_or_flagged_in_words_never_wrong_and_tight(sim_dir, machine):
+    machine = {"load_ratio": 5.0, **machine}
+    ratio = machine["load_ratio"]
+    sim, d, clock = set_up("dsx7e", 19200, friction=0.02, noise=0.002, **machine)
+    outcome, found = _outcome(sim, d, clock)
+    if outcome == "refused":
+        assert any(w in found for w in OFF_MODEL_WORDS), found
+    else:
+        assert abs(found.load_ratio - ratio) <= 3 * found.ratio_std, found
+        if abs(found.load_ratio - ratio) > 0.02 * (1 + ratio):
+            assert any(n.startswith("off-model:") for n in found.notes)
+
+
+def test_a_rigid_load_gets_no_off_model_note(sim_dir):
+    sim, d, clock = set_up("dsx7e", 19200, load_ratio=5.0, friction=0.02, noise=0.002, seed=3)
+    outcome, est = _outcome(sim, d, clock)
+    assert outcome == "accepted" and not any(n.startswith("off-model:") for n in est.notes)
+
+
+def test_through_the_cli_an_arm_load_is_flagged_or_refused_with_its_reason(cli):
+    assert cli("sim", "config", "--load-ratio", "5", "--arm-gravity", "0.15", "--gear", "10",
+               "--friction", "0.02").code == 0
+    for _attempt in range(3):
+        # In real time under load the motion sometimes trips the travel guard before any fit (issue 16's motion
+        # items, on rigid loads too); that outcome says nothing about the fit, so it is run again.
+        r = cli("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--json")
+        if "travel limit" not in r.out:
+            break
+    data = r.json()
+    if r.code == 0:
+        assert any("load varies over the travel" in n for n in data["notes"]), data
+        assert abs(data["ratio"] - 5.0) <= 3 * data["ratio_std"]
+    else:
+        assert r.code == 1 and data["ok"] is False
+        assert any(w in data["reason"] for w in OFF_MODEL_WORDS), data
+        assert any(w in r.err for w in OFF_MODEL_WORDS)
