@@ -99,6 +99,13 @@ def _estimate(load: float):
     return est
 
 
+def test_a_noisy_pilot_on_a_bare_motor_does_not_become_the_ratio(sim_dir):
+    """30 % friction and 1 % noise on a bare motor: a pilot fit that accepted small speed changes gave a ratio of
+    811 with a 'usable' uncertainty, and the drive at that ratio ended in the overload alarm."""
+    run = run_once("is620p", 0.0, 0.3, 0.01, 79, baud=57600)
+    assert run.outcome in ("ok", "refused") and run.peak < GROWTH, run.reason
+
+
 def test_a_route_without_a_position_hold_is_left_alone(sim_dir):
     d = _drive("dsx7e")
     hold = StableHold(d, "trigger", {})
