@@ -26,6 +26,7 @@ from servotool.motion.travel import TravelLimit
 from servotool.ops.trace import Sampler, motion_entries
 from servotool.ops.trace_file import check_writable, write_trace
 from servotool.sim.state import effective_values
+from servotool.tuning.stable_hold import guard_hold
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
 
@@ -98,7 +99,7 @@ def jog(
     _check_options(seconds, interactive, toggle, trace_file)
     with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
         d.dead_man_waived = no_dead_man
-        jogger = Jogger(d)
+        jogger = guard_hold(Jogger(d))
         if sampler is not None:
             jogger.idle = sampler.sample_for
         plan = jogger.plan(speed, seconds, max_travel, travel_limit(ctx, travel))

@@ -16,6 +16,7 @@ from servotool.motion.jogger import Jogger
 from servotool.report.charts import need_matplotlib
 from servotool.report.tune_report import write_tune_report
 from servotool.tuning.identify import IdentificationRefused
+from servotool.tuning.stable_hold import guard_hold
 from servotool.tuning.tune import TuneRequest, check_request, tune_inertia
 
 
@@ -43,7 +44,7 @@ class JogStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         drive.dead_man_waived = _waived(step.arg)
-        jogger = Jogger(drive)
+        jogger = guard_hold(Jogger(drive))
         plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
         jogger.run(plan)
         bound = plan.dead_man

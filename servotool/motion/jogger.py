@@ -87,6 +87,10 @@ class Jogger:
         self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
         self.guard = TravelGuard(drive, None)   # the soft travel limit of the planned JOG (none until plan())
         self._timeout_s: float | None = deadman.UNREAD   # the drive's communication timeout, read once
+        # Called by run() before the JOG moves with its settings to put back (code -> raw): a caller may write
+        # temporary settings there, each original recorded in it, and the JOG puts them back with its own
+        # (tuning.stable_hold.guard_hold: a position hold that cannot swing up on an unknown load).
+        self.prepare: Callable[[dict[str, int]], object] | None = None
 
     @property
     def keepalive_s(self) -> float:
@@ -278,6 +282,8 @@ class Jogger:
             saved = self._snapshot()
             failing = True
             try:
+                if self.prepare is not None:
+                    self.prepare(saved)
                 self._run(plan, on_sample, command)
                 failing = False
             finally:

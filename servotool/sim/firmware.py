@@ -5,13 +5,13 @@ identification phases) applied at their exact simulated times on the way. Roles,
 entry does what, so any profile with the roles gets the behaviour.
 
 Servo on by command puts the drive in its control mode. Where the profile's motion route is a speed reference
-(IS620P, SDC), its motion_setup puts the drive in a speed mode (IS620P H02-00 = 0, SDC's JOG mode), which has no
-position loop: standing still is the speed loop holding zero speed (its integral keeps the position, softly).
-Elsewhere (DSX7E's Fn033) servo on is the plant's position mode: standing still holds position through the position
-loop, so a load the motor cannot hold ends in the following-error alarm; a host speed reference runs under speed
-control and the hold resumes where it returns to zero. (A position hold in speed mode made IS620P's hold after a
-move oscillate with growing amplitude whenever the configured inertia ratio was far below the load's: the position
-gain then exceeds the speed loop's real bandwidth, which the manual's speed mode never does.)
+(SDC), its motion_setup puts the drive in a speed mode (SDC's JOG mode), which has no position loop: standing still
+is the speed loop holding zero speed (its integral keeps the position, softly). Elsewhere servo on is the plant's
+position mode (DSX7E's Fn033; IS620P's segment route, H02-00 = 1 since issue 15): standing still holds position
+through the position loop, so a load the motor cannot hold ends in the following-error alarm; a host speed reference
+or a segment runs under speed control and the hold resumes where it returns to zero. That hold swings up whenever
+the configured inertia ratio is far below the load (the position gain then exceeds the speed loop's real bandwidth),
+as a real drive's would; servotool keeps its own motions' hold damped (tuning/stable_hold.py, issue 16).
 JOG, a test function, runs under speed control throughout, its stop included, as real drives' JOG does (a position
 hold there would also make a badly mis-tuned speed loop oscillate at every JOG stop of the inertia identification).
 

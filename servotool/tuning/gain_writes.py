@@ -118,9 +118,19 @@ def drive_loop(drive: Drive) -> LoopGains:
                      values["torque_filter"])
 
 
-def ratio_raw(drive: Drive, load_ratio: float) -> tuple[Entry, int]:
-    entry = drive.profile.need_role("inertia_ratio", FEATURE)
-    raw = eng_to_raw(entry, drive.profile.param_from_load_ratio(max(0.0, load_ratio)), clamp=False)
+NEAREST_SHARE = 0.02
+"""A ratio just outside the parameter's range is written as the nearest end when that is within this share of
+J_total or the estimate's 3 sigma: SD25's Po013 starts at 0.01, so a bare motor (0.00 or a little below) was
+refused (issue 16's sweep at 115200 baud: half the runs at load 0)."""
+
+
+def ratio_raw(drive: Drive, load_ratio: float, std: float = 0.0) -> tuple[Entry, int]:
+    p, entry = drive.profile, drive.profile.need_role("inertia_ratio", FEATURE)
+    raw = eng_to_raw(entry, p.param_from_load_ratio(max(0.0, load_ratio)), clamp=False)
+    nearest = max(entry.min, min(entry.max, raw))
+    off = abs(p.load_ratio_from_param(nearest * entry.scale) - load_ratio)
+    if off <= max(NEAREST_SHARE * (1.0 + max(0.0, load_ratio)), 3.0 * std):
+        raw = nearest
     if not entry.min <= raw <= entry.max:
         raise IdentificationFailed(f"identified ratio {load_ratio:.2f} does not fit {entry.code}'s range")
     return entry, raw

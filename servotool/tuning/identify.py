@@ -19,6 +19,7 @@ from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estim
 from servotool.tuning.planning import PILOT_SHARE, TIME_BUDGET_S, TORQUE_SHARE, MotionPlan
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
 from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
+from servotool.tuning.stable_hold import StableHold, pilot_settings
 
 __all__ = ["IdentificationFailed", "IdentificationRefused", "Identifier", "Result", "Trace", "TravelExceeded"]
 
@@ -225,12 +226,14 @@ class _HostRun:
         peak = max((abs(q) for q in trace.torque[first:]), default=0.0)
         return s.travel_rev, peak
 
-    def pilot(self) -> float:
+    def pilot(self, hold: StableHold, settings: EstimatorSettings) -> float:
         """Pilot cycle at reduced speed: how far the axis really goes per nominal revolution (a badly matched speed
-        loop overshoots) and how much torque the acceleration takes, before the full test; returns its speed."""
+        loop overshoots) and how much torque the acceleration takes, before the full test; returns its speed.
+        `hold` keeps a position hold stable for the unknown load; the pilot's rough estimate then configures it."""
         plan = self.plan
         both = len(plan.directions) > 1
         pilot = plan.speed_rpm * PILOT_SHARE
+        hold.before_pilot()
         if self.progress:
             self.progress(f"pilot move at {pilot:.0f} rpm")
         excursion, peak = 0.0, 0.0
@@ -239,6 +242,8 @@ class _HostRun:
         for direction in plan.directions:
             excursion, pk = self.move(direction, pilot)
             peak = max(peak, pk)
+        if hold.active:
+            hold.after_pilot(self.ident._estimate(pilot_settings(settings), self.torque_limit, self.sampler.rate()))
         nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
         limit_rev = plan.travel_limit_rev
         lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
@@ -287,8 +292,9 @@ class _HostRun:
         settings = EstimatorSettings(fit_load_torque=len(self.plan.directions) > 1)
         jogger = self.jogger
         saved = jogger.settings_to_restore()
+        hold = StableHold(self.ident.drive, jogger.route.kind, saved)
         try:
-            cycles = self.cycles(self.pilot(), settings)
+            cycles = self.cycles(self.pilot(hold, settings), settings)
         except BaseException:
             jogger.stop_quietly()
             raise

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.polynomial import polynomial as P
 
 from servotool.tuning.gains import LoopGains
 
@@ -86,3 +87,22 @@ def margins(gains: LoopGains, j_total_kgm2: float, j_configured_kgm2: float | No
     closed = pi * forward * plant / (1 + speed_open)
     ppm, pgm, _ = _read(gains.position_per_s / s * closed)
     return Margins(spm, sgm, wc, ppm, pgm)
+
+
+def least_damping(gains: LoopGains, j_total_kgm2: float, j_configured_kgm2: float, position: bool = True) -> float:
+    """The smallest damping ratio among the closed loop's poles (negative: an oscillation that grows), for the same
+    structure as margins() with the delay as a first-order Pade term. position=True: the position loop closed
+    around the speed loop (a position hold); False: the speed loop alone. Unlike the margins read at the first
+    crossover, the poles also catch a position loop crossing a resonant speed loop's peak."""
+    kp = 2 * math.pi * gains.speed_hz * j_configured_kgm2
+    ti = max(gains.integral_ms, 0.1) / 1000.0
+    tau = 1.5 * CONTROL_PERIOD_S
+    lags = P.polymul(P.polymul([1.0, gains.filter_ms / 1000.0], [1.0, CURRENT_LOOP_S]), [1.0, tau / 2])
+    # Ti s (PI) * J s (plant) * lags * speed filter + Kp (Ti s + 1) * delay numerator [* the position path]
+    left = P.polymul(P.polymul(lags, [0.0, 0.0, ti * j_total_kgm2]), [1.0, SPEED_FILTER_S])
+    right = P.polymul([1.0, ti], [1.0, -tau / 2]) * kp
+    if position:
+        left = P.polymul(left, [0.0, 1.0])
+        right = P.polymul(right, [gains.position_per_s, gains.position_per_s * SPEED_FILTER_S + 1.0])
+    roots = np.roots(P.polyadd(left, right)[::-1])
+    return float(min(-r.real / abs(r) for r in roots if abs(r) > 0))

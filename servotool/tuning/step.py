@@ -15,6 +15,7 @@ from servotool.motion.keepalive import keepalive_interval_s
 from servotool.ops.eeprom import ram_writes
 from servotool.tuning.identify import IdentificationFailed
 from servotool.tuning.preflight import FEATURE, active_alarm
+from servotool.tuning.stable_hold import StableHold
 
 OVERSHOOT_LIMIT_PCT = 35.0    # a PI speed loop at 45 degrees of phase margin overshoots a fast step by about 30 %
 
@@ -65,18 +66,21 @@ def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> flo
     return duration
 
 
-def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None
-                  ) -> StepResponse:
+def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None,
+                  load_unknown: bool = False) -> StepResponse:
     """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
 
     JOG parameters are put back afterwards (their writes kept out of EEPROM where the drive has a switch); the
-    keep-alive beats at the drive's watchdog rate.
+    keep-alive beats at the drive's watchdog rate. load_unknown (the check before identification): on a route that
+    holds position between the steps, the position gain is lowered meanwhile so that the hold cannot swing up on
+    a load far above the configured ratio (tuning.stable_hold); the speed loop being checked is left as it is.
     """
     with ram_writes(drive):
-        return _step_response(drive, speed_rpm, duration_s, timing)
+        return _step_response(drive, speed_rpm, duration_s, timing, load_unknown)
 
 
-def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None) -> StepResponse:
+def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None,
+                   load_unknown: bool) -> StepResponse:
     p, timing = drive.profile, timing or RealClock()
     jogger = Jogger(drive, keepalive_interval_s(drive), FEATURE, timing)
     jog_accel = p.need_role("jog_accel", FEATURE)
@@ -97,6 +101,8 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Cl
             timing.sleep(0.02)
 
     try:
+        if load_unknown:
+            StableHold(drive, jogger.route.kind, saved).soften_position()
         jogger.set_speed(speed_rpm)
         jogger.set_ramp(jog_accel.min)
         for direction in (1, -1):

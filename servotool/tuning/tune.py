@@ -165,7 +165,7 @@ def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = No
         motion, rest = request.host_motion(drive, clock)
     if approve_motion is not None and not approve_motion(motion):
         raise TuneDeclined("nothing moved")
-    before = _step(drive, step_s, clock)
+    before = _step(drive, step_s, clock, load_unknown=True)
     try:
         result = ident.run_host(motion, progress=progress, rest=rest) if motion is not None else \
             ident.run_drive(keep=not request.dry_run)
@@ -235,7 +235,8 @@ def check_drive_result(drive: Drive, result: identify.Result, request: TuneReque
 
 def propose(drive: Drive, result: identify.Result, request: TuneRequest) -> Proposal:
     """The ratio parameter value (where the profile maps one; SDC does not) and the gains for the result."""
-    entry, raw = gain_writes.ratio_raw(drive, result.new_ratio) if drive.profile.role("inertia_ratio") else \
+    std = result.estimate.ratio_std if result.estimate is not None else 0.0
+    entry, raw = gain_writes.ratio_raw(drive, result.new_ratio, std) if drive.profile.role("inertia_ratio") else \
         (None, None)
     if not request.gains:
         return Proposal(result, entry, raw, None, [], None, drive.profile)
@@ -258,5 +259,6 @@ def _write(drive: Drive, proposal: Proposal, approved: bool, save: bool | None
     return writes, outcome["persisted"]
 
 
-def _step(drive: Drive, seconds: float | None, clock: Clock) -> StepResponse | None:
-    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock) if seconds is not None else None
+def _step(drive: Drive, seconds: float | None, clock: Clock, load_unknown: bool = False) -> StepResponse | None:
+    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock, load_unknown) if seconds is not None \
+        else None

@@ -102,8 +102,10 @@ def test_tune_says_when_its_result_is_in_ram_only_and_save_stores_it(cli):
     cli("sim", "config", "--profile", "is620p", "--load-ratio", "4")
     cli("--port", "sim", "--profile", "is620p", "param", "set", *IS620P_SETUP,
         "H0C-13=0")
-    # A moderate speed: at full automatic speed these drives' loops overshoot near the 2 rev travel limit now and
-    # then (issue 16); this test is about where the result is stored, not about that margin.
+    # A moderate speed: at the automatic speed a move covers 1.8 of the 2 rev, and a stall of this process on a busy
+    # machine (60-200 ms measured) lets the real-time simulated motor run past the travel guard (or, without
+    # position feedback, makes the travel integrated from the speed overshoot it). Not issue 16's growing hold
+    # oscillation, which is gone (bench/hold_stability.py). This test is about where the result is stored.
     r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--max-speed", "600")
     assert r.code == 0 and "not saved to EEPROM" in r.err, r.err
     r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes", "--save", "--json",

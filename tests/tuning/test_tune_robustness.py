@@ -31,22 +31,23 @@ def set_up(profile_id: str, baud: int = 115200, **machine: float):
     return sim, d, clock
 
 
-SEGMENT_ROUTE_UNSTABLE = "issue 16: IS620P now moves by position segments (issue 15's dead-man route), and in " \
-    "position mode the factory gains at ratio 1.00 are unstable with a load of 37-49; the travel guard stops it"
+IS620P_HOLD = ("H08-15", "H08-01", "H08-02")
 
 
-@pytest.mark.xfail(reason=SEGMENT_ROUTE_UNSTABLE, strict=False)
 @pytest.mark.parametrize("ratio,seed", [(37.0, 2), (49.0, 1)])
 def test_is620p_with_a_heavy_load_identifies_instead_of_oscillating_after_the_pilot(sim_dir, ratio, seed):
-    """IS620P's speed mode has no position loop: at the factory ratio 1.00 with a load of 37-49 a position hold
-    after the pilot swung with growing amplitude until the travel guard stopped it (these seeds did, at 57600)."""
+    """IS620P's segment route ends each move in a position hold: at the factory ratio 1.00 with a load of 37-49 it
+    swung with growing amplitude after the pilot until the travel guard stopped it (these seeds did, at 57600).
+    The hold is now kept damped, and the ratio and gains it used are put back afterwards."""
     sim, d, clock = set_up("is620p", 57600, load_ratio=ratio, friction=0.02, noise=0.002, seed=seed)
+    before = _raws(d, IS620P_HOLD)
     peak = [0.0]
     sim.on_read.append(lambda _d: peak.__setitem__(0, max(peak[0], abs(sim.firmware.plant.true_speed_rpm))))
     res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - ratio) <= 3 * est.ratio_std
     assert peak[0] < 1.3 * res.identified.plan.speed_rpm          # no swing beyond the planned speed
+    assert _raws(d, IS620P_HOLD) == before                         # a dry run leaves the drive as it was
 
 
 GAIN_CODES = ("Pn101", "Pn102", "Pn100", "Pn128", "Pn003")
