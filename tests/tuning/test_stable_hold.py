@@ -17,8 +17,8 @@ from servotool.ops.params import write_one
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
 from servotool.tuning.estimator import estimate_inertia
-from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.gains import LoopGains
+from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.margins import least_damping
 from servotool.tuning.stable_hold import HOLD_MIN_DAMPING, StableHold, guard_hold
 from servotool.tuning.tune import TuneRequest, tune_inertia
