@@ -123,6 +123,8 @@ def run() -> None:
             raise
         sys.exit(_fail("internal", f"internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the "
                        "traceback)", 1, as_json))
+    if result == 130:                 # typer turns Ctrl-C into a silent exit 130: say it as for any failure
+        sys.exit(_fail("interrupted", "interrupted", 130, as_json))
     sys.stdout.flush()
     sys.exit(result if isinstance(result, int) else 0)
 

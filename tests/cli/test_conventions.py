@@ -75,10 +75,10 @@ def test_piped_monitor_streams_lines_and_ctrl_c_exits_130(sim_dir):
         first = proc.stdout.readline()          # arrives while the command still runs: line-buffered
         assert '"Un000"' in first and '"units"' in first
         proc.send_signal(signal.SIGINT)
-        proc.communicate(timeout=30)
+        _, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
-    assert proc.returncode == 130
+    assert proc.returncode == 130 and "servotool: interrupted" in err
 
 
 def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
@@ -89,10 +89,10 @@ def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
         assert "SIMULATED" in proc.stderr.readline()
         time.sleep(2)                           # sampling by now
         proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
+        out, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
-    assert proc.returncode == 130 and "Un000" in out
+    assert proc.returncode == 130 and "Un000" in out and "servotool: interrupted" in err
 
 
 def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_runs(cli):
