@@ -9,19 +9,16 @@ from pathlib import Path
 
 import pytest
 
-from servotool.clock import VirtualClock
 from servotool.drive import Drive
-from servotool.model.loader import load_profile
 from servotool.motion.jogger import Jogger
 from servotool.ops.params import write_one
-from servotool.sim.firmware import build_drive
-from servotool.sim.virtual import VirtualLink, make_motion_setup
 from servotool.tuning.estimator import estimate_inertia
 from servotool.tuning.gains import LoopGains
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.margins import least_damping
 from servotool.tuning.stable_hold import HOLD_MIN_DAMPING, StableHold, guard_hold
 from servotool.tuning.tune import TuneRequest, tune_inertia
+from tests.tuning.test_tune_robustness import set_up
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 from hold_stability import GROWTH, run_once
@@ -39,13 +36,9 @@ def test_the_factory_hold_grows_beyond_a_load_of_16_at_the_factory_ratio():
 
 
 def _drive(profile_id: str, baud: int = 115200, **machine: float):
-    profile = load_profile(profile_id)
-    clock = VirtualClock(100.0)
-    sim = build_drive(profile, 1, clock, persist=False)
-    sim.settings.update(**machine)
-    sim.firmware.reconfigure()
-    make_motion_setup(sim)
-    return Drive(VirtualLink([sim], clock, baud), profile, 1)
+    d = set_up(profile_id, baud, **machine)[1]
+    d.dead_man_waived = False        # the hold is tested on the drive's own route
+    return d
 
 
 def _raws(d: Drive, codes: tuple[str, ...]) -> list[int]:

@@ -7,15 +7,7 @@ import pytest
 
 from servotool.model.loader import load_profile
 from servotool.motion.deadman import route_of
-
-# The drive setup each profile's motion_setup asks for, as a user does it (None: a power cycle).
-SETUP = {
-    "dsx7e": [],
-    "is620p": [["param", "set", "H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1",
-                "H17-02=28"]],
-    "sdc": [["param", "set", "PN4=3"]],
-    "sd25": [["param", "set", "--save", "Po407.X=26", "Po408.X=27"], None, ["param", "set", "So-58.X=1"]],
-}
+from tests.motion.test_motion import SETUP
 
 SD25_AT_9600 = ("issue 16 item 1 unmet on SD25 at 9600: speed and torque take two requests (10-register limit, "
                 "L904 and L916 are 14 apart), 18 samples/s at most, and its torque reads in 1 % steps while 2 rev of "
