@@ -30,12 +30,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from servotool.tuning.consistency import FitData, assess
+from servotool.tuning.consistency import FitData, Verdict, assess
 from servotool.tuning.fit_numerics import (
     corrected_lstsq,
     cumulative_hermite,
     jackknife_std,
     line_deviation,
+    ma1_std,
     move_ids,
     sign_windows,
     speed_noise_rpm,
@@ -151,23 +152,72 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     pct = np.asarray(torque_pct, dtype=float)
     _validate(t, rpm, pct, rated_torque_nm, rotor_inertia_kgcm2, torque_limit_pct)
     jm = rotor_inertia_kgcm2 * KGCM2_TO_KGM2
-    n = int(t.size)
-    r = _Partial(n_samples=n)
+    r = _Partial(n_samples=int(t.size))
+    try:
+        _check_samples(r, pct, torque_limit_pct, cfg)
+        sig = _signals(t, rpm, pct, rated_torque_nm, cfg, r)
+        fit = _fit(sig, _windows(sig, cfg, r), cfg, r)
+    except _Refused as exc:
+        return r.refuse(str(exc))
+    verdict = assess(FitData(t=t, w=sig.w, kink=sig.kink, position=sig.cum_w, starts=fit.starts, ends=fit.ends,
+                             torque=sig.torque, x=fit.x, y=fit.y, eiv=fit.eiv, groups=sig.moves[fit.starts],
+                             theta=fit.theta, j_std=float(fit.std[0]), min_jackknife_moves=cfg.min_jackknife_moves,
+                             rated_nm=rated_torque_nm, jm=jm))
+    return _conclude(r, fit, verdict, jm, cfg)
 
-    if n < cfg.min_samples:
-        return r.refuse(f"too few samples ({n} < {cfg.min_samples}); log a longer motion or sample faster")
 
+class _Refused(Exception):
+    """The fit stops here; the message is the reason, in words for the operator."""
+
+
+@dataclass(frozen=True)
+class _Signals:
+    """The log in SI units, with what the windows and integrals need."""
+
+    t: np.ndarray
+    rpm: np.ndarray
+    w: np.ndarray
+    torque: np.ndarray
+    noise_w: float
+    band: float
+    kink: np.ndarray
+    cum_t: np.ndarray
+    cum_w: np.ndarray
+    moves: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """The corrected least-squares fit over the chosen windows."""
+
+    names: list[str]
+    starts: np.ndarray
+    ends: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    eiv: np.ndarray
+    theta: np.ndarray
+    std: np.ndarray
+    resid: np.ndarray
+
+
+def _check_samples(r: _Partial, pct: np.ndarray, torque_limit_pct: float | None, cfg: EstimatorSettings) -> None:
+    if r.n_samples < cfg.min_samples:
+        raise _Refused(f"too few samples ({r.n_samples} < {cfg.min_samples}); log a longer motion or sample faster")
     if torque_limit_pct is not None:
         r.n_saturated = int(np.count_nonzero(np.abs(pct) >= cfg.saturation_fraction * torque_limit_pct))
         if r.n_saturated > cfg.max_saturated_samples:
-            return r.refuse(f"torque saturated: {r.n_saturated} samples at the {torque_limit_pct:g} % torque limit; "
-                            "use gentler acceleration or a lower test speed")
+            raise _Refused(f"torque saturated: {r.n_saturated} samples at the {torque_limit_pct:g} % torque limit; "
+                           "use gentler acceleration or a lower test speed")
 
+
+def _signals(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: float, cfg: EstimatorSettings,
+             r: _Partial) -> _Signals:
+    """Noise, zero-speed band, kinks (torque steps) and the Hermite integrals of torque and speed."""
     noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm)
     r.speed_noise_rpm = noise_rpm
     peak = float(np.max(np.abs(rpm)))
     band = cfg.zero_band_rpm if cfg.zero_band_rpm is not None else max(0.02 * peak, 3.0 * noise_rpm)
-
     w = rpm * RPM_TO_RAD_S
     torque = pct / 100.0 * rated_torque_nm
     dev, ref = line_deviation(t, pct)
@@ -177,109 +227,97 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     kink[1:-1] = (np.abs(dev) > cfg.kink_sigma * torque_noise * ref) | (
         np.abs(dev_w) > cfg.kink_sigma * noise_rpm * ref_w)
     r.n_kinks = int(np.count_nonzero(kink))
+    return _Signals(t=t, rpm=rpm, w=w, torque=torque, noise_w=noise_rpm * RPM_TO_RAD_S, band=band, kink=kink,
+                    cum_t=cumulative_hermite(t, torque, kink), cum_w=cumulative_hermite(t, w, kink),
+                    moves=move_ids(rpm, band))
 
-    cum_t = cumulative_hermite(t, torque, kink)
-    cum_w = cumulative_hermite(t, w, kink)
-    noise_w = noise_rpm * RPM_TO_RAD_S
+
+def _windows(sig: _Signals, cfg: EstimatorSettings, r: _Partial) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, ends) of the windows: the shortest that give enough excitation, else the most excited."""
     # Longer windows raise the speed change per window against the (fixed) noise of its two end samples.
     ks = [cfg.window_intervals] if cfg.window_intervals is not None else list(range(1, cfg.max_window_intervals + 1))
     best = (np.zeros(0, dtype=int), np.zeros(0, dtype=int))
     for k in ks:
-        starts, ends = sign_windows(rpm, band, kink, max(1, k))
+        starts, ends = sign_windows(sig.rpm, sig.band, sig.kink, max(1, k))
         r.n_windows = int(starts.size)
         if r.n_windows < cfg.min_windows:
             break
-        dw = w[ends] - w[starts]
-        excitation = float(np.sqrt(np.mean(dw**2)) / (math.sqrt(2.0) * noise_w))
+        dw = sig.w[ends] - sig.w[starts]
+        excitation = float(np.sqrt(np.mean(dw**2)) / (math.sqrt(2.0) * sig.noise_w))
         if k == ks[0] or excitation > r.excitation:
             r.excitation, r.window_intervals, best = excitation, k, (starts, ends)
         if excitation >= cfg.min_excitation:
             break
     if r.window_intervals == 0:
-        return r.refuse(f"too few usable windows ({r.n_windows} < {cfg.min_windows}) outside the zero-speed band "
-                        f"of {band:.3g} rpm and away from torque steps; log a longer motion at higher speed")
-    starts, ends = best
-    r.n_windows = int(starts.size)
+        raise _Refused(f"too few usable windows ({r.n_windows} < {cfg.min_windows}) outside the zero-speed band "
+                       f"of {sig.band:.3g} rpm and away from torque steps; log a longer motion at higher speed")
+    r.n_windows = int(best[0].size)
     if r.excitation < cfg.min_excitation:
-        return r.refuse(f"too little acceleration: speed changes are only {r.excitation:.1f}x the speed noise "
-                        f"(need {cfg.min_excitation:g}x); use faster accelerations or a higher test speed")
-    dw = w[ends] - w[starts]
-    dt = t[ends] - t[starts]
-    sgn = np.sign(w[starts])
-    y = cum_t[ends] - cum_t[starts]
+        raise _Refused(f"too little acceleration: speed changes are only {r.excitation:.1f}x the speed noise "
+                       f"(need {cfg.min_excitation:g}x); use faster accelerations or a higher test speed")
+    return best
 
+
+def _fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSettings, r: _Partial) -> _Fit:
+    """Corrected least squares over the windows, with an honest (MA(1), jackknife) uncertainty."""
+    starts, ends = windows
+    t, w = sig.t, sig.w
+    dw, dt, sgn = w[ends] - w[starts], t[ends] - t[starts], np.sign(w[starts])
+    y = sig.cum_t[ends] - sig.cum_t[starts]
     both = bool(np.count_nonzero(sgn > 0) >= 3 and np.count_nonzero(sgn < 0) >= 3)
     if cfg.fit_load_torque and not both:
-        return r.refuse("motion in one direction only: Coulomb friction and load (gravity) torque cannot be "
-                        "separated; run the test with --direction both")
-
-    names = ["J", "Tc"]
-    cols = [dw, sgn * dt]
+        raise _Refused("motion in one direction only: Coulomb friction and load (gravity) torque cannot be "
+                       "separated; run the test with --direction both")
+    names, cols = ["J", "Tc"], [dw, sgn * dt]
     if cfg.fit_viscous:
         names.append("B")
-        cols.append(cum_w[ends] - cum_w[starts])
+        cols.append(sig.cum_w[ends] - sig.cum_w[starts])
     if cfg.fit_load_torque:
         names.append("Tg")
         cols.append(dt)
     x = np.column_stack(cols)
     p = x.shape[1]
     if r.n_windows <= p + 2:
-        return r.refuse(f"too few usable windows ({r.n_windows}) for {p} unknowns")
-
+        raise _Refused(f"too few usable windows ({r.n_windows}) for {p} unknowns")
     scale = np.linalg.norm(x, axis=0)
     scale[scale == 0] = 1.0
     xs = x / scale
     sv = np.linalg.svd(xs, compute_uv=False)
     r.condition = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
     if r.condition > cfg.max_condition:
-        return r.refuse(f"regression ill-conditioned (condition {r.condition:.3g}): the motion does not separate "
-                        "inertia from friction and load torque; vary speed and acceleration in both directions")
-
+        raise _Refused(f"regression ill-conditioned (condition {r.condition:.3g}): the motion does not separate "
+                       "inertia from friction and load torque; vary speed and acceleration in both directions")
     # Speed noise in the regressor dw (variance 2 * noise^2 per window) inflates X'X and biases J low by about
     # 1/excitation^2; subtracting its expectation removes that bias (corrected least squares).
     eiv = np.zeros(p)
-    eiv[0] = 2.0 * noise_w**2 / scale[0] ** 2
-    theta_s = corrected_lstsq(xs, y, eiv)
-    theta = theta_s / scale
+    eiv[0] = 2.0 * sig.noise_w**2 / scale[0] ** 2
+    theta = corrected_lstsq(xs, y, eiv) / scale
     resid = y - x @ theta
-    dof = r.n_windows - p
-    s2 = float(resid @ resid) / dof
-    # Windows that share an end sample have correlated errors (the shared torque sample enters both integrals,
-    # the shared speed sample both speed changes with opposite signs): an MA(1) error, covariance s2*(I + rho*A).
-    adj = np.flatnonzero(ends[:-1] == starts[1:])
-    rho = float(np.sum(resid[adj] * resid[adj + 1]) / (s2 * dof)) if adj.size else 0.0
-    rho = min(max(rho, -0.5), 0.5)
-    xtx_inv = np.linalg.inv(xs.T @ xs - xs.shape[0] * np.diag(eiv))
-    meat = xs.T @ xs + rho * (xs[adj].T @ xs[adj + 1] + xs[adj + 1].T @ xs[adj])
-    cov = s2 * (xtx_inv @ meat @ xtx_inv) / np.outer(scale, scale)
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    std = ma1_std(xs, y, eiv, resid, starts, ends) / scale
     # Errors the noise model misses (trapezoid error at a torque step, loop transients at slow sampling) repeat
-    # within a move but differ between moves: a delete-one-move jackknife sees them, the formula above does not.
-    jk = jackknife_std(xs, y, eiv, move_ids(rpm, band)[starts], cfg.min_jackknife_moves) / scale
-    std = np.maximum(std, jk)
-    est = dict(zip(names, theta, strict=True))
-    err = dict(zip(names, std, strict=True))
-    verdict = assess(FitData(t=t, w=w, kink=kink, position=cum_w, starts=starts, ends=ends, torque=torque, x=x, y=y,
-                             eiv=eiv, groups=move_ids(rpm, band)[starts], theta=theta,
-                             j_std=float(std[0]), min_jackknife_moves=cfg.min_jackknife_moves,
-                             rated_nm=rated_torque_nm, jm=jm))
-    est["J"], err["J"] = verdict.j, verdict.j_std
+    # within a move but differ between moves: a delete-one-move jackknife sees them, the formula does not.
+    std = np.maximum(std, jackknife_std(xs, y, eiv, sig.moves[starts], cfg.min_jackknife_moves) / scale)
+    return _Fit(names=names, starts=starts, ends=ends, x=x, y=y, eiv=eiv, theta=theta, std=std, resid=resid)
 
-    j = float(est["J"])
-    r.j, r.j_std = j, float(err["J"])
+
+def _conclude(r: _Partial, fit: _Fit, verdict: Verdict, jm: float, cfg: EstimatorSettings) -> InertiaEstimate:
+    """The estimate with the model check's J, notes and the refusals that only the whole result can decide."""
+    est = dict(zip(fit.names, fit.theta, strict=True))
+    err = dict(zip(fit.names, fit.std, strict=True))
+    j = float(verdict.j)
+    r.j, r.j_std = j, float(verdict.j_std)
     r.ratio, r.ratio_std = j / jm - 1.0, r.j_std / jm
     r.tc, r.tc_std = float(est["Tc"]), float(err["Tc"])
     r.b, r.b_std = float(est.get("B", 0.0)), float(err.get("B", 0.0))
     r.tg, r.tg_std = float(est.get("Tg", 0.0)), float(err.get("Tg", 0.0))
-    r.res_rms = float(np.sqrt(np.mean(resid**2)))
-    y_rms = float(np.sqrt(np.mean(y**2)))
+    r.res_rms = float(np.sqrt(np.mean(fit.resid**2)))
+    y_rms = float(np.sqrt(np.mean(fit.y**2)))
     r.res_rel = r.res_rms / y_rms if y_rms > 0 else math.inf
     if not cfg.fit_load_torque:
         r.notes.append("load torque not fitted (one direction only, or told there is none): 'coulomb' is "
                        "Coulomb + load torque")
     if r.tc < -3 * r.tc_std:
         r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
-
     r.notes.extend(verdict.notes)
     if j <= 0:
         return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")

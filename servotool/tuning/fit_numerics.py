@@ -144,3 +144,19 @@ def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.nda
         have[idx[fill]] = True
     out[1:] = np.cumsum(0.5 * h * (v[1:] + v[:-1]) + h * h / 12.0 * (d[:-1] - d[1:]))
     return out
+
+
+def ma1_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, resid: np.ndarray, starts: np.ndarray,
+            ends: np.ndarray) -> np.ndarray:
+    """Standard errors of a corrected least-squares fit, in the scaled columns xs (divide by the scale). Windows
+    that share an end sample have correlated errors (the shared torque sample enters both integrals, the shared
+    speed sample both speed changes with opposite signs): an MA(1) error, covariance s2*(I + rho*A)."""
+    dof = y.size - xs.shape[1]
+    s2 = float(resid @ resid) / dof
+    adj = np.flatnonzero(ends[:-1] == starts[1:])
+    rho = float(np.sum(resid[adj] * resid[adj + 1]) / (s2 * dof)) if adj.size else 0.0
+    rho = min(max(rho, -0.5), 0.5)
+    xtx_inv = np.linalg.inv(xs.T @ xs - xs.shape[0] * np.diag(eiv))
+    meat = xs.T @ xs + rho * (xs[adj].T @ xs[adj + 1] + xs[adj + 1].T @ xs[adj])
+    cov = s2 * (xtx_inv @ meat @ xtx_inv)
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
