@@ -37,7 +37,7 @@ PILOT_SHARE = 0.25
 # misreads the acceleration torque by a different fraction of its step in every cycle instead of by the same
 # amount: the step error averages out over the cycles and the move jackknife sees it, where with one acceleration
 # it repeats identically and only a fixed floor (sampling.quantization_floor) can cover it.
-DITHER_MIN = 0.6
+DITHER_MIN = 0.4
 COARSE_TORQUE_STEP_PCT = 0.5   # readings in steps this coarse (% of rated) are dithered
 MIN_SAMPLES_PER_RAMP = 5.0     # a dithered ramp keeps this many sampling intervals (else the speed is lowered)
 
