@@ -16,7 +16,15 @@ from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
-from servotool.tuning.planning import PILOT_SHARE, TIME_BUDGET_S, TORQUE_SHARE, MotionPlan
+from servotool.tuning.planning import (
+    COARSE_TORQUE_STEP_PCT,
+    MIN_SAMPLES_PER_RAMP,
+    PILOT_SHARE,
+    TIME_BUDGET_S,
+    TORQUE_SHARE,
+    MotionPlan,
+    dither,
+)
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
 from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
 from servotool.tuning.stable_hold import StableHold, pilot_settings
@@ -159,6 +167,8 @@ class _HostRun:
         self.old_ratio = ident.current_ratio()
         self.stop_band = max(3.0, 4.0 * (rest.speed_noise_rpm if rest is not None else 0.0))
         self.sampler = Sampler(d, self.timing, plan.travel_limit_rev, self._beat)
+        # A torque read in whole percent: its step error would repeat in every move of the same acceleration.
+        self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT
         self.ramp = plan.ramp_s
         # Stop early where the stopping distance would leave the band [lo, hi] (set after the pilot).
         self.band: tuple[float, float] | None = None
@@ -268,23 +278,44 @@ class _HostRun:
             speed = min(speed, pilot * TORQUE_SHARE * self.torque_limit / peak)
         return speed
 
+    def _dithered(self, cycle: int, speed: float) -> tuple[float, float]:
+        """Ramp and speed of a cycle: a torque read in coarse steps gets a different acceleration in every cycle,
+        by a shorter ramp (stronger, less travel) down to MIN_SAMPLES_PER_RAMP samples a ramp, below that by a
+        lower speed (weaker; a ramp of fewer samples has no windows clear of its torque steps)."""
+        if not self.coarse:
+            return self.ramp, speed
+        rate = self.sampler.rate()
+        floor = max(0.1, MIN_SAMPLES_PER_RAMP / rate if rate > 0 else 0.0)
+        factor = dither(cycle)
+        ramp = max(min(self.ramp, floor), self.ramp * factor)
+        return ramp, speed * min(1.0, factor * self.ramp / ramp)
+
     def cycles(self, speed: float, settings: EstimatorSettings) -> int:
         """The planned cycles (adaptive: until the estimate is precise enough, within the time budget)."""
         plan, s = self.plan, self.sampler
+        # The next cycle takes as long as the longest so far (the pilot's before the first: it also holds the set-up).
         cycle_s = s.elapsed() * 1.1
-        done = 0
+        done, began = 0, 0.0
         for rep in range(plan.repeats):
+            if rep >= 1:
+                cycle_s = max(s.elapsed() - began, cycle_s if rep >= 2 else 0.0) * 1.05
+            began = s.elapsed()
             if plan.adaptive and rep >= 2:
                 if s.elapsed() + cycle_s > TIME_BUDGET_S:
                     break
                 est = self.ident._estimate(settings, self.torque_limit, rate=s.rate())
                 if est.ok and est.j_std_kgm2 <= 0.5 * settings.max_rel_uncertainty * est.j_total_kgm2:
                     break
-            for direction in plan.directions:
-                if self.progress:
-                    self.progress(f"move {rep + 1}/{plan.repeats} {'forward' if direction > 0 else 'reverse'} "
-                                  f"at {speed:.0f} rpm")
-                self.move(direction, speed)
+            base = self.ramp
+            self.ramp, move_speed = self._dithered(rep, speed)
+            try:
+                for direction in plan.directions:
+                    if self.progress:
+                        self.progress(f"move {rep + 1}/{plan.repeats} {'forward' if direction > 0 else 'reverse'} "
+                                      f"at {move_speed:.0f} rpm")
+                    self.move(direction, move_speed)
+            finally:
+                self.ramp = base
             done += 1
         return done
 

@@ -32,6 +32,26 @@ TORQUE_SHARE = 0.6
 PILOT_SHARE = 0.25
 
 
+# Where the torque reads in coarse steps, each cycle's acceleration is scaled by a different factor down to this
+# (a shorter ramp at the same speed, or a lower speed where the ramp would get too few samples). The reading then
+# misreads the acceleration torque by a different fraction of its step in every cycle instead of by the same
+# amount: the step error averages out over the cycles and the move jackknife sees it, where with one acceleration
+# it repeats identically and only a fixed floor (sampling.quantization_floor) can cover it.
+DITHER_MIN = 0.4
+COARSE_TORQUE_STEP_PCT = 0.5   # readings in steps this coarse (% of rated) are dithered
+MIN_SAMPLES_PER_RAMP = 5.0     # a dithered ramp keeps this many sampling intervals (else the speed is lowered)
+
+
+def dither(cycle: int) -> float:
+    """The ramp factor of a cycle: 1, then spread over [DITHER_MIN, 1] by halving the gaps (van der Corput)."""
+    x, denom, n = 0.0, 1.0, cycle
+    while n:
+        denom *= 2.0
+        x += (n & 1) / denom
+        n >>= 1
+    return 1.0 - (1.0 - DITHER_MIN) * x
+
+
 @dataclass(frozen=True)
 class MotionPlan:
     speed_rpm: float

@@ -154,7 +154,8 @@ def test_a_ratio_configured_far_above_a_bare_motor_comes_down_for_the_identifica
         assert res.ratio == pytest.approx(0.0, abs=0.1)
     except IdentificationRefused as exc:
         # A bare rotor's acceleration torque is little more than the torque reading's 1 % step at this line
-        # rate: refused as too uncertain (issue 16 item 1), but never by an alarm.
-        assert "too uncertain" in str(exc) and "1 % steps" in str(exc)
+        # rate: refused as too uncertain (issue 16 item 1), but never by an alarm. With dithered accelerations the
+        # step error shows as a spread between moves (subsets, jackknife) rather than as the fixed floor.
+        assert "too uncertain" in str(exc)
     assert d.link.drives[1].firmware.plant.alarm is None
     assert _raws(d, ("H08-15",)) == [3000]

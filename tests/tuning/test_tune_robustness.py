@@ -173,7 +173,9 @@ def test_a_torque_read_in_whole_percent_is_not_trusted_beyond_its_steps(sim_dir)
     try:
         res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     except IdentificationRefused as exc:
-        assert "1 % steps" in str(exc)
+        # With dithered accelerations the step error shows as a spread between moves (the jackknife's), or as
+        # what is left of the floor ("1 % steps"): either way too uncertain.
+        assert "too uncertain" in str(exc)
         return
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - 10.0) <= 3 * est.ratio_std
