@@ -26,9 +26,8 @@ from servotool.clock import Clock, RealClock
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import to_canonical
 from servotool.model.profile import Entry, Motor, Profile
-from servotool.model.roles import status_bit
 from servotool.model.setup import requirements
-from servotool.sim import functions
+from servotool.sim import functions, monitors
 from servotool.sim.alarms import AlarmLog
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.handover import Handover, MachineState
@@ -48,7 +47,6 @@ DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 # and so does the simulated one. Only `sim config --fake-watchdog on` (not real, off by default) makes it stop host
 # motion, ramped and without an alarm, when no motion-role write arrives for this long.
 FAKE_WATCHDOG_MS = 500.0
-STATUS_BITS = {"servo_on": 0, "fault": 1, "warning": 2, "moving": 3, "jog": 4, "identifying": 5}
 COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
 STOP_STEP_S = 0.01           # a quiet ramp-down after host loss is checked for standstill at this resolution
 
@@ -366,40 +364,9 @@ class Firmware:
         self.plant.set_gains(self._gains())
         self.drive.bank.save()
 
-    # ----- monitors ------------------------------------------------------------------------------------------
-    def _set(self, role: str, eng: float) -> None:
-        entry = self.profile.role(role)
-        if entry is None or entry.cls == "Pn" or entry.cls == "Fn":
-            return
-        self.drive.bank.set_live(entry.code, eng_to_raw(entry, eng, clamp=False))
-
     def _refresh_monitors(self) -> None:
-        p = self.plant
-        self._set("speed_feedback", p.speed_rpm)
-        self._set("speed_command", p.speed_command_rpm)
-        self._set("torque_feedback", p.torque_pct)
-        entry = self.profile.role("position_feedback")
-        if entry is not None and entry.cls not in ("Pn", "Fn"):
-            self.drive.bank.set_live(entry.code, p.position_counts, wrap=True)   # a multi-turn counter wraps
-        self._set("following_error", p.following_error_counts)
-        self._set("load_rate", p.load_rate_pct)
-        self._set("current_rms", abs(p.torque_pct) / 100 * 2.8)
-        self._set("bus_voltage", 311.0)
-        self._set("alarm_code", self.alarms.code(p.alarm))
-        for n, code in enumerate(self.alarms.history[:8], start=1):
-            self._set(f"alarm_history_{n}", code)
-        self._refresh_status_word()
-
-    def _refresh_status_word(self) -> None:
-        status = self.profile.role("servo_status")
-        if status is None:
-            return
-        p = self.plant
-        bits = {"servo_on": p.servo_on, "fault": p.alarm is not None, "moving": abs(p.true_speed_rpm) > 1,
-                "jog": self.mode == "jog", "identifying": self.mode == "ident"}
-        where = {k: status_bit(status, k) for k in bits} if status.bits else STATUS_BITS
-        word = sum(1 << b for k, on in bits.items() if on and (b := where.get(k)) is not None)
-        self.drive.bank.set_live(status.code, word)
+        monitors.refresh(self.profile, self.drive.bank, self.plant, self.alarms, jogging=self.mode == "jog",
+                         identifying=self.mode == "ident")
 
 
 def build_drive(profile: Profile, unit: int, clock: Clock | None = None, *, persist: bool = True) -> SimulatedDrive:
