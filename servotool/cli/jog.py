@@ -20,7 +20,8 @@ from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
 from servotool.motion.deadman import sentence
 from servotool.motion.hold import HoldToRun
-from servotool.motion.jogger import Jogger, JogPlan
+from servotool.motion.jog_plan import JogPlan
+from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelLimit
 from servotool.ops.trace import Sampler, motion_entries

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
@@ -19,40 +18,17 @@ from servotool.model.profile import Entry
 from servotool.model.roles import FEATURE, jog_codes, motion_route
 from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
+from servotool.motion.jog_plan import JogPlan, travel_estimate
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.segments import SegmentMoves
 from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelGuard, TravelLimit
-from servotool.ops import alarms
+from servotool.ops import alarms, journal
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.ops.status import servo_is_on
 
 KEY_POLL_S = 0.02      # interactive JOG polls the keys this often (key repeat comes about every 30 ms)
-
-
-def travel_estimate(speed_rpm: float, seconds: float | None) -> float:
-    """How far a timed JOG travels at speed (0 for an interactive one, whose travel the guard watches)."""
-    return abs(speed_rpm) / 60.0 * seconds if seconds is not None else 0.0
-
-
-@dataclass(frozen=True)
-class JogPlan:
-    speed_rpm: float
-    direction: int           # +1 forward, -1 reverse
-    seconds: float | None    # None: until stopped
-    max_speed_rpm: float
-    accel_ms: float | None
-    travel_rev: float | None  # estimate for a timed jog
-    dead_man: DeadManBound | None = None
-    travel_limit: TravelLimit | None = None
-
-    def describe(self) -> str:
-        what = "forward" if self.direction > 0 else "reverse"
-        more = f" for {self.seconds:g} s (about {self.travel_rev:.2f} rev)" if self.seconds is not None else ""
-        ramp = f", ramp {self.accel_ms:g} ms" if self.accel_ms is not None else ""
-        limit = f", {self.travel_limit.describe()}" if self.travel_limit is not None else ""
-        return f"JOG {what} at {self.speed_rpm:g} rpm{more}{ramp}{limit}"
 
 
 class Jogger:
@@ -202,7 +178,9 @@ class Jogger:
             # A reference held in a parameter (e.g. a signed JOG speed) would run at once on enable: zero it first.
             if self._saved_reference is None and self.speed_entry.readable:
                 self._saved_reference = self.drive.read_entries([self.speed_entry])[0].raw
+                journal.note_settings(self.drive, {self.speed_entry.code: self._saved_reference})
             self.drive.write_raw(self.speed_entry, self._speed_raw(0))
+            journal.note_servo(self.drive, self.servo.code)
             self.drive.write_raw(self.servo, 1)
             self._enabled = True
         if self._enabled:
@@ -213,6 +191,7 @@ class Jogger:
         """The segment route: servo on for the first move, then a fresh move (or a braking one) now."""
         assert self.servo is not None
         if self.direction and not self._enabled and self.segments is not None:
+            journal.note_servo(self.drive, self.servo.code)
             self.drive.write_raw(self.servo, 1)         # servo on, start bits off: the next write is an edge
             self.segments.start_high = False
             self._enabled = True
@@ -245,6 +224,7 @@ class Jogger:
         """Servo off (the drive stops holding the axis) and put back a parameter-held speed reference."""
         if self.servo is not None:
             self.drive.write_raw(self.servo, 0)
+            journal.clear_servo(self.drive)
         self._enabled = False
         if self.segments is not None:
             self.segments.moving = 0
@@ -282,6 +262,7 @@ class Jogger:
             saved = self._snapshot()
             failing = True
             try:
+                journal.note_settings(self.drive, saved)
                 if self.prepare is not None:
                     self.prepare(saved)
                 self._run(plan, on_sample, command)
@@ -302,7 +283,8 @@ class Jogger:
 
     def _snapshot(self) -> dict[str, int]:
         entries = self._written_settings()
-        return {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
+        found = {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
+        return {**found, **journal.pending_settings(self.drive)}   # a dead process's originals win
 
     def _put_back(self, saved: dict[str, int], failing: bool) -> None:
         """Write back what differs from `saved`; while failing, the first error stays the one reported."""
@@ -311,6 +293,7 @@ class Jogger:
             for entry, reading in zip(entries, self.drive.read_entries(entries), strict=True):
                 if reading.raw != saved[entry.code]:
                     write_one(self.drive, entry, saved[entry.code])
+            journal.clear_settings(self.drive)
             if self.segments is not None:
                 self.segments.forget_distance()     # the next move writes its displacement again
         except ServoError:
@@ -370,6 +353,7 @@ class Jogger:
         ramp = self._ramp_entry()
         saved = self._snapshot()
         self._ramp_raw = saved[ramp.code]
+        journal.note_settings(self.drive, saved)
         return saved
 
     def _ramp_entry(self) -> Entry:

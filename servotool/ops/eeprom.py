@@ -78,13 +78,15 @@ def _put_back(drive: Drive, entry: Entry, raw: int, failing: bool, state: dict[s
 @contextmanager
 def ram_writes(drive: Drive) -> Iterator[None]:
     """Keep transient writes (a motion's speed, ramp, servo-on) out of EEPROM where the drive has a switch
-    (IS620P's factory H0C-13 = 1 stores every write); the switch is put back afterwards."""
+    (IS620P's factory H0C-13 = 1 stores every write); the switch is put back afterwards. The port's lock is held
+    on every drive: the motion's settings are journaled (ops.journal.note_settings) for the next command to put
+    back if this process dies, and only a dead holder's record may be recovered."""
     from servotool.ops.journal import port_lock
 
-    if drive.profile.persistence.mode != "switchable":
-        yield
-        return
     with port_lock(drive):
+        if drive.profile.persistence.mode != "switchable":
+            yield
+            return
         entry, current, _eeprom, ram = switch_state(drive)
         with _switched(drive, entry, current, ram):
             yield

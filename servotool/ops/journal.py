@@ -1,12 +1,13 @@
 """The host's journal of what servotool is in the middle of changing on a drive, and the per-port write lock.
 
 Before the EEPROM switch is changed for a batch of writes (SD25 Po505, IS620P H0C-13), its original raw value is
-recorded here; a restore records its automatic backup and targets. A record outlives only a process that died
-(kill -9, power loss of the PC, a line that stopped answering): the next command on that drive finds it, puts the
-switch back and says what the interrupted operation left. Records live beside the automatic backups, one file per
-port and unit; every change of a drive's persistence happens under the port's lock, so a record found by whoever
-holds the lock belongs to a process that is gone, and a RAM-only write never runs while another process has the
-switch on EEPROM.
+recorded here; a restore records its automatic backup and targets; a motion records the settings it changes for
+its duration (JOG speed, ramp, segment displacement, the hold's gains) with their original raw values. A record
+outlives only a process that died (kill -9, power loss of the PC, a line that stopped answering): the next command
+on that drive finds it, puts the settings and the switch back and says what the interrupted operation left.
+Records live beside the automatic backups, one file per port and unit; every change of a drive's persistence and
+every motion happens under the port's lock, so a record found by whoever holds the lock belongs to a process that
+is gone, and a RAM-only write never runs while another process has the switch on EEPROM.
 """
 
 from __future__ import annotations
@@ -27,9 +28,12 @@ from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError
 from servotool.files import FileLock, backup_dir, load_yaml, sweep_temp, write_atomic
 from servotool.model.codec import format_value
+from servotool.ops.status import servo_is_on
 
 Notice = Callable[[str], None]
 LOCK_WAIT_S = 60.0
+LOOP_ROLES = ("position_loop_gain", "speed_loop_gain", "speed_loop_integral", "inertia_ratio", "torque_filter")
+STANDSTILL_RPM = 20.0     # a motion's settings are put back only below this speed (a hold jitters a few rpm)
 
 
 def journal_dir() -> Path:
@@ -148,6 +152,10 @@ def recover(drive: Drive, notice: Notice) -> list[str]:
         return []
     lines: list[str] = []
     pid = record.get("pid")
+    keep: dict[str, Any] = {}
+    if record.get("settings") or record.get("servo"):   # before the switch: written back in RAM, as changed
+        line, keep = _end_motion(drive, record, pid)
+        lines.append(line)
     switch = record.get("switch")
     if isinstance(switch, dict):
         lines.append(_put_switch_back(drive, switch, pid))
@@ -156,7 +164,7 @@ def recover(drive: Drive, notice: Notice) -> list[str]:
         lines.append(_interrupted(drive, op, pid))
     for line in lines:
         notice(line)
-    _write(drive, {})
+    _write(drive, keep)
     return lines
 
 
@@ -173,6 +181,64 @@ def _put_switch_back(drive: Drive, switch: dict[str, Any], pid: object) -> str:
     drive.write_verified(entry, original)
     return (f"servotool: put {entry.code} back to {format_value(entry, original)} (was "
             f"{format_value(entry, now)}): a servotool process (pid {pid}) ended with it changed")
+
+
+def _end_motion(drive: Drive, record: dict[str, Any], pid: object) -> tuple[str, dict[str, Any]]:
+    """What a dead process's motion left, put back once the motor stands: the servo off where the motion switched
+    it on, and the settings it changed; a loop gain (how the servo holds the axis) only with the servo off.
+    (the line to tell, the record's part still pending)."""
+    settings = record.get("settings") or {}
+    originals = _valid_settings(drive, settings) if isinstance(settings, dict) else None
+    servo = drive.profile.find(str(record.get("servo"))) if record.get("servo") else None
+    if originals is None:
+        return f"servotool: ignored a damaged journal record for unit {drive.unit} ({record_path(drive)})", {}
+    found = [drive.profile.entry(code) for code in originals]
+    changed = [(e, originals[e.code], r.raw) for e, r in zip(found, drive.read_entries(found), strict=True)
+               if r.raw != originals[e.code]]
+    head = f"servotool: a servotool process (pid {pid}) ended during a motion"
+    if _moving(drive):
+        return (f"{head} and the motor still turns: the servo and {len(changed)} changed setting(s) are left "
+                "until a command finds it standing"), {k: v for k, v in record.items() if k in ("settings", "servo")}
+    done: list[str] = []
+    if servo is not None:
+        drive.write_raw(servo, 0)
+        done.append("switched the servo off")
+    loop = {e.code for r in LOOP_ROLES if (e := drive.profile.role(r)) is not None} \
+        if servo_is_on(drive) is not False else set()
+    for entry, raw, was in changed:
+        if entry.code not in loop:
+            drive.write_verified(entry, raw)
+            done.append(f"put {entry.code} to {format_value(entry, raw)} (was {format_value(entry, was)})")
+    pending = {e.code: raw for e, raw, _was in changed if e.code in loop}
+    line = f"{head}; " + ("; ".join(done) if done else "its settings are as before")
+    if pending:
+        line += (f"; {', '.join(pending)} (loop gains) go back when the servo is off: the next jog or tune "
+                 "puts them back as it ends")
+    return line, ({"settings": pending} if pending else {})
+
+
+def _valid_settings(drive: Drive, settings: dict[str, Any]) -> dict[str, int] | None:
+    """code -> original raw, each an entry of this profile in its range; None when any is not."""
+    out: dict[str, int] = {}
+    for code, raw in settings.items():
+        e = drive.profile.find(str(code))
+        if e is None or not isinstance(raw, int) or isinstance(raw, bool) or not e.min <= raw <= e.max:
+            return None
+        out[e.code] = raw
+    return out
+
+
+def pending_settings(drive: Drive) -> dict[str, int]:
+    """Originals (code -> raw) a dead process's motion left to be put back later (loop gains while the servo was
+    on): a motion starting now puts them back as it ends, with its own settings."""
+    record = read_record(drive) if drive.port else None
+    settings = record.get("settings") if record else None
+    return (_valid_settings(drive, settings) or {}) if isinstance(settings, dict) else {}
+
+
+def _moving(drive: Drive) -> bool:
+    speed = drive.profile.role("speed_feedback")
+    return speed is not None and speed.readable and abs(float(drive.read_entries([speed])[0].eng)) > STANDSTILL_RPM
 
 
 def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
@@ -223,3 +289,27 @@ def note_switch(drive: Drive, code: str, original: int) -> None:
 def clear_switch(drive: Drive) -> None:
     """The switch is confirmed back: the record goes."""
     _update(drive, switch=None)
+
+
+def note_settings(drive: Drive, originals: dict[str, int]) -> None:
+    """Record the original raw values (code -> raw) of settings a motion changes until it ends (added to those
+    recorded already, whose originals stay); call again whenever one is added."""
+    if not drive.port:
+        return
+    record = read_record(drive) or {}
+    before = record.get("settings") if isinstance(record.get("settings"), dict) else {}
+    _update(drive, settings={**originals, **before} or None)
+
+
+def clear_settings(drive: Drive) -> None:
+    """The motion's settings are confirmed back: their record goes."""
+    _update(drive, settings=None)
+
+
+def note_servo(drive: Drive, code: str) -> None:
+    """A motion switches the servo on through this entry: a dead process's is switched off at standstill."""
+    _update(drive, servo=code)
+
+
+def clear_servo(drive: Drive) -> None:
+    _update(drive, servo=None)

@@ -37,6 +37,7 @@ from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import from_canonical, to_canonical
 from servotool.model.profile import Entry
 from servotool.motion.jogger import Jogger
+from servotool.ops import journal
 from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate
 from servotool.tuning.gains import LoopGains, rigidity_scale
@@ -240,7 +241,9 @@ class StableHold:
             eng = value if role == "inertia_ratio" else from_canonical(role, e, value)
             raw = eng_to_raw(e, eng, clamp=True)
             if raw != self.raws[e.code]:
-                self.saved.setdefault(e.code, self.raws[e.code])
+                if e.code not in self.saved:
+                    self.saved[e.code] = self.raws[e.code]
+                    journal.note_settings(self.drive, self.saved)
                 write_one(self.drive, e, raw, self.raws[e.code])
                 self.raws[e.code] = raw
         self.setting = setting

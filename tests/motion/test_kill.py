@@ -14,10 +14,12 @@ import pytest
 
 from servotool.config import ConnectOptions, resolve
 from servotool.model.loader import load_profile
+from servotool.model.roles import motion_route
 from servotool.motion.deadman import route_of
+from servotool.ops.journal import LOOP_ROLES
 from servotool.session import open_drives
 
-from .test_motion import PROFILES, ROOT, set_up
+from .test_motion import PROFILES, ROOT, read, set_up
 
 BOUND_RE = re.compile(r"motor stops within ([0-9.]+) rev \(([0-9.]+) s\)")
 BOUNDED = [p for p in PROFILES if route_of(load_profile(p)).route != "none"]
@@ -113,3 +115,34 @@ def test_a_drive_without_dead_man_refuses_and_a_killed_jog_runs_on_as_the_real_d
     proc.wait()
     time.sleep(1.0)
     assert sample(port, profile)[0] > 250         # nothing on the drive stops it
+
+
+@pytest.mark.parametrize("profile", BOUNDED)
+def test_settings_a_killed_jog_changed_are_put_back_by_the_next_command(cli, served_as, profile):
+    """The speed parameter a JOG writes for its duration is journaled: kill -9 mid-JOG leaves it changed on
+    the drive (in EEPROM on a drive that stores every write), and the next command puts it back and says so."""
+    port = served_as(profile)
+    set_up(cli, profile, port)
+    entries = motion_route(load_profile(profile), "test").entries
+    code = entries["segment_speed" if "segment_speed" in entries else "jog_speed"].code
+    gains = [e.code for r in LOOP_ROLES if (e := load_profile(profile).role(r)) is not None]
+    before = read(port, code, profile=profile)[0]
+    gains_before = read(port, *gains, profile=profile)
+    assert before != 700
+    proc, _rev, stop_s = start_motion(port, profile, "jog", "--speed", "700", "--time", "30", "--yes")
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and abs(sample(port, profile)[0]) < 600:
+        time.sleep(0.05)
+    assert read(port, code, profile=profile)[0] == 700      # a second client does not recover a live holder's
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    time.sleep(stop_s + 0.3)
+    r = cli("--port", port, "--profile", profile, "param", "get", code)
+    assert r.code == 0, r.err
+    assert f"put {code} to" in r.err and "ended during a motion" in r.err, r.err
+    assert read(port, code, profile=profile)[0] == before
+    # A loop gain the JOG lowered (IS620P's hold) waits for the servo to be off: the next JOG puts it back.
+    assert cli("--port", port, "--profile", profile, "alarm", "clear").code == 0     # DSX7E's dead-man tripped
+    r = cli("--port", port, "--profile", profile, "jog", "--speed", "100", "--time", "0.3", "--yes")
+    assert r.code == 0, r.err
+    assert read(port, *gains, profile=profile) == gains_before
