@@ -12,7 +12,8 @@ the fit's noise-based uncertainty tight while the answer is wrong. Three checks 
   motor's by the deflection's rate, which follows the torque's rate of change); where it is significant, the
   extended model's inertia is used, flagged with the resonance it implies ("resonance near N Hz"), and a third of
   its correction is added to the uncertainty (the quasi-static term is approximate). A hint of the term (beyond
-  two sigmas) keeps the rigid answer but adds the whole change it would make. Short of that, the term cannot
+  two sigmas, implying a resonance below the sampling rate) keeps the rigid answer but adds the whole change it
+  would make. Short of that, the term cannot
   tell a stiff coupling from a rigid load at slow sampling: its column is the shape of the integration's own
   curvature correction, and on rigid loads it picks up that correction's error near torque steps (half of the
   rigid runs on slow lines gave it beyond half a sigma). Then 0.7 of what a free spring term adds to J's
@@ -47,6 +48,8 @@ MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behi
 COMPLIANCE_HINT_SIGMA = 2.0  # beyond this many it widens the uncertainty by what it would change J (one-sided 2 sigma:
 #                             at 0.5 the hint widened a third of rigid loads on slow lines, 79 of 479 bench runs refused
 #                             for 'perhaps a resonance')
+RESOLVABLE_HZ_PER_RATE = 1.0  # ... and only where the resonance it implies lies below the sampling rate: a spring that
+#                             rings faster than the samples come is not told from the integration's own error
 UNRESOLVED_SPRING_SHARE = 0.7  # short of the hint, this share of what a free spring term adds to J's uncertainty
 #                             counts: a 100 Hz coupling at ratio 10 biases J by ~1.2 % with its term at -0.4 sigma
 POSITION_MODEL_ERROR = 0.5  # half the position model's correction counts as uncertain where its load differs between
@@ -111,7 +114,8 @@ def assess(fit: FitData) -> Verdict:
         # The quasi-static spring term is approximate: a third of its correction counts as uncertain (a 20 Hz
         # coupling's correction left 2-5 % of a 7-28 % bias).
         j, j_std, resid = _take(fit, np.column_stack([x, spring.col]), (j, j_std, resid), 1 / MODEL_ERROR_DIVISOR)
-    elif spring is not None and spring.z < -COMPLIANCE_HINT_SIGMA:
+    elif (spring is not None and spring.z < -COMPLIANCE_HINT_SIGMA
+          and spring.hz < RESOLVABLE_HZ_PER_RATE * _rate(fit)):
         # A hint of a spring (a stiff coupling, 50-100 Hz): the rigid answer stands, uncertain by what the spring
         # term would change.
         hinted = _take(fit, np.column_stack([x, spring.col]), (j, j_std, resid), 0.0)
@@ -250,6 +254,11 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     unresolved = math.sqrt(max(0.0, float(std[0]) ** 2 - float(base[1][0]) ** 2)) if base is not None else 0.0
     strong = z < -COMPLIANCE_SIGMA and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
     return _Spring(col[:, None], math.sqrt(ratio / -b) / (2 * math.pi), z, strong, unresolved)
+
+
+def _rate(fit: FitData) -> float:
+    """Samples per second (the median interval's)."""
+    return float(1.0 / np.median(np.diff(fit.t))) if fit.t.size > 1 else 0.0
 
 
 def _torque_slope(fit: FitData) -> np.ndarray:
