@@ -83,6 +83,7 @@ class FitData:
     min_jackknife_moves: int
     rated_nm: float
     jm: float                 # the motor's inertia, kg*m^2
+    max_rel: float = 0.02     # the estimator's limit on sigma / J (a widening names its cause only if it crosses it)
 
 
 @dataclass(frozen=True)
@@ -119,8 +120,9 @@ def assess(fit: FitData) -> Verdict:
         # A hint of a spring (a stiff coupling, 50-100 Hz): the rigid answer stands, uncertain by what the spring
         # term would change.
         hinted = _take(fit, np.column_stack([x, spring.col]), (j, j_std, resid), 0.0)
+        if j_std <= fit.max_rel * abs(j):      # else too uncertain anyway: the hint is not why
+            widened = f"perhaps a resonance near {spring.hz:.0f} Hz (a compliant coupling)"
         j_std = math.hypot(j_std, hinted[0] - j)
-        widened = f"perhaps a resonance near {spring.hz:.0f} Hz (a compliant coupling)"
     elif spring is not None:
         # No evidence either way: at slow sampling the spring term cannot tell a stiff coupling from a rigid load
         # (and on rigid loads it picks up the integration's own error near torque steps), so the part of J's
