@@ -13,12 +13,12 @@ the fit's noise-based uncertainty tight while the answer is wrong. Three checks 
   extended model's inertia is used, flagged with the resonance it implies ("resonance near N Hz"), and a third of
   its correction is added to the uncertainty (the quasi-static term is approximate). A hint of the term (beyond
   two sigmas, implying a resonance below the sampling rate) keeps the rigid answer but adds the whole change it
-  would make. Short of that, the term cannot
-  tell a stiff coupling from a rigid load at slow sampling: its column is the shape of the integration's own
-  curvature correction, and on rigid loads it picks up that correction's error near torque steps (half of the
-  rigid runs on slow lines gave it beyond half a sigma). Then 0.7 of what a free spring term adds to J's
-  uncertainty counts, without words: a 100 Hz coupling at ratio 10 biased J by ~1.2 % with the term at -0.4
-  sigma.
+  would make; a refusal names the resonance only where the hint took the uncertainty over the limit. Short of
+  that, the term cannot tell a stiff coupling from a rigid load: its column has the shape of the integration's own
+  curvature correction, and on rigid loads at slow lines it picks up that correction's error near torque steps
+  and at the stops (beyond half a sigma in half the runs, beyond two in a fifth to a third). So the rigid answer
+  keeps the uncertainty it has with a free spring term, without words: a 100 Hz coupling at ratio 10 biased J by
+  1.1-1.4 % with its term at -0.4 sigma.
 - subsets: J is taken from each subset of the windows with the friction and load fitted on all of them
   (forward/reverse x accelerating/braking, and the start/middle/end of the travel). Where the subsets disagree
   more than their uncertainties allow, the uncertainty is widened by the Birge ratio sqrt(chi2/dof); where they
@@ -50,8 +50,9 @@ COMPLIANCE_HINT_SIGMA = 2.0  # beyond this many it widens the uncertainty by wha
 #                             for 'perhaps a resonance')
 RESOLVABLE_HZ_PER_RATE = 1.0  # ... and only where the resonance it implies lies below the sampling rate: a spring that
 #                             rings faster than the samples come is not told from the integration's own error
-UNRESOLVED_SPRING_SHARE = 0.7  # short of the hint, this share of what a free spring term adds to J's uncertainty
-#                             counts: a 100 Hz coupling at ratio 10 biases J by ~1.2 % with its term at -0.4 sigma
+UNRESOLVED_SPRING_SHARE = 1.0  # short of the hint, what a free spring term adds to J's uncertainty counts (J keeps
+#                             the fit's value with its spring-term uncertainty): a 100 Hz coupling at ratio 10 biased
+#                             J by 1.1-1.4 % with its term at -0.4 sigma
 POSITION_MODEL_ERROR = 0.5  # half the position model's correction counts as uncertain where its load differs between
 #                             the directions (backlash looks like a load that varies over the travel, and that model
 #                             moved J by +3 % the wrong way) ...
