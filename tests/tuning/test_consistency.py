@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from servotool.tuning.identify import IdentificationRefused
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 from inertia_accuracy import identify_once
 from off_model import identify
@@ -41,3 +43,17 @@ def test_the_off_model_rows_once_outside_their_3_sigma_are_covered_or_refused(si
     if outcome != "refused":
         assert est is not None
         assert abs(est.load_ratio - 10.0) <= 3 * est.ratio_std, (outcome, est.load_ratio, est.ratio_std, why)
+
+
+@pytest.mark.parametrize("profile_id,baud,ratio,friction,viscous,gravity,noise,seed", [
+    ("sd25", 19200, 10.0, 0.05, 0.0, 0.2, 0.005, 11),       # SD25 19200 row, machine 10
+    ("is620p", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 12),      # IS620P 19200 row, machine 11
+])
+def test_a_rigid_load_too_uncertain_anyway_is_not_blamed_on_a_resonance(sim_dir, profile_id, baud, ratio, friction,
+                                                                        viscous, gravity, noise, seed):
+    """Refused 'perhaps a resonance near N Hz (a compliant coupling)' on a rigid plant whose fit was too uncertain
+    before the spring hint (or with the hint below 2 sigma): the refusal now gives the usual remedy instead."""
+    with pytest.raises(IdentificationRefused) as caught:
+        identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
+    reason = str(caught.value)
+    assert "too uncertain" in reason and "resonance" not in reason, reason
