@@ -1,0 +1,59 @@
+"""The rigid-model checks (tuning.consistency) on the benches' own rows: no false resonance on a rigid load at a
+slow line, and the off-model rows that were accepted outside their 3 sigma now covered or refused (issue 16)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from servotool.tuning.identify import IdentificationRefused
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
+from inertia_accuracy import identify_once
+from off_model import identify
+
+
+@pytest.mark.parametrize("profile_id,baud,ratio,friction,viscous,gravity,noise,seed", [
+    ("sd25", 19200, 10.0, 0.1, 0.001, -0.4, 0.0, 10),      # bench --profiles --quick, SD25 19200 row, machine 9
+    ("sdc", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 12),        # SDC 19200 row, machine 11
+])
+def test_a_rigid_load_on_a_slow_line_is_not_refused_for_a_resonance(sim_dir, profile_id, baud, ratio, friction,
+                                                                     viscous, gravity, noise, seed):
+    """These were refused 'inertia too uncertain (2.1-2.5 %): perhaps a resonance near 41-43 Hz' although the
+    plant is rigid: the spring term's hint fired at half a sigma, and its column is the shape of the integration's
+    own curvature correction. Now accepted, with the truth inside the stated 3 sigma and no off-model note."""
+    run = identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
+    est = run.identified.estimate
+    assert est is not None and est.ok
+    assert abs(run.ratio - ratio) <= 3 * est.ratio_std
+    assert not any(n.startswith("off-model:") for n in est.notes), est.notes
+
+
+@pytest.mark.parametrize("machine,seed", [
+    ({"backlash_rad": 0.05}, 8),                                    # was flagged +4.24 % vs 3 sigma 2.43 %
+    ({"resonance_hz": 100.0, "resonance_damping": 0.05}, 22),      # was accepted +1.36 % vs 3 sigma 1.02 %
+])
+def test_the_off_model_rows_once_outside_their_3_sigma_are_covered_or_refused(sim_dir, machine, seed):
+    """bench/off_model.py's two violations (ratio 10, 19200 baud, the bench's seeds): backlash looked like a load
+    varying over the travel and that model moved J the wrong way; a stiff coupling's term was too weak to see."""
+    outcome, est, why = identify(10.0, machine, 19200, seed=seed)
+    assert outcome in ("accepted", "flagged", "refused"), why
+    if outcome != "refused":
+        assert est is not None
+        assert abs(est.load_ratio - 10.0) <= 3 * est.ratio_std, (outcome, est.load_ratio, est.ratio_std, why)
+
+
+@pytest.mark.parametrize("profile_id,baud,ratio,friction,viscous,gravity,noise,seed", [
+    ("sd25", 19200, 10.0, 0.05, 0.0, 0.2, 0.005, 11),       # SD25 19200 row, machine 10
+    ("is620p", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 12),      # IS620P 19200 row, machine 11
+])
+def test_a_rigid_load_too_uncertain_anyway_is_not_blamed_on_a_resonance(sim_dir, profile_id, baud, ratio, friction,
+                                                                        viscous, gravity, noise, seed):
+    """Refused 'perhaps a resonance near N Hz (a compliant coupling)' on a rigid plant whose fit was too uncertain
+    before the spring hint (or with the hint below 2 sigma): the refusal now gives the usual remedy instead."""
+    with pytest.raises(IdentificationRefused) as caught:
+        identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
+    reason = str(caught.value)
+    assert "too uncertain" in reason and "resonance" not in reason, reason
