@@ -16,8 +16,8 @@ bang-bang speed profile: a = band / T^2 with T = k / rate), capped by the motor'
 limit less friction and gravity. k = 2 is the least with which samples show each phase's slope; today's estimator
 gets 5-6 (its windows stay clear of the torque steps at both ends of a phase). k = 1 (phases one sampling interval
 long) would need a fit of the commanded profile through a model of the drive's loop, and a loop that follows such
-ramps (at the factory inertia ratio a heavy load lags them by 0.1-0.2 s). The rate is what the line carries for speed and torque back to
-back (bench line_rate; the identification itself gets about 0.8x of it).
+ramps (at the factory inertia ratio a heavy load lags them by 0.1-0.2 s). The rate is what the line carries for
+speed and torque back to back (bench line_rate; the identification itself gets about 0.8x of it).
 
 Prints per row the share of the bench's 60 machines whose bound allows sigma <= 2 % (the estimator's acceptance
 rule) and <= 1 % (needed for a worst error <= 3 % over some 60 runs), at k = 1, 2, 3, 5 and 7: where that share
