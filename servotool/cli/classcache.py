@@ -77,7 +77,8 @@ def install() -> ClassCache:
     current = getattr(dataclasses, "exec", None)
     if isinstance(getattr(current, "__self__", None), ClassCache):
         return current.__self__
-    cache = ClassCache(cache_dir() / f"dataclasses-{sys.implementation.cache_tag}.marshal")
+    optimized = f"-O{sys.flags.optimize}" if sys.flags.optimize else ""      # as .pyc files: -O keeps its own
+    cache = ClassCache(cache_dir() / f"dataclasses-{sys.implementation.cache_tag}{optimized}.marshal")
     dataclasses.exec = cache.exec  # type: ignore[attr-defined]   # shadows the builtin for that module only
     atexit.register(cache.save)
     return cache

@@ -148,13 +148,18 @@ def _end(status: int) -> NoReturn:
     if run_exit_handlers is None or others:
         sys.exit(status)
     try:
-        sys.stdout.flush()
+        _flush(sys.stdout)
         run_exit_handlers()
-        sys.stdout.flush()
-        sys.stderr.flush()
+        _flush(sys.stdout)
+        _flush(sys.stderr)
     except BrokenPipeError:
         _broken_pipe()
     os._exit(status)
+
+
+def _flush(stream: object) -> None:
+    if flush := getattr(stream, "flush", None):      # None under pythonw
+        flush()
 
 
 def _terminated(signum: int, _frame: object) -> None:
