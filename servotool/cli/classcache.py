@@ -36,8 +36,9 @@ class ClassCache:
         self.used: dict[str, CodeType] = {}
         self.compiled = 0           # texts this process had to compile (none when the cache knew them all)
 
-    def exec(self, source: Any, globals: dict[str, Any] | None = None, locals: Any = None) -> None:
-        """`exec` as dataclasses calls it, with a text's code from the cache."""
+    def exec(self, source: Any, globals: dict[str, Any] | None = None, locals: Any = None, **options: Any) -> None:
+        """`exec` as dataclasses calls it (any later keyword, such as closure, passed on), with a text's code from
+        the cache."""
         if globals is None:         # exec's own default: the caller's globals (and locals)
             frame = sys._getframe(1)
             globals, locals = frame.f_globals, frame.f_locals if locals is None else locals
@@ -49,7 +50,7 @@ class ClassCache:
                 self.compiled += 1
             self.used[source] = code
             source = code
-        builtins.exec(source, globals, locals)
+        builtins.exec(source, globals, locals, **options)
 
     def save(self) -> None:
         """Write the file when this process compiled anything new."""
