@@ -25,8 +25,8 @@ run()
 """
 
 
-def loaded(env: dict[str, str], *args: str) -> list[str]:
-    r = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, cwd=ROOT,
+def loaded(env: dict[str, str], *args: str, probe: str = PROBE) -> list[str]:
+    r = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, cwd=ROOT,
                        env={**os.environ, **env}, timeout=120)
     assert r.returncode == 0, r.stderr
     line = next(x for x in r.stderr.splitlines() if x.startswith("LOADED "))
@@ -37,6 +37,24 @@ def test_param_get_loads_no_numpy_pydantic_yaml_or_other_commands(sim_dir, tmp_p
     env = {"SERVOTOOL_CACHE_DIR": str(tmp_path / "cache")}
     loaded(env, "--port", "sim", "param", "get", "Pn004")          # the first run compiles the profile
     assert loaded(env, "--port", "sim", "param", "get", "Pn004") == []
+
+
+def test_param_get_on_a_real_port_loads_no_modbus_library_asyncio_or_file_lock(sim_dir, tmp_path):
+    from servotool.model.loader import load_profile
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.server import EmbeddedSim
+
+    sim = EmbeddedSim([build_drive(load_profile("dsx7e"), 1, persist=False)])    # this process serves the drive
+    env = {"SERVOTOOL_CACHE_DIR": str(tmp_path / "cache")}
+    names = ("pymodbus", "asyncio", "filelock")
+    probe = PROBE.replace('"numpy", ', f"*{names!r}, \"numpy\", ")
+    try:
+        args = ("--port", sim.port, "-P", "dsx7e", "param", "get", "Pn004")
+        loaded(env, *args)
+        assert set(loaded(env, *args, probe=probe)).isdisjoint(names)
+        assert set(loaded(env, "--port", "sim", "param", "get", "Pn004", probe=probe)) >= set(names)  # can fail
+    finally:
+        sim.close()
 
 
 def test_tune_help_loads_tuning_only_when_asked(sim_dir):
