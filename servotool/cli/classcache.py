@@ -35,6 +35,7 @@ class ClassCache:
         self.code: dict[str, CodeType] = _read(path)
         self.used: dict[str, CodeType] = {}
         self.compiled = 0           # texts this process had to compile (none when the cache knew them all)
+        self.saving = False         # saved at exit (a servotool command)
 
     def exec(self, source: Any, globals: dict[str, Any] | None = None, locals: Any = None, **options: Any) -> None:
         """`exec` as dataclasses calls it (any later keyword, such as closure, passed on), with a text's code from
@@ -74,12 +75,21 @@ def _read(path: Path) -> dict[str, CodeType]:
 
 
 def install() -> ClassCache:
-    """Make dataclasses compile through the cache from now on in this process (once); the file is saved at exit."""
+    """Make dataclasses compile through the cache from now on in this process (once)."""
     current = getattr(dataclasses, "exec", None)
     if isinstance(getattr(current, "__self__", None), ClassCache):
         return current.__self__
     optimized = f"-O{sys.flags.optimize}" if sys.flags.optimize else ""      # as .pyc files: -O keeps its own
     cache = ClassCache(cache_dir() / f"dataclasses-{sys.implementation.cache_tag}{optimized}.marshal")
     dataclasses.exec = cache.exec  # type: ignore[attr-defined]   # shadows the builtin for that module only
-    atexit.register(cache.save)
     return cache
+
+
+def save_at_exit() -> None:
+    """Save what this process compiles when it ends: called by a servotool command only, so that a program that
+    imports the CLI (a test run, with its own dataclasses by the hundred) does not fill the file every command
+    reads."""
+    cache = install()
+    if not cache.saving:
+        cache.saving = True
+        atexit.register(cache.save)

@@ -12,7 +12,7 @@ from typing import NoReturn
 import typer
 
 from servotool import __version__
-from servotool.cli import complete, fastparse
+from servotool.cli import classcache, complete, fastparse
 from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, state
 from servotool.cli.lazy import lazy, lazy_group
@@ -104,6 +104,7 @@ def run() -> None:
 
 
 def _run() -> int:
+    classcache.save_at_exit()
     given = State()       # the options given on the command line, filled in by main(); fix commands repeat them
     _interrupt_on_termination()
     if hasattr(sys.stdout, "reconfigure"):

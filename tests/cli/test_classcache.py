@@ -37,6 +37,10 @@ def compiled_and_used(env: dict[str, str]) -> list[int]:
 
 def test_a_second_one_shot_compiles_no_dataclass(sim_dir, tmp_path):
     env = {"SERVOTOOL_CACHE_DIR": str(tmp_path / "cache")}
+    # a program that only imports the CLI (a test run) uses the cache but leaves the file to the commands
+    subprocess.run([sys.executable, "-c", "import dataclasses, servotool.cli.main; "
+                    "assert dataclasses.exec.__self__.compiled > 40"], check=True, cwd=ROOT, env={**os.environ, **env})
+    assert not list((tmp_path / "cache").glob("dataclasses-*"))
     compiled, used = compiled_and_used(env)
     assert compiled >= 40 and used == compiled
     assert compiled_and_used(env) == [0, used]
