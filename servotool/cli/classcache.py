@@ -22,17 +22,20 @@ from typing import Any
 
 from servotool.files import cache_dir, write_atomic
 
-# Entries kept: far more than all the commands define together; beyond it (texts of older versions of the
-# classes) the file is rewritten with only what the last process used.
-MAX_ENTRIES = 3000
+# Bytes kept: far more than all the commands define together (~0.8 MB); beyond it (texts of older versions of the
+# classes) the file is rewritten with only the modules the last process used.
+MAX_BYTES = 4 << 20
 
 
 class ClassCache:
-    """Compiled dataclass sources by text, loaded from and saved to one file."""
+    """Compiled dataclass sources by text, grouped by the module that defines the class, loaded from and saved to
+    one file. A module's group is unpacked when the module defines its first class: a command pays only for the
+    modules it loads, not for every command's."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.code: dict[str, CodeType] = _read(path)
+        self._stored: dict[str, bytes] = _read(path)        # module -> its {text: code}, marshalled
+        self._modules: dict[str, dict[str, CodeType]] = {}  # the groups unpacked (or begun) by this process
         self.used: dict[str, CodeType] = {}
         self.compiled = 0           # texts this process had to compile (none when the cache knew them all)
         self.saving = False         # saved at exit (a servotool command)
@@ -44,31 +47,48 @@ class ClassCache:
             frame = sys._getframe(1)
             globals, locals = frame.f_globals, frame.f_locals if locals is None else locals
         if isinstance(source, str):
-            code = self.code.get(source)
+            codes = self._module(str(globals.get("__name__", "")))
+            code = codes.get(source)
             if type(code) is not CodeType:
                 # dont_inherit: compiled as dataclasses compiles it, without this module's `from __future__`
-                code = self.code[source] = compile(source, "<string>", "exec", dont_inherit=True)
+                code = codes[source] = compile(source, "<string>", "exec", dont_inherit=True)
                 self.compiled += 1
             self.used[source] = code
             source = code
         builtins.exec(source, globals, locals, **options)
 
+    def _module(self, name: str) -> dict[str, CodeType]:
+        if (codes := self._modules.get(name)) is None:
+            try:
+                codes = marshal.loads(self._stored[name]) if name in self._stored else {}
+            except Exception:       # damaged (marshal raises EOFError, ValueError, TypeError)
+                codes = {}
+            self._modules[name] = codes = codes if isinstance(codes, dict) else {}
+        return codes
+
+    def known(self) -> dict[str, CodeType]:
+        """Every compiled text the file and this process have, of every module."""
+        return {text: code for name in [*self._stored, *self._modules] for text, code in self._module(name).items()}
+
     def save(self) -> None:
         """Write the file when this process compiled anything new."""
         if not self.compiled:
             return
-        keep = self.code if len(self.code) <= MAX_ENTRIES else self.used
         try:
-            write_atomic(self.path, MAGIC_NUMBER + marshal.dumps(keep), durable=False)
+            mine = {name: marshal.dumps(codes) for name, codes in self._modules.items() if codes}
+            stored = {**self._stored, **mine}
+            if sum(len(b) for b in stored.values() if isinstance(b, bytes)) > MAX_BYTES:
+                stored = mine
+            write_atomic(self.path, MAGIC_NUMBER + marshal.dumps(stored), durable=False)
         except (OSError, ValueError):       # ValueError: marshal met something it cannot write
             pass
 
 
-def _read(path: Path) -> dict[str, CodeType]:
+def _read(path: Path) -> dict[str, bytes]:
     try:
         data = path.read_bytes()
-        if data.startswith(MAGIC_NUMBER) and isinstance(code := marshal.loads(data[len(MAGIC_NUMBER):]), dict):
-            return code
+        if data.startswith(MAGIC_NUMBER) and isinstance(stored := marshal.loads(data[len(MAGIC_NUMBER):]), dict):
+            return stored
     except Exception:       # missing, unreadable, damaged (marshal raises EOFError, ValueError, TypeError)
         pass
     return {}

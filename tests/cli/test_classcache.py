@@ -5,9 +5,11 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import json
+import marshal
 import os
 import subprocess
 import sys
+from importlib.util import MAGIC_NUMBER
 from pathlib import Path
 
 import pytest
@@ -80,10 +82,25 @@ def test_cached_code_makes_the_same_class(tmp_path, monkeypatch):
 
 def test_a_damaged_or_foreign_cache_file_is_ignored_and_rewritten(tmp_path, monkeypatch):
     path = tmp_path / "c.marshal"
-    for junk in (b"", b"not marshal at all", b"\x00\x00\r\n" + b"\xff" * 40):
+    for junk in (b"", b"not marshal at all", b"\x00\x00\r\n" + b"\xff" * 40,
+                 MAGIC_NUMBER + marshal.dumps({__name__: b"junk", "other": 5})):
         path.write_bytes(junk)
         cache = ClassCache(path)
-        assert cache.code == {}
+        assert cache.known() == {}
         assert define(cache, monkeypatch)(1).y == 0.5
         cache.save()
-        assert ClassCache(path).code.keys() == cache.used.keys()
+        assert ClassCache(path).known().keys() == cache.used.keys()
+
+
+def test_each_module_s_classes_are_unpacked_only_when_it_defines_one(tmp_path, monkeypatch):
+    path = tmp_path / "c.marshal"
+    first = ClassCache(path)
+    define(first, monkeypatch)
+    first.save()
+    stored = marshal.loads(path.read_bytes()[len(MAGIC_NUMBER):])
+    assert list(stored) == [__name__]
+    stored["some.other.module"] = b"damaged, and never unpacked by this test"
+    path.write_bytes(MAGIC_NUMBER + marshal.dumps(stored))
+    second = ClassCache(path)
+    define(second, monkeypatch)
+    assert second.compiled == 0 and list(second._modules) == [__name__]
