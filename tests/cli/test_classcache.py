@@ -25,7 +25,7 @@ def report():
     sys.stderr.write("CACHE " + json.dumps([cache.compiled, len(cache.used)]) + "\\n")
 sys.argv = ["servotool", *sys.argv[1:]]
 from servotool.cli.main import run
-atexit.register(report)     # runs before the cache's own save (registered earlier)
+atexit.register(report)
 run()
 """
 
