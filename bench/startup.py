@@ -4,8 +4,8 @@ Runs `servotool --port sim param get Pn004` (a new process each time, on the emb
 `python -c "import pymodbus.client"` alternately, 7 times each by default, and prints the medians and their ratio
 (target: at most 2x). Both run with their bytecode cached (PYTHONPYCACHEPREFIX in a temporary folder, even where
 PYTHONDONTWRITEBYTECODE is set: an installed package has its .pyc files), after one warm-up run of each, so that both
-find their files in the OS cache and servotool its compiled profile in the cache (a temporary one: the user's is
-shared with every other copy of servotool, whose different model code replaces the entry).
+find their files in the OS cache and servotool its compiled profile and dataclass methods in the cache (a temporary
+one: the user's is shared with every other copy of servotool, whose different model code replaces the entry).
 
     python bench/startup.py [--runs N]
 """

@@ -80,7 +80,8 @@ def open_tcp(port: str, timeout: float) -> socket.socket:
     """Connect to a tcp://HOST:PORT spec; DeviceError naming the real cause when it cannot."""
     host, number = parse_tcp(port) or ("", 0)
     try:
-        sock = socket.create_connection((host, number), timeout=timeout)
+        # An ASCII name goes as bytes: as text, getaddrinfo loads the IDNA codec (2 ms) to leave it unchanged.
+        sock = socket.create_connection((host.encode() if host.isascii() else host, number), timeout=timeout)
     except OSError as exc:
         raise DeviceError(f"cannot open port {port}: {port_problem(port, exc, timeout=timeout)}") from None
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

@@ -204,27 +204,42 @@ class EmbeddedSim:
         self.drives = drives
         self.lock = threading.Lock()
         self._loop = asyncio.new_event_loop()
-        self._server: ModbusTcpServer | None = None
         self.proxy: FaultProxy | None = None
+        # Started on this thread, before the loop's own thread runs it: a wait for that thread at each step of
+        # the start would cost a scheduling round trip each on a busy machine.
+        try:
+            self._server: ModbusTcpServer | None = self._loop.run_until_complete(
+                _start("tcp://127.0.0.1:0", drives, LineSettings(), self.lock, None))
+            port = bound_port(self._server)
+            if faults is not None:
+                from servotool.sim.faults import FaultProxy
+
+                self.proxy = FaultProxy(("127.0.0.1", port), faults)
+                port = self._loop.run_until_complete(self.proxy.start())
+        except BaseException:
+            self._loop.close()
+            raise
+        self.port = f"tcp://127.0.0.1:{port}"
         self._thread = threading.Thread(target=self._loop.run_forever, name="servotool-sim", daemon=True)
         self._thread.start()
-        future = asyncio.run_coroutine_threadsafe(
-            _start("tcp://127.0.0.1:0", drives, LineSettings(), self.lock, None), self._loop)
-        self._server = future.result(timeout=10)
-        port = bound_port(self._server)
-        if faults is not None:
-            from servotool.sim.faults import FaultProxy
 
-            self.proxy = FaultProxy(("127.0.0.1", port), faults)
-            port = asyncio.run_coroutine_threadsafe(self.proxy.start(), self._loop).result(timeout=10)
-        self.port = f"tcp://127.0.0.1:{port}"
+    async def _stop(self) -> None:
+        try:
+            if self.proxy is not None:
+                await self.proxy.close()
+                self.proxy = None
+            if self._server is not None:
+                await self._server.shutdown()
+                self._server = None
+        finally:
+            # After the callbacks the shutdown scheduled (its connections' ends), not before them.
+            self._loop.call_soon(self._loop.stop)
 
     def close(self) -> None:
-        if self.proxy is not None:
-            asyncio.run_coroutine_threadsafe(self.proxy.close(), self._loop).result(timeout=5)
-            self.proxy = None
-        if self._server is not None:
-            asyncio.run_coroutine_threadsafe(self._server.shutdown(), self._loop).result(timeout=5)
-            self._server = None
-        self._loop.call_soon_threadsafe(self._loop.stop)
+        """Shut the server down and stop its thread: one request to that thread, one wait for it to end."""
+        if not self._thread.is_alive():
+            return
+        done = asyncio.run_coroutine_threadsafe(self._stop(), self._loop)
         self._thread.join(timeout=5)
+        if done.done():
+            done.result()       # a failure to shut down is raised, as before
