@@ -25,7 +25,7 @@ from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelGuard, TravelLimit
 from servotool.ops import alarms, journal
 from servotool.ops.eeprom import ram_writes
-from servotool.ops.params import write_one
+from servotool.ops.params import write_changes, write_one, write_runs
 from servotool.ops.status import servo_is_on
 
 KEY_POLL_S = 0.02      # interactive JOG polls the keys this often (key repeat comes about every 30 ms)
@@ -58,6 +58,7 @@ class Jogger:
         self._enabled = False          # speed route: servo switched on by us
         self._saved_reference: int | None = None
         self._ramp_raw: int | None = None
+        self._speed_param_raw: int | None = None   # the speed parameter as this jogger last read or wrote it
         self._stop_wait_s = 3.0
         self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
         self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
@@ -156,12 +157,63 @@ class Jogger:
             self.arm_dead_man(self.speed_rpm)
         if self.route.kind in ("trigger", "segment"):
             raw = self._speed_raw(self.speed_rpm)
-            if self.drive.read_entries([self.speed_entry])[0].raw != raw:  # no needless EEPROM write
+            if self._speed_param() != raw:  # no needless EEPROM write
                 write_one(self.drive, self.speed_entry, raw)
+                self._speed_param_raw = raw
             if self.route.kind == "segment" and self.direction:
                 self._segment_command()          # the running move takes the new speed at once
         elif self._enabled and self.direction:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
+
+    def _speed_param(self) -> int:
+        if self._speed_param_raw is None:
+            self._speed_param_raw = self.drive.read_entries([self.speed_entry])[0].raw
+        return self._speed_param_raw
+
+    def start(self, direction: int, speed_rpm: float, ramp_raw: int) -> None:
+        """A move from rest: set_speed, set_ramp and command(direction) in the fewest requests. What changed goes
+        in one verified write where the entries are adjacent (on the segment route with the move's displacement:
+        IS620P's H11-12..H11-15, DSX7E's Pn512-513), and what this jogger wrote itself is not read again (IS620P
+        spent six requests a move on them, DSX7E five)."""
+        if self.route.kind not in ("trigger", "segment") or self.direction:
+            self.set_speed(speed_rpm)
+            self.set_ramp(ramp_raw)
+            self.command(direction)
+            return
+        self.speed_rpm = abs(speed_rpm)
+        ramp = self._ramp_entry()
+        ramp_ms = float(raw_to_eng(ramp, ramp_raw))
+        if ramp_raw != self._ramp_raw or self.dead_man is None or self.speed_rpm > self.dead_man.speed_rpm:
+            self.arm_dead_man(self.speed_rpm, ramp_ms)      # before anything is written
+        changes = [(e, old, new) for e, old, new in ((self.speed_entry, self._speed_param(),
+                   self._speed_raw(self.speed_rpm)), (ramp, self._ramp_raw, ramp_raw)) if old != new]
+        if changes and self.segments is not None and direction:
+            distance = self.route.entries["segment_distance"]
+            raw = self.segments.distance_raw(direction, self.speed_rpm, self.keepalive.interval_s, ramp_ms)
+            written = self.segments.written_distance()
+            fold = (distance, raw if written is None else written, raw)    # folded only where adjacent
+            if raw != written and any(len(run) > 1 and fold in run for run in write_runs(
+                    self.drive, sorted([*changes, fold], key=lambda c: c[0].address))):
+                changes.append(fold)
+        for result in write_changes(self.drive, changes):
+            if result.entry is self.speed_entry:
+                self._speed_param_raw = result.new
+            elif result.entry is ramp:
+                self._ramp_raw = result.new
+            elif self.segments is not None:
+                self.segments.distance_written(result.new)
+        self.command(direction)
+
+    def keep_alive(self) -> None:
+        """Feed the dead-man with no write the drive does not need: the keep-alive entry once the beat is due; on
+        the segment route a fresh segment only once the running one would end within a beat (each covers
+        SEGMENT_BEATS beats at speed: re-arming it on every beat cost IS620P two writes a beat)."""
+        ka = self.keepalive
+        if self.segments is not None and ka.entry is None:
+            if self.segments.moving and ka.due_after((deadman.SEGMENT_BEATS - 1.0) * ka.interval_s):
+                ka.beat()
+            return
+        ka.beat_if_due()
 
     def command(self, direction: int) -> None:
         """+1 forward, -1 reverse, 0 stop (ramped by the drive's JOG/speed accel time)."""
@@ -226,6 +278,7 @@ class Jogger:
             self.drive.write_raw(self.servo, 0)
             journal.clear_servo(self.drive)
         self._enabled = False
+        self._speed_param_raw = None
         if self.segments is not None:
             self.segments.moving = 0
         if self._saved_reference is not None:
@@ -296,6 +349,7 @@ class Jogger:
             journal.clear_settings(self.drive)
             if self.segments is not None:
                 self.segments.forget_distance()     # the next move writes its displacement again
+            self._speed_param_raw = None
         except ServoError:
             if not failing:
                 raise
@@ -354,6 +408,7 @@ class Jogger:
         saved = self._snapshot()
         self._ramp_raw = saved[ramp.code]
         journal.note_settings(self.drive, saved)
+        self._speed_param_raw = saved.get(self.speed_entry.code)
         return saved
 
     def _ramp_entry(self) -> Entry:

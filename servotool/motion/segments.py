@@ -39,9 +39,25 @@ class SegmentMoves:
         self._start(rev)
         return True
 
+    def distance_raw(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> int:
+        """The displacement (raw) a fresh move in `direction` writes (see move)."""
+        return self._raw_of(direction * deadman.segment_rev(speed_rpm, beat_s, ramp_ms))
+
+    def distance_written(self, raw: int) -> None:
+        """The displacement was written with other settings (Jogger.start): the move need not write it again."""
+        self._raw = raw
+
+    def written_distance(self) -> int | None:
+        """The displacement last written (None: unknown)."""
+        return self._raw
+
+    def _raw_of(self, rev: float) -> int:
+        distance = self.route.entries["segment_distance"]
+        return max(distance.min, min(distance.max, round(rev * self.units_per_rev()))) or (1 if rev > 0 else -1)
+
     def _start(self, rev: float) -> None:
         distance = self.route.entries["segment_distance"]
-        raw = max(distance.min, min(distance.max, round(rev * self.units_per_rev()))) or (1 if rev > 0 else -1)
+        raw = self._raw_of(rev)
         if raw != self._raw:
             self.drive.write_raw(distance, raw)
             self._raw = raw

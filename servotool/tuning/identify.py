@@ -183,7 +183,7 @@ class _HostRun:
         # take samples' time on a slow line.
         bound = self.jogger.dead_man
         if bound is None or bound.bounded:
-            self.jogger.keepalive.beat_if_due()
+            self.jogger.keep_alive()
 
     def sample(self) -> None:
         try:
@@ -210,9 +210,7 @@ class _HostRun:
         """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
         s, jogger, trace = self.sampler, self.jogger, self.sampler.trace
         first = len(trace.t)
-        jogger.set_speed(speed)
-        jogger.set_ramp(eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed))
-        jogger.command(direction)
+        jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed))
         start = self.timing.now()
         while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
             self.sample()
