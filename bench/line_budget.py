@@ -16,19 +16,21 @@ identification's sampling window (first to last sample: what Sampler.rate() divi
 
 share: samples/s over what the line carries for speed and torque back to back (as inertia_accuracy's column).
 
-Run: python bench/line_budget.py [--profile is620p] [--baud 57600] [--ratio 20] [--friction 0.05]
+Run: python bench/line_budget.py [--profile is620p] [--baud 57600] [--machines 6]
+share: the median over the machines (as inertia_accuracy's column).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
 
-from bench.inertia_accuracy import line_rate
+from bench.inertia_accuracy import draws, line_rate
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.errors import ServoError
@@ -85,12 +87,12 @@ class RecordingLink(VirtualLink):
 
 
 def budget(profile_id: str, baud: int, ratio: float, friction: float, gravity: float = 0.0, noise: float = 0.002,
-           seed: int = 1) -> dict[str, object]:
+           viscous: float = 0.0005, seed: int = 1) -> dict[str, object]:
     """One identification's requests by kind over its sampling window: counts, seconds, and the share."""
     profile = load_profile(profile_id)
     clock = VirtualClock(1000.0)
     sim = build_drive(profile, 1, clock, persist=False)
-    sim.settings.update(load_ratio=ratio, friction=friction, viscous=0.0005, load_torque=gravity, noise=noise,
+    sim.settings.update(load_ratio=ratio, friction=friction, viscous=viscous, load_torque=gravity, noise=noise,
                         seed=seed, brake=1)
     sim.firmware.reconfigure()
     make_motion_setup(sim)
@@ -123,22 +125,28 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--profile", action="append")
     ap.add_argument("--baud", type=int, action="append")
-    ap.add_argument("--ratio", type=float, default=20.0)
-    ap.add_argument("--friction", type=float, default=0.05)
+    ap.add_argument("--machines", type=int, default=6, help="the first N of inertia_accuracy's quick draws")
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     rows = [(p, b) for p in (args.profile or ["is620p", "dsx7e"]) for b in (args.baud or [57600, 19200])]
     kinds = ["samples", "position", "beat", "re-arm", "command", "hold", "alarm", "other", "host"]
+    print(f"requests (count, % of the sampling window) summed over {args.machines} machines")
     print(f"{'profile':>7} {'baud':>6} {'share':>5} {'window':>6}  " + "  ".join(f"{k:>13}" for k in kinds))
     for pid, baud in rows:
-        b = budget(pid, baud, args.ratio, args.friction)
-        if "counts" not in b:
-            print(f"{pid:>7} {baud:>6} {b['outcome']}")
-            continue
-        counts, secs, window = b["counts"], b["seconds"], b["window_s"]
+        counts: Counter[str] = Counter()
+        secs: Counter[str] = Counter()
+        window, shares = 0.0, []
+        for n, (ratio, fr, visc, gr, nz) in enumerate(draws(True)[:args.machines]):
+            b = budget(pid, baud, ratio, fr, gr, nz, viscous=visc, seed=n + 1)
+            if "counts" not in b:
+                continue
+            counts.update(b["counts"])
+            secs.update(b["seconds"])
+            window += b["window_s"]
+            shares.append(b["share"])
         cells = [f"{counts.get(k, 0):>5} {100 * secs.get(k, 0.0) / window:>5.1f}%" for k in kinds]
-        print(f"{pid:>7} {baud:>6} {b['share']:>5.2f} {window:>6.2f}  " + "  ".join(f"{c:>13}" for c in cells)
-              + ("" if b["outcome"] == "ok" else f"  ({b['outcome']})"))
+        print(f"{pid:>7} {baud:>6} {statistics.median(shares):>5.2f} {window:>6.2f}  "
+              + "  ".join(f"{c:>13}" for c in cells))
 
 
 if __name__ == "__main__":

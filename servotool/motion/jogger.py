@@ -59,6 +59,8 @@ class Jogger:
         self._saved_reference: int | None = None
         self._ramp_raw: int | None = None
         self._speed_param_raw: int | None = None   # the speed parameter as this jogger last read or wrote it
+        self._own_s: float | None = None     # segment route: the running move accelerates this long, then stops
+        self._ends_at: float | None = None   # ... and its own segment brakes it from then on (see start)
         self._stop_wait_s = 3.0
         self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
         self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
@@ -170,11 +172,13 @@ class Jogger:
             self._speed_param_raw = self.drive.read_entries([self.speed_entry])[0].raw
         return self._speed_param_raw
 
-    def start(self, direction: int, speed_rpm: float, ramp_raw: int) -> None:
+    def start(self, direction: int, speed_rpm: float, ramp_raw: int, stop_after_s: float | None = None) -> None:
         """A move from rest: set_speed, set_ramp and command(direction) in the fewest requests. What changed goes
         in one verified write where the entries are adjacent (on the segment route with the move's displacement:
         IS620P's H11-12..H11-15, DSX7E's Pn512-513), and what this jogger wrote itself is not read again (IS620P
-        spent six requests a move on them, DSX7E five)."""
+        spent six requests a move on them, DSX7E five). stop_after_s: the move accelerates that long, then stops
+        (command(0)); on the segment route one segment of its own then carries it, within the dead-man's bound
+        (SegmentMoves.length_rev), and a command(0) from then on writes nothing."""
         if self.route.kind not in ("trigger", "segment") or self.direction:
             self.set_speed(speed_rpm)
             self.set_ramp(ramp_raw)
@@ -189,7 +193,8 @@ class Jogger:
                    self._speed_raw(self.speed_rpm)), (ramp, self._ramp_raw, ramp_raw)) if old != new]
         if changes and self.segments is not None and direction:
             distance = self.route.entries["segment_distance"]
-            raw = self.segments.distance_raw(direction, self.speed_rpm, self.keepalive.interval_s, ramp_ms)
+            raw = self.segments.distance_raw(direction, self.speed_rpm, self.keepalive.interval_s, ramp_ms,
+                                             stop_after_s)
             written = self.segments.written_distance()
             fold = (distance, raw if written is None else written, raw)    # folded only where adjacent
             if raw != written and any(len(run) > 1 and fold in run for run in write_runs(
@@ -202,23 +207,31 @@ class Jogger:
                 self._ramp_raw = result.new
             elif self.segments is not None:
                 self.segments.distance_written(result.new)
-        self.command(direction)
+        self._command(direction, stop_after_s)
 
     def keep_alive(self) -> None:
         """Feed the dead-man with no write the drive does not need: the keep-alive entry once the beat is due; on
         the segment route a fresh segment only once the running one would end within a beat (each covers
         SEGMENT_BEATS beats at speed: re-arming it on every beat cost IS620P two writes a beat)."""
         ka = self.keepalive
-        if self.segments is not None and ka.entry is None:
-            if self.segments.moving and ka.due_after((deadman.SEGMENT_BEATS - 1.0) * ka.interval_s):
+        segments = self.segments
+        if segments is not None and ka.entry is None:
+            # a move's own segment ends within the dead-man's bound by itself (start): never re-armed
+            if segments.moving and not segments.ends_itself and \
+                    ka.due_after((deadman.SEGMENT_BEATS - 1.0) * ka.interval_s):
                 ka.beat()
             return
         ka.beat_if_due()
 
     def command(self, direction: int) -> None:
         """+1 forward, -1 reverse, 0 stop (ramped by the drive's JOG/speed accel time)."""
+        self._command(direction, None)
+
+    def _command(self, direction: int, own_s: float | None) -> None:
         self.direction = (direction > 0) - (direction < 0)
         if self.route.kind == "segment":
+            if self.direction:
+                self._own_s = own_s
             self._segment_command()
             return
         if self.jog is not None:
@@ -247,9 +260,18 @@ class Jogger:
             self.drive.write_raw(self.servo, 1)         # servo on, start bits off: the next write is an edge
             self.segments.start_high = False
             self._enabled = True
-        if self._enabled and self.segments is not None and self.segments.move(
-                self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now()):
+        segments = self.segments
+        if segments is None or not self._enabled:
+            return
+        if not self.direction and segments.ends_itself and self._ends_at is not None and \
+                self.clock.now() >= self._ends_at:
+            segments.moving = 0        # the move's own segment is braking it now: nothing to write
+            return
+        if segments.move(self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now(),
+                         self._own_s if self.direction else None):
             self.keepalive.sent()
+            own = segments.ends_itself and self._own_s is not None
+            self._ends_at = self.clock.now() + self._own_s if own and self._own_s is not None else None
 
     def _ramp_ms_now(self) -> float | None:
         if self._ramp_raw is not None:

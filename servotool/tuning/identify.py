@@ -210,7 +210,10 @@ class _HostRun:
         """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
         s, jogger, trace = self.sampler, self.jogger, self.sampler.trace
         first = len(trace.t)
-        jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed))
+        # After the pilot a segment route's move may end by itself (no later than the stop command the pilot's
+        # stretch and lag were learned with); the pilot stops by command, as an early stop (_must_stop) does.
+        jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
+                     self.ramp if self.band is not None else None)
         start = self.timing.now()
         while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
             self.sample()
