@@ -183,7 +183,8 @@ class _HostRun:
         # take samples' time on a slow line.
         bound = self.jogger.dead_man
         if bound is None or bound.bounded:
-            self.jogger.keep_alive()
+            # Before the next call: a sample, a position read, the alarm check and a move's settings at most.
+            self.jogger.keep_alive(lead_s=4.0 * self.sampler.interval())
 
     def sample(self) -> None:
         try:
