@@ -25,7 +25,7 @@ from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelGuard, TravelLimit
 from servotool.ops import alarms, journal
 from servotool.ops.eeprom import ram_writes
-from servotool.ops.params import write_changes, write_one, write_runs
+from servotool.ops.params import write_one
 from servotool.ops.status import servo_is_on
 
 KEY_POLL_S = 0.02      # interactive JOG polls the keys this often (key repeat comes about every 30 ms)
@@ -59,8 +59,6 @@ class Jogger:
         self._saved_reference: int | None = None
         self._ramp_raw: int | None = None
         self._speed_param_raw: int | None = None   # the speed parameter as this jogger last read or wrote it
-        self._own_s: float | None = None     # segment route: the running move accelerates this long, then stops
-        self._ends_at: float | None = None   # ... and its own segment brakes it from then on (see start)
         self._stop_wait_s = 3.0
         self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
         self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
@@ -159,7 +157,7 @@ class Jogger:
             self.arm_dead_man(self.speed_rpm)
         if self.route.kind in ("trigger", "segment"):
             raw = self._speed_raw(self.speed_rpm)
-            if self._speed_param() != raw:  # no needless EEPROM write
+            if self.speed_param() != raw:  # no needless EEPROM write
                 write_one(self.drive, self.speed_entry, raw)
                 self._speed_param_raw = raw
             if self.route.kind == "segment" and self.direction:
@@ -167,77 +165,16 @@ class Jogger:
         elif self._enabled and self.direction:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
 
-    def _speed_param(self) -> int:
+    def speed_param(self) -> int:
+        """The speed parameter's raw value (trigger and segment routes): read once, then as this jogger wrote it."""
         if self._speed_param_raw is None:
             self._speed_param_raw = self.drive.read_entries([self.speed_entry])[0].raw
         return self._speed_param_raw
 
-    def start(self, direction: int, speed_rpm: float, ramp_raw: int, stop_after_s: float | None = None) -> None:
-        """A move from rest: set_speed, set_ramp and command(direction) in the fewest requests. What changed goes
-        in one verified write where the entries are adjacent (on the segment route with the move's displacement:
-        IS620P's H11-12..H11-15, DSX7E's Pn512-513), and what this jogger wrote itself is not read again (IS620P
-        spent six requests a move on them, DSX7E five). stop_after_s: the move accelerates that long, then stops
-        (command(0)); on the segment route one segment of its own then carries it, within the dead-man's bound
-        (SegmentMoves.length_rev), and a command(0) from then on writes nothing."""
-        if self.route.kind not in ("trigger", "segment") or self.direction:
-            self.set_speed(speed_rpm)
-            self.set_ramp(ramp_raw)
-            self.command(direction)
-            return
-        self.speed_rpm = abs(speed_rpm)
-        ramp = self._ramp_entry()
-        ramp_ms = float(raw_to_eng(ramp, ramp_raw))
-        if ramp_raw != self._ramp_raw or self.dead_man is None or self.speed_rpm > self.dead_man.speed_rpm:
-            self.arm_dead_man(self.speed_rpm, ramp_ms)      # before anything is written
-        changes = [(e, old, new) for e, old, new in ((self.speed_entry, self._speed_param(),
-                   self._speed_raw(self.speed_rpm)), (ramp, self._ramp_raw, ramp_raw)) if old != new]
-        if changes and self.segments is not None and direction:
-            distance = self.route.entries["segment_distance"]
-            raw = self.segments.distance_raw(direction, self.speed_rpm, self.keepalive.interval_s, ramp_ms,
-                                             stop_after_s)
-            written = self.segments.written_distance()
-            fold = (distance, raw if written is None else written, raw)    # folded only where adjacent
-            if raw != written and any(len(run) > 1 and fold in run for run in write_runs(
-                    self.drive, sorted([*changes, fold], key=lambda c: c[0].address))):
-                changes.append(fold)
-        for result in write_changes(self.drive, changes):
-            if result.entry is self.speed_entry:
-                self._speed_param_raw = result.new
-            elif result.entry is ramp:
-                self._ramp_raw = result.new
-            elif self.segments is not None:
-                self.segments.distance_written(result.new)
-        self._command(direction, stop_after_s)
-
-    def keep_alive(self, lead_s: float = 0.0) -> None:
-        """Feed the dead-man with no write the drive does not need. lead_s: how long the caller may take before it
-        calls again. A drive's watchdog (route drive_timeout) gets its beat at the last moment that still leaves a
-        third of its timeout spare: once the time since the last write plus lead_s reaches two thirds of it (a beat
-        every third, as a JOG keeps, wrote 1.6 beats a move on DSX7E at 19200). On the segment route a fresh
-        segment only once the running one would end within a beat (each covers SEGMENT_BEATS beats at speed:
-        re-arming it on every beat cost IS620P two writes a beat); a move's own segment ends within the dead-man's
-        bound by itself (start) and is never re-armed."""
-        ka, segments, timeout = self.keepalive, self.segments, self._timeout_s
-        if segments is not None and ka.entry is None:
-            if segments.moving and not segments.ends_itself and \
-                    ka.due_after((deadman.SEGMENT_BEATS - 1.0) * ka.interval_s):
-                ka.beat()
-        elif ka.entry is not None and timeout is not None and timeout > 0 and self.dead_man is not None and \
-                self.dead_man.route == "drive_timeout":
-            if ka.due_after(max(ka.interval_s, 2.0 / 3.0 * timeout - lead_s)):
-                ka.beat()
-        else:
-            ka.beat_if_due()
-
     def command(self, direction: int) -> None:
         """+1 forward, -1 reverse, 0 stop (ramped by the drive's JOG/speed accel time)."""
-        self._command(direction, None)
-
-    def _command(self, direction: int, own_s: float | None) -> None:
         self.direction = (direction > 0) - (direction < 0)
         if self.route.kind == "segment":
-            if self.direction:
-                self._own_s = own_s
             self._segment_command()
             return
         if self.jog is not None:
@@ -266,18 +203,9 @@ class Jogger:
             self.drive.write_raw(self.servo, 1)         # servo on, start bits off: the next write is an edge
             self.segments.start_high = False
             self._enabled = True
-        segments = self.segments
-        if segments is None or not self._enabled:
-            return
-        if not self.direction and segments.ends_itself and self._ends_at is not None and \
-                self.clock.now() >= self._ends_at:
-            segments.moving = 0        # the move's own segment is braking it now: nothing to write
-            return
-        if segments.move(self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now(),
-                         self._own_s if self.direction else None):
+        if self._enabled and self.segments is not None and self.segments.move(
+                self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now()):
             self.keepalive.sent()
-            own = segments.ends_itself and self._own_s is not None
-            self._ends_at = self.clock.now() + self._own_s if own and self._own_s is not None else None
 
     def _ramp_ms_now(self) -> float | None:
         if self._ramp_raw is not None:

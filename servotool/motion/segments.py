@@ -26,12 +26,13 @@ class SegmentMoves:
         self._per_rev: float | None = None
         self.start_high = True                # the start bits may be on: a move needs them off first
         self.ends_itself = False              # the running move's own segment stops it (see length_rev)
+        self.own_s: float | None = None       # the next fresh move accelerates this long, then stops (once)
 
-    def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None,
-             own_s: float | None = None) -> bool:
-        """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own, see
-        length_rev); direction 0 brakes a running move at the ramp (read as time to rated speed). False when there
-        was nothing to do."""
+    def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
+        """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own where
+        own_s is set, see length_rev); direction 0 brakes a running move at the ramp (read as time to rated speed).
+        False when there was nothing to do."""
+        own_s, self.own_s = self.own_s, None
         if direction:
             rev, self.ends_itself = self.length_rev(speed_rpm, beat_s, ramp_ms, own_s)
             rev *= direction

@@ -11,8 +11,8 @@ from servotool.errors import ServoError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry
 from servotool.model.roles import status_bit
-from servotool.motion.jogger import Jogger
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
+from servotool.motion.moves import Mover
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
@@ -158,7 +158,7 @@ class _HostRun:
         p, d = ident.p, ident.drive
         self.ident, self.plan, self.progress, self.timing = ident, plan, progress, ident.timing
         beat_s = ident.keepalive_s if ident.keepalive_s is not None else keepalive_interval_s(d)
-        self.jogger = Jogger(d, beat_s, FEATURE, self.timing)
+        self.jogger = Mover(d, beat_s, FEATURE, self.timing)
         self.jog_accel = p.need_role("jog_accel", FEATURE)
         assert p.motor is not None
         self.rated_rpm = p.motor.rated_speed_rpm
