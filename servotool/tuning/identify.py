@@ -150,6 +150,9 @@ class Identifier:
         return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)
 
 
+REST_RAMPS = 0.5      # the axis rests this many ramp times (at least two samples) between moves
+
+
 class _HostRun:
     """One host identification: the pilot, the planned cycles and the fit, on one Jogger and one Sampler."""
 
@@ -227,8 +230,13 @@ class _HostRun:
             self.sample()
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
                 break
+        # At rest for two samples and half a ramp before the next move: the loop settles (the requests of the next
+        # move's settings used to give it that time; without it DSX7E at 19200 was accepted less often).
+        rest = self.timing.now() + REST_RAMPS * self.ramp
         self.sample()
-        self.sample()                      # two samples at rest separate this move from the next
+        self.sample()
+        while self.timing.now() < rest:
+            self.sample()
         if v_stop > self.stop_band:
             coast = abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0
             self.lag_s = max(self.lag_s, coast / (v_stop / 60.0))
