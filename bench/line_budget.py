@@ -46,7 +46,7 @@ from servotool.tuning.tune import TuneRequest, tune_inertia
 # The first function on the stack (innermost first) that names the kind of a request.
 KINDS = [("_read", "samples"), ("Sampler.sample", "position"), ("_resend_command", "re-arm"),
          ("KeepAlive.beat", "beat"), ("StableHold.", "hold"), ("active_alarm", "alarm"),
-         ("Jogger.start", "command"), ("Jogger.set_speed", "command"), ("Jogger.set_ramp", "command"),
+         ("Mover.start", "command"), ("Jogger.set_speed", "command"), ("Jogger.set_ramp", "command"),
          ("Jogger.command", "command")]
 
 
