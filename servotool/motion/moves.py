@@ -23,6 +23,12 @@ class Mover(Jogger):
 
     _ends_at: float | None = None     # segment route: from then on the running move's own segment brakes it
 
+    @property
+    def folds(self) -> bool:
+        """Whether start writes a move's settings in fewer requests than set_speed, set_ramp and command (the JOG
+        and segment routes, whose speed is a parameter)."""
+        return self.route.kind in ("trigger", "segment")
+
     def start(self, direction: int, speed_rpm: float, ramp_raw: int, stop_after_s: float | None = None) -> None:
         """A move from rest: set_speed, set_ramp and command(direction) in the fewest requests. What changed goes in
         one verified write where the entries are adjacent (on the segment route with the move's displacement:
@@ -30,7 +36,7 @@ class Mover(Jogger):
         spent six requests a move on them, DSX7E five). stop_after_s: the move accelerates that long and then stops
         (command(0)); on the segment route one segment of its own then carries it where that is within the
         dead-man's segment (SegmentMoves.length_rev), and a command(0) from then on writes nothing."""
-        if self.route.kind not in ("trigger", "segment") or self.direction:
+        if not self.folds or self.direction:
             self.set_speed(speed_rpm)
             self.set_ramp(ramp_raw)
             self.command(direction)
