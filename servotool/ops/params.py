@@ -94,6 +94,19 @@ def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list
     return runs
 
 
+def write_changes(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[WriteResult]:
+    """Changed parameters (entry, old, new) in the fewest verified requests: adjacent ones in one FC16 request
+    (write_runs), each run verified by one read-back; the others by write_one."""
+    results: list[WriteResult] = []
+    for run in write_runs(drive, sorted(changes, key=lambda c: c[0].address)):
+        if len(run) == 1:
+            entry, old, new = run[0]
+            results.append(write_one(drive, entry, new, old))
+        else:
+            results.extend(drive.write_block_verified([(e, new, old) for e, old, new in run]))
+    return results
+
+
 def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
     """Write the planned changes in order, adjacent ones in one FC16 request (as the manuals' multi-register
     examples do), each verified by read-back. A failure names what was written before it."""
