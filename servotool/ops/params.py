@@ -99,12 +99,16 @@ def write_changes(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[W
     (write_runs), each run verified by one read-back; the others by write_one."""
     results: list[WriteResult] = []
     for run in write_runs(drive, sorted(changes, key=lambda c: c[0].address)):
-        if len(run) == 1:
-            entry, old, new = run[0]
-            results.append(write_one(drive, entry, new, old))
-        else:
-            results.extend(drive.write_block_verified([(e, new, old) for e, old, new in run]))
+        results.extend(_write_run(drive, run))
     return results
+
+
+def _write_run(drive: Drive, run: list[tuple[Entry, int, int]]) -> list[WriteResult]:
+    """One run of write_runs: a lone entry by write_one, adjacent ones in one verified FC16 request."""
+    if len(run) == 1:
+        entry, old, new = run[0]
+        return [write_one(drive, entry, new, old)]
+    return drive.write_block_verified([(e, new, old) for e, old, new in run])
 
 
 def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
@@ -113,11 +117,7 @@ def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
     results: list[WriteResult] = []
     for run in write_runs(drive, plan.changes):
         try:
-            if len(run) == 1:
-                entry, old, new = run[0]
-                results.append(write_one(drive, entry, new, old))
-            else:
-                results.extend(drive.write_block_verified([(e, new, old) for e, old, new in run]))
+            results.extend(_write_run(drive, run))
         except ServoError as exc:
             raise _naming_written(exc, results, [e for e, _, _ in run]) from None
     return results
