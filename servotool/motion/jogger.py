@@ -186,9 +186,7 @@ class Jogger:
             # A reference held in a parameter (e.g. a signed JOG speed) would run at once on enable: zero it first.
             if self._saved_reference is None and self.speed_entry.readable:
                 self._saved_reference = self.drive.read_entries([self.speed_entry])[0].raw
-                journal.note_settings(self.drive, {self.speed_entry.code: self._saved_reference})
             self.drive.write_raw(self.speed_entry, self._speed_raw(0))
-            journal.note_servo(self.drive, self.servo.code)
             self.drive.write_raw(self.servo, 1)
             self._enabled = True
         if self._enabled:
@@ -199,7 +197,6 @@ class Jogger:
         """The segment route: servo on for the first move, then a fresh move (or a braking one) now."""
         assert self.servo is not None
         if self.direction and not self._enabled and self.segments is not None:
-            journal.note_servo(self.drive, self.servo.code)
             self.drive.write_raw(self.servo, 1)         # servo on, start bits off: the next write is an edge
             self.segments.start_high = False
             self._enabled = True
@@ -232,7 +229,6 @@ class Jogger:
         """Servo off (the drive stops holding the axis) and put back a parameter-held speed reference."""
         if self.servo is not None:
             self.drive.write_raw(self.servo, 0)
-            journal.clear_servo(self.drive)
         self._enabled = False
         self._speed_param_raw = None
         if self.segments is not None:
@@ -271,7 +267,7 @@ class Jogger:
             saved = self._snapshot()
             failing = True
             try:
-                journal.note_settings(self.drive, saved)
+                self._journal(saved)
                 if self.prepare is not None:
                     self.prepare(saved)
                 self._run(plan, on_sample, command)
@@ -280,9 +276,9 @@ class Jogger:
                 self._put_back(saved, failing)
 
     def _written_settings(self) -> list[Entry]:
-        """The parameters this motion writes, to be put back as found: the JOG speed of a trigger or segment
-        route, a segment's displacement, and the ramp (role jog_accel), where the profile maps them."""
-        entries = [self.speed_entry] if self.route.kind in ("trigger", "segment") else []
+        """The parameters this motion writes, to be put back as found: the JOG speed (a speed route's reference,
+        which leave() also puts back), a segment's displacement, and the ramp (role jog_accel), if mapped."""
+        entries = [self.speed_entry]
         if self.route.kind == "segment":
             entries.append(self.route.entries["segment_distance"])
         ramp = self.profile.role("jog_accel")
@@ -302,7 +298,7 @@ class Jogger:
             for entry, reading in zip(entries, self.drive.read_entries(entries), strict=True):
                 if reading.raw != saved[entry.code]:
                     write_one(self.drive, entry, saved[entry.code])
-            journal.clear_settings(self.drive)
+            journal.clear_motion(self.drive, servo_off=not self._enabled)
             if self.segments is not None:
                 self.segments.forget_distance()     # the next move writes its displacement again
             self._speed_param_raw = None
@@ -363,9 +359,16 @@ class Jogger:
         ramp = self._ramp_entry()
         saved = self._snapshot()
         self._ramp_raw = saved[ramp.code]
-        journal.note_settings(self.drive, saved)
+        self._journal(saved)
         self._speed_param_raw = saved.get(self.speed_entry.code)
         return saved
+
+    def _journal(self, saved: dict[str, int]) -> None:
+        """Before the motion starts (file writes do not delay its timing): the originals of what it changes, and
+        that it may switch the servo on (it refuses one already on), for the next command should this one die."""
+        journal.note_settings(self.drive, saved)
+        if self.servo is not None:
+            journal.note_servo(self.drive, self.servo.code)
 
     def _ramp_entry(self) -> Entry:
         return self.profile.need_role("jog_accel", self.feature)

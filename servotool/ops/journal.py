@@ -301,15 +301,11 @@ def note_settings(drive: Drive, originals: dict[str, int]) -> None:
     _update(drive, settings={**originals, **before} or None)
 
 
-def clear_settings(drive: Drive) -> None:
-    """The motion's settings are confirmed back: their record goes."""
-    _update(drive, settings=None)
-
-
 def note_servo(drive: Drive, code: str) -> None:
-    """A motion switches the servo on through this entry: a dead process's is switched off at standstill."""
+    """A motion may switch the servo on through this entry: a dead process's is switched off at standstill."""
     _update(drive, servo=code)
 
 
-def clear_servo(drive: Drive) -> None:
-    _update(drive, servo=None)
+def clear_motion(drive: Drive, *, servo_off: bool) -> None:
+    """The motion's settings are confirmed back (and, with servo_off, its servo off): their record goes."""
+    _update(drive, settings=None, **({"servo": None} if servo_off else {}))
