@@ -276,9 +276,9 @@ class Jogger:
                 self._put_back(saved, failing)
 
     def _written_settings(self) -> list[Entry]:
-        """The parameters this motion writes, to be put back as found: the JOG speed (a speed route's reference,
-        which leave() also puts back), a segment's displacement, and the ramp (role jog_accel), if mapped."""
-        entries = [self.speed_entry]
+        """The parameters this motion writes, to be put back as found: the JOG speed of a trigger or segment
+        route, a segment's displacement, and the ramp (role jog_accel), where the profile maps them."""
+        entries = [self.speed_entry] if self.route.kind in ("trigger", "segment") else []
         if self.route.kind == "segment":
             entries.append(self.route.entries["segment_distance"])
         ramp = self.profile.role("jog_accel")
@@ -351,7 +351,6 @@ class Jogger:
         except DeviceError:
             pass  # the drive's own watchdog stops the motor when the host goes quiet
 
-
     # ----- for motions that change the JOG settings (identification, step response) --------------------------
     def settings_to_restore(self) -> dict[str, int]:
         """Raw values (code -> raw) of the settings a motion changes and puts back (see _written_settings); the
@@ -364,11 +363,16 @@ class Jogger:
         return saved
 
     def _journal(self, saved: dict[str, int]) -> None:
-        """Before the motion starts (file writes do not delay its timing): the originals of what it changes, and
-        that it may switch the servo on (it refuses one already on), for the next command should this one die."""
-        journal.note_settings(self.drive, saved)
-        if self.servo is not None:
-            journal.note_servo(self.drive, self.servo.code)
+        """Before the motion (file writes do not delay its timing), for the next command should this one die: the
+        originals of what it changes (with a speed route's reference held in a parameter, SDC PN22, which leave()
+        puts back) and the servo it may switch on (it refuses one already on). None on an in-process link."""
+        e = self.speed_entry
+        if self.drive.port:
+            speed_ref = {e.code: self.drive.read_entries([e])[0].raw} \
+                if self.route.kind == "speed" and e.readable and e.cls == "Pn" else {}
+            journal.note_settings(self.drive, {**speed_ref, **saved})
+            if self.servo is not None:
+                journal.note_servo(self.drive, self.servo.code)
 
     def _ramp_entry(self) -> Entry:
         return self.profile.need_role("jog_accel", self.feature)
