@@ -169,11 +169,11 @@ def recover(drive: Drive, notice: Notice) -> list[str]:
 
 
 def _put_switch_back(drive: Drive, switch: dict[str, Any], pid: object) -> str:
-    entry = drive.profile.find(str(switch.get("code")))
-    original = switch.get("original")
-    if entry is None or not isinstance(original, int) or isinstance(original, bool) \
-            or not entry.min <= original <= entry.max:
+    valid = _valid_settings(drive, {str(switch.get("code")): switch.get("original")})
+    if not valid:
         return f"servotool: ignored a damaged journal record for unit {drive.unit} ({record_path(drive)})"
+    [(code, original)] = valid.items()
+    entry = drive.profile.entry(code)
     now = drive.read_entries([entry])[0].raw
     if now == original:
         return (f"servotool: a servotool process (pid {pid}) ended while changing {entry.code}; it is "
