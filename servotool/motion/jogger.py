@@ -58,6 +58,7 @@ class Jogger:
         self._enabled = False          # speed route: servo switched on by us
         self._saved_reference: int | None = None
         self._ramp_raw: int | None = None
+        self._speed_param_raw: int | None = None   # the speed parameter as this jogger last read or wrote it
         self._stop_wait_s = 3.0
         self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
         self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
@@ -156,12 +157,19 @@ class Jogger:
             self.arm_dead_man(self.speed_rpm)
         if self.route.kind in ("trigger", "segment"):
             raw = self._speed_raw(self.speed_rpm)
-            if self.drive.read_entries([self.speed_entry])[0].raw != raw:  # no needless EEPROM write
+            if self.speed_param() != raw:  # no needless EEPROM write
                 write_one(self.drive, self.speed_entry, raw)
+                self._speed_param_raw = raw
             if self.route.kind == "segment" and self.direction:
                 self._segment_command()          # the running move takes the new speed at once
         elif self._enabled and self.direction:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
+
+    def speed_param(self) -> int:
+        """The speed parameter's raw value (trigger and segment routes): read once, then as this jogger wrote it."""
+        if self._speed_param_raw is None:
+            self._speed_param_raw = self.drive.read_entries([self.speed_entry])[0].raw
+        return self._speed_param_raw
 
     def command(self, direction: int) -> None:
         """+1 forward, -1 reverse, 0 stop (ramped by the drive's JOG/speed accel time)."""
@@ -222,6 +230,7 @@ class Jogger:
         if self.servo is not None:
             self.drive.write_raw(self.servo, 0)
         self._enabled = False
+        self._speed_param_raw = None
         if self.segments is not None:
             self.segments.moving = 0
         if self._saved_reference is not None:
@@ -292,6 +301,7 @@ class Jogger:
             journal.clear_motion(self.drive, servo_off=not self._enabled)
             if self.segments is not None:
                 self.segments.forget_distance()     # the next move writes its displacement again
+            self._speed_param_raw = None
         except ServoError:
             if not failing:
                 raise
@@ -349,6 +359,7 @@ class Jogger:
         saved = self._snapshot()
         self._ramp_raw = saved[ramp.code]
         self._journal(saved)
+        self._speed_param_raw = saved.get(self.speed_entry.code)
         return saved
 
     def _journal(self, saved: dict[str, int]) -> None:

@@ -55,6 +55,10 @@ class KeepAlive:
         """Whether a beat is due: interval_s has passed since the last write that kept the drive alive."""
         return (self.clock.now() if now is None else now) - self.last >= self.interval_s
 
+    def due_after(self, seconds: float) -> bool:
+        """Whether `seconds` have passed since the last write that kept the drive alive."""
+        return self.clock.now() - self.last >= seconds
+
     def sent(self) -> None:
         """A motion command just went out: the drive's watchdog counts it as a beat."""
         self.last = self.clock.now()

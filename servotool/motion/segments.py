@@ -25,13 +25,19 @@ class SegmentMoves:
         self._raw: int | None = None          # the displacement last written
         self._per_rev: float | None = None
         self.start_high = True                # the start bits may be on: a move needs them off first
+        self.ends_itself = False              # the running move's own segment stops it (see length_rev)
+        self.own_s: float | None = None       # the next fresh move accelerates this long, then stops (once)
 
     def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
-        """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop; direction 0 brakes a
-        running move at the ramp (read as time to rated speed). False when there was nothing to do."""
+        """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own where
+        own_s is set, see length_rev); direction 0 brakes a running move at the ramp (read as time to rated speed).
+        False when there was nothing to do."""
+        own_s, self.own_s = self.own_s, None
         if direction:
-            rev = direction * deadman.segment_rev(speed_rpm, beat_s, ramp_ms)
+            rev, self.ends_itself = self.length_rev(speed_rpm, beat_s, ramp_ms, own_s)
+            rev *= direction
         elif self.moving:
+            self.ends_itself = False
             rev = self.moving * deadman.braking_rev(speed_rpm, ramp_ms, self.rated_rpm)
         else:
             return False
@@ -39,9 +45,38 @@ class SegmentMoves:
         self._start(rev)
         return True
 
+    def length_rev(self, speed_rpm: float, beat_s: float, ramp_ms: float | None, own_s: float | None
+                   ) -> tuple[float, bool]:
+        """The length of a fresh move, and whether it is the move's own. A move that accelerates for own_s and then
+        stops (identification) is one segment of its own where that is no longer than the dead-man's: the drive
+        brakes it at its end by itself, with no re-arm and no stop command (three writes a move on IS620P)."""
+        bounded = deadman.segment_rev(speed_rpm, beat_s, ramp_ms)
+        if own_s is None or not ramp_ms or ramp_ms <= 0:
+            return bounded, False
+        to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.rated_rpm
+        own = abs(speed_rpm) / 60.0 * own_s * min(1.0, own_s / to_speed_s)   # up for own_s, down as long
+        return (own, True) if own <= bounded else (bounded, False)
+
+    def distance_raw(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None,
+                     own_s: float | None = None) -> int:
+        """The displacement (raw) a fresh move in `direction` writes (see move)."""
+        return self._raw_of(direction * self.length_rev(speed_rpm, beat_s, ramp_ms, own_s)[0])
+
+    def distance_written(self, raw: int) -> None:
+        """The displacement was written with other settings (Jogger.start): the move need not write it again."""
+        self._raw = raw
+
+    def written_distance(self) -> int | None:
+        """The displacement last written (None: unknown)."""
+        return self._raw
+
+    def _raw_of(self, rev: float) -> int:
+        distance = self.route.entries["segment_distance"]
+        return max(distance.min, min(distance.max, round(rev * self.units_per_rev()))) or (1 if rev > 0 else -1)
+
     def _start(self, rev: float) -> None:
         distance = self.route.entries["segment_distance"]
-        raw = max(distance.min, min(distance.max, round(rev * self.units_per_rev()))) or (1 if rev > 0 else -1)
+        raw = self._raw_of(rev)
         if raw != self._raw:
             self.drive.write_raw(distance, raw)
             self._raw = raw

@@ -94,6 +94,15 @@ def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list
     return runs
 
 
+def write_changes(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[WriteResult]:
+    """Changed parameters (entry, old, new) in the fewest verified requests: adjacent ones in one FC16 request
+    (write_runs), each run verified by one read-back; the others by write_one."""
+    results: list[WriteResult] = []
+    for run in write_runs(drive, sorted(changes, key=lambda c: c[0].address)):
+        results.extend(_write_run(drive, run))
+    return results
+
+
 def _write_run(drive: Drive, run: list[tuple[Entry, int, int]]) -> list[WriteResult]:
     """One run of write_runs: a lone entry by write_one, adjacent ones in one verified FC16 request."""
     if len(run) == 1:

@@ -1,0 +1,79 @@
+"""A move from rest on the segment route (IS620P): its settings folded into one request, a segment of its own that
+stops it (within the dead-man's bound, else the beat-sized segment), and a re-arm only when one is needed."""
+
+from __future__ import annotations
+
+import pytest
+
+from servotool.clock import VirtualClock
+from servotool.drive import Drive
+from servotool.model.codec import eng_to_raw
+from servotool.model.loader import load_profile
+from servotool.motion import deadman
+from servotool.motion.moves import Mover
+from servotool.sim.firmware import build_drive
+from servotool.sim.virtual import VirtualLink, make_motion_setup
+
+BEAT_S = 0.1
+
+
+def _jogger(sim_dir):
+    profile = load_profile("is620p")
+    clock = VirtualClock(100.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    make_motion_setup(sim)
+    d = Drive(VirtualLink([sim], clock, 57600), profile, 1)
+    jogger = Mover(d, BEAT_S, "test", clock)
+    saved = jogger.settings_to_restore()
+    writes: list[tuple[int, list[int]]] = []
+    write = d.link.write
+    d.link.write = lambda unit, address, values, **kw: (writes.append((address, list(values))),
+                                                        write(unit, address, values, **kw))[1]
+    return sim, jogger, clock, writes, saved
+
+
+def _ramp_raw(jogger: Mover, up_s: float, speed: float) -> int:
+    """The ramp parameter (time to rated speed) that reaches `speed` in up_s."""
+    return eng_to_raw(jogger.profile.entry("H11-15"), up_s * 1000.0 * 3000.0 / speed)
+
+
+def test_a_move_that_stops_after_its_ramp_is_one_segment_and_needs_no_stop_write(sim_dir):
+    sim, jogger, clock, writes, saved = _jogger(sim_dir)
+    distance = jogger.profile.entry("H11-12")
+    jogger.start(1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=0.1)
+    block = [v for a, v in writes if a == distance.address]
+    assert len(block) == 1 and len(block[0]) == 4          # displacement, speed and ramp in one request
+    assert block[0][0] == pytest.approx(600.0 / 60.0 * 0.1 * 10000, abs=2)    # up 0.1 s, down as long
+    writes.clear()
+    clock.advance(0.35)                                     # longer than two beats: never re-armed
+    jogger.keep_alive()
+    jogger.command(0)                                       # at the ramp's end: the segment brakes by itself
+    assert writes == []
+    clock.advance(0.5)
+    assert abs(sim.firmware.plant.true_speed_rpm) < 5.0
+    jogger.leave_and_restore(saved)
+
+
+def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_dir):
+    _sim, jogger, clock, writes, saved = _jogger(sim_dir)
+    distance = jogger.profile.entry("H11-12")
+    jogger.start(1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=0.1)
+    clock.advance(0.03)
+    writes.clear()
+    jogger.command(0)                                       # before its end: a braking segment now
+    assert [a for a, _v in writes].count(distance.address) == 1
+    clock.advance(0.5)
+    # A move longer than the dead-man's segment is not one of its own: beat-sized, re-armed before it would end.
+    ramp = _ramp_raw(jogger, 0.1, 600.0)
+    jogger.start(-1, 600.0, ramp, stop_after_s=2.0)
+    bound = deadman.segment_rev(600.0, BEAT_S, 100.0 * 3000.0 / 600.0) * 10000
+    assert abs(jogger.segments.written_distance()) == pytest.approx(bound, abs=2)
+    writes.clear()
+    clock.advance(1.5 * BEAT_S)
+    jogger.keep_alive()
+    assert writes == []                                     # one beat and a half: the segment still runs
+    clock.advance(0.5 * BEAT_S)
+    jogger.keep_alive()
+    assert len(writes) == 2                                 # two beats: re-armed (the start edge)
+    jogger.command(0)
+    jogger.leave_and_restore(saved)
