@@ -17,6 +17,7 @@ from servotool.tuning.preflight import DEFAULT_SAMPLES_PER_S, RestCheck, check_a
 # square of the ramp time at a fixed travel), and a low-inertia axis with a noisy torque reading then cannot reach
 # the precision within the time budget (10 intervals: 2.0-2.7 % at 19200 baud with 0.4 % rated torque noise).
 SAMPLES_PER_RAMP = 7.0
+MIN_RAMP_S = 0.1          # ... and at least this long (a loop with factory gains on an unknown load follows them)
 
 
 # Automatic repeats stop before the motion (with its pilot) would take longer than this.
@@ -120,7 +121,7 @@ def plan_motion(profile: Profile, *, max_speed: float | None, accel_time_ms: flo
         raise UsageError("--direction must be both, forward or reverse")
     if accel_time_ms is None:
         rate = samples_per_s if samples_per_s and math.isfinite(samples_per_s) else DEFAULT_SAMPLES_PER_S
-        ramp = min(0.5, max(0.1, SAMPLES_PER_RAMP / rate))
+        ramp = min(0.5, max(MIN_RAMP_S, SAMPLES_PER_RAMP / rate))
     else:
         if not (math.isfinite(accel_time_ms) and 20 <= accel_time_ms <= 5000):
             raise UsageError("--accel-time must be 20..5000 ms")
