@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 # Manual references (“L417-419”, “is620p.md L1036”, “(L3215)”): for -v, not for everyone.
 _REF = r"(?:[\w./-]+\.md,?\s*)?\bL\d{2,}(?:\s*[-–]\s*L?\d+)?"
-MANUAL_REFS = re.compile(rf"\s*\((?:see\s+)?{_REF}(?:\s*[,;]\s*{_REF})*\)|\s*[,;]\s*{_REF}(?=\))|\s*\b{_REF}")
+MANUAL_REFS = re.compile(rf"\s*\((?:see\s+)?{_REF}(?:\s*[,;]\s*{_REF})*\)|(?:\s*[,;]\s*{_REF})+(?=\))|\s*\b{_REF}")
 
 # ConnectOptions field -> its long option on the command line
 OPTION_FLAGS = {"port": "--port", "baud": "--baud", "parity": "--parity", "stopbits": "--stopbits",

@@ -175,6 +175,18 @@ def notice(text: str) -> None:
 
 
 _UNVERIFIED = re.compile(r"(\S+) \((\w+)\): ")
+_RELIES = re.compile(r"(.+?) relies on .*; unverified\b")      # "the dead-man (segment) relies on L..; unverified: ..."
+
+
+def _short_caution(line: str) -> str:
+    """A caution's one line: what it is about, without the manual's line numbers."""
+    if m := _UNVERIFIED.match(line):
+        return f"{m.group(1)} ({m.group(2).replace('_', ' ')}) is not confirmed by the manual"
+    if m := _RELIES.match(line):
+        return f"{m.group(1).replace('_', ' ')} is not confirmed by the manual"
+    from servotool.cli.messages import plain  # the words' module, only once a caution is shown
+
+    return plain(line.split(": ", 1)[0])
 
 
 def caution(lines: Sequence[str]) -> None:
@@ -182,16 +194,17 @@ def caution(lines: Sequence[str]) -> None:
     --explain."""
     for line in lines:
         if not Verbosity.explain:
-            m = _UNVERIFIED.match(line)
-            line = (f"{m.group(1)} ({m.group(2).replace('_', ' ')}) is not confirmed by the manual" if m
-                    else line.split(": ", 1)[0])
+            line = _short_caution(line)
         err.print(f"servotool: caution: {line}", markup=False)
     if lines and not Verbosity.explain:
         err.print("servotool: (--explain shows why)", markup=False)
 
 
 def warn(text: str) -> None:
-    err.print(f"servotool: warning: {text}", markup=False)
+    """A warning on stderr (shown with --quiet too); the manual's line numbers only with -v."""
+    from servotool.cli.messages import plain
+
+    err.print(f"servotool: warning: {plain(text, Verbosity.level > 0)}", markup=False)
 
 
 _emitted = [False]

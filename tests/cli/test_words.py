@@ -74,3 +74,20 @@ def test_cautions_are_one_line_each_unless_explained(capsys):
     finally:
         render.Verbosity.explain = False
     assert "keeps running" in capsys.readouterr().err
+
+
+def test_a_dead_man_caution_is_one_line_without_manual_lines(capsys):
+    render.caution(["the dead-man (segment) relies on IS620P CANopen manual L3426-3438 (H11 segment parameters), "
+                    "L3164-3166; is620p.md L477-491; unverified: how a segment is started is the general manual's"])
+    assert capsys.readouterr().err.splitlines()[0] == \
+        "servotool: caution: the dead-man (segment) is not confirmed by the manual"
+
+
+def test_warnings_leave_manual_lines_to_verbose(capsys, monkeypatch):
+    text = "not saved to EEPROM (store them with Sn-SEt; its mechanism is not printed, L417-419, L844-874)"
+    render.warn(text)
+    assert capsys.readouterr().err.strip() == \
+        "servotool: warning: not saved to EEPROM (store them with Sn-SEt; its mechanism is not printed)"
+    monkeypatch.setattr(render.Verbosity, "level", 1)
+    render.warn(text)
+    assert "L417-419, L844-874" in capsys.readouterr().err
