@@ -39,7 +39,7 @@ def build(name: str, spec: Lazy) -> Any:
     called)."""
     objects = [_load(t) for t in spec.targets]
     if len(objects) == 1 and not isinstance(objects[0], typer.Typer):
-        single = typer.Typer()
+        single = typer.Typer(add_completion=False)     # completion is the root's: not on each command's help
         single.command(name)(objects[0])
         command = typer.main.get_command(single)
     else:

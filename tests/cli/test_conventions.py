@@ -51,6 +51,19 @@ def test_help_is_printed_once(cli, args):
     assert (r.out + r.err).count("Usage:") == 1
 
 
+def test_completion_options_belong_to_the_root_help_only(cli):
+    assert "--install-completion" in cli("--help").out
+    for command in ("scan", "jog", "monitor"):
+        r = cli(command, "--help")
+        assert r.code == 0 and "Usage:" in r.out and "--install-completion" not in r.out
+
+
+def test_the_cli_module_runs_as_a_script_too(cli):
+    r = subprocess.run([sys.executable, "-m", "servotool.cli.main", "--version"], capture_output=True, text=True,
+                       cwd=ROOT, timeout=60)
+    assert r.returncode == 0 and r.stdout.startswith("servotool ")
+
+
 def test_with_json_an_error_is_a_json_object_too(cli):
     r = cli("--port", "sim", "param", "get", "Pn999", "--json")
     assert r.code == 2
