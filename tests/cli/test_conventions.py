@@ -33,6 +33,8 @@ def root():
                                                                      "--unit", "3"]),      # serve's own options
     (["alarm", "--json", "show", "--port", "sim"], ["--port", "sim", "alarm", "show", "--json"]),
     (["param", "get", "--", "--port"], ["param", "get", "--", "--port"]),
+    (["--json", "--port", "sim", "param", "get", "Pn004"], ["--port", "sim", "param", "get", "--json", "Pn004"]),
+    (["-q", "--json", "alarm", "show"], ["-q", "alarm", "show", "--json"]),
 ])
 def test_global_options_after_the_sub_command_are_moved_before_it(root, given, hoisted):
     assert hoist_globals(root, given) == hoisted
