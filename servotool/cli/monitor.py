@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from collections import deque
 from collections.abc import Iterator
@@ -15,7 +14,7 @@ from rich.text import Text
 
 from servotool.cli import complete
 from servotool.cli.common import drive, resolved
-from servotool.cli.render import count, info, out, table
+from servotool.cli.render import count, emit_json_line, info, out, table
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
 from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
@@ -132,7 +131,7 @@ def _show(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None, *, plot: 
         if plot and not lines:
             print(_plain_line(mon, s), flush=True)
         elif as_json:
-            print(json.dumps(_sample_json(mon, s)), flush=True)
+            emit_json_line(_sample_json(mon, s))
     if not as_json and not (plot and not lines):
         out.print(monitor_table(mon, out.width))
 

@@ -208,11 +208,21 @@ def warn(text: str) -> None:
 
 
 _emitted = [False]
+_streaming = [False]
 
 
 def emit_json(data: Any) -> None:
+    """One JSON document on stdout (one line where the command streams JSON lines: an error after them too)."""
     _emitted[0] = True
-    sys.stdout.write(json.dumps(data, indent=2, ensure_ascii=False, default=str) + "\n")
+    sys.stdout.write(json.dumps(data, indent=None if _streaming[0] else 2, ensure_ascii=False, default=str) + "\n")
+    sys.stdout.flush()
+
+
+def emit_json_line(data: Any) -> None:
+    """One object of a stream of JSON lines (monitor --json), written at once; the command's error, if any, is
+    then one line as well."""
+    _streaming[0] = True
+    sys.stdout.write(json.dumps(data, ensure_ascii=False, default=str) + "\n")
     sys.stdout.flush()
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -90,10 +91,12 @@ def test_piped_monitor_streams_lines_and_ctrl_c_exits_130(sim_dir):
         first = proc.stdout.readline()          # arrives while the command still runs: line-buffered
         assert '"Un000"' in first and '"units"' in first
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
+        rest, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
     assert proc.returncode == 130 and "servotool: interrupted" in err
+    lines = [json.loads(line) for line in (first + rest).splitlines()]     # still JSON lines, the error too
+    assert lines[-1]["error"]["exit_status"] == 130
 
 
 def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
