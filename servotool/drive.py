@@ -46,6 +46,9 @@ class Reading:
                                   "unit": e.unit}
         if (fields := fields_json(e, self.raw)) is not None:
             out["fields"] = fields
+            meanings = {f: m for f, v in fields.items() if (m := e.field_enums.get(f.upper(), {}).get(v))}
+            if meanings:
+                out["meanings"] = meanings
         if self.raw in e.enum:
             out["meaning"] = e.enum[self.raw]
         if e.default is not None:

@@ -91,3 +91,11 @@ def test_warnings_leave_manual_lines_to_verbose(capsys, monkeypatch):
     monkeypatch.setattr(render.Verbosity, "level", 1)
     render.warn(text)
     assert "L417-419, L844-874" in capsys.readouterr().err
+
+
+def test_a_whole_digit_entry_carries_its_fields_meanings_in_json(cli):
+    r = cli("--port", "sim", "-P", "sd25", "param", "get", "Po001", "--json")
+    assert r.code == 0, r.err
+    row = r.json()[0]
+    assert row["fields"] == {"Y": 1, "X": 21}
+    assert row["meanings"] == {"Y": "CCW seen from the shaft", "X": "bus"}
