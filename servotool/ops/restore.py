@@ -120,16 +120,18 @@ def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
 
 
 def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
-            progress: Callable[[Entry], None] | None = None, notice: Notice | None = None) -> RestoreReport:
-    """Automatic backup first, then write and verify each change; on failure, roll back what was changed and
-    raise RestoreFailed with the account of the drive's state."""
+            progress: Callable[[Entry], None] | None = None, notice: Notice | None = None,
+            backup_progress: Callable[[int], None] | None = None) -> RestoreReport:
+    """Automatic backup first (backup_progress: entries read), then write and verify each change (progress: each
+    entry written); on failure, roll back what was changed and raise RestoreFailed with the account of the drive's
+    state."""
     from servotool.ops import journal
     from servotool.ops.eeprom import persistence
     from servotool.ops.params import write_one
 
     check_servo_off(drive, plan.needs_servo_off, "the restore")
     try:
-        before = take(drive)
+        before = take(drive, backup_progress)
     except ServoError as exc:
         exc.args = (f"{exc}; nothing was written (the automatic backup comes first)",)
         raise

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import csv
 import io
+import os
+import subprocess
+import sys
+
+import pytest
 
 
 def test_find_searches_codes_names_and_descriptions_without_a_drive(cli):
@@ -78,3 +83,32 @@ def test_shell_completion_of_codes_groups_and_profiles(cli):
     assert _complete(cli, "servotool -P s") == ["sd25", "sdc"]
     assert "gain" in _complete(cli, "servotool param list --group g")
     assert "Pn101=" in _complete(cli, "servotool param set Pn10")
+
+
+def _stderr_on_a_terminal(*args: str) -> str:
+    """Run servotool with stderr on a pseudo-terminal (where progress bars show); what it wrote there."""
+    pty = pytest.importorskip("pty")
+    master, slave = pty.openpty()
+    subprocess.run([sys.executable, "-m", "servotool", *args], stdout=subprocess.DEVNULL, stderr=slave,
+                   env={**os.environ, "COLUMNS": "100"}, timeout=60, check=False)
+    os.close(slave)
+    seen = b""
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:          # the other end is closed: all read
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    return seen.decode(errors="replace")
+
+
+def test_diff_and_restore_show_progress_while_reading_the_drive(cli, tmp_path):
+    backup = tmp_path / "axis.yaml"
+    cli("--port", "sim", "param", "backup", "-o", str(backup))
+    cli("--port", "sim", "param", "set", "Pn101=25")
+    assert "reading the drive" in _stderr_on_a_terminal("--port", "sim", "param", "diff", "--factory")
+    shown = _stderr_on_a_terminal("--port", "sim", "param", "restore", str(backup), "--yes")
+    assert "automatic backup, then writing" in shown and "109/109" in shown      # 108 read, 1 written
