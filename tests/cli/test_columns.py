@@ -41,6 +41,9 @@ TABLES = [
     ("--port", "sim", "monitor", "--once"),
     ("--port", "sim", "alarm", "history"),
     ("sim", "show"),
+    ("-P", "is620p", "param", "find", "speed"),
+    ("--port", "sim", "raw", "read", "0x2004"),
+    ("--port", "sim", "param", "diff", "--factory"),
 ]
 
 
