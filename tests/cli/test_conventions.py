@@ -99,6 +99,18 @@ def test_piped_monitor_streams_lines_and_ctrl_c_exits_130(sim_dir):
     assert lines[-1]["error"]["exit_status"] == 130
 
 
+def test_sim_serve_at_ctrl_c_stops_and_exits_130(sim_dir):
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert "serving on" in proc.stderr.readline()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and "simulator stopped" in err
+
+
 def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
     proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "monitor", "Un000"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
