@@ -74,8 +74,11 @@ def run(
         out.print(f"plan {'completed' if ok else 'FAILED'}: {sum(r.ok for r in runner.results)}/"
                   f"{len(runner.results)} steps ok; report {report_path}", markup=False)
     if not ok:
-        failed = next(r for r in runner.results if not r.ok)
-        raise typer.Exit(int(failed.data.get("exit_code", 1)))
+        failures = [r for r in runner.results if not r.ok]
+        if Verbosity.level < 0 and not as_json:     # --quiet hid the step lines: a failure is an error, shown
+            for r in failures:
+                notice(f"FAIL unit {r.unit} {r.step.where()}: {r.detail}")
+        raise typer.Exit(int(failures[0].data.get("exit_code", 1)) if failures else 1)
 
 
 def _units(plan: Plan, given: int | None, default: int) -> list[int]:

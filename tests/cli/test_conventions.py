@@ -130,3 +130,15 @@ def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_ru
     r = cli("--port", "sim", "monitor", "--once", "--csv", "--json")
     assert r.code == 2 and "'--json' looks like an option" in r.err and "Traceback" not in r.err
     assert not (Path(__file__).resolve().parents[2] / "--json").exists()     # the tests run in the repository
+
+
+def test_quiet_keeps_results_and_errors(cli, tmp_path):
+    r = cli("-q", "--port", "sim", "jog", "--speed", "100", "--time", "0.2")
+    assert r.code == 0 and "JOG done: peak" in r.err and "SIMULATED" not in r.err        # the banner goes
+    assert "if this program stops" not in r.err                      # progress words go
+    (tmp_path / "axis-1.yaml").write_text("taken\n")
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: dsx7e\nsteps:\n  - backup: axis-{unit}.yaml\n")
+    r = cli("-q", "run", str(plan), "--yes")
+    assert r.code == 2 and "plan FAILED" in r.out
+    assert "FAIL unit 1 step 1 (backup, line 4):" in r.err and "axis-1.yaml exists" in r.err     # why, though quiet
