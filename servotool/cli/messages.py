@@ -106,7 +106,10 @@ def unknown_text(exc: UnknownName, given: ConnectOptions) -> str:
 
 # Roles whose name says little to a user.
 ROLE_WORDS = {"motion_route": "JOG or speed command (a JOG trigger with its speed, or a speed reference with servo-on)",
-              "speed_feedback": "motor speed reading", "torque_feedback": "motor torque reading"}
+              "speed_feedback": "motor speed reading", "torque_feedback": "motor torque reading",
+              "alarm_history_1": "alarm history", "alarm_reset": "alarm reset", "factory_reset": "factory reset",
+              "inertia_id": "inertia identification function", "inertia_ratio": "load inertia ratio setting",
+              "eeprom_save": "command that saves to EEPROM", "jog_accel": "JOG ramp setting"}
 
 
 def missing_role_text(exc: MissingRole, verbose: bool) -> str:

@@ -29,6 +29,9 @@ def test_a_missing_role_is_worded_as_what_the_user_can_do():
     text = error_text(exc, ConnectOptions())
     assert "role" not in text and "alarm reset" in text and "panel" in text
     assert "role 'alarm_reset'" in error_text(exc, ConnectOptions(), verbose=True)
+    for role, words in (("alarm_history_1", "the alarm history of"),
+                        ("inertia_id", "the inertia identification function of")):
+        assert words in error_text(MissingRole("x", role, "sdc"), ConnectOptions())
 
 
 def test_unknown_code_suggests_and_the_fix_command_keeps_the_connection_options(cli):
