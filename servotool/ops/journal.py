@@ -262,9 +262,9 @@ def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
         return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted before changing anything: "
                 f"read back, the drive equals the automatic backup {auto}")
     return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted after writing {len(written)} of "
-            f"{len(targets)} entries; read back, the drive differs from the automatic backup {auto} in "
-            f"{len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): run it again to "
-            f"finish, or 'servotool param restore {auto}' to go back")
+            f"{len(targets)} {'entry' if len(targets) == 1 else 'entries'}; read back, the drive differs from the "
+            f"automatic backup {auto} in {len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): "
+            f"run it again to finish, or 'servotool param restore {auto}' to go back")
 
 
 def recover_at_start(drive: Drive, notice: Notice, extra_folders: tuple[Path, ...] = ()) -> None:
