@@ -54,6 +54,13 @@ def test_help_is_printed_once(cli, args):
     assert (r.out + r.err).count("Usage:") == 1
 
 
+def test_a_mistyped_command_gets_the_close_ones(cli):
+    r = cli("parm", "get", "Pn004")
+    assert r.code == 2 and "No such command 'parm'. Did you mean 'param'" in r.err
+    r = cli("param", "gt", "Pn004")
+    assert r.code == 2 and "Did you mean 'get'?" in r.err
+
+
 def test_completion_options_belong_to_the_root_help_only(cli):
     assert "--install-completion" in cli("--help").out
     for command in ("scan", "jog", "monitor"):
