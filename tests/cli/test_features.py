@@ -112,3 +112,19 @@ def test_diff_and_restore_show_progress_while_reading_the_drive(cli, tmp_path):
     assert "reading the drive" in _stderr_on_a_terminal("--port", "sim", "param", "diff", "--factory")
     shown = _stderr_on_a_terminal("--port", "sim", "param", "restore", str(backup), "--yes")
     assert "automatic backup, then writing" in shown and "109/109" in shown      # 108 read, 1 written
+
+
+def test_raw_write_on_a_real_port_asks_first(cli):
+    from servotool.model.loader import load_profile
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.server import EmbeddedSim
+
+    line = EmbeddedSim([build_drive(load_profile("dsx7e"), 1, persist=False)])
+    try:
+        r = cli("--port", line.port, "-P", "dsx7e", "raw", "write", "0x2004=300", input="")
+        assert r.code == 2 and "needs confirmation" in r.err and "Pn004" in r.err
+        assert cli("--port", line.port, "-P", "dsx7e", "raw", "read", "0x2004", "--json").json()[0]["value"] == 250
+        r = cli("--port", line.port, "-P", "dsx7e", "raw", "write", "0x2004=300", "--yes")
+        assert r.code == 0 and "verified" in r.out
+    finally:
+        line.close()
