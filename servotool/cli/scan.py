@@ -26,10 +26,7 @@ def scan(
                                   "(default: each profile's factory format, then all four)."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Find drives on a bus and the shipped profile each answering drive matches.
-
-    Every line setting x unit id is tried with a short timeout (global --timeout, default 0.1 s).
-    """
+    """Find drives on a bus (line settings x unit ids, --timeout each, default 0.1 s) and the profile each matches."""
     options = state(ctx).options
     if port:
         options = replace(options, port=port)
