@@ -295,6 +295,13 @@ def _field_int(entry: Entry, idx: int, text: str) -> int:
         v = int(text) if plain else (int(text, 16) if entry.field_width == 4 and len(text) == 1 else None)
     except ValueError:
         v = None
+    meanings = entry.field_enums.get(name.upper(), {})
+    if v is None and meanings:       # a field's meaning by name, as for a whole entry (Po001.X=bus)
+        v = enum_value(meanings, text)
+        if v is None:
+            choices = ", ".join(f"{k}={m}" for k, m in sorted(meanings.items()))
+            raise UsageError(f"{entry.code}: field {name} value '{text}' is none of {choices}"
+                             f"{did_you_mean(text, meanings.values())}")
     if v is None:
         raise UsageError(f"{entry.code}: field {name} value '{text}' is not a digit")
     lo, hi = field_range(entry, name)

@@ -102,3 +102,12 @@ def test_a_whole_digit_entry_carries_its_fields_meanings_in_json(cli):
     row = r.json()[0]
     assert row["fields"] == {"Y": 1, "X": 21}
     assert row["meanings"] == {"Y": "CCW seen from the shaft", "X": "bus"}
+
+
+def test_a_fields_meaning_is_accepted_by_name(cli):
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po001.X=internal speed")
+    assert r.code == 0, r.err
+    assert r.out.splitlines() == ["Po001 (Control mode and forward direction): d 1 21 -> d 1 0 [takes effect after a "
+                                  "power cycle]", "1 value stored in EEPROM"]
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po001.X=bsu")
+    assert r.code == 2 and "none of 0=internal speed" in r.err and "did you mean bus" in r.err
