@@ -113,7 +113,9 @@ class ExpectStep(StepType):
                for x in exps if not x.low <= values[x.entry.code] <= x.high]
         if bad:
             raise VerifyError("expectation failed: " + "; ".join(bad))
-        return Outcome("as expected", {"values": values, "units": {x.entry.code: x.entry.unit for x in exps}})
+        meanings = {r.entry.code: r.entry.enum[r.raw] for r in readings if r.raw in r.entry.enum}
+        return Outcome("as expected", {"values": values, "units": {x.entry.code: x.entry.unit for x in exps},
+                                       **({"meanings": meanings} if meanings else {})})
 
 
 class _FileStep(StepType):

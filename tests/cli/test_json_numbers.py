@@ -39,4 +39,12 @@ def test_a_plan_reports_expected_values_as_numbers_with_units(cli, tmp_path):
     assert r.code == 0, r.err
     [step] = r.json()["steps"]
     assert isinstance(step["values"]["Un000"], int) and step["values"]["Pn101"] == 18.0
-    assert step["units"] == {"Un000": "rpm", "Pn101": "Hz"}
+    assert step["units"] == {"Un000": "rpm", "Pn101": "Hz"} and "meanings" not in step
+
+
+def test_a_plan_reports_an_enum_value_with_its_meaning(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: sdc\nsteps:\n  - set: {PN4: jog}\n  - expect: {PN4: jog}\n")
+    r = cli("run", str(plan), "--yes", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["steps"][1]["values"] == {"PN4": 3} and r.json()["steps"][1]["meanings"] == {"PN4": "jog"}
