@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 from servotool.cli import render
 from servotool.cli.messages import error_text, plain
 from servotool.config import ConnectOptions
@@ -111,3 +113,22 @@ def test_a_fields_meaning_is_accepted_by_name(cli):
                                   "power cycle]", "1 value stored in EEPROM"]
     r = cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po001.X=bsu")
     assert r.code == 2 and "none of 0=internal speed" in r.err and "did you mean bus" in r.err
+
+
+def test_what_a_killed_restore_left_is_told_with_quiet_and_the_users_options(cli, sim_dir, tmp_path):
+    from servotool.files import backup_dir
+    from servotool.ops.journal import journal_dir, port_key
+
+    auto = tmp_path / "auto.yaml"
+    assert cli("--port", "sim", "param", "backup", "-o", str(auto)).code == 0
+    assert cli("--port", "sim", "param", "set", "Pn101=25").code == 0       # the dead restore's one write
+    assert journal_dir() == backup_dir() / "journal"
+    journal_dir().mkdir(parents=True, exist_ok=True)
+    record = journal_dir() / f"{port_key(f'sim:{sim_dir.resolve()}')}-unit1.json"
+    record.write_text(json.dumps({"op": {"name": "restore", "auto_backup": str(auto), "targets": {"Pn101": 250}},
+                                  "pid": 1}))
+    r = cli("-q", "--port", "sim", "param", "get", "Pn004")
+    assert r.code == 0, r.err
+    assert "a restore (pid 1) was interrupted after writing 1 of 1 entry" in r.err
+    assert f"'servotool --port sim param restore {auto}'" in r.err
+    assert not record.exists()
