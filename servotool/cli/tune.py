@@ -286,11 +286,11 @@ def _show(proposal: tune.Proposal) -> None:
                 out.print(f"  friction compensation (suggested, not written): {s.entry.code} = {s.value:g} "
                           f"{s.entry.unit} ({s.what})", markup=False)
     if changes and sugg is not None:
-        t = table("Role", "Code", "Current", "Suggested", "Unit",
+        t = table("Code", "Name", "Current", "Suggested", "Unit",
                   title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop gain"
                         + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else ""))
         for c in changes:
-            t.add_row(c.role, c.entry.code, f"{c.old:g}", f"{c.new:g}", c.entry.unit)
+            t.add_row(c.entry.code, c.entry.name, f"{c.old:g}", f"{c.new:g}", c.entry.unit)    # the role: in JSON
         out.print(t)
         if proposal.margins is not None:
             out.print(f"margins on the identified inertia: {proposal.margins.describe()}", markup=False)
