@@ -39,6 +39,7 @@ def test_a_trace_as_json_and_a_trigger_that_never_fires(cli):
     assert r.code == 0, r.err
     cap = r.json()["captures"][0]
     assert cap["samples"] == 5 and cap["values"]["Un000"]["unit"] == "rpm" and cap["rate_hz"] > 0
+    assert all(type(v) is int for v in cap["values"]["Un000"]["values"])      # rpm in steps of 1: -2, not -2.0
     r = cli("--port", "sim", "trace", "Un000", "--trigger", "Un000>1000", "--timeout", "0.3")
     assert r.code == 1 and "the trigger did not fire within --timeout; Un000 ranged" in r.err
     assert "Traceback" not in r.err
