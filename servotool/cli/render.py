@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 NAME_MIN = 20           # a wrapped name or description keeps at least this many columns: readable
 UNLIMITED = 10_000      # "no width": nothing wraps
-WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note"}   # text columns: these wrap
+WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note", "Result"}   # text columns: these wrap
 # Columns dropped first when a table is too wide, least useful first; tables may give their own order.
 DROP_ORDER = ("Address", "Type", "Class", "Version", "Vendor", "Unverified", "Effect", "Trend", "Min", "Max",
               "Default", "Needs", "")

@@ -352,14 +352,15 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
         emit_json(_clean({"ok": ok, "load_ratio": _rounded(res.load_ratio, 4), "levels": rows, "chosen": res.chosen,
                           "reason": res.reason, "gains": _gains_json(res.changes), "persisted": res.persisted}))
         return
-    t = table("Level", "Speed gain Hz", "Phase margin", "Gain margin", "Overshoot", "Settling", "Result",
+    # Six columns and a wrapping Result fit 80 (the settling time goes first where a failure's words need room).
+    t = table("Level", "Speed gain", "Margins", "Overshoot", "Settling", "Result", drop=("Settling",),
               title=f"rigidity levels tried (load ratio {res.load_ratio:.2f})")
     for r in rows:
         settle = f"{r['settling_ms']:.0f} ms" if r["settling_ms"] is not None else "-"
         over = f"{r['overshoot_pct']:.0f} %" if r["overshoot_pct"] is not None else "-"
         gm = f"{r['gain_margin_db']:.1f} dB" if r["gain_margin_db"] is not None else "inf"
-        t.add_row(str(r["level"]), f"{r['speed_gain_hz']:.1f}", f"{r['phase_margin_deg']:.0f}°", gm, over, settle,
-                  r["failure"] or "ok")
+        t.add_row(str(r["level"]), f"{r['speed_gain_hz']:.1f} Hz", f"{r['phase_margin_deg']:.0f}°, {gm}", over,
+                  settle, r["failure"] or "ok")
     out.print(t)
     if res.chosen is not None:
         out.print(f"{res.reason}; kept level {res.chosen}: " + ", ".join(f"{c.entry.code} {c.old:g} -> {c.new:g}"

@@ -121,3 +121,10 @@ def test_the_gains_table_names_entries_not_roles_and_fits_80_columns(cli):
     assert r.code == 0, r.err
     assert "Speed loop gain" in r.out and "speed_loop_gain" not in r.out
     assert _widest(r.out) <= 80 and (_name_width(r.out) or 0) >= render.NAME_MIN
+
+
+def test_the_levels_tried_by_tune_gains_are_a_table_at_80_columns(cli):
+    r = cli("--port", "sim", "tune", "gains", "--yes", "--from", "16", "--to", "17", env=NARROW)
+    assert r.code == 0, r.err
+    assert _widest(r.out) <= 80
+    assert any(line.startswith("│ 16") for line in r.out.splitlines()), r.out     # a row, not a block per level
