@@ -20,6 +20,8 @@ def test_find_searches_codes_names_and_descriptions_without_a_drive(cli):
     assert [row["code"] for row in r.json()] == ["H08-00"]
     r = cli("param", "find", "monitor", "speed", "--port", "sim", "--json")     # Un entries too
     assert "Un000" in [row["code"] for row in r.json()]
+    r = cli("-P", "sd25", "param", "find", "CCW", "--json")          # in Po001's description only
+    assert [row["code"] for row in r.json()] == ["Po001"]
 
 
 def test_diff_factory_compares_the_drive_with_its_defaults(cli):
