@@ -201,7 +201,9 @@ def _without_unit(entry: Entry, text: str) -> str:
         raise UsageError(f"{what}: '{text}' is none of {_choices(entry)}")
     if not entry.unit:
         raise UsageError(f"{what}: takes a plain number (no unit), not '{text}'")
-    raise UsageError(f"{what}: '{text}' is in {unit}, but {entry.code} is in {entry.unit} (e.g. {number}{entry.unit})")
+    # A prefixed unit (3krpm) is another number in the entry's unit: no example made of the same digits.
+    example = f"give it in {entry.unit}" if unit.lower().endswith(entry.unit.lower()) else f"e.g. {number}{entry.unit}"
+    raise UsageError(f"{what}: '{text}' is in {unit}, but {entry.code} is in {entry.unit} ({example})")
 
 
 def _choices(entry: Entry) -> str:
