@@ -108,7 +108,7 @@ def unknown_text(exc: UnknownName, given: ConnectOptions) -> str:
 ROLE_WORDS = {"motion_route": "JOG or speed command (a JOG trigger with its speed, or a speed reference with servo-on)",
               "speed_feedback": "motor speed reading", "torque_feedback": "motor torque reading",
               "alarm_history_1": "alarm history", "alarm_reset": "alarm reset", "factory_reset": "factory reset",
-              "inertia_id": "inertia identification function", "inertia_ratio": "load inertia ratio setting",
+              "inertia_id": "inertia identification function",
               "eeprom_save": "command that saves to EEPROM", "jog_accel": "JOG ramp setting"}
 
 
