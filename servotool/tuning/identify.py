@@ -240,6 +240,7 @@ class _HostRun:
         jogger.command(0)
         stop = self.timing.now()
         at_stop, v_stop = s.pred, abs(trace.speed[-1]) if trace.speed else 0.0
+        self.sample()          # after the stop's own writes: no stall
         while self.timing.now() - stop < 3 * self.ramp + 0.5:
             self._sample_timed()
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
