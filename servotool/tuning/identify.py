@@ -180,6 +180,10 @@ class _HostRun:
         # speed loop configured for a fraction of the real inertia lags its ramps by tens of ms, more with high
         # friction (the integral winds up at breakaway); the stop guard adds the travel of that lag.
         self.lag_s = 0.0
+        # The longest time between two samples seen so far (rest check, moves): the guard must foresee a check
+        # that comes that late. A host stalls (a loaded laptop, a scheduler's 16 ms tick, a USB adapter's latency
+        # timer) and an axis at 900 rpm covers 0.2 rev in 13 ms: more than the band leaves.
+        self.gap_s = rest.longest_gap_s if rest is not None else 0.0
 
     def _beat(self) -> None:
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
@@ -197,6 +201,11 @@ class _HostRun:
                                  "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel"
                                  ) from None
 
+    def _sample_timed(self) -> None:
+        """A sample inside a move, its gap from the one before kept when it is the longest yet."""
+        self.sample()
+        self.gap_s = max(self.gap_s, self.sampler.interval())
+
     def _must_stop(self, direction: int, speed: float) -> bool:
         """Whether the stopping distance (the ramp's, stretched as the pilot showed, plus the travel until a stop
         command can act and the loop's lag) would carry the axis out of its band: drift (gravity, overshoot) must
@@ -205,8 +214,12 @@ class _HostRun:
             return False
         s = self.sampler
         v = abs(s.trace.speed[-1])
-        stop_rev = self.stretch * v * v * self.ramp / (2 * speed) / 60.0
-        stop_rev += v / 60.0 * (2.0 * s.interval() + self.lag_s)
+        # Until a stop command acts: the next sample (as late as the longest gap yet: beyond the usual interval the
+        # ramp goes on accelerating) and the write, then the loop's lag.
+        late = max(0.0, self.gap_s - s.interval())
+        v_late = min(speed, v + speed / self.ramp * late)
+        stop_rev = v / 60.0 * (2.0 * s.interval() + self.lag_s) + (v + v_late) / 2.0 / 60.0 * late
+        stop_rev += self.stretch * v_late * v_late * self.ramp / (2 * speed) / 60.0
         lo, hi = self.band
         return s.pred + stop_rev > hi if direction > 0 else s.pred - stop_rev < lo
 
@@ -219,15 +232,17 @@ class _HostRun:
         jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
                      self.ramp if self.band is not None else None)
         start = self.timing.now()
+        self.sample()
         while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
-            self.sample()
+            self._sample_timed()
             if self._must_stop(direction, speed):
                 break
         jogger.command(0)
         stop = self.timing.now()
         at_stop, v_stop = s.pred, abs(trace.speed[-1]) if trace.speed else 0.0
+        self.sample()          # after the stop's own writes: no stall
         while self.timing.now() - stop < 3 * self.ramp + 0.5:
-            self.sample()
+            self._sample_timed()
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
                 break
         # At rest for two samples and, where the next move's settings go in fewer requests (Mover.folds), half a
