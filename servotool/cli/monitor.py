@@ -113,8 +113,8 @@ def _csv_mode(csv_file: Path | None, force: bool, append: bool) -> CsvMode:
 
 def _show(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None, *, plot: bool, live_view: bool,
           lines: bool, as_json: bool) -> None:
-    """Samples as they come: a live chart or table on a terminal, else plain or JSON lines (lines: --json or
-    --once), each also logged to the CSV."""
+    """Samples as they come: a live chart or table on a terminal, else a plain or JSON line each as it comes (a
+    pipe sees them at once), then the table; lines: --json or --once. Each sample is also logged to the CSV."""
     if plot and live_view:
         _plot_live(mon, samples, log)
         return
@@ -128,7 +128,7 @@ def _show(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None, *, plot: 
     for s in samples:
         if log:
             log.write(s)
-        if plot and not lines:
+        if not lines:
             print(_plain_line(mon, s), flush=True)
         elif as_json:
             emit_json_line(_sample_json(mon, s))

@@ -7,7 +7,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -124,12 +123,13 @@ def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
                             env={**os.environ, "COLUMNS": "100"})
     try:
         assert "SIMULATED" in proc.stderr.readline()
-        time.sleep(2)                           # sampling by now
+        first = proc.stdout.readline()          # each sample a line as it comes, through the pipe
+        assert " s  Un000 " in first and first.strip().endswith("rpm"), first
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
-    assert proc.returncode == 130 and "Un000" in out and "servotool: interrupted" in err
+    assert proc.returncode == 130 and "│ Un000 │ Motor speed" in out and "servotool: interrupted" in err
 
 
 def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_runs(cli):
