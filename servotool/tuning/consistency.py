@@ -33,11 +33,17 @@ friction and load torque the estimator reports stay the rigid fit's.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from servotool.tuning.fit_numerics import corrected_lstsq, cumulative_hermite, jackknife_std
+from servotool.tuning.fit_numerics import (
+    corrected_lstsq,
+    cumulative_hermite,
+    follower_speed,
+    jackknife_std,
+    projected_fits,
+)
 
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
@@ -57,6 +63,16 @@ POSITION_MODEL_ERROR = 0.5  # half the position model's correction counts as unc
 #                             the directions (backlash looks like a load that varies over the travel, and that model
 #                             moved J by +3 % the wrong way) ...
 ONE_WAY_SIGMA = 2.0       # ... by more than this many sigmas (an arm's gravity is the same both ways)
+LOAD_HZ_MIN = 1.0          # a two-mass load's own resonance (against a held motor) is searched from here ...
+LOAD_HZ_PER_RATE = 0.2    # ... up to this fraction of the sampling rate, in steps of LOAD_HZ_STEP
+LOAD_HZ_STEP = 1.05
+RESONANT_DAMPING = (0.02, 0.03, 0.045, 0.065, 0.09, 0.125, 0.17)  # a coupling's damping ratios (seen from the load)
+LAG_DAMPING = (0.5, 0.9)  # heavily damped 'couplings': a lag, which rigid loads show too (the speed's filter and
+#                           the loop's transients): at 57600-115200 baud they left 0.2-0.7 of the rigid fit's residual
+RESONANCE_SHARE = 0.5     # a resonance counts where it leaves at most this share of the residual the rigid and the
+#                           lag models leave (rigid loads: 1.2 and more; two-mass loads at 115200: 0.01-0.33;
+#                           backlash and cogging: 0.8 and more) ...
+RESONANCE_F = 30.0        # ... and the improvement is this many times what two free parameters get from noise
 MIN_SUBSET_WINDOWS = 6
 BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
 #                           chance: chi2/dof of 2.25 over 2-3 subsets happens one time in ten on a rigid load)
@@ -109,8 +125,15 @@ def assess(fit: FitData) -> Verdict:
         why.append(f"load varies over the travel (load torque changes by {position[1]:.0f} % of rated torque: an "
                    "arm or a gravity axis on a gear?)")
         j, j_std, resid = _take(fit, x, (j, j_std, resid), POSITION_MODEL_ERROR if position[2] else 0.0)
-    spring = _compliance_model(fit, x, j, j_std)
-    if spring is not None and spring.strong:
+    mass = _two_mass(fit, x)
+    spring = None if mass is not None else _compliance_model(fit, x, j, j_std)
+    if mass is not None:
+        why.append(f"resonance near {mass[0]:.0f} Hz: the load follows the motor through a compliant coupling")
+        # The fit's own uncertainty misses how far the two-mass model is from the machine: a third of the change
+        # it makes counts (20 Hz couplings at 115200 baud: 0.04-0.3 of a 4-31 % change left).
+        j, j_std, resid = _take(replace(fit, y=mass[2], eiv=np.zeros_like(fit.eiv)), mass[1], (j, j_std, resid),
+                                1 / MODEL_ERROR_DIVISOR)
+    elif spring is not None and spring.strong:
         why.append(f"resonance or torque ripple near {spring.hz:.0f} Hz: the load follows the motor through a "
                    "compliant coupling (or a long shaft, cogging)")
         # The quasi-static spring term is approximate: a third of its correction counts as uncertain (a 20 Hz
@@ -257,6 +280,53 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     unresolved = math.sqrt(max(0.0, float(std[0]) ** 2 - float(base[1][0]) ** 2)) if base is not None else 0.0
     strong = z < -COMPLIANCE_SIGMA and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
     return _Spring(col[:, None], math.sqrt(ratio / -b) / (2 * math.pi), z, strong, unresolved)
+
+
+def _two_mass(fit: FitData, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray] | None:
+    """(the motor-side resonance in Hz, the regression and the torque integrals of the two-mass model) where the
+    motor speed carries a resolvable resonance of its load, else None.
+
+    Through a spring and a damper the load's speed wL is the motor's w through a second-order low-pass at the load's
+    own resonance fa; with the motor's inertia Jm known, the momentum balance over a window is
+    J * delta wL = int T - Jm * (delta w - delta wL) - friction. The rigid fit absorbs the missing deflection rate
+    as inertia (a 20 Hz coupling at ratio 2 and 115200 baud: +7 %, with a quasi-static spring term at 2 sigmas).
+    fa and the damping are searched on a grid; heavily damped 'couplings' (a lag) are the reference it must beat."""
+    rate, ratio = _rate(fit), float(fit.theta[0]) / fit.jm - 1.0
+    top = LOAD_HZ_PER_RATE * rate
+    if ratio <= MIN_COMPLIANT_RATIO or top <= LOAD_HZ_MIN * LOAD_HZ_STEP:
+        return None
+    hz = np.exp(np.arange(math.log(LOAD_HZ_MIN), math.log(top), math.log(LOAD_HZ_STEP)))
+    grid_hz, grid_z = (a.ravel() for a in np.meshgrid(hz, RESONANT_DAMPING + LAG_DAMPING, indexing="ij"))
+    j, rss, rss0 = _follower_fits(fit, x, grid_hz, grid_z)
+    resonant = grid_z < min(LAG_DAMPING)
+    best = int(np.flatnonzero(resonant)[np.argmin(rss[resonant])])
+    reference = min(rss0, float(np.min(rss[~resonant])))
+    dof = max(1, x.shape[0] - x.shape[1] - 2)
+    if not (rss[best] <= RESONANCE_SHARE * reference
+            and (reference - rss[best]) / 2 > RESONANCE_F * rss[best] / dof and j[best] > 0):
+        return None
+    # refine around the best grid point
+    near_hz, near_z = (a.ravel() for a in np.meshgrid(grid_hz[best] * LOAD_HZ_STEP ** np.linspace(-1, 1, 9),
+                                                     grid_z[best] * 1.4 ** np.linspace(-1, 1, 7), indexing="ij"))
+    j, rss, _rss0 = _follower_fits(fit, x, near_hz, near_z)
+    b = int(np.argmin(rss))
+    w_load = follower_speed(fit.t, fit.w, near_hz[b:b + 1], near_z[b:b + 1])[:, 0]
+    dwl = w_load[fit.ends] - w_load[fit.starts]
+    y = fit.y - fit.jm * (fit.x[:, 0] - dwl)
+    return float(near_hz[b] * math.sqrt(j[b] / fit.jm)), np.column_stack([dwl, x[:, 1:]]), y
+
+
+def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
+    """(J, residual sum of squares) of the two-mass model at each (hz, damping) of the load, and the rigid fit's
+    residual sum of squares (plain least squares: a ranking, the chosen model is refitted)."""
+    w_load = follower_speed(fit.t, fit.w, hz, damping)
+    dwl = w_load[fit.ends] - w_load[fit.starts]
+    dw = fit.x[:, 0]
+    y = fit.y[:, None] - fit.jm * (dw[:, None] - dwl)
+    j, rss = projected_fits(dwl, y, x[:, 1:])
+    _j0, rss0 = projected_fits(dw[:, None], fit.y[:, None], x[:, 1:])
+    return j, rss, float(rss0[0])
 
 
 def _rate(fit: FitData) -> float:

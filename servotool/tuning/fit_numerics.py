@@ -160,3 +160,45 @@ def ma1_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, resid: np.ndarray, s
     meat = xs.T @ xs + rho * (xs[adj].T @ xs[adj + 1] + xs[adj + 1].T @ xs[adj])
     cov = s2 * (xtx_inv @ meat @ xtx_inv)
     return np.sqrt(np.clip(np.diag(cov), 0.0, None))
+
+
+def follower_speed(t: np.ndarray, w: np.ndarray, hz: np.ndarray, damping: np.ndarray) -> np.ndarray:
+    """Speed of a load that follows the motor speed w through a spring and a damper, for each (hz, damping): the
+    load's own resonance against a held motor and its damping ratio (below 1). The load's speed is w through the
+    low-pass (2 zeta wa s + wa^2) / (s^2 + 2 zeta wa s + wa^2), driven by w linear between samples and integrated
+    exactly. Rows: samples; columns: one per (hz, damping); it starts with w[0] and no deflection."""
+    wa = 2 * np.pi * np.asarray(hz, dtype=float)
+    zeta = np.asarray(damping, dtype=float)
+    k, c = wa * wa, 2 * zeta * wa
+    wd = wa * np.sqrt(1.0 - zeta * zeta)
+    # State: deflection d (motor minus load angle) and e = load speed - motor speed; with the motor's acceleration a
+    # constant over an interval, d' = -e and e' = k d - c e - a: s(h) = P s(0) + G a, exactly.
+    span = np.diff(t)
+    steps, which = np.unique(np.round(span, 9), return_inverse=True)
+    maps = []
+    for h in steps:
+        decay, cos, sin = np.exp(-0.5 * c * h), np.cos(wd * h), np.sin(wd * h) / wd
+        p00, p01 = decay * (cos + 0.5 * c * sin), -decay * sin
+        p10, p11 = decay * k * sin, decay * (cos - 0.5 * c * sin)
+        maps.append((p00, p01, p10, p11, (c * p01 - p11 + 1.0) / k, p01))
+    d, e = np.zeros(wa.shape), np.zeros(wa.shape)
+    out = np.empty((t.size, *wa.shape))
+    out[0] = w[0]
+    accel = np.diff(w) / span
+    for i in range(1, t.size):
+        p00, p01, p10, p11, g0, g1 = maps[which[i - 1]]
+        a = accel[i - 1]
+        d, e = p00 * d + p01 * e + g0 * a, p10 * d + p11 * e + g1 * a
+        out[i] = e + w[i]
+    return out
+
+
+def projected_fits(u: np.ndarray, v: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(coefficient, residual sum of squares) of v[:, g] on u[:, g] for every column g, with the columns `others`
+    fitted alongside (projected out once for all)."""
+    q, _r = np.linalg.qr(others / np.where(np.linalg.norm(others, axis=0) > 0, np.linalg.norm(others, axis=0), 1.0))
+    pu, pv = u - q @ (q.T @ u), v - q @ (q.T @ v)
+    uu, uv = np.sum(pu * pu, axis=0), np.sum(pu * pv, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        coef = np.where(uu > 0, uv / uu, 0.0)
+    return coef, np.sum(pv * pv, axis=0) - coef * uv
