@@ -78,10 +78,11 @@ RESONANT_DAMPING = (0.015, 0.035, 0.08, 0.18)  # a coupling's damping ratios (se
 DAMPING_STEP = 2.3
 LAG_DAMPING = (0.5, 0.9)  # heavily damped 'couplings': a lag, which rigid loads show too (the speed's filter and
 #                           the loop's transients): at 57600-115200 baud they left 0.2-0.7 of the rigid fit's residual
-CANDIDATE_SHARE = 0.8     # the coarse grid's best resonance is refined where it leaves at most this share ...
-RESONANCE_SHARE = 0.5     # ... and counts where it then leaves at most this share of the residual the rigid and the
-#                           lag models leave (rigid loads: 1.2 and more; two-mass loads at 115200: 0.01-0.33;
-#                           backlash and cogging: 0.8 and more) ...
+CANDIDATE_SHARE = 0.95    # the coarse grid's best resonance is refined where it leaves at most this share ...
+RESONANCE_SHARE = 0.8     # ... and counts where it then leaves at most this share of the residual the rigid and the
+#                           lag models leave (rigid loads: 1.2 and more; two-mass loads at 115200: 0.01-0.33, at
+#                           57600 with torque read in whole % (IS620P): 0.7-0.8; backlash and cogging: 0.8 and more,
+#                           where the two-mass change is refused as too uncertain anyway) ...
 RESONANCE_F = 30.0        # ... and the improvement is this many times what two free parameters get from noise
 MIN_SUBSET_WINDOWS = 6
 BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
