@@ -45,7 +45,7 @@ import numpy as np
 from servotool.tuning.fit_numerics import (
     corrected_lstsq,
     cumulative_hermite,
-    follower_speed,
+    follower_changes,
     jackknife_std,
     projected_fits,
 )
@@ -74,15 +74,14 @@ LOAD_HZ_MAX = 60.0        # (stiffer couplings moved J by 0.4-1.4 %, within the 
 LOAD_HZ_STEP = 1.15       # then twice finer around the best (a coarse grid first: the scan runs while the drive
 #                           holds between moves, and the drive's watchdog waits for no fit)
 SCAN_RATE = 400.0         # the scan integrates the load over samples at most this often (and every window's ends)
-RESONANT_DAMPING = (0.015, 0.035, 0.08, 0.18)  # a coupling's damping ratios (seen from the load), DAMPING_STEP apart
-DAMPING_STEP = 2.3
+RESONANT_DAMPING = (0.015, 0.035, 0.08, 0.18)  # a coupling's damping ratios (seen from the load), DAMPING_STEP
+DAMPING_STEP, MAX_RESONANT_DAMPING = 2.3, 0.3  # apart, refined up to MAX_RESONANT_DAMPING (beyond: a lag)
 LAG_DAMPING = (0.5, 0.9)  # heavily damped 'couplings': a lag, which rigid loads show too (the speed's filter and
 #                           the loop's transients): at 57600-115200 baud they left 0.2-0.7 of the rigid fit's residual
 CANDIDATE_SHARE = 0.95    # the coarse grid's best resonance is refined where it leaves at most this share ...
 RESONANCE_SHARE = 0.8     # ... and counts where it then leaves at most this share of the residual the rigid and the
 #                           lag models leave (rigid loads: 1.2 and more; two-mass loads at 115200: 0.01-0.33, at
-#                           57600 with torque read in whole % (IS620P): 0.7-0.8; backlash and cogging: 0.8 and more,
-#                           where the two-mass change is refused as too uncertain anyway) ...
+#                           57600 with torque read in whole % (IS620P): 0.7-0.8; backlash: 0.8 and more, refused) ...
 RESONANCE_F = 30.0        # ... and the improvement is this many times what two free parameters get from noise
 MIN_SUBSET_WINDOWS = 6
 BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
@@ -323,8 +322,9 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
         return None
     best = (float(grid_hz[b]), float(grid_z[b]), float(j[b]), float(rss[b]))
     for spread_hz, spread_z in ((LOAD_HZ_STEP, DAMPING_STEP), (LOAD_HZ_STEP ** (1 / 3), DAMPING_STEP ** (1 / 3))):
-        near_hz, near_z = (a.ravel() for a in np.meshgrid(best[0] * spread_hz ** np.linspace(-1, 1, 7),
-                                                         best[1] * spread_z ** np.linspace(-1, 1, 7), indexing="ij"))
+        near_hz, near_z = (a.ravel() for a in np.meshgrid(
+            best[0] * spread_hz ** np.linspace(-1, 1, 7),
+            np.minimum(best[1] * spread_z ** np.linspace(-1, 1, 7), MAX_RESONANT_DAMPING), indexing="ij"))
         j, rss, _rss0 = _follower_fits(fit, x, near_hz, near_z)
         b = int(np.argmin(rss))
         if rss[b] < best[3]:
@@ -333,7 +333,7 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
     if not (best[3] <= RESONANCE_SHARE * reference and (reference - best[3]) / 2 > RESONANCE_F * best[3] / dof
             and best[2] > 0):
         return None
-    dwl = _load_speed_changes(fit, np.array(best[:1]), np.array(best[1:2]))[:, 0]
+    dwl = _window_changes(fit, np.array(best[:1]), np.array(best[1:2]))[:, 0]
     y = fit.y - fit.jm * (fit.x[:, 0] - dwl)
     return _TwoMass(best[0] * math.sqrt(best[2] / fit.jm), np.column_stack([dwl, x[:, 1:]]), y)
 
@@ -342,7 +342,7 @@ def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndar
                    ) -> tuple[np.ndarray, np.ndarray, float]:
     """(J, residual sum of squares) of the two-mass model at each (hz, damping) of the load, and the rigid fit's
     residual sum of squares (plain least squares: a ranking, the chosen model is refitted)."""
-    dwl = _load_speed_changes(fit, hz, damping)
+    dwl = _window_changes(fit, hz, damping)
     dw = fit.x[:, 0]
     y = fit.y[:, None] - fit.jm * (dw[:, None] - dwl)
     j, rss = projected_fits(dwl, y, x[:, 1:])
@@ -350,17 +350,9 @@ def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndar
     return j, rss, float(rss0[0])
 
 
-def _load_speed_changes(fit: FitData, hz: np.ndarray, damping: np.ndarray) -> np.ndarray:
-    """The load's speed change over each window (rows) for each (hz, damping) (columns), integrated over the
-    windows' ends and samples between them at most SCAN_RATE apart (the load's resonance lies far below it)."""
-    due = np.zeros(fit.t.size, dtype=bool)
-    due[fit.starts] = due[fit.ends] = True
-    due[0] = due[-1] = True
-    ticks = np.floor((fit.t - fit.t[0]) * SCAN_RATE)
-    due[1:] |= ticks[1:] != ticks[:-1]
-    keep = np.flatnonzero(due)
-    w_load = follower_speed(fit.t[keep], fit.w[keep], hz, damping)
-    return w_load[np.searchsorted(keep, fit.ends)] - w_load[np.searchsorted(keep, fit.starts)]
+def _window_changes(fit: FitData, hz: np.ndarray, damping: np.ndarray) -> np.ndarray:
+    """The load's speed change over each window (rows) for each (hz, damping) (columns)."""
+    return follower_changes(fit.t, fit.w, fit.starts, fit.ends, hz, damping, SCAN_RATE)
 
 
 def _rate(fit: FitData) -> float:

@@ -199,6 +199,20 @@ def follower_speed(t: np.ndarray, w: np.ndarray, hz: np.ndarray, damping: np.nda
     return -2.0 * (modes * lam).real + np.asarray(w, dtype=float)[:, None]
 
 
+def follower_changes(t: np.ndarray, w: np.ndarray, starts: np.ndarray, ends: np.ndarray, hz: np.ndarray,
+                     damping: np.ndarray, max_rate: float) -> np.ndarray:
+    """follower_speed's change over each window [starts, ends] (rows) for each (hz, damping) (columns), integrated
+    over the windows' ends and samples between them at most max_rate apart (the load's resonance lies far below)."""
+    due = np.zeros(t.size, dtype=bool)
+    due[starts] = due[ends] = True
+    due[0] = due[-1] = True
+    ticks = np.floor((t - t[0]) * max_rate)
+    due[1:] |= ticks[1:] != ticks[:-1]
+    keep = np.flatnonzero(due)
+    w_load = follower_speed(t[keep], w[keep], hz, damping)
+    return w_load[np.searchsorted(keep, ends)] - w_load[np.searchsorted(keep, starts)]
+
+
 def projected_fits(u: np.ndarray, v: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(coefficient, residual sum of squares) of v[:, g] on u[:, g] for every column g, with the columns `others`
     fitted alongside (projected out once for all)."""
