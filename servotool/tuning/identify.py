@@ -150,6 +150,7 @@ class Identifier:
         return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)
 
 
+FIT_LEAD_S = 1.0      # the dead-man is fed before an estimate between moves as if it took up to this long
 REST_RAMPS = 0.5      # the axis rests this many ramp times (at least two samples) between moves
 
 
@@ -184,14 +185,25 @@ class _HostRun:
         # that comes that late. A host stalls (a loaded laptop, a scheduler's 16 ms tick, a USB adapter's latency
         # timer) and an axis at 900 rpm covers 0.2 rev in 13 ms: more than the band leaves.
         self.gap_s = rest.longest_gap_s if rest is not None else 0.0
+        self.fit_s = 0.0      # the longest estimate between moves so far (host time)
 
-    def _beat(self) -> None:
+    def _beat(self, lead_s: float = 0.0) -> None:
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
         # take samples' time on a slow line.
         bound = self.jogger.dead_man
         if bound is None or bound.bounded:
             # Before the next call: a sample, a position read, the alarm check and a move's settings at most.
-            self.jogger.keep_alive(lead_s=4.0 * self.sampler.interval())
+            self.jogger.keep_alive(lead_s=4.0 * self.sampler.interval() + lead_s)
+
+    def _estimate_between_moves(self, settings: EstimatorSettings) -> InertiaEstimate:
+        """An estimate while the drive holds between moves: the dead-man is fed first for as long as a fit may take
+        (twice the longest so far; the two-mass scan makes one tens of ms, more on a busy host, against DSX7E's
+        500 ms watchdog)."""
+        self._beat(lead_s=max(FIT_LEAD_S, 2.0 * self.fit_s))
+        start = self.timing.now()
+        est = self.ident._estimate(settings, self.torque_limit, self.sampler.rate())
+        self.fit_s = max(self.fit_s, self.timing.now() - start)
+        return est
 
     def sample(self) -> None:
         try:
@@ -279,7 +291,7 @@ class _HostRun:
             excursion, pk = self.move(direction, pilot)
             peak = max(peak, pk)
         if hold.active:
-            hold.after_pilot(self.ident._estimate(pilot_settings(settings), self.torque_limit, self.sampler.rate()))
+            hold.after_pilot(self._estimate_between_moves(pilot_settings(settings)))
         nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
         limit_rev = plan.travel_limit_rev
         lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
@@ -329,7 +341,7 @@ class _HostRun:
             if plan.adaptive and rep >= 2:
                 if s.elapsed() + cycle_s > TIME_BUDGET_S:
                     break
-                est = self.ident._estimate(settings, self.torque_limit, rate=s.rate())
+                est = self._estimate_between_moves(settings)
                 if est.ok and est.j_std_kgm2 <= 0.5 * settings.max_rel_uncertainty * est.j_total_kgm2:
                     break
             base = self.ramp
