@@ -7,7 +7,7 @@ refused (with its reason), with the error of J_total and the stated 3 sigma (% o
 
 Target: no accepted (or flagged) result off by more than its stated 3 sigma.
 
-Run: python bench/off_model.py [--quick] [--baud 19200]
+Run: python bench/off_model.py [--quick] [--baud 19200] [--profile is620p --baud 57600]
 """
 
 from __future__ import annotations
@@ -79,6 +79,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="fewer loads and ratios")
     ap.add_argument("--baud", type=int, action="append", help="line speed (repeatable; default 19200 and 115200)")
+    ap.add_argument("--profile", default="dsx7e", help="the simulated drive's profile (default dsx7e; is620p at 57600 "
+                    "reads torque in whole percent)")
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     loads = LOADS_QUICK if args.quick else LOADS_QUICK + LOADS_MORE
@@ -92,7 +94,7 @@ def main() -> None:
         for label, machine in loads:
             for ratio in ratios:
                 n += 1
-                outcome, est, why = identify(ratio, machine, baud, seed=n)
+                outcome, est, why = identify(ratio, machine, baud, seed=n, profile_id=args.profile)
                 outcomes[outcome] = outcomes.get(outcome, 0) + 1
                 err = sig3 = float("nan")
                 if est is not None and est.j_total_kgm2 == est.j_total_kgm2:

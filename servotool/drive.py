@@ -18,6 +18,7 @@ from servotool.model.codec import (
     split_field,
     words_to_raw,
 )
+from servotool.model.lookup import enum_value
 from servotool.model.profile import Entry, Profile
 
 
@@ -46,6 +47,9 @@ class Reading:
                                   "unit": e.unit}
         if (fields := fields_json(e, self.raw)) is not None:
             out["fields"] = fields
+            meanings = {f: m for f, v in fields.items() if (m := e.field_enums.get(f.upper(), {}).get(v))}
+            if meanings:
+                out["meanings"] = meanings
         if self.raw in e.enum:
             out["meaning"] = e.enum[self.raw]
         if e.default is not None:
@@ -200,9 +204,11 @@ class Drive:
         if field is not None:
             if raw:
                 raise UsageError(f"{entry.code}.{field}: --raw takes whole register values, not fields")
-            if not value.strip() or any(c in value.strip() for c in " \t,=_"):
-                raise UsageError(f"{entry.code}.{field}: '{value.strip()}' is not a single field value")
-            value = f"{field}={value.strip()}"
+            named = enum_value(entry.field_enums.get(field.upper(), {}), value)    # 'internal speed' has a space
+            value = str(named) if named is not None else value.strip()
+            if not value or any(c in value for c in " \t,=_"):
+                raise UsageError(f"{entry.code}.{field}: '{value}' is not a single field value")
+            value = f"{field}={value}"
         if entry.cls != "Pn":
             raise UsageError(f"{entry.code} ({entry.name}) is a {entry.cls} entry, not a settable parameter")
         if not entry.writable:

@@ -56,9 +56,10 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
         return args
     own = _options(leaf)
     moved: list[str] = []
-    # A flag of the sub-command given to its group (`alarm --json show`) goes to the sub-command.
-    first = next((k for k, a in enumerate(args) if not a.startswith("-") and a not in _values(args, glob)), start)
-    between = [k for k in range(first, start) if own.get(args[k]) is False and args[k] not in glob]
+    # A flag of the sub-command given to its group (`alarm --json show`) or before it (`servotool --json param get
+    # Pn004`) goes to the sub-command.
+    values = _value_positions(args[:start], glob)
+    between = [k for k in range(start) if own.get(args[k]) is False and args[k] not in glob and k not in values]
     rest = [a for k, a in enumerate(args[:start]) if k not in between] + [args[k] for k in between]
     i = start
     while i < len(args):
@@ -83,15 +84,9 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
     return moved + rest
 
 
-def _values(args: list[str], glob: dict[str, bool]) -> set[str]:
-    """The values of the leading global options (`--port sim`: 'sim' is no sub-command name)."""
-    found: set[str] = set()
-    for k, token in enumerate(args):
-        if not token.startswith("-"):
-            break
-        if glob.get(token) and k + 1 < len(args):
-            found.add(args[k + 1])
-    return found
+def _value_positions(args: list[str], glob: dict[str, bool]) -> set[int]:
+    """Where the values of global options are (`--port --json` would be a port named '--json', not a flag)."""
+    return {k + 1 for k, token in enumerate(args) if glob.get(token) and "=" not in token}
 
 
 def _short_flags(token: str, glob: dict[str, bool], own: dict[str, bool]) -> bool:

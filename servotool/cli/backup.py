@@ -17,6 +17,7 @@ from servotool.model.profile import Profile
 from servotool.ops.params import select
 
 if TYPE_CHECKING:     # imported by the commands that use them: `param get` and `set` share this group
+    from servotool.drive import Drive
     from servotool.ops import backup, restore
 
 app = typer.Typer(help="Back up, compare and restore drive parameters; factory reset.")
@@ -85,7 +86,7 @@ def diff_cmd(
     if file is None:
         with drive(ctx) as d:
             profile = d.profile
-            current = {r.entry.code: r.raw for r in d.read_entries(select(profile), partial=True)}
+            current = _read_all(d, as_json)
             missing = list(d.missing)
         _show_diff(backup.diff(profile, current, backup.defaults(profile)), ("drive", "factory default"), missing,
                    as_json)
@@ -111,11 +112,18 @@ def diff_cmd(
         with drive(ctx) as d:
             profile = d.profile
             a = load(file, profile)
-            current = {r.entry.code: r.raw for r in d.read_entries(select(profile), partial=True)}
+            current = _read_all(d, as_json)
             missing = list(d.missing)
         labels = ("drive", str(file))
         diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
     _show_diff(diffs, labels, missing, as_json)
+
+
+def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
+    """Every readable parameter of the drive (code -> raw), with a progress bar on a terminal."""
+    entries = select(d.profile)
+    with progress("reading the drive", len(entries), enabled=not as_json) as advance:
+        return {r.entry.code: r.raw for r in d.read_entries(entries, partial=True, progress=advance)}
 
 
 def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing: list[str], as_json: bool) -> None:
@@ -168,8 +176,11 @@ def restore_cmd(
             return
         if not confirm(f"Write {count(len(plan.changes), 'parameter')}?", yes):
             raise ServoError("restore cancelled: nothing was written")
-        with progress("writing", len(plan.changes), enabled=not as_json) as advance:
-            report = restore.restore(d, b, plan, progress=lambda _entry: advance(1), notice=_where)
+        # The automatic backup reads every entry before the first write: at a slow baud rate that is most of it.
+        with progress("automatic backup, then writing", len(entries) + len(plan.changes),
+                      enabled=not as_json) as advance:
+            report = restore.restore(d, b, plan, progress=lambda _entry: advance(1), notice=_where,
+                                     backup_progress=advance)
     if as_json:
         emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
                    "auto_backup": str(report.auto_backup), "persisted": report.persisted,

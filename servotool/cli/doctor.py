@@ -19,8 +19,11 @@ def doctor(
     count: int = typer.Option(50, "--count", "-n", help="Requests to send."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Link health: round-trip time (min/median/max), echo, error and retry rate over --count requests, achieved
-    vs theoretical request rate for the line settings, and the USB adapter's latency timer (Linux)."""
+    """Link health: round trips, echo, errors and retries, request rate, the USB adapter's latency.
+
+    Round-trip time (min/median/max), echo, error and retry rate over --count requests, the request rate achieved
+    against the line settings' theoretical one, and the USB adapter's latency timer (Linux).
+    """
     options = state(ctx).options
     options = replace(options, port=port or options.port, unit=unit if unit is not None else options.unit)
     settings, unit_id, profile = health.link_settings(options)

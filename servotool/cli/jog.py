@@ -13,7 +13,7 @@ import typer
 
 from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.keys import raw_keys
-from servotool.cli.render import Verbosity, caution, emit_json, err, info
+from servotool.cli.render import Verbosity, caution, emit_json, err, info, notice
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.roles import FEATURE
@@ -143,7 +143,7 @@ def _result(plan: JogPlan, seconds: float | None, show: _Speeds, final: float | 
                    "final_speed_rpm": final,
                    "dead_man": plan.dead_man.as_json() if plan.dead_man is not None else None})
     else:
-        info(f"JOG done: peak {show.peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")
+        notice(f"JOG done: peak {show.peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")   # a result
 
 
 def _check_options(seconds: float | None, interactive: bool, toggle: bool, trace_file: Path | None) -> None:

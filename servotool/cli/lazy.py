@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import importlib
 from dataclasses import dataclass
+from difflib import get_close_matches
 from typing import Any, ClassVar
 
 import typer
@@ -39,7 +40,7 @@ def build(name: str, spec: Lazy) -> Any:
     called)."""
     objects = [_load(t) for t in spec.targets]
     if len(objects) == 1 and not isinstance(objects[0], typer.Typer):
-        single = typer.Typer()
+        single = typer.Typer(add_completion=False)     # completion is the root's: not on each command's help
         single.command(name)(objects[0])
         command = typer.main.get_command(single)
     else:
@@ -72,7 +73,19 @@ def _app_group(apps: list[typer.Typer]) -> Any:
     return group
 
 
-class _OnDemand(TyperGroup):
+class _Suggesting(TyperGroup):
+    """A group that answers an unknown sub-command with the close ones, lazily registered ones included (typer's
+    own suggestion sees only the commands built so far)."""
+
+    def resolve_command(self, ctx: Any, args: list[str]) -> Any:
+        if args and not args[0].startswith("-") and not ctx.resilient_parsing:
+            names = self.list_commands(ctx)
+            if args[0] not in names and (close := get_close_matches(args[0], names)):
+                ctx.fail(f"No such command {args[0]!r}. Did you mean {', '.join(map(repr, close))}?")
+        return super().resolve_command(ctx, args)
+
+
+class _OnDemand(_Suggesting):
     """A typer group whose commands are made from their CommandInfo on first use."""
 
     infos: dict[str, tuple[Any, typer.Typer]]
@@ -92,7 +105,7 @@ class _OnDemand(TyperGroup):
 def lazy_group(commands: dict[str, Lazy]) -> type[TyperGroup]:
     """A TyperGroup class (for typer.Typer(cls=...)) that also offers these lazily imported sub-commands."""
 
-    class LazyGroup(TyperGroup):
+    class LazyGroup(_Suggesting):
         registry: ClassVar[dict[str, Lazy]] = commands
 
         def list_commands(self, ctx: Any) -> list[str]:

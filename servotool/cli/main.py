@@ -199,3 +199,7 @@ def _usage_error(exc: Exception, as_json: bool) -> int | None:
         return code
     where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
     return _fail("usage", f"{' '.join(str(message()).split())}{where}", code, as_json)
+
+
+if __name__ == "__main__":      # `python -m servotool.cli.main` runs too, rather than exiting 0 having done nothing
+    run()

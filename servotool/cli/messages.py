@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 # Manual references (“L417-419”, “is620p.md L1036”, “(L3215)”): for -v, not for everyone.
 _REF = r"(?:[\w./-]+\.md,?\s*)?\bL\d{2,}(?:\s*[-–]\s*L?\d+)?"
-MANUAL_REFS = re.compile(rf"\s*\((?:see\s+)?{_REF}(?:\s*[,;]\s*{_REF})*\)|\s*[,;]\s*{_REF}(?=\))|\s*\b{_REF}")
+MANUAL_REFS = re.compile(rf"\s*\((?:see\s+)?{_REF}(?:\s*[,;]\s*{_REF})*\)|(?:\s*[,;]\s*{_REF})+(?=\))|\s*\b{_REF}")
 
 # ConnectOptions field -> its long option on the command line
 OPTION_FLAGS = {"port": "--port", "baud": "--baud", "parity": "--parity", "stopbits": "--stopbits",
@@ -106,7 +106,10 @@ def unknown_text(exc: UnknownName, given: ConnectOptions) -> str:
 
 # Roles whose name says little to a user.
 ROLE_WORDS = {"motion_route": "JOG or speed command (a JOG trigger with its speed, or a speed reference with servo-on)",
-              "speed_feedback": "motor speed reading", "torque_feedback": "motor torque reading"}
+              "speed_feedback": "motor speed reading", "torque_feedback": "motor torque reading",
+              "alarm_history_1": "alarm history", "alarm_reset": "alarm reset", "factory_reset": "factory reset",
+              "inertia_id": "inertia identification function",
+              "eeprom_save": "command that saves to EEPROM", "jog_accel": "JOG ramp setting"}
 
 
 def missing_role_text(exc: MissingRole, verbose: bool) -> str:

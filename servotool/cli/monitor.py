@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from collections import deque
 from collections.abc import Iterator
@@ -15,7 +14,7 @@ from rich.text import Text
 
 from servotool.cli import complete
 from servotool.cli.common import drive, resolved
-from servotool.cli.render import count, info, out, table
+from servotool.cli.render import count, emit_json_line, info, out, table
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
 from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
@@ -114,8 +113,8 @@ def _csv_mode(csv_file: Path | None, force: bool, append: bool) -> CsvMode:
 
 def _show(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None, *, plot: bool, live_view: bool,
           lines: bool, as_json: bool) -> None:
-    """Samples as they come: a live chart or table on a terminal, else plain or JSON lines (lines: --json or
-    --once), each also logged to the CSV."""
+    """Samples as they come: a live chart or table on a terminal, else a plain or JSON line each as it comes (a
+    pipe sees them at once), then the table; lines: --json or --once. Each sample is also logged to the CSV."""
     if plot and live_view:
         _plot_live(mon, samples, log)
         return
@@ -129,10 +128,10 @@ def _show(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None, *, plot: 
     for s in samples:
         if log:
             log.write(s)
-        if plot and not lines:
+        if not lines:
             print(_plain_line(mon, s), flush=True)
         elif as_json:
-            print(json.dumps(_sample_json(mon, s)), flush=True)
+            emit_json_line(_sample_json(mon, s))
     if not as_json and not (plot and not lines):
         out.print(monitor_table(mon, out.width))
 

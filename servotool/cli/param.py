@@ -100,12 +100,13 @@ def set_(
         return
     if persisted is False:
         warn(eeprom.ram_only_warning(d.profile))
-    if save:
-        out.print(f"{len(stored)} value{'s' if len(stored) != 1 else ''} stored in EEPROM", markup=False)
     for r in results:
-        note = f"  [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
+        note = f" [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
+        unit = f" {r.entry.unit}" if r.entry.unit else ""
         out.print(f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "
-                  f"{format_value(r.entry, r.new)} {r.entry.unit}{note}".replace("  [", " [").rstrip(), markup=False)
+                  f"{format_value(r.entry, r.new)}{unit}{note}", markup=False)
+    if save:        # after the changes it stored
+        out.print(f"{count(len(stored), 'value')} stored in EEPROM", markup=False)
 
 
 def _class(text: str) -> str:

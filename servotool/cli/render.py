@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 NAME_MIN = 20           # a wrapped name or description keeps at least this many columns: readable
 UNLIMITED = 10_000      # "no width": nothing wraps
-WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note"}   # text columns: these wrap
+WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note", "Result"}   # text columns: these wrap
 # Columns dropped first when a table is too wide, least useful first; tables may give their own order.
 DROP_ORDER = ("Address", "Type", "Class", "Version", "Vendor", "Unverified", "Effect", "Trend", "Min", "Max",
               "Default", "Needs", "")
@@ -175,6 +175,18 @@ def notice(text: str) -> None:
 
 
 _UNVERIFIED = re.compile(r"(\S+) \((\w+)\): ")
+_RELIES = re.compile(r"(.+?) relies on .*; unverified\b")      # "the dead-man (segment) relies on L..; unverified: ..."
+
+
+def _short_caution(line: str) -> str:
+    """A caution's one line: what it is about, without the manual's line numbers."""
+    if m := _UNVERIFIED.match(line):
+        return f"{m.group(1)} ({m.group(2).replace('_', ' ')}) is not confirmed by the manual"
+    if m := _RELIES.match(line):
+        return f"{m.group(1).replace('_', ' ')} is not confirmed by the manual"
+    from servotool.cli.messages import plain  # the words' module, only once a caution is shown
+
+    return plain(line.split(": ", 1)[0])
 
 
 def caution(lines: Sequence[str]) -> None:
@@ -182,24 +194,35 @@ def caution(lines: Sequence[str]) -> None:
     --explain."""
     for line in lines:
         if not Verbosity.explain:
-            m = _UNVERIFIED.match(line)
-            line = (f"{m.group(1)} ({m.group(2).replace('_', ' ')}) is not confirmed by the manual" if m
-                    else line.split(": ", 1)[0])
+            line = _short_caution(line)
         err.print(f"servotool: caution: {line}", markup=False)
     if lines and not Verbosity.explain:
         err.print("servotool: (--explain shows why)", markup=False)
 
 
 def warn(text: str) -> None:
-    err.print(f"servotool: warning: {text}", markup=False)
+    """A warning on stderr (shown with --quiet too); the manual's line numbers only with -v."""
+    from servotool.cli.messages import plain
+
+    err.print(f"servotool: warning: {plain(text, Verbosity.level > 0)}", markup=False)
 
 
 _emitted = [False]
+_streaming = [False]
 
 
 def emit_json(data: Any) -> None:
+    """One JSON document on stdout (one line where the command streams JSON lines: an error after them too)."""
     _emitted[0] = True
-    sys.stdout.write(json.dumps(data, indent=2, ensure_ascii=False, default=str) + "\n")
+    sys.stdout.write(json.dumps(data, indent=None if _streaming[0] else 2, ensure_ascii=False, default=str) + "\n")
+    sys.stdout.flush()
+
+
+def emit_json_line(data: Any) -> None:
+    """One object of a stream of JSON lines (monitor --json), written at once; the command's error, if any, is
+    then one line as well."""
+    _streaming[0] = True
+    sys.stdout.write(json.dumps(data, ensure_ascii=False, default=str) + "\n")
     sys.stdout.flush()
 
 

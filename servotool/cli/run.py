@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from servotool.cli.common import state
+from servotool.cli.common import notice_for, state
 from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, count, emit_json, info, notice, out, trace_frame, warn
 from servotool.commission.plan import Plan, load_plan
@@ -48,7 +48,8 @@ def run(
     def ask(unit: int, question: str) -> bool:
         return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
 
-    with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=info) as drives:
+    with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None,
+                     notice=notice_for(ctx)) as drives:
         runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info,
                         word=lambda exc: error_text(exc, cli_opts))
         rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)
@@ -74,8 +75,11 @@ def run(
         out.print(f"plan {'completed' if ok else 'FAILED'}: {sum(r.ok for r in runner.results)}/"
                   f"{len(runner.results)} steps ok; report {report_path}", markup=False)
     if not ok:
-        failed = next(r for r in runner.results if not r.ok)
-        raise typer.Exit(int(failed.data.get("exit_code", 1)))
+        failures = [r for r in runner.results if not r.ok]
+        if Verbosity.level < 0 and not as_json:     # --quiet hid the step lines: a failure is an error, shown
+            for r in failures:
+                notice(f"FAIL unit {r.unit} {r.step.where()}: {r.detail}")
+        raise typer.Exit(int(failures[0].data.get("exit_code", 1)) if failures else 1)
 
 
 def _units(plan: Plan, given: int | None, default: int) -> list[int]:

@@ -8,7 +8,7 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from servotool.cli.common import JSON_OPT, state
-from servotool.cli.render import Verbosity, emit_json, err, info, out, table
+from servotool.cli.render import Verbosity, count, emit_json, err, info, out, table
 from servotool.ops import scan as scanning
 
 
@@ -26,8 +26,7 @@ def scan(
                                   "(default: each profile's factory format, then all four)."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Find drives on a bus: every line setting x unit id with a short timeout (global --timeout, default 0.1 s),
-    and the shipped profile each answering drive matches."""
+    """Find drives on a bus (line settings x unit ids, --timeout each, default 0.1 s) and the profile each matches."""
     options = state(ctx).options
     if port:
         options = replace(options, port=port)
@@ -58,7 +57,9 @@ def _render(result: scanning.ScanResult) -> None:
     if not result.found:
         out.print(f"no drive answered on {result.port} ({result.probes} probes, {result.seconds:.1f} s)", markup=False)
     else:
-        t = table("Port", "Baud", "Format", "Unit", "Model", "Firmware", "Likely profile")
+        # One port per scan (named in the title): its column goes first when 80 columns are too few for all.
+        t = table("Port", "Baud", "Format", "Unit", "Model", "Firmware", "Likely profile",
+                  title=f"{count(len(result.found), 'drive')} on {result.port}", drop=("Port", "Firmware", "Format"))
         for f in result.found:
             best = f.best
             model = "?" if best is None else best.profile.model + (f" (code {best.model})" if best.model is not None

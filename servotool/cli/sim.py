@@ -76,8 +76,9 @@ def serve(
     try:
         serve_units(port, p, ids, line, line_baud=line_baud, trace=trace_frame if Verbosity.level > 0 else None,
                     ready=ready, faults=bad_line)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:       # its only way to stop, and still exit 130 as every command at Ctrl-C
         info("servotool: simulator stopped")
+        raise typer.Exit(130) from None
 
 
 @app.command("reset")

@@ -62,6 +62,7 @@ def trace(
     entries = resolve_entries(res.profile, codes or [])
     trig = parse_trigger(res.profile, trigger) if trigger else None
     captures: list[Capture] = []
+    interrupted = False
     with drive(ctx) as d:
         tracer = Tracer(d, entries, trig, window, repeat=repeat, timeout_s=timeout)
         about = _about(res, tracer, trigger, window)
@@ -72,13 +73,16 @@ def trace(
                 info(f"capture {cap.index}: {cap.timing.describe()}")
                 if plot:
                     _plot(cap, tracer, res)
-        except KeyboardInterrupt:
-            info("trace stopped by Ctrl-C")
+        except KeyboardInterrupt:       # the captures taken are written, then exit 130 as for any Ctrl-C
+            info(f"trace stopped by Ctrl-C after {len(captures)} capture(s)")
+            interrupted = True
         except ServoError:
             if captures:
                 _write(captures, tracer, about, output, force, as_json, plot)
             raise
     _write(captures, tracer, about, output, force, as_json, plot)
+    if interrupted:
+        raise typer.Exit(130)
     if not captures:
         b, e = tracer.buffer, tracer.trigger.entry if tracer.trigger else None
         seen = f"; {e.code} ranged {b.low:g}..{b.high:g} {e.unit}" if e is not None and b.low <= b.high else ""

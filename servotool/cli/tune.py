@@ -14,7 +14,8 @@ from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.model.profile import Profile
+from servotool.model.codec import eng_to_raw, raw_to_eng
+from servotool.model.profile import Entry, Profile
 from servotool.motion import deadman
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
@@ -32,6 +33,32 @@ def _clean(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [_clean(v) for v in value]
     return value
+
+
+def _sig(value: float | None, digits: int = 4) -> float | None:
+    """A measured figure to the digits it carries (JSON gave 0.024729362562792387 N·m for a friction)."""
+    return None if value is None or not math.isfinite(value) else float(f"{value:.{digits}g}")
+
+
+def _rounded(value: float | None, decimals: int) -> float | None:
+    return None if value is None or not math.isfinite(value) else round(value, decimals)
+
+
+def _entry_value(entry: Entry, value: float) -> float | int:
+    """A value as the entry holds it: to its resolution, an int where its scale is 1 (not 300.0 for 300 %)."""
+    return raw_to_eng(entry, eng_to_raw(entry, value, clamp=False))
+
+
+def _gains_json(changes: Any) -> list[dict[str, Any]]:
+    return [{"role": c.role, "code": c.entry.code, "old": _entry_value(c.entry, c.old),
+             "new": _entry_value(c.entry, c.new), "unit": c.entry.unit} for c in changes]
+
+
+def _step_json(response: step.StepResponse | None) -> dict[str, Any] | None:
+    if response is None:
+        return None
+    summary = response.summary()
+    return {**summary, **{k: _rounded(summary[k], 2) for k in ("overshoot_pct", "settling_ms", "ripple_pct")}}
 
 
 def _check_options(method: str, rigidity: int | None, bandwidth: float | None, no_gains: bool,
@@ -55,11 +82,11 @@ def _estimate_json(result: identify.Result) -> dict[str, Any]:
     return {
         "method": result.method,
         "old_ratio": round(result.old_ratio, 4) if result.old_ratio is not None else None,
-        "ratio_std": est.ratio_std if est else None,
-        "coulomb_nm": est.coulomb_nm if est else None,
-        "viscous_nm_per_rad_s": est.viscous_nm_per_rad_s if est else None,
-        "load_torque_nm": est.load_torque_nm if est else None,
-        "residual_rel": est.residual_rel if est else None, "notes": list(est.notes) if est else [],
+        "ratio_std": _sig(est.ratio_std) if est else None,
+        "coulomb_nm": _sig(est.coulomb_nm) if est else None,
+        "viscous_nm_per_rad_s": _sig(est.viscous_nm_per_rad_s) if est else None,
+        "load_torque_nm": _sig(est.load_torque_nm) if est else None,
+        "residual_rel": _rounded(est.residual_rel, 4) if est else None, "notes": list(est.notes) if est else [],
         "samples": len(result.trace.t), "samples_per_s": round(result.samples_per_s, 1),
         "travel_rev": round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None,
         "time_s": round(result.time_used_s, 2), "cycles": result.cycles,
@@ -186,8 +213,10 @@ def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:
     report = friction_report(profile, est) if est is not None else None
     if report is None:
         return None
-    return {"coulomb_pct": report.coulomb_pct, "viscous_pct_at_rated_speed": report.viscous_pct_at_rated,
-            "load_pct": report.load_pct, "compensation": {s.entry.code: s.value for s in report.settings}}
+    return {"coulomb_pct": _rounded(report.coulomb_pct, 2),
+            "viscous_pct_at_rated_speed": _rounded(report.viscous_pct_at_rated, 2),
+            "load_pct": _rounded(report.load_pct, 2),
+            "compensation": {s.entry.code: _entry_value(s.entry, s.value) for s in report.settings}}
 
 
 def _report(folder: Path, result: identify.Result, profile: Profile, res: tune.TuneResult | None,
@@ -207,16 +236,15 @@ def _render(res: tune.TuneResult, profile: Profile, as_json: bool,
         emit_json(_clean({
             "ok": True, **_estimate_json(res.identified), "ratio": round(res.ratio, 4),
             "friction": _friction_json(profile, res.identified.estimate),
-            "parameter": entry.code if entry else None, "parameter_value": proposal.parameter_value,
-            "written": res.ratio_stored, "persisted": res.persisted,
-            "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new, "unit": c.entry.unit}
-                      for c in changes],
-            "gains_written": res.gains_written, "bandwidth_hz": sugg.bandwidth_hz if sugg else None,
+            "parameter": entry.code if entry else None,
+            "parameter_value": raw_to_eng(entry, proposal.parameter_raw) if entry and proposal.parameter_raw is not
+            None else None,
+            "written": res.ratio_stored, "persisted": res.persisted, "gains": _gains_json(changes),
+            "gains_written": res.gains_written, "bandwidth_hz": _rounded(sugg.bandwidth_hz, 2) if sugg else None,
             "rigidity": sugg.rigidity if sugg else None,
-            "phase_margin_deg": proposal.margins.phase_deg if proposal.margins else None,
-            "gain_margin_db": proposal.margins.gain_db if proposal.margins else None,
-            "step_before": res.step_before.summary() if res.step_before else None,
-            "step_after": res.step_after.summary() if res.step_after else None,
+            "phase_margin_deg": _rounded(proposal.margins.phase_deg, 1) if proposal.margins else None,
+            "gain_margin_db": _rounded(proposal.margins.gain_db, 1) if proposal.margins else None,
+            "step_before": _step_json(res.step_before), "step_after": _step_json(res.step_after),
             "dead_man": dead_man.as_json() if dead_man is not None else None,
         }))
         return
@@ -258,11 +286,11 @@ def _show(proposal: tune.Proposal) -> None:
                 out.print(f"  friction compensation (suggested, not written): {s.entry.code} = {s.value:g} "
                           f"{s.entry.unit} ({s.what})", markup=False)
     if changes and sugg is not None:
-        t = table("Role", "Code", "Current", "Suggested", "Unit",
+        t = table("Code", "Name", "Current", "Suggested", "Unit",
                   title=f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop gain"
                         + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else ""))
         for c in changes:
-            t.add_row(c.role, c.entry.code, f"{c.old:g}", f"{c.new:g}", c.entry.unit)
+            t.add_row(c.entry.code, c.entry.name, f"{c.old:g}", f"{c.new:g}", c.entry.unit)    # the role: in JSON
         out.print(t)
         if proposal.margins is not None:
             out.print(f"margins on the identified inertia: {proposal.margins.describe()}", markup=False)
@@ -316,24 +344,23 @@ def gains(
 def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None:
     rows = [{"level": t.level, "speed_gain_hz": round(t.speed_gain_hz, 2),
              "phase_margin_deg": round(t.margins.phase_deg, 1), "gain_margin_db": _clean(round(t.margins.gain_db, 1)),
-             "overshoot_pct": t.response.overshoot_pct if t.response else None,
-             "settling_ms": t.response.settling_ms if t.response else None,
+             "overshoot_pct": _rounded(t.response.overshoot_pct, 2) if t.response else None,
+             "settling_ms": _rounded(t.response.settling_ms, 2) if t.response else None,
              "ripple_pct": round(t.response.ripple_pct, 2) if t.response else None, "failure": t.failure}
             for t in res.trials]
     if as_json:
-        emit_json(_clean({"ok": ok, "load_ratio": res.load_ratio, "levels": rows, "chosen": res.chosen,
-                          "reason": res.reason,
-                          "gains": [{"role": c.role, "code": c.entry.code, "old": c.old, "new": c.new,
-                                     "unit": c.entry.unit} for c in res.changes], "persisted": res.persisted}))
+        emit_json(_clean({"ok": ok, "load_ratio": _rounded(res.load_ratio, 4), "levels": rows, "chosen": res.chosen,
+                          "reason": res.reason, "gains": _gains_json(res.changes), "persisted": res.persisted}))
         return
-    t = table("Level", "Speed gain Hz", "Phase margin", "Gain margin", "Overshoot", "Settling", "Result",
+    # Six columns and a wrapping Result fit 80 (the settling time goes first where a failure's words need room).
+    t = table("Level", "Speed gain", "Margins", "Overshoot", "Settling", "Result", drop=("Settling",),
               title=f"rigidity levels tried (load ratio {res.load_ratio:.2f})")
     for r in rows:
         settle = f"{r['settling_ms']:.0f} ms" if r["settling_ms"] is not None else "-"
         over = f"{r['overshoot_pct']:.0f} %" if r["overshoot_pct"] is not None else "-"
         gm = f"{r['gain_margin_db']:.1f} dB" if r["gain_margin_db"] is not None else "inf"
-        t.add_row(str(r["level"]), f"{r['speed_gain_hz']:.1f}", f"{r['phase_margin_deg']:.0f}°", gm, over, settle,
-                  r["failure"] or "ok")
+        t.add_row(str(r["level"]), f"{r['speed_gain_hz']:.1f} Hz", f"{r['phase_margin_deg']:.0f}°, {gm}", over,
+                  settle, r["failure"] or "ok")
     out.print(t)
     if res.chosen is not None:
         out.print(f"{res.reason}; kept level {res.chosen}: " + ", ".join(f"{c.entry.code} {c.old:g} -> {c.new:g}"

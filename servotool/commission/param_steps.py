@@ -108,12 +108,14 @@ class ExpectStep(StepType):
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         exps = self.expectations(step, drive.profile)
         readings = drive.read_entries([x.entry for x in exps])
-        values = {x.entry.code: float(r.eng) for x, r in zip(exps, readings, strict=True)}
+        values = {x.entry.code: r.eng for x, r in zip(exps, readings, strict=True)}     # as the entry holds it
         bad = [f"{x.entry.code}={values[x.entry.code]:g} not in [{x.low:g}, {x.high:g}]"
                for x in exps if not x.low <= values[x.entry.code] <= x.high]
         if bad:
             raise VerifyError("expectation failed: " + "; ".join(bad))
-        return Outcome("as expected", {"values": values})
+        meanings = {r.entry.code: r.entry.enum[r.raw] for r in readings if r.raw in r.entry.enum}
+        return Outcome("as expected", {"values": values, "units": {x.entry.code: x.entry.unit for x in exps},
+                                       **({"meanings": meanings} if meanings else {})})
 
 
 class _FileStep(StepType):

@@ -201,7 +201,9 @@ def _without_unit(entry: Entry, text: str) -> str:
         raise UsageError(f"{what}: '{text}' is none of {_choices(entry)}")
     if not entry.unit:
         raise UsageError(f"{what}: takes a plain number (no unit), not '{text}'")
-    raise UsageError(f"{what}: '{text}' is in {unit}, but {entry.code} is in {entry.unit} (e.g. {number}{entry.unit})")
+    # A prefixed unit (3krpm) is another number in the entry's unit: no example made of the same digits.
+    example = f"give it in {entry.unit}" if unit.lower().endswith(entry.unit.lower()) else f"e.g. {number}{entry.unit}"
+    raise UsageError(f"{what}: '{text}' is in {unit}, but {entry.code} is in {entry.unit} ({example})")
 
 
 def _choices(entry: Entry) -> str:
@@ -295,6 +297,13 @@ def _field_int(entry: Entry, idx: int, text: str) -> int:
         v = int(text) if plain else (int(text, 16) if entry.field_width == 4 and len(text) == 1 else None)
     except ValueError:
         v = None
+    meanings = entry.field_enums.get(name.upper(), {})
+    if v is None and meanings:       # a field's meaning by name, as for a whole entry (Po001.X=bus)
+        v = enum_value(meanings, text)
+        if v is None:
+            choices = ", ".join(f"{k}={m}" for k, m in sorted(meanings.items()))
+            raise UsageError(f"{entry.code}: field {name} value '{text}' is none of {choices}"
+                             f"{did_you_mean(text, meanings.values())}")
     if v is None:
         raise UsageError(f"{entry.code}: field {name} value '{text}' is not a digit")
     lo, hi = field_range(entry, name)

@@ -130,16 +130,20 @@ def _update(drive: Drive, **parts: Any) -> None:
 @contextmanager
 def operation(drive: Drive, op: str, auto_backup: Path, targets: dict[str, int]) -> Iterator[None]:
     """Record an operation that writes many values (a restore) with its automatic backup and targets, so that a
-    kill midway is reported by the next command with the drive's state read from it."""
-    _update(drive, op={"name": op, "auto_backup": str(auto_backup), "targets": targets, "since": RealClock().wall()})
-    try:
-        yield
-    except BaseException:
-        # A failure the caller accounts for itself (RestoreFailed) or an interrupt: the record served its purpose
-        # only when the process dies; an exception still reaches the user, so the record goes.
+    kill midway is reported by the next command with the drive's state read from it. The port is held from
+    before the record is written: the recovery its first holder runs would take this live record for a dead one's
+    (and drop it)."""
+    with port_lock(drive):
+        _update(drive, op={"name": op, "auto_backup": str(auto_backup), "targets": targets,
+                           "since": RealClock().wall()})
+        try:
+            yield
+        except BaseException:
+            # A failure the caller accounts for itself (RestoreFailed) or an interrupt: the record served its
+            # purpose only when the process dies; an exception still reaches the user, so the record goes.
+            _update(drive, op=None)
+            raise
         _update(drive, op=None)
-        raise
-    _update(drive, op=None)
 
 
 # ----- recovery --------------------------------------------------------------------------------------------------
@@ -258,9 +262,9 @@ def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
         return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted before changing anything: "
                 f"read back, the drive equals the automatic backup {auto}")
     return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted after writing {len(written)} of "
-            f"{len(targets)} entries; read back, the drive differs from the automatic backup {auto} in "
-            f"{len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): run it again to "
-            f"finish, or 'servotool param restore {auto}' to go back")
+            f"{len(targets)} {'entry' if len(targets) == 1 else 'entries'}; read back, the drive differs from the "
+            f"automatic backup {auto} in {len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): "
+            f"run it again to finish, or 'servotool param restore {auto}' to go back")
 
 
 def recover_at_start(drive: Drive, notice: Notice, extra_folders: tuple[Path, ...] = ()) -> None:

@@ -120,16 +120,18 @@ def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
 
 
 def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
-            progress: Callable[[Entry], None] | None = None, notice: Notice | None = None) -> RestoreReport:
-    """Automatic backup first, then write and verify each change; on failure, roll back what was changed and
-    raise RestoreFailed with the account of the drive's state."""
+            progress: Callable[[Entry], None] | None = None, notice: Notice | None = None,
+            backup_progress: Callable[[int], None] | None = None) -> RestoreReport:
+    """Automatic backup first (backup_progress: entries read), then write and verify each change (progress: each
+    entry written); on failure, roll back what was changed and raise RestoreFailed with the account of the drive's
+    state."""
     from servotool.ops import journal
     from servotool.ops.eeprom import persistence
     from servotool.ops.params import write_one
 
     check_servo_off(drive, plan.needs_servo_off, "the restore")
     try:
-        before = take(drive)
+        before = take(drive, backup_progress)
     except ServoError as exc:
         exc.args = (f"{exc}; nothing was written (the automatic backup comes first)",)
         raise
@@ -200,8 +202,9 @@ def _account(drive: Drive, failed: tuple[str, ServoError, list[str], list[str]],
                       f"{format_value(drive.profile.entry(c), snapshot[c])}" for c in differ[:6])
     more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
     why = f" (could not undo {'; '.join(undo_failed)})" if undo_failed else ""
-    return failure(f"{wrote}; rollback incomplete{why}: {len(differ)} entries differ from the automatic backup "
-                   f"{auto}: {shown}{more}", "restore", False, differ)
+    verb = "differs" if len(differ) == 1 else "differ"
+    return failure(f"{wrote}; rollback incomplete{why}: {_entries(len(differ))} {verb} from the automatic "
+                   f"backup {auto}: {shown}{more}", "restore", False, differ)
 
 
 ATTEMPTS = 3        # a flaky line drops a request now and then: an account is worth a few more tries
@@ -253,7 +256,7 @@ def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
     report = restore(drive, b, rplan, notice=notice)
     left = [f"{e.code} not on this drive" for e in rplan.missing] + \
         [f"{e.code} refused by the drive" for e, _ in report.refused]
-    return (f"{len(report.written)} entries restored (automatic backup {report.auto_backup})"
+    return (f"{_entries(len(report.written))} restored (automatic backup {report.auto_backup})"
             + (f"; left out: {', '.join(left)}" if left else ""))
 
 
@@ -273,3 +276,7 @@ def not_at_default(drive: Drive, progress: Callable[[int], None] | None = None) 
     """Readable parameters whose value differs from the profile's factory default (entry, raw)."""
     return [(r.entry, r.raw) for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)
             if r.entry.default is not None and r.raw != r.entry.default]
+
+
+def _entries(n: int) -> str:
+    return f"{n} {'entry' if n == 1 else 'entries'}"

@@ -7,6 +7,9 @@ sampling rate it would see on that line.
 
 from __future__ import annotations
 
+import random
+from dataclasses import dataclass
+
 from servotool.clock import VirtualClock
 from servotool.errors import DeviceError, ModbusException
 from servotool.model.setup import requirements
@@ -41,13 +44,30 @@ def make_motion_setup(sim: SimulatedDrive) -> None:
     sim.firmware.plant.set_gains(sim.firmware._gains())
 
 
+@dataclass(frozen=True)
+class HostStalls:
+    """A host that stalls now and then before it sends a request (a loaded laptop, a scheduler tick, a USB
+    adapter's latency timer): each request, with probability `rate`, waits a uniform 10 ms..max_s first; seeded."""
+
+    rate: float
+    max_s: float = 0.05
+    seed: int = 1
+
+
 class VirtualLink:
     """A Link (servotool.link.ports.Link) straight into simulated drives, by unit id."""
 
-    def __init__(self, drives: list[SimulatedDrive], clock: VirtualClock, baud: int = 115200) -> None:
+    def __init__(self, drives: list[SimulatedDrive], clock: VirtualClock, baud: int = 115200,
+                 stalls: HostStalls | None = None) -> None:
         self.drives = {d.unit: d for d in drives}
         self.clock, self.baud = clock, baud
         self.requests = 0
+        self.stalls = stalls
+        self._stall_rng = random.Random(stalls.seed if stalls else 0)
+
+    def _stall(self) -> None:
+        if self.stalls is not None and self._stall_rng.random() < self.stalls.rate:
+            self.clock.advance(self._stall_rng.uniform(0.01, self.stalls.max_s))
 
     def _drive(self, unit: int, what: str) -> SimulatedDrive:
         drive = self.drives.get(unit)
@@ -58,6 +78,7 @@ class VirtualLink:
     def read(self, unit: int, address: int, count: int) -> list[int]:
         what = f"read {count} register(s) at {address} from unit {unit}"
         self.requests += 1
+        self._stall()
         self.clock.advance(wire_time(3, count, self.baud) + TURNAROUND_S)
         try:
             return self._drive(unit, what).read(address, count)
@@ -68,6 +89,7 @@ class VirtualLink:
               idempotent: bool = True) -> None:
         what = f"write {len(values)} register(s) at {address} to unit {unit}"
         self.requests += 1
+        self._stall()
         fc = 16 if multiple or len(values) > 1 else 6
         self.clock.advance(wire_time(fc, len(values), self.baud) + TURNAROUND_S)
         try:

@@ -1,13 +1,18 @@
 """Is the rigid model right for this load? Consistency checks on the inertia fit (tuning.estimator).
 
 Mechanics outside the model (a compliant coupling, backlash, gravity that changes with position, cogging) leave
-the fit's noise-based uncertainty tight while the answer is wrong. Three checks see them:
+the fit's noise-based uncertainty tight while the answer is wrong. These checks see them:
 
 - the load torque over the travel: the fit is repeated with a load torque that varies (quadratically) with the
   position (integrated speed). Where the variation is significant, the load varies over the travel and the
   extended model's inertia is used (an arm on a gear: the constant-torque model biased J by 10-40 %); where the
   dependence differs between forward and reverse moves, half its correction counts as uncertain (backlash also
   looks like such a load, and the model then moves J the wrong way).
+- a resonance: where the sampling resolves it, the fit is repeated with the load's speed following the motor's
+  through a spring and damper (the two-mass model, the motor's inertia known), over a grid of the load's resonance
+  and damping. Where a lightly damped coupling explains the data far better than the rigid load and a heavily
+  damped one (a lag, which rigid loads show too), its inertia is used, flagged with the resonance
+  ("resonance near N Hz"), and a third of its correction counts as uncertain. Otherwise:
 - compliance: the fit is repeated with a term for a spring between motor and load (the load's speed lags the
   motor's by the deflection's rate, which follows the torque's rate of change); where it is significant, the
   extended model's inertia is used, flagged with the resonance it implies ("resonance near N Hz"), and a third of
@@ -33,11 +38,17 @@ friction and load torque the estimator reports stay the rigid fit's.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from servotool.tuning.fit_numerics import corrected_lstsq, cumulative_hermite, jackknife_std
+from servotool.tuning.fit_numerics import (
+    corrected_lstsq,
+    cumulative_hermite,
+    follower_changes,
+    jackknife_std,
+    projected_fits,
+)
 
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
@@ -57,6 +68,21 @@ POSITION_MODEL_ERROR = 0.5  # half the position model's correction counts as unc
 #                             the directions (backlash looks like a load that varies over the travel, and that model
 #                             moved J by +3 % the wrong way) ...
 ONE_WAY_SIGMA = 2.0       # ... by more than this many sigmas (an arm's gravity is the same both ways)
+LOAD_HZ_MIN = 1.0         # a two-mass load's own resonance (against a held motor) is searched from here ...
+LOAD_HZ_PER_RATE = 0.2    # ... up to this fraction of the sampling rate and LOAD_HZ_MAX, in steps of LOAD_HZ_STEP
+LOAD_HZ_MAX = 60.0        # (stiffer couplings moved J by 0.4-1.4 %, within the uncertainty the other checks give)
+LOAD_HZ_STEP = 1.15       # then twice finer around the best (a coarse grid first: the scan runs while the drive
+#                           holds between moves, and the drive's watchdog waits for no fit)
+SCAN_RATE = 400.0         # the scan integrates the load over samples at most this often (and every window's ends)
+RESONANT_DAMPING = (0.015, 0.035, 0.08, 0.18)  # a coupling's damping ratios (seen from the load), DAMPING_STEP
+DAMPING_STEP, MAX_RESONANT_DAMPING = 2.3, 0.3  # apart, refined up to MAX_RESONANT_DAMPING (beyond: a lag)
+LAG_DAMPING = (0.5, 0.9)  # heavily damped 'couplings': a lag, which rigid loads show too (the speed's filter and
+#                           the loop's transients): at 57600-115200 baud they left 0.2-0.7 of the rigid fit's residual
+CANDIDATE_SHARE = 0.95    # the coarse grid's best resonance is refined where it leaves at most this share ...
+RESONANCE_SHARE = 0.8     # ... and counts where it then leaves at most this share of the residual the rigid and the
+#                           lag models leave (rigid loads: 1.2 and more; two-mass loads at 115200: 0.01-0.33, at
+#                           57600 with torque read in whole % (IS620P): 0.7-0.8; backlash: 0.8 and more, refused) ...
+RESONANCE_F = 30.0        # ... and the improvement is this many times what two free parameters get from noise
 MIN_SUBSET_WINDOWS = 6
 BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
 #                           chance: chi2/dof of 2.25 over 2-3 subsets happens one time in ten on a rigid load)
@@ -109,8 +135,16 @@ def assess(fit: FitData) -> Verdict:
         why.append(f"load varies over the travel (load torque changes by {position[1]:.0f} % of rated torque: an "
                    "arm or a gravity axis on a gear?)")
         j, j_std, resid = _take(fit, x, (j, j_std, resid), POSITION_MODEL_ERROR if position[2] else 0.0)
-    spring = _compliance_model(fit, x, j, j_std)
-    if spring is not None and spring.strong:
+    mass = _two_mass(fit, x)
+    spring = None if mass is not None else _compliance_model(fit, x, j, j_std)
+    if mass is not None:
+        why.append(f"resonance near {mass.hz:.0f} Hz: the load follows the motor through a compliant coupling")
+        # The fit's own uncertainty misses how far the two-mass model is from the machine: a third of the change
+        # it makes counts (20 Hz couplings at 115200 baud: 0.04-0.3 of a 4-31 % change left). The load's speed is
+        # the motor's low-passed, its noise mostly filtered out: no errors-in-variables correction.
+        j, j_std, resid = _take(replace(fit, y=mass.y, eiv=np.zeros_like(fit.eiv)), mass.x, (j, j_std, resid),
+                                1 / MODEL_ERROR_DIVISOR)
+    elif spring is not None and spring.strong:
         why.append(f"resonance or torque ripple near {spring.hz:.0f} Hz: the load follows the motor through a "
                    "compliant coupling (or a long shaft, cogging)")
         # The quasi-static spring term is approximate: a third of its correction counts as uncertain (a 20 Hz
@@ -257,6 +291,68 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     unresolved = math.sqrt(max(0.0, float(std[0]) ** 2 - float(base[1][0]) ** 2)) if base is not None else 0.0
     strong = z < -COMPLIANCE_SIGMA and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
     return _Spring(col[:, None], math.sqrt(ratio / -b) / (2 * math.pi), z, strong, unresolved)
+
+
+@dataclass(frozen=True)
+class _TwoMass:
+    hz: float              # the motor-side resonance (torque to motor speed)
+    x: np.ndarray          # the regression with the load's speed change in place of the motor's
+    y: np.ndarray          # the torque integrals less what turns the motor alone (Jm times the deflection's rate)
+
+
+def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
+    """The two-mass model where the motor speed carries a resolvable resonance of its load, else None.
+
+    Through a spring and a damper the load's speed wL is the motor's w through a second-order low-pass at the load's
+    own resonance fa; with the motor's inertia Jm known, the momentum balance over a window is
+    J * delta wL = int T - Jm * (delta w - delta wL) - friction. The rigid fit absorbs the missing deflection rate
+    as inertia (a 20 Hz coupling at ratio 2 and 115200 baud: +7 %, with a quasi-static spring term at 2 sigmas).
+    fa and the damping are searched on a grid; heavily damped 'couplings' (a lag) are the reference it must beat."""
+    rate, ratio = _rate(fit), float(fit.theta[0]) / fit.jm - 1.0
+    top = min(LOAD_HZ_PER_RATE * rate, LOAD_HZ_MAX)
+    if ratio <= MIN_COMPLIANT_RATIO or top <= LOAD_HZ_MIN * LOAD_HZ_STEP:
+        return None
+    hz = np.exp(np.arange(math.log(LOAD_HZ_MIN), math.log(top), math.log(LOAD_HZ_STEP)))
+    grid_hz, grid_z = (a.ravel() for a in np.meshgrid(hz, RESONANT_DAMPING + LAG_DAMPING, indexing="ij"))
+    j, rss, rss0 = _follower_fits(fit, x, grid_hz, grid_z)
+    resonant = grid_z < min(LAG_DAMPING)
+    b = int(np.flatnonzero(resonant)[np.argmin(rss[resonant])])
+    reference = min(rss0, float(np.min(rss[~resonant])))
+    if rss[b] > CANDIDATE_SHARE * reference:
+        return None
+    best = (float(grid_hz[b]), float(grid_z[b]), float(j[b]), float(rss[b]))
+    for spread_hz, spread_z in ((LOAD_HZ_STEP, DAMPING_STEP), (LOAD_HZ_STEP ** (1 / 3), DAMPING_STEP ** (1 / 3))):
+        near_hz, near_z = (a.ravel() for a in np.meshgrid(
+            best[0] * spread_hz ** np.linspace(-1, 1, 7),
+            np.minimum(best[1] * spread_z ** np.linspace(-1, 1, 7), MAX_RESONANT_DAMPING), indexing="ij"))
+        j, rss, _rss0 = _follower_fits(fit, x, near_hz, near_z)
+        b = int(np.argmin(rss))
+        if rss[b] < best[3]:
+            best = (float(near_hz[b]), float(near_z[b]), float(j[b]), float(rss[b]))
+    dof = max(1, x.shape[0] - x.shape[1] - 2)
+    if not (best[3] <= RESONANCE_SHARE * reference and (reference - best[3]) / 2 > RESONANCE_F * best[3] / dof
+            and best[2] > 0):
+        return None
+    dwl = _window_changes(fit, np.array(best[:1]), np.array(best[1:2]))[:, 0]
+    y = fit.y - fit.jm * (fit.x[:, 0] - dwl)
+    return _TwoMass(best[0] * math.sqrt(best[2] / fit.jm), np.column_stack([dwl, x[:, 1:]]), y)
+
+
+def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
+    """(J, residual sum of squares) of the two-mass model at each (hz, damping) of the load, and the rigid fit's
+    residual sum of squares (plain least squares: a ranking, the chosen model is refitted)."""
+    dwl = _window_changes(fit, hz, damping)
+    dw = fit.x[:, 0]
+    y = fit.y[:, None] - fit.jm * (dw[:, None] - dwl)
+    j, rss = projected_fits(dwl, y, x[:, 1:])
+    _j0, rss0 = projected_fits(dw[:, None], fit.y[:, None], x[:, 1:])
+    return j, rss, float(rss0[0])
+
+
+def _window_changes(fit: FitData, hz: np.ndarray, damping: np.ndarray) -> np.ndarray:
+    """The load's speed change over each window (rows) for each (hz, damping) (columns)."""
+    return follower_changes(fit.t, fit.w, fit.starts, fit.ends, hz, damping, SCAN_RATE)
 
 
 def _rate(fit: FitData) -> float:

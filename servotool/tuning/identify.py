@@ -150,6 +150,7 @@ class Identifier:
         return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)
 
 
+FIT_LEAD_S = 1.0      # the dead-man is fed before an estimate between moves as if it took up to this long
 REST_RAMPS = 0.5      # the axis rests this many ramp times (at least two samples) between moves
 
 
@@ -180,14 +181,29 @@ class _HostRun:
         # speed loop configured for a fraction of the real inertia lags its ramps by tens of ms, more with high
         # friction (the integral winds up at breakaway); the stop guard adds the travel of that lag.
         self.lag_s = 0.0
+        # The longest time between two samples seen so far (rest check, moves): the guard must foresee a check
+        # that comes that late. A host stalls (a loaded laptop, a scheduler's 16 ms tick, a USB adapter's latency
+        # timer) and an axis at 900 rpm covers 0.2 rev in 13 ms: more than the band leaves.
+        self.gap_s = rest.longest_gap_s if rest is not None else 0.0
+        self.fit_s = 0.0      # the longest estimate between moves so far (host time)
 
-    def _beat(self) -> None:
+    def _beat(self, lead_s: float = 0.0) -> None:
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
         # take samples' time on a slow line.
         bound = self.jogger.dead_man
         if bound is None or bound.bounded:
             # Before the next call: a sample, a position read, the alarm check and a move's settings at most.
-            self.jogger.keep_alive(lead_s=4.0 * self.sampler.interval())
+            self.jogger.keep_alive(lead_s=4.0 * self.sampler.interval() + lead_s)
+
+    def _estimate_between_moves(self, settings: EstimatorSettings) -> InertiaEstimate:
+        """An estimate while the drive holds between moves: the dead-man is fed first for as long as a fit may take
+        (twice the longest so far; the two-mass scan makes one tens of ms, more on a busy host, against DSX7E's
+        500 ms watchdog)."""
+        self._beat(lead_s=max(FIT_LEAD_S, 2.0 * self.fit_s))
+        start = self.timing.now()
+        est = self.ident._estimate(settings, self.torque_limit, self.sampler.rate())
+        self.fit_s = max(self.fit_s, self.timing.now() - start)
+        return est
 
     def sample(self) -> None:
         try:
@@ -197,6 +213,11 @@ class _HostRun:
                                  "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel"
                                  ) from None
 
+    def _sample_timed(self) -> None:
+        """A sample inside a move, its gap from the one before kept when it is the longest yet."""
+        self.sample()
+        self.gap_s = max(self.gap_s, self.sampler.interval())
+
     def _must_stop(self, direction: int, speed: float) -> bool:
         """Whether the stopping distance (the ramp's, stretched as the pilot showed, plus the travel until a stop
         command can act and the loop's lag) would carry the axis out of its band: drift (gravity, overshoot) must
@@ -205,8 +226,12 @@ class _HostRun:
             return False
         s = self.sampler
         v = abs(s.trace.speed[-1])
-        stop_rev = self.stretch * v * v * self.ramp / (2 * speed) / 60.0
-        stop_rev += v / 60.0 * (2.0 * s.interval() + self.lag_s)
+        # Until a stop command acts: the next sample (as late as the longest gap yet: beyond the usual interval the
+        # ramp goes on accelerating) and the write, then the loop's lag.
+        late = max(0.0, self.gap_s - s.interval())
+        v_late = min(speed, v + speed / self.ramp * late)
+        stop_rev = v / 60.0 * (2.0 * s.interval() + self.lag_s) + (v + v_late) / 2.0 / 60.0 * late
+        stop_rev += self.stretch * v_late * v_late * self.ramp / (2 * speed) / 60.0
         lo, hi = self.band
         return s.pred + stop_rev > hi if direction > 0 else s.pred - stop_rev < lo
 
@@ -219,15 +244,17 @@ class _HostRun:
         jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
                      self.ramp if self.band is not None else None)
         start = self.timing.now()
+        self.sample()
         while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
-            self.sample()
+            self._sample_timed()
             if self._must_stop(direction, speed):
                 break
         jogger.command(0)
         stop = self.timing.now()
         at_stop, v_stop = s.pred, abs(trace.speed[-1]) if trace.speed else 0.0
+        self.sample()          # after the stop's own writes: no stall
         while self.timing.now() - stop < 3 * self.ramp + 0.5:
-            self.sample()
+            self._sample_timed()
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
                 break
         # At rest for two samples and, where the next move's settings go in fewer requests (Mover.folds), half a
@@ -264,7 +291,7 @@ class _HostRun:
             excursion, pk = self.move(direction, pilot)
             peak = max(peak, pk)
         if hold.active:
-            hold.after_pilot(self.ident._estimate(pilot_settings(settings), self.torque_limit, self.sampler.rate()))
+            hold.after_pilot(self._estimate_between_moves(pilot_settings(settings)))
         nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
         limit_rev = plan.travel_limit_rev
         lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
@@ -314,7 +341,7 @@ class _HostRun:
             if plan.adaptive and rep >= 2:
                 if s.elapsed() + cycle_s > TIME_BUDGET_S:
                     break
-                est = self.ident._estimate(settings, self.torque_limit, rate=s.rate())
+                est = self._estimate_between_moves(settings)
                 if est.ok and est.j_std_kgm2 <= 0.5 * settings.max_rel_uncertainty * est.j_total_kgm2:
                     break
             base = self.ramp

@@ -41,6 +41,9 @@ TABLES = [
     ("--port", "sim", "monitor", "--once"),
     ("--port", "sim", "alarm", "history"),
     ("sim", "show"),
+    ("-P", "is620p", "param", "find", "speed"),
+    ("--port", "sim", "raw", "read", "0x2004"),
+    ("--port", "sim", "param", "diff", "--factory"),
 ]
 
 
@@ -111,3 +114,17 @@ def test_progress_shows_a_bar_with_time_left_on_a_terminal_only(monkeypatch):
     monkeypatch.setattr(render, "err", render.Console(file=io.StringIO(), force_terminal=False))
     with render.progress("reading", 10) as advance:     # piped: nothing, and advancing is harmless
         advance(3)
+
+
+def test_the_gains_table_names_entries_not_roles_and_fits_80_columns(cli):
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--rigidity", "14", env=NARROW)
+    assert r.code == 0, r.err
+    assert "Speed loop gain" in r.out and "speed_loop_gain" not in r.out
+    assert _widest(r.out) <= 80 and (_name_width(r.out) or 0) >= render.NAME_MIN
+
+
+def test_the_levels_tried_by_tune_gains_are_a_table_at_80_columns(cli):
+    r = cli("--port", "sim", "tune", "gains", "--yes", "--from", "16", "--to", "17", env=NARROW)
+    assert r.code == 0, r.err
+    assert _widest(r.out) <= 80
+    assert any(line.startswith("│ 16") for line in r.out.splitlines()), r.out     # a row, not a block per level

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -33,6 +33,8 @@ def root():
                                                                      "--unit", "3"]),      # serve's own options
     (["alarm", "--json", "show", "--port", "sim"], ["--port", "sim", "alarm", "show", "--json"]),
     (["param", "get", "--", "--port"], ["param", "get", "--", "--port"]),
+    (["--json", "--port", "sim", "param", "get", "Pn004"], ["--port", "sim", "param", "get", "--json", "Pn004"]),
+    (["-q", "--json", "alarm", "show"], ["-q", "alarm", "show", "--json"]),
 ])
 def test_global_options_after_the_sub_command_are_moved_before_it(root, given, hoisted):
     assert hoist_globals(root, given) == hoisted
@@ -49,6 +51,26 @@ def test_options_after_the_sub_command_work_end_to_end(cli):
 def test_help_is_printed_once(cli, args):
     r = cli(*args)
     assert (r.out + r.err).count("Usage:") == 1
+
+
+def test_a_mistyped_command_gets_the_close_ones(cli):
+    r = cli("parm", "get", "Pn004")
+    assert r.code == 2 and "No such command 'parm'. Did you mean 'param'" in r.err
+    r = cli("param", "gt", "Pn004")
+    assert r.code == 2 and "Did you mean 'get'?" in r.err
+
+
+def test_completion_options_belong_to_the_root_help_only(cli):
+    assert "--install-completion" in cli("--help").out
+    for command in ("scan", "jog", "monitor"):
+        r = cli(command, "--help")
+        assert r.code == 0 and "Usage:" in r.out and "--install-completion" not in r.out
+
+
+def test_the_cli_module_runs_as_a_script_too(cli):
+    r = subprocess.run([sys.executable, "-m", "servotool.cli.main", "--version"], capture_output=True, text=True,
+                       cwd=ROOT, timeout=60)
+    assert r.returncode == 0 and r.stdout.startswith("servotool ")
 
 
 def test_with_json_an_error_is_a_json_object_too(cli):
@@ -75,10 +97,24 @@ def test_piped_monitor_streams_lines_and_ctrl_c_exits_130(sim_dir):
         first = proc.stdout.readline()          # arrives while the command still runs: line-buffered
         assert '"Un000"' in first and '"units"' in first
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
+        rest, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
     assert proc.returncode == 130 and "servotool: interrupted" in err
+    lines = [json.loads(line) for line in (first + rest).splitlines()]     # still JSON lines, the error too
+    assert lines[-1]["error"]["exit_status"] == 130
+
+
+def test_sim_serve_at_ctrl_c_stops_and_exits_130(sim_dir):
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert "serving on" in proc.stderr.readline()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and "simulator stopped" in err
 
 
 def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
@@ -87,12 +123,13 @@ def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
                             env={**os.environ, "COLUMNS": "100"})
     try:
         assert "SIMULATED" in proc.stderr.readline()
-        time.sleep(2)                           # sampling by now
+        first = proc.stdout.readline()          # each sample a line as it comes, through the pipe
+        assert " s  Un000 " in first and first.strip().endswith("rpm"), first
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
-    assert proc.returncode == 130 and "Un000" in out and "servotool: interrupted" in err
+    assert proc.returncode == 130 and "│ Un000 │ Motor speed" in out and "servotool: interrupted" in err
 
 
 def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_runs(cli):
@@ -100,3 +137,15 @@ def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_ru
     r = cli("--port", "sim", "monitor", "--once", "--csv", "--json")
     assert r.code == 2 and "'--json' looks like an option" in r.err and "Traceback" not in r.err
     assert not (Path(__file__).resolve().parents[2] / "--json").exists()     # the tests run in the repository
+
+
+def test_quiet_keeps_results_and_errors(cli, tmp_path):
+    r = cli("-q", "--port", "sim", "jog", "--speed", "100", "--time", "0.2")
+    assert r.code == 0 and "JOG done: peak" in r.err and "SIMULATED" not in r.err        # the banner goes
+    assert "if this program stops" not in r.err                      # progress words go
+    (tmp_path / "axis-1.yaml").write_text("taken\n")
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nprofile: dsx7e\nsteps:\n  - backup: axis-{unit}.yaml\n")
+    r = cli("-q", "run", str(plan), "--yes")
+    assert r.code == 2 and "plan FAILED" in r.out
+    assert "FAIL unit 1 step 1 (backup, line 4):" in r.err and "axis-1.yaml exists" in r.err     # why, though quiet

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import csv
 import io
+import os
+import subprocess
+import sys
+
+import pytest
 
 
 def test_find_searches_codes_names_and_descriptions_without_a_drive(cli):
@@ -15,6 +20,8 @@ def test_find_searches_codes_names_and_descriptions_without_a_drive(cli):
     assert [row["code"] for row in r.json()] == ["H08-00"]
     r = cli("param", "find", "monitor", "speed", "--port", "sim", "--json")     # Un entries too
     assert "Un000" in [row["code"] for row in r.json()]
+    r = cli("-P", "sd25", "param", "find", "CCW", "--json")          # in Po001's description only
+    assert [row["code"] for row in r.json()] == ["Po001"]
 
 
 def test_diff_factory_compares_the_drive_with_its_defaults(cli):
@@ -46,6 +53,7 @@ def test_a_csv_backup_edited_in_a_spreadsheet_restores(cli, tmp_path):
     r = cli("--port", "sim", "param", "restore", str(path), "--yes")
     assert r.code == 0, r.err
     assert "1 parameter restored" in r.out and "no checksum" in r.err
+    assert "interrupted" not in r.err           # the restore's own journal record is not taken for a dead one's
     assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 22.5
 
 
@@ -77,3 +85,48 @@ def test_shell_completion_of_codes_groups_and_profiles(cli):
     assert _complete(cli, "servotool -P s") == ["sd25", "sdc"]
     assert "gain" in _complete(cli, "servotool param list --group g")
     assert "Pn101=" in _complete(cli, "servotool param set Pn10")
+
+
+def _stderr_on_a_terminal(*args: str) -> str:
+    """Run servotool with stderr on a pseudo-terminal (where progress bars show); what it wrote there."""
+    pty = pytest.importorskip("pty")
+    master, slave = pty.openpty()
+    subprocess.run([sys.executable, "-m", "servotool", *args], stdout=subprocess.DEVNULL, stderr=slave,
+                   env={**os.environ, "COLUMNS": "100"}, timeout=60, check=False)
+    os.close(slave)
+    seen = b""
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:          # the other end is closed: all read
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    return seen.decode(errors="replace")
+
+
+def test_diff_and_restore_show_progress_while_reading_the_drive(cli, tmp_path):
+    backup = tmp_path / "axis.yaml"
+    cli("--port", "sim", "param", "backup", "-o", str(backup))
+    cli("--port", "sim", "param", "set", "Pn101=25")
+    assert "reading the drive" in _stderr_on_a_terminal("--port", "sim", "param", "diff", "--factory")
+    shown = _stderr_on_a_terminal("--port", "sim", "param", "restore", str(backup), "--yes")
+    assert "automatic backup, then writing" in shown and "109/109" in shown      # 108 read, 1 written
+
+
+def test_raw_write_on_a_real_port_asks_first(cli):
+    from servotool.model.loader import load_profile
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.server import EmbeddedSim
+
+    line = EmbeddedSim([build_drive(load_profile("dsx7e"), 1, persist=False)])
+    try:
+        r = cli("--port", line.port, "-P", "dsx7e", "raw", "write", "0x2004=300", input="")
+        assert r.code == 2 and "needs confirmation" in r.err and "Pn004" in r.err
+        assert cli("--port", line.port, "-P", "dsx7e", "raw", "read", "0x2004", "--json").json()[0]["value"] == 250
+        r = cli("--port", line.port, "-P", "dsx7e", "raw", "write", "0x2004=300", "--yes")
+        assert r.code == 0 and "verified" in r.out
+    finally:
+        line.close()

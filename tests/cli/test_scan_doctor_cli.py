@@ -20,7 +20,7 @@ def line():
 def test_scan_finds_two_drives_table_and_json(cli, line):
     r = cli("scan", "--port", line, "--units", "1-5")
     assert r.code == 0, r.err
-    rows = [ln for ln in r.out.splitlines() if line in ln]
+    rows = [ln for ln in r.out.splitlines() if line in ln and "│" in ln]       # table rows, not the title
     assert len(rows) == 2 and "sdc" in rows[0] and "SDC" in rows[0] and "4007" in rows[0]
     assert "is620p" in rows[1] and "IS620P" in rows[1]
     r = cli("scan", "--port", line, "--units", "1-5", "--json")
@@ -53,3 +53,12 @@ def test_doctor_counts_failures_of_a_silent_unit(cli, line):
     assert r.code == 0, r.err
     data = r.json()
     assert data["failures"] == 3 and data["error_rate"] == 1.0 and data["rtt_ms"] is None
+
+
+def test_scan_table_fits_80_columns_one_row_per_drive(cli, line):
+    r = cli("scan", "--port", line, "--units", "1-5", env={"COLUMNS": "80"})
+    assert r.code == 0, r.err
+    lines = r.out.splitlines()
+    assert max(len(ln) for ln in lines) <= 80 and line in lines[0]        # the port is named in the title
+    rows = [ln for ln in lines if "is620p" in ln]
+    assert len(rows) == 1 and "IS620P" in rows[0]                         # a table row, not a block per drive

@@ -4,11 +4,16 @@ simulator); bad input is refused in one line before the port opens."""
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
 from servotool.ops.trace_file import read_table
 
+ROOT = Path(__file__).resolve().parents[2]
 NO_PORT = ("--port", "/dev/nonexistent", "--profile", "dsx7e")
 
 
@@ -34,6 +39,7 @@ def test_a_trace_as_json_and_a_trigger_that_never_fires(cli):
     assert r.code == 0, r.err
     cap = r.json()["captures"][0]
     assert cap["samples"] == 5 and cap["values"]["Un000"]["unit"] == "rpm" and cap["rate_hz"] > 0
+    assert all(type(v) is int for v in cap["values"]["Un000"]["values"])      # rpm in steps of 1: -2, not -2.0
     r = cli("--port", "sim", "trace", "Un000", "--trigger", "Un000>1000", "--timeout", "0.3")
     assert r.code == 1 and "the trigger did not fire within --timeout; Un000 ranged" in r.err
     assert "Traceback" not in r.err
@@ -107,3 +113,17 @@ def test_the_monitor_chart_is_readable_at_80_columns_with_every_entry_in_a_legen
     for label in ("Un000 [rpm]", "Un001 [rpm]", "Un002 [%]"):
         assert label in text
     assert "30 samples" in lines[0] and "not drawn" not in text           # title; two units fit in 30 rows
+
+
+def test_ctrl_c_writes_the_captures_taken_and_exits_130(sim_dir):
+    proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "trace", "Un000", "--samples", "20",
+                             "--repeat", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        while "capture 1:" not in proc.stderr.readline():      # one capture taken (--repeat 0: until Ctrl-C)
+            assert proc.poll() is None
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and "servotool: interrupted" in err and "did not fire" not in err
+    assert out.startswith("# servotool trace") and "Un000" in out

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 from servotool.cli import render
 from servotool.cli.messages import error_text, plain
 from servotool.config import ConnectOptions
@@ -29,6 +31,9 @@ def test_a_missing_role_is_worded_as_what_the_user_can_do():
     text = error_text(exc, ConnectOptions())
     assert "role" not in text and "alarm reset" in text and "panel" in text
     assert "role 'alarm_reset'" in error_text(exc, ConnectOptions(), verbose=True)
+    for role, words in (("alarm_history_1", "the alarm history of"),
+                        ("inertia_id", "the inertia identification function of")):
+        assert words in error_text(MissingRole("x", role, "sdc"), ConnectOptions())
 
 
 def test_unknown_code_suggests_and_the_fix_command_keeps_the_connection_options(cli):
@@ -74,3 +79,56 @@ def test_cautions_are_one_line_each_unless_explained(capsys):
     finally:
         render.Verbosity.explain = False
     assert "keeps running" in capsys.readouterr().err
+
+
+def test_a_dead_man_caution_is_one_line_without_manual_lines(capsys):
+    render.caution(["the dead-man (segment) relies on IS620P CANopen manual L3426-3438 (H11 segment parameters), "
+                    "L3164-3166; is620p.md L477-491; unverified: how a segment is started is the general manual's"])
+    assert capsys.readouterr().err.splitlines()[0] == \
+        "servotool: caution: the dead-man (segment) is not confirmed by the manual"
+
+
+def test_warnings_leave_manual_lines_to_verbose(capsys, monkeypatch):
+    text = "not saved to EEPROM (store them with Sn-SEt; its mechanism is not printed, L417-419, L844-874)"
+    render.warn(text)
+    assert capsys.readouterr().err.strip() == \
+        "servotool: warning: not saved to EEPROM (store them with Sn-SEt; its mechanism is not printed)"
+    monkeypatch.setattr(render.Verbosity, "level", 1)
+    render.warn(text)
+    assert "L417-419, L844-874" in capsys.readouterr().err
+
+
+def test_a_whole_digit_entry_carries_its_fields_meanings_in_json(cli):
+    r = cli("--port", "sim", "-P", "sd25", "param", "get", "Po001", "--json")
+    assert r.code == 0, r.err
+    row = r.json()[0]
+    assert row["fields"] == {"Y": 1, "X": 21}
+    assert row["meanings"] == {"Y": "CCW seen from the shaft", "X": "bus"}
+
+
+def test_a_fields_meaning_is_accepted_by_name(cli):
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po001.X=internal speed")
+    assert r.code == 0, r.err
+    assert r.out.splitlines() == ["Po001 (Control mode and forward direction): d 1 21 -> d 1 0 [takes effect after a "
+                                  "power cycle]", "1 value stored in EEPROM"]
+    r = cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po001.X=bsu")
+    assert r.code == 2 and "none of 0=internal speed" in r.err and "did you mean bus" in r.err
+
+
+def test_what_a_killed_restore_left_is_told_with_quiet_and_the_users_options(cli, sim_dir, tmp_path):
+    from servotool.files import backup_dir
+    from servotool.ops.journal import journal_dir, port_key
+
+    auto = tmp_path / "auto.yaml"
+    assert cli("--port", "sim", "param", "backup", "-o", str(auto)).code == 0
+    assert cli("--port", "sim", "param", "set", "Pn101=25").code == 0       # the dead restore's one write
+    assert journal_dir() == backup_dir() / "journal"
+    journal_dir().mkdir(parents=True, exist_ok=True)
+    record = journal_dir() / f"{port_key(f'sim:{sim_dir.resolve()}')}-unit1.json"
+    record.write_text(json.dumps({"op": {"name": "restore", "auto_backup": str(auto), "targets": {"Pn101": 250}},
+                                  "pid": 1}))
+    r = cli("-q", "--port", "sim", "param", "get", "Pn004")
+    assert r.code == 0, r.err
+    assert "a restore (pid 1) was interrupted after writing 1 of 1 entry" in r.err
+    assert f"'servotool --port sim param restore {auto}'" in r.err
+    assert not record.exists()

@@ -66,8 +66,10 @@ def test_numbers_with_an_exponent_or_in_hex_are_no_units():
 
 def test_a_value_in_another_unit_is_refused_naming_the_right_one():
     entry = load_profile("dsx7e").entry("Pn027")
-    with pytest.raises(UsageError, match=r"'3000Hz' is in Hz, but Pn027 is in rpm"):
+    with pytest.raises(UsageError, match=r"'3000Hz' is in Hz, but Pn027 is in rpm \(e.g. 3000rpm\)"):
         parse_value(entry, "3000Hz")
+    with pytest.raises(UsageError, match=r"'3krpm' is in krpm, but Pn027 is in rpm \(give it in rpm\)"):
+        parse_value(entry, "3krpm")                 # not 'e.g. 3rpm'
 
 
 def test_enum_names_whole_or_a_unique_start_and_typos_get_suggestions():

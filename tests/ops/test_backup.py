@@ -133,7 +133,7 @@ def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
         now = d.read_one(victim.code)
         assert now.raw == before[victim.code] + 1
         assert (f"rollback incomplete (could not undo {victim.code} ({victim.code}: wrote" in str(exc.value))
-        assert f"1 entries differ from the automatic backup {auto_dir}" in str(exc.value)
+        assert f"1 entry differs from the automatic backup {auto_dir}" in str(exc.value)
         assert f"{victim.code} is {now.text}, was " in str(exc.value)
         assert exc.value.next_step == "restore"         # the CLI words it with the user's connection options
         auto = exc.value.auto_backup

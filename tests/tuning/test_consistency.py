@@ -3,6 +3,7 @@ slow line, and the off-model rows that were accepted outside their 3 sigma now c
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -23,8 +24,14 @@ def test_a_rigid_load_on_a_slow_line_is_not_refused_for_a_resonance(sim_dir, pro
                                                                      viscous, gravity, noise, seed):
     """These were refused 'inertia too uncertain (2.1-2.5 %): perhaps a resonance near 41-43 Hz' although the
     plant is rigid: the spring term's hint fired at half a sigma, and its column is the shape of the integration's
-    own curvature correction. Now accepted, with the truth inside the stated 3 sigma and no off-model note."""
-    run = identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
+    own curvature correction. Now accepted, with the truth inside the stated 3 sigma and no off-model note, or (the
+    SD25 machine since the stop guard foresees host stalls: its moves are a little shorter) refused as too uncertain
+    without blaming a resonance."""
+    try:
+        run = identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
+    except IdentificationRefused as exc:
+        assert "too uncertain" in str(exc) and "resonance" not in str(exc), str(exc)
+        return
     est = run.identified.estimate
     assert est is not None and est.ok
     assert abs(run.ratio - ratio) <= 3 * est.ratio_std
@@ -57,3 +64,18 @@ def test_a_rigid_load_too_uncertain_anyway_is_not_blamed_on_a_resonance(sim_dir,
         identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
     reason = str(caught.value)
     assert "too uncertain" in reason and "resonance" not in reason, reason
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_a_damped_two_mass_at_a_fast_line_is_refused_for_its_resonance(sim_dir, seed):
+    """A 20 Hz coupling with damping 0.2 at ratio 2 and 115200 baud was accepted +7.2..7.5 % off with a stated
+    3 sigma of 4.5-5.1 %: the rigid fit took the load's lag behind the motor for inertia, and the quasi-static spring
+    term put the resonance at 45-66 Hz at 2 sigmas. The two-mass model finds it near 20 Hz; what it changes is too
+    uncertain to accept, so the refusal names the resonance (or the truth lies within the stated 3 sigma)."""
+    outcome, est, why = identify(2.0, {"resonance_hz": 20.0, "resonance_damping": 0.2}, 115200, seed=seed)
+    assert est is not None, why
+    if outcome == "refused":
+        hz = re.search(r"resonance near (\d+) Hz", why)
+        assert hz is not None and 15 <= int(hz.group(1)) <= 25, why
+    else:
+        assert abs(est.load_ratio - 2.0) <= 3 * est.ratio_std, (outcome, est.load_ratio, est.ratio_std, why)

@@ -10,7 +10,7 @@ from servotool.clock import VirtualClock
 from servotool.drive import Drive, coalesce_reads
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
-from servotool.sim.virtual import TURNAROUND_S, VirtualLink, make_motion_setup, wire_time
+from servotool.sim.virtual import TURNAROUND_S, HostStalls, VirtualLink, make_motion_setup, wire_time
 from servotool.tuning.friction import friction_report
 from servotool.tuning.gain_search import GainSearchFailed, search_gains
 from servotool.tuning.gain_writes import MarginRefused
@@ -18,7 +18,7 @@ from servotool.tuning.identify import IdentificationFailed, IdentificationRefuse
 from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
 
 
-def set_up(profile_id: str, baud: int = 115200, **machine: float):
+def set_up(profile_id: str, baud: int = 115200, stalls: HostStalls | None = None, **machine: float):
     """(simulated drive, host Drive, clock) of a drive with its motion setup made, on virtual time."""
     profile = load_profile(profile_id)
     clock = VirtualClock(100.0)
@@ -26,7 +26,7 @@ def set_up(profile_id: str, baud: int = 115200, **machine: float):
     sim.settings.update(**machine)
     sim.firmware.reconfigure()
     make_motion_setup(sim)
-    d = Drive(VirtualLink([sim], clock, baud), profile, 1)
+    d = Drive(VirtualLink([sim], clock, baud, stalls), profile, 1)
     d.dead_man_waived = True    # SD25 and SDC have no dead-man route (issue 15); these tests are about the estimate
     return sim, d, clock
 
@@ -179,3 +179,38 @@ def test_a_torque_read_in_whole_percent_is_not_trusted_beyond_its_steps(sim_dir)
         return
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - 10.0) <= 3 * est.ratio_std
+
+
+@pytest.mark.parametrize("ratio, seed", [(0.0, 2), (0.0, 3), (1.0, 2), (1.0, 4)])
+def test_a_host_that_stalls_does_not_carry_the_axis_past_its_travel(sim_dir, ratio, seed):
+    """DSX7E at its automatic speed (about 900 rpm, 0.2 rev of margin: 13 ms) on a host that stalls 10-50 ms before
+    2 % of its requests: the stop guard foresees a check as late as the longest gap it has seen (these runs went past
+    the 2 rev and stopped with 'travel limit reached'). A result too uncertain for the shortened moves is refused."""
+    _sim, d, clock = set_up("dsx7e", stalls=HostStalls(0.02, 0.05, seed), load_ratio=ratio, seed=seed)
+    try:
+        ident = tune_inertia(d, TuneRequest(dry_run=True), clock=clock).identified
+    except IdentificationRefused as exc:
+        ident = exc.result
+    assert ident.travel_used_rev <= 2.0
+
+
+def test_a_slow_fit_between_moves_does_not_starve_the_drives_watchdog(sim_dir, monkeypatch):
+    """tune inertia fits between moves while DSX7E holds with its 500 ms watchdog (Pn620) running, and feeds it at
+    the last safe moment (a third of it spare): a fit of 0.3 s (the two-mass scan on a busy host) could start 0.32 s
+    after the last beat and the drive trip E25. The dead-man is fed before each such fit."""
+    from servotool.tuning.identify import Identifier
+    from servotool.tuning.preflight import active_alarm
+    sim, d, clock = set_up("dsx7e", load_ratio=4.0, seed=2)
+    d.dead_man_waived = False
+    fit, silent = Identifier._estimate, []
+
+    def slow_fit(self, *args, **kwargs):
+        silent.append(clock.now() - sim.firmware.last_host)
+        clock.advance(0.3)
+        return fit(self, *args, **kwargs)
+
+    monkeypatch.setattr(Identifier, "_estimate", slow_fit)
+    res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    assert res.ratio == pytest.approx(4.0, rel=0.1)
+    assert silent and max(silent[:-1]) <= 0.2, silent     # the last fit comes after the motion
+    assert active_alarm(d) is None
