@@ -83,9 +83,10 @@ def test_a_bare_motor_at_57600_is_accepted_within_its_3_sigma(sim_dir) -> None:
 
 
 def test_a_fine_reading_on_a_fast_line_gets_the_shorter_ramps_too(sim_dir) -> None:
-    """bench --profiles DSX7E 115200, machine 25 (load ratio 50, 1 % noise): refused 'inertia too uncertain (4.3 %)'
-    while its 0.1 s ramps (the floor, at 300 samples/s) kept the acceleration torque near the noise."""
-    run = identify_once(50.0, 0.05, 0.0, 0.01, 115200, seed=26, profile_id="dsx7e", viscous=0.0)
+    """bench --profiles DSX7E 115200, a machine of its second sample (draw seed 17, machine 21: load ratio 20,
+    1 % noise, gravity +20 %): refused 'inertia too uncertain (2.9 %)' while its 0.1 s ramps (the floor, at 300
+    samples/s) kept the acceleration torque weak against the noise."""
+    run = identify_once(20.0, 0.1, 0.2, 0.01, 115200, seed=22, profile_id="dsx7e", viscous=0.0005)
     est = run.identified.estimate
     assert est is not None and est.ok
-    assert abs(run.ratio - 50.0) <= 3 * est.ratio_std
+    assert abs(run.ratio - 20.0) <= 3 * est.ratio_std
