@@ -49,7 +49,12 @@ class Mover(Jogger):
         changes = [(e, old, new) for e, old, new in ((self.speed_entry, self.speed_param(),
                    self._speed_raw(self.speed_rpm)), (ramp, self._ramp_raw, ramp_raw)) if old != new]
         if changes and self.segments is not None and direction:
-            changes += self._folded_distance(changes, direction, ramp_ms, stop_after_s)
+            # The speed unchanged between a changed ramp and the displacement (IS620P H11-14 between H11-12/13 and
+            # H11-15: a dithered cycle) goes along, so that the three go in one request instead of three.
+            speed = self.speed_param()
+            bridged = changes if changes[0][0] is self.speed_entry else [(self.speed_entry, speed, speed), *changes]
+            fold = self._folded_distance(bridged, direction, ramp_ms, stop_after_s)
+            changes = changes + fold if not fold or bridged is changes else bridged + fold
         for result in write_changes(self.drive, changes):
             if result.entry is self.speed_entry:
                 self._speed_param_raw = result.new
