@@ -152,6 +152,7 @@ class Identifier:
 
 FIT_LEAD_S = 1.0      # the dead-man is fed before an estimate between moves as if it took up to this long
 REST_RAMPS = 0.5      # the axis rests this many ramp times (at least two samples) between moves
+STALL_RAMPS = 2.0     # a dithered ramp lasts at least this many of the longest gaps between samples
 
 
 class _HostRun:
@@ -322,10 +323,13 @@ class _HostRun:
         115200), by the same shorter ramps at the same speed: stronger accelerations for light loads, where the
         floor, not the samples a ramp needs, kept them weak (bench: 55 -> 59 of 60 accepted); on slower lines
         (DSX7E 19200: 53 -> 50, one travel trip) the planned ramps stay."""
+        # No shorter than twice the longest gap yet: a host stall must not take a whole ramp before the stop guard
+        # sees the axis again (bench/host_stalls.py).
+        floor = STALL_RAMPS * self.gap_s
         if self.coarse:
-            return dithered(self.ramp, speed, cycle, self.sampler.rate())
+            return dithered(self.ramp, speed, cycle, self.sampler.rate(), floor)
         if self.plan.ramp_s <= MIN_RAMP_S:
-            return dithered(self.ramp, speed, cycle, self.sampler.rate())[0], speed
+            return dithered(self.ramp, speed, cycle, self.sampler.rate(), floor)[0], speed
         return self.ramp, speed
 
     def cycles(self, speed: float, settings: EstimatorSettings) -> int:

@@ -58,11 +58,12 @@ def dither(cycle: int) -> float:
     return 1.0 - (1.0 - DITHER_MIN) * x
 
 
-def dithered(ramp_s: float, speed_rpm: float, cycle: int, samples_per_s: float) -> tuple[float, float]:
+def dithered(ramp_s: float, speed_rpm: float, cycle: int, samples_per_s: float,
+             min_ramp_s: float = 0.0) -> tuple[float, float]:
     """Ramp and speed of a dithered cycle: the ramp shortened by dither(cycle) (stronger, less travel) down to
-    MIN_SAMPLES_PER_RAMP samples and DITHER_MIN_RAMP_S, below that the speed lowered (weaker; a ramp of fewer samples
-    has no windows clear of its torque steps)."""
-    floor = max(DITHER_MIN_RAMP_S, MIN_SAMPLES_PER_RAMP / samples_per_s if samples_per_s > 0 else 0.0)
+    MIN_SAMPLES_PER_RAMP samples, DITHER_MIN_RAMP_S and min_ramp_s, below that the speed lowered (weaker; a ramp of
+    fewer samples has no windows clear of its torque steps)."""
+    floor = max(DITHER_MIN_RAMP_S, min_ramp_s, MIN_SAMPLES_PER_RAMP / samples_per_s if samples_per_s > 0 else 0.0)
     factor = dither(cycle)
     ramp = max(min(ramp_s, floor), ramp_s * factor)
     return ramp, speed_rpm * min(1.0, factor * ramp_s / ramp)

@@ -181,12 +181,15 @@ def test_a_torque_read_in_whole_percent_is_not_trusted_beyond_its_steps(sim_dir)
     assert est is not None and abs(res.ratio - 10.0) <= 3 * est.ratio_std
 
 
-@pytest.mark.parametrize("ratio, seed", [(0.0, 2), (0.0, 3), (1.0, 2), (1.0, 4)])
-def test_a_host_that_stalls_does_not_carry_the_axis_past_its_travel(sim_dir, ratio, seed):
-    """DSX7E at its automatic speed (about 900 rpm, 0.2 rev of margin: 13 ms) on a host that stalls 10-50 ms before
-    2 % of its requests: the stop guard foresees a check as late as the longest gap it has seen (these runs went past
-    the 2 rev and stopped with 'travel limit reached'). A result too uncertain for the shortened moves is refused."""
-    _sim, d, clock = set_up("dsx7e", stalls=HostStalls(0.02, 0.05, seed), load_ratio=ratio, seed=seed)
+@pytest.mark.parametrize("profile_id, baud, ratio, seed", [
+    ("dsx7e", 115200, 0.0, 2), ("dsx7e", 115200, 0.0, 3), ("dsx7e", 115200, 1.0, 2), ("dsx7e", 115200, 1.0, 4),
+    ("dsx7e", 115200, 10.0, 4), ("is620p", 57600, 1.0, 2)])     # the last two: in a dithered cycle's short ramp
+def test_a_host_that_stalls_does_not_carry_the_axis_past_its_travel(sim_dir, profile_id, baud, ratio, seed):
+    """At the automatic speed (DSX7E about 900 rpm: 0.2 rev of margin is 13 ms) on a host that stalls 10-50 ms before
+    2 % of its requests: the stop guard foresees a check as late as the longest gap it has seen, and a dithered
+    cycle's ramp lasts at least two such gaps (these runs went past the 2 rev and stopped with 'travel limit
+    reached'). A result too uncertain for the shortened moves is refused."""
+    _sim, d, clock = set_up(profile_id, baud, stalls=HostStalls(0.02, 0.05, seed), load_ratio=ratio, seed=seed)
     try:
         ident = tune_inertia(d, TuneRequest(dry_run=True), clock=clock).identified
     except IdentificationRefused as exc:
