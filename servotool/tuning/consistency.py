@@ -391,7 +391,7 @@ def _birge(j: float, j_std: float, dw: np.ndarray, resid: np.ndarray, labels: np
             continue
         js.append(j + float(dw[m] @ resid[m]) / info)
         sig.append(j_std * math.sqrt(total / info))
-    if len(js) < 2 or j_std <= 0:
+    if len(js) < 2 or not (0 < j_std < math.inf) or not math.isfinite(j):    # an unbounded fit: refused elsewhere
         return 1.0, 0.0
     a, s = np.asarray(js), np.asarray(sig)
     wts = 1.0 / s**2
