@@ -54,7 +54,7 @@ class Mover(Jogger):
             speed = self.speed_param()
             bridged = changes if changes[0][0] is self.speed_entry else [(self.speed_entry, speed, speed), *changes]
             fold = self._folded_distance(bridged, direction, ramp_ms, stop_after_s)
-            changes = changes + fold if not fold or bridged is changes else bridged + fold
+            changes = bridged + fold if fold else changes
         for result in write_changes(self.drive, changes):
             if result.entry is self.speed_entry:
                 self._speed_param_raw = result.new

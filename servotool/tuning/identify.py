@@ -323,14 +323,12 @@ class _HostRun:
         115200), by the same shorter ramps at the same speed: stronger accelerations for light loads, where the
         floor, not the samples a ramp needs, kept them weak (bench: 55 -> 59 of 60 accepted); on slower lines
         (DSX7E 19200: 53 -> 50, one travel trip) the planned ramps stay."""
+        if not self.coarse and self.plan.ramp_s > MIN_RAMP_S:
+            return self.ramp, speed
         # No shorter than twice the longest gap yet: a host stall must not take a whole ramp before the stop guard
         # sees the axis again (bench/host_stalls.py).
-        floor = STALL_RAMPS * self.gap_s
-        if self.coarse:
-            return dithered(self.ramp, speed, cycle, self.sampler.rate(), floor)
-        if self.plan.ramp_s <= MIN_RAMP_S:
-            return dithered(self.ramp, speed, cycle, self.sampler.rate(), floor)[0], speed
-        return self.ramp, speed
+        ramp, slower = dithered(self.ramp, speed, cycle, self.sampler.rate(), STALL_RAMPS * self.gap_s)
+        return ramp, slower if self.coarse else speed
 
     def cycles(self, speed: float, settings: EstimatorSettings) -> int:
         """The planned cycles (adaptive: until the estimate is precise enough, within the time budget)."""
