@@ -64,6 +64,7 @@ def identify(ratio: float, machine: dict[str, float], baud: int, seed: int, prof
     make_motion_setup(sim)
     fit_brake(sim.firmware.plant)
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
+    drive.dead_man_waived = True     # as --no-dead-man: SD25 and SDC have no dead-man route (the others keep theirs)
     try:
         r = tune_inertia(drive, TuneRequest(travel_rev=TRAVEL_REV, dry_run=True), clock=clock)
     except IdentificationRefused as exc:
