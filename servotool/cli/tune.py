@@ -14,8 +14,8 @@ from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.model.codec import eng_to_raw, raw_to_eng
-from servotool.model.profile import Entry, Profile
+from servotool.model.codec import as_held, raw_to_eng
+from servotool.model.profile import Profile
 from servotool.motion import deadman
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
@@ -44,14 +44,9 @@ def _rounded(value: float | None, decimals: int) -> float | None:
     return None if value is None or not math.isfinite(value) else round(value, decimals)
 
 
-def _entry_value(entry: Entry, value: float) -> float | int:
-    """A value as the entry holds it: to its resolution, an int where its scale is 1 (not 300.0 for 300 %)."""
-    return raw_to_eng(entry, eng_to_raw(entry, value, clamp=False))
-
-
 def _gains_json(changes: Any) -> list[dict[str, Any]]:
-    return [{"role": c.role, "code": c.entry.code, "old": _entry_value(c.entry, c.old),
-             "new": _entry_value(c.entry, c.new), "unit": c.entry.unit} for c in changes]
+    return [{"role": c.role, "code": c.entry.code, "old": as_held(c.entry, c.old),
+             "new": as_held(c.entry, c.new), "unit": c.entry.unit} for c in changes]
 
 
 def _step_json(response: step.StepResponse | None) -> dict[str, Any] | None:
@@ -216,7 +211,7 @@ def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:
     return {"coulomb_pct": _rounded(report.coulomb_pct, 2),
             "viscous_pct_at_rated_speed": _rounded(report.viscous_pct_at_rated, 2),
             "load_pct": _rounded(report.load_pct, 2),
-            "compensation": {s.entry.code: _entry_value(s.entry, s.value) for s in report.settings}}
+            "compensation": {s.entry.code: as_held(s.entry, s.value) for s in report.settings}}
 
 
 def _report(folder: Path, result: identify.Result, profile: Profile, res: tune.TuneResult | None,

@@ -67,6 +67,12 @@ def eng_to_raw(entry: Entry, eng: float, *, clamp: bool = True) -> int:
     return max(entry.min, min(entry.max, raw)) if clamp else raw
 
 
+def as_held(entry: Entry, eng: float) -> float | int | None:
+    """A computed value as the entry holds it: to its resolution, an int where the scale is 1 (-2, not -2.0; 300,
+    not 300.0); None where it is not finite (JSON has no NaN)."""
+    return raw_to_eng(entry, eng_to_raw(entry, eng, clamp=False)) if math.isfinite(eng) else None
+
+
 def decimals(entry: Entry) -> int:
     """Digits after the point implied by the scale (0.1 -> 1, 0.01 -> 2)."""
     if entry.scale >= 1:

@@ -14,7 +14,7 @@ from typing import Any
 
 from servotool.errors import UsageError
 from servotool.files import read_text, write_atomic
-from servotool.model.codec import eng_to_raw, raw_to_eng
+from servotool.model.codec import as_held
 from servotool.model.profile import Entry
 from servotool.ops.trace import Capture
 
@@ -74,13 +74,8 @@ def capture_json(cap: Capture, entries: list[Entry]) -> dict[str, Any]:
     return {"capture": cap.index, "samples": tm.samples, "pre_trigger_samples": cap.pre_samples,
             "rate_hz": _num(tm.rate_hz), "jitter_ms": _num(tm.jitter_ms), "max_interval_ms": _num(tm.max_gap_ms),
             "t_s": [round(t, 5) for t in cap.t],
-            "values": {e.code: {"unit": e.unit, "values": [_held(e, v) for v in cap.values[e.code]]}
+            "values": {e.code: {"unit": e.unit, "values": [as_held(e, v) for v in cap.values[e.code]]}
                        for e in entries}}
-
-
-def _held(entry: Entry, value: float) -> float | int | None:
-    """A sample as its entry holds it: an int where the scale is 1 (-2, not -2.0), else to the resolution."""
-    return raw_to_eng(entry, eng_to_raw(entry, value, clamp=False)) if math.isfinite(value) else None
 
 
 def _num(x: float | None) -> float | None:
