@@ -314,7 +314,8 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
         return None
     hz = np.exp(np.arange(math.log(LOAD_HZ_MIN), math.log(top), math.log(LOAD_HZ_STEP)))
     grid_hz, grid_z = (a.ravel() for a in np.meshgrid(hz, RESONANT_DAMPING + LAG_DAMPING, indexing="ij"))
-    j, rss, rss0 = _follower_fits(fit, x, grid_hz, grid_z)
+    j, rss = _follower_fits(fit, x, grid_hz, grid_z)
+    rss0 = float(projected_fits(fit.x[:, :1], fit.y[:, None], x[:, 1:])[1][0])      # the rigid fit's
     resonant = grid_z < min(LAG_DAMPING)
     b = int(np.flatnonzero(resonant)[np.argmin(rss[resonant])])
     reference = min(rss0, float(np.min(rss[~resonant])))
@@ -325,7 +326,7 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
         near_hz, near_z = (a.ravel() for a in np.meshgrid(
             best[0] * spread_hz ** np.linspace(-1, 1, 7),
             np.minimum(best[1] * spread_z ** np.linspace(-1, 1, 7), MAX_RESONANT_DAMPING), indexing="ij"))
-        j, rss, _rss0 = _follower_fits(fit, x, near_hz, near_z)
+        j, rss = _follower_fits(fit, x, near_hz, near_z)
         b = int(np.argmin(rss))
         if rss[b] < best[3]:
             best = (float(near_hz[b]), float(near_z[b]), float(j[b]), float(rss[b]))
@@ -339,15 +340,12 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
 
 
 def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, float]:
-    """(J, residual sum of squares) of the two-mass model at each (hz, damping) of the load, and the rigid fit's
-    residual sum of squares (plain least squares: a ranking, the chosen model is refitted)."""
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(J, residual sum of squares) of the two-mass model at each (hz, damping) of the load (plain least squares: a
+    ranking, the chosen model is refitted)."""
     dwl = _window_changes(fit, hz, damping)
-    dw = fit.x[:, 0]
-    y = fit.y[:, None] - fit.jm * (dw[:, None] - dwl)
-    j, rss = projected_fits(dwl, y, x[:, 1:])
-    _j0, rss0 = projected_fits(dw[:, None], fit.y[:, None], x[:, 1:])
-    return j, rss, float(rss0[0])
+    y = fit.y[:, None] - fit.jm * (fit.x[:, :1] - dwl)
+    return projected_fits(dwl, y, x[:, 1:])
 
 
 def _window_changes(fit: FitData, hz: np.ndarray, damping: np.ndarray) -> np.ndarray:
