@@ -53,11 +53,11 @@ class KeepAlive:
 
     def due(self, now: float | None = None) -> bool:
         """Whether a beat is due: interval_s has passed since the last write that kept the drive alive."""
-        return (self.clock.now() if now is None else now) - self.last >= self.interval_s
+        return self.due_after(self.interval_s, now)
 
-    def due_after(self, seconds: float) -> bool:
+    def due_after(self, seconds: float, now: float | None = None) -> bool:
         """Whether `seconds` have passed since the last write that kept the drive alive."""
-        return self.clock.now() - self.last >= seconds
+        return (self.clock.now() if now is None else now) - self.last >= seconds
 
     def sent(self) -> None:
         """A motion command just went out: the drive's watchdog counts it as a beat."""
