@@ -16,7 +16,7 @@ PACKAGE = "servotool"
 
 # Lowest first: a module imports only from its own layer and those below.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("servotool", "servotool.errors", "servotool.clock", "servotool.files"),
+    ("servotool", "servotool.errors", "servotool.clock", "servotool.files", "servotool.words"),
     ("servotool.model",),
     ("servotool.link",),
     ("servotool.config",),      # option layering: pure data over the model and port parsing (plans use it too)

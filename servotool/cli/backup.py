@@ -8,13 +8,14 @@ from typing import TYPE_CHECKING
 import typer
 
 from servotool.cli.common import JSON_OPT, confirm, drive, state
-from servotool.cli.render import count, emit_json, err, info, out, progress, table, warn
+from servotool.cli.render import emit_json, err, info, out, progress, table, warn
 from servotool.config import resolve
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
 from servotool.ops.params import select
+from servotool.words import count
 
 if TYPE_CHECKING:     # imported by the commands that use them: `param get` and `set` share this group
     from servotool.drive import Drive

@@ -14,11 +14,12 @@ from rich.text import Text
 
 from servotool.cli import complete
 from servotool.cli.common import drive, resolved
-from servotool.cli.render import count, emit_json_line, info, out, table
+from servotool.cli.render import emit_json_line, info, out, table
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
 from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
 from servotool.ops.trace_file import Series, TimeTable
+from servotool.words import count
 
 PLOT_SAMPLES = 300   # the scrolling chart shows this many of the latest samples
 PLOT_REFRESH_S = 0.2

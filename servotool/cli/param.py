@@ -9,7 +9,7 @@ import typer
 
 from servotool.cli import complete
 from servotool.cli.common import JSON_OPT, drive, state
-from servotool.cli.render import count, emit_json, info, out, progress, table, warn
+from servotool.cli.render import emit_json, info, out, progress, table, warn
 from servotool.config import resolve
 from servotool.drive import Reading
 from servotool.errors import UnknownName
@@ -17,6 +17,7 @@ from servotool.model.codec import format_field, format_value, get_field, json_va
 from servotool.model.lookup import class_name, search, suggest
 from servotool.ops import eeprom, params
 from servotool.ops.backup_csv import value_text
+from servotool.words import count
 
 app = typer.Typer(help="Read, set and list drive parameters.")
 

@@ -8,13 +8,14 @@ import typer
 
 from servotool.cli import complete
 from servotool.cli.common import JSON_OPT
-from servotool.cli.render import count, emit_json, out, table
+from servotool.cli.render import emit_json, out, table
 from servotool.errors import UnknownName
 from servotool.model.codec import field_range, format_value
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
 from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
 from servotool.model.profile import Entry, IdentityCheck, Profile
 from servotool.model.roles import sim_extensions
+from servotool.words import count
 
 app = typer.Typer(no_args_is_help=True, help="List, show and check drive profiles.")
 

@@ -231,11 +231,6 @@ def json_emitted() -> bool:
     return _emitted[0]
 
 
-def count(n: int, noun: str, plural: str | None = None) -> str:
-    """'1 parameter', '2 parameters'."""
-    return f"{n} {noun if n == 1 else plural or noun + 's'}"
-
-
 def table(*columns: str, title: str | None = None, drop: Sequence[str] | None = None) -> Grid:
     """A table of text cells (a rich Table where rich draws it); `drop` names the columns to give up first when it
     is too wide (default DROP_ORDER)."""

@@ -10,13 +10,14 @@ import typer
 
 from servotool.cli.common import notice_for, state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, count, emit_json, info, notice, out, trace_frame, warn
+from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame, warn
 from servotool.commission.plan import Plan, load_plan
 from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
 from servotool.config import Resolved, merge, options_from, resolve
 from servotool.errors import ServoError, UsageError
 from servotool.session import open_drives
+from servotool.words import count
 
 
 def run(

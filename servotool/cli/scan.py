@@ -8,8 +8,9 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from servotool.cli.common import JSON_OPT, state
-from servotool.cli.render import Verbosity, count, emit_json, err, info, out, table
+from servotool.cli.render import Verbosity, emit_json, err, info, out, table
 from servotool.ops import scan as scanning
+from servotool.words import count
 
 
 def _split(values: list[str] | None) -> list[str]:

@@ -12,6 +12,7 @@ from servotool.model.codec import format_value, json_value, parse_value, raw_to_
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup, params, restore
 from servotool.ops.eeprom import check_power_cycle, persistence
+from servotool.words import count
 
 
 class SetStep(StepType):
@@ -195,5 +196,5 @@ class SaveStep(StepType):
         with persistence(drive, save=True):
             for entry, raw in written:     # the same value again, now with the switch set to EEPROM
                 params.write_one(drive, entry, raw, raw)
-        return Outcome(f"{len(written)} value{'s' if len(written) != 1 else ''} stored in EEPROM",
+        return Outcome(f"{count(len(written), 'value')} stored in EEPROM",
                        {"stored": [e.code for e, _ in written]})

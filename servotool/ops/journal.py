@@ -29,6 +29,7 @@ from servotool.errors import DeviceError, ServoError
 from servotool.files import FileLock, backup_dir, load_yaml, sweep_temp, write_atomic
 from servotool.model.codec import format_value
 from servotool.ops.status import servo_is_on
+from servotool.words import count
 
 Notice = Callable[[str], None]
 LOCK_WAIT_S = 60.0
@@ -262,7 +263,7 @@ def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
         return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted before changing anything: "
                 f"read back, the drive equals the automatic backup {auto}")
     return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted after writing {len(written)} of "
-            f"{len(targets)} {'entry' if len(targets) == 1 else 'entries'}; read back, the drive differs from the "
+            f"{count(len(targets), 'entry')}; read back, the drive differs from the "
             f"automatic backup {auto} in {len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): "
             f"run it again to finish, or 'servotool param restore {auto}' to go back")
 

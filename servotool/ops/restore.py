@@ -13,6 +13,7 @@ from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile
 from servotool.ops.backup import Backup, auto_backup, auto_path, load, save, take
 from servotool.ops.params import select
+from servotool.words import count
 
 # Exceptions by which a drive refuses writes at an address (illegal function, illegal data address): the entry is
 # reported and the restore goes on. Any other failure (a refused value, no answer) rolls the restore back.
@@ -203,7 +204,7 @@ def _account(drive: Drive, failed: tuple[str, ServoError, list[str], list[str]],
     more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
     why = f" (could not undo {'; '.join(undo_failed)})" if undo_failed else ""
     verb = "differs" if len(differ) == 1 else "differ"
-    return failure(f"{wrote}; rollback incomplete{why}: {_entries(len(differ))} {verb} from the automatic "
+    return failure(f"{wrote}; rollback incomplete{why}: {count(len(differ), 'entry')} {verb} from the automatic "
                    f"backup {auto}: {shown}{more}", "restore", False, differ)
 
 
@@ -256,7 +257,7 @@ def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
     report = restore(drive, b, rplan, notice=notice)
     left = [f"{e.code} not on this drive" for e in rplan.missing] + \
         [f"{e.code} refused by the drive" for e, _ in report.refused]
-    return (f"{_entries(len(report.written))} restored (automatic backup {report.auto_backup})"
+    return (f"{count(len(report.written), 'entry')} restored (automatic backup {report.auto_backup})"
             + (f"; left out: {', '.join(left)}" if left else ""))
 
 
@@ -276,7 +277,3 @@ def not_at_default(drive: Drive, progress: Callable[[int], None] | None = None) 
     """Readable parameters whose value differs from the profile's factory default (entry, raw)."""
     return [(r.entry, r.raw) for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)
             if r.entry.default is not None and r.raw != r.entry.default]
-
-
-def _entries(n: int) -> str:
-    return f"{n} {'entry' if n == 1 else 'entries'}"

@@ -22,6 +22,7 @@ from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import Entry, Profile
 from servotool.model.roles import readable_by_role
+from servotool.words import count
 
 TRIGGER_FORMS = ("CODE>LEVEL (rises through LEVEL), CODE<LEVEL (falls through LEVEL), CODE.BIT (a bit of a "
                  "status word sets; BIT a number or the bit's name) or CODE.BIT=0 (it clears)")
@@ -176,7 +177,7 @@ class Timing:
 
     def describe(self) -> str:
         if self.rate_hz is None:
-            return f"{self.samples} sample{'' if self.samples == 1 else 's'}"
+            return count(self.samples, 'sample')
         return (f"{self.samples} samples, {self.rate_hz:.1f} samples/s, jitter {self.jitter_ms:.2f} ms "
                 f"(longest interval {self.max_gap_ms:.1f} ms)")
 
