@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+from servotool.errors import UsageError
 from servotool.motion.deadman import DeadManBound
 from servotool.motion.travel import TravelLimit
 
@@ -11,6 +13,21 @@ from servotool.motion.travel import TravelLimit
 def travel_estimate(speed_rpm: float, seconds: float | None) -> float:
     """How far a timed JOG travels at speed (0 for an interactive one, whose travel the guard watches)."""
     return abs(speed_rpm) / 60.0 * seconds if seconds is not None else 0.0
+
+
+def checked_travel(speed_rpm: float, seconds: float | None, limit_rev: float | None = None,
+                   limit_name: str = "") -> float:
+    """The travel estimate of a JOG request, its speed and time checked; over limit_rev (worded limit_name, by
+    default '--max-travel limit N rev') is refused."""
+    if speed_rpm == 0 or not math.isfinite(speed_rpm):
+        raise UsageError("--speed must be a non-zero number (its sign gives the direction)")
+    if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
+        raise UsageError("--time must be a number > 0")
+    estimate = travel_estimate(speed_rpm, seconds)
+    if limit_rev is not None and estimate > limit_rev:
+        raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {estimate:.2f} rev, over "
+                         f"the {limit_name or f'--max-travel limit {limit_rev:g} rev'}")
+    return estimate
 
 
 @dataclass(frozen=True)

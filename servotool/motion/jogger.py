@@ -7,7 +7,6 @@ enum names forward/reverse/stop, else +1/-1/0), or a signed speed reference with
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 from servotool.clock import Clock, RealClock
@@ -18,7 +17,7 @@ from servotool.model.profile import Entry
 from servotool.model.roles import FEATURE, jog_codes, motion_route
 from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
-from servotool.motion.jog_plan import JogPlan, travel_estimate
+from servotool.motion.jog_plan import JogPlan, checked_travel
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.segments import SegmentMoves
 from servotool.motion.setup import check_setup
@@ -57,6 +56,7 @@ class Jogger:
         self.speed_rpm = 0.0
         self._enabled = False          # speed route: servo switched on by us
         self._saved_reference: int | None = None
+        self._journaled_reference: int | None = None   # as _journal read it for this motion (a real port only)
         self._ramp_raw: int | None = None
         self._speed_param_raw: int | None = None   # the speed parameter as this jogger last read or wrote it
         self._stop_wait_s = 3.0
@@ -87,10 +87,7 @@ class Jogger:
     def plan(self, speed_rpm: float, seconds: float | None, max_travel_rev: float | None = None,
              travel: TravelLimit | None = None) -> JogPlan:
         """Check everything before any motion: alarm, servo state, speed and travel limits, the dead-man."""
-        if speed_rpm == 0 or not math.isfinite(speed_rpm):
-            raise UsageError("--speed must be a non-zero number (its sign gives the direction)")
-        if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
-            raise UsageError("--time must be a number > 0")
+        checked_travel(speed_rpm, seconds, max_travel_rev)
         limit = self.speed_limit()
         if abs(speed_rpm) > limit:
             raise UsageError(f"speed {abs(speed_rpm):g} rpm is over the limit {limit:g} rpm "
@@ -105,14 +102,9 @@ class Jogger:
                                  "(see 'servotool alarm', clear it first)")
         if self.servo_already_on():
             raise UsageError("refusing to JOG: the servo is already on (enabled from elsewhere); switch it off first")
-        estimate = travel_estimate(speed_rpm, seconds)
-        if max_travel_rev is not None and estimate > max_travel_rev:
-            raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {estimate:.2f} rev, over "
-                             f"the --max-travel limit {max_travel_rev:g} rev")
+        if travel is not None:
+            checked_travel(speed_rpm, seconds, travel.rev, travel.describe())
         self.guard = TravelGuard(self.drive, travel)
-        if travel is not None and travel_estimate(speed_rpm, seconds) > travel.rev:
-            raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about "
-                             f"{travel_estimate(speed_rpm, seconds):.2f} rev, over the {travel.describe()}")
         self.keepalive.interval_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
         accel_ms = self._ramp_ms()
         self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * \
@@ -147,8 +139,7 @@ class Jogger:
             and self.drive.read_entries([self.servo])[0].raw != 0)
 
     def _speed_raw(self, signed_rpm: float) -> int:
-        e = self.speed_entry
-        return eng_to_raw(e, signed_rpm)
+        return eng_to_raw(self.speed_entry, signed_rpm)
 
     def set_speed(self, speed_rpm: float) -> None:
         """The speed of the following moves (rpm, sign ignored); a running speed-route move changes at once."""
@@ -185,7 +176,8 @@ class Jogger:
         if self.direction and not self._enabled:
             # A reference held in a parameter (e.g. a signed JOG speed) would run at once on enable: zero it first.
             if self._saved_reference is None and self.speed_entry.readable:
-                self._saved_reference = self.drive.read_entries([self.speed_entry])[0].raw
+                self._saved_reference = self._journaled_reference if self._journaled_reference is not None \
+                    else self.drive.read_entries([self.speed_entry])[0].raw
             self.drive.write_raw(self.speed_entry, self._speed_raw(0))
             self.drive.write_raw(self.servo, 1)
             self._enabled = True
@@ -368,8 +360,9 @@ class Jogger:
         puts back) and the servo it may switch on (it refuses one already on). None on an in-process link."""
         e = self.speed_entry
         if self.drive.port:
-            speed_ref = {e.code: self.drive.read_entries([e])[0].raw} \
-                if self.route.kind == "speed" and e.readable and e.cls == "Pn" else {}
+            if self.route.kind == "speed" and e.readable and e.cls == "Pn":
+                self._journaled_reference = self.drive.read_entries([e])[0].raw     # command() needs it too
+            speed_ref = {e.code: self._journaled_reference} if self._journaled_reference is not None else {}
             journal.note_settings(self.drive, {**speed_ref, **saved})
             if self.servo is not None:
                 journal.note_servo(self.drive, self.servo.code)

@@ -16,7 +16,7 @@ from servotool.motion.hold import HoldToRun
 from servotool.motion.jogger import Jogger
 from servotool.motion.travel import AxisPosition, TravelLimit, TravelLimitHit
 from servotool.sim.firmware import build_drive
-from servotool.sim.virtual import VirtualLink
+from servotool.sim.virtual import VirtualLink, make_motion_setup
 
 
 def _virtual(profile_id: str = "dsx7e"):
@@ -132,3 +132,29 @@ def test_a_link_too_slow_for_the_beat_is_refused_with_the_alternatives(sim_dir):
     assert b.link_cycle_s > 0.05
     with pytest.raises(UsageError, match=r"cannot keep the dead-man beat.*faster baud rate.*slower speed"):
         deadman.check(b, waived=False)
+
+
+def test_a_speed_route_on_a_real_port_reads_its_parameter_held_reference_once_and_puts_it_back(sim_dir):
+    """SDC holds its speed reference in a parameter (PN22): read for the journal before the motion, that read is
+    the one the enable zeroes and leave() puts back (a second read cost a request on a 9600 line)."""
+    profile = load_profile("sdc")
+    clock = VirtualClock(10.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    make_motion_setup(sim)
+    d = Drive(VirtualLink([sim], clock), profile, 1, port="COM7")      # a real port: the journal is kept
+    d.dead_man_waived = True
+    before = sim.bank.effective_value("PN22")
+    reads: list[str] = []
+    read_entries = d.read_entries
+
+    def counted(entries, *args, **kwargs):
+        reads.extend(e.code for e in entries)
+        return read_entries(entries, *args, **kwargs)
+
+    d.read_entries = counted                                               # type: ignore[method-assign]
+    jogger = Jogger(d, clock=clock)
+    jogger.run(jogger.plan(200, 0.5))
+    # For the journal; to see whether it needs putting back; the put-back's verifying read. Not again at enable.
+    assert reads.count("PN22") == 3
+    assert sim.bank.effective_value("PN22") == before
+    assert abs(sim.firmware.plant.true_speed_rpm) < 3
