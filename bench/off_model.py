@@ -7,7 +7,9 @@ refused (with its reason), with the error of J_total and the stated 3 sigma (% o
 
 Target: no accepted (or flagged) result off by more than its stated 3 sigma.
 
-Run: python bench/off_model.py [--quick] [--baud 19200] [--profile is620p --baud 57600]
+Run: python bench/off_model.py [--quick] [--baud 19200] [--profile is620p --baud 57600] [--seeds N]
+--seeds N: each machine N times with its own noise (one seed hid a backlash load accepted outside its
+3 sigma in 7 of 14 runs).
 """
 
 from __future__ import annotations
@@ -76,42 +78,65 @@ def identify(ratio: float, machine: dict[str, float], baud: int, seed: int, prof
     return ("flagged" if flagged else "accepted"), est, "; ".join(n for n in est.notes if n.startswith("off-model:"))
 
 
+def outcome_of(ratio: float, machine: dict[str, float], baud: int, seed: int, profile_id: str
+               ) -> tuple[str, float, float, str]:
+    """(outcome, error % of J_total, stated 3 sigma %, reason or flags) of one run."""
+    outcome, est, why = identify(ratio, machine, baud, seed=seed, profile_id=profile_id)
+    err = sig3 = float("nan")
+    if est is not None and est.j_total_kgm2 == est.j_total_kgm2:
+        err = (est.load_ratio - ratio) / (1.0 + ratio) * 100
+        sig3 = 3 * est.ratio_std / (1.0 + est.load_ratio) * 100
+    return outcome, err, sig3, why
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="fewer loads and ratios")
     ap.add_argument("--baud", type=int, action="append", help="line speed (repeatable; default 19200 and 115200)")
     ap.add_argument("--profile", default="dsx7e", help="the simulated drive's profile (default dsx7e; is620p at 57600 "
                     "reads torque in whole percent)")
+    ap.add_argument("--seeds", type=int, default=1, help="runs of each machine, each with its own noise (default 1: "
+                    "one row per run; more: one row per machine with its counts and worst error against 3 sigma)")
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     loads = LOADS_QUICK if args.quick else LOADS_QUICK + LOADS_MORE
     ratios = [5.0] if args.quick else [2.0, 10.0]
     bauds = args.baud or ([19200] if args.quick else [19200, 115200])
-    print(f"{'load':<22} {'ratio':>5} {'baud':>6} {'outcome':<9} {'err%':>7} {'3sig%':>6}  reason / flags")
-    violations = counted = 0
-    n = 0
+    if args.seeds > 1:
+        print(f"{'load':<22} {'ratio':>5} {'baud':>6} {'acc':>4} {'flag':>4} {'ref':>4} {'viol':>4}  worst err/3sig")
+    else:
+        print(f"{'load':<22} {'ratio':>5} {'baud':>6} {'outcome':<9} {'err%':>7} {'3sig%':>6}  reason / flags")
+    violations = counted = runs = n = 0
     outcomes: dict[str, int] = {}
     for baud in bauds:
         for label, machine in loads:
             for ratio in ratios:
                 n += 1
-                outcome, est, why = identify(ratio, machine, baud, seed=n, profile_id=args.profile)
-                outcomes[outcome] = outcomes.get(outcome, 0) + 1
-                err = sig3 = float("nan")
-                if est is not None and est.j_total_kgm2 == est.j_total_kgm2:
-                    err = (est.load_ratio - ratio) / (1.0 + ratio) * 100
-                    sig3 = 3 * est.ratio_std / (1.0 + est.load_ratio) * 100
-                bad = ""
-                if outcome in ("accepted", "flagged"):
-                    counted += 1
-                    if abs(err) > sig3:
-                        violations += 1
-                        bad = "  <-- outside 3 sigma"
-                print(f"{label:<22} {ratio:>5.1f} {baud:>6} {outcome:<9} {err:>7.2f} {sig3:>6.2f}  {why[:110]}{bad}",
-                      flush=True)
+                row: dict[str, int] = {}
+                worst, row_violations = 0.0, 0
+                for k in range(args.seeds):
+                    runs += 1
+                    outcome, err, sig3, why = outcome_of(ratio, machine, baud, n + 1000 * k, args.profile)
+                    outcomes[outcome] = outcomes.get(outcome, 0) + 1
+                    row[outcome] = row.get(outcome, 0) + 1
+                    bad = ""
+                    if outcome in ("accepted", "flagged"):
+                        counted += 1
+                        worst = max(worst, abs(err) / sig3 if sig3 > 0 else float("inf"))
+                        if abs(err) > sig3:
+                            row_violations += 1
+                            bad = "  <-- outside 3 sigma"
+                    if args.seeds == 1:
+                        print(f"{label:<22} {ratio:>5.1f} {baud:>6} {outcome:<9} {err:>7.2f} {sig3:>6.2f}  "
+                              f"{why[:110]}{bad}", flush=True)
+                violations += row_violations
+                if args.seeds > 1:
+                    print(f"{label:<22} {ratio:>5.1f} {baud:>6} {row.get('accepted', 0):>4} {row.get('flagged', 0):>4} "
+                          f"{row.get('refused', 0) + row.get('failed', 0):>4} {row_violations:>4}  {worst:.2f}"
+                          f"{'  <-- outside 3 sigma' if row_violations else ''}", flush=True)
     print("\n" + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
     print(f"no accepted result off by more than its stated 3 sigma: {violations} violation(s) in {counted} "
-          f"accepted or flagged of {n} runs: {'met' if violations == 0 else 'MISSED'}")
+          f"accepted or flagged of {runs} runs: {'met' if violations == 0 else 'MISSED'}")
 
 
 if __name__ == "__main__":
