@@ -24,12 +24,13 @@ the fit's noise-based uncertainty tight while the answer is wrong. These checks 
   and at the stops (beyond half a sigma in half the runs, beyond two in a fifth to a third). So the rigid answer
   keeps the uncertainty it has with a free spring term, without words: a 100 Hz coupling at ratio 10 biased J by
   1.1-1.4 % with its term at -0.4 sigma.
-- subsets: J is taken from each subset of the windows with the friction and load fitted on all of them
-  (forward/reverse x accelerating/braking, and the start/middle/end of the travel). Where the subsets disagree
+- subsets (tuning.subsets): J is taken from each subset of the windows with the friction and load fitted on all of
+  them (forward/reverse x accelerating/braking, the start/middle/end of the travel, weak/medium/strong
+  accelerations). Where the subsets disagree
   more than their uncertainties allow, the uncertainty is widened by the Birge ratio sqrt(chi2/dof); where they
   disagree grossly (by more than GROSS_SPREAD of J, well beyond their uncertainties) the result is refused.
-  Backlash shows as a lower J while braking (the motor crosses the gap alone), a compliant coupling as J that
-  differs between the phases of a move.
+  Backlash shows as a lower J while braking or a higher one at weak accelerations (the motor crosses the gap
+  alone), a compliant coupling as J that differs between the phases of a move.
 
 The returned notes start with "off-model:" so reports can tell them from others. Only J is corrected: the
 friction and load torque the estimator reports stay the rigid fit's.
@@ -49,6 +50,7 @@ from servotool.tuning.fit_numerics import (
     jackknife_std,
     projected_fits,
 )
+from servotool.tuning.subsets import Windows, cause, worst_subsets
 
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
@@ -83,7 +85,6 @@ RESONANCE_SHARE = 0.8     # ... and counts where it then leaves at most this sha
 #                           lag models leave (rigid loads: 1.2 and more; two-mass loads at 115200: 0.01-0.33, at
 #                           57600 with torque read in whole % (IS620P): 0.7-0.8; backlash: 0.8 and more, refused) ...
 RESONANCE_F = 30.0        # ... and the improvement is this many times what two free parameters get from noise
-MIN_SUBSET_WINDOWS = 6
 BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
 #                           chance: chi2/dof of 2.25 over 2-3 subsets happens one time in ten on a rigid load)
 BIRGE_REFUSE = 3.0        # refuse when the subsets disagree this many times beyond their uncertainties ...
@@ -165,20 +166,15 @@ def assess(fit: FitData) -> Verdict:
         j_std = math.hypot(j_std, UNRESOLVED_SPRING_SHARE * spring.unresolved)
     if why:
         notes.append(f"off-model: {'; '.join(why)}; inertia fitted with a model of it")
-    dw = fit.x[:, 0]
-    worst: tuple[float, float, str] = (1.0, 0.0, "")
-    for name, labels in _groupings(fit, dw).items():
-        birge, spread = _birge(j, j_std, dw, resid, labels)
-        if birge > worst[0]:
-            worst = (birge, spread, name)
-    birge, spread, name = worst
+    birge, spread, name = worst_subsets(Windows(fit.t, fit.w, fit.position, fit.starts, fit.ends, float(fit.eiv[0])),
+                                        fit.x[:, 0], j, j_std, resid)
     if birge > BIRGE_WIDEN:
         j_std *= birge
         text = f"inertia differs {name} by {100 * spread:.0f} % ({birge:.1f}x its uncertainty)"
         if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
-            return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {_cause(name)}"]))
-        notes.append(f"off-model: {text}; uncertainty widened to the spread ({_cause(name)})")
-        return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {_cause(name)}"]))
+            return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {cause(name)}"]))
+        notes.append(f"off-model: {text}; uncertainty widened to the spread ({cause(name)})")
+        return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {cause(name)}"]))
     return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why))
 
 
@@ -190,14 +186,6 @@ def _take(fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], 
         return before
     j = float(found[0][0])
     return j, math.hypot(max(float(found[1][0]), before[1]), model_error * (j - before[0])), found[2]
-
-
-def _cause(name: str) -> str:
-    if "braking" in name:
-        return "backlash (lost motion at reversals) or a compliant coupling (resonance) outside the rigid model"
-    if "travel" in name:
-        return "the load varies over the travel (gravity on an arm, cogging, a binding guide)"
-    return "the load is not one rigid inertia (compliance, backlash or a load that varies)"
 
 
 def _refit(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
@@ -366,33 +354,3 @@ def _torque_slope(fit: FitData) -> np.ndarray:
     return np.gradient(fit.torque, fit.t)
 
 
-def _groupings(fit: FitData, dw: np.ndarray) -> dict[str, np.ndarray]:
-    """Subsets of the windows to compare J across, by name (as in 'inertia differs NAME')."""
-    sgn = np.sign(fit.w[fit.starts])
-    phase = np.where(sgn * dw > 0, 0, 1)                      # accelerating, braking
-    mid = 0.5 * (fit.position[fit.starts] + fit.position[fit.ends])
-    edges = np.quantile(mid, [1 / 3, 2 / 3]) if mid.size else np.zeros(2)
-    return {
-        "between accelerating and braking, forward and reverse": (sgn > 0) * 2 + phase,
-        "over the travel (start, middle, end)": np.searchsorted(edges, mid),
-    }
-
-
-def _birge(j: float, j_std: float, dw: np.ndarray, resid: np.ndarray, labels: np.ndarray) -> tuple[float, float]:
-    """(Birge ratio, relative spread) of J taken from each subset with the other parameters held."""
-    total = float(dw @ dw)
-    js, sig = [], []
-    for label in np.unique(labels):
-        m = labels == label
-        info = float(dw[m] @ dw[m])
-        if np.count_nonzero(m) < MIN_SUBSET_WINDOWS or info <= 0.02 * total:
-            continue
-        js.append(j + float(dw[m] @ resid[m]) / info)
-        sig.append(j_std * math.sqrt(total / info))
-    if len(js) < 2 or not (0 < j_std < math.inf) or not math.isfinite(j):    # an unbounded fit: refused elsewhere
-        return 1.0, 0.0
-    a, s = np.asarray(js), np.asarray(sig)
-    wts = 1.0 / s**2
-    mean = float(np.sum(wts * a) / np.sum(wts))
-    chi2 = float(np.sum(wts * (a - mean) ** 2))
-    return math.sqrt(chi2 / (a.size - 1)), float(np.ptp(a)) / abs(j)

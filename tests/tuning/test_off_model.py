@@ -39,6 +39,11 @@ def test_an_arm_on_a_gear_is_fitted_with_a_load_that_varies_over_the_travel(sim_
     {"backlash_rad": 0.05, "seed": 4},
     {"resonance_hz": 20.0, "seed": 3},        # was accepted 15-24 % off with a 1 % uncertainty
     {"resonance_hz": 50.0, "seed": 12, "load_ratio": 10.0},
+    # Backlash 0.1 rad on a light load: accepted +7.9 and +8.9 % off with a stated 3 sigma of 5.8 and 6.3 % (7 of
+    # 14 accepted runs of bench/off_model.py's machine outside their 3 sigma) until J was compared across weak,
+    # medium and strong accelerations (the motor crosses the gap alone where the torque reverses)
+    {"backlash_rad": 0.1, "seed": 9, "load_ratio": 2.0},
+    {"backlash_rad": 0.1, "seed": 10, "load_ratio": 2.0},
 ])
 def test_an_off_model_load_is_refused_or_flagged_in_words_never_wrong_and_tight(sim_dir, machine):
     machine = {"load_ratio": 5.0, **machine}
