@@ -50,7 +50,7 @@ from servotool.tuning.fit_numerics import (
     jackknife_std,
     projected_fits,
 )
-from servotool.tuning.subsets import Windows, cause, worst_subsets
+from servotool.tuning.subsets import Windows, cause, torque_step, worst_subsets
 
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
@@ -166,8 +166,8 @@ def assess(fit: FitData) -> Verdict:
         j_std = math.hypot(j_std, UNRESOLVED_SPRING_SHARE * spring.unresolved)
     if why:
         notes.append(f"off-model: {'; '.join(why)}; inertia fitted with a model of it")
-    birge, spread, name = worst_subsets(Windows(fit.t, fit.w, fit.position, fit.starts, fit.ends, float(fit.eiv[0])),
-                                        fit.x[:, 0], j, j_std, resid)
+    windows = Windows(fit.t, fit.w, fit.position, fit.starts, fit.ends, float(fit.eiv[0]), torque_step(fit.torque))
+    birge, spread, name = worst_subsets(windows, fit.x[:, 0], j, j_std, resid)
     if birge > BIRGE_WIDEN:
         j_std *= birge
         text = f"inertia differs {name} by {100 * spread:.0f} % ({birge:.1f}x its uncertainty)"

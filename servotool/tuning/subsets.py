@@ -9,7 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 
 MIN_SUBSET_WINDOWS = 6
-ACCEL_SNR = 10.0          # windows sorted by acceleration: their speed change this many times its noise or more
+ACCEL_SNR = 10.0          # windows sorted by acceleration: their speed change this many times its noise or more,
+ACCEL_STEPS = 10.0        # ... and their acceleration torque this many steps of the torque reading or more
 
 
 @dataclass(frozen=True)
@@ -22,13 +23,14 @@ class Windows:
     starts: np.ndarray
     ends: np.ndarray
     eiv: float                # the speed change's noise variance, scaled as the fit's first column (FitData.eiv[0])
+    torque_step: float        # N*m: the torque reading's resolution where it reads on a grid (0: finer or unknown)
 
 
 def worst_subsets(win: Windows, dw: np.ndarray, j: float, j_std: float, resid: np.ndarray) -> tuple[float, float, str]:
     """(Birge ratio, relative spread, grouping's name) of the grouping whose subsets disagree most; (1, 0, '')
     where none disagrees beyond chance."""
     worst: tuple[float, float, str] = (1.0, 0.0, "")
-    for name, labels in _groupings(win, dw).items():
+    for name, labels in _groupings(win, dw, j).items():
         birge, spread = _birge(j, j_std, dw, resid, labels)
         if birge > worst[0]:
             worst = (birge, spread, name)
@@ -47,7 +49,7 @@ def cause(name: str) -> str:
     return "the load is not one rigid inertia (compliance, backlash or a load that varies)"
 
 
-def _groupings(win: Windows, dw: np.ndarray) -> dict[str, np.ndarray]:
+def _groupings(win: Windows, dw: np.ndarray, j: float) -> dict[str, np.ndarray]:
     """Subsets of the windows to compare J across, by name (as in 'inertia differs NAME'); label -1: left out."""
     sgn = np.sign(win.w[win.starts])
     phase = np.where(sgn * dw > 0, 0, 1)                      # accelerating, braking
@@ -55,7 +57,7 @@ def _groupings(win: Windows, dw: np.ndarray) -> dict[str, np.ndarray]:
     return {
         "between accelerating and braking, forward and reverse": (sgn > 0) * 2 + phase,
         "over the travel (start, middle, end)": _terciles(mid),
-        "with the acceleration (weak, medium, strong)": _acceleration_terciles(win, dw),
+        "with the acceleration (weak, medium, strong)": _acceleration_terciles(win, dw, j),
     }
 
 
@@ -64,7 +66,7 @@ def _terciles(v: np.ndarray) -> np.ndarray:
     return np.searchsorted(np.quantile(v, [1 / 3, 2 / 3]), v) if v.size else np.zeros(0, dtype=int)
 
 
-def _acceleration_terciles(win: Windows, dw: np.ndarray) -> np.ndarray:
+def _acceleration_terciles(win: Windows, dw: np.ndarray, j: float) -> np.ndarray:
     """Terciles of the windows' accelerations (their speed changes: every window spans as many sampling intervals,
     and a jittered interval would sort its length in too), of the windows whose speed change stands ACCEL_SNR times
     above its noise (-1: the others).
@@ -72,9 +74,12 @@ def _acceleration_terciles(win: Windows, dw: np.ndarray) -> np.ndarray:
     Backlash: the motor crosses the gap alone where the torque reverses, and the weakly accelerating windows there
     read J high (+14-18 % where the whole fit was +7-9 % off with a 3 sigma of 5-6 %). Sorting by the speed change
     itself sorts its noise too: a window whose noise shrank it lands among the weak ones and reads J high (+7 % on a
-    bare motor with 1 % noise), so only windows the noise cannot move between terciles are sorted."""
+    bare motor with 1 % noise), so only windows the noise cannot move between terciles are sorted. Likewise a
+    torque read in whole percent misreads a weak acceleration's torque by a larger share (a bare IS620P motor with
+    noise-free readings: J 19 % apart), so only windows whose acceleration torque spans ACCEL_STEPS of its steps."""
     noise = float(np.sqrt(win.eiv * float(dw @ dw)))       # the noise of a window's speed change
-    clear = np.abs(dw) >= ACCEL_SNR * noise
+    accel_torque = abs(j) * np.abs(dw) / (win.t[win.ends] - win.t[win.starts])
+    clear = (np.abs(dw) >= ACCEL_SNR * noise) & (accel_torque >= ACCEL_STEPS * win.torque_step)
     labels = np.full(dw.size, -1)
     if np.count_nonzero(clear) >= 3 * MIN_SUBSET_WINDOWS:
         labels[clear] = _terciles(np.abs(dw)[clear])
@@ -99,3 +104,14 @@ def _birge(j: float, j_std: float, dw: np.ndarray, resid: np.ndarray, labels: np
     mean = float(np.sum(wts * a) / np.sum(wts))
     chi2 = float(np.sum(wts * (a - mean) ** 2))
     return math.sqrt(chi2 / (a.size - 1)), float(np.ptp(a)) / abs(j)
+
+
+def torque_step(torque: np.ndarray) -> float:
+    """The torque reading's step (N*m) where every reading lies on one grid (whole percent: SD25, SDC, IS620P), else
+    0."""
+    values = np.unique(torque)
+    if values.size < 3:
+        return 0.0
+    step = float(np.min(np.diff(values)))
+    grid = (values - values[0]) / step
+    return step if float(np.max(np.abs(grid - np.round(grid)))) < 0.01 else 0.0
