@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from servotool.tuning.identify import IdentificationRefused
+from servotool.tuning.subsets import torque_step
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
 
@@ -82,3 +84,20 @@ def test_through_the_cli_an_arm_load_is_right_flagged_or_refused_with_its_reason
         assert r.code == 1 and data["ok"] is False
         assert any(w in data["reason"] for w in OFF_MODEL_WORDS), data
         assert any(w in r.err for w in OFF_MODEL_WORDS)
+
+
+def test_a_torque_read_in_whole_percent_does_not_pass_for_backlash(sim_dir):
+    """bench --profiles IS620P 57600, machine 38 (a bare motor, noise-free readings in whole percent): its weak
+    accelerations misread by a larger share of a step read J 19 % apart from the strong ones, refused as backlash
+    until only windows whose acceleration torque spans 10 steps were sorted by acceleration."""
+    from bench.inertia_accuracy import identify_once
+    try:
+        identify_once(0.0, 0.2, -0.4, 0.0, 57600, seed=39, profile_id="is620p", viscous=0.0)
+    except IdentificationRefused as exc:
+        assert "acceleration" not in str(exc), exc
+
+
+def test_the_torque_step_is_found_from_readings_on_a_grid():
+    assert torque_step(np.array([3.0, -1.0, 0.0, 7.0, 3.0]) * 0.0127) == pytest.approx(0.0127)
+    assert torque_step(np.array([0.1, 0.27, 0.7, 1.31])) == 0.0       # not on one grid
+    assert torque_step(np.array([0.5, 0.5])) == 0.0
