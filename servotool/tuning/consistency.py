@@ -26,9 +26,9 @@ the fit's noise-based uncertainty tight while the answer is wrong. These checks 
   1.1-1.4 % with its term at -0.4 sigma.
 - subsets (tuning.subsets): J is taken from each subset of the windows with the friction and load fitted on all of
   them (forward/reverse x accelerating/braking, the start/middle/end of the travel, weak/medium/strong
-  accelerations). Where the subsets disagree
-  more than their uncertainties allow, the uncertainty is widened by the Birge ratio sqrt(chi2/dof); where they
-  disagree grossly (by more than GROSS_SPREAD of J, well beyond their uncertainties) the result is refused.
+  accelerations). Where the subsets disagree more than their uncertainties allow, the uncertainty is widened by
+  the Birge ratio sqrt(chi2/dof); where they disagree grossly (by more than GROSS_SPREAD of J, well beyond their
+  uncertainties) the result is refused.
   Backlash shows as a lower J while braking or a higher one at weak accelerations (the motor crosses the gap
   alone), a compliant coupling as J that differs between the phases of a move.
 
