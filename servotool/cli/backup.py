@@ -14,7 +14,7 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
-from servotool.ops.params import select
+from servotool.ops.params import read_settings, select
 from servotool.words import count
 
 if TYPE_CHECKING:     # imported by the commands that use them: `param get` and `set` share this group
@@ -122,9 +122,8 @@ def diff_cmd(
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
     """Every readable parameter of the drive (code -> raw), with a progress bar on a terminal."""
-    entries = select(d.profile)
-    with progress("reading the drive", len(entries), enabled=not as_json) as advance:
-        return {r.entry.code: r.raw for r in d.read_entries(entries, partial=True, progress=advance)}
+    with progress("reading the drive", len(select(d.profile)), enabled=not as_json) as advance:
+        return read_settings(d, advance)
 
 
 def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing: list[str], as_json: bool) -> None:

@@ -18,7 +18,7 @@ from servotool.files import backup_dir, load_yaml, write_atomic
 from servotool.model.codec import format_value, json_value
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup_csv
-from servotool.ops.params import select
+from servotool.ops.params import read_settings, select
 
 FORMAT = 1
 
@@ -65,15 +65,13 @@ def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
     """Read every readable Pn (coalesced) and the entries of the profile's identity section; entries the drive
     lacks are left out and listed in `missing` (Pn only)."""
     p = drive.profile
-    entries = select(p)
-    readings = drive.read_entries(entries, progress=progress, partial=True)
+    values = read_settings(drive, progress)
     identity: dict[str, str] = {}
     ident = identity_entries(p)
     for r in drive.read_entries(ident, partial=True) if ident else []:
         identity[r.entry.code] = r.text
     return Backup(p.id, p.version, p.model, drive.unit, utc_now().isoformat(timespec="seconds"),
-                  __version__, identity, {r.entry.code: r.raw for r in readings},
-                  missing=[e.code for e in entries if e.code in drive.missing])
+                  __version__, identity, values, missing=[e.code for e in select(p) if e.code in drive.missing])
 
 
 def identity_entries(profile: Profile) -> list[Entry]:

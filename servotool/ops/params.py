@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from servotool.drive import Drive, WriteResult
@@ -22,6 +23,12 @@ def select(profile: Profile, *, group: str | None = None, classes: tuple[str, ..
             raise UnknownName("group", group, profile.id, suggest(group, known), known)
         entries = members
     return [e for e in entries if e.cls in classes and e.readable]
+
+
+def read_settings(drive: Drive, progress: Callable[[int], None] | None = None) -> dict[str, int]:
+    """Every readable parameter as the drive holds it (code -> raw, coalesced); entries it lacks are left out (and
+    listed in drive.missing)."""
+    return {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)}
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from servotool.errors import DeviceError, ModbusException, ServoError, UsageErro
 from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile
 from servotool.ops.backup import Backup, auto_backup, auto_path, load, save, take
-from servotool.ops.params import select
+from servotool.ops.params import read_settings, select
 from servotool.words import count
 
 # Exceptions by which a drive refuses writes at an address (illegal function, illegal data address): the entry is
@@ -215,7 +215,7 @@ def _read_all(drive: Drive) -> dict[str, int] | None:
     """Every parameter as read from the drive, None when it does not answer after a few tries."""
     for _ in range(ATTEMPTS):
         try:
-            return {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True)}
+            return read_settings(drive)
         except ServoError:
             continue
     return None
@@ -250,7 +250,7 @@ def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> 
 def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
     """Plan step: restore a backup file completely (no prompts)."""
     b = load(path, drive.profile)
-    current = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True)}
+    current = read_settings(drive)
     rplan = restore_changes(drive.profile, b, current)
     if not rplan.changes:
         return "nothing to restore: the drive already matches"
