@@ -40,6 +40,7 @@ from servotool.tuning.fit_numerics import (
     move_ids,
     sign_windows,
     speed_noise_rpm,
+    validate_log,
 )
 
 RPM_TO_RAD_S = math.pi / 30.0
@@ -133,6 +134,10 @@ class InertiaEstimate:
     """Samples recognised as torque steps (kinks) and left out with their neighbouring intervals."""
     condition: float
     notes: tuple[str, ...] = field(default_factory=tuple)
+    advice: str = ""
+    """What would cure a refusal, in general terms; the caller that planned the motion may say it in its own."""
+    shortfall: float = math.nan
+    """How many times short of its limit a refusal that more excitation would cure fell (else NaN)."""
 
 
 def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list[float],
@@ -150,15 +155,15 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
     t = np.asarray(t_s, dtype=float)
     rpm = np.asarray(speed_rpm, dtype=float)
     pct = np.asarray(torque_pct, dtype=float)
-    _validate(t, rpm, pct, rated_torque_nm, rotor_inertia_kgcm2, torque_limit_pct)
+    validate_log(t, rpm, pct, rated_torque_nm, rotor_inertia_kgcm2, torque_limit_pct)
     jm = rotor_inertia_kgcm2 * KGCM2_TO_KGM2
     r = _Partial(n_samples=int(t.size))
     try:
         _check_samples(r, pct, torque_limit_pct, cfg)
         sig = _signals(t, rpm, pct, rated_torque_nm, cfg, r)
-        fit = _fit(sig, _windows(sig, cfg, r), cfg, r)
+        fit = _excited_fit(sig, _windows(sig, cfg, r), cfg, r)
     except _Refused as exc:
-        return r.refuse(str(exc))
+        return r.refuse(str(exc), exc.advice)
     verdict = assess(FitData(t=t, w=sig.w, kink=sig.kink, position=sig.cum_w, starts=fit.starts, ends=fit.ends,
                              torque=sig.torque, x=fit.x, y=fit.y, eiv=fit.eiv, groups=sig.moves[fit.starts],
                              theta=fit.theta, j_std=float(fit.std[0]), min_jackknife_moves=cfg.min_jackknife_moves,
@@ -167,7 +172,11 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
 
 
 class _Refused(Exception):
-    """The fit stops here; the message is the reason, in words for the operator."""
+    """The fit stops here; the message is the reason, in words for the operator, and `advice` what would cure it."""
+
+    def __init__(self, reason: str, advice: str = "") -> None:
+        super().__init__(reason)
+        self.advice = advice
 
 
 @dataclass(frozen=True)
@@ -252,10 +261,26 @@ def _windows(sig: _Signals, cfg: EstimatorSettings, r: _Partial) -> tuple[np.nda
         raise _Refused(f"too few usable windows ({r.n_windows} < {cfg.min_windows}) outside the zero-speed band "
                        f"of {sig.band:.3g} rpm and away from torque steps; log a longer motion at higher speed")
     r.n_windows = int(best[0].size)
-    if r.excitation < cfg.min_excitation:
-        raise _Refused(f"too little acceleration: speed changes are only {r.excitation:.1f}x the speed noise "
-                       f"(need {cfg.min_excitation:g}x); use faster accelerations or a higher test speed")
     return best
+
+
+def _excited_fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSettings, r: _Partial
+                 ) -> _Fit:
+    """The fit, refused first where the windows' speed changes are too close to the speed noise; made anyway to tell
+    how far short the data fell (`shortfall`): the excitation passes its limit well before the precision does."""
+    low = r.excitation < cfg.min_excitation
+    try:
+        fit: _Fit | None = _fit(sig, windows, cfg, r)
+    except _Refused:
+        if not low:
+            raise
+        fit = None
+    if fit is not None and not low:
+        return fit
+    rel = fit.std[0] / fit.theta[0] if fit is not None and fit.theta[0] > 0 else 0.0
+    r.shortfall = max(cfg.min_excitation / max(r.excitation, 1e-9), rel / cfg.max_rel_uncertainty)
+    raise _Refused(f"too little acceleration: speed changes are only {r.excitation:.1f}x the speed noise "
+                   f"(need {cfg.min_excitation:g}x)", "use faster accelerations or a higher test speed")
 
 
 def _fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSettings, r: _Partial) -> _Fit:
@@ -331,8 +356,9 @@ def _conclude(r: _Partial, fit: _Fit, verdict: Verdict, jm: float, cfg: Estimato
         if verdict.widened:
             return r.refuse(f"inertia too uncertain ({100 * rel:.1f} % of J_total > "
                             f"{100 * cfg.max_rel_uncertainty:g} %): {verdict.widened}")
-        return r.refuse(f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %); "
-                        "repeat the motion more times or use stronger accelerations")
+        r.shortfall = rel / cfg.max_rel_uncertainty
+        return r.refuse(f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %)",
+                        "use stronger accelerations or more moves")
     return r.result(ok=True, reason="")
 
 
@@ -362,11 +388,12 @@ class _Partial:
     res_rms: float = math.nan
     res_rel: float = math.nan
     notes: list[str] = field(default_factory=list)
+    shortfall: float = math.nan
 
-    def refuse(self, reason: str) -> InertiaEstimate:
-        return self.result(ok=False, reason=reason)
+    def refuse(self, reason: str, advice: str = "") -> InertiaEstimate:
+        return self.result(ok=False, reason=reason, advice=advice)
 
-    def result(self, *, ok: bool, reason: str) -> InertiaEstimate:
+    def result(self, *, ok: bool, reason: str, advice: str = "") -> InertiaEstimate:
         return InertiaEstimate(
             ok=ok, reason=reason, j_total_kgm2=self.j, j_std_kgm2=self.j_std, load_ratio=self.ratio,
             ratio_std=self.ratio_std, coulomb_nm=self.tc, coulomb_std_nm=self.tc_std, viscous_nm_per_rad_s=self.b,
@@ -374,21 +401,5 @@ class _Partial:
             residual_rms_nms=self.res_rms, residual_rel=self.res_rel, excitation=self.excitation,
             speed_noise_rpm=self.speed_noise_rpm, n_samples=self.n_samples, n_windows=self.n_windows,
             n_saturated=self.n_saturated, n_kinks=self.n_kinks, window_intervals=self.window_intervals,
-            condition=self.condition, notes=tuple(self.notes))
+            condition=self.condition, notes=tuple(self.notes), advice=advice, shortfall=self.shortfall)
 
-
-def _validate(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated: float, rotor: float,
-              limit: float | None) -> None:
-    if t.ndim != 1 or t.shape != rpm.shape or t.shape != pct.shape:
-        raise ValueError(f"t, speed and torque must be 1-D arrays of equal length (got {t.shape}, {rpm.shape}, "
-                         f"{pct.shape})")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(rpm)) and np.all(np.isfinite(pct))):
-        raise ValueError("t, speed and torque must be finite (drop samples with failed reads instead of NaN)")
-    if t.size > 1 and np.any(np.diff(t) <= 0):
-        raise ValueError("sample times must be strictly increasing")
-    if not (math.isfinite(rated) and rated > 0):
-        raise ValueError(f"rated torque must be a positive number of N*m, got {rated!r}")
-    if not (math.isfinite(rotor) and rotor > 0):
-        raise ValueError(f"rotor inertia must be a positive number of kg*cm^2, got {rotor!r}")
-    if limit is not None and not (math.isfinite(limit) and limit > 0):
-        raise ValueError(f"torque limit must be a positive % of rated torque, got {limit!r}")

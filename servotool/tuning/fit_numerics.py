@@ -4,6 +4,8 @@ the piecewise-cubic interpolant over uneven sample times."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -222,3 +224,21 @@ def projected_fits(u: np.ndarray, v: np.ndarray, others: np.ndarray) -> tuple[np
     with np.errstate(divide="ignore", invalid="ignore"):
         coef = np.where(uu > 0, uv / uu, 0.0)
     return coef, np.sum(pv * pv, axis=0) - coef * uv
+
+
+def validate_log(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated: float, rotor: float,
+                 limit: float | None) -> None:
+    """Raise ValueError for a malformed log (shapes, non-finite values, time not increasing) or motor data."""
+    if t.ndim != 1 or t.shape != rpm.shape or t.shape != pct.shape:
+        raise ValueError(f"t, speed and torque must be 1-D arrays of equal length (got {t.shape}, {rpm.shape}, "
+                         f"{pct.shape})")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(rpm)) and np.all(np.isfinite(pct))):
+        raise ValueError("t, speed and torque must be finite (drop samples with failed reads instead of NaN)")
+    if t.size > 1 and np.any(np.diff(t) <= 0):
+        raise ValueError("sample times must be strictly increasing")
+    if not (math.isfinite(rated) and rated > 0):
+        raise ValueError(f"rated torque must be a positive number of N*m, got {rated!r}")
+    if not (math.isfinite(rotor) and rotor > 0):
+        raise ValueError(f"rotor inertia must be a positive number of kg*cm^2, got {rotor!r}")
+    if limit is not None and not (math.isfinite(limit) and limit > 0):
+        raise ValueError(f"torque limit must be a positive % of rated torque, got {limit!r}")

@@ -196,7 +196,8 @@ def quantization_floor(est: InertiaEstimate, trace: Trace, step_pct: float, rate
     if rel > max_rel:
         return replace(out, ok=False, reason=f"inertia too uncertain ({100 * rel:.1f} % of J_total > "
                        f"{100 * max_rel:g} %: the torque reads in {step_pct:g} % steps against an acceleration "
-                       f"torque of {signal_pct:.1f} %); use stronger accelerations or a faster line")
+                       f"torque of {signal_pct:.1f} %)", advice="use stronger accelerations or a faster line",
+                       shortfall=rel / max_rel)
     return out
 
 

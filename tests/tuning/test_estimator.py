@@ -241,6 +241,19 @@ def test_refuses_when_uncertainty_is_too_large() -> None:
     assert r.ratio_std > 0.02  # the estimate is reported alongside the refusal
     loose = estimate(log, settings=EstimatorSettings(max_rel_uncertainty=1.0))
     assert loose.ok and loose.ratio_std == pytest.approx(r.ratio_std)
+    # How far short it fell, for a caller that planned the motion to size its remedy; the general advice apart.
+    assert r.shortfall == pytest.approx(r.j_std_kgm2 / r.j_total_kgm2 / 0.02)
+    assert r.advice and r.advice not in r.reason
+    assert math.isnan(loose.shortfall) and not loose.advice
+
+
+def test_too_little_acceleration_tells_how_far_short_the_precision_fell_too() -> None:
+    """Windows one interval long are too little excited (under 10x the speed noise); the fit made anyway tells how
+    far short the uncertainty is, which can be far more than the excitation's own shortfall."""
+    log = simulate(50.0, fs=25.0, jitter=0.4, speed_noise_rpm=5.0, seed=3)
+    r = estimate(log, settings=EstimatorSettings(window_intervals=1))
+    assert not r.ok and r.reason.startswith("too little acceleration") and r.advice not in r.reason
+    assert r.shortfall >= 10.0 / r.excitation > 1.0
 
 
 def test_refuses_inverted_torque_sign() -> None:
