@@ -149,12 +149,15 @@ def inertia(
         except tune.TuneDeclined:
             raise typer.Exit(1) from None
         except ServoError as exc:   # refused, tripped, travel exceeded, link lost
-            refused = exc.result if isinstance(exc, identify.IdentificationRefused) else None
+            refusal = exc if isinstance(exc, identify.IdentificationRefused) else None
+            refused = refusal.result if refusal is not None else None
             if report is not None and refused is not None:
                 _report(report, refused, d.profile, None, str(exc))
             if as_json and ask.moving:
+                cure = refusal.remedy if refusal is not None else None
                 emit_json(_clean({"ok": False, "reason": str(exc), **(_estimate_json(refused) if refused else {}),
-                                  "ratio": refused.new_ratio if refused else None, "written": False}))
+                                  "ratio": refused.new_ratio if refused else None, "written": False,
+                                  "suggested_travel_rev": cure.suggested_rev if cure is not None else None}))
             raise
         profile = d.profile
     if report is not None:

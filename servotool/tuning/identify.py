@@ -23,7 +23,9 @@ from servotool.tuning.planning import (
     TIME_BUDGET_S,
     TORQUE_SHARE,
     MotionPlan,
+    Remedy,
     dithered,
+    remedy,
 )
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
 from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
@@ -59,9 +61,10 @@ class Result:
 class IdentificationRefused(IdentificationFailed):
     """The motion ran, but the estimate is not trustworthy; the result (with its trace) is attached."""
 
-    def __init__(self, message: str, result: Result) -> None:
+    def __init__(self, message: str, result: Result, remedy: Remedy | None = None) -> None:
         super().__init__(message)
         self.result = result
+        self.remedy = remedy    # a longer travel that would likely succeed, where that is what fell short
 
 
 class Identifier:
@@ -187,6 +190,8 @@ class _HostRun:
         # timer) and an axis at 900 rpm covers 0.2 rev in 13 ms: more than the band leaves.
         self.gap_s = rest.longest_gap_s if rest is not None else 0.0
         self.fit_s = 0.0      # the longest estimate between moves so far (host time)
+        self.speed = plan.speed_rpm                        # the test speed (set after the pilot)
+        self.cap = (plan.speed_limit_rpm, "speed")         # the highest test speed at these ramps, and its bound
 
     def _beat(self, lead_s: float = 0.0) -> None:
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
@@ -313,9 +318,11 @@ class _HostRun:
         if excursion > 0:
             room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
             speed = min(speed, pilot * plan.ramp_s / self.ramp * room / (excursion * (plan.repeats if not both else 1)))
+        self.cap = (plan.speed_limit_rpm, "speed")
         if self.torque_limit is not None and peak > 0:
-            speed = min(speed, pilot * TORQUE_SHARE * self.torque_limit / peak)
-        return speed
+            self.cap = min(self.cap, (pilot * TORQUE_SHARE * self.torque_limit / peak, "torque"))
+        self.speed = min(speed, self.cap[0])
+        return self.speed
 
     def _dithered(self, cycle: int, speed: float) -> tuple[float, float]:
         """Ramp and speed of a cycle: a torque read in coarse steps gets a different acceleration in every cycle
@@ -377,5 +384,8 @@ class _HostRun:
         result = Result("host", self.old_ratio, est.load_ratio, est, s.trace, self.plan, s.travel_rev, s.elapsed(),
                         rate, cycles)
         if not est.ok:
-            raise IdentificationRefused(f"identification refused: {est.reason}", result)
+            cure = remedy(self.plan.travel_limit_rev, est.shortfall, self.speed, *self.cap)
+            advice = cure.words() if cure is not None else est.advice
+            raise IdentificationRefused(f"identification refused: {est.reason}" + (f"; {advice}" if advice else ""),
+                                        result, cure)
         return result
