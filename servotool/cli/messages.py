@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from servotool.config import ConnectOptions
 from servotool.errors import MissingRole, ServoError, SetupGap, SetupRequired, UnknownName
+from servotool.words import agree
 
 if TYPE_CHECKING:
     from servotool.ops.restore import RestoreFailed
@@ -136,7 +137,7 @@ def setup_text(exc: SetupRequired, given: ConnectOptions) -> str:
     if later:
         codes = ", ".join(g.code for g in later)
         text += (f" — set {'it' if len(later) == 1 else 'them'} with '{set_command(later, exc.save)}', {cycle} "
-                 f"({codes} take{'s' if len(later) == 1 else ''} effect after a power cycle)")
+                 f"({codes} {agree(len(later), 'takes', 'take')} effect after a power cycle)")
     else:
         text += f" — {cycle}"
     if now:

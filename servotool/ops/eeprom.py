@@ -8,6 +8,7 @@ from contextlib import contextmanager
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.profile import Entry, Profile, can_save
+from servotool.words import agree
 
 
 def switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
@@ -126,9 +127,8 @@ def check_power_cycle(drive: Drive, entries: list[Entry], save: bool | None) -> 
     codes = ", ".join(later)
     how = ("store it with --save" if can_save(drive.profile) and save is not False
            else "drop --no-save" if can_save(drive.profile) else drive.profile.persistence.note)
-    raise UsageError(f"{codes} take{'s' if len(later) == 1 else ''} effect only after a power cycle, and "
-                     f"written in RAM only {'it' if len(later) == 1 else 'they'} would be lost by that power "
-                     f"cycle: {how}")
+    raise UsageError(f"{codes} {agree(len(later), 'takes', 'take')} effect only after a power cycle, and "
+                     f"written in RAM only {agree(len(later), 'it', 'they')} would be lost by that power cycle: {how}")
 
 
 @contextmanager

@@ -13,7 +13,7 @@ from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile
 from servotool.ops.backup import Backup, auto_backup, auto_path, load, save, take
 from servotool.ops.params import read_settings, select
-from servotool.words import count
+from servotool.words import agree, count
 
 # Exceptions by which a drive refuses writes at an address (illegal function, illegal data address): the entry is
 # reported and the restore goes on. Any other failure (a refused value, no answer) rolls the restore back.
@@ -203,7 +203,7 @@ def _account(drive: Drive, failed: tuple[str, ServoError, list[str], list[str]],
                       f"{format_value(drive.profile.entry(c), snapshot[c])}" for c in differ[:6])
     more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
     why = f" (could not undo {'; '.join(undo_failed)})" if undo_failed else ""
-    verb = "differs" if len(differ) == 1 else "differ"
+    verb = agree(len(differ), "differs", "differ")
     return failure(f"{wrote}; rollback incomplete{why}: {count(len(differ), 'entry')} {verb} from the automatic "
                    f"backup {auto}: {shown}{more}", "restore", False, differ)
 
