@@ -12,7 +12,7 @@ Targets: median |error| <= 2 %, worst <= 5 %, travel <= 2 rev, time <= 10 s, no 
 uncertainty should bound the error (|error| <= 3 sigma).
 
 Run: python bench/inertia_accuracy.py [--quick]
-     python bench/inertia_accuracy.py --profiles [--quick]
+     python bench/inertia_accuracy.py --profiles [--quick] [--remedies]
 --profiles: all four profiles at their factory line speed (SD25 9600 8N1, SDC 9600 8O1, IS620P 57600, DSX7E 115200)
 and at 19200, through tune_inertia as the CLI runs it (its motion route, hold and keep-alive; drives without a
 dead-man route moved as with --no-dead-man), over a seeded sample of issue 16's machines (loads 0-50, Coulomb up to
@@ -22,6 +22,9 @@ median |error of J_total| <= 1 %, worst <= 3 %, the true value within the report
 within 2 rev and 10 s; and the identification samples at >= 0.8x what the line carries for speed and torque back
 to back ('share'). The wire time counts 11 bits a character whatever the format (8N1 is 10: a real 8N1 line is
 about 10 % faster than modelled).
+--remedies (with --profiles): every refusal that suggests a longer travel (tuning.planning.Remedy) is run again
+with it, as a user following the advice would, in a second table: refusals, those with a travel suggested (and
+said to be enough), accepted when followed, within their 3 sigma, their error and the travels suggested.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ import re
 import statistics
 import tempfile
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from servotool.clock import VirtualClock
@@ -44,6 +48,7 @@ from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.plant import Plant
 from servotool.sim.virtual import TURNAROUND_S, VirtualLink, make_motion_setup, wire_time
+from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, TuneResult, tune_inertia
 
 TRAVEL_REV = 2.0
@@ -76,7 +81,8 @@ NOISE = [0.0, 0.002, 0.005, 0.01]
 
 
 def identify_once(ratio: float, friction: float, gravity: float, noise: float, baud: int, seed: int,
-                  brake: bool = True, profile_id: str = "dsx7e", viscous: float = 0.0005) -> TuneResult:
+                  brake: bool = True, profile_id: str = "dsx7e", viscous: float = 0.0005,
+                  travel_rev: float = TRAVEL_REV) -> TuneResult:
     """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine; a drive
     without a dead-man route is moved as the CLI moves it with --no-dead-man."""
     profile = load_profile(profile_id)
@@ -88,7 +94,7 @@ def identify_once(ratio: float, friction: float, gravity: float, noise: float, b
     make_motion_setup(sim)
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
     drive.dead_man_waived = True
-    return tune_inertia(drive, TuneRequest(travel_rev=TRAVEL_REV, dry_run=True), clock=clock)
+    return tune_inertia(drive, TuneRequest(travel_rev=travel_rev, dry_run=True), clock=clock)
 
 
 def line_rate(profile_id: str, baud: int) -> float:
@@ -155,30 +161,89 @@ def draws(quick: bool, seed: int = 16) -> list[tuple[float, float, float, float,
     return rng.sample(grid, 14 if quick else 60)
 
 
-def profiles_table(quick: bool) -> bool:
-    """Every profile at its factory line speed and at 19200 through tune_inertia; returns whether all targets met."""
+@dataclass
+class Remedies:
+    """The refusals of one cell that suggest a longer travel (tuning.planning.Remedy), run again with it."""
+
+    profile: str
+    baud: int
+    refused: int = 0
+    given: int = 0
+    enough: int = 0                                          # the remedy said it should be enough
+    accepted: list[tuple[float, bool, float]] = field(default_factory=list)   # |error| %, within 3 sigma, travel
+
+    def follow(self, refusal: IdentificationRefused, true: float, rerun: Callable[[float], TuneResult]) -> None:
+        self.refused += 1
+        cure = refusal.remedy
+        if cure is None:
+            return
+        self.given += 1
+        self.enough += cure.enough
+        try:
+            run = rerun(cure.suggested_rev)
+        except ServoError:
+            return
+        est = run.identified.estimate
+        assert est is not None
+        self.accepted.append((abs(run.ratio - true) / (1.0 + true) * 100, abs(run.ratio - true) <= 3 * est.ratio_std,
+                              cure.suggested_rev))
+
+    def row(self) -> str:
+        ok = self.accepted
+        errors = [e for e, _w, _t in ok]
+        travels = [t for _e, _w, t in ok]
+        return (f"{self.profile:>7} {self.baud:>6} {self.refused:>7} {self.given:>6} {self.enough:>6} "
+                f"{len(ok):>8} {sum(w for _e, w, _t in ok):>3}/{len(ok):<3} "
+                f"{statistics.median(errors) if errors else math.nan:>7.2f} {max(errors) if errors else math.nan:>7.2f}"
+                f" {statistics.median(travels) if travels else math.nan:>6.1f} {max(travels, default=math.nan):>6.1f}")
+
+
+def run_cell(pid: str, baud: int, machines: list[tuple[float, float, float, float, float]], remedies: bool
+             ) -> tuple[Cell, Remedies]:
+    """One row of the --profiles table, and (for the remedies table) the refusals' suggested travels followed."""
+    cell, followed = Cell(pid, baud), Remedies(pid, baud)
+    for n, (ratio, fr, visc, gr, nz) in enumerate(machines):
+        try:
+            run: TuneResult | ServoError = identify_once(ratio, fr, gr, nz, baud, seed=n + 1, profile_id=pid,
+                                                         viscous=visc)
+        except ServoError as exc:
+            run = exc
+        cell.add(ratio, run)
+        if remedies and isinstance(run, IdentificationRefused):
+            followed.follow(run, ratio, lambda travel, m=(ratio, fr, visc, gr, nz), n=n: identify_once(
+                m[0], m[1], m[3], m[4], baud, seed=n + 1, profile_id=pid, viscous=m[2], travel_rev=travel))
+    return cell, followed
+
+
+def profiles_table(quick: bool, remedies: bool = False) -> bool:
+    """Every profile at its factory line speed and at 19200 through tune_inertia; returns whether all targets met.
+    remedies: each refusal that suggests a longer travel is run again with it (a second table)."""
     machines = draws(quick)
     print(f"{len(machines)} machines per row (seeded sample of loads {LOADS}, Coulomb {COULOMB} x rated, viscous "
           f"{VISCOUS} x rated per rad/s, gravity {GRAVITY} x rated, noise {NOISE})")
     print(f"{'profile':>7} {'baud':>6} {'runs':>4} {'accepted':>9} {'median%':>7} {'worst%':>7} {'in3sig':>7} "
           f"{'>2rev':>4} {'samp/s':>6} {'line/s':>6} {'share':>5}  targets")
-    cells = []
+    cells, followed = [], []
     for pid, factory in FACTORY_BAUD.items():
         for baud in sorted({factory, 19200}, reverse=True):
-            cell = Cell(pid, baud)
-            for n, (ratio, fr, visc, gr, nz) in enumerate(machines):
-                try:
-                    run: TuneResult | ServoError = identify_once(ratio, fr, gr, nz, baud, seed=n + 1, profile_id=pid,
-                                                                 viscous=visc)
-                except ServoError as exc:
-                    run = exc
-                cell.add(ratio, run)
+            cell, remedied = run_cell(pid, baud, machines, remedies)
             print(cell.row(), flush=True)
             cells.append(cell)
+            followed.append(remedied)
     print("\nrefusals (each counts as a miss):")
     for cell in cells:
         for reason, count in cell.reasons.most_common():
             print(f"  {cell.profile:>7} {cell.baud:>6} {count:>3} x {reason}")
+    if remedies:
+        print("\nrefusals that suggest a longer travel, run again with it (issue 16: the remedy a refusal names must "
+              "help):")
+        print(f"{'profile':>7} {'baud':>6} {'refused':>7} {'travel':>6} {'enough':>6} {'accepted':>8} {'in3sig':>7} "
+              f"{'median%':>7} {'worst%':>7} {'med_rev':>6} {'max_rev':>6}")
+        for remedied in followed:
+            print(remedied.row())
+        accepted = [a for remedied in followed for a in remedied.accepted]
+        print(f"all rows: {sum(r.given for r in followed)} travels suggested, {len(accepted)} accepted when "
+              f"followed, {sum(w for _e, w, _t in accepted)} of them within their 3 sigma")
     met = all(all(c.targets().values()) for c in cells)
     print("targets (accepted >= 95 %, median <= 1 %, worst <= 3 %, in 3 sigma >= 95 %, <= 2 rev and 10 s; "
           "'share': identification samples/s over what the line carries for speed and torque, target >= 0.8): "
@@ -190,10 +255,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="a smaller grid")
     ap.add_argument("--profiles", action="store_true", help="every profile at its factory line speed and 19200")
+    ap.add_argument("--remedies", action="store_true", help="with --profiles: run each refusal that suggests a "
+                    "longer travel again with it")
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     if args.profiles:
-        profiles_table(args.quick)
+        profiles_table(args.quick, args.remedies)
         return
     ratios = [0.0, 3.0, 20.0, 50.0] if args.quick else [0.0, 1.0, 3.0, 10.0, 20.0, 35.0, 50.0]
     frictions = [0.02] if args.quick else [0.01, 0.05]
