@@ -149,20 +149,26 @@ def inertia(
         except tune.TuneDeclined:
             raise typer.Exit(1) from None
         except ServoError as exc:   # refused, tripped, travel exceeded, link lost
-            refusal = exc if isinstance(exc, identify.IdentificationRefused) else None
-            refused = refusal.result if refusal is not None else None
-            if report is not None and refused is not None:
-                _report(report, refused, d.profile, None, str(exc))
-            if as_json and ask.moving:
-                cure = refusal.remedy if refusal is not None else None
-                emit_json(_clean({"ok": False, "reason": str(exc), **(_estimate_json(refused) if refused else {}),
-                                  "ratio": refused.new_ratio if refused else None, "written": False,
-                                  "suggested_travel_rev": cure.suggested_rev if cure is not None else None}))
+            _failed(exc, report, d.profile, as_json and ask.moving)
             raise
         profile = d.profile
     if report is not None:
         _report(report, res.identified, profile, res)
     _render(res, profile, as_json, ask.dead_man)
+
+
+def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: bool) -> None:
+    """What a failed identification leaves: the report of a refused one, and the JSON of any (the reason, the
+    estimate so far, the travel a refusal suggests)."""
+    refusal = exc if isinstance(exc, identify.IdentificationRefused) else None
+    refused = refusal.result if refusal is not None else None
+    if report is not None and refused is not None:
+        _report(report, refused, profile, None, str(exc))
+    if as_json:
+        cure = refusal.remedy if refusal is not None else None
+        emit_json(_clean({"ok": False, "reason": str(exc), **(_estimate_json(refused) if refused else {}),
+                          "ratio": refused.new_ratio if refused else None, "written": False,
+                          "suggested_travel_rev": cure.suggested_rev if cure is not None else None}))
 
 
 class _Dialog:
