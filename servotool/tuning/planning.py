@@ -186,14 +186,14 @@ class Remedy:
     suggested_rev: float    # the one to ask for
     gain: float             # how many times harder the moves would accelerate with it
     enough: bool            # whether that covers the shortfall, with REMEDY_MARGIN
-    bound: str              # what bounds the moves beyond the suggested travel: "torque" or "speed"
+    bound: str              # what bounds the moves beyond it: "torque" or "speed" (rated or --max-speed)
 
     def words(self) -> str:
         said = (f"its moves were bound by the {self.travel_rev:g} rev travel: where the axis has room, --travel "
                 f"{self.suggested_rev:g} lets them accelerate {self.gain:.1f}x harder")
         if self.enough:
             return said + ": the uncertainty usually falls with it"
-        limit = "the torque share of the limit" if self.bound == "torque" else "the motor's speed limit"
+        limit = "the torque share of the limit" if self.bound == "torque" else "the speed limit (rated or --max-speed)"
         return said + f", as far as {limit} allows: that may not be enough"
 
 
@@ -202,7 +202,7 @@ def remedy(travel_rev: float, shortfall: float, speed_rpm: float, cap_rpm: float
     (the data fell short by nothing a stronger acceleration cures, or the moves already reach `cap_rpm`).
 
     speed_rpm: the test speed the travel allowed; cap_rpm: the highest that `bound` ("torque": the torque share of
-    the limit, "speed": the motor's speed limit) allows at the same ramps."""
+    the limit, "speed": the motor's rated speed or --max-speed) allows at the same ramps."""
     if not (math.isfinite(shortfall) and shortfall > 1.0) or speed_rpm <= 0:
         return None
     room = cap_rpm / speed_rpm

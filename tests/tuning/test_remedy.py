@@ -57,3 +57,9 @@ def test_sd25_at_its_factory_9600_baud_is_refused_with_a_travel_that_then_succee
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - 37.0) <= 3 * est.ratio_std
     assert res.identified.travel_used_rev <= cure.suggested_rev
+
+
+def test_a_speed_bound_remedy_names_the_speed_limit():
+    cure = remedy(2.0, 5.0, 300.0, 900.0, "speed")            # 3x at most: rated speed or --max-speed
+    assert cure is not None and not cure.enough and cure.suggested_rev == 6.0
+    assert "the speed limit (rated or --max-speed)" in cure.words()
