@@ -96,7 +96,8 @@ def inertia(
     max_speed: float = typer.Option(None, "--max-speed", help="Highest test speed in rpm (default: from --travel)."),
     accel_time: float = typer.Option(None, "--accel-time", help="Ramp time of each move in ms (default: from the "
                                      "link's sampling rate, 100..500 ms)."),
-    travel: float = typer.Option(2.0, "--travel", help="Travel limit: range of axis positions in revolutions."),
+    travel: float = typer.Option(2.0, "--travel", help="Travel limit: range of axis positions in revolutions. More "
+                                 "travel, stronger accelerations: a refusal on a slow line says how much would do."),
     direction: str = typer.Option("both", "--direction", help="both (out and back, load torque separated from "
                                   "friction), forward or reverse (only; friction and load torque fitted as one)."),
     repeats: int = typer.Option(None, "--repeats", help="Number of move cycles (default: repeat until the "
