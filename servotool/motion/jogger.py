@@ -19,6 +19,7 @@ from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
 from servotool.motion.jog_plan import JogPlan, checked_travel
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
+from servotool.motion.rest import STOPPED_RPM, RestWatch
 from servotool.motion.segments import SegmentMoves
 from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelGuard, TravelLimit
@@ -239,9 +240,10 @@ class Jogger:
         """Command stop and wait (bounded by the ramp) until the motor is at rest, keeping the host alive."""
         self.command(0)
         end = self.clock.now() + (wait_s if wait_s is not None else self._stop_wait_s)
+        watch = RestWatch(STOPPED_RPM)
         while self.speed_fb is not None and self.clock.now() < end:
             speed = self.speed()
-            if speed is not None and abs(speed) < 3.0:
+            if speed is not None and watch.at_rest(self.clock.now(), speed):
                 break
             self.beat()           # the watchdog keeps running while the drive ramps down
             self.idle(min(0.05, self.keepalive_s))

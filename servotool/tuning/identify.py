@@ -13,6 +13,7 @@ from servotool.model.profile import Entry
 from servotool.model.roles import status_bit
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.moves import Mover
+from servotool.motion.rest import RestWatch
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
@@ -190,8 +191,7 @@ class _HostRun:
         # timer) and an axis at 900 rpm covers 0.2 rev in 13 ms: more than the band leaves.
         self.gap_s = rest.longest_gap_s if rest is not None else 0.0
         self.fit_s = 0.0      # the longest estimate between moves so far (host time)
-        self.speed = plan.speed_rpm                        # the test speed (set after the pilot)
-        self.cap = (plan.speed_limit_rpm, "speed")         # the highest test speed at these ramps, and its bound
+        self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")   # the test speed, its cap and bound
 
     def _beat(self, lead_s: float = 0.0) -> None:
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
@@ -366,6 +366,15 @@ class _HostRun:
             done += 1
         return done
 
+    def settle(self) -> None:
+        """Wait (bounded) for the axis to rest before the servo goes off: a ringing loop swings through zero."""
+        watch, end = RestWatch(self.stop_band), self.timing.now() + 3 * self.ramp + 0.5
+        while self.timing.now() < end:
+            speed = self.jogger.speed()
+            if speed is None or watch.at_rest(self.timing.now(), speed):
+                return
+            self._beat()
+
     def run(self) -> Result:
         settings = EstimatorSettings(fit_load_torque=len(self.plan.directions) > 1)
         jogger = self.jogger
@@ -373,6 +382,7 @@ class _HostRun:
         hold = StableHold(self.ident.drive, jogger.route.kind, saved)
         try:
             cycles = self.cycles(self.pilot(hold, settings), settings)
+            self.settle()
         except BaseException:
             jogger.stop_quietly()
             raise

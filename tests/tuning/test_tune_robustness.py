@@ -8,7 +8,9 @@ import pytest
 
 from servotool.clock import VirtualClock
 from servotool.drive import Drive, coalesce_reads
+from servotool.model.codec import eng_to_raw
 from servotool.model.loader import load_profile
+from servotool.ops.params import write_one
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import TURNAROUND_S, HostStalls, VirtualLink, make_motion_setup, wire_time
 from servotool.tuning.friction import friction_report
@@ -217,3 +219,17 @@ def test_a_slow_fit_between_moves_does_not_starve_the_drives_watchdog(sim_dir, m
     assert res.ratio == pytest.approx(4.0, rel=0.1)
     assert silent and max(silent[:-1]) <= 0.2, silent     # the last fit comes after the motion
     assert active_alarm(d) is None
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_tune_inertia_returns_with_the_axis_at_rest_after_a_ringing_stop(sim_dir, seed):
+    """DSX7E with a load of 6 on a speed loop set for far less (Pn101 25 Hz, Pn102 30 ms, ratio 2.5) swings
+    through zero after each stop. One reading near zero was taken for rest: tune inertia returned (and a plan's
+    next step read the speed) with the axis still turning at about 69 rpm (seeds 1, 4, 5, 6 of 1-6)."""
+    sim, d, clock = set_up("dsx7e", 115200, load_ratio=6.0, seed=seed)
+    for code, value in (("Pn101", 25.0), ("Pn102", 30.0)):
+        entry = d.profile.entry(code)
+        write_one(d, entry, eng_to_raw(entry, value))
+    res = tune_inertia(d, TuneRequest(rigidity=12, gains=True), clock=clock)
+    assert res.ratio == pytest.approx(6.0, rel=0.05)
+    assert abs(sim.firmware.plant.true_speed_rpm) < 1.0
