@@ -179,8 +179,8 @@ MIN_REMEDY_GAIN = 2.0
 class Remedy:
     """A longer travel for a host identification refused for too little excitation where the travel bounded its
     moves: at the same ramps the speed, the acceleration and its torque grow in proportion to the travel. What a
-    refusal used to suggest, more repeats, helps far less on a slow line (SD25 at 9600: 20 cycles, 46 s, left 5 of
-    6 refusals refused)."""
+    refusal used to suggest, more repeats, helps far less on a slow line (SD25 at 9600: 20 cycles, 46 s, left all 5
+    refusals of 6 machines refused)."""
 
     travel_rev: float       # the travel limit the motion had
     suggested_rev: float    # the one to ask for
