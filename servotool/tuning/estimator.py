@@ -402,4 +402,3 @@ class _Partial:
             speed_noise_rpm=self.speed_noise_rpm, n_samples=self.n_samples, n_windows=self.n_windows,
             n_saturated=self.n_saturated, n_kinks=self.n_kinks, window_intervals=self.window_intervals,
             condition=self.condition, notes=tuple(self.notes), advice=advice, shortfall=self.shortfall)
-

@@ -318,7 +318,6 @@ class _HostRun:
         if excursion > 0:
             room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
             speed = min(speed, pilot * plan.ramp_s / self.ramp * room / (excursion * (plan.repeats if not both else 1)))
-        self.cap = (plan.speed_limit_rpm, "speed")
         if self.torque_limit is not None and peak > 0:
             self.cap = min(self.cap, (pilot * TORQUE_SHARE * self.torque_limit / peak, "torque"))
         self.speed = min(speed, self.cap[0])
