@@ -119,14 +119,17 @@ def test_falling_axis_is_refused_before_any_motion_and_identified_once_a_brake_h
 
 
 def test_refusal_writes_the_trace_and_a_json_reason(cli, tmp_path):
-    cli("sim", "config", "--load-ratio", "3", "--noise", "0.05")
+    cli("sim", "config", "--load-ratio", "3", "--noise", "0.03")
     trace = tmp_path / "t.csv"
-    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--repeats", "1", "--save-trace", str(trace))
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--repeats", "1", "--travel", "1",
+            "--save-trace", str(trace))
     assert r.code == 1
     data = r.json()
     assert data["ok"] is False and "refused" in data["reason"] and data["written"] is False
-    # too noisy for a 2 % uncertainty within 2 rev: the travel that would accelerate hard enough, for a script too
-    assert data["suggested_travel_rev"] >= 4.0 and f"--travel {data['suggested_travel_rev']:g} " in data["reason"]
+    # too noisy for a 2 % uncertainty within 1 rev: the travel that would accelerate hard enough, for a script too.
+    # The torque share leaves 3.5-5x at this load (at 2 rev and noise 0.05 it left 2.0-2.5x: a loaded CI run fell
+    # under the 2x a remedy needs).
+    assert data["suggested_travel_rev"] >= 2.0 and f"--travel {data['suggested_travel_rev']:g} " in data["reason"]
     assert "NaN" not in r.out
     assert len(trace.read_text().splitlines()) > 20
     assert _params(cli, "Pn004")["Pn004"] == 250
