@@ -89,6 +89,15 @@ class Mover(Jogger):
         segments.own_s = None
         self._ends_at = self.clock.now() + own if own is not None and segments.ends_itself else None
 
+    def own_segment_rev(self) -> float | None:
+        """The length (rev) of the running move's own segment, which the drive brakes by itself at its end (start with
+        stop_after_s); None where the host stops the move."""
+        segments = self.segments
+        raw = segments.written_distance() if segments is not None else None
+        if segments is None or raw is None or not segments.ends_itself or not self.direction:
+            return None
+        return abs(raw) / segments.units_per_rev()
+
     def keep_alive(self, lead_s: float = 0.0) -> None:
         """Feed the dead-man with no write the drive does not need. lead_s: how long the caller may take before it
         calls again. A drive's watchdog (route drive_timeout) gets its beat at the last moment that still leaves a

@@ -224,12 +224,13 @@ class _HostRun:
         self.sample()
         self.gap_s = max(self.gap_s, self.sampler.interval())
 
-    def _must_stop(self, direction: int, speed: float) -> bool:
+    def _must_stop(self, direction: int, speed: float, own_end: float | None = None) -> bool:
         """Whether the stopping distance (the ramp's, stretched as the pilot showed, plus the travel until a stop
         command can act and the loop's lag) would carry the axis out of its band: drift (gravity, overshoot) must
-        not add up to the limit."""
-        if self.band is None:
+        not add up to the limit. own_end: where the move's own segment stops it (inside the band: no command needed)."""
+        if self.band is None or (own_end is not None and self.band[0] <= own_end <= self.band[1]):
             return False
+        lo, hi = self.band
         s = self.sampler
         v = abs(s.trace.speed[-1])
         # Until a stop command acts: the next sample (as late as the longest gap yet: beyond the usual interval the
@@ -238,7 +239,6 @@ class _HostRun:
         v_late = min(speed, v + speed / self.ramp * late)
         stop_rev = v / 60.0 * (2.0 * s.interval() + self.lag_s) + (v + v_late) / 2.0 / 60.0 * late
         stop_rev += self.stretch * v_late * v_late * self.ramp / (2 * speed) / 60.0
-        lo, hi = self.band
         return s.pred + stop_rev > hi if direction > 0 else s.pred - stop_rev < lo
 
     def move(self, direction: int, speed: float) -> tuple[float, float]:
@@ -250,10 +250,12 @@ class _HostRun:
         jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
                      self.ramp if self.band is not None else None)
         start = self.timing.now()
+        own = jogger.own_segment_rev()
+        own_end = None if own is None else s.pred + direction * own * self.stretch
         self.sample()
         while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
             self._sample_timed()
-            if self._must_stop(direction, speed):
+            if self._must_stop(direction, speed, own_end):
                 break
         jogger.command(0)
         stop = self.timing.now()
