@@ -31,6 +31,7 @@ from servotool.tuning.planning import (
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
 from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
 from servotool.tuning.stable_hold import StableHold, pilot_settings
+from servotool.tuning.travel_guard import TravelGuard
 
 __all__ = ["IdentificationFailed", "IdentificationRefused", "Identifier", "Result", "Trace", "TravelExceeded"]
 
@@ -179,17 +180,7 @@ class _HostRun:
         # A torque read in whole percent: its step error would repeat in every move of the same acceleration.
         self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT
         self.ramp = plan.ramp_s
-        # Stop early where the stopping distance would leave the band [lo, hi] (set after the pilot).
-        self.band: tuple[float, float] | None = None
-        self.stretch = 1.0
-        # The loop's lag (s): how much further than its ramp the axis coasted after a stop command, per speed. A
-        # speed loop configured for a fraction of the real inertia lags its ramps by tens of ms, more with high
-        # friction (the integral winds up at breakaway); the stop guard adds the travel of that lag.
-        self.lag_s = 0.0
-        # The longest time between two samples seen so far (rest check, moves): the guard must foresee a check
-        # that comes that late. A host stalls (a loaded laptop, a scheduler's 16 ms tick, a USB adapter's latency
-        # timer) and an axis at 900 rpm covers 0.2 rev in 13 ms: more than the band leaves.
-        self.gap_s = rest.longest_gap_s if rest is not None else 0.0
+        self.guard = TravelGuard(gap_s=rest.longest_gap_s if rest is not None else 0.0)
         self.fit_s = 0.0      # the longest estimate between moves so far (host time)
         self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")   # the test speed, its cap and bound
 
@@ -222,40 +213,23 @@ class _HostRun:
     def _sample_timed(self) -> None:
         """A sample inside a move, its gap from the one before kept when it is the longest yet."""
         self.sample()
-        self.gap_s = max(self.gap_s, self.sampler.interval())
-
-    def _must_stop(self, direction: int, speed: float, own_end: float | None = None) -> bool:
-        """Whether the stopping distance (the ramp's, stretched as the pilot showed, plus the travel until a stop
-        command can act and the loop's lag) would carry the axis out of its band: drift (gravity, overshoot) must
-        not add up to the limit. own_end: where the move's own segment stops it (inside the band: no command needed)."""
-        if self.band is None or (own_end is not None and self.band[0] <= own_end <= self.band[1]):
-            return False
-        lo, hi = self.band
-        s = self.sampler
-        v = abs(s.trace.speed[-1])
-        # Until a stop command acts: the next sample (as late as the longest gap yet: beyond the usual interval the
-        # ramp goes on accelerating) and the write, then the loop's lag.
-        late = max(0.0, self.gap_s - s.interval())
-        v_late = min(speed, v + speed / self.ramp * late)
-        stop_rev = v / 60.0 * (2.0 * s.interval() + self.lag_s) + (v + v_late) / 2.0 / 60.0 * late
-        stop_rev += self.stretch * v_late * v_late * self.ramp / (2 * speed) / 60.0
-        return s.pred + stop_rev > hi if direction > 0 else s.pred - stop_rev < lo
+        self.guard.gap_s = max(self.guard.gap_s, self.sampler.interval())
 
     def move(self, direction: int, speed: float) -> tuple[float, float]:
         """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
-        s, jogger, trace = self.sampler, self.jogger, self.sampler.trace
+        s, jogger, trace, guard = self.sampler, self.jogger, self.sampler.trace, self.guard
         first = len(trace.t)
-        # After the pilot a segment route's move may end by itself (no later than the stop command the pilot's
-        # stretch and lag were learned with); the pilot stops by command, as an early stop (_must_stop) does.
+        # After the pilot a segment route's move may end by itself (where it stops inside the travel band); the
+        # pilot stops by command, as an early stop (TravelGuard.must_stop) does.
         jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
-                     self.ramp if self.band is not None else None)
+                     self.ramp if guard.band is not None else None)
         start = self.timing.now()
         own = jogger.own_segment_rev()
-        own_end = None if own is None else s.pred + direction * own * self.stretch
+        own_end = guard.own_end(s.pred, direction, own, speed)
         self.sample()
         while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
             self._sample_timed()
-            if self._must_stop(direction, speed, own_end):
+            if guard.must_stop(s.pred, abs(trace.speed[-1]), direction, speed, self.ramp, s.interval(), own_end):
                 break
         jogger.command(0)
         stop = self.timing.now()
@@ -273,9 +247,10 @@ class _HostRun:
         self.sample()
         while self.timing.now() < rest:
             self.sample()
+        if own is not None:
+            guard.ran_own(trace.t[first:], trace.speed[first:], direction, own, speed)
         if v_stop > self.stop_band:
-            coast = abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0
-            self.lag_s = max(self.lag_s, coast / (v_stop / 60.0))
+            guard.coasted(abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0, v_stop)
         active = active_alarm(self.ident.drive)
         if active:
             raise IdentificationFailed(f"the drive stopped the identification with alarm {active}")
@@ -303,7 +278,7 @@ class _HostRun:
         nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
         limit_rev = plan.travel_limit_rev
         lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
-        self.band, self.stretch = (lo, lo + 0.9 * limit_rev), max(1.0, excursion / nominal)
+        self.guard.band, self.guard.stretch = (lo, lo + 0.9 * limit_rev), max(1.0, excursion / nominal)
         return self._test_speed(pilot, excursion, peak)
 
     def _test_speed(self, pilot: float, excursion: float, peak: float) -> float:
@@ -311,12 +286,13 @@ class _HostRun:
         plan = self.plan
         both = len(plan.directions) > 1
         speed = plan.speed_rpm     # excursion and torque grow in proportion to the speed at a fixed ramp time
-        if self.stretch > 1.5:
+        guard = self.guard
+        if guard.stretch > 1.5:
             # The loop cannot follow the ramps (far-off inertia ratio: an under-damped loop): slower ramps at
             # a lower speed (the same travel) keep its swing inside the travel band.
-            factor = min(2.0, self.stretch / 1.5, 0.5 / self.ramp)
+            factor = min(2.0, guard.stretch / 1.5, 0.5 / self.ramp)
             self.ramp, speed = self.ramp * factor, speed / factor
-            self.stretch /= factor
+            guard.stretch /= factor
         if excursion > 0:
             room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
             speed = min(speed, pilot * plan.ramp_s / self.ramp * room / (excursion * (plan.repeats if not both else 1)))
@@ -335,7 +311,7 @@ class _HostRun:
             return self.ramp, speed
         # No shorter than twice the longest gap yet: a host stall must not take a whole ramp before the stop guard
         # sees the axis again (bench/host_stalls.py).
-        ramp, slower = dithered(self.ramp, speed, cycle, self.sampler.rate(), STALL_RAMPS * self.gap_s)
+        ramp, slower = dithered(self.ramp, speed, cycle, self.sampler.rate(), STALL_RAMPS * self.guard.gap_s)
         return ramp, slower if self.coarse else speed
 
     def cycles(self, speed: float, settings: EstimatorSettings) -> int:
