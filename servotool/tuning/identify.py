@@ -205,6 +205,7 @@ class _HostRun:
     def sample(self) -> None:
         try:
             self.sampler.sample()
+            self.guard.saw(self.sampler.pred)
         except TravelLimitReached:
             raise TravelExceeded(f"travel limit {self.plan.travel_limit_rev:g} rev reached: motion stopped; the "
                                  "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel"
@@ -226,6 +227,7 @@ class _HostRun:
         start = self.timing.now()
         own = jogger.own_segment_rev()
         own_end = guard.own_end(s.pred, direction, own, speed)
+        guard.begin(s.pred, direction)
         self.sample()
         while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
             self._sample_timed()
@@ -248,7 +250,7 @@ class _HostRun:
         while self.timing.now() < rest:
             self.sample()
         if own is not None:
-            guard.ran_own(trace.t[first:], trace.speed[first:], direction, own, speed)
+            guard.ran_own(own, speed)
         if v_stop > self.stop_band:
             guard.coasted(abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0, v_stop)
         active = active_alarm(self.ident.drive)

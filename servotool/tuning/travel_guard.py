@@ -6,8 +6,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 OWN_MARGIN = 2.0      # an own segment's end is predicted this many times its longest lag yet beyond it
 
 
@@ -28,6 +26,10 @@ class TravelGuard:
     gap_s: float = 0.0
     # How long (s, at speed) the moves that their own segment ended ran past it, the longest yet (None: none yet).
     own_lag_s: float | None = None
+    # The running move: where it started (rev), its direction and the furthest it went that way.
+    origin: float = 0.0
+    direction: int = 0
+    reach: float = 0.0
 
     def must_stop(self, pred: float, v: float, direction: int, speed: float, ramp_s: float, interval_s: float,
                   own_end: float | None = None) -> bool:
@@ -55,11 +57,17 @@ class TravelGuard:
             return pred + direction * own_rev * self.stretch
         return pred + direction * (own_rev + OWN_MARGIN * self.own_lag_s * speed / 60.0)
 
-    def ran_own(self, t: list[float], rpm: list[float], direction: int, own_rev: float, speed: float) -> None:
-        """A move that its own segment of own_rev carried ran this path (samples from its start): how far past it."""
-        tt, vv = np.asarray(t), np.asarray(rpm)
-        peak = float(np.max(direction * np.cumsum(np.diff(tt) * (vv[1:] + vv[:-1])), initial=0.0)) / 120.0
-        self.own_lag_s = max(self.own_lag_s or 0.0, (peak - own_rev) / (speed / 60.0))
+    def begin(self, pred: float, direction: int) -> None:
+        """A move starts from pred (rev) in direction."""
+        self.origin, self.direction, self.reach = pred, direction, 0.0
+
+    def saw(self, pred: float) -> None:
+        """The axis is at pred (the sampler's position, each sample)."""
+        self.reach = max(self.reach, self.direction * (pred - self.origin))
+
+    def ran_own(self, own_rev: float, speed: float) -> None:
+        """The running move, which its own segment of own_rev carried at `speed`, has ended: how far past it."""
+        self.own_lag_s = max(self.own_lag_s or 0.0, (self.reach - own_rev) / (speed / 60.0))
 
     def coasted(self, coast_rev: float, v_stop: float) -> None:
         """After a stop command at v_stop rpm the axis went coast_rev further than its ramp."""

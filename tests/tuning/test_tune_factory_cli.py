@@ -62,10 +62,17 @@ def test_at_the_factory_9600_baud_a_refusal_names_the_travel_that_then_identifie
         assert cli(*cmd).code == 0
     tune = ("--port", "sim", "--profile", profile, "tune", "inertia", "--yes", "--json", "--dry-run", "--no-dead-man")
     r = cli(*tune)
+    if r.code == 1 and r.json()["suggested_travel_rev"] is None:
+        # Real time: now and then the subsets of a rigid load's log disagree by chance and the uncertainty is widened
+        # over the limit; that refusal names the disagreement instead of a travel (more travel need not cure what it
+        # suspects). A user runs it again.
+        assert "inertia differs" in r.json()["reason"] or "resonance" in r.json()["reason"], r.json()["reason"]
+        r = cli(*tune)
     if r.code != 0 or profile == "sd25":
         assert r.code == 1, r.err     # refused (SD25: always, at 4-7 %), not failed otherwise
         travel = r.json()["suggested_travel_rev"]
-        assert travel >= 4.0 and f"--travel {travel:g} " in r.json()["reason"]
+        assert travel is not None and travel >= 4.0, r.json()["reason"]
+        assert f"--travel {travel:g} " in r.json()["reason"]
         r = cli(*tune, "--travel", str(travel))
         assert r.code == 0, r.err
         assert r.json()["travel_rev"] <= travel
