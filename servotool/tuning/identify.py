@@ -16,6 +16,7 @@ from servotool.motion.moves import Mover
 from servotool.motion.rest import RestWatch
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
+from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
@@ -31,7 +32,6 @@ from servotool.tuning.planning import (
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
 from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
 from servotool.tuning.stable_hold import StableHold, pilot_settings
-from servotool.tuning.travel_guard import TravelGuard
 
 __all__ = ["IdentificationFailed", "IdentificationRefused", "Identifier", "Result", "Trace", "TravelExceeded"]
 
@@ -180,7 +180,7 @@ class _HostRun:
         # A torque read in whole percent: its step error would repeat in every move of the same acceleration.
         self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT
         self.ramp = plan.ramp_s
-        self.guard = TravelGuard(gap_s=rest.longest_gap_s if rest is not None else 0.0)
+        self.guard = BandGuard(gap_s=rest.longest_gap_s if rest is not None else 0.0)
         self.fit_s = 0.0      # the longest estimate between moves so far (host time)
         self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")   # the test speed, its cap and bound
 
@@ -221,17 +221,15 @@ class _HostRun:
         s, jogger, trace, guard = self.sampler, self.jogger, self.sampler.trace, self.guard
         first = len(trace.t)
         # After the pilot a segment route's move may end by itself (where it stops inside the travel band); the
-        # pilot stops by command, as an early stop (TravelGuard.must_stop) does.
+        # pilot stops by command, as an early stop (BandGuard.must_stop) does.
         jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
                      self.ramp if guard.band is not None else None)
         start = self.timing.now()
-        own = jogger.own_segment_rev()
-        own_end = guard.own_end(s.pred, direction, own, speed)
-        guard.begin(s.pred, direction)
+        guard.begin(s.pred, direction, speed, jogger.own_segment_rev())
         self.sample()
         while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
             self._sample_timed()
-            if guard.must_stop(s.pred, abs(trace.speed[-1]), direction, speed, self.ramp, s.interval(), own_end):
+            if guard.must_stop(s.pred, abs(trace.speed[-1]), self.ramp, s.interval()):
                 break
         jogger.command(0)
         stop = self.timing.now()
@@ -249,8 +247,7 @@ class _HostRun:
         self.sample()
         while self.timing.now() < rest:
             self.sample()
-        if own is not None:
-            guard.ran_own(own, speed)
+        guard.ended()
         if v_stop > self.stop_band:
             guard.coasted(abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0, v_stop)
         active = active_alarm(self.ident.drive)

@@ -1,6 +1,10 @@
 """The guard that keeps an identification's moves inside their travel band (tuning.identify): a move stops early
 where its stopping distance would carry the axis out of the band, as far as the pilot and the moves so far showed
-the axis to run on. Drift (gravity, overshoot) must not add up to the travel limit."""
+the axis to run on. Drift (gravity, overshoot) must not add up to the travel limit.
+
+A JOG's soft limit (motion.travel.TravelGuard) is its twin for a motion of unknown length: it reads the position
+and stops at a fixed distance from the limit. Here the moves are planned, the band sits inside the limit that the
+sampler enforces, and the guard learns from the pilot and each move how far the axis runs on."""
 
 from __future__ import annotations
 
@@ -10,7 +14,7 @@ OWN_MARGIN = 2.0      # an own segment's end is predicted this many times its lo
 
 
 @dataclass
-class TravelGuard:
+class BandGuard:
     """What the guard has learnt of the axis; band [lo, hi] in rev, set after the pilot (None: no guard yet)."""
 
     band: tuple[float, float] | None = None
@@ -26,19 +30,36 @@ class TravelGuard:
     gap_s: float = 0.0
     # How long (s, at speed) the moves that their own segment ended ran past it, the longest yet (None: none yet).
     own_lag_s: float | None = None
-    # The running move: where it started (rev), its direction and the furthest it went that way.
+    # The running move: where it started (rev), its direction, speed (rpm) and own segment (rev, None: the host stops
+    # it), where that segment will stop it, and the furthest it went.
     origin: float = 0.0
     direction: int = 0
+    speed: float = 0.0
+    own_rev: float | None = None
+    own_end: float | None = None
     reach: float = 0.0
 
-    def must_stop(self, pred: float, v: float, direction: int, speed: float, ramp_s: float, interval_s: float,
-                  own_end: float | None = None) -> bool:
-        """Whether stopping now still keeps the axis (at pred rev, v rpm, in a move to `speed` in ramp_s, sampled
+    def begin(self, pred: float, direction: int, speed: float, own_rev: float | None) -> None:
+        """A move starts from pred (rev) in direction to `speed`; own_rev: its own segment, which the drive brakes
+        by itself at its end. It stops as far past it as the own segments so far ran, twice over, else stretched
+        as the pilot's stopped move."""
+        self.origin, self.direction, self.speed, self.own_rev, self.reach = pred, direction, speed, own_rev, 0.0
+        if own_rev is None:
+            self.own_end = None
+        elif self.own_lag_s is None:
+            self.own_end = pred + direction * own_rev * self.stretch
+        else:
+            self.own_end = pred + direction * (own_rev + OWN_MARGIN * self.own_lag_s * speed / 60.0)
+
+    def must_stop(self, pred: float, v: float, ramp_s: float, interval_s: float) -> bool:
+        """Whether stopping the running move now still keeps the axis (at pred rev, v rpm, its ramp ramp_s, sampled
         every interval_s) inside the band: the ramp's stopping distance, stretched as the pilot showed, plus the
-        travel until a stop command can act and the loop's lag. own_end: where the move's own segment stops it;
-        inside the band the drive brakes it there by itself, with no command to wait for."""
+        travel until a stop command can act and the loop's lag. A move whose own segment stops it inside the band
+        the drive brakes there by itself, with no command to wait for."""
+        own_end = self.own_end
         if self.band is None or (own_end is not None and self.band[0] <= own_end <= self.band[1]):
             return False
+        direction, speed = self.direction, self.speed
         lo, hi = self.band
         # Until a stop command acts: the next sample (as late as the longest gap yet: beyond the usual interval the
         # ramp goes on accelerating) and the write, then the loop's lag.
@@ -48,26 +69,14 @@ class TravelGuard:
         stop_rev += self.stretch * v_late * v_late * ramp_s / (2 * speed) / 60.0
         return pred + stop_rev > hi if direction > 0 else pred - stop_rev < lo
 
-    def own_end(self, pred: float, direction: int, own_rev: float | None, speed: float) -> float | None:
-        """Where a move from pred that its own segment of own_rev carries will stop (None: the host stops it): as
-        far past it as the own segments so far ran, twice over, else stretched as the pilot's stopped move."""
-        if own_rev is None:
-            return None
-        if self.own_lag_s is None:
-            return pred + direction * own_rev * self.stretch
-        return pred + direction * (own_rev + OWN_MARGIN * self.own_lag_s * speed / 60.0)
-
-    def begin(self, pred: float, direction: int) -> None:
-        """A move starts from pred (rev) in direction."""
-        self.origin, self.direction, self.reach = pred, direction, 0.0
-
     def saw(self, pred: float) -> None:
         """The axis is at pred (the sampler's position, each sample)."""
         self.reach = max(self.reach, self.direction * (pred - self.origin))
 
-    def ran_own(self, own_rev: float, speed: float) -> None:
-        """The running move, which its own segment of own_rev carried at `speed`, has ended: how far past it."""
-        self.own_lag_s = max(self.own_lag_s or 0.0, (self.reach - own_rev) / (speed / 60.0))
+    def ended(self) -> None:
+        """The running move has ended at rest: where its own segment carried it, how far it ran past it."""
+        if self.own_rev is not None:
+            self.own_lag_s = max(self.own_lag_s or 0.0, (self.reach - self.own_rev) / (self.speed / 60.0))
 
     def coasted(self, coast_rev: float, v_stop: float) -> None:
         """After a stop command at v_stop rpm the axis went coast_rev further than its ramp."""
