@@ -28,7 +28,8 @@ the fit's noise-based uncertainty tight while the answer is wrong. These checks 
   them (forward/reverse x accelerating/braking, the start/middle/end of the travel, weak/medium/strong
   accelerations). Where the subsets disagree more than their uncertainties allow, the uncertainty is widened by
   the Birge ratio sqrt(chi2/dof); where they disagree grossly (by more than GROSS_SPREAD of J, well beyond their
-  uncertainties) the result is refused.
+  uncertainties) the result is refused. Accelerations that disagree no more than the speed noise can make them
+  (subsets.points_off_model) widen it without an off-model note.
   Backlash shows as a lower J while braking or a higher one at weak accelerations (the motor crosses the gap
   alone), a compliant coupling as J that differs between the phases of a move.
 
@@ -50,7 +51,7 @@ from servotool.tuning.fit_numerics import (
     jackknife_std,
     projected_fits,
 )
-from servotool.tuning.subsets import Windows, cause, torque_step, worst_subsets
+from servotool.tuning.subsets import Windows, cause, points_off_model, torque_step, worst_subsets
 
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
@@ -173,6 +174,11 @@ def assess(fit: FitData) -> Verdict:
         text = f"inertia differs {name} by {100 * spread:.0f} % ({birge:.1f}x its uncertainty)"
         if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
             return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {cause(name)}"]))
+        if not points_off_model(name, birge):
+            notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, as much as "
+                         "the speed noise alone can make it differ on a rigid load")
+            return Verdict(j, j_std, tuple(notes), widened="; ".join(
+                [*why, f"{text}: the speed noise, or backlash or a compliant coupling"]))
         notes.append(f"off-model: {text}; uncertainty widened to the spread ({cause(name)})")
         return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {cause(name)}"]))
     return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why))
