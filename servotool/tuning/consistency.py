@@ -122,6 +122,7 @@ class Verdict:
     notes: tuple[str, ...]
     refuse: str = ""          # empty: usable (perhaps with a widened uncertainty)
     widened: str = ""         # why the uncertainty was widened (words for a refusal it causes), empty if not
+    curable: bool = False     # the widening is one that stronger accelerations shrink (a remedy may be offered)
 
 
 def assess(fit: FitData) -> Verdict:
@@ -178,7 +179,7 @@ def assess(fit: FitData) -> Verdict:
             notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, as much as "
                          "the speed noise alone can make it differ on a rigid load")
             return Verdict(j, j_std, tuple(notes), widened="; ".join(
-                [*why, f"{text}: the speed noise, or backlash or a compliant coupling"]))
+                [*why, f"{text}: the speed noise, or backlash or a compliant coupling"]), curable=not why)
         notes.append(f"off-model: {text}; uncertainty widened to the spread ({cause(name)})")
         return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {cause(name)}"]))
     return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why))

@@ -114,3 +114,19 @@ def test_the_torque_step_is_found_from_readings_on_a_grid():
     assert torque_step(np.array([3.0, -1.0, 0.0, 7.0, 3.0]) * 0.0127) == pytest.approx(0.0127)
     assert torque_step(np.array([0.1, 0.27, 0.7, 1.31])) == 0.0       # not on one grid
     assert torque_step(np.array([0.5, 0.5])) == 0.0
+
+
+def test_a_refusal_widened_by_the_accelerations_names_a_travel_that_then_identifies_backlash(sim_dir):
+    """Backlash 0.1 rad on a light load: the accelerations disagree within what the speed noise can do, the widened
+    uncertainty is refused, and the refusal used to suggest nothing. It now names a longer travel (the gap weighs
+    less in a stronger motion); followed, it gives a result within its 3 sigma."""
+    machine = {"load_ratio": 2.0, "friction": 0.02, "noise": 0.002, "seed": 9, "backlash_rad": 0.1}
+    _sim, d, clock = set_up("dsx7e", 19200, **machine)
+    with pytest.raises(IdentificationRefused) as refused:
+        tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    assert "inertia differs with the acceleration" in str(refused.value)
+    assert refused.value.remedy is not None, str(refused.value)
+    _sim, d, clock = set_up("dsx7e", 19200, **machine)
+    est = tune_inertia(d, TuneRequest(dry_run=True, travel_rev=refused.value.remedy.suggested_rev),
+                       clock=clock).identified.estimate
+    assert abs(est.load_ratio - 2.0) <= 3 * est.ratio_std
