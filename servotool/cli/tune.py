@@ -282,8 +282,9 @@ def _show(proposal: tune.Proposal) -> None:
               + (f" ± {est.ratio_std:.2f}" if est else "") + param, markup=False)
     if est:
         travel = f"{result.travel_used_rev:.2f} rev, " if result.travel_used_rev is not None else ""
-        out.print(f"friction {est.coulomb_nm:.4f} N·m, viscous {est.viscous_nm_per_rad_s:.2e} N·m·s/rad, "
-                  f"load torque {est.load_torque_nm:.4f} N·m, fit residual {est.residual_rel:.1%}; "
+        out.print(f"friction {est.coulomb_nm:.4f} ± {est.coulomb_std_nm:.4f} N·m, viscous "
+                  f"{est.viscous_nm_per_rad_s:.2e} N·m·s/rad, load torque {est.load_torque_nm:.4f} ± "
+                  f"{est.load_torque_std_nm:.4f} N·m, fit residual {est.residual_rel:.1%}; "
                   f"{len(result.trace.t)} samples ({result.samples_per_s:.0f}/s), {travel}"
                   f"{result.time_used_s:.1f} s", markup=False)
         report = friction_report(proposal.profile, est)

@@ -175,7 +175,7 @@ def assess(fit: FitData) -> Verdict:
         text = f"inertia differs {name} by {100 * spread:.0f} % ({birge:.1f}x its uncertainty)"
         if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
             return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {cause(name)}"]))
-        if not points_off_model(name, birge):
+        if not points_off_model(name, birge, spread):
             notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, as much as "
                          "the speed noise alone can make it differ on a rigid load")
             return Verdict(j, j_std, tuple(notes), widened="; ".join(

@@ -66,11 +66,12 @@ def test_a_rigid_load_gets_no_off_model_note(sim_dir):
     assert outcome == "accepted" and not any(n.startswith("off-model:") for n in est.notes)
 
 
-@pytest.mark.parametrize("ratio,seed", [(5.0, 1), (1.0, 2), (5.0, 3), (5.0, 9)])
+@pytest.mark.parametrize("ratio,seed", [(5.0, 1), (1.0, 2), (5.0, 3), (5.0, 9), (1.0, 8), (1.0, 10)])
 def test_speed_noise_sorted_with_the_acceleration_widens_a_rigid_load_without_blaming_backlash(sim_dir, ratio, seed):
     """Windows sorted by their own speed change sort its noise too: on these rigid loads (115200 baud, 0.2 % noise)
     the weak accelerations read J high, and the result said "off-model: ... backlash or a compliant coupling" (16 of
-    24 rigid runs). The uncertainty is still widened; the words now say what it may be."""
+    24 rigid runs). The uncertainty is still widened; the words now say what it may be. The last two disagree by
+    more than 3 sigmas, but by 2-3 % of J: a bias that many windows make stand out, not backlash."""
     sim, d, clock = set_up("dsx7e", 115200, load_ratio=ratio, friction=0.05, noise=0.002, seed=seed)
     outcome, est = _outcome(sim, d, clock)
     assert outcome == "accepted", est
