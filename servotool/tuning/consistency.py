@@ -176,10 +176,13 @@ def assess(fit: FitData) -> Verdict:
         if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
             return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {cause(name)}"]))
         if not points_off_model(name, birge, spread):
-            notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, as much as "
-                         "the speed noise alone can make it differ on a rigid load")
+            sorted_by_noise = "acceleration" in name
+            notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, "
+                         + ("as much as the speed noise alone can make it differ on a rigid load" if sorted_by_noise
+                            else "too little to point to the mechanics"))
             return Verdict(j, j_std, tuple(notes), widened="; ".join(
-                [*why, f"{text}: the speed noise, or backlash or a compliant coupling"]), curable=not why)
+                [*why, f"{text}: the speed noise, or backlash or a compliant coupling" if sorted_by_noise else text]),
+                curable=not why)
         notes.append(f"off-model: {text}; uncertainty widened to the spread ({cause(name)})")
         return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {cause(name)}"]))
     return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why))

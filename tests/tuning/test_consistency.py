@@ -83,3 +83,14 @@ def test_a_damped_two_mass_at_a_fast_line_is_refused_for_its_resonance(sim_dir, 
         assert hz is not None and 15 <= int(hz.group(1)) <= 25, why
     else:
         assert abs(est.load_ratio - 2.0) <= 3 * est.ratio_std, (outcome, est.load_ratio, est.ratio_std, why)
+
+
+def test_a_rigid_load_whose_travel_differs_by_1_percent_at_a_fast_line_is_not_called_off_model(sim_dir):
+    """At 921600 baud (the simulated drive's own rate) thousands of windows make a 1 % difference in J over the
+    travel stand 1.5 sigmas out; the result said "off-model: the load varies over the travel". A difference within
+    3 % of J now widens the uncertainty without blaming the mechanics."""
+    run = identify_once(5.0, 0.05, 0.0, 0.002, 921600, seed=6, profile_id="dsx7e", viscous=0.0)
+    est = run.identified.estimate
+    assert not any(n.startswith("off-model:") for n in est.notes), est.notes
+    assert any("too little to point to the mechanics" in n for n in est.notes), est.notes
+    assert abs(run.ratio - 5.0) <= 3 * est.ratio_std
