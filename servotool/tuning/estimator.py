@@ -14,7 +14,8 @@ with integrals of the piecewise-cubic (Hermite) interpolant over the actual time
 miss the curvature between slow samples (a ringing loop) and bias J. Windows never contain a sample inside the
 zero-speed band, so sign(omega) is constant within a window (stiction and the noisy sign near standstill stay out
 of the fit), and no window touches a torque step (a kink in speed or torque), which no interpolant can place
-between slow samples. The speed noise in omega_b - omega_a (a noisy regressor) is corrected for.
+between slow samples, or spans a host's stall. The speed noise in omega_b - omega_a (a noisy regressor) is
+corrected for.
 The windows are disjoint, so only neighbours sharing an end sample have correlated errors; the covariance accounts
 for that correlation (MA(1)), which keeps the reported uncertainty honest (overlapping "all pairs" windows would
 report a smaller, dishonest one).
@@ -44,6 +45,7 @@ from servotool.tuning.fit_numerics import (
 )
 
 RPM_TO_RAD_S = math.pi / 30.0
+GAP_INTERVALS = 6.0   # no window spans more median intervals (a stall: a cubic misses a ringing loop's swing)
 KGCM2_TO_KGM2 = 1e-4
 
 
@@ -235,6 +237,7 @@ def _signals(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: f
     kink = np.zeros(pct.size, dtype=bool)
     kink[1:-1] = (np.abs(dev) > cfg.kink_sigma * torque_noise * ref) | (
         np.abs(dev_w) > cfg.kink_sigma * noise_rpm * ref_w)
+    kink[1:] |= np.diff(t) > GAP_INTERVALS * float(np.median(np.diff(t)))
     r.n_kinks = int(np.count_nonzero(kink))
     return _Signals(t=t, rpm=rpm, w=w, torque=torque, noise_w=noise_rpm * RPM_TO_RAD_S, band=band, kink=kink,
                     cum_t=cumulative_hermite(t, torque, kink), cum_w=cumulative_hermite(t, w, kink),
