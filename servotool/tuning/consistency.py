@@ -51,7 +51,7 @@ from servotool.tuning.fit_numerics import (
     jackknife_std,
     projected_fits,
 )
-from servotool.tuning.subsets import Windows, cause, points_off_model, torque_step, worst_subsets
+from servotool.tuning.subsets import Windows, cause, points_off_model, torque_step, unblamed, worst_subsets
 
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
@@ -176,13 +176,10 @@ def assess(fit: FitData) -> Verdict:
         if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
             return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {cause(name)}"]))
         if not points_off_model(name, birge, spread):
-            sorted_by_noise = "acceleration" in name
-            notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, "
-                         + ("as much as the speed noise alone can make it differ on a rigid load" if sorted_by_noise
-                            else "too little to point to the mechanics"))
-            return Verdict(j, j_std, tuple(notes), widened="; ".join(
-                [*why, f"{text}: the speed noise, or backlash or a compliant coupling" if sorted_by_noise else text]),
-                curable=not why)
+            words, causes = unblamed(name)
+            notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, {words}")
+            return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}: {causes}" if causes else text]),
+                           curable=not why)
         notes.append(f"off-model: {text}; uncertainty widened to the spread ({cause(name)})")
         return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {cause(name)}"]))
     return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why))

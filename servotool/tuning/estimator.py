@@ -237,7 +237,8 @@ def _signals(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: f
     kink = np.zeros(pct.size, dtype=bool)
     kink[1:-1] = (np.abs(dev) > cfg.kink_sigma * torque_noise * ref) | (
         np.abs(dev_w) > cfg.kink_sigma * noise_rpm * ref_w)
-    kink[1:] |= np.diff(t) > GAP_INTERVALS * float(np.median(np.diff(t)))
+    gaps = np.diff(t)
+    kink[1:] |= gaps > GAP_INTERVALS * float(np.median(gaps))
     r.n_kinks = int(np.count_nonzero(kink))
     return _Signals(t=t, rpm=rpm, w=w, torque=torque, noise_w=noise_rpm * RPM_TO_RAD_S, band=band, kink=kink,
                     cum_t=cumulative_hermite(t, torque, kink), cum_w=cumulative_hermite(t, w, kink),

@@ -67,6 +67,15 @@ def points_off_model(name: str, birge: float, spread: float) -> bool:
     return (birge > NOISE_BIRGE and spread > NOISE_SPREAD) or "acceleration" not in name
 
 
+def unblamed(name: str) -> tuple[str, str]:
+    """(the note's words, the causes a refusal names) for the named grouping's disagreement that points to no
+    mechanics (points_off_model False); the causes are empty where it names none."""
+    if "acceleration" in name:
+        return ("as much as the speed noise alone can make it differ on a rigid load",
+                "the speed noise, or backlash or a compliant coupling")
+    return "too little to point to the mechanics", ""
+
+
 def _groupings(win: Windows, dw: np.ndarray, j: float) -> dict[str, np.ndarray]:
     """Subsets of the windows to compare J across, by name (as in 'inertia differs NAME'); label -1: left out."""
     sgn = np.sign(win.w[win.starts])
