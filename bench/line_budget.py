@@ -34,7 +34,10 @@ import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
 
-from bench.inertia_accuracy import draws, line_rate
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from inertia_accuracy import draws, line_rate
+
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.errors import ServoError
