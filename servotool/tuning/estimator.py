@@ -36,7 +36,7 @@ from servotool.tuning.fit_numerics import (
     corrected_lstsq,
     cumulative_hermite,
     jackknife_std,
-    line_deviation,
+    kink_mask,
     ma1_std,
     move_ids,
     sign_windows,
@@ -231,14 +231,7 @@ def _signals(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: f
     band = cfg.zero_band_rpm if cfg.zero_band_rpm is not None else max(0.02 * peak, 3.0 * noise_rpm)
     w = rpm * RPM_TO_RAD_S
     torque = pct / 100.0 * rated_torque_nm
-    dev, ref = line_deviation(t, pct)
-    torque_noise = max(float(1.4826 * np.median(np.abs(dev) / ref)), cfg.torque_noise_floor_pct) if dev.size else 0.0
-    dev_w, ref_w = line_deviation(t, rpm)
-    kink = np.zeros(pct.size, dtype=bool)
-    kink[1:-1] = (np.abs(dev) > cfg.kink_sigma * torque_noise * ref) | (
-        np.abs(dev_w) > cfg.kink_sigma * noise_rpm * ref_w)
-    gaps = np.diff(t)
-    kink[1:] |= gaps > GAP_INTERVALS * float(np.median(gaps))
+    kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct, GAP_INTERVALS)
     r.n_kinks = int(np.count_nonzero(kink))
     return _Signals(t=t, rpm=rpm, w=w, torque=torque, noise_w=noise_rpm * RPM_TO_RAD_S, band=band, kink=kink,
                     cum_t=cumulative_hermite(t, torque, kink), cum_w=cumulative_hermite(t, w, kink),
@@ -366,7 +359,6 @@ def _conclude(r: _Partial, fit: _Fit, verdict: Verdict, jm: float, cfg: Estimato
     return r.result(ok=True, reason="")
 
 
-# ----- helpers ---------------------------------------------------------------------------------------------------
 @dataclass
 class _Partial:
     """Accumulates result fields so refusals at any stage report what is known so far."""

@@ -51,6 +51,21 @@ def cubic_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return v[c] - pred, np.sqrt(1.0 + sum(w**2 for w in weights))
 
 
+def kink_mask(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, noise_rpm: float, kink_sigma: float,
+              torque_noise_floor_pct: float, gap_intervals: float) -> np.ndarray:
+    """Samples at a torque step (torque or speed further than kink_sigma noise sigmas off the line through its
+    neighbours; the torque noise estimated robustly, floored) or ending a gap of more than gap_intervals median
+    sampling intervals (a host stall)."""
+    dev, ref = line_deviation(t, pct)
+    torque_noise = max(float(1.4826 * np.median(np.abs(dev) / ref)), torque_noise_floor_pct) if dev.size else 0.0
+    dev_w, ref_w = line_deviation(t, rpm)
+    kink = np.zeros(pct.size, dtype=bool)
+    kink[1:-1] = (np.abs(dev) > kink_sigma * torque_noise * ref) | (np.abs(dev_w) > kink_sigma * noise_rpm * ref_w)
+    gaps = np.diff(t)
+    kink[1:] |= gaps > gap_intervals * float(np.median(gaps))
+    return kink
+
+
 def sign_windows(rpm: np.ndarray, band: float, kink: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Disjoint windows of k sampling intervals whose samples all lie outside the zero band with one sign.
 
