@@ -168,6 +168,7 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
         return r.refuse(str(exc), exc.advice)
     verdict = assess(FitData(t=t, w=sig.w, kink=sig.kink, position=sig.cum_w, starts=fit.starts, ends=fit.ends,
                              torque=sig.torque, x=fit.x, y=fit.y, eiv=fit.eiv, groups=sig.moves[fit.starts],
+                             names=tuple(fit.names),
                              theta=fit.theta, j_std=float(fit.std[0]), min_jackknife_moves=cfg.min_jackknife_moves,
                              rated_nm=rated_torque_nm, jm=jm, max_rel=cfg.max_rel_uncertainty))
     return _conclude(r, fit, verdict, jm, cfg)

@@ -10,7 +10,7 @@ from servotool.tuning.subsets import torque_step
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
 
-OFF_MODEL_WORDS = ("load varies over the travel", "inertia differs", "resonance")
+OFF_MODEL_WORDS = ("load varies over the travel", "inertia differs", "resonance", "lost motion")
 # An accepted result further off than the rigid loads' worst target (issue 16: 3 %) must say why; closer, the truth
 # inside its stated 3 sigma is what the issue asks (backlash 0.05 rad comes out +0.8..2.2 % with a 3 sigma of 2.8-3 %).
 WORST_RIGID = 0.03
@@ -117,15 +117,46 @@ def test_the_torque_step_is_found_from_readings_on_a_grid():
     assert torque_step(np.array([0.5, 0.5])) == 0.0
 
 
-def test_a_refusal_widened_by_the_accelerations_names_a_travel_that_then_identifies_backlash(sim_dir):
-    """Backlash 0.1 rad on a light load: the accelerations disagree within what the speed noise can do, the widened
-    uncertainty is refused, and the refusal used to suggest nothing. It now names a longer travel (the gap weighs
-    less in a stronger motion); followed, it gives a result within its 3 sigma."""
-    machine = {"load_ratio": 2.0, "friction": 0.02, "noise": 0.002, "seed": 9, "backlash_rad": 0.1}
+def test_a_refusal_widened_by_the_accelerations_names_a_travel_that_then_identifies(sim_dir):
+    """The accelerations disagree within what the speed noise can do (1 % noise, a rigid load), the widened
+    uncertainty is refused, and the refusal used to suggest nothing. It names a longer travel (noise sorting weighs
+    less in a stronger motion); followed, it gives a result within its 3 sigma. (Backlash 0.1 rad on a light load
+    was this test's machine until lost motion was fitted around: it now identifies at 2 rev.)"""
+    machine = {"load_ratio": 5.0, "friction": 0.05, "noise": 0.01, "seed": 1}
     _sim, d, clock = set_up("dsx7e", 19200, **machine)
     with pytest.raises(IdentificationRefused) as refused:
         tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     assert "inertia differs with the acceleration" in str(refused.value)
+    assert refused.value.remedy is not None, str(refused.value)
+    _sim, d, clock = set_up("dsx7e", 19200, **machine)
+    est = tune_inertia(d, TuneRequest(dry_run=True, travel_rev=refused.value.remedy.suggested_rev),
+                       clock=clock).identified.estimate
+    assert abs(est.load_ratio - 5.0) <= 3 * est.ratio_std
+
+
+@pytest.mark.parametrize("seed", [10, 1010])
+def test_backlash_is_fitted_clear_of_its_lost_motion_or_refused_naming_it(sim_dir, seed):
+    """IS620P at 57600, backlash 0.2 rad on a light load (bench/off_model.py --profile is620p --baud 57600): where
+    the braking torque reverses, the motor crossed the gap alone and those windows, through the friction every
+    window shares, pulled J 5 % low in every subset alike; accepted outside its 3 sigma in 3 of 3 runs, no note. The
+    windows clear of the lost motion now give J, or the refusal names it."""
+    _sim, d, clock = set_up("is620p", 57600, load_ratio=2.0, friction=0.02, noise=0.002, seed=seed,
+                            backlash_rad=0.2)
+    outcome, found = _outcome(_sim, d, clock)
+    if outcome == "refused":
+        assert "lost motion where the torque reverses" in found, found
+    else:
+        assert any("lost motion" in n for n in found.notes), found.notes
+        assert abs(found.load_ratio - 2.0) <= 3 * found.ratio_std, found
+
+
+def test_a_refusal_for_lost_motion_names_a_travel_that_then_identifies(sim_dir):
+    """A stronger motion crosses the gap faster: fewer windows are lost to it, and the refusal says how far."""
+    machine = {"load_ratio": 2.0, "friction": 0.02, "noise": 0.002, "seed": 10, "backlash_rad": 0.1}
+    _sim, d, clock = set_up("dsx7e", 19200, **machine)
+    with pytest.raises(IdentificationRefused) as refused:
+        tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    assert "lost motion where the torque reverses" in str(refused.value)
     assert refused.value.remedy is not None, str(refused.value)
     _sim, d, clock = set_up("dsx7e", 19200, **machine)
     est = tune_inertia(d, TuneRequest(dry_run=True, travel_rev=refused.value.remedy.suggested_rev),
