@@ -4,8 +4,9 @@ Mechanics outside the model (a compliant coupling, backlash, gravity that change
 the fit's noise-based uncertainty tight while the answer is wrong. These checks see them:
 
 - lost motion (tuning.lost_motion): where the windows clear of the spans in which the motor may have turned without
-  its load give a J LOST_MOTION_SIGMA from the whole fit's, they alone are fitted from there on, flagged ("lost
-  motion where the torque reverses"), with a third of the change counted as uncertain.
+  its load give a J 3 sigmas apart from the whole fit's, they alone are fitted from there on, flagged ("lost
+  motion (backlash?) where the torque reverses"), with what a margin twice as wide still changes counted as
+  uncertain.
 - the load torque over the travel: the fit is repeated with a load torque that varies (quadratically) with the
   position (integrated speed). Where the variation is significant, the load varies over the travel and the
   extended model's inertia is used (an arm on a gear: the constant-torque model biased J by 10-40 %); where the
@@ -47,19 +48,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from servotool.tuning.fit_data import MODEL_ERROR_DIVISOR, FitData, refit
 from servotool.tuning.fit_numerics import (
-    corrected_lstsq,
     cumulative_hermite,
     follower_changes,
-    jackknife_std,
     projected_fits,
 )
-from servotool.tuning.lost_motion import LoadSide, clear_windows, coupled_intervals
+from servotool.tuning.lost_motion import clear_of_lost_motion
 from servotool.tuning.subsets import Windows, cause, points_off_model, torque_step, unblamed, worst_subsets
 
 POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
-MODEL_ERROR_DIVISOR = 3.0  # a correction by an extended model counts as uncertain by a third of its size
 COMPLIANCE_SIGMA = 4.0    # a compliance term counts when beyond this many sigmas
 COMPLIANCE_MIN_SHIFT = 0.01  # ... and moves J by more than this fraction (and 2 sigma)
 MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behind a coupling to matter
@@ -93,33 +92,7 @@ RESONANCE_F = 30.0        # ... and the improvement is this many times what two 
 BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
 #                           chance: chi2/dof of 2.25 over 2-3 subsets happens one time in ten on a rigid load)
 BIRGE_REFUSE = 3.0        # refuse when the subsets disagree this many times beyond their uncertainties ...
-LOST_MOTION_SIGMA = 3.0   # the windows clear of possible lost motion count where their J is this many sigmas apart
-LOST_MOTION_MIN_WINDOWS = 12  # ... and they are at least this many
 GROSS_SPREAD = 0.08       # ... and their spread exceeds this fraction of J
-
-
-@dataclass(frozen=True)
-class FitData:
-    """What the estimator's fit saw: samples, windows, the regression and its solution (unscaled)."""
-
-    t: np.ndarray
-    w: np.ndarray             # rad/s
-    kink: np.ndarray
-    position: np.ndarray      # rad, integral of w at each sample
-    starts: np.ndarray
-    ends: np.ndarray
-    torque: np.ndarray        # N*m
-    x: np.ndarray             # columns: J (dw), then friction and load terms
-    y: np.ndarray
-    eiv: np.ndarray           # regressor-noise variance per row of x scaled to unit column norms
-    groups: np.ndarray        # move number of each window (for the jackknife)
-    names: tuple[str, ...]    # the parameters in x's columns and theta: J, Tc, then B and Tg where fitted
-    theta: np.ndarray
-    j_std: float
-    min_jackknife_moves: int
-    rated_nm: float
-    jm: float                 # the motor's inertia, kg*m^2
-    max_rel: float = 0.02     # the estimator's limit on sigma / J (a widening names its cause only if it crosses it)
 
 
 @dataclass(frozen=True)
@@ -134,7 +107,7 @@ class Verdict:
 
 def assess(fit: FitData) -> Verdict:
     """J and its uncertainty after the consistency checks, with the operator's words for what was found."""
-    fit, why = _clear_of_lost_motion(fit)
+    fit, why = clear_of_lost_motion(fit)
     lost = len(why)             # lost motion weighs less in a stronger motion: a refusal for it alone is curable
     notes: list[str] = []
     j, j_std, resid = float(fit.theta[0]), fit.j_std, fit.y - fit.x @ fit.theta
@@ -194,57 +167,14 @@ def assess(fit: FitData) -> Verdict:
                    curable=len(why) == lost and not widened)
 
 
-def _clear_of_lost_motion(fit: FitData) -> tuple[FitData, list[str]]:
-    """The fit over the windows clear of where the motor may have turned without its load (tuning.lost_motion), with
-    the words for it, where their J stands LOST_MOTION_SIGMA of its uncertainty apart from the whole fit's (lost
-    motion reads J low where the motor crosses the gap alone, high where a window ends as the flank takes the load
-    up); else the fit as it is, and no words."""
-    est = dict(zip(fit.names, (float(v) for v in fit.theta), strict=True))
-    load = LoadSide(est["J"] - fit.jm, est["Tc"], est.get("B", 0.0), est.get("Tg", 0.0))
-    keep = clear_windows(fit.starts, fit.ends, coupled_intervals(fit.t, fit.w, load))
-    if keep.all() or np.count_nonzero(keep) < max(LOST_MOTION_MIN_WINDOWS, 3 * fit.x.shape[1]):
-        return fit, []
-    # The errors-in-variables term is per row of the unit-norm column: the fewer rows' norm is smaller.
-    eiv = fit.eiv * (np.sum(fit.x**2, axis=0) / np.maximum(np.sum(fit.x[keep] ** 2, axis=0), 1e-300))
-    clear = replace(fit, starts=fit.starts[keep], ends=fit.ends[keep], x=fit.x[keep], y=fit.y[keep], eiv=eiv,
-                    groups=fit.groups[keep])
-    found = _refit(clear, clear.x)
-    if found is None or not abs(found[0][0] - fit.theta[0]) > LOST_MOTION_SIGMA * found[1][0]:
-        return fit, []
-    # The observer's gap is a guess: a third of the change it makes counts as uncertain (DSX7E at 19200, backlash
-    # 0.1 rad: J 1.4-2.9 % off after changes of 2.6-5.8 %; IS620P at 57600, 0.2 rad: within 0.3 % of 5 %).
-    shift = float(found[0][0] - fit.theta[0])
-    return replace(clear, theta=found[0], j_std=math.hypot(float(found[1][0]), shift / MODEL_ERROR_DIVISOR)), [
-        f"lost motion where the torque reverses (backlash): J from the {clear.starts.size} of {fit.starts.size} "
-        "windows clear of it"]
-
-
 def _take(fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], model_error: float
           ) -> tuple[float, float, np.ndarray]:
     """(J, sigma, residual) of the extended fit; sigma grows by model_error times the correction to J."""
-    found = _refit(fit, x)
+    found = refit(fit, x)
     if found is None:
         return before
     j = float(found[0][0])
     return j, math.hypot(max(float(found[1][0]), before[1]), model_error * (j - before[0])), found[2]
-
-
-def _refit(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(parameters, their sigmas, residual) of the fit with extra columns after the estimator's; None if singular."""
-    scale = np.linalg.norm(x, axis=0)
-    scale[scale == 0] = 1.0
-    xs = x / scale
-    eiv = np.concatenate([fit.eiv, np.zeros(x.shape[1] - fit.eiv.size)])
-    try:
-        theta = corrected_lstsq(xs, fit.y, eiv) / scale
-        resid = fit.y - x @ theta
-        dof = max(1, x.shape[0] - x.shape[1])
-        cov = float(resid @ resid) / dof * np.linalg.inv(xs.T @ xs - xs.shape[0] * np.diag(eiv))
-    except np.linalg.LinAlgError:
-        return None
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / scale
-    std = np.maximum(std, jackknife_std(xs, fit.y, eiv, fit.groups, fit.min_jackknife_moves) / scale)
-    return theta, std, resid
 
 
 def _position_columns(fit: FitData) -> list[np.ndarray]:
@@ -265,7 +195,7 @@ def _position_model(fit: FitData) -> tuple[np.ndarray, float, bool] | None:
     cols = _position_columns(fit)
     if not np.any(cols[0]):
         return None
-    found = _refit(fit, np.column_stack([fit.x, *cols]))
+    found = refit(fit, np.column_stack([fit.x, *cols]))
     if found is None:
         return None
     theta, std, _resid = found
@@ -282,7 +212,7 @@ def _one_way(fit: FitData, cols: list[np.ndarray]) -> bool:
     """Whether the position dependence differs between forward and reverse moves: gravity on an arm is the same
     function of the position both ways, lost motion at the reversals (backlash) is not."""
     sgn = np.sign(fit.w[fit.starts])
-    found = _refit(fit, np.column_stack([fit.x, *cols, *(c * sgn for c in cols)]))
+    found = refit(fit, np.column_stack([fit.x, *cols, *(c * sgn for c in cols)]))
     if found is None:
         return True
     theta, std = found[0], found[1]
@@ -307,7 +237,7 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     then gains the term -J_load^2 / (J k) * (T'(end) - T'(start)) = -(ratio / omega_r^2) * delta T'."""
     slope = _torque_slope(fit)
     col = slope[fit.ends] - slope[fit.starts]
-    found = _refit(fit, np.column_stack([x, col]))
+    found = refit(fit, np.column_stack([x, col]))
     if found is None:
         return None
     theta, std, _resid = found
@@ -316,7 +246,7 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     if not (b < 0 and std[-1] > 0 and ratio > MIN_COMPLIANT_RATIO and math.isfinite(std[0])):
         return None
     z = b / float(std[-1])
-    base = _refit(fit, x)
+    base = refit(fit, x)
     unresolved = math.sqrt(max(0.0, float(std[0]) ** 2 - float(base[1][0]) ** 2)) if base is not None else 0.0
     strong = z < -COMPLIANCE_SIGMA and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
     return _Spring(col[:, None], math.sqrt(ratio / -b) / (2 * math.pi), z, strong, unresolved)

@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from servotool.tuning.consistency import FitData, Verdict, assess
+from servotool.tuning.consistency import Verdict, assess
+from servotool.tuning.fit_data import FitData
 from servotool.tuning.fit_numerics import (
     corrected_lstsq,
     cumulative_hermite,

@@ -144,7 +144,7 @@ def test_backlash_is_fitted_clear_of_its_lost_motion_or_refused_naming_it(sim_di
                             backlash_rad=0.2)
     outcome, found = _outcome(_sim, d, clock)
     if outcome == "refused":
-        assert "lost motion where the torque reverses" in found, found
+        assert "lost motion (backlash?) where the torque reverses" in found, found
     else:
         assert any("lost motion" in n for n in found.notes), found.notes
         assert abs(found.load_ratio - 2.0) <= 3 * found.ratio_std, found
@@ -152,11 +152,11 @@ def test_backlash_is_fitted_clear_of_its_lost_motion_or_refused_naming_it(sim_di
 
 def test_a_refusal_for_lost_motion_names_a_travel_that_then_identifies(sim_dir):
     """A stronger motion crosses the gap faster: fewer windows are lost to it, and the refusal says how far."""
-    machine = {"load_ratio": 2.0, "friction": 0.02, "noise": 0.002, "seed": 10, "backlash_rad": 0.1}
+    machine = {"load_ratio": 2.0, "friction": 0.02, "noise": 0.002, "seed": 6, "backlash_rad": 0.1}
     _sim, d, clock = set_up("dsx7e", 19200, **machine)
     with pytest.raises(IdentificationRefused) as refused:
         tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
-    assert "lost motion where the torque reverses" in str(refused.value)
+    assert "lost motion (backlash?) where the torque reverses" in str(refused.value)
     assert refused.value.remedy is not None, str(refused.value)
     _sim, d, clock = set_up("dsx7e", 19200, **machine)
     est = tune_inertia(d, TuneRequest(dry_run=True, travel_rev=refused.value.remedy.suggested_rev),

@@ -45,7 +45,7 @@ def test_identification_through_the_cli_at_the_factory_line_speed(cli, profile):
 # At 9600 the travel bounds the moves: a load of 37 with gravity is always too uncertain within 2 rev on SD25
 # (4-7 %), a load of 20 now and then on SDC (1.9-2.3 %).
 AT_9600 = {"sd25": ["--load-ratio", "37", "--friction", "0.1", "--viscous", "0.001", "--load-torque", "0.4",
-                    "--brake", "on", "--seed", "9"],
+                    "--brake", "on", "--seed", "8"],
            "sdc": ["--load-ratio", "20", "--friction", "0.05", "--seed", "5"]}
 
 
