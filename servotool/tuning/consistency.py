@@ -103,6 +103,8 @@ class Verdict:
     refuse: str = ""          # empty: usable (perhaps with a widened uncertainty)
     widened: str = ""         # why the uncertainty was widened (words for a refusal it causes), empty if not
     curable: bool = False     # the widening is one that stronger accelerations shrink (a remedy may be offered)
+    residual: tuple[float, float] = (math.nan, math.nan)  # RMS per window of the model used's equation error and
+    #                                                       of the torque integrals it explains (N*m*s)
 
 
 def assess(fit: FitData) -> Verdict:
@@ -149,22 +151,23 @@ def assess(fit: FitData) -> Verdict:
         j_std = math.hypot(j_std, UNRESOLVED_SPRING_SHARE * spring.unresolved)
     if why:
         notes.append(f"off-model: {'; '.join(why)}; inertia fitted with a model of it")
+    fitted = (float(np.sqrt(np.mean(resid**2))), float(np.sqrt(np.mean(fit.y**2))))
     windows = Windows(fit.t, fit.w, fit.position, fit.starts, fit.ends, float(fit.eiv[0]), torque_step(fit.torque))
     birge, spread, name = worst_subsets(windows, fit.x[:, 0], j, j_std, resid)
     if birge > BIRGE_WIDEN:
         j_std *= birge
         text = f"inertia differs {name} by {100 * spread:.0f} % ({birge:.1f}x its uncertainty)"
         if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
-            return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {cause(name)}"]))
+            return Verdict(j, j_std, tuple(notes), refuse="; ".join([*why, f"{text}: {cause(name)}"]), residual=fitted)
         if not points_off_model(name, birge, spread):
             words, causes = unblamed(name)
             notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, {words}")
             return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}: {causes}" if causes else text]),
-                           curable=len(why) == lost)
+                           curable=len(why) == lost, residual=fitted)
         notes.append(f"off-model: {text}; uncertainty widened to the spread ({cause(name)})")
-        return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {cause(name)}"]))
+        return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {cause(name)}"]), residual=fitted)
     return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why),
-                   curable=len(why) == lost and not widened)
+                   curable=len(why) == lost and not widened, residual=fitted)
 
 
 def _take(fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], model_error: float

@@ -122,7 +122,7 @@ class InertiaEstimate:
     """Constant load torque (gravity); positive opposes positive speed."""
     load_torque_std_nm: float
     residual_rms_nms: float
-    """RMS equation error per window, in N*m*s."""
+    """RMS equation error per window of the model the checks settled on, in N*m*s."""
     residual_rel: float
     """residual_rms_nms / RMS of the windows' torque integrals."""
     excitation: float
@@ -211,7 +211,6 @@ class _Fit:
     eiv: np.ndarray
     theta: np.ndarray
     std: np.ndarray
-    resid: np.ndarray
 
 
 def _check_samples(r: _Partial, pct: np.ndarray, torque_limit_pct: float | None, cfg: EstimatorSettings) -> None:
@@ -321,7 +320,7 @@ def _fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSe
     # Errors the noise model misses (trapezoid error at a torque step, loop transients at slow sampling) repeat
     # within a move but differ between moves: a delete-one-move jackknife sees them, the formula does not.
     std = np.maximum(std, jackknife_std(xs, y, eiv, sig.moves[starts], cfg.min_jackknife_moves) / scale)
-    return _Fit(names=names, starts=starts, ends=ends, x=x, y=y, eiv=eiv, theta=theta, std=std, resid=resid)
+    return _Fit(names=names, starts=starts, ends=ends, x=x, y=y, eiv=eiv, theta=theta, std=std)
 
 
 def _conclude(r: _Partial, fit: _Fit, verdict: Verdict, jm: float, cfg: EstimatorSettings) -> InertiaEstimate:
@@ -334,8 +333,8 @@ def _conclude(r: _Partial, fit: _Fit, verdict: Verdict, jm: float, cfg: Estimato
     r.tc, r.tc_std = float(est["Tc"]), float(err["Tc"])
     r.b, r.b_std = float(est.get("B", 0.0)), float(err.get("B", 0.0))
     r.tg, r.tg_std = float(est.get("Tg", 0.0)), float(err.get("Tg", 0.0))
-    r.res_rms = float(np.sqrt(np.mean(fit.resid**2)))
-    y_rms = float(np.sqrt(np.mean(fit.y**2)))
+    # The model the checks settled on is what must fit (the windows clear of lost motion, a two-mass load's)
+    r.res_rms, y_rms = verdict.residual
     r.res_rel = r.res_rms / y_rms if y_rms > 0 else math.inf
     if not cfg.fit_load_torque:
         r.notes.append("load torque not fitted (one direction only, or told there is none): 'coulomb' is "
