@@ -36,7 +36,6 @@ class FitData:
     max_rel: float = 0.02     # the estimator's limit on sigma / J (a widening names its cause only if it crosses it)
 
 
-
 def refit(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(parameters, their sigmas, residual) of the fit with extra columns after the estimator's; None if singular."""
     scale = np.linalg.norm(x, axis=0)
