@@ -46,10 +46,10 @@ GROWTH = 1.3
 class Run:
     """One `tune inertia` on one simulated machine."""
 
-    peak: float = 0.0                 # max |true speed| / max |commanded speed|
-    outcome: str = "ok"               # ok | trip | alarm | refused
+    peak: float = 0.0  # max |true speed| / max |commanded speed|
+    outcome: str = "ok"  # ok | trip | alarm | refused
     reason: str = ""
-    error_pct: float | None = None    # |ratio error| / (1 + ratio), accepted runs
+    error_pct: float | None = None  # |ratio error| / (1 + ratio), accepted runs
 
 
 @dataclass
@@ -64,8 +64,9 @@ class Cell:
         return sum(r.peak > GROWTH for r in self.runs)
 
 
-def machine(profile_id: str, ratio: float, friction: float, noise: float, seed: int, baud: int | None = None
-            ) -> tuple[Drive, VirtualClock, dict[str, float]]:
+def machine(
+    profile_id: str, ratio: float, friction: float, noise: float, seed: int, baud: int | None = None
+) -> tuple[Drive, VirtualClock, dict[str, float]]:
     """A simulated drive with its motion setup on virtual time, and the largest |true speed| and |commanded
     speed| seen at any read so far."""
     profile = load_profile(profile_id)
@@ -75,7 +76,7 @@ def machine(profile_id: str, ratio: float, friction: float, noise: float, seed: 
     sim.firmware.reconfigure()
     make_motion_setup(sim)
     drive = Drive(VirtualLink([sim], clock, baud or FACTORY_BAUD[profile_id]), profile, 1)
-    drive.dead_man_waived = True      # SD25 and SDC have no dead-man route; this is about the loops
+    drive.dead_man_waived = True  # SD25 and SDC have no dead-man route; this is about the loops
     plant = sim.firmware.plant
     seen = {"speed": 0.0, "command": 0.0}
 
@@ -87,8 +88,7 @@ def machine(profile_id: str, ratio: float, friction: float, noise: float, seed: 
     return drive, clock, seen
 
 
-def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed: int,
-             baud: int | None = None) -> Run:
+def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed: int, baud: int | None = None) -> Run:
     """`tune inertia` (dry run) on one machine, watching the true speed at every read."""
     drive, clock, seen = machine(profile_id, ratio, friction, noise, seed, baud)
     run = Run()
@@ -105,8 +105,9 @@ def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed:
     return run
 
 
-def run_jog(profile_id: str, ratio: float, friction: float, noise: float, seed: int, speed_rpm: float,
-            baud: int | None = None) -> Run:
+def run_jog(
+    profile_id: str, ratio: float, friction: float, noise: float, seed: int, speed_rpm: float, baud: int | None = None
+) -> Run:
     """A 1 s JOG at speed_rpm as `servotool jog` runs it (guard_hold), watching the true speed."""
     drive, clock, seen = machine(profile_id, ratio, friction, noise, seed, baud)
     run = Run()
@@ -120,8 +121,15 @@ def run_jog(profile_id: str, ratio: float, friction: float, noise: float, seed: 
     return run
 
 
-def sweep(profiles: list[str], loads: list[float], frictions: list[float], noises: list[float],
-          seeds: int, baud: int | None = None, jog: bool = False) -> dict[tuple[str, float], Cell]:
+def sweep(
+    profiles: list[str],
+    loads: list[float],
+    frictions: list[float],
+    noises: list[float],
+    seeds: int,
+    baud: int | None = None,
+    jog: bool = False,
+) -> dict[tuple[str, float], Cell]:
     cells: dict[tuple[str, float], Cell] = {}
     for pid, load in itertools.product(profiles, loads):
         cell = cells.setdefault((pid, load), Cell())
@@ -134,19 +142,26 @@ def sweep(profiles: list[str], loads: list[float], frictions: list[float], noise
 
 
 def print_table(cells: dict[tuple[str, float], Cell]) -> None:
-    print(f"{'profile':>7} {'load':>5} {'runs':>4} {'peak max':>8} {'peak med':>8} {'grow':>4} {'trip':>4} "
-          f"{'alarm':>5} {'refused':>7} {'err% max':>8}  reasons")
+    print(
+        f"{'profile':>7} {'load':>5} {'runs':>4} {'peak max':>8} {'peak med':>8} {'grow':>4} {'trip':>4} "
+        f"{'alarm':>5} {'refused':>7} {'err% max':>8}  reasons"
+    )
     for (pid, load), cell in cells.items():
         peaks = sorted(r.peak for r in cell.runs)
         errs = [r.error_pct for r in cell.runs if r.error_pct is not None]
         reasons = sorted({r.reason for r in cell.runs if r.reason})
-        print(f"{pid:>7} {load:>5.0f} {len(cell.runs):>4} {peaks[-1]:>8.2f} {peaks[len(peaks) // 2]:>8.2f} "
-              f"{cell.grown:>4} {cell.count('trip'):>4} {cell.count('alarm'):>5} {cell.count('refused'):>7} "
-              f"{(max(errs) if errs else float('nan')):>8.2f}  {'; '.join(reasons)[:90]}", flush=True)
+        print(
+            f"{pid:>7} {load:>5.0f} {len(cell.runs):>4} {peaks[-1]:>8.2f} {peaks[len(peaks) // 2]:>8.2f} "
+            f"{cell.grown:>4} {cell.count('trip'):>4} {cell.count('alarm'):>5} {cell.count('refused'):>7} "
+            f"{(max(errs) if errs else float('nan')):>8.2f}  {'; '.join(reasons)[:90]}",
+            flush=True,
+        )
     runs = [r for c in cells.values() for r in c.runs]
-    print(f"total: {len(runs)} runs, peak > {GROWTH}x: {sum(r.peak > GROWTH for r in runs)}, travel trips: "
-          f"{sum(r.outcome == 'trip' for r in runs)}, alarms: {sum(r.outcome == 'alarm' for r in runs)}, "
-          f"refused: {sum(r.outcome == 'refused' for r in runs)}")
+    print(
+        f"total: {len(runs)} runs, peak > {GROWTH}x: {sum(r.peak > GROWTH for r in runs)}, travel trips: "
+        f"{sum(r.outcome == 'trip' for r in runs)}, alarms: {sum(r.outcome == 'alarm' for r in runs)}, "
+        f"refused: {sum(r.outcome == 'refused' for r in runs)}"
+    )
 
 
 def main() -> None:

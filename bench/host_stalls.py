@@ -61,8 +61,11 @@ def main() -> None:
     for pid, baud in ROWS:
         for rate, max_s in STALLS:
             counts = Counter(outcome(pid, baud, ratio, seed, HostStalls(rate, max_s, seed)) for ratio, seed in machines)
-            print(f"{pid:>7} {baud:>6} {rate:>10.1%} {max_s * 1000:>6.0f}  {counts['identified']:>10} "
-                  f"{counts['refused']:>8} {counts['travel trip']:>13}", flush=True)
+            print(
+                f"{pid:>7} {baud:>6} {rate:>10.1%} {max_s * 1000:>6.0f}  {counts['identified']:>10} "
+                f"{counts['refused']:>8} {counts['travel trip']:>13}",
+                flush=True,
+            )
             for other in set(counts) - {"identified", "refused", "travel trip"}:
                 print(f"{'':>34}{counts[other]} x {other}")
 

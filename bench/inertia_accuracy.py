@@ -75,21 +75,37 @@ FACTORY_BAUD = {"sd25": 9600, "sdc": 9600, "is620p": 57600, "dsx7e": 115200}
 # to 1 %. A run draws one level of each (seeded); gravity runs on a braked axis, as the sim's brake does by default.
 LOADS = [0.0, 1.0, 5.0, 10.0, 20.0, 37.0, 50.0]
 COULOMB = [0.01, 0.05, 0.1, 0.2, 0.3]
-VISCOUS = [0.0, 0.0005, 0.001]           # fraction of rated torque per rad/s
+VISCOUS = [0.0, 0.0005, 0.001]  # fraction of rated torque per rad/s
 GRAVITY = [-0.4, -0.2, 0.0, 0.2, 0.4]
 NOISE = [0.0, 0.002, 0.005, 0.01]
 
 
-def identify_once(ratio: float, friction: float, gravity: float, noise: float, baud: int, seed: int,
-                  brake: bool = True, profile_id: str = "dsx7e", viscous: float = 0.0005,
-                  travel_rev: float = TRAVEL_REV) -> TuneResult:
+def identify_once(
+    ratio: float,
+    friction: float,
+    gravity: float,
+    noise: float,
+    baud: int,
+    seed: int,
+    brake: bool = True,
+    profile_id: str = "dsx7e",
+    viscous: float = 0.0005,
+    travel_rev: float = TRAVEL_REV,
+) -> TuneResult:
     """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine; a drive
     without a dead-man route is moved as the CLI moves it with --no-dead-man."""
     profile = load_profile(profile_id)
     clock = VirtualClock(1000.0)
     sim = build_drive(profile, 1, clock, persist=False)
-    sim.settings.update(load_ratio=ratio, friction=friction, viscous=viscous, load_torque=gravity, noise=noise,
-                        seed=seed, brake=1 if brake else 0)
+    sim.settings.update(
+        load_ratio=ratio,
+        friction=friction,
+        viscous=viscous,
+        load_torque=gravity,
+        noise=noise,
+        seed=seed,
+        brake=1 if brake else 0,
+    )
     sim.firmware.reconfigure()
     make_motion_setup(sim)
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
@@ -118,9 +134,9 @@ class Cell:
     profile: str
     baud: int
     runs: int = 0
-    errors: list[float] = field(default_factory=list)       # |error| % of J_total, accepted runs
-    within: int = 0                                          # true value within the reported 3 sigma
-    over: int = 0                                            # over 2 rev or 10 s
+    errors: list[float] = field(default_factory=list)  # |error| % of J_total, accepted runs
+    within: int = 0  # true value within the reported 3 sigma
+    over: int = 0  # over 2 rev or 10 s
     rates: list[float] = field(default_factory=list)
     reasons: Counter[str] = field(default_factory=Counter)
 
@@ -139,19 +155,25 @@ class Cell:
 
     def targets(self) -> dict[str, bool]:
         n, ok = self.runs, len(self.errors)
-        return {"accepted >= 95 %": ok >= 0.95 * n, "median <= 1 %": ok > 0 and statistics.median(self.errors) <= 1,
-                "worst <= 3 %": ok > 0 and max(self.errors) <= 3, "in 3 sigma >= 95 %": ok > 0 and self.within >= 0.95
-                * ok, "2 rev, 10 s": ok > 0 and self.over == 0}
+        return {
+            "accepted >= 95 %": ok >= 0.95 * n,
+            "median <= 1 %": ok > 0 and statistics.median(self.errors) <= 1,
+            "worst <= 3 %": ok > 0 and max(self.errors) <= 3,
+            "in 3 sigma >= 95 %": ok > 0 and self.within >= 0.95 * ok,
+            "2 rev, 10 s": ok > 0 and self.over == 0,
+        }
 
     def row(self) -> str:
         ok, e = len(self.errors), self.errors
         line = line_rate(self.profile, self.baud)
         rate = statistics.median(self.rates) if self.rates else 0.0
         unmet = [k for k, v in self.targets().items() if not v]
-        return (f"{self.profile:>7} {self.baud:>6} {self.runs:>4} {ok:>4} {ok / self.runs:>4.0%} "
-                f"{statistics.median(e) if e else math.nan:>7.2f} {max(e) if e else math.nan:>7.2f} "
-                f"{self.within:>3}/{ok:<3} {self.over:>4} {rate:>6.0f} {line:>6.0f} {rate / line:>5.2f}  "
-                + ("met" if not unmet else "UNMET: " + ", ".join(unmet)))
+        return (
+            f"{self.profile:>7} {self.baud:>6} {self.runs:>4} {ok:>4} {ok / self.runs:>4.0%} "
+            f"{statistics.median(e) if e else math.nan:>7.2f} {max(e) if e else math.nan:>7.2f} "
+            f"{self.within:>3}/{ok:<3} {self.over:>4} {rate:>6.0f} {line:>6.0f} {rate / line:>5.2f}  "
+            + ("met" if not unmet else "UNMET: " + ", ".join(unmet))
+        )
 
 
 def draws(quick: bool, seed: int = 16) -> list[tuple[float, float, float, float, float]]:
@@ -169,8 +191,8 @@ class Remedies:
     baud: int
     refused: int = 0
     given: int = 0
-    enough: int = 0                                          # the remedy said it should be enough
-    accepted: list[tuple[float, bool, float]] = field(default_factory=list)   # |error| %, within 3 sigma, travel
+    enough: int = 0  # the remedy said it should be enough
+    accepted: list[tuple[float, bool, float]] = field(default_factory=list)  # |error| %, within 3 sigma, travel
 
     def follow(self, refusal: IdentificationRefused, true: float, rerun: Callable[[float], TuneResult]) -> None:
         self.refused += 1
@@ -185,33 +207,43 @@ class Remedies:
             return
         est = run.identified.estimate
         assert est is not None
-        self.accepted.append((abs(run.ratio - true) / (1.0 + true) * 100, abs(run.ratio - true) <= 3 * est.ratio_std,
-                              cure.suggested_rev))
+        self.accepted.append(
+            (abs(run.ratio - true) / (1.0 + true) * 100, abs(run.ratio - true) <= 3 * est.ratio_std, cure.suggested_rev)
+        )
 
     def row(self) -> str:
         ok = self.accepted
         errors = [e for e, _w, _t in ok]
         travels = [t for _e, _w, t in ok]
-        return (f"{self.profile:>7} {self.baud:>6} {self.refused:>7} {self.given:>6} {self.enough:>6} "
-                f"{len(ok):>8} {sum(w for _e, w, _t in ok):>3}/{len(ok):<3} "
-                f"{statistics.median(errors) if errors else math.nan:>7.2f} {max(errors) if errors else math.nan:>7.2f}"
-                f" {statistics.median(travels) if travels else math.nan:>6.1f} {max(travels, default=math.nan):>6.1f}")
+        return (
+            f"{self.profile:>7} {self.baud:>6} {self.refused:>7} {self.given:>6} {self.enough:>6} "
+            f"{len(ok):>8} {sum(w for _e, w, _t in ok):>3}/{len(ok):<3} "
+            f"{statistics.median(errors) if errors else math.nan:>7.2f} {max(errors) if errors else math.nan:>7.2f}"
+            f" {statistics.median(travels) if travels else math.nan:>6.1f} {max(travels, default=math.nan):>6.1f}"
+        )
 
 
-def run_cell(pid: str, baud: int, machines: list[tuple[float, float, float, float, float]], remedies: bool
-             ) -> tuple[Cell, Remedies]:
+def run_cell(
+    pid: str, baud: int, machines: list[tuple[float, float, float, float, float]], remedies: bool
+) -> tuple[Cell, Remedies]:
     """One row of the --profiles table, and (for the remedies table) the refusals' suggested travels followed."""
     cell, followed = Cell(pid, baud), Remedies(pid, baud)
     for n, (ratio, fr, visc, gr, nz) in enumerate(machines):
         try:
-            run: TuneResult | ServoError = identify_once(ratio, fr, gr, nz, baud, seed=n + 1, profile_id=pid,
-                                                         viscous=visc)
+            run: TuneResult | ServoError = identify_once(
+                ratio, fr, gr, nz, baud, seed=n + 1, profile_id=pid, viscous=visc
+            )
         except ServoError as exc:
             run = exc
         cell.add(ratio, run)
         if remedies and isinstance(run, IdentificationRefused):
-            followed.follow(run, ratio, lambda travel, m=(ratio, fr, visc, gr, nz), n=n: identify_once(
-                m[0], m[1], m[3], m[4], baud, seed=n + 1, profile_id=pid, viscous=m[2], travel_rev=travel))
+            followed.follow(
+                run,
+                ratio,
+                lambda travel, m=(ratio, fr, visc, gr, nz), n=n: identify_once(
+                    m[0], m[1], m[3], m[4], baud, seed=n + 1, profile_id=pid, viscous=m[2], travel_rev=travel
+                ),
+            )
     return cell, followed
 
 
@@ -219,10 +251,14 @@ def profiles_table(quick: bool, remedies: bool = False) -> bool:
     """Every profile at its factory line speed and at 19200 through tune_inertia; returns whether all targets met.
     remedies: each refusal that suggests a longer travel is run again with it (a second table)."""
     machines = draws(quick)
-    print(f"{len(machines)} machines per row (seeded sample of loads {LOADS}, Coulomb {COULOMB} x rated, viscous "
-          f"{VISCOUS} x rated per rad/s, gravity {GRAVITY} x rated, noise {NOISE})")
-    print(f"{'profile':>7} {'baud':>6} {'runs':>4} {'accepted':>9} {'median%':>7} {'worst%':>7} {'in3sig':>7} "
-          f"{'>2rev':>4} {'samp/s':>6} {'line/s':>6} {'share':>5}  targets")
+    print(
+        f"{len(machines)} machines per row (seeded sample of loads {LOADS}, Coulomb {COULOMB} x rated, viscous "
+        f"{VISCOUS} x rated per rad/s, gravity {GRAVITY} x rated, noise {NOISE})"
+    )
+    print(
+        f"{'profile':>7} {'baud':>6} {'runs':>4} {'accepted':>9} {'median%':>7} {'worst%':>7} {'in3sig':>7} "
+        f"{'>2rev':>4} {'samp/s':>6} {'line/s':>6} {'share':>5}  targets"
+    )
     cells, followed = [], []
     for pid, factory in FACTORY_BAUD.items():
         for baud in sorted({factory, 19200}, reverse=True):
@@ -235,19 +271,27 @@ def profiles_table(quick: bool, remedies: bool = False) -> bool:
         for reason, count in cell.reasons.most_common():
             print(f"  {cell.profile:>7} {cell.baud:>6} {count:>3} x {reason}")
     if remedies:
-        print("\nrefusals that suggest a longer travel, run again with it (issue 16: the remedy a refusal names must "
-              "help):")
-        print(f"{'profile':>7} {'baud':>6} {'refused':>7} {'travel':>6} {'enough':>6} {'accepted':>8} {'in3sig':>7} "
-              f"{'median%':>7} {'worst%':>7} {'med_rev':>6} {'max_rev':>6}")
+        print(
+            "\nrefusals that suggest a longer travel, run again with it (issue 16: the remedy a refusal names must "
+            "help):"
+        )
+        print(
+            f"{'profile':>7} {'baud':>6} {'refused':>7} {'travel':>6} {'enough':>6} {'accepted':>8} {'in3sig':>7} "
+            f"{'median%':>7} {'worst%':>7} {'med_rev':>6} {'max_rev':>6}"
+        )
         for remedied in followed:
             print(remedied.row())
         accepted = [a for remedied in followed for a in remedied.accepted]
-        print(f"all rows: {sum(r.given for r in followed)} travels suggested, {len(accepted)} accepted when "
-              f"followed, {sum(w for _e, w, _t in accepted)} of them within their 3 sigma")
+        print(
+            f"all rows: {sum(r.given for r in followed)} travels suggested, {len(accepted)} accepted when "
+            f"followed, {sum(w for _e, w, _t in accepted)} of them within their 3 sigma"
+        )
     met = all(all(c.targets().values()) for c in cells)
-    print("targets (accepted >= 95 %, median <= 1 %, worst <= 3 %, in 3 sigma >= 95 %, <= 2 rev and 10 s; "
-          "'share': identification samples/s over what the line carries for speed and torque, target >= 0.8): "
-          + ("all met" if met else "NOT all met"))
+    print(
+        "targets (accepted >= 95 %, median <= 1 %, worst <= 3 %, in 3 sigma >= 95 %, <= 2 rev and 10 s; "
+        "'share': identification samples/s over what the line carries for speed and torque, target >= 0.8): "
+        + ("all met" if met else "NOT all met")
+    )
     return met
 
 
@@ -255,8 +299,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="a smaller grid")
     ap.add_argument("--profiles", action="store_true", help="every profile at its factory line speed and 19200")
-    ap.add_argument("--remedies", action="store_true", help="with --profiles: run each refusal that suggests a "
-                    "longer travel again with it")
+    ap.add_argument(
+        "--remedies",
+        action="store_true",
+        help="with --profiles: run each refusal that suggests a longer travel again with it",
+    )
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     if args.profiles:
@@ -267,8 +314,10 @@ def main() -> None:
     gravities = [0.0, 0.1]
     noises = [0.002] if args.quick else [0.001, 0.004]
     bauds = [19200, 115200]
-    print(f"{'baud':>6} {'true':>6} {'fric':>5} {'grav':>5} {'noise':>6} {'est':>8} {'err%':>7} {'sigma%':>7} "
-          f"{'travel':>7} {'time_s':>7} {'samp/s':>7}")
+    print(
+        f"{'baud':>6} {'true':>6} {'fric':>5} {'grav':>5} {'noise':>6} {'est':>8} {'err%':>7} {'sigma%':>7} "
+        f"{'travel':>7} {'time_s':>7} {'samp/s':>7}"
+    )
     rows: dict[int, list[tuple[float, float, float, float]]] = {b: [] for b in bauds}
     refused: dict[int, int] = dict.fromkeys(bauds, 0)
     for n, (baud, ratio, fr, gr, nz) in enumerate(itertools.product(bauds, ratios, frictions, gravities, noises)):
@@ -285,9 +334,11 @@ def main() -> None:
         err = (r.ratio - ratio) / (1.0 + ratio) * 100
         sigma = ident.estimate.ratio_std / (1.0 + r.ratio) * 100
         travel = ident.travel_used_rev or 0.0
-        rows[baud].append((abs(err), sigma, travel, r.seconds))   # the whole run, rest check included
-        print(f"{head} {r.ratio:>8.3f} {err:>7.2f} {sigma:>7.2f} {travel:>7.2f} {r.seconds:>7.2f} "
-              f"{ident.samples_per_s:>7.1f}")
+        rows[baud].append((abs(err), sigma, travel, r.seconds))  # the whole run, rest check included
+        print(
+            f"{head} {r.ratio:>8.3f} {err:>7.2f} {sigma:>7.2f} {travel:>7.2f} {r.seconds:>7.2f} "
+            f"{ident.samples_per_s:>7.1f}"
+        )
     print()
     met = True
     for baud in bauds:
@@ -299,15 +350,21 @@ def main() -> None:
         errors = [e for e, *_ in ok]
         within = sum(1 for e, s, *_ in ok if e <= 3 * s)
         worst_travel, worst_time = max(x[2] for x in ok), max(x[3] for x in ok)
-        line_met = (refused[baud] == 0 and statistics.median(errors) <= 2 and max(errors) <= 5
-                    and worst_travel <= TRAVEL_REV and worst_time <= 10)
+        line_met = (
+            refused[baud] == 0
+            and statistics.median(errors) <= 2
+            and max(errors) <= 5
+            and worst_travel <= TRAVEL_REV
+            and worst_time <= 10
+        )
         met &= line_met
-        print(f"{baud:>6} baud: runs {total}, refused {refused[baud]}; |error| of J_total: median "
-              f"{statistics.median(errors):.2f} %, worst {max(errors):.2f} %; error within 3 sigma {within}/{len(ok)};"
-              f" worst travel {worst_travel:.2f} rev, worst time {worst_time:.1f} s: "
-              f"{'targets met' if line_met else 'TARGETS MISSED'}")
-    print("targets (median <= 2 %, worst <= 5 %, <= 2 rev, <= 10 s, no refusals): "
-          + ("met" if met else "MISSED"))
+        print(
+            f"{baud:>6} baud: runs {total}, refused {refused[baud]}; |error| of J_total: median "
+            f"{statistics.median(errors):.2f} %, worst {max(errors):.2f} %; error within 3 sigma {within}/{len(ok)};"
+            f" worst travel {worst_travel:.2f} rev, worst time {worst_time:.1f} s: "
+            f"{'targets met' if line_met else 'TARGETS MISSED'}"
+        )
+    print("targets (median <= 2 %, worst <= 5 %, <= 2 rev, <= 10 s, no refusals): " + ("met" if met else "MISSED"))
 
 
 if __name__ == "__main__":

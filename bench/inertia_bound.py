@@ -49,14 +49,20 @@ from inertia_accuracy import FACTORY_BAUD, draws, line_rate
 
 from servotool.model.loader import load_profile
 
-BAND_REV = 0.9 * 2.0          # the travel band a motion may use (10 % margin of the 2 rev limit)
-MOTION_S = 8.0                # of the 10 s: the rest check and the put-back take the rest
-TORQUE_USE = 0.6 * 300.0      # % of rated: identification's share of the simulator's 300 % limit
-K_SAMPLES = (1, 2, 3, 5, 7)     # today's automatic ramps: 7 intervals of the rest check, 5-6 of the motion's samples
+BAND_REV = 0.9 * 2.0  # the travel band a motion may use (10 % margin of the 2 rev limit)
+MOTION_S = 8.0  # of the 10 s: the rest check and the put-back take the rest
+TORQUE_USE = 0.6 * 300.0  # % of rated: identification's share of the simulator's 300 % limit
+K_SAMPLES = (1, 2, 3, 5, 7)  # today's automatic ramps: 7 intervals of the rest check, 5-6 of the motion's samples
 
 
-def bound(profile_id: str, baud: int, machine: tuple[float, float, float, float, float], k: int,
-          step_pct: float | None = None, measured: bool = False) -> float:
+def bound(
+    profile_id: str,
+    baud: int,
+    machine: tuple[float, float, float, float, float],
+    k: int,
+    step_pct: float | None = None,
+    measured: bool = False,
+) -> float:
     """The least sigma(J)/J (fraction) on one machine at k samples per phase of constant acceleration; measured:
     the acceleration known only from the noisy speed readings."""
     p = load_profile(profile_id)
@@ -65,11 +71,11 @@ def bound(profile_id: str, baud: int, machine: tuple[float, float, float, float,
     ratio, coulomb, viscous, gravity, noise = machine
     rate = line_rate(profile_id, baud)
     j = motor.rotor_inertia_kgcm2 * 1e-4 * (1.0 + ratio)
-    seg = max(k / rate, BAND_REV / (motor.rated_speed_rpm / 60.0))      # the motor's speed caps v = band / T
-    a = 2 * math.pi * BAND_REV / seg**2                                   # rad/s^2
+    seg = max(k / rate, BAND_REV / (motor.rated_speed_rpm / 60.0))  # the motor's speed caps v = band / T
+    a = 2 * math.pi * BAND_REV / seg**2  # rad/s^2
     w_peak = 2 * math.pi * BAND_REV / seg
     room_pct = TORQUE_USE - 100.0 * (coulomb + abs(gravity) + viscous * w_peak)
-    tau_a = min(j * a / motor.rated_torque_nm * 100.0, room_pct)          # % of rated
+    tau_a = min(j * a / motor.rated_torque_nm * 100.0, room_pct)  # % of rated
     step = p.need_role("torque_feedback", "bench").scale if step_pct is None else step_pct
     sigma_t = math.hypot(noise * 100.0, step / math.sqrt(12.0))
     n = rate * MOTION_S
@@ -84,13 +90,19 @@ def bound(profile_id: str, baud: int, machine: tuple[float, float, float, float,
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--measured", action="store_true", help="the acceleration known only from the noisy speed")
-    ap.add_argument("--torque-step", type=float, default=None,
-                    help="the torque reading's step, %% of rated, instead of the profile's (SD25 So-66.B: 0.1?)")
+    ap.add_argument(
+        "--torque-step",
+        type=float,
+        default=None,
+        help="the torque reading's step, %% of rated, instead of the profile's (SD25 So-66.B: 0.1?)",
+    )
     args = ap.parse_args()
     machines = draws(False)
-    print(f"{len(machines)} machines (bench/inertia_accuracy.py --profiles); band {BAND_REV} rev, {MOTION_S:g} s of "
-          f"samples all at full acceleration, torque up to {TORQUE_USE:g} %"
-          + ("; acceleration from the noisy speed" if args.measured else "; acceleration known exactly"))
+    print(
+        f"{len(machines)} machines (bench/inertia_accuracy.py --profiles); band {BAND_REV} rev, {MOTION_S:g} s of "
+        f"samples all at full acceleration, torque up to {TORQUE_USE:g} %"
+        + ("; acceleration from the noisy speed" if args.measured else "; acceleration known exactly")
+    )
     print(f"{'profile':>7} {'baud':>6} {'line/s':>6} " + " ".join(f"{f'k={k}: <=2% <=1% med%':>22}" for k in K_SAMPLES))
     for pid, factory in FACTORY_BAUD.items():
         for baud in sorted({factory, 19200}, reverse=True):

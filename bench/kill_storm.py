@@ -37,10 +37,18 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PROFILES = {
     # profile: (switch code, its raw value meaning RAM only, values the target backup has, values set with --save)
-    "sd25": ("Po505", 0x0101, {"Po101": "75", "Po102": "35", "Po109": "11", "Po110": "12", "Po111": "13",
-                               "Po301": "50"}, {"Po101": "66", "Po102": "44", "Po109": "21"}),
-    "is620p": ("H0C-13", 0, {"H08-00": "30.0", "H08-02": "50.0", "H06-03": "150", "H06-05": "60"},
-               {"H08-00": "33.0", "H08-02": "55.0", "H06-05": "70"}),
+    "sd25": (
+        "Po505",
+        0x0101,
+        {"Po101": "75", "Po102": "35", "Po109": "11", "Po110": "12", "Po111": "13", "Po301": "50"},
+        {"Po101": "66", "Po102": "44", "Po109": "21"},
+    ),
+    "is620p": (
+        "H0C-13",
+        0,
+        {"H08-00": "30.0", "H08-02": "50.0", "H06-03": "150", "H06-05": "60"},
+        {"H08-00": "33.0", "H08-02": "55.0", "H06-05": "70"},
+    ),
 }
 OPS = ("restore", "reset", "save", "plan")
 
@@ -57,20 +65,32 @@ class Storm:
     def __init__(self, profile: str, baud: int, root: Path) -> None:
         self.profile, self.root = profile, root
         self.switch, self.ram_mode, self.target_values, self.save_values = PROFILES[profile]
-        self.env = {**os.environ, "SERVOTOOL_SIM_DIR": str(root / "sim"), "SERVOTOOL_BACKUP_DIR": str(root / "auto"),
-                    "SERVOTOOL_CONFIG": str(root / "none.yaml"), "PYTHONPATH": str(ROOT), "COLUMNS": "200"}
+        self.env = {
+            **os.environ,
+            "SERVOTOOL_SIM_DIR": str(root / "sim"),
+            "SERVOTOOL_BACKUP_DIR": str(root / "auto"),
+            "SERVOTOOL_CONFIG": str(root / "none.yaml"),
+            "PYTHONPATH": str(ROOT),
+            "COLUMNS": "200",
+        }
         for var in ("SERVOTOOL_PORT", "SERVOTOOL_PROFILE", "SERVOTOOL_UNIT"):
             self.env.pop(var, None)
         self.state_file = root / "sim" / f"{profile}-unit1.json"
         self.target = root / "work" / "target.yaml"
         self.plan = root / "work" / "plan.yaml"
-        self.repaired = 0          # kills after which the next command had something to put back or report
+        self.repaired = 0  # kills after which the next command had something to put back or report
         (root / "work").mkdir(parents=True)
         self._prepare(baud)
 
     def cli(self, *args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
-        return subprocess.run([sys.executable, "-m", "servotool", *args], capture_output=True, text=True,
-                              env=self.env, cwd=ROOT, timeout=timeout)
+        return subprocess.run(
+            [sys.executable, "-m", "servotool", *args],
+            capture_output=True,
+            text=True,
+            env=self.env,
+            cwd=ROOT,
+            timeout=timeout,
+        )
 
     def on_drive(self, *args: str) -> subprocess.CompletedProcess[str]:
         return self.cli("--port", "sim", "-P", self.profile, *args)
@@ -86,8 +106,8 @@ class Storm:
         saved = {k: os.environ.get(k) for k in ("SERVOTOOL_SIM_DIR", "SERVOTOOL_BACKUP_DIR", "SERVOTOOL_CONFIG")}
         os.environ.update({k: self.env[k] for k in saved})
         try:
-            with open_drives(resolve(ConnectOptions(port="sim", profile=self.profile)), notice=lambda _m: None) \
-                    as (d,):
+            with open_drives(resolve(ConnectOptions(port="sim", profile=self.profile)), notice=lambda _m: None) as (d,):
+
                 def put(values: dict[str, str], save: bool | None, raw: bool = False) -> None:
                     plan = params.prepare_set(d, [f"{k}={v}" for k, v in values.items()], raw=raw)
                     params.set_values(d, plan, save)
@@ -95,8 +115,8 @@ class Storm:
                 put(self.target_values, True)
                 backup.write_backup(d, self.target)
                 restore.factory_reset(d)
-                put({self.switch: str(self.ram_mode)}, None, raw=True)   # RAM only: the switch flips
-                put(dict(list(self.save_values.items())[:1]), None)      # one value already in RAM
+                put({self.switch: str(self.ram_mode)}, None, raw=True)  # RAM only: the switch flips
+                put(dict(list(self.save_values.items())[:1]), None)  # one value already in RAM
             sim_state.configure(load_profile_cached(self.profile), 1, line_baud=baud)
         finally:
             for k, v in saved.items():
@@ -104,9 +124,14 @@ class Storm:
                     os.environ.pop(k, None)
                 else:
                     os.environ[k] = v
-        steps = "\n".join(f"  - {line}" for line in (
-            "set: {" + ", ".join(f"{k}: {v}" for k, v in self.save_values.items()) + "}", "save:",
-            "backup: {file: out.yaml, overwrite: true}"))
+        steps = "\n".join(
+            f"  - {line}"
+            for line in (
+                "set: {" + ", ".join(f"{k}: {v}" for k, v in self.save_values.items()) + "}",
+                "save:",
+                "backup: {file: out.yaml, overwrite: true}",
+            )
+        )
         self.plan.write_text(f"port: sim\nprofile: {self.profile}\nsteps:\n{steps}\n")
         self.start_state = self.state_file.read_text()
         self.before = self.drive_state()
@@ -121,8 +146,16 @@ class Storm:
         if op == "reset":
             return ["--port", "sim", "-P", self.profile, "param", "reset", "--yes"]
         if op == "save":
-            return ["--port", "sim", "-P", self.profile, "param", "set", "--save",
-                    *(f"{k}={v}" for k, v in self.save_values.items())]
+            return [
+                "--port",
+                "sim",
+                "-P",
+                self.profile,
+                "param",
+                "set",
+                "--save",
+                *(f"{k}={v}" for k, v in self.save_values.items()),
+            ]
         return ["run", str(self.plan), "--yes"]
 
     def reset(self) -> None:
@@ -150,8 +183,13 @@ class Storm:
         """Kill the operation after delay s (targeted: delay s after it reached its writes); run the next
         command; (recovered, why not)."""
         self.reset()
-        proc = subprocess.Popen([sys.executable, "-m", "servotool", *self.command(op)], env=self.env, cwd=ROOT,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "servotool", *self.command(op)],
+            env=self.env,
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         if targeted:
             while proc.poll() is None and not self.marker(op):
                 time.sleep(0.002)
@@ -177,11 +215,13 @@ class Storm:
                     ok[e.code].add(e.default)
         elif op == "restore":
             import yaml
+
             for c, v in yaml.safe_load(self.target.read_text())["values"].items():
                 if c != self.switch and c in ok:
                     ok[c].add(v)
         else:
             from servotool.model.codec import parse_value
+
             for c, v in self.save_values.items():
                 ok[c].add(parse_value(prof.entry(c), v))
         return ok
@@ -191,6 +231,7 @@ class Storm:
         switch_ok = {self.before["ram"][self.switch]}
         if op == "reset":
             from servotool.model.loader import load_profile
+
             switch_ok.add(load_profile(self.profile).entry(self.switch).default)
         if now["ram"][self.switch] not in switch_ok or now["eeprom"][self.switch] not in switch_ok:
             return False, f"switch {self.switch} left at {now['ram'][self.switch]}"
@@ -201,6 +242,7 @@ class Storm:
         m = re.search(r"differs from the automatic backup (\S+) in (\d+)", said)
         if m:
             import yaml
+
             auto = yaml.safe_load(Path(m.group(1)).read_text())["values"]
             true = sum(1 for c, v in auto.items() if c != self.switch and now["ram"].get(c) != v)
             if true != int(m.group(2)):
@@ -235,15 +277,19 @@ def main() -> None:
                 for n in range(args.kills):
                     # half at any moment of the command, half in the window where it writes
                     targeted = n % 2 == 1
-                    good, why = storm.kill_at(op, rng.uniform(0, args.window) if targeted else
-                                              rng.uniform(0.2, span), targeted)
+                    good, why = storm.kill_at(
+                        op, rng.uniform(0, args.window) if targeted else rng.uniform(0.2, span), targeted
+                    )
                     ok += good
                     if not good:
                         print(f"  {profile} {op}: NOT recovered: {why}", file=sys.stderr)
                 totals["kills"] += args.kills
                 totals["ok"] += ok
-                print(f"{profile:8} {op:8} {args.kills:5d} {ok:9d} {100 * ok / args.kills:6.1f} {storm.repaired:8d}  "
-                      f"(uninterrupted {span:.1f} s)", flush=True)
+                print(
+                    f"{profile:8} {op:8} {args.kills:5d} {ok:9d} {100 * ok / args.kills:6.1f} {storm.repaired:8d}  "
+                    f"(uninterrupted {span:.1f} s)",
+                    flush=True,
+                )
     share = 100 * totals["ok"] / max(1, totals["kills"])
     print(f"{'all':8} {'':8} {totals['kills']:5d} {totals['ok']:9d} {share:6.1f}")
 

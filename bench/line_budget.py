@@ -47,10 +47,18 @@ from servotool.sim.virtual import TURNAROUND_S, VirtualLink, make_motion_setup, 
 from servotool.tuning.tune import TuneRequest, tune_inertia
 
 # The first function on the stack (innermost first) that names the kind of a request.
-KINDS = [("_read", "samples"), ("Sampler.sample", "position"), ("_resend_command", "re-arm"),
-         ("KeepAlive.beat", "beat"), ("StableHold.", "hold"), ("active_alarm", "alarm"),
-         ("Mover.start", "command"), ("Jogger.set_speed", "command"), ("Jogger.set_ramp", "command"),
-         ("Jogger.command", "command")]
+KINDS = [
+    ("_read", "samples"),
+    ("Sampler.sample", "position"),
+    ("_resend_command", "re-arm"),
+    ("KeepAlive.beat", "beat"),
+    ("StableHold.", "hold"),
+    ("active_alarm", "alarm"),
+    ("Mover.start", "command"),
+    ("Jogger.set_speed", "command"),
+    ("Jogger.set_ramp", "command"),
+    ("Jogger.command", "command"),
+]
 
 
 def kind_of() -> str:
@@ -59,7 +67,8 @@ def kind_of() -> str:
         name = frame.f_code.co_qualname
         for key, kind in KINDS:
             if (name.startswith(key) if key.endswith(".") else name.endswith(key)) and (
-                    key != "_read" or "Sampler" in name):
+                key != "_read" or "Sampler" in name
+            ):
                 return kind
         frame = frame.f_back
     return "other"
@@ -86,21 +95,31 @@ class RecordingLink(VirtualLink):
         self.log.append(Request(self.clock.now(), wire_time(3, count, self.baud) + TURNAROUND_S, kind_of()))
         return super().read(unit, address, count)
 
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True,
-              idempotent: bool = True) -> None:
+    def write(
+        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+    ) -> None:
         fc = 16 if multiple or len(values) > 1 else 6
         self.log.append(Request(self.clock.now(), wire_time(fc, len(values), self.baud) + TURNAROUND_S, kind_of()))
         super().write(unit, address, values, multiple=multiple, idempotent=idempotent)
 
 
-def budget(profile_id: str, baud: int, ratio: float, friction: float, gravity: float = 0.0, noise: float = 0.002,
-           viscous: float = 0.0005, seed: int = 1) -> dict[str, object]:
+def budget(
+    profile_id: str,
+    baud: int,
+    ratio: float,
+    friction: float,
+    gravity: float = 0.0,
+    noise: float = 0.002,
+    viscous: float = 0.0005,
+    seed: int = 1,
+) -> dict[str, object]:
     """One identification's requests by kind over its sampling window: counts, seconds, and the share."""
     profile = load_profile(profile_id)
     clock = VirtualClock(1000.0)
     sim = build_drive(profile, 1, clock, persist=False)
-    sim.settings.update(load_ratio=ratio, friction=friction, viscous=viscous, load_torque=gravity, noise=noise,
-                        seed=seed, brake=1)
+    sim.settings.update(
+        load_ratio=ratio, friction=friction, viscous=viscous, load_torque=gravity, noise=noise, seed=seed, brake=1
+    )
     sim.firmware.reconfigure()
     make_motion_setup(sim)
     link = RecordingLink([sim], clock, baud)
@@ -124,8 +143,14 @@ def budget(profile_id: str, baud: int, ratio: float, friction: float, gravity: f
     secs["host"] = (last - first) - sum(r.seconds for r in window)
     n = len(trace.t) if trace is not None else 0
     rate = ident.samples_per_s if ident is not None else (n - 1) / (trace.t[-1] - trace.t[0]) if n > 1 else 0.0
-    return {"outcome": outcome, "counts": counts, "seconds": secs, "window_s": last - first, "rate": rate,
-            "share": rate / line_rate(profile_id, baud)}
+    return {
+        "outcome": outcome,
+        "counts": counts,
+        "seconds": secs,
+        "window_s": last - first,
+        "rate": rate,
+        "share": rate / line_rate(profile_id, baud),
+    }
 
 
 def main() -> None:
@@ -143,7 +168,7 @@ def main() -> None:
         counts: Counter[str] = Counter()
         secs: Counter[str] = Counter()
         window, shares = 0.0, []
-        for n, (ratio, fr, visc, gr, nz) in enumerate(draws(True)[:args.machines]):
+        for n, (ratio, fr, visc, gr, nz) in enumerate(draws(True)[: args.machines]):
             b = budget(pid, baud, ratio, fr, gr, nz, viscous=visc, seed=n + 1)
             if "counts" not in b:
                 continue
@@ -152,8 +177,10 @@ def main() -> None:
             window += b["window_s"]
             shares.append(b["share"])
         cells = [f"{counts.get(k, 0):>5} {100 * secs.get(k, 0.0) / window:>5.1f}%" for k in kinds]
-        print(f"{pid:>7} {baud:>6} {statistics.median(shares):>5.2f} {window:>6.2f}  "
-              + "  ".join(f"{c:>13}" for c in cells))
+        print(
+            f"{pid:>7} {baud:>6} {statistics.median(shares):>5.2f} {window:>6.2f}  "
+            + "  ".join(f"{c:>13}" for c in cells)
+        )
 
 
 if __name__ == "__main__":

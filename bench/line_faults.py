@@ -39,9 +39,9 @@ FAULTS = (*KINDS, "mixed", "mixed+echo")
 RATES = (0.01, 0.05, 0.20)
 OPS = ("get", "set", "backup", "restore", "monitor")
 OUTCOMES = ("ok", "error", "WRONG", "traceback", "hang")
-TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.15, 30.0     # late replies come after the timeout, within the late window
+TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.15, 30.0  # late replies come after the timeout, within the late window
 VERBOSE = False
-ACCOUNTS: Counter[str] = Counter()      # failed restores by the drive state they stated: equal, differ, unknown
+ACCOUNTS: Counter[str] = Counter()  # failed restores by the drive state they stated: equal, differ, unknown
 
 
 class Wrong(Exception):
@@ -54,14 +54,22 @@ class Bench:
     def __init__(self, profile: Profile, seed: int) -> None:
         self.profile = profile
         self.sim_drive: SimulatedDrive = build_drive(profile, profile.default_unit, persist=False)
-        self.sim_drive.configure(noise=0.0)          # at rest with no noise, live values hold still
-        self.sim_drive.firmware.reconfigure()         # type: ignore[attr-defined]
+        self.sim_drive.configure(noise=0.0)  # at rest with no noise, live values hold still
+        self.sim_drive.firmware.reconfigure()  # type: ignore[attr-defined]
         self.sim = EmbeddedSim([self.sim_drive], LineFaults())
         self.rng = random.Random(seed)
         roles = {c.upper() for c in profile.roles.values()}
         self.params = [e for e in profile.of_class("Pn") if e.readable]
-        self.settable = [e for e in self.params if e.writable and e.code.upper() not in roles and not e.fields
-                         and not e.enum and not e.bits and e.max > e.min]
+        self.settable = [
+            e
+            for e in self.params
+            if e.writable
+            and e.code.upper() not in roles
+            and not e.fields
+            and not e.enum
+            and not e.bits
+            and e.max > e.min
+        ]
         self.monitors = monitor.default_entries(profile)
 
     def truth(self, entry: Entry) -> int:
@@ -120,11 +128,12 @@ class Bench:
             else:
                 ACCOUNTS["equal" if not differ else "differ"] += 1
             raise
-        except ServoError as exc:       # before any write: it must say so, and be true
+        except ServoError as exc:  # before any write: it must say so, and be true
             now = {e.code: self.truth(e) for e in self.params}
             if "nothing was written" not in str(exc) or now != truth:
-                raise Wrong(f"restore failed before writing? said {exc}; changed "
-                            f"{sorted(c for c in now if now[c] != truth[c])}") from None
+                raise Wrong(
+                    f"restore failed before writing? said {exc}; changed {sorted(c for c in now if now[c] != truth[c])}"
+                ) from None
             ACCOUNTS["nothing written"] += 1
             raise
         for e, _, new in plan.changes:
@@ -134,8 +143,9 @@ class Bench:
         """One try of op on a fresh link: its outcome (one of OUTCOMES)."""
         assert self.sim.proxy is not None
         self.sim.proxy.set_faults(faults)
-        link = ModbusLink(LinkSettings(self.sim.port, timeout=TIMEOUT_S, retries=2,
-                                       echo=None if faults.echo else False))
+        link = ModbusLink(
+            LinkSettings(self.sim.port, timeout=TIMEOUT_S, retries=2, echo=None if faults.echo else False)
+        )
         drive = Drive(link, self.profile, self.profile.default_unit)
         outcome = _guarded(lambda: getattr(self, op)(drive))
         if outcome != "hang":
@@ -185,7 +195,7 @@ def main() -> None:
     global VERBOSE
     VERBOSE = args.verbose
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
-    os.environ.setdefault("SERVOTOOL_BACKUP_DIR", tempfile.mkdtemp())     # the restores' automatic backups
+    os.environ.setdefault("SERVOTOOL_BACKUP_DIR", tempfile.mkdtemp())  # the restores' automatic backups
     rates = (0.20,) if args.quick else RATES
     counts: dict[tuple[str, float, str], Counter[str]] = {}
     t0 = time.monotonic()
@@ -208,18 +218,21 @@ def main() -> None:
 def report(counts: dict[tuple[str, float, str], Counter[str]], elapsed: float) -> None:
     print(f"{'fault':<11} {'rate':>5} {'op':<8} {'tries':>5} " + " ".join(f"{o:>9}" for o in OUTCOMES))
     total: Counter[str] = Counter()
-    for (kind, rate, op), cell in sorted(counts.items(), key=lambda kv: (FAULTS.index(kv[0][0]), kv[0][1],
-                                                                          OPS.index(kv[0][2]))):
+    for (kind, rate, op), cell in sorted(
+        counts.items(), key=lambda kv: (FAULTS.index(kv[0][0]), kv[0][1], OPS.index(kv[0][2]))
+    ):
         total.update(cell)
         print(f"{kind:<11} {rate:>5.0%} {op:<8} {sum(cell.values()):>5} " + " ".join(f"{cell[o]:>9}" for o in OUTCOMES))
     print(f"{'all':<11} {'':>5} {'':<8} {sum(total.values()):>5} " + " ".join(f"{total[o]:>9}" for o in OUTCOMES))
     print(f"silent wrong: {total['WRONG']} in {sum(total.values())} tries ({elapsed:.0f} s)")
     if ACCOUNTS:
         stated = ACCOUNTS["equal"] + ACCOUNTS["differ"] + ACCOUNTS["nothing written"]
-        print(f"failed restores: {stated + ACCOUNTS['unknown']}, drive state stated and true in {stated} "
-              f"(nothing written {ACCOUNTS['nothing written']}, rolled back to equal the automatic backup "
-              f"{ACCOUNTS['equal']}, listed differences {ACCOUNTS['differ']}), 'unknown' (no answer) in "
-              f"{ACCOUNTS['unknown']}; a wrong statement counts as WRONG above")
+        print(
+            f"failed restores: {stated + ACCOUNTS['unknown']}, drive state stated and true in {stated} "
+            f"(nothing written {ACCOUNTS['nothing written']}, rolled back to equal the automatic backup "
+            f"{ACCOUNTS['equal']}, listed differences {ACCOUNTS['differ']}), 'unknown' (no answer) in "
+            f"{ACCOUNTS['unknown']}; a wrong statement counts as WRONG above"
+        )
 
 
 if __name__ == "__main__":

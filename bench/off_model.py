@@ -66,7 +66,7 @@ def identify(ratio: float, machine: dict[str, float], baud: int, seed: int, prof
     make_motion_setup(sim)
     fit_brake(sim.firmware.plant)
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
-    drive.dead_man_waived = True     # as --no-dead-man: SD25 and SDC have no dead-man route (the others keep theirs)
+    drive.dead_man_waived = True  # as --no-dead-man: SD25 and SDC have no dead-man route (the others keep theirs)
     try:
         r = tune_inertia(drive, TuneRequest(travel_rev=TRAVEL_REV, dry_run=True), clock=clock)
     except IdentificationRefused as exc:
@@ -78,8 +78,9 @@ def identify(ratio: float, machine: dict[str, float], baud: int, seed: int, prof
     return ("flagged" if flagged else "accepted"), est, "; ".join(n for n in est.notes if n.startswith("off-model:"))
 
 
-def outcome_of(ratio: float, machine: dict[str, float], baud: int, seed: int, profile_id: str
-               ) -> tuple[str, float, float, str]:
+def outcome_of(
+    ratio: float, machine: dict[str, float], baud: int, seed: int, profile_id: str
+) -> tuple[str, float, float, str]:
     """(outcome, error % of J_total, stated 3 sigma %, reason or flags) of one run."""
     outcome, est, why = identify(ratio, machine, baud, seed=seed, profile_id=profile_id)
     err = sig3 = float("nan")
@@ -93,10 +94,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="fewer loads and ratios")
     ap.add_argument("--baud", type=int, action="append", help="line speed (repeatable; default 19200 and 115200)")
-    ap.add_argument("--profile", default="dsx7e", help="the simulated drive's profile (default dsx7e; is620p at 57600 "
-                    "reads torque in whole percent)")
-    ap.add_argument("--seeds", type=int, default=1, help="runs of each machine, each with its own noise (default 1: "
-                    "one row per run; more: one row per machine with its counts and worst error against 3 sigma)")
+    ap.add_argument(
+        "--profile",
+        default="dsx7e",
+        help="the simulated drive's profile (default dsx7e; is620p at 57600 reads torque in whole percent)",
+    )
+    ap.add_argument(
+        "--seeds",
+        type=int,
+        default=1,
+        help="runs of each machine, each with its own noise (default 1: "
+        "one row per run; more: one row per machine with its counts and worst error against 3 sigma)",
+    )
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     loads = LOADS_QUICK if args.quick else LOADS_QUICK + LOADS_MORE
@@ -127,16 +136,24 @@ def main() -> None:
                             row_violations += 1
                             bad = "  <-- outside 3 sigma"
                     if args.seeds == 1:
-                        print(f"{label:<22} {ratio:>5.1f} {baud:>6} {outcome:<9} {err:>7.2f} {sig3:>6.2f}  "
-                              f"{why[:110]}{bad}", flush=True)
+                        print(
+                            f"{label:<22} {ratio:>5.1f} {baud:>6} {outcome:<9} {err:>7.2f} {sig3:>6.2f}  "
+                            f"{why[:110]}{bad}",
+                            flush=True,
+                        )
                 violations += row_violations
                 if args.seeds > 1:
-                    print(f"{label:<22} {ratio:>5.1f} {baud:>6} {row.get('accepted', 0):>4} {row.get('flagged', 0):>4} "
-                          f"{row.get('refused', 0) + row.get('failed', 0):>4} {row_violations:>4}  {worst:.2f}"
-                          f"{'  <-- outside 3 sigma' if row_violations else ''}", flush=True)
+                    print(
+                        f"{label:<22} {ratio:>5.1f} {baud:>6} {row.get('accepted', 0):>4} {row.get('flagged', 0):>4} "
+                        f"{row.get('refused', 0) + row.get('failed', 0):>4} {row_violations:>4}  {worst:.2f}"
+                        f"{'  <-- outside 3 sigma' if row_violations else ''}",
+                        flush=True,
+                    )
     print("\n" + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
-    print(f"no accepted result off by more than its stated 3 sigma: {violations} violation(s) in {counted} "
-          f"accepted or flagged of {runs} runs: {'met' if violations == 0 else 'MISSED'}")
+    print(
+        f"no accepted result off by more than its stated 3 sigma: {violations} violation(s) in {counted} "
+        f"accepted or flagged of {runs} runs: {'met' if violations == 0 else 'MISSED'}"
+    )
 
 
 if __name__ == "__main__":

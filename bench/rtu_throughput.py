@@ -41,12 +41,16 @@ def main() -> None:
     print(f"embedded sim (RTU over loopback TCP): {rate:8.0f} requests/s  {rtt:6.3f} ms/request")
     if shutil.which("socat"):
         a, b = tmp / "a", tmp / "b"
-        socat = subprocess.Popen(["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
-                                 stderr=subprocess.DEVNULL)
+        socat = subprocess.Popen(
+            ["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"], stderr=subprocess.DEVNULL
+        )
         while not (a.exists() and b.exists()):
             time.sleep(0.05)
-        server = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", str(a), "--baud",
-                                   "115200"], stderr=subprocess.PIPE, text=True)
+        server = subprocess.Popen(
+            [sys.executable, "-m", "servotool", "sim", "serve", "--port", str(a), "--baud", "115200"],
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         server.stderr.readline()
         try:
             rate, rtt = measure(str(b), args.requests // 2, baud=115200)

@@ -26,8 +26,26 @@ UNITS = list(range(1, 248))
 
 
 def serve(port: str, *extra: str) -> tuple[subprocess.Popen[str], str]:
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "-P", "sd25", "-u", "5", "-u", "200",
-                             "--port", port, *extra], stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "servotool",
+            "sim",
+            "serve",
+            "-P",
+            "sd25",
+            "-u",
+            "5",
+            "-u",
+            "200",
+            "--port",
+            port,
+            *extra,
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     assert proc.stderr is not None
     line = proc.stderr.readline()
     m = re.search(r"serving on (\S+)", line)
@@ -41,8 +59,10 @@ def measure(label: str, port: str, timeout: float, line: LineSettings) -> None:
     result = scan(port, UNITS, [line], shipped_profiles(), timeout=timeout)
     budget = len(UNITS) * timeout
     found = ", ".join(f"unit {f.unit} = {f.best.profile.id if f.best else '?'}" for f in result.found)
-    print(f"{label}: {len(UNITS)} ids in {result.seconds:6.2f} s; timeout alone {budget:6.2f} s; "
-          f"ratio {result.seconds / budget:4.2f} (target <= 1.50); found {found or 'nothing'}")
+    print(
+        f"{label}: {len(UNITS)} ids in {result.seconds:6.2f} s; timeout alone {budget:6.2f} s; "
+        f"ratio {result.seconds / budget:4.2f} (target <= 1.50); found {found or 'nothing'}"
+    )
 
 
 def main() -> None:
@@ -59,8 +79,9 @@ def main() -> None:
         server.terminate()
     if args.pty and shutil.which("socat"):
         a, b = tmp / "a", tmp / "b"
-        socat = subprocess.Popen(["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
-                                 stderr=subprocess.DEVNULL)
+        socat = subprocess.Popen(
+            ["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"], stderr=subprocess.DEVNULL
+        )
         while not (a.exists() and b.exists()):
             time.sleep(0.05)
         server, _ = serve(str(a), "--baud", "115200")

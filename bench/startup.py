@@ -37,10 +37,14 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=7)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        env = {**os.environ, "SERVOTOOL_SIM_DIR": str(Path(tmp) / "sim"),
-               "SERVOTOOL_CONFIG": str(Path(tmp) / "none.yaml"), "PYTHONPYCACHEPREFIX": str(Path(tmp) / "pyc"),
-               "SERVOTOOL_CACHE_DIR": str(Path(tmp) / "cache"),
-               "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+        env = {
+            **os.environ,
+            "SERVOTOOL_SIM_DIR": str(Path(tmp) / "sim"),
+            "SERVOTOOL_CONFIG": str(Path(tmp) / "none.yaml"),
+            "PYTHONPYCACHEPREFIX": str(Path(tmp) / "pyc"),
+            "SERVOTOOL_CACHE_DIR": str(Path(tmp) / "cache"),
+            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+        }
         env.pop("PYTHONDONTWRITEBYTECODE", None)
         seconds(SERVOTOOL, env)
         seconds(BASELINE, env)
@@ -49,10 +53,14 @@ def main() -> None:
             ours.append(seconds(SERVOTOOL, env))
             base.append(seconds(BASELINE, env))
     a, b = statistics.median(ours), statistics.median(base)
-    print(f"servotool --port sim param get Pn004: median {a * 1000:.0f} ms of {args.runs} "
-          f"(min {min(ours) * 1000:.0f}, max {max(ours) * 1000:.0f})")
-    print(f"python -c 'import pymodbus.client':  median {b * 1000:.0f} ms of {args.runs} "
-          f"(min {min(base) * 1000:.0f}, max {max(base) * 1000:.0f})")
+    print(
+        f"servotool --port sim param get Pn004: median {a * 1000:.0f} ms of {args.runs} "
+        f"(min {min(ours) * 1000:.0f}, max {max(ours) * 1000:.0f})"
+    )
+    print(
+        f"python -c 'import pymodbus.client':  median {b * 1000:.0f} ms of {args.runs} "
+        f"(min {min(base) * 1000:.0f}, max {max(base) * 1000:.0f})"
+    )
     print(f"ratio {a / b:.2f}x (target <= 2x)")
 
 

@@ -217,7 +217,7 @@ def option_lines(cmd) -> list[str]:
 
 def command_sections(group, prefix: str) -> list[str]:
     out = []
-    for name in sorted(group.list_commands(None)):      # lazily loaded commands too
+    for name in sorted(group.list_commands(None)):  # lazily loaded commands too
         cmd = group.get_command(None, name)
         full = f"{prefix} {name}"
         if hasattr(cmd, "commands"):

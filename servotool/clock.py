@@ -44,7 +44,7 @@ class VirtualClock:
         return self.t
 
     def wall(self) -> float:
-        return self.t            # drives sharing one virtual clock share its time
+        return self.t  # drives sharing one virtual clock share its time
 
     def sleep(self, seconds: float) -> None:
         self.advance(max(0.0, seconds))

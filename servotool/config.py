@@ -39,9 +39,9 @@ class ConnectOptions:
     timeout: float | None = None
     retries: int | None = None
     profile: str | None = None
-    travel: float | None = None       # soft travel limit of host motion, rev either way (jog --travel)
+    travel: float | None = None  # soft travel limit of host motion, rev either way (jog --travel)
     no_identity_check: bool | None = None
-    echo: str | None = None             # auto, on or off
+    echo: str | None = None  # auto, on or off
     turnaround_ms: float | None = None
     silence_ms: float | None = None
 
@@ -54,7 +54,7 @@ def _convert(name: str, value: Any, where: str) -> Any:
         return None
     if name == "no_identity_check":
         return _flag(value, where)
-    if name == "echo" and isinstance(value, bool):      # YAML reads a bare on/off as a boolean
+    if name == "echo" and isinstance(value, bool):  # YAML reads a bare on/off as a boolean
         return "on" if value else "off"
     if name not in ("baud", "stopbits", "unit", "retries", *FLOATS):
         return str(value)
@@ -137,8 +137,8 @@ class Resolved:
     profile: Profile
     settings: LinkSettings
     unit: int
-    travel: float | None = None      # soft travel limit (rev) from the environment or config file
-    identity_check: bool = True     # check the drive answering against the profile before any write
+    travel: float | None = None  # soft travel limit (rev) from the environment or config file
+    identity_check: bool = True  # check the drive answering against the profile before any write
 
     @property
     def simulated(self) -> bool:
@@ -165,7 +165,8 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         raise UsageError("no drive profile given: use --profile (see 'servotool profiles list') or SERVOTOOL_PROFILE")
     profile = load_profile(name)
     settings = LinkSettings(
-        port=port, line=line_format(opts, profile),
+        port=port,
+        line=line_format(opts, profile),
         # the embedded simulator's only delay is this host's own CPU, which a loaded machine can hold up for
         # longer than a real drive ever takes to answer
         timeout=opts.timeout if opts.timeout is not None else (2.0 if port == SIM_PORT else 1.0),
@@ -178,8 +179,13 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         raise UsageError(f"bad retries {settings.retries}: must be 0..{MAX_RETRIES}")
     if opts.travel is not None and not (math.isfinite(opts.travel) and opts.travel > 0):
         raise UsageError(f"bad travel {opts.travel:g}: must be a number of revolutions > 0")
-    return Resolved(profile, settings, check_unit(opts.unit if opts.unit is not None else profile.default_unit),
-                    identity_check=not opts.no_identity_check, travel=opts.travel)
+    return Resolved(
+        profile,
+        settings,
+        check_unit(opts.unit if opts.unit is not None else profile.default_unit),
+        identity_check=not opts.no_identity_check,
+        travel=opts.travel,
+    )
 
 
 def rs485(opts: ConnectOptions) -> dict[str, Any]:

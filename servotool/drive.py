@@ -43,8 +43,13 @@ class Reading:
 
     def as_json(self) -> dict[str, object]:
         e = self.entry
-        out: dict[str, object] = {"code": e.code, "name": e.name, "value": json_value(e, self.raw), "raw": self.raw,
-                                  "unit": e.unit}
+        out: dict[str, object] = {
+            "code": e.code,
+            "name": e.name,
+            "value": json_value(e, self.raw),
+            "raw": self.raw,
+            "unit": e.unit,
+        }
         if (fields := fields_json(e, self.raw)) is not None:
             out["fields"] = fields
             meanings = {f: m for f, v in fields.items() if (m := e.field_enums.get(f.upper(), {}).get(v))}
@@ -68,8 +73,11 @@ class WriteResult:
 
     @property
     def note(self) -> str:
-        return {"servo_off": "takes effect with the servo off", "power_cycle": "takes effect after a power cycle",
-                "unknown": "the manual does not say when it takes effect"}.get(self.entry.effect, "")
+        return {
+            "servo_off": "takes effect with the servo off",
+            "power_cycle": "takes effect after a power cycle",
+            "unknown": "the manual does not say when it takes effect",
+        }.get(self.entry.effect, "")
 
 
 def _prefixed(exc: DeviceError, prefix: str) -> DeviceError:
@@ -78,21 +86,25 @@ def _prefixed(exc: DeviceError, prefix: str) -> DeviceError:
     return exc
 
 
-ILLEGAL_ADDRESS = 2      # the Modbus exception of an address the drive does not have
+ILLEGAL_ADDRESS = 2  # the Modbus exception of an address the drive does not have
 
 
 class NotOnDrive(ModbusException):
     """Entries the profile lists but the drive lacks: it answers exception 02 (illegal data address) for them."""
 
     def __init__(self, entries: list[Entry]) -> None:
-        DeviceError.__init__(self, f"{', '.join(e.code for e in entries)}: not on this drive (it answers Modbus "
-                                   f"exception 02, illegal data address, for "
-                                   f"{'its address' if len(entries) == 1 else 'their addresses'})")
+        DeviceError.__init__(
+            self,
+            f"{', '.join(e.code for e in entries)}: not on this drive (it answers Modbus "
+            f"exception 02, illegal data address, for "
+            f"{'its address' if len(entries) == 1 else 'their addresses'})",
+        )
         self.code, self.entries = ILLEGAL_ADDRESS, entries
 
 
-def coalesce_reads(profile: Profile, entries: Iterable[Entry],
-                   holes: frozenset[int] = frozenset()) -> list[tuple[int, int, list[Entry]]]:
+def coalesce_reads(
+    profile: Profile, entries: Iterable[Entry], holes: frozenset[int] = frozenset()
+) -> list[tuple[int, int, list[Entry]]]:
     """Group entries into as few FC03 requests as the profile allows: (address, count, entries).
 
     A request may span a gap only when every address in the gap belongs to a readable entry, since a real
@@ -134,11 +146,12 @@ class Drive:
         self.profile = profile
         self.unit = unit
         self.port = port
-        self.missing: dict[str, Entry] = {}     # entries the drive answered exception 02 for, this run, by code
+        self.missing: dict[str, Entry] = {}  # entries the drive answered exception 02 for, this run, by code
 
     # ----- reading -------------------------------------------------------------------------------------------
-    def read_entries(self, entries: Iterable[Entry], progress: Callable[[int], None] | None = None, *,
-                     partial: bool = False) -> list[Reading]:
+    def read_entries(
+        self, entries: Iterable[Entry], progress: Callable[[int], None] | None = None, *, partial: bool = False
+    ) -> list[Reading]:
         """Read entries in coalesced requests; results in the order asked.
 
         An entry the drive lacks (exception 02) is found by splitting the request that met it, remembered in
@@ -149,8 +162,9 @@ class Drive:
                 raise UsageError(f"{e.code} ({e.name}) is write-only and cannot be read")
         values: dict[str, int] = {}
         if partial or not any(e.code in self.missing for e in entries):
-            for start, count, group in coalesce_reads(self.profile, [e for e in entries if e.code not in
-                                                                     self.missing], self._holes()):
+            for start, count, group in coalesce_reads(
+                self.profile, [e for e in entries if e.code not in self.missing], self._holes()
+            ):
                 self._read_block(start, count, group, values)
                 if progress:
                     progress(len(group))
@@ -182,7 +196,7 @@ class Drive:
             raise _prefixed(exc, f"reading {_names(group)}") from None
         for e in group:
             off = e.address - start
-            values[e.code] = words_to_raw(e, words[off: off + e.words])
+            values[e.code] = words_to_raw(e, words[off : off + e.words])
 
     def read(self, *codes: str) -> list[Reading]:
         return self.read_entries(self.profile.entry(c) for c in codes)
@@ -204,7 +218,7 @@ class Drive:
         if field is not None:
             if raw:
                 raise UsageError(f"{entry.code}.{field}: --raw takes whole register values, not fields")
-            named = enum_value(entry.field_enums.get(field.upper(), {}), value)    # 'internal speed' has a space
+            named = enum_value(entry.field_enums.get(field.upper(), {}), value)  # 'internal speed' has a space
             value = str(named) if named is not None else value.strip()
             if not value or any(c in value for c in " \t,=_"):
                 raise UsageError(f"{entry.code}.{field}: '{value}' is not a single field value")
@@ -237,8 +251,10 @@ class Drive:
         if entry.readable:
             back = self.read_entries([entry])[0].raw
             if back != raw:
-                raise VerifyError(f"{entry.code}: wrote {format_value(entry, raw)} but the drive reads back "
-                                  f"{format_value(entry, back)}")
+                raise VerifyError(
+                    f"{entry.code}: wrote {format_value(entry, raw)} but the drive reads back "
+                    f"{format_value(entry, back)}"
+                )
         return WriteResult(entry, old, raw)
 
     def write_block_verified(self, items: list[tuple[Entry, int, int | None]]) -> list[WriteResult]:
@@ -260,8 +276,9 @@ class Drive:
         back = {r.entry.code: r.raw for r in self.read_entries(readable)} if readable else {}
         for e, raw, _ in items:
             if e.code in back and back[e.code] != raw:
-                raise VerifyError(f"{e.code}: wrote {format_value(e, raw)} but the drive reads back "
-                                  f"{format_value(e, back[e.code])}")
+                raise VerifyError(
+                    f"{e.code}: wrote {format_value(e, raw)} but the drive reads back {format_value(e, back[e.code])}"
+                )
         return [WriteResult(e, old, raw) for e, raw, old in items]
 
     def trigger(self, role: str, feature: str, value: int | None = None) -> None:

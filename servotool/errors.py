@@ -34,15 +34,23 @@ class MissingRole(UsageError):
 class UnknownName(UsageError):
     """A code, group, class or profile id that is not there; `suggestions` are the closest that are."""
 
-    def __init__(self, kind: str, name: str, profile_id: str | None, suggestions: Sequence[str] = (),
-                 known: Sequence[str] = ()) -> None:
+    def __init__(
+        self, kind: str, name: str, profile_id: str | None, suggestions: Sequence[str] = (), known: Sequence[str] = ()
+    ) -> None:
         self.kind, self.name, self.profile_id = kind, name, profile_id
         self.suggestions, self.known = list(suggestions), list(known)
         where = f" for profile {profile_id}" if profile_id else ""
         hint = ""
         if suggestions:
-            hint = "; did you mean " + (self.suggestions[0] if len(self.suggestions) == 1 else
-                                        ", ".join(self.suggestions[:-1]) + " or " + self.suggestions[-1]) + "?"
+            hint = (
+                "; did you mean "
+                + (
+                    self.suggestions[0]
+                    if len(self.suggestions) == 1
+                    else ", ".join(self.suggestions[:-1]) + " or " + self.suggestions[-1]
+                )
+                + "?"
+            )
         super().__init__(f"unknown {kind} '{name}'{where}{hint}")
 
 
@@ -50,7 +58,7 @@ class DeviceError(ServoError):
     """The link or the drive failed: timeout, CRC error, Modbus exception."""
 
     exit_code = 1
-    fault = ""      # for a failed exchange: silent, garbled, stray or extra (what the last try met)
+    fault = ""  # for a failed exchange: silent, garbled, stray or extra (what the last try met)
 
 
 class ModbusException(DeviceError):
@@ -90,9 +98,9 @@ class SetupGap:
     """One motion-setup requirement the drive does not meet (yet)."""
 
     code: str
-    differences: tuple[tuple[str, str, str], ...]   # (setting, wanted, now) for each part that differs
-    assignments: tuple[str, ...]    # the `param set` arguments that make it so: CODE=VALUE or CODE.FIELD=VALUE
-    power_cycle: bool               # takes effect only after a power cycle
+    differences: tuple[tuple[str, str, str], ...]  # (setting, wanted, now) for each part that differs
+    assignments: tuple[str, ...]  # the `param set` arguments that make it so: CODE=VALUE or CODE.FIELD=VALUE
+    power_cycle: bool  # takes effect only after a power cycle
 
 
 class SetupRequired(UsageError):
@@ -103,16 +111,18 @@ class SetupRequired(UsageError):
     The message states the facts; the CLI adds the commands that fix them.
     """
 
-    def __init__(self, feature: str, missing: Sequence[SetupGap], waiting: Sequence[SetupGap] = (),
-                 save: bool = False) -> None:
+    def __init__(
+        self, feature: str, missing: Sequence[SetupGap], waiting: Sequence[SetupGap] = (), save: bool = False
+    ) -> None:
         self.feature, self.missing, self.waiting, self.save = feature, tuple(missing), tuple(waiting), save
         super().__init__(f"{feature} needs drive setup first: {', '.join(self.settings())}")
 
     def settings(self) -> list[str]:
         """'SETTING = wanted (now x)' for each difference, and the settings waiting for a power cycle."""
         parts = [f"{s} = {want} (now {now})" for g in self.missing for s, want, now in g.differences]
-        return parts + [f"{a.replace('=', ' = ')} (set, in effect after a power cycle)"
-                        for g in self.waiting for a in g.assignments]
+        return parts + [
+            f"{a.replace('=', ' = ')} (set, in effect after a power cycle)" for g in self.waiting for a in g.assignments
+        ]
 
 
 class IdentityMismatch(UsageError):
@@ -121,10 +131,16 @@ class IdentityMismatch(UsageError):
     `answers` say what the drive answered; `better` is (profile id, model) of a shipped profile it matches, or None.
     """
 
-    def __init__(self, profile: str, model: str, unit: int, answers: Sequence[str],
-                 better: tuple[str, str] | None) -> None:
+    def __init__(
+        self, profile: str, model: str, unit: int, answers: Sequence[str], better: tuple[str, str] | None
+    ) -> None:
         self.profile, self.model, self.unit, self.answers, self.better = profile, model, unit, tuple(answers), better
-        fit = (f"it answers like profile {better[0]} ({better[1]}): use --profile {better[0]}" if better else
-               "no shipped profile fits it")
-        super().__init__(f"unit {unit} is not the drive profile {profile} ({model}) describes: "
-                         f"{'; '.join(answers)}; {fit}; nothing was written (--no-identity-check skips this check)")
+        fit = (
+            f"it answers like profile {better[0]} ({better[1]}): use --profile {better[0]}"
+            if better
+            else "no shipped profile fits it"
+        )
+        super().__init__(
+            f"unit {unit} is not the drive profile {profile} ({model}) describes: "
+            f"{'; '.join(answers)}; {fit}; nothing was written (--no-identity-check skips this check)"
+        )

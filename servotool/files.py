@@ -20,12 +20,14 @@ from servotool.errors import FileProblem
 
 APP = "servotool"
 
+
 def _yaml() -> tuple[Any, Any]:
     """PyYAML and its safe loader (the C one when PyYAML has it: several times faster), imported when a YAML file
     is read: a command that reads none (a profile from the compiled cache) starts without it."""
     import yaml
 
     return yaml, getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
 
 # Bounds checked before a document is built: the loaders recurse (a profile nested 100,000 deep crashed the C
 # loader), and no servotool file comes near them (profiles are ~150 kB and ~8 levels deep).
@@ -37,6 +39,7 @@ STALE_TMP_S = 3600.0
 
 
 # ----- user folders ----------------------------------------------------------------------------------------------
+
 
 def config_file() -> Path:
     """The user's config file (SERVOTOOL_CONFIG, else config.yaml in the user config folder)."""
@@ -68,6 +71,7 @@ def cache_dir() -> Path:
 
 # ----- writing ---------------------------------------------------------------------------------------------------
 
+
 def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable: bool = True) -> os.stat_result:
     """Write text (UTF-8) or bytes so that readers see the old file or the new one, never half of one.
 
@@ -82,21 +86,21 @@ def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable
     sweep_temp(path.parent, path.name)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp")
     try:
-        with (os.fdopen(fd, "wb") if isinstance(text, bytes) else os.fdopen(fd, "w", encoding="utf-8")) as fh:
+        with os.fdopen(fd, "wb") if isinstance(text, bytes) else os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
             fh.flush()
             if durable:
                 os.fsync(fh.fileno())
             st = os.fstat(fh.fileno())
         if replace and os.name == "posix":
-            try:      # a replaced file keeps its mode (a user's 0644 backup stays readable by others)
+            try:  # a replaced file keeps its mode (a user's 0644 backup stays readable by others)
                 os.chmod(tmp, path.stat().st_mode & 0o7777)
             except FileNotFoundError:
                 pass
         if replace:
             os.replace(tmp, path)
         else:
-            os.link(tmp, path)     # fails if the name exists, even one that appeared since the caller looked
+            os.link(tmp, path)  # fails if the name exists, even one that appeared since the caller looked
     finally:
         Path(tmp).unlink(missing_ok=True)
     return st
@@ -109,11 +113,11 @@ def process_alive(pid: int) -> bool | None:
     if os.name == "nt":
         return _windows_process_alive(pid)
     try:
-        os.kill(pid, 0)      # signal 0: only asks (on Windows os.kill would terminate it)
+        os.kill(pid, 0)  # signal 0: only asks (on Windows os.kill would terminate it)
     except ProcessLookupError:
         return False
     except OSError:
-        return True          # exists, owned by someone else
+        return True  # exists, owned by someone else
     return True
 
 
@@ -123,14 +127,14 @@ def _windows_process_alive(pid: int) -> bool | None:
         import ctypes
 
         kernel32 = ctypes.windll.kernel32  # type: ignore[attr-defined]
-        handle = kernel32.OpenProcess(0x1000, False, pid)      # PROCESS_QUERY_LIMITED_INFORMATION
+        handle = kernel32.OpenProcess(0x1000, False, pid)  # PROCESS_QUERY_LIMITED_INFORMATION
         if not handle:
-            return False if kernel32.GetLastError() == 87 else None     # ERROR_INVALID_PARAMETER: no such pid
+            return False if kernel32.GetLastError() == 87 else None  # ERROR_INVALID_PARAMETER: no such pid
         try:
             code = ctypes.c_ulong()
             if not kernel32.GetExitCodeProcess(handle, ctypes.byref(code)):
                 return None
-            return code.value == 259                                     # STILL_ACTIVE
+            return code.value == 259  # STILL_ACTIVE
         finally:
             kernel32.CloseHandle(handle)
     except (AttributeError, OSError):
@@ -141,13 +145,13 @@ def sweep_temp(folder: Path, name: str = "") -> int:
     """Delete the temporary files write_atomic left in folder (for the target `name`, or all) when the process
     that made them is gone (a kill -9 between write and rename). Returns how many were removed."""
     removed = 0
-    try:      # a plain listing: pathlib's glob compiles a pattern each time (3 folders at each command's start)
+    try:  # a plain listing: pathlib's glob compiles a pattern each time (3 folders at each command's start)
         with os.scandir(folder) as listing:
             candidates = [folder / e.name for e in listing if e.name.startswith(f".{name}") and e.name.endswith(".tmp")]
     except OSError:
         return 0
     for tmp in candidates:
-        pid_text = tmp.name[:-len(".tmp")].rsplit(".", 2)[-2] if tmp.name.count(".") >= 3 else ""
+        pid_text = tmp.name[: -len(".tmp")].rsplit(".", 2)[-2] if tmp.name.count(".") >= 3 else ""
         alive = process_alive(int(pid_text)) if pid_text.isascii() and pid_text.isdigit() else None
         try:
             if alive is False or (alive is None and RealClock().wall() - tmp.stat().st_mtime > STALE_TMP_S):
@@ -159,6 +163,7 @@ def sweep_temp(folder: Path, name: str = "") -> int:
 
 
 # ----- reading ---------------------------------------------------------------------------------------------------
+
 
 def read_text(path: Path) -> str:
     """A text file's content; FileProblem when it cannot be read or is not UTF-8."""
@@ -176,9 +181,8 @@ def read_text(path: Path) -> str:
 
 def _yaml_problem(path: Path, exc: Any) -> FileProblem:
     mark = getattr(exc, "problem_mark", None)
-    problem = " ".join(str(getattr(exc, "problem", None) or exc).split())     # one line, whatever the file held
-    return FileProblem(path, f"invalid YAML: {problem}",
-                       line=mark.line + 1 if mark else None)
+    problem = " ".join(str(getattr(exc, "problem", None) or exc).split())  # one line, whatever the file held
+    return FileProblem(path, f"invalid YAML: {problem}", line=mark.line + 1 if mark else None)
 
 
 def check_yaml_bounds(text: str, path: Path) -> None:
@@ -193,13 +197,19 @@ def check_yaml_bounds(text: str, path: Path) -> None:
             if isinstance(event, yaml.CollectionStartEvent):
                 depth += 1
                 if depth > MAX_YAML_DEPTH:
-                    raise FileProblem(path, f"nested more than {MAX_YAML_DEPTH} levels deep",
-                                      line=event.start_mark.line + 1 if event.start_mark else None)
+                    raise FileProblem(
+                        path,
+                        f"nested more than {MAX_YAML_DEPTH} levels deep",
+                        line=event.start_mark.line + 1 if event.start_mark else None,
+                    )
             elif isinstance(event, yaml.CollectionEndEvent):
                 depth -= 1
             elif isinstance(event, yaml.AliasEvent):
-                raise FileProblem(path, "YAML aliases (*name) are not accepted",
-                                  line=event.start_mark.line + 1 if event.start_mark else None)
+                raise FileProblem(
+                    path,
+                    "YAML aliases (*name) are not accepted",
+                    line=event.start_mark.line + 1 if event.start_mark else None,
+                )
     except yaml.YAMLError as exc:
         raise _yaml_problem(path, exc) from None
 
@@ -230,6 +240,7 @@ def load_yaml(path: Path) -> Any:
 
 # ----- locking ---------------------------------------------------------------------------------------------------
 
+
 class FileLock:
     """An exclusive lock between processes, on a lock file kept open for the holder's lifetime (opening it for
     each use costs a third of the simulator's request rate). Not reentrant. filelock's descriptor lock makes it
@@ -245,7 +256,7 @@ class FileLock:
         from filelock import lock_descriptor, unlock_descriptor
 
         fd = self._open()
-        lock_descriptor(fd, poll_interval=poll_interval)     # holders keep it for milliseconds: poll often
+        lock_descriptor(fd, poll_interval=poll_interval)  # holders keep it for milliseconds: poll often
         try:
             yield
         finally:

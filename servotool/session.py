@@ -17,13 +17,19 @@ _ADVISED: set[str] = set()
 
 def sim_notice(resolved: Resolved, units: list[int]) -> str:
     ids = ",".join(str(u) for u in units)
-    return (f"servotool: SIMULATED drive ({resolved.profile.model} profile '{resolved.profile.id}', unit {ids}); "
-            f"no real hardware is involved")
+    return (
+        f"servotool: SIMULATED drive ({resolved.profile.model} profile '{resolved.profile.id}', unit {ids}); "
+        f"no real hardware is involved"
+    )
 
 
 @contextmanager
-def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace | None = None,
-                notice: Callable[[str], None] | None = None) -> Iterator[list[Drive]]:
+def open_drives(
+    resolved: Resolved,
+    units: list[int] | None = None,
+    trace: Trace | None = None,
+    notice: Callable[[str], None] | None = None,
+) -> Iterator[list[Drive]]:
     """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit."""
     from servotool.files import sim_state_dir
     from servotool.ops.journal import recover_at_start
@@ -41,7 +47,7 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
         settings = replace(settings, port=sim.port)
         (notice or _stderr)(sim_notice(resolved, units))
     elif (advice := latency_advice(settings.port)) and settings.port not in _ADVISED:
-        _ADVISED.add(settings.port)             # once a run, however many times the port opens
+        _ADVISED.add(settings.port)  # once a run, however many times the port opens
         (notice or _stderr)(f"servotool: warning: {advice}")
     try:
         link = ModbusLink(settings, trace=trace)
@@ -58,7 +64,7 @@ def open_drives(resolved: Resolved, units: list[int] | None = None, trace: Trace
 
             if text := warning_text(confirm(drives)):
                 (notice or _stderr)(f"servotool: warning: {text}")
-        for d in drives:      # what a killed servotool process left on these drives is put right first
+        for d in drives:  # what a killed servotool process left on these drives is put right first
             recover_at_start(d, notice or _stderr, (sim_state_dir(),) if sim else ())
         yield drives
     finally:

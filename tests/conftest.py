@@ -42,8 +42,15 @@ def cli(sim_dir):
 
     def run(*args: str, input: str | None = None, env: dict[str, str] | None = None, timeout: float = 120) -> Result:
         full_env = {**os.environ, "COLUMNS": "200", **(env or {})}
-        proc = subprocess.run([sys.executable, "-m", "servotool", *args], capture_output=True, text=True,
-                              input=input, env=full_env, timeout=timeout, cwd=ROOT)
+        proc = subprocess.run(
+            [sys.executable, "-m", "servotool", *args],
+            capture_output=True,
+            text=True,
+            input=input,
+            env=full_env,
+            timeout=timeout,
+            cwd=ROOT,
+        )
         return Result(proc.returncode, proc.stdout, proc.stderr)
 
     return run

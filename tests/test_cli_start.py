@@ -23,8 +23,14 @@ run()
 
 
 def start(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True, cwd=ROOT,
-                          timeout=60, env={**os.environ, "COLUMNS": "200"})
+    return subprocess.run(
+        [sys.executable, "-c", PROBE, *args],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+        env={**os.environ, "COLUMNS": "200"},
+    )
 
 
 def test_help_works_without_termios_tty_and_fcntl():
@@ -35,6 +41,11 @@ def test_help_works_without_termios_tty_and_fcntl():
 
 
 def test_the_probe_really_hides_the_modules():
-    r = subprocess.run([sys.executable, "-c", PROBE.replace("import servotool.cli.jog", "import termios")],
-                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-c", PROBE.replace("import servotool.cli.jog", "import termios")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+    )
     assert r.returncode != 0 and "termios" in r.stderr

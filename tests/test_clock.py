@@ -16,16 +16,28 @@ from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink
 
 PACKAGE = Path(__file__).resolve().parent.parent / "servotool"
-TIME_READERS = {("time", "monotonic"), ("time", "sleep"), ("time", "time"), ("time", "perf_counter"),
-                ("time", "strftime"), ("time", "localtime"), ("datetime", "now"), ("datetime", "utcnow"),
-                ("datetime", "today"), ("date", "today")}
+TIME_READERS = {
+    ("time", "monotonic"),
+    ("time", "sleep"),
+    ("time", "time"),
+    ("time", "perf_counter"),
+    ("time", "strftime"),
+    ("time", "localtime"),
+    ("datetime", "now"),
+    ("datetime", "utcnow"),
+    ("datetime", "today"),
+    ("date", "today"),
+}
 
 
 def _reads_time(path: Path) -> list[str]:
     found = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
-                and (node.value.id, node.attr) in TIME_READERS:
+        if (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and (node.value.id, node.attr) in TIME_READERS
+        ):
             found.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: {node.value.id}.{node.attr}")
         if isinstance(node, ast.ImportFrom) and node.module == "time":
             found.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno}: from time import ...")
@@ -33,8 +45,12 @@ def _reads_time(path: Path) -> list[str]:
 
 
 def test_only_the_clock_module_reads_or_waits_on_time():
-    found = [hit for path in sorted(PACKAGE.rglob("*.py")) if path.name != "clock.py" or path.parent != PACKAGE
-             for hit in _reads_time(path)]
+    found = [
+        hit
+        for path in sorted(PACKAGE.rglob("*.py"))
+        if path.name != "clock.py" or path.parent != PACKAGE
+        for hit in _reads_time(path)
+    ]
     assert found == []
 
 
@@ -48,7 +64,7 @@ def _virtual(profile: str = "dsx7e") -> tuple[Drive, VirtualLink, VirtualClock]:
 def test_monitor_samples_on_the_clock_it_is_given():
     d, _link, clock = _virtual()
     mon = Monitor(d, default_entries(d.profile), clock)
-    samples = list(mon.run(10, 2.0))            # 2 s of virtual time: no real waiting
+    samples = list(mon.run(10, 2.0))  # 2 s of virtual time: no real waiting
     assert len(samples) == 20 and samples[0].t == 0.0
     assert abs(samples[-1].t - 1.9) < 0.01 and abs(mon.achieved_rate - 10) < 0.1
     assert clock.now() >= 1001.9
@@ -74,4 +90,4 @@ def test_doctor_times_the_link_on_the_clock_it_is_given():
         health = check(PortSettings(sim.port, timeout=1.0, retries=1), 1, profile, 5, clock=VirtualClock(7.0))
     finally:
         sim.close()
-    assert len(health.rtts) == 5 and health.rtts == [0.0] * 5 and health.seconds == 0.0   # virtual time stood
+    assert len(health.rtts) == 5 and health.rtts == [0.0] * 5 and health.seconds == 0.0  # virtual time stood

@@ -32,8 +32,11 @@ def test_folders_follow_xdg_on_linux_and_the_servotool_variables_win(tmp_path, m
     monkeypatch.setenv("SERVOTOOL_CONFIG", str(tmp_path / "c.yaml"))
     monkeypatch.setenv("SERVOTOOL_SIM_DIR", str(tmp_path / "s"))
     monkeypatch.setenv("SERVOTOOL_BACKUP_DIR", str(tmp_path / "b"))
-    assert (files.config_file(), files.sim_state_dir(), files.backup_dir()) == \
-        (tmp_path / "c.yaml", tmp_path / "s", tmp_path / "b")
+    assert (files.config_file(), files.sim_state_dir(), files.backup_dir()) == (
+        tmp_path / "c.yaml",
+        tmp_path / "s",
+        tmp_path / "b",
+    )
 
 
 def test_an_atomic_write_replaces_only_when_allowed_and_leaves_no_temporary_file(tmp_path):
@@ -47,7 +50,7 @@ def test_an_atomic_write_replaces_only_when_allowed_and_leaves_no_temporary_file
     assert path.read_text() == "three\n"
     assert [p.name for p in path.parent.iterdir()] == ["file.txt"]
     if os.name == "posix":
-        assert path.stat().st_mode & 0o777 == 0o600          # private, as mkstemp makes it
+        assert path.stat().st_mode & 0o777 == 0o600  # private, as mkstemp makes it
 
 
 BROKEN = "a: [1, 2\nb: 3\n"
@@ -58,8 +61,11 @@ def _messages(tmp_path: Path, monkeypatch) -> list[str]:
     path = tmp_path / "mini.yaml"
     path.write_text(BROKEN)
     said = [read_profile(path)[1][0]]
-    for read in (lambda: load_backup(path, load_profile("dsx7e")), lambda: load_plan(path),
-                 lambda: resolve(ConnectOptions(port="sim"))):
+    for read in (
+        lambda: load_backup(path, load_profile("dsx7e")),
+        lambda: load_plan(path),
+        lambda: resolve(ConnectOptions(port="sim")),
+    ):
         monkeypatch.setenv("SERVOTOOL_CONFIG", str(path))
         with pytest.raises(UsageError) as exc:
             read()
@@ -87,9 +93,18 @@ def test_every_file_kind_reports_bytes_that_are_not_utf8_the_same_way(tmp_path, 
 def test_a_lock_held_by_another_process_is_waited_for(tmp_path):
     lock = tmp_path / "state" / "drive.lock"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\nfrom pathlib import Path\nfrom servotool.files import FileLock\n"
-         "with FileLock(Path(sys.argv[1])).held():\n    print('held', flush=True)\n    time.sleep(0.5)\n",
-         str(lock)], stdout=subprocess.PIPE, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\nfrom pathlib import Path\nfrom servotool.files import FileLock\n"
+            "with FileLock(Path(sys.argv[1])).held():\n    print('held', flush=True)\n    time.sleep(0.5)\n",
+            str(lock),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     try:
         assert holder.stdout is not None and holder.stdout.readline() == "held\n"
         start = time.monotonic()
@@ -100,4 +115,4 @@ def test_a_lock_held_by_another_process_is_waited_for(tmp_path):
         holder.wait(5)
     start = time.monotonic()
     with files.FileLock(lock).held():
-        assert time.monotonic() - start < 0.2                 # free again once the holder has gone
+        assert time.monotonic() - start < 0.2  # free again once the holder has gone

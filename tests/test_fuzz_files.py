@@ -23,9 +23,33 @@ from servotool.ops import backup
 
 ROOT = Path(__file__).resolve().parent.parent
 MUTANTS = 200
-VALUES = ["[1, 2]", "{a: 1}", "true", "null", "''", "-1", "1e309", "-1e309", ".nan", ".inf", "-.inf", "1e-300",
-          "99999999999999999999999999", "!!binary aGVsbG8=", "!!timestamp 2001-12-14", "!!python/object:os.system x",
-          "!!set {a, b}", "0x10", "٣", "５", "&a [*a]", "!!float 1", "3.7", "\"\\x00\"", "*nothing"]
+VALUES = [
+    "[1, 2]",
+    "{a: 1}",
+    "true",
+    "null",
+    "''",
+    "-1",
+    "1e309",
+    "-1e309",
+    ".nan",
+    ".inf",
+    "-.inf",
+    "1e-300",
+    "99999999999999999999999999",
+    "!!binary aGVsbG8=",
+    "!!timestamp 2001-12-14",
+    "!!python/object:os.system x",
+    "!!set {a, b}",
+    "0x10",
+    "٣",
+    "５",
+    "&a [*a]",
+    "!!float 1",
+    "3.7",
+    '"\\x00"',
+    "*nothing",
+]
 
 PLAN = """\
 port: sim
@@ -59,28 +83,31 @@ def mutate(text: str, rng: random.Random) -> bytes:
     """One mutant: byte flips, a truncation, a wrong-typed value, deep nesting, a tag, or bytes not UTF-8."""
     data = text.encode()
     kind = rng.randrange(7)
-    if kind == 0:                                         # byte flips
+    if kind == 0:  # byte flips
         b = bytearray(data)
         for _ in range(rng.randint(1, 4)):
             b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
         return bytes(b)
-    if kind == 1:                                         # truncation
+    if kind == 1:  # truncation
         return data[: rng.randrange(len(data))]
     lines = text.splitlines(keepends=True)
     i = rng.randrange(len(lines))
     key, sep, _ = lines[i].partition(": ")
-    if kind == 2 and sep:                                 # a wrong type, NaN/inf, a huge number, a tag
+    if kind == 2 and sep:  # a wrong type, NaN/inf, a huge number, a tag
         lines[i] = f"{key}: {rng.choice(VALUES)}\n"
-    elif kind == 3:                                       # deep nesting, flow or block
+    elif kind == 3:  # deep nesting, flow or block
         depth = rng.choice([40, 1000, 100_000])
-        deep = "[" * depth + "]" * depth if rng.random() < 0.5 else \
-            "".join(f"{' ' * d}k:\n" for d in range(min(depth, 3000))) + " " * min(depth, 3000) + "x\n"
-        lines[i] = (f"{key}: {deep}\n" if sep and deep.startswith("[") else deep)
-    elif kind == 4:                                       # not UTF-8
-        return data[: len(data) // 2] + bytes([rng.choice([0xFF, 0xFE, 0xC0, 0x80])]) + data[len(data) // 2:]
-    elif kind == 5 and sep:                               # unknown key beside a known one
+        deep = (
+            "[" * depth + "]" * depth
+            if rng.random() < 0.5
+            else "".join(f"{' ' * d}k:\n" for d in range(min(depth, 3000))) + " " * min(depth, 3000) + "x\n"
+        )
+        lines[i] = f"{key}: {deep}\n" if sep and deep.startswith("[") else deep
+    elif kind == 4:  # not UTF-8
+        return data[: len(data) // 2] + bytes([rng.choice([0xFF, 0xFE, 0xC0, 0x80])]) + data[len(data) // 2 :]
+    elif kind == 5 and sep:  # unknown key beside a known one
         lines.insert(i, f"{key}_x{rng.randrange(99)}: 1\n")
-    else:                                                 # a whole line duplicated or dropped
+    else:  # a whole line duplicated or dropped
         if rng.random() < 0.5:
             lines.insert(i, lines[i])
         else:
@@ -132,7 +159,7 @@ def test_mutated_files_are_accepted_or_refused_in_one_line(kind, tmp_path, monke
             assert "internal error" not in msg, (n, msg)
         except Exception as exc:
             pytest.fail(f"{kind} mutant {n} ({path.read_bytes()[:200]!r}...): {type(exc).__name__}: {exc}")
-    assert refused > MUTANTS // 3          # the mutations do break files (else the test proves nothing)
+    assert refused > MUTANTS // 3  # the mutations do break files (else the test proves nothing)
 
 
 def test_bad_files_through_the_command_line_are_one_line_and_exit_2(tmp_path):
@@ -143,13 +170,26 @@ def test_bad_files_through_the_command_line_are_one_line_and_exit_2(tmp_path):
     plan.write_text(f"port: sim\nsteps:\n  - set: {deep}\n")
     config = tmp_path / "config.yaml"
     config.write_text("port: sim\nretries: -.inf\n")
-    env = {**os.environ, "SERVOTOOL_SIM_DIR": str(tmp_path / "sim"), "SERVOTOOL_BACKUP_DIR": str(tmp_path / "b"),
-           "SERVOTOOL_CONFIG": str(tmp_path / "none.yaml")}
-    for args, extra in ((["profiles", "check", str(bad)], {}), (["run", str(plan), "--dry-run"], {}),
-                        (["--port", "sim", "param", "restore", str(plan), "--dry-run"], {}),
-                        (["--port", "sim", "param", "get", "Pn100"], {"SERVOTOOL_CONFIG": str(config)})):
-        r = subprocess.run([sys.executable, "-m", "servotool", *args], capture_output=True, text=True, cwd=ROOT,
-                           env={**env, **extra}, timeout=60)
+    env = {
+        **os.environ,
+        "SERVOTOOL_SIM_DIR": str(tmp_path / "sim"),
+        "SERVOTOOL_BACKUP_DIR": str(tmp_path / "b"),
+        "SERVOTOOL_CONFIG": str(tmp_path / "none.yaml"),
+    }
+    for args, extra in (
+        (["profiles", "check", str(bad)], {}),
+        (["run", str(plan), "--dry-run"], {}),
+        (["--port", "sim", "param", "restore", str(plan), "--dry-run"], {}),
+        (["--port", "sim", "param", "get", "Pn100"], {"SERVOTOOL_CONFIG": str(config)}),
+    ):
+        r = subprocess.run(
+            [sys.executable, "-m", "servotool", *args],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            env={**env, **extra},
+            timeout=60,
+        )
         lines = [x for x in r.stderr.splitlines() if x.strip() and "SIMULATED" not in x]
         assert r.returncode in (1, 2) and len(lines) <= 2, (args, r.returncode, r.stderr[-2000:])
         assert "Traceback" not in r.stderr and "internal error" not in r.stderr, (args, r.stderr[-2000:])
@@ -158,8 +198,9 @@ def test_bad_files_through_the_command_line_are_one_line_and_exit_2(tmp_path):
 @pytest.mark.parametrize("value", ["٣", "５", "1_0", "3.7", "-.inf", ".nan", "99"])
 def test_config_numbers_are_plain_finite_whole_and_bounded(value, tmp_path, monkeypatch):
     config = tmp_path / "config.yaml"
-    config.write_text(f"port: sim\nretries: {value!r}\n" if not value.startswith((".", "-.")) else
-                      f"port: sim\nretries: {value}\n")
+    config.write_text(
+        f"port: sim\nretries: {value!r}\n" if not value.startswith((".", "-.")) else f"port: sim\nretries: {value}\n"
+    )
     monkeypatch.setenv("SERVOTOOL_CONFIG", str(config))
     with pytest.raises(ServoError, match="retries must be"):
         resolve(ConnectOptions())

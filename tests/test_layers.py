@@ -19,12 +19,12 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("servotool", "servotool.errors", "servotool.clock", "servotool.files", "servotool.words"),
     ("servotool.model",),
     ("servotool.link",),
-    ("servotool.config",),      # option layering: pure data over the model and port parsing (plans use it too)
+    ("servotool.config",),  # option layering: pure data over the model and port parsing (plans use it too)
     ("servotool.drive",),
     ("servotool.ops",),
     ("servotool.motion",),
     ("servotool.tuning",),
-    ("servotool.report",),      # pictures of measurements and tune results (plan steps write tune reports)
+    ("servotool.report",),  # pictures of measurements and tune results (plan steps write tune reports)
     ("servotool.commission",),
     ("servotool.session",),
     ("servotool.cli", "servotool.__main__"),
@@ -36,9 +36,19 @@ UPWARD_EXCEPTIONS: dict[tuple[str, str], str] = {}
 SIM = "servotool.sim"
 SIM_MAY_IMPORT = (*LAYERS[0], "servotool.model", "servotool.link.ports", SIM)
 SIM_IMPORTED_BY = ("servotool.session", "servotool.cli", SIM)
-CLIENT_SIDE = ("servotool.link.modbus", "servotool.drive", "servotool.ops", "servotool.motion", "servotool.tuning",
-               "servotool.report", "servotool.commission", "servotool.config",
-               "servotool.session", "servotool.cli", "pymodbus.client")
+CLIENT_SIDE = (
+    "servotool.link.modbus",
+    "servotool.drive",
+    "servotool.ops",
+    "servotool.motion",
+    "servotool.tuning",
+    "servotool.report",
+    "servotool.commission",
+    "servotool.config",
+    "servotool.session",
+    "servotool.cli",
+    "pymodbus.client",
+)
 
 
 def modules() -> dict[str, Path]:
@@ -87,7 +97,7 @@ def layer_of(module: str) -> int | None:
 
 def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
     """One import cycle as a path that returns to its start, or None."""
-    state: dict[str, int] = {}          # 1: on the current path, 2: done
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
     path: list[str] = []
 
     def visit(node: str) -> list[str] | None:
@@ -95,7 +105,7 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
         path.append(node)
         for nxt in sorted(graph[node]):
             if state.get(nxt) == 1:
-                return [*path[path.index(nxt):], nxt]
+                return [*path[path.index(nxt) :], nxt]
             if nxt not in state and (cycle := visit(nxt)):
                 return cycle
         path.pop()
@@ -138,8 +148,12 @@ def test_imports_go_only_down_the_layers():
         rank = layer_of(module)
         for target in targets:
             target_rank = layer_of(target)
-            if rank is not None and target_rank is not None and target_rank > rank \
-                    and (module, target) not in UPWARD_EXCEPTIONS:
+            if (
+                rank is not None
+                and target_rank is not None
+                and target_rank > rank
+                and (module, target) not in UPWARD_EXCEPTIONS
+            ):
                 upward.append(f"{module} imports {target}")
     assert not upward, upward
 

@@ -2,4 +2,4 @@
 
 from servotool.cli.classcache import install
 
-install()     # before the modules of a command define their dataclasses
+install()  # before the modules of a command define their dataclasses

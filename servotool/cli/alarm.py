@@ -17,9 +17,11 @@ def _show(ctx: typer.Context, as_json: bool) -> None:
     if as_json:
         emit_json(state.as_json())
     elif state.active:
-        out.print(f"ALARM {state.display}: {state.name}"
-                  + ("" if state.clearable is None else f" ({'clearable' if state.clearable else 'not clearable'})"),
-                  markup=False)
+        out.print(
+            f"ALARM {state.display}: {state.name}"
+            + ("" if state.clearable is None else f" ({'clearable' if state.clearable else 'not clearable'})"),
+            markup=False,
+        )
     else:
         out.print("no alarm", markup=False)
 
@@ -46,8 +48,7 @@ def clear(ctx: typer.Context, as_json: bool = JSON_OPT) -> None:
     if as_json:
         emit_json({"before": before.as_json(), "after": after.as_json()})
     else:
-        out.print(f"cleared {before.display} {before.name}" if before.active else "no alarm was active",
-                  markup=False)
+        out.print(f"cleared {before.display} {before.name}" if before.active else "no alarm was active", markup=False)
 
 
 @app.command("history")

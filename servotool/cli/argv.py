@@ -50,7 +50,7 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
     glob = _globals(root)
     try:
         leaf, start = _leaf(root, args, glob)
-    except Exception:       # a broken sub-command is reported when it runs, with the arguments as given
+    except Exception:  # a broken sub-command is reported when it runs, with the arguments as given
         return args
     if leaf is root:
         return args
@@ -70,7 +70,7 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
         name = token.split("=", 1)[0]
         if name in glob and name not in own:
             takes = glob[name] and "=" not in token
-            moved += args[i:i + 1 + takes]
+            moved += args[i : i + 1 + takes]
             i += 1 + takes
             continue
         if _short_flags(token, glob, own):
@@ -78,7 +78,7 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
         else:
             rest.append(token)
             if own.get(name) and "=" not in token and i + 1 < len(args):
-                rest.append(args[i + 1])       # an option's value is never taken for an option
+                rest.append(args[i + 1])  # an option's value is never taken for an option
                 i += 1
         i += 1
     return moved + rest

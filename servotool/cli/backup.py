@@ -17,7 +17,7 @@ from servotool.model.profile import Profile
 from servotool.ops.params import read_settings, select
 from servotool.words import count
 
-if TYPE_CHECKING:     # imported by the commands that use them: `param get` and `set` share this group
+if TYPE_CHECKING:  # imported by the commands that use them: `param get` and `set` share this group
     from servotool.drive import Drive
     from servotool.ops import backup, restore
 
@@ -34,11 +34,16 @@ def _where(text: str) -> None:
 @app.command("backup")
 def backup_cmd(
     ctx: typer.Context,
-    output: Path = typer.Option(None, "--output", "-o", help="Backup file (default: MODEL-unitN-DATE.yaml here, "
-                                "or .csv)."),
+    output: Path = typer.Option(
+        None, "--output", "-o", help="Backup file (default: MODEL-unitN-DATE.yaml here, or .csv)."
+    ),
     force: bool = typer.Option(False, "--force", help="Replace an existing file."),
-    fmt: str = typer.Option(None, "--format", help="yaml (checksummed; the default) or csv (for a spreadsheet; "
-                            "restore reads it too). Default: from the file name's suffix."),
+    fmt: str = typer.Option(
+        None,
+        "--format",
+        help="yaml (checksummed; the default) or csv (for a spreadsheet; "
+        "restore reads it too). Default: from the file name's suffix.",
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
@@ -47,7 +52,7 @@ def backup_cmd(
     kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
     if kind not in ("yaml", "yml", "csv"):
         raise UsageError(f"--format must be yaml or csv, not '{fmt or kind}'")
-    backup.check_output(output or Path(f"new.{kind}"), force=force)   # before reading the drive (24 s at 1200 Bd)
+    backup.check_output(output or Path(f"new.{kind}"), force=force)  # before reading the drive (24 s at 1200 Bd)
     with drive(ctx) as d:
         entries = select(d.profile)
         with progress("reading parameters", len(entries), enabled=not as_json) as advance:
@@ -56,8 +61,16 @@ def backup_cmd(
         path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
         backup.save(b, d.profile, path, force=force, fmt=suffix)
     if as_json:
-        emit_json({"file": str(path), "format": "csv" if kind == "csv" else "yaml", "entries": len(b.values),
-                   "checksum": b.checksum(), "identity": b.identity, "missing": b.missing})
+        emit_json(
+            {
+                "file": str(path),
+                "format": "csv" if kind == "csv" else "yaml",
+                "entries": len(b.values),
+                "checksum": b.checksum(),
+                "identity": b.identity,
+                "missing": b.missing,
+            }
+        )
     else:
         lacking = f" ({len(b.missing)} not on this drive, marked in the file)" if b.missing else ""
         out.print(f"{count(len(b.values), 'parameter')} saved to {path}{lacking}", markup=False)
@@ -66,11 +79,15 @@ def backup_cmd(
 @app.command("diff")
 def diff_cmd(
     ctx: typer.Context,
-    file: Path = typer.Argument(None, help="Backup file (compared with the drive, or with FILE2); none with --factory: "
-                                "the drive against its factory defaults."),
+    file: Path = typer.Argument(
+        None,
+        help="Backup file (compared with the drive, or with FILE2); none with --factory: "
+        "the drive against its factory defaults.",
+    ),
     file2: Path = typer.Argument(None, help="Second backup file: compare the two files, no drive needed."),
-    from_default: bool = typer.Option(False, "--factory", "--changed-from-default", help="Compare with the factory "
-                                      "defaults (the drive's, or FILE's)."),
+    from_default: bool = typer.Option(
+        False, "--factory", "--changed-from-default", help="Compare with the factory defaults (the drive's, or FILE's)."
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Differences between the drive and a file, two files, a file or the drive and the factory defaults.
@@ -89,8 +106,9 @@ def diff_cmd(
             profile = d.profile
             current = _read_all(d, as_json)
             missing = list(d.missing)
-        _show_diff(backup.diff(profile, current, backup.defaults(profile)), ("drive", "factory default"), missing,
-                   as_json)
+        _show_diff(
+            backup.diff(profile, current, backup.defaults(profile)), ("drive", "factory default"), missing, as_json
+        )
         return
 
     def load(path: Path, profile: Profile) -> backup.Backup:
@@ -99,7 +117,7 @@ def diff_cmd(
             warn(w)
         return b
 
-    missing: list[str] = []           # entries the drive lacks (a drive diff only)
+    missing: list[str] = []  # entries the drive lacks (a drive diff only)
     if file2 is not None or from_default:
         name = opts.profile or backup.profile_of(file)
         if name is None:
@@ -136,8 +154,14 @@ def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing:
     t = table("Code", "Name", labels[0], labels[1], "Unit", "Needs")
     for x in diffs:
         e = x.entry
-        t.add_row(e.code, e.name, "" if x.a is None else format_value(e, x.a),
-                  "" if x.b is None else format_value(e, x.b), e.unit, MARK.get(e.effect, ""))
+        t.add_row(
+            e.code,
+            e.name,
+            "" if x.a is None else format_value(e, x.a),
+            "" if x.b is None else format_value(e, x.b),
+            e.unit,
+            MARK.get(e.effect, ""),
+        )
     out.print(t)
 
 
@@ -156,7 +180,7 @@ def restore_cmd(
     from servotool.ops import backup, restore
 
     profile = resolve(state(ctx).options).profile
-    b = backup.load(file, profile, force=force)       # every file problem is refused before connecting
+    b = backup.load(file, profile, force=force)  # every file problem is refused before connecting
     for w in b.warnings:
         warn(w)
     with drive(ctx) as d:
@@ -168,25 +192,41 @@ def restore_cmd(
             _show_plan(plan)
         if dry_run or not plan.changes:
             if as_json:
-                emit_json({"dry_run": dry_run, "changes": _changes_json(plan), "written": [],
-                           "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
-                           "missing": [e.code for e in plan.missing], "refused": []})
+                emit_json(
+                    {
+                        "dry_run": dry_run,
+                        "changes": _changes_json(plan),
+                        "written": [],
+                        "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
+                        "missing": [e.code for e in plan.missing],
+                        "refused": [],
+                    }
+                )
             elif not plan.changes:
                 out.print("nothing to restore: the drive already matches", markup=False)
             return
         if not confirm(f"Write {count(len(plan.changes), 'parameter')}?", yes):
             raise ServoError("restore cancelled: nothing was written")
         # The automatic backup reads every entry before the first write: at a slow baud rate that is most of it.
-        with progress("automatic backup, then writing", len(entries) + len(plan.changes),
-                      enabled=not as_json) as advance:
-            report = restore.restore(d, b, plan, progress=lambda _entry: advance(1), notice=_where,
-                                     backup_progress=advance)
+        with progress(
+            "automatic backup, then writing", len(entries) + len(plan.changes), enabled=not as_json
+        ) as advance:
+            report = restore.restore(
+                d, b, plan, progress=lambda _entry: advance(1), notice=_where, backup_progress=advance
+            )
     if as_json:
-        emit_json({"dry_run": False, "changes": _changes_json(plan), "written": [e.code for e in report.written],
-                   "auto_backup": str(report.auto_backup), "persisted": report.persisted,
-                   "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
-                   "missing": [e.code for e in plan.missing],
-                   "refused": [{"code": e.code, "why": why} for e, why in report.refused]})
+        emit_json(
+            {
+                "dry_run": False,
+                "changes": _changes_json(plan),
+                "written": [e.code for e in report.written],
+                "auto_backup": str(report.auto_backup),
+                "persisted": report.persisted,
+                "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
+                "missing": [e.code for e in plan.missing],
+                "refused": [{"code": e.code, "why": why} for e, why in report.refused],
+            }
+        )
         return
     for e, why in report.refused:
         warn(f"{e.code} ({e.name}) not restored: the drive refuses writes there ({why})")
@@ -199,14 +239,17 @@ def restore_cmd(
 
 
 def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
-    return [{"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit,
-             "effect": e.effect} for e, old, new in plan.changes]
+    return [
+        {"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit, "effect": e.effect}
+        for e, old, new in plan.changes
+    ]
 
 
 def _show_plan(plan: restore.RestoreChanges) -> None:
     if plan.changes:
-        t = table("Code", "Name", "Drive", "Backup", "Unit", "Needs",
-                  title=f"{count(len(plan.changes), 'change')}, in order")
+        t = table(
+            "Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{count(len(plan.changes), 'change')}, in order"
+        )
         for e, old, new in plan.changes:
             t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
         out.print(t)
@@ -233,8 +276,11 @@ def reset_cmd(
         with progress("checking the defaults", count_pn, enabled=not as_json) as advance:
             left = restore.not_at_default(d, progress=advance)
         before = backup.load(auto, d.profile).values
-    cycle = [e.code for e in d.profile.of_class("Pn")
-             if e.effect == "power_cycle" and before.get(e.code, e.default) != e.default]
+    cycle = [
+        e.code
+        for e in d.profile.of_class("Pn")
+        if e.effect == "power_cycle" and before.get(e.code, e.default) != e.default
+    ]
     if as_json:
         emit_json({"auto_backup": str(auto), "not_at_default": [e.code for e, _ in left], "power_cycle": cycle})
         return

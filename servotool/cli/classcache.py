@@ -34,16 +34,16 @@ class ClassCache:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self._stored: dict[str, bytes] = _read(path)        # module -> its {text: code}, marshalled
+        self._stored: dict[str, bytes] = _read(path)  # module -> its {text: code}, marshalled
         self._modules: dict[str, dict[str, CodeType]] = {}  # the groups unpacked (or begun) by this process
         self.used: dict[str, CodeType] = {}
-        self.compiled = 0           # texts this process had to compile (none when the cache knew them all)
-        self.saving = False         # saved at exit (a servotool command)
+        self.compiled = 0  # texts this process had to compile (none when the cache knew them all)
+        self.saving = False  # saved at exit (a servotool command)
 
     def exec(self, source: Any, globals: dict[str, Any] | None = None, locals: Any = None, **options: Any) -> None:
         """`exec` as dataclasses calls it (any later keyword, such as closure, passed on), with a text's code from
         the cache."""
-        if globals is None:         # exec's own default: the caller's globals (and locals)
+        if globals is None:  # exec's own default: the caller's globals (and locals)
             frame = sys._getframe(1)
             globals, locals = frame.f_globals, frame.f_locals if locals is None else locals
         if isinstance(source, str):
@@ -61,7 +61,7 @@ class ClassCache:
         if (codes := self._modules.get(name)) is None:
             try:
                 codes = marshal.loads(self._stored[name]) if name in self._stored else {}
-            except Exception:       # damaged (marshal raises EOFError, ValueError, TypeError)
+            except Exception:  # damaged (marshal raises EOFError, ValueError, TypeError)
                 codes = {}
             self._modules[name] = codes = codes if isinstance(codes, dict) else {}
         return codes
@@ -80,16 +80,16 @@ class ClassCache:
             if sum(len(b) for b in stored.values() if isinstance(b, bytes)) > MAX_BYTES:
                 stored = mine
             write_atomic(self.path, MAGIC_NUMBER + marshal.dumps(stored), durable=False)
-        except (OSError, ValueError):       # ValueError: marshal met something it cannot write
+        except (OSError, ValueError):  # ValueError: marshal met something it cannot write
             pass
 
 
 def _read(path: Path) -> dict[str, bytes]:
     try:
         data = path.read_bytes()
-        if data.startswith(MAGIC_NUMBER) and isinstance(stored := marshal.loads(data[len(MAGIC_NUMBER):]), dict):
+        if data.startswith(MAGIC_NUMBER) and isinstance(stored := marshal.loads(data[len(MAGIC_NUMBER) :]), dict):
             return stored
-    except Exception:       # missing, unreadable, damaged (marshal raises EOFError, ValueError, TypeError)
+    except Exception:  # missing, unreadable, damaged (marshal raises EOFError, ValueError, TypeError)
         pass
     return {}
 
@@ -99,7 +99,7 @@ def install() -> ClassCache:
     current = getattr(dataclasses, "exec", None)
     if isinstance(getattr(current, "__self__", None), ClassCache):
         return current.__self__
-    optimized = f"-O{sys.flags.optimize}" if sys.flags.optimize else ""      # as .pyc files: -O keeps its own
+    optimized = f"-O{sys.flags.optimize}" if sys.flags.optimize else ""  # as .pyc files: -O keeps its own
     cache = ClassCache(cache_dir() / f"dataclasses-{sys.implementation.cache_tag}{optimized}.marshal")
     dataclasses.exec = cache.exec  # type: ignore[attr-defined]   # shadows the builtin for that module only
     return cache

@@ -40,7 +40,7 @@ def notice_for(ctx: typer.Context) -> Callable[[str], None]:
     given = state(ctx).options
 
     def notice(line: str) -> None:
-        if line.startswith("servotool: SIMULATED"):       # session.sim_notice: the banner
+        if line.startswith("servotool: SIMULATED"):  # session.sim_notice: the banner
             info(line)
             return
         from servotool.cli.messages import plain, with_options
@@ -54,8 +54,9 @@ def notice_for(ctx: typer.Context) -> Callable[[str], None]:
 def drive(ctx: typer.Context) -> Iterator[Drive]:
     """The one drive the global options point at; after a command that completed, names each entry the drive
     turned out to lack (once, however often it was asked for)."""
-    with open_drives(resolved(ctx), trace=trace_frame if Verbosity.level > 0 else None,
-                     notice=notice_for(ctx)) as drives:
+    with open_drives(
+        resolved(ctx), trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)
+    ) as drives:
         yield drives[0]
         for e in drives[0].missing.values():
             warn(f"{e.code} ({e.name}): not on this drive (exception 02 for its address); left out")
@@ -63,8 +64,9 @@ def drive(ctx: typer.Context) -> Iterator[Drive]:
 
 @contextmanager
 def drives(ctx: typer.Context, units: list[int]) -> Iterator[list[Drive]]:
-    with open_drives(resolved(ctx), units, trace=trace_frame if Verbosity.level > 0 else None,
-                     notice=notice_for(ctx)) as found:
+    with open_drives(
+        resolved(ctx), units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)
+    ) as found:
         yield found
 
 
@@ -74,7 +76,7 @@ def confirm(question: str, yes: bool) -> bool:
         return True
     if not sys.stdin.isatty():
         raise UsageError(f"'{question}' needs confirmation: run in a terminal or pass --yes")
-    return typer.confirm(question, default=False, err=True)   # stdout stays clean for --json
+    return typer.confirm(question, default=False, err=True)  # stdout stays clean for --json
 
 
 JSON_OPT = typer.Option(False, "--json", help="Machine-readable output with stable keys.")

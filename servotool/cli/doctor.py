@@ -42,21 +42,36 @@ def _lines(h: health.Health) -> list[str]:
     where = f"{h.port} ({h.line.describe()})" if h.line else f"{h.port} (RTU over TCP)"
     lines = [f"link: {where}, unit {h.unit}, {h.count} reads of {h.registers} register(s) at address {h.address}"]
     rtt = h.rtt_ms()
-    lines.append("round trip: no answer" if rtt is None else
-                 f"round trip: min {rtt['min']:.1f} ms, median {rtt['median']:.1f} ms, max {rtt['max']:.1f} ms"
-                 + (f" ({h.exceptions} exception answers)" if h.exceptions else ""))
-    lines.append("echo: " + {True: "detected (the adapter repeats what is sent; it is skipped)",
-                             False: "none", None: "not determined (no answer)"}[h.echo])
-    lines.append(f"errors: {h.failures} of {h.count} requests failed ({100 * h.failures / h.count:.1f} %); "
-                 f"retries: {h.retries} extra frames ({100 * h.retries / h.count:.1f} %)")
+    lines.append(
+        "round trip: no answer"
+        if rtt is None
+        else f"round trip: min {rtt['min']:.1f} ms, median {rtt['median']:.1f} ms, max {rtt['max']:.1f} ms"
+        + (f" ({h.exceptions} exception answers)" if h.exceptions else "")
+    )
+    lines.append(
+        "echo: "
+        + {
+            True: "detected (the adapter repeats what is sent; it is skipped)",
+            False: "none",
+            None: "not determined (no answer)",
+        }[h.echo]
+    )
+    lines.append(
+        f"errors: {h.failures} of {h.count} requests failed ({100 * h.failures / h.count:.1f} %); "
+        f"retries: {h.retries} extra frames ({100 * h.retries / h.count:.1f} %)"
+    )
     theory = h.theoretical_rate
-    lines.append(f"rate: {h.achieved_rate:.0f} requests/s" + (
-        f" of {theory:.0f}/s the line allows at {h.line.describe()} (wire time only)" if theory and h.line else ""))
+    lines.append(
+        f"rate: {h.achieved_rate:.0f} requests/s"
+        + (f" of {theory:.0f}/s the line allows at {h.line.describe()} (wire time only)" if theory and h.line else "")
+    )
     if h.latency is None:
         lines.append("adapter: no USB-serial latency timer found" + (" (RTU over TCP)" if h.line is None else ""))
     elif h.latency.ms > 1:
-        lines.append(f"adapter: latency timer {h.latency.ms} ms ({h.latency.path}): replies wait up to that long in "
-                     f"the adapter; lower it with 'echo 1 | sudo tee {h.latency.path}'")
+        lines.append(
+            f"adapter: latency timer {h.latency.ms} ms ({h.latency.path}): replies wait up to that long in "
+            f"the adapter; lower it with 'echo 1 | sudo tee {h.latency.path}'"
+        )
     else:
         lines.append(f"adapter: latency timer {h.latency.ms} ms ({h.latency.path}): fine")
     return lines

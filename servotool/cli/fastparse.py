@@ -35,8 +35,8 @@ def _convert(kind: type, value: Any) -> Any:
             return float(text)
         except ValueError:
             pass
-    else:           # str and Path
-        if text.startswith("--"):       # `-o --json`: the option's value was left out
+    else:  # str and Path
+        if text.startswith("--"):  # `-o --json`: the option's value was left out
             raise ValueError(f"{value!r} looks like an option, not a value: give the value right after the option")
         return kind(value)
     raise ValueError(f"{value!r} is not a valid {_KIND[kind]}.")
@@ -48,10 +48,14 @@ def _plain_kind(annotation: Any, info: Any) -> tuple[type, bool] | None:
         return None
     if getattr(info, "min", None) is not None or getattr(info, "max", None) is not None:
         return None
-    if any(getattr(info, flag, False) for flag in ("exists", "resolve_path", "allow_dash")) or \
-            getattr(info, "path_type", None) is not None or getattr(info, "file_okay", True) is not True or \
-            getattr(info, "dir_okay", True) is not True or getattr(info, "writable", False) or \
-            getattr(info, "readable", True) is not True:
+    if (
+        any(getattr(info, flag, False) for flag in ("exists", "resolve_path", "allow_dash"))
+        or getattr(info, "path_type", None) is not None
+        or getattr(info, "file_okay", True) is not True
+        or getattr(info, "dir_okay", True) is not True
+        or getattr(info, "writable", False)
+        or getattr(info, "readable", True) is not True
+    ):
         return None
     many = get_origin(annotation) is list
     kind = get_args(annotation)[0] if many else annotation
@@ -64,12 +68,13 @@ def install() -> bool:
         from typer import core
         from typer._click.exceptions import BadParameter
         from typer._coercion import RuntimeParam
+
         original = core._TyperParameter.get_runtime_param
     except (ImportError, AttributeError):
         return False
 
     @dataclass(frozen=True)
-    class PlainParam(RuntimeParam):     # type: ignore[misc,valid-type]
+    class PlainParam(RuntimeParam):  # type: ignore[misc,valid-type]
         kind: type = str
         many: bool = False
 
@@ -87,8 +92,9 @@ def install() -> bool:
             plain = None if desc.file_annotation is not None else _plain_kind(desc.annotation, desc.parameter_info)
             if plain is None:
                 return original(self)
-            self._runtime_param = PlainParam(parameter_info=desc.parameter_info, annotation=desc.annotation,
-                                             kind=plain[0], many=plain[1])
+            self._runtime_param = PlainParam(
+                parameter_info=desc.parameter_info, annotation=desc.annotation, kind=plain[0], many=plain[1]
+            )
         return self._runtime_param
 
     core._TyperParameter.get_runtime_param = get_runtime_param

@@ -21,8 +21,16 @@ class Column:
     """One column: the settings a rich Column takes, and its cells. (A plain class: a dataclass costs ~0.5 ms to
     create at start-up.)"""
 
-    def __init__(self, header: str, justify: str = "left", overflow: str = "fold", no_wrap: bool = False,
-                 width: int | None = None, max_width: int | None = None, cells: list[Any] | None = None) -> None:
+    def __init__(
+        self,
+        header: str,
+        justify: str = "left",
+        overflow: str = "fold",
+        no_wrap: bool = False,
+        width: int | None = None,
+        max_width: int | None = None,
+        cells: list[Any] | None = None,
+    ) -> None:
         self.header, self.justify, self.overflow, self.no_wrap = header, justify, overflow, no_wrap
         self.width, self.max_width = width, max_width
         self._cells: list[Any] = cells if cells is not None else []
@@ -43,8 +51,16 @@ class Grid:
     def row_count(self) -> int:
         return len(self.columns[0]._cells) if self.columns else 0
 
-    def add_column(self, header: str, *, justify: str = "left", overflow: str = "fold", no_wrap: bool = False,
-                   width: int | None = None, max_width: int | None = None) -> None:
+    def add_column(
+        self,
+        header: str,
+        *,
+        justify: str = "left",
+        overflow: str = "fold",
+        no_wrap: bool = False,
+        width: int | None = None,
+        max_width: int | None = None,
+    ) -> None:
         self.columns.append(Column(header, justify, overflow, no_wrap, width, max_width, [""] * self.row_count))
 
     def add_row(self, *cells: Any) -> None:
@@ -57,11 +73,21 @@ class Grid:
     def rich(self) -> Table:
         from rich.table import Table
 
-        t = Table(title=self.title, show_lines=self.show_lines, header_style=self.header_style,
-                  title_justify=self.title_justify)  # type: ignore[arg-type]
+        t = Table(
+            title=self.title,
+            show_lines=self.show_lines,
+            header_style=self.header_style,
+            title_justify=self.title_justify,
+        )  # type: ignore[arg-type]
         for c in self.columns:
-            t.add_column(c.header, justify=c.justify, overflow=c.overflow, no_wrap=c.no_wrap,  # type: ignore[arg-type]
-                         width=c.width, max_width=c.max_width)
+            t.add_column(
+                c.header,
+                justify=c.justify,
+                overflow=c.overflow,
+                no_wrap=c.no_wrap,  # type: ignore[arg-type]
+                width=c.width,
+                max_width=c.max_width,
+            )
         for row in zip(*(c._cells for c in self.columns), strict=True):
             t.add_row(*row)
         return t
@@ -79,8 +105,11 @@ class Grid:
             return None
         widths = [max(map(len, cells)) for cells in texts]
         for c, w in zip(self.columns, widths, strict=True):
-            if c.width is not None or (c.max_width is not None and c.max_width < w) or c.justify not in ("left",
-                                                                                                       "right"):
+            if (
+                c.width is not None
+                or (c.max_width is not None and c.max_width < w)
+                or c.justify not in ("left", "right")
+            ):
                 return None
         span = sum(widths) + 3 * len(widths) + 1
         if span > width or (self.title and (not _plain(self.title) or len(self.title) > span)):
@@ -90,8 +119,10 @@ class Grid:
             return box[0] + box[2].join(box[1] * (w + 2) for w in widths) + box[3]
 
         def row(box: str, cells: list[str]) -> str:
-            padded = (cell.rjust(w) if c.justify == "right" else cell.ljust(w)
-                      for cell, w, c in zip(cells, widths, self.columns, strict=True))
+            padded = (
+                cell.rjust(w) if c.justify == "right" else cell.ljust(w)
+                for cell, w, c in zip(cells, widths, self.columns, strict=True)
+            )
             return box[0] + box[2].join(f" {p} " for p in padded) + box[3]
 
         lines = [self.title.ljust(span)] if self.title else []

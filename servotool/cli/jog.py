@@ -70,8 +70,11 @@ def _traced(ctx: typer.Context, d: Drive, path: Path | None) -> Iterator[Sampler
     finally:
         if sampler.samples:
             rec = sampler.recording()
-            about = about_lines(resolved(ctx), f"trigger: none (the JOG's own motion, sampled between keep-alive "
-                                f"beats); {sampler.requests_per_sample} request(s) per sample")
+            about = about_lines(
+                resolved(ctx),
+                f"trigger: none (the JOG's own motion, sampled between keep-alive "
+                f"beats); {sampler.requests_per_sample} request(s) per sample",
+            )
             write_trace(path, [rec], sampler.entries, about, replace=True)
             info(f"trace: {rec.timing.describe()} written to {path}")
 
@@ -80,21 +83,44 @@ def jog(
     ctx: typer.Context,
     speed: float = typer.Option(..., "--speed", "-s", help="JOG speed in rpm; negative runs in reverse."),
     seconds: float = typer.Option(None, "--time", "-t", help="Run this long, then ramp down and stop."),
-    interactive: bool = typer.Option(False, "--interactive", "-i", help=f"Keyboard control, hold-to-run: the motor "
-                                     f"moves only while a direction key is held. {KEYS}."),
-    toggle: bool = typer.Option(False, "--toggle", help="With --interactive: a direction key starts the motion and "
-                                "space stops it (no need to hold the key)."),
+    interactive: bool = typer.Option(
+        False,
+        "--interactive",
+        "-i",
+        help=f"Keyboard control, hold-to-run: the motor moves only while a direction key is held. {KEYS}.",
+    ),
+    toggle: bool = typer.Option(
+        False,
+        "--toggle",
+        help="With --interactive: a direction key starts the motion and space stops it (no need to hold the key).",
+    ),
     max_travel: float = typer.Option(None, "--max-travel", help="Refuse a timed JOG longer than this (revolutions)."),
-    travel: float = typer.Option(None, "--travel", help="Soft travel limit: revolutions either way from where the "
-                                 "JOG starts, checked before and during motion (default: 'travel' in the config "
-                                 "file or SERVOTOOL_TRAVEL; none)."),
+    travel: float = typer.Option(
+        None,
+        "--travel",
+        help="Soft travel limit: revolutions either way from where the "
+        "JOG starts, checked before and during motion (default: 'travel' in the config "
+        "file or SERVOTOOL_TRAVEL; none).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print the plan and the result as JSON."),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving through unverified entries "
-                             "(real drives only; the simulator never asks)."),
-    no_dead_man: bool = typer.Option(False, "--no-dead-man", help="Move a drive that has no dead-man route (nothing "
-                                     "stops the motor if this program dies); keep an E-stop at hand."),
-    trace_file: Path = typer.Option(None, "--trace", help="Record speed, torque and position between the "
-                                    "keep-alive beats, on the same port, to this CSV ('servotool plot' draws it)."),
+    yes: bool = typer.Option(
+        False,
+        "--yes",
+        "-y",
+        help="Do not ask before moving through unverified entries (real drives only; the simulator never asks).",
+    ),
+    no_dead_man: bool = typer.Option(
+        False,
+        "--no-dead-man",
+        help="Move a drive that has no dead-man route (nothing "
+        "stops the motor if this program dies); keep an E-stop at hand.",
+    ),
+    trace_file: Path = typer.Option(
+        None,
+        "--trace",
+        help="Record speed, torque and position between the "
+        "keep-alive beats, on the same port, to this CSV ('servotool plot' draws it).",
+    ),
 ) -> None:
     """JOG the motor. Before moving it prints what stops the motor if this program stops, and the bound."""
     _check_options(seconds, interactive, toggle, trace_file)
@@ -105,8 +131,9 @@ def jog(
             jogger.idle = sampler.sample_for
         plan = jogger.plan(speed, seconds, max_travel, travel_limit(ctx, travel))
         confirm_motion(ctx, d, yes)
-        info(plan.describe() + ("" if not interactive else
-                                f"  [{'toggle' if toggle else 'hold a key to move'}: {KEYS}]"))
+        info(
+            plan.describe() + ("" if not interactive else f"  [{'toggle' if toggle else 'hold a key to move'}: {KEYS}]")
+        )
         if plan.dead_man is not None:
             info(sentence(plan.dead_man))
         show = _Speeds(seconds)
@@ -114,6 +141,7 @@ def jog(
             if interactive:
                 hold = None if toggle else HoldToRun(jogger.clock, jogger.keepalive_s)
                 with raw_keys() as key:
+
                     def command() -> int | None:
                         k = key()
                         if k == "quit":
@@ -122,6 +150,7 @@ def jog(
                         if hold is not None:
                             return hold.key(pressed)
                         return jogger.direction if pressed is None else pressed
+
                     jogger.run(plan, show, command)
             else:
                 jogger.run(plan, show)
@@ -135,15 +164,20 @@ def jog(
 
 
 def _result(plan: JogPlan, seconds: float | None, show: _Speeds, final: float | None, as_json: bool) -> None:
-    sign = plan.direction if seconds is not None else 1      # a timed reverse JOG peaks at a negative speed
+    sign = plan.direction if seconds is not None else 1  # a timed reverse JOG peaks at a negative speed
     if as_json:
-        emit_json({"speed_rpm": plan.speed_rpm * plan.direction, "time_s": seconds,
-                   "peak_speed_rpm": round(show.peak, 1) * sign,
-                   "median_speed_rpm": round(statistics.median(show.late), 1) * sign if show.late else None,
-                   "final_speed_rpm": final,
-                   "dead_man": plan.dead_man.as_json() if plan.dead_man is not None else None})
+        emit_json(
+            {
+                "speed_rpm": plan.speed_rpm * plan.direction,
+                "time_s": seconds,
+                "peak_speed_rpm": round(show.peak, 1) * sign,
+                "median_speed_rpm": round(statistics.median(show.late), 1) * sign if show.late else None,
+                "final_speed_rpm": final,
+                "dead_man": plan.dead_man.as_json() if plan.dead_man is not None else None,
+            }
+        )
     else:
-        notice(f"JOG done: peak {show.peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")   # a result
+        notice(f"JOG done: peak {show.peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")  # a result
 
 
 def _check_options(seconds: float | None, interactive: bool, toggle: bool, trace_file: Path | None) -> None:

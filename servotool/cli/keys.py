@@ -13,8 +13,17 @@ from contextlib import contextmanager
 
 # Key sequences -> the action names callers map to what they do.
 POSIX_KEYS = {"\x1b[C": "fwd", "\x1b[D": "rev", "d": "fwd", "a": "rev", " ": "stop", "q": "quit", "\x1b": "quit"}
-WINDOWS_KEYS = {"\xe0M": "fwd", "\xe0K": "rev", "\x00M": "fwd", "\x00K": "rev", "d": "fwd", "a": "rev", " ": "stop",
-                "q": "quit", "\x1b": "quit"}
+WINDOWS_KEYS = {
+    "\xe0M": "fwd",
+    "\xe0K": "rev",
+    "\x00M": "fwd",
+    "\x00K": "rev",
+    "d": "fwd",
+    "a": "rev",
+    " ": "stop",
+    "q": "quit",
+    "\x1b": "quit",
+}
 
 KeyReader = Callable[[], "str | None"]
 
@@ -53,7 +62,7 @@ def windows_key() -> str | None:
     data = ""
     while msvcrt.kbhit():  # type: ignore[attr-defined]   # a held key queues repeats: take them all
         data += msvcrt.getwch()  # type: ignore[attr-defined]
-        if data[-1] in ("\x00", "\xe0"):    # an arrow key arrives as a prefix and its scan code
+        if data[-1] in ("\x00", "\xe0"):  # an arrow key arrives as a prefix and its scan code
             data += msvcrt.getwch()  # type: ignore[attr-defined]
     return last_key(data, WINDOWS_KEYS)
 

@@ -40,7 +40,7 @@ def build(name: str, spec: Lazy) -> Any:
     called)."""
     objects = [_load(t) for t in spec.targets]
     if len(objects) == 1 and not isinstance(objects[0], typer.Typer):
-        single = typer.Typer(add_completion=False)     # completion is the root's: not on each command's help
+        single = typer.Typer(add_completion=False)  # completion is the root's: not on each command's help
         single.command(name)(objects[0])
         command = typer.main.get_command(single)
     else:
@@ -49,7 +49,7 @@ def build(name: str, spec: Lazy) -> Any:
     if spec.help is not None:
         command.help = spec.help
     if hasattr(command, "commands") and not command.invoke_without_command:
-        command.no_args_is_help = True      # a bare group name shows its help, once
+        command.no_args_is_help = True  # a bare group name shows its help, once
     return command
 
 
@@ -62,8 +62,12 @@ def _app_group(apps: list[typer.Typer]) -> Any:
             for sub_name, sub in typer.main.get_group(extra).commands.items():
                 group.add_command(sub, sub_name)
         return group
-    infos = {(i.name or typer.main.get_command_name(i.callback.__name__)): (i, a)
-             for a in apps for i in a.registered_commands if i.callback is not None}
+    infos = {
+        (i.name or typer.main.get_command_name(i.callback.__name__)): (i, a)
+        for a in apps
+        for i in a.registered_commands
+        if i.callback is not None
+    }
     shell = copy.copy(apps[0])
     shell.registered_commands = []
     shell.info = copy.copy(apps[0].info)
@@ -98,7 +102,8 @@ class _OnDemand(_Suggesting):
         if cmd_name not in self.commands and found is not None:
             info, app = found
             self.commands[cmd_name] = typer.main.get_command_from_info(
-                info, pretty_exceptions_short=app.pretty_exceptions_short, rich_markup_mode=app.rich_markup_mode)
+                info, pretty_exceptions_short=app.pretty_exceptions_short, rich_markup_mode=app.rich_markup_mode
+            )
         return super().get_command(ctx, cmd_name)
 
 
@@ -117,5 +122,3 @@ def lazy_group(commands: dict[str, Lazy]) -> type[TyperGroup]:
             return super().get_command(ctx, cmd_name)
 
     return LazyGroup
-
-

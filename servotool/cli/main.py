@@ -24,8 +24,11 @@ fastparse.install()
 
 # Each command's module is imported when that command runs (a typer app or a command function, "module:name").
 COMMANDS = {
-    "param": lazy("servotool.cli.param:app", "servotool.cli.backup:app",
-                  help="Read, set, list, back up and restore drive parameters."),
+    "param": lazy(
+        "servotool.cli.param:app",
+        "servotool.cli.backup:app",
+        help="Read, set, list, back up and restore drive parameters.",
+    ),
     "profiles": lazy("servotool.cli.profiles:app"),
     "sim": lazy("servotool.cli.sim:app"),
     "alarm": lazy("servotool.cli.alarm:app"),
@@ -41,9 +44,13 @@ COMMANDS = {
 }
 
 app = typer.Typer(
-    name="servotool", no_args_is_help=True, add_completion=True, pretty_exceptions_enable=False,
+    name="servotool",
+    no_args_is_help=True,
+    add_completion=True,
+    pretty_exceptions_enable=False,
     help="Commission and tune AC servo drives over Modbus RTU (real or simulated).",
-    context_settings={"help_option_names": ["-h", "--help"]}, cls=lazy_group(COMMANDS),
+    context_settings={"help_option_names": ["-h", "--help"]},
+    cls=lazy_group(COMMANDS),
 )
 
 
@@ -56,32 +63,60 @@ def _version(value: bool) -> None:
 @app.callback()
 def main(
     ctx: typer.Context,
-    port: str = typer.Option(None, "--port", "-p", help="Serial port (/dev/ttyUSB0, COM3), tcp://HOST:PORT "
-                             "(RTU over TCP) or 'sim'. Env: SERVOTOOL_PORT."),
+    port: str = typer.Option(
+        None,
+        "--port",
+        "-p",
+        help="Serial port (/dev/ttyUSB0, COM3), tcp://HOST:PORT (RTU over TCP) or 'sim'. Env: SERVOTOOL_PORT.",
+    ),
     baud: int = typer.Option(None, "--baud", "-b", help="Baud rate (default: the profile's). Env: SERVOTOOL_BAUD."),
     parity: str = typer.Option(None, "--parity", help="N, E or O (default: the profile's). Env: SERVOTOOL_PARITY."),
     stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's). Env: SERVOTOOL_STOPBITS."),
-    unit: int = typer.Option(None, "--unit", "-u", help="Modbus unit id 1..247 (default: the profile's). "
-                             "Env: SERVOTOOL_UNIT."),
+    unit: int = typer.Option(
+        None, "--unit", "-u", help="Modbus unit id 1..247 (default: the profile's). Env: SERVOTOOL_UNIT."
+    ),
     timeout: float = typer.Option(None, "--timeout", help="Response timeout in seconds. Env: SERVOTOOL_TIMEOUT."),
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
-    echo: str = typer.Option(None, "--echo", help="auto|on|off: the RS485 adapter echoes what it sends (default auto: "
-                             "found out on the first exchange). Env: SERVOTOOL_ECHO."),
-    turnaround_ms: float = typer.Option(None, "--turnaround-ms", help="Quiet time after a reply before the next "
-                                        "request, for slow drives (default 0). Env: SERVOTOOL_TURNAROUND_MS."),
-    silence_ms: float = typer.Option(None, "--silence-ms", help="Silence that ends a frame (default: 3.5 characters "
-                                     "at the baud rate). Env: SERVOTOOL_SILENCE_MS."),
+    echo: str = typer.Option(
+        None,
+        "--echo",
+        help="auto|on|off: the RS485 adapter echoes what it sends (default auto: "
+        "found out on the first exchange). Env: SERVOTOOL_ECHO.",
+    ),
+    turnaround_ms: float = typer.Option(
+        None,
+        "--turnaround-ms",
+        help="Quiet time after a reply before the next "
+        "request, for slow drives (default 0). Env: SERVOTOOL_TURNAROUND_MS.",
+    ),
+    silence_ms: float = typer.Option(
+        None,
+        "--silence-ms",
+        help="Silence that ends a frame (default: 3.5 characters at the baud rate). Env: SERVOTOOL_SILENCE_MS.",
+    ),
     profile: str = typer.Option(
-        None, "--profile", "-P", autocompletion=complete.profiles,
-        help="Drive profile id or YAML file (default for sim: "
-                                "dsx7e). Env: SERVOTOOL_PROFILE."),
-    no_identity_check: bool = typer.Option(None, "--no-identity-check", help="Skip the check, made before "
-                                           "any write, that the drive answering is the one the profile describes. "
-                                           "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.", show_default=False),
+        None,
+        "--profile",
+        "-P",
+        autocompletion=complete.profiles,
+        help="Drive profile id or YAML file (default for sim: dsx7e). Env: SERVOTOOL_PROFILE.",
+    ),
+    no_identity_check: bool = typer.Option(
+        None,
+        "--no-identity-check",
+        help="Skip the check, made before "
+        "any write, that the drive answering is the one the profile describes. "
+        "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.",
+        show_default=False,
+    ),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
-    explain: bool = typer.Option(False, "--explain", help="Cautions in full (why an entry is not confirmed by the "
-                                 "manual, what a missing watchdog means), not one line each."),
+    explain: bool = typer.Option(
+        False,
+        "--explain",
+        help="Cautions in full (why an entry is not confirmed by the "
+        "manual, what a missing watchdog means), not one line each.",
+    ),
     version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Show the version."),
 ) -> None:
     """Commission and tune AC servo drives over Modbus RTU (real or simulated).
@@ -89,10 +124,20 @@ def main(
     Options also come from SERVOTOOL_* environment variables and the config file (~/.config/servotool/config.yaml
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
-    state(ctx).options = ConnectOptions(port=port, baud=baud, parity=parity, stopbits=stopbits, unit=unit,
-                                        timeout=timeout, retries=retries, profile=profile, echo=echo,
-                                        turnaround_ms=turnaround_ms, silence_ms=silence_ms,
-                                        no_identity_check=no_identity_check or None)
+    state(ctx).options = ConnectOptions(
+        port=port,
+        baud=baud,
+        parity=parity,
+        stopbits=stopbits,
+        unit=unit,
+        timeout=timeout,
+        retries=retries,
+        profile=profile,
+        echo=echo,
+        turnaround_ms=turnaround_ms,
+        silence_ms=silence_ms,
+        no_identity_check=no_identity_check or None,
+    )
     Verbosity.level = -1 if quiet else verbose
     Verbosity.explain = explain
 
@@ -105,13 +150,13 @@ def run() -> None:
 
 def _run() -> int:
     classcache.save_at_exit()
-    given = State()       # the options given on the command line, filled in by main(); fix commands repeat them
+    given = State()  # the options given on the command line, filled in by main(); fix commands repeat them
     _interrupt_on_termination()
     if hasattr(sys.stdout, "reconfigure"):
-        sys.stdout.reconfigure(line_buffering=True)       # streamed lines reach a pipe as they are made
+        sys.stdout.reconfigure(line_buffering=True)  # streamed lines reach a pipe as they are made
     root = typer.main.get_command(app)
     args = hoist_globals(root, sys.argv[1:])
-    as_json = "--json" in args[:args.index("--")] if "--" in args else "--json" in args
+    as_json = "--json" in args[: args.index("--")] if "--" in args else "--json" in args
     try:
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
@@ -120,16 +165,20 @@ def _run() -> int:
         return _fail(error_code(exc), error_text(exc, given.options, Verbosity.level > 0), exc.exit_code, as_json)
     except (KeyboardInterrupt, typer.Abort):
         return _fail("interrupted", "interrupted", 130, as_json)
-    except BrokenPipeError:           # `| head` closed the pipe: nothing more to say, to anyone
+    except BrokenPipeError:  # `| head` closed the pipe: nothing more to say, to anyone
         _broken_pipe()
     except Exception as exc:
         if (code := _usage_error(exc, as_json)) is not None:
             return code
         if os.environ.get("SERVOTOOL_DEBUG"):  # a bug: still one line for the user, the traceback on request
             raise
-        return _fail("internal", f"internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the "
-                     "traceback)", 1, as_json)
-    if result == 130:                 # typer turns Ctrl-C into a silent exit 130: say it as for any failure
+        return _fail(
+            "internal",
+            f"internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the traceback)",
+            1,
+            as_json,
+        )
+    if result == 130:  # typer turns Ctrl-C into a silent exit 130: say it as for any failure
         return _fail("interrupted", "interrupted", 130, as_json)
     return result if isinstance(result, int) else 0
 
@@ -159,7 +208,7 @@ def _end(status: int) -> NoReturn:
 
 
 def _flush(stream: object) -> None:
-    if flush := getattr(stream, "flush", None):      # None under pythonw
+    if flush := getattr(stream, "flush", None):  # None under pythonw
         flush()
 
 
@@ -194,12 +243,12 @@ def _usage_error(exc: Exception, as_json: bool) -> int | None:
         return None
     ctx = getattr(exc, "ctx", None)
     if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:
-        if text := str(message()).strip():    # typer's rich help printed itself when the error was made
+        if text := str(message()).strip():  # typer's rich help printed itself when the error was made
             print(text)
         return code
     where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
     return _fail("usage", f"{' '.join(str(message()).split())}{where}", code, as_json)
 
 
-if __name__ == "__main__":      # `python -m servotool.cli.main` runs too, rather than exiting 0 having done nothing
+if __name__ == "__main__":  # `python -m servotool.cli.main` runs too, rather than exiting 0 having done nothing
     run()

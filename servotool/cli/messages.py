@@ -24,10 +24,20 @@ _REF = r"(?:[\w./-]+\.md,?\s*)?\bL\d{2,}(?:\s*[-–]\s*L?\d+)?"
 MANUAL_REFS = re.compile(rf"\s*\((?:see\s+)?{_REF}(?:\s*[,;]\s*{_REF})*\)|(?:\s*[,;]\s*{_REF})+(?=\))|\s*\b{_REF}")
 
 # ConnectOptions field -> its long option on the command line
-OPTION_FLAGS = {"port": "--port", "baud": "--baud", "parity": "--parity", "stopbits": "--stopbits",
-                "unit": "--unit", "timeout": "--timeout", "retries": "--retries", "profile": "--profile",
-                "echo": "--echo", "turnaround_ms": "--turnaround-ms", "silence_ms": "--silence-ms",
-                "no_identity_check": "--no-identity-check"}
+OPTION_FLAGS = {
+    "port": "--port",
+    "baud": "--baud",
+    "parity": "--parity",
+    "stopbits": "--stopbits",
+    "unit": "--unit",
+    "timeout": "--timeout",
+    "retries": "--retries",
+    "profile": "--profile",
+    "echo": "--echo",
+    "turnaround_ms": "--turnaround-ms",
+    "silence_ms": "--silence-ms",
+    "no_identity_check": "--no-identity-check",
+}
 
 
 def connection_args(given: ConnectOptions) -> list[str]:
@@ -75,13 +85,14 @@ def error_text(exc: ServoError, given: ConnectOptions, verbose: bool = False) ->
     return with_options(plain(text, verbose), given)
 
 
-OFFLINE = ("sim", "profiles")      # commands that take no connection options
+OFFLINE = ("sim", "profiles")  # commands that take no connection options
 _SUGGESTED = re.compile(r"'servotool ((?!-)[^']*)'")
 
 
 def with_options(text: str, given: ConnectOptions) -> str:
     """Commands a library message suggests ('servotool alarm') with the user's connection options, so that
     copying one reaches the same drive; commands that carry options already are left as they are."""
+
     def repl(m: re.Match[str]) -> str:
         try:
             args = shlex.split(m.group(1))
@@ -89,7 +100,7 @@ def with_options(text: str, given: ConnectOptions) -> str:
             return m.group(0)
         own = set(OPTION_FLAGS.values()) | {"-p", "-P", "-u", "-b"}
         if not args or args[0] in OFFLINE or own & {a.split("=")[0] for a in args}:
-            return m.group(0)         # a command that reaches no drive, or names its own connection
+            return m.group(0)  # a command that reaches no drive, or names its own connection
         return "'" + command(given, *args) + "'"
 
     return _SUGGESTED.sub(repl, text)
@@ -106,23 +117,32 @@ def unknown_text(exc: UnknownName, given: ConnectOptions) -> str:
 
 
 # Roles whose name says little to a user.
-ROLE_WORDS = {"motion_route": "JOG or speed command (a JOG trigger with its speed, or a speed reference with servo-on)",
-              "speed_feedback": "motor speed reading", "torque_feedback": "motor torque reading",
-              "alarm_history_1": "alarm history", "alarm_reset": "alarm reset", "factory_reset": "factory reset",
-              "inertia_id": "inertia identification function",
-              "eeprom_save": "command that saves to EEPROM", "jog_accel": "JOG ramp setting"}
+ROLE_WORDS = {
+    "motion_route": "JOG or speed command (a JOG trigger with its speed, or a speed reference with servo-on)",
+    "speed_feedback": "motor speed reading",
+    "torque_feedback": "motor torque reading",
+    "alarm_history_1": "alarm history",
+    "alarm_reset": "alarm reset",
+    "factory_reset": "factory reset",
+    "inertia_id": "inertia identification function",
+    "eeprom_save": "command that saves to EEPROM",
+    "jog_accel": "JOG ramp setting",
+}
 
 
 def missing_role_text(exc: MissingRole, verbose: bool) -> str:
     """A feature the drive's profile gives no Modbus way to: say so, and what is left to the user."""
     what = ROLE_WORDS.get(exc.role, exc.role.replace("_", " "))
-    text = (f"{exc.feature}: servotool knows no way to reach the {what} of this drive over Modbus "
-            f"(profile {exc.profile_id}); do it on the drive's panel, or give a profile that maps it with --profile")
+    text = (
+        f"{exc.feature}: servotool knows no way to reach the {what} of this drive over Modbus "
+        f"(profile {exc.profile_id}); do it on the drive's panel, or give a profile that maps it with --profile"
+    )
     return text + (f" [role '{exc.role}']" if verbose else "")
 
 
 def setup_text(exc: SetupRequired, given: ConnectOptions) -> str:
     """The refusal, then how to fix it: set the values (stored, and a power cycle, for those that need one)."""
+
     def set_command(gaps: Sequence[SetupGap], save: bool) -> str:
         return command(given, "param", "set", *(["--save"] if save else []), *(a for g in gaps for a in g.assignments))
 
@@ -136,8 +156,10 @@ def setup_text(exc: SetupRequired, given: ConnectOptions) -> str:
         cycle += f" ('{command(given, 'sim', 'reset', '--power-cycle')}' on the simulator)"
     if later:
         codes = ", ".join(g.code for g in later)
-        text += (f" — set {'it' if len(later) == 1 else 'them'} with '{set_command(later, exc.save)}', {cycle} "
-                 f"({codes} {agree(len(later), 'takes', 'take')} effect after a power cycle)")
+        text += (
+            f" — set {'it' if len(later) == 1 else 'them'} with '{set_command(later, exc.save)}', {cycle} "
+            f"({codes} {agree(len(later), 'takes', 'take')} effect after a power cycle)"
+        )
     else:
         text += f" — {cycle}"
     if now:
@@ -149,11 +171,14 @@ def restore_failed_text(exc: RestoreFailed, given: ConnectOptions) -> str:
     """Where a restore stopped and the drive's state, then what to do with the automatic backup."""
     auto, text = str(exc.auto_backup), exc.facts()
     if exc.next_step == "compare":
-        return text + (f": when it does, compare it with '{command(given, 'param', 'diff', auto)}' and restore "
-                       f"that file if needed")
+        return text + (
+            f": when it does, compare it with '{command(given, 'param', 'diff', auto)}' and restore that file if needed"
+        )
     if exc.next_step == "restore":
         return text + f"; run '{command(given, 'param', 'restore', auto)}' once the cause is fixed"
     if exc.source is not None:
-        return text + f"; run '{command(given, 'param', 'restore', str(exc.source), '--yes')}' again once the cause " \
+        return (
+            text + f"; run '{command(given, 'param', 'restore', str(exc.source), '--yes')}' again once the cause "
             f"is fixed"
+        )
     return text

@@ -21,10 +21,10 @@ from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_durati
 from servotool.ops.trace_file import Series, TimeTable
 from servotool.words import count
 
-PLOT_SAMPLES = 300   # the scrolling chart shows this many of the latest samples
+PLOT_SAMPLES = 300  # the scrolling chart shows this many of the latest samples
 PLOT_REFRESH_S = 0.2
-TREND_MIN = 8       # a trend narrower than this says nothing: drop the column instead
-NAME_FLOOR = 16     # the name keeps at least this much room (or its full length) before the trend gets any
+TREND_MIN = 8  # a trend narrower than this says nothing: drop the column instead
+NAME_FLOOR = 16  # the name keeps at least this much room (or its full length) before the trend gets any
 
 
 def _fmt(value: float, decimals: int) -> str:
@@ -34,8 +34,9 @@ def _fmt(value: float, decimals: int) -> str:
 def _title(mon: Monitor) -> str:
     rate = mon.achieved_rate
     count = f"{mon.samples} sample{'' if mon.samples == 1 else 's'}"
-    return (f"{mon.drive.profile.model} unit {mon.drive.unit}: {count}"
-            + (f", {rate:.1f} Hz" if rate is not None else ""))
+    return f"{mon.drive.profile.model} unit {mon.drive.unit}: {count}" + (
+        f", {rate:.1f} Hz" if rate is not None else ""
+    )
 
 
 def monitor_table(mon: Monitor, width: int) -> Table:
@@ -67,18 +68,28 @@ def monitor_table(mon: Monitor, width: int) -> Table:
 def _sample_json(mon: Monitor, s: Sample) -> dict[str, object]:
     """One JSON line: values rounded to each entry's resolution, with their units."""
     series = mon.series
-    values = {c: round(v, decimals(series[c].entry)) if isinstance(v, float) and c in series else v
-              for c, v in s.values.items()}
-    return {"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"), "values": values,
-            "units": {c: series[c].entry.unit for c in s.values if c in series}}
+    values = {
+        c: round(v, decimals(series[c].entry)) if isinstance(v, float) and c in series else v
+        for c, v in s.values.items()
+    }
+    return {
+        "t": round(s.t, 4),
+        "time": s.wall.isoformat(timespec="milliseconds"),
+        "values": values,
+        "units": {c: series[c].entry.unit for c in s.values if c in series},
+    }
 
 
 def monitor_chart(mon: Monitor, history: deque[Sample], width: int, height: int) -> Text:
     """The latest samples as a chart: one panel per unit, one series per entry, a legend with the units."""
     from servotool.report.terminal import terminal_chart
 
-    table = TimeTable(Path("monitor"), "elapsed_s", [s.t for s in history],
-                      [Series(e.code, e.unit, [float(s.values[e.code]) for s in history]) for e in mon.entries])
+    table = TimeTable(
+        Path("monitor"),
+        "elapsed_s",
+        [s.t for s in history],
+        [Series(e.code, e.unit, [float(s.values[e.code]) for s in history]) for e in mon.entries],
+    )
     chart = terminal_chart(table, width, height - 1, _title(mon))
     rest = f"\nnot drawn (no room; name fewer entries): {', '.join(chart.left_out)}" if chart.left_out else ""
     return Text.from_ansi(chart.text + rest)
@@ -86,8 +97,9 @@ def monitor_chart(mon: Monitor, history: deque[Sample], width: int, height: int)
 
 def _plain_line(mon: Monitor, s: Sample) -> str:
     """One sample as a line: what --plot prints when the output is not a terminal."""
-    return f"{s.t:8.3f} s  " + "  ".join(f"{e.code} {s.values[e.code]:g}{' ' + e.unit if e.unit else ''}"
-                                          for e in mon.entries)
+    return f"{s.t:8.3f} s  " + "  ".join(
+        f"{e.code} {s.values[e.code]:g}{' ' + e.unit if e.unit else ''}" for e in mon.entries
+    )
 
 
 def _plot_live(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None) -> None:
@@ -112,8 +124,16 @@ def _csv_mode(csv_file: Path | None, force: bool, append: bool) -> CsvMode:
     return "replace" if force else "append" if append else "new"
 
 
-def _show(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None, *, plot: bool, live_view: bool,
-          lines: bool, as_json: bool) -> None:
+def _show(
+    mon: Monitor,
+    samples: Iterator[Sample],
+    log: CsvLog | None,
+    *,
+    plot: bool,
+    live_view: bool,
+    lines: bool,
+    as_json: bool,
+) -> None:
     """Samples as they come: a live chart or table on a terminal, else a plain or JSON line each as it comes (a
     pipe sees them at once), then the table; lines: --json or --once. Each sample is also logged to the CSV."""
     if plot and live_view:
@@ -140,20 +160,31 @@ def _show(mon: Monitor, samples: Iterator[Sample], log: CsvLog | None, *, plot: 
 def monitor(
     ctx: typer.Context,
     codes: list[str] = typer.Argument(
-        None, autocompletion=complete.codes,
-        help="Entries to watch (default: the profile's key monitors)."),
-    rate: float = typer.Option(10.0, "--rate", "-r", help="Samples per second, > 0 (a rate the link cannot keep up "
-                                                          "with polls as fast as it can; the rate achieved is shown)."),
+        None, autocompletion=complete.codes, help="Entries to watch (default: the profile's key monitors)."
+    ),
+    rate: float = typer.Option(
+        10.0,
+        "--rate",
+        "-r",
+        help="Samples per second, > 0 (a rate the link cannot keep up "
+        "with polls as fast as it can; the rate achieved is shown).",
+    ),
     duration: float = typer.Option(None, "--duration", "-d", help="Stop after this many seconds (default: Ctrl-C)."),
-    csv_file: Path = typer.Option(None, "--csv", help="Also log timestamped samples to this CSV file (a new file "
-                                                      "unless --force or --append)."),
+    csv_file: Path = typer.Option(
+        None, "--csv", help="Also log timestamped samples to this CSV file (a new file unless --force or --append)."
+    ),
     force: bool = typer.Option(False, "--force", help="With --csv: replace an existing file."),
-    append: bool = typer.Option(False, "--append", help="With --csv: add rows to an existing file with the same "
-                                                        "columns."),
+    append: bool = typer.Option(
+        False, "--append", help="With --csv: add rows to an existing file with the same columns."
+    ),
     as_json: bool = typer.Option(False, "--json", help="One JSON object per sample, one per line."),
     once: bool = typer.Option(False, "--once", help="Print one sample and exit."),
-    plot: bool = typer.Option(False, "--plot", help="A scrolling chart instead of the table (one panel per unit); "
-                              "plain lines when the output is not a terminal."),
+    plot: bool = typer.Option(
+        False,
+        "--plot",
+        help="A scrolling chart instead of the table (one panel per unit); "
+        "plain lines when the output is not a terminal.",
+    ),
 ) -> None:
     """Watch live values with units, min/max and a trend; report the sample rate achieved."""
     check_rate(rate)
@@ -170,7 +201,7 @@ def monitor(
             samples = mon.run(rate, duration, samples=1 if once else None)
             try:
                 _show(mon, samples, log, plot=plot, live_view=live_view, lines=as_json or once, as_json=as_json)
-            except KeyboardInterrupt:     # the samples so far are shown, then exit 130 as for any Ctrl-C
+            except KeyboardInterrupt:  # the samples so far are shown, then exit 130 as for any Ctrl-C
                 interrupted = True
                 if not (live_view or as_json or plot):
                     out.print(monitor_table(mon, out.width))
@@ -178,8 +209,11 @@ def monitor(
         if log:
             log.close()
     if not once:
-        rate_text = f"{mon.achieved_rate:.1f} samples/s achieved" if mon.achieved_rate is not None else \
-            "too few samples to measure a rate"
+        rate_text = (
+            f"{mon.achieved_rate:.1f} samples/s achieved"
+            if mon.achieved_rate is not None
+            else "too few samples to measure a rate"
+        )
         info(f"{count(mon.samples, 'sample')} in {mon.elapsed:.2f} s: {rate_text}")
     if interrupted:
         raise typer.Exit(130)

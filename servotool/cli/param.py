@@ -26,9 +26,11 @@ app = typer.Typer(help="Read, set and list drive parameters.")
 def get(
     ctx: typer.Context,
     codes: list[str] = typer.Argument(
-        ..., autocompletion=complete.codes,
+        ...,
+        autocompletion=complete.codes,
         help="Vendor codes (e.g. Pn004, Po109, H09-06), role names, or "
-                                      "CODE.FIELD for one field of a two-/four-parameter value (e.g. Po001.Y)."),
+        "CODE.FIELD for one field of a two-/four-parameter value (e.g. Po001.Y).",
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Read entries (any class) from the drive."""
@@ -36,8 +38,9 @@ def get(
         targets = [split_field(d.profile, c) for c in codes]
         readings = d.read_entries([e for e, _ in targets])
     if as_json:
-        emit_json([r.as_json() if f is None else _field_json(r, f) for r, (_, f) in zip(readings, targets,
-                                                                                          strict=True)])
+        emit_json(
+            [r.as_json() if f is None else _field_json(r, f) for r, (_, f) in zip(readings, targets, strict=True)]
+        )
         return
     t = table("Code", "Name", "Value", "Unit")
     for r, (e, f) in zip(readings, targets, strict=True):
@@ -51,8 +54,14 @@ def get(
 def _field_json(r: Reading, field: str) -> dict[str, object]:
     e = r.entry
     value = get_field(e, r.raw, field)
-    data: dict[str, object] = {"code": f"{e.code}.{field}", "name": e.name, "field": field, "value": value,
-                               "entry_value": format_value(e, r.raw), "raw": r.raw}
+    data: dict[str, object] = {
+        "code": f"{e.code}.{field}",
+        "name": e.name,
+        "field": field,
+        "value": value,
+        "entry_value": format_value(e, r.raw),
+        "raw": r.raw,
+    }
     if (meaning := e.field_enums.get(field.upper(), {}).get(value)) is not None:
         data["meaning"] = meaning
     return data
@@ -62,14 +71,19 @@ def _field_json(r: Reading, field: str) -> dict[str, object]:
 def set_(
     ctx: typer.Context,
     assignments: list[str] = typer.Argument(
-        ..., autocompletion=complete.assignments,
+        ...,
+        autocompletion=complete.assignments,
         help="CODE=VALUE in engineering units (e.g. Pn100=40.0); "
-                                            "two-/four-parameter values as the manual shows them (Po001='d 1 21', "
-                                            "Po175=b1200) or one field at a time (Po001.Y=1)."),
+        "two-/four-parameter values as the manual shows them (Po001='d 1 21', "
+        "Po175=b1200) or one field at a time (Po001.Y=1).",
+    ),
     raw: bool = typer.Option(False, "--raw", help="Values are raw register integers, not engineering units."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and show what would change; write nothing."),
-    save: bool = typer.Option(None, "--save/--no-save", help="Store in EEPROM (or keep out of it) as the drive "
-                              "allows; default: the drive's current setting."),
+    save: bool = typer.Option(
+        None,
+        "--save/--no-save",
+        help="Store in EEPROM (or keep out of it) as the drive allows; default: the drive's current setting.",
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Validate every value against the profile, write the ones that differ, read back to verify."""
@@ -83,30 +97,45 @@ def set_(
             results, stored = outcome.results, outcome.stored
             persisted = outcome.persisted if plan.changes or save else None
     if as_json:
-        emit_json({
-            "dry_run": dry_run,
-            "changed": [{"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit,
-                         "effect": e.effect} for e, old, new in plan.changes],
-            "unchanged": [{"code": e.code, "value": json_value(e, v), "unit": e.unit} for e, v in plan.unchanged],
-            "persisted": persisted,
-            "stored": [e.code for e in stored],
-        })
+        emit_json(
+            {
+                "dry_run": dry_run,
+                "changed": [
+                    {
+                        "code": e.code,
+                        "old": json_value(e, old),
+                        "new": json_value(e, new),
+                        "unit": e.unit,
+                        "effect": e.effect,
+                    }
+                    for e, old, new in plan.changes
+                ],
+                "unchanged": [{"code": e.code, "value": json_value(e, v), "unit": e.unit} for e, v in plan.unchanged],
+                "persisted": persisted,
+                "stored": [e.code for e in stored],
+            }
+        )
         return
     for e, v in plan.unchanged:
         info(f"{e.code} already {format_value(e, v)} {e.unit}".rstrip())
     if dry_run:
         for e, old, new in plan.changes:
-            out.print(f"would set {e.code} ({e.name}): {format_value(e, old)} -> {format_value(e, new)} {e.unit}",
-                      markup=False)
+            out.print(
+                f"would set {e.code} ({e.name}): {format_value(e, old)} -> {format_value(e, new)} {e.unit}",
+                markup=False,
+            )
         return
     if persisted is False:
         warn(eeprom.ram_only_warning(d.profile))
     for r in results:
         note = f" [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
         unit = f" {r.entry.unit}" if r.entry.unit else ""
-        out.print(f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "
-                  f"{format_value(r.entry, r.new)}{unit}{note}", markup=False)
-    if save:        # after the changes it stored
+        out.print(
+            f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "
+            f"{format_value(r.entry, r.new)}{unit}{note}",
+            markup=False,
+        )
+    if save:  # after the changes it stored
         out.print(f"{count(len(stored), 'value')} stored in EEPROM", markup=False)
 
 
@@ -125,12 +154,17 @@ LISTABLE = ("Pn", "Un", "Sn")
 def list_(
     ctx: typer.Context,
     group: str = typer.Option(
-        None, "--group", "-g", autocompletion=complete.groups,
+        None,
+        "--group",
+        "-g",
+        autocompletion=complete.groups,
         help="Only this group: the profile's own (see 'profiles "
-                              "show') or gain, speed, position, torque, io, comm, monitor on every profile."),
+        "show') or gain, speed, position, torque, io, comm, monitor on every profile.",
+    ),
     changed: bool = typer.Option(False, "--changed", help="Only entries that differ from the factory default."),
-    cls: str = typer.Option(None, "--class", help="Entry class to list: Pn, Un or Sn (default: Pn; with --group, "
-                            "every class in the group)."),
+    cls: str = typer.Option(
+        None, "--class", help="Entry class to list: Pn, Un or Sn (default: Pn; with --group, every class in the group)."
+    ),
     as_csv: bool = typer.Option(False, "--csv", help="CSV on stdout, for a spreadsheet."),
     as_json: bool = JSON_OPT,
 ) -> None:
@@ -146,8 +180,13 @@ def list_(
         _csv(readings)
         return
     if as_json:
-        emit_json([r.as_json() for r in readings] + [{"code": e.code, "name": e.name, "value": None,
-                                                      "missing": "not on this drive"} for e in d.missing.values()])
+        emit_json(
+            [r.as_json() for r in readings]
+            + [
+                {"code": e.code, "name": e.name, "value": None, "missing": "not on this drive"}
+                for e in d.missing.values()
+            ]
+        )
         return
     t = table("Code", "Name", "Value", "Unit", "Default", "", title=f"{d.profile.model} unit {d.unit}")
     for r in readings:
@@ -160,22 +199,40 @@ def list_(
 @app.command("find")
 def find(
     ctx: typer.Context,
-    words: list[str] = typer.Argument(..., help="Words to look for in codes, names, descriptions and groups "
-                                      "(every word must match; any case)."),
+    words: list[str] = typer.Argument(
+        ..., help="Words to look for in codes, names, descriptions and groups (every word must match; any case)."
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Search the profile's entries of every class; no drive needed (the profile from --profile or the port)."""
     profile = resolve(state(ctx).options, need_port=False).profile
     hits = search(profile.entries, words)
     if as_json:
-        emit_json([{"code": e.code, "class": e.cls, "name": e.name, "unit": e.unit, "group": e.group,
-                    "description": e.description} for e in hits])
+        emit_json(
+            [
+                {
+                    "code": e.code,
+                    "class": e.cls,
+                    "name": e.name,
+                    "unit": e.unit,
+                    "group": e.group,
+                    "description": e.description,
+                }
+                for e in hits
+            ]
+        )
         return
     if not hits:
         out.print(f"nothing in profile {profile.id} matches {' '.join(words)}", markup=False)
         return
-    t = table("Code", "Class", "Name", "Unit", "Group", title=f"{count(len(hits), 'match', 'matches')} in "
-              f"{profile.model} profile '{profile.id}'")
+    t = table(
+        "Code",
+        "Class",
+        "Name",
+        "Unit",
+        "Group",
+        title=f"{count(len(hits), 'match', 'matches')} in {profile.model} profile '{profile.id}'",
+    )
     for e in hits:
         t.add_row(e.code, e.cls, e.name, e.unit, e.group)
     out.print(t)
@@ -187,5 +244,15 @@ def _csv(readings: list[Reading]) -> None:
     w.writerow(["code", "name", "value", "unit", "meaning", "default", "changed", "raw"])
     for r in readings:
         e = r.entry
-        w.writerow([e.code, e.name, value_text(e, r.raw), e.unit, e.enum.get(r.raw, ""),
-                    "" if e.default is None else value_text(e, e.default), "yes" if r.changed else "", r.raw])
+        w.writerow(
+            [
+                e.code,
+                e.name,
+                value_text(e, r.raw),
+                e.unit,
+                e.enum.get(r.raw, ""),
+                "" if e.default is None else value_text(e, e.default),
+                "yes" if r.changed else "",
+                r.raw,
+            ]
+        )

@@ -25,13 +25,28 @@ def read(
         words = raw.read_registers(d, start, count)
         owners = [raw.owner(d, start + i) for i in range(len(words))]
     if as_json:
-        emit_json([{"address": start + i, "value": w, "signed": w - 0x10000 if w >= 0x8000 else w,
-                    "entry": e.code if e else None} for i, (w, e) in enumerate(zip(words, owners, strict=True))])
+        emit_json(
+            [
+                {
+                    "address": start + i,
+                    "value": w,
+                    "signed": w - 0x10000 if w >= 0x8000 else w,
+                    "entry": e.code if e else None,
+                }
+                for i, (w, e) in enumerate(zip(words, owners, strict=True))
+            ]
+        )
         return
     t = table("Address", "Hex", "Value", "Signed", "Hex value", "Entry")
     for i, (w, e) in enumerate(zip(words, owners, strict=True)):
-        t.add_row(str(start + i), f"0x{start + i:04X}", str(w), str(w - 0x10000 if w >= 0x8000 else w),
-                  f"0x{w:04X}", f"{e.code} {e.name}" if e else "")
+        t.add_row(
+            str(start + i),
+            f"0x{start + i:04X}",
+            str(w),
+            str(w - 0x10000 if w >= 0x8000 else w),
+            f"0x{w:04X}",
+            f"{e.code} {e.name}" if e else "",
+        )
     out.print(t)
 
 

@@ -26,12 +26,25 @@ if TYPE_CHECKING:
     from rich.console import Console, Group
     from rich.table import Table
 
-NAME_MIN = 20           # a wrapped name or description keeps at least this many columns: readable
-UNLIMITED = 10_000      # "no width": nothing wraps
-WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note", "Result"}   # text columns: these wrap
+NAME_MIN = 20  # a wrapped name or description keeps at least this many columns: readable
+UNLIMITED = 10_000  # "no width": nothing wraps
+WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note", "Result"}  # text columns: these wrap
 # Columns dropped first when a table is too wide, least useful first; tables may give their own order.
-DROP_ORDER = ("Address", "Type", "Class", "Version", "Vendor", "Unverified", "Effect", "Trend", "Min", "Max",
-              "Default", "Needs", "")
+DROP_ORDER = (
+    "Address",
+    "Type",
+    "Class",
+    "Version",
+    "Vendor",
+    "Unverified",
+    "Effect",
+    "Trend",
+    "Min",
+    "Max",
+    "Default",
+    "Needs",
+    "",
+)
 RIGHT = ("Value", "Default", "Min", "Max", "Address")
 
 
@@ -57,7 +70,7 @@ def _is_terminal(file: IO[str]) -> bool:
     isatty = getattr(file, "isatty", None)
     try:
         return bool(isatty and isatty())
-    except ValueError:      # closed
+    except ValueError:  # closed
         return False
 
 
@@ -137,10 +150,10 @@ class _Stream:
             return None
         file, (o,) = self._file(), objects
         if _is_terminal(file) and (not self._stderr or kwargs.get("style") or isinstance(o, Grid)):
-            return None        # styles show, and stdout's width is the terminal's: rich's
+            return None  # styles show, and stdout's width is the terminal's: rich's
         width = UNLIMITED if self._stderr else _stdout_width() or UNLIMITED
         if isinstance(o, Grid):
-            utf = (getattr(file, "encoding", None) or "utf-8").lower().startswith("utf")   # else rich draws ASCII
+            utf = (getattr(file, "encoding", None) or "utf-8").lower().startswith("utf")  # else rich draws ASCII
             return o.plain(width) if utf else None
         if type(o) is not str or ("[" in o and kwargs.get("markup", True) is not False):
             return None
@@ -148,7 +161,7 @@ class _Stream:
         if not all(line.isprintable() for line in lines):
             return None
         if width != UNLIMITED and not all(line.isascii() and len(line) <= width for line in lines):
-            return None        # it would wrap
+            return None  # it would wrap
         return o + "\n"
 
 
@@ -160,7 +173,7 @@ class Verbosity:
     """Global -q/-v/--explain state."""
 
     level = 0  # -1 quiet, 0 normal, 1+ verbose
-    explain = False     # cautions in full
+    explain = False  # cautions in full
 
 
 def info(text: str) -> None:
@@ -175,7 +188,7 @@ def notice(text: str) -> None:
 
 
 _UNVERIFIED = re.compile(r"(\S+) \((\w+)\): ")
-_RELIES = re.compile(r"(.+?) relies on .*; unverified\b")      # "the dead-man (segment) relies on L..; unverified: ..."
+_RELIES = re.compile(r"(.+?) relies on .*; unverified\b")  # "the dead-man (segment) relies on L..; unverified: ..."
 
 
 def _short_caution(line: str) -> str:
@@ -262,8 +275,10 @@ def fit(t: Grid | Table, width: int) -> Grid | Table | Group:
     if _span(desired) <= width or n == 0:
         return t
     wraps = [str(c.header) in WRAP for c in t.columns]
-    least = [max(1, min(d, NAME_MIN)) if w else max(b, min(h, 12), 1)
-             for d, b, h, w in zip(desired, body, head, wraps, strict=True)]
+    least = [
+        max(1, min(d, NAME_MIN)) if w else max(b, min(h, 12), 1)
+        for d, b, h, w in zip(desired, body, head, wraps, strict=True)
+    ]
     keep = list(range(n))
     order = getattr(t, "drop", DROP_ORDER)
     for name in order:
@@ -274,12 +289,11 @@ def fit(t: Grid | Table, width: int) -> Grid | Table | Group:
         return _vertical(t, width)
     widths = {i: least[i] for i in keep}
     spare = width - _span(list(widths.values()))
-    for i in sorted(keep, key=lambda i: not wraps[i]):      # text columns take the room first
+    for i in sorted(keep, key=lambda i: not wraps[i]):  # text columns take the room first
         more = min(spare, desired[i] - widths[i])
         widths[i] += more
         spare -= more
-    fitted = Table(title=t.title, show_lines=t.show_lines, header_style=t.header_style,
-                   title_justify=t.title_justify)
+    fitted = Table(title=t.title, show_lines=t.show_lines, header_style=t.header_style, title_justify=t.title_justify)
     for i in keep:
         c = t.columns[i]
         fitted.add_column(c.header, justify=c.justify, overflow="fold", width=widths[i], no_wrap=False)
@@ -313,8 +327,14 @@ def progress(label: str, total: int, enabled: bool = True) -> Iterator[Any]:
         return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                  console=err, transient=True) as bar:
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=err,
+        transient=True,
+    ) as bar:
         task = bar.add_task(label, total=total)
         yield lambda n=1: bar.advance(task, n)
 

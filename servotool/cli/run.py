@@ -23,11 +23,11 @@ from servotool.words import count
 def run(
     ctx: typer.Context,
     plan_file: Path = typer.Argument(..., help="The plan (YAML)."),
-    dry_run: bool = typer.Option(False, "--dry-run", help="Validate the whole plan and show the steps; touch "
-                                 "nothing."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Validate the whole plan and show the steps; touch nothing."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Skip operator prompts."),
-    continue_on_error: bool = typer.Option(False, "--continue-on-error", help="Run the remaining steps after a "
-                                           "failed one."),
+    continue_on_error: bool = typer.Option(
+        False, "--continue-on-error", help="Run the remaining steps after a failed one."
+    ),
     report: Path = typer.Option(None, "--report", help="Report file (default: PLAN.report.json next to the plan)."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
 ) -> None:
@@ -49,15 +49,25 @@ def run(
     def ask(unit: int, question: str) -> bool:
         return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
 
-    with open_drives(resolved, units, trace=trace_frame if Verbosity.level > 0 else None,
-                     notice=notice_for(ctx)) as drives:
-        runner = Runner(plan, drives, yes=yes, continue_on_error=continue_on_error, ask=ask, log=info,
-                        word=lambda exc: error_text(exc, cli_opts))
+    with open_drives(
+        resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)
+    ) as drives:
+        runner = Runner(
+            plan,
+            drives,
+            yes=yes,
+            continue_on_error=continue_on_error,
+            ask=ask,
+            log=info,
+            word=lambda exc: error_text(exc, cli_opts),
+        )
         rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)
         if rep.previous is not None:
             prev = rep.head["previous_run"]
-            warn(f"the last run of this plan (pid {prev['pid']}) ended without finishing, after "
-                 f"{count(prev['steps_done'], 'step')}: its report {report_path} said 'running'; this run replaces it")
+            warn(
+                f"the last run of this plan (pid {prev['pid']}) ended without finishing, after "
+                f"{count(prev['steps_done'], 'step')}: its report {report_path} said 'running'; this run replaces it"
+            )
         rep.write("running")
         runner.after_step = lambda: rep.write("running")
         ok: bool | None = None
@@ -73,11 +83,14 @@ def run(
     if as_json:
         emit_json(data)
     else:
-        out.print(f"plan {'completed' if ok else 'FAILED'}: {sum(r.ok for r in runner.results)}/"
-                  f"{len(runner.results)} steps ok; report {report_path}", markup=False)
+        out.print(
+            f"plan {'completed' if ok else 'FAILED'}: {sum(r.ok for r in runner.results)}/"
+            f"{len(runner.results)} steps ok; report {report_path}",
+            markup=False,
+        )
     if not ok:
         failures = [r for r in runner.results if not r.ok]
-        if Verbosity.level < 0 and not as_json:     # --quiet hid the step lines: a failure is an error, shown
+        if Verbosity.level < 0 and not as_json:  # --quiet hid the step lines: a failure is an error, shown
             for r in failures:
                 notice(f"FAIL unit {r.unit} {r.step.where()}: {r.detail}")
         raise typer.Exit(int(failures[0].data.get("exit_code", 1)) if failures else 1)
@@ -92,16 +105,29 @@ def _units(plan: Plan, given: int | None, default: int) -> list[int]:
     return [given]
 
 
-def _show_dry_run(plan: Plan, plan_file: Path, resolved: Resolved, units: list[int], lines: list[str],
-                  as_json: bool) -> None:
+def _show_dry_run(
+    plan: Plan, plan_file: Path, resolved: Resolved, units: list[int], lines: list[str], as_json: bool
+) -> None:
     if as_json:
-        emit_json({"plan": str(plan_file), "dry_run": True, "ok": True, "profile": resolved.profile.id,
-                   "units": units, "steps": [{"step": st.index + 1, "line": st.line, "name": st.name,
-                                              "would": line.split(": ", 1)[1]}
-                                             for st, line in zip(plan.steps, lines, strict=True)]})
+        emit_json(
+            {
+                "plan": str(plan_file),
+                "dry_run": True,
+                "ok": True,
+                "profile": resolved.profile.id,
+                "units": units,
+                "steps": [
+                    {"step": st.index + 1, "line": st.line, "name": st.name, "would": line.split(": ", 1)[1]}
+                    for st, line in zip(plan.steps, lines, strict=True)
+                ],
+            }
+        )
         return
-    out.print(f"plan {plan_file}: {count(len(plan.steps), 'step')} on {resolved.profile.model} unit(s) "
-              f"{', '.join(map(str, units))}; valid. Would run:", markup=False)
+    out.print(
+        f"plan {plan_file}: {count(len(plan.steps), 'step')} on {resolved.profile.model} unit(s) "
+        f"{', '.join(map(str, units))}; valid. Would run:",
+        markup=False,
+    )
     for line in lines:
         out.print("  " + line, markup=False)
 

@@ -33,18 +33,31 @@ def _target(ctx: typer.Context, profile: str | None, unit: int | None) -> tuple[
 @app.command("serve")
 def serve(
     ctx: typer.Context,
-    port: str = typer.Option(..., "--port", "-p", help="Serial device (/dev/ttyS1, a socat pty) or "
-                             "tcp://127.0.0.1:N (RTU framing over TCP; N=0 picks a free port)."),
+    port: str = typer.Option(
+        ...,
+        "--port",
+        "-p",
+        help="Serial device (/dev/ttyS1, a socat pty) or "
+        "tcp://127.0.0.1:N (RTU framing over TCP; N=0 picks a free port).",
+    ),
     profile: str = typer.Option(None, "--profile", "-P", help="Profile to simulate (default: dsx7e)."),
-    units: list[int] = typer.Option(None, "--unit", "-u", help="Unit id to answer; repeat for several drives on "
-                                    "one line (default: the profile's)."),
+    units: list[int] = typer.Option(
+        None, "--unit", "-u", help="Unit id to answer; repeat for several drives on one line (default: the profile's)."
+    ),
     baud: int = typer.Option(None, "--baud", "-b", help="Serial baud rate (default: the profile's)."),
     parity: str = typer.Option(None, "--parity", help="N, E or O (default: the profile's)."),
     stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's)."),
-    line_baud: int = typer.Option(None, "--line-baud", help="Delay each answer by its wire time at this baud "
-                                  "(overrides 'sim config --line-baud'; 0 = off)."),
-    faults: str = typer.Option(None, "--faults", help="A bad line (tcp:// ports): KIND:RATE[,...] of crc, drop, "
-                               "late, duplicate, truncate, garbage or mixed, RATE as 0.05 or 5%, per reply."),
+    line_baud: int = typer.Option(
+        None,
+        "--line-baud",
+        help="Delay each answer by its wire time at this baud (overrides 'sim config --line-baud'; 0 = off).",
+    ),
+    faults: str = typer.Option(
+        None,
+        "--faults",
+        help="A bad line (tcp:// ports): KIND:RATE[,...] of crc, drop, "
+        "late, duplicate, truncate, garbage or mixed, RATE as 0.05 or 5%, per reply.",
+    ),
     fault_seed: int = typer.Option(1, "--fault-seed", help="Seed of the line's faults (same seed, same faults)."),
     late_ms: float = typer.Option(500.0, "--late-ms", help="How late a 'late' reply comes, ms."),
     response_delay: float = typer.Option(0.0, "--response-delay", help="Delay every reply by this many ms."),
@@ -63,20 +76,35 @@ def serve(
     line = line_format(ConnectOptions(baud=baud, parity=parity, stopbits=stopbits), p)
 
     def ready(where: str, took: dict[int, list[str]]) -> None:
-        info(f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "
-             f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); Ctrl-C stops")
+        info(
+            f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "
+            f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); Ctrl-C stops"
+        )
         for u, codes in took.items():
             if codes:
                 info(f"servotool: unit {u} powered on; now in effect: {', '.join(codes)}")
 
     bad_line = None
     if faults or response_delay or echo:
-        bad_line = LineFaults(parse_rates(faults or ""), seed=fault_seed, late_s=late_ms / 1000.0,
-                              response_delay_s=response_delay / 1000.0, echo=echo)
+        bad_line = LineFaults(
+            parse_rates(faults or ""),
+            seed=fault_seed,
+            late_s=late_ms / 1000.0,
+            response_delay_s=response_delay / 1000.0,
+            echo=echo,
+        )
     try:
-        serve_units(port, p, ids, line, line_baud=line_baud, trace=trace_frame if Verbosity.level > 0 else None,
-                    ready=ready, faults=bad_line)
-    except KeyboardInterrupt:       # its only way to stop, and still exit 130 as every command at Ctrl-C
+        serve_units(
+            port,
+            p,
+            ids,
+            line,
+            line_baud=line_baud,
+            trace=trace_frame if Verbosity.level > 0 else None,
+            ready=ready,
+            faults=bad_line,
+        )
+    except KeyboardInterrupt:  # its only way to stop, and still exit 130 as every command at Ctrl-C
         info("servotool: simulator stopped")
         raise typer.Exit(130) from None
 
@@ -86,8 +114,11 @@ def reset(
     ctx: typer.Context,
     profile: str = typer.Option(None, "--profile", "-P", help="Profile of the simulated drive."),
     unit: int = typer.Option(None, "--unit", "-u", help="Unit id (default: the profile's)."),
-    power_cycle: bool = typer.Option(False, "--power-cycle", help="Power-cycle: parameters stored in EEPROM "
-                                     "reload and pending power-cycle changes take effect."),
+    power_cycle: bool = typer.Option(
+        False,
+        "--power-cycle",
+        help="Power-cycle: parameters stored in EEPROM reload and pending power-cycle changes take effect.",
+    ),
     factory: bool = typer.Option(False, "--factory", help="Erase the simulated drive's state: factory defaults."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
@@ -106,8 +137,10 @@ def reset(
     if as_json:
         emit_json({"profile": p.id, "unit": u, "reset": "power_cycle", "took_effect": pending})
         return
-    out.print(f"simulated {p.model} unit {u}: power-cycled"
-              + (f"; now in effect: {', '.join(pending)}" if pending else ""), markup=False)
+    out.print(
+        f"simulated {p.model} unit {u}: power-cycled" + (f"; now in effect: {', '.join(pending)}" if pending else ""),
+        markup=False,
+    )
 
 
 @app.command("config")
@@ -130,13 +163,25 @@ def config(
     gear: float = typer.Option(None, "--gear", help=SIM_SETTINGS["gear"][4]),
     cogging: float = typer.Option(None, "--cogging", help=SIM_SETTINGS["cogging"][4]),
     cogging_periods: int = typer.Option(None, "--cogging-periods", help=SIM_SETTINGS["cogging_periods"][4]),
-    brake: str = typer.Option(None, "--brake", help="on|off: holding brake, closed while the servo is off "
-                              "(default on; off lets a gravity load fall, held back only by friction)."),
-    fake_watchdog: str = typer.Option(None, "--fake-watchdog", help="on|off, NOT REAL (default off): stop host "
-                                      "motion after 500 ms of host silence on a drive whose manual documents no "
-                                      "communication timeout. The real drive keeps running."),
-    missing: str = typer.Option(None, "--missing", help="CODE,...: entries this drive lacks (answered with "
-                                "exception 02, like a firmware without them); '' restores them all."),
+    brake: str = typer.Option(
+        None,
+        "--brake",
+        help="on|off: holding brake, closed while the servo is off "
+        "(default on; off lets a gravity load fall, held back only by friction).",
+    ),
+    fake_watchdog: str = typer.Option(
+        None,
+        "--fake-watchdog",
+        help="on|off, NOT REAL (default off): stop host "
+        "motion after 500 ms of host silence on a drive whose manual documents no "
+        "communication timeout. The real drive keeps running.",
+    ),
+    missing: str = typer.Option(
+        None,
+        "--missing",
+        help="CODE,...: entries this drive lacks (answered with "
+        "exception 02, like a firmware without them); '' restores them all.",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable output."),
 ) -> None:
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
@@ -145,12 +190,27 @@ def config(
     p, u = _target(ctx, profile, unit)
     if missing is not None:
         sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
-    status = sim_state.configure(p, u, load_ratio=load_ratio, friction=friction, viscous=viscous,
-                                 load_torque=load_torque, noise=noise, seed=seed, line_baud=line_baud, brake=brake_on,
-                                 fake_watchdog=fake_on, resonance_hz=resonance_hz,
-                                 resonance_damping=resonance_damping, backlash_rad=backlash_rad,
-                                 arm_gravity=arm_gravity, arm_angle=arm_angle, gear=gear, cogging=cogging,
-                                 cogging_periods=cogging_periods)
+    status = sim_state.configure(
+        p,
+        u,
+        load_ratio=load_ratio,
+        friction=friction,
+        viscous=viscous,
+        load_torque=load_torque,
+        noise=noise,
+        seed=seed,
+        line_baud=line_baud,
+        brake=brake_on,
+        fake_watchdog=fake_on,
+        resonance_hz=resonance_hz,
+        resonance_damping=resonance_damping,
+        backlash_rad=backlash_rad,
+        arm_gravity=arm_gravity,
+        arm_angle=arm_angle,
+        gear=gear,
+        cogging=cogging,
+        cogging_periods=cogging_periods,
+    )
     if as_json:
         emit_json({"profile": p.id, "unit": u, "settings": status.settings, "missing": list(status.missing)})
         return
@@ -168,18 +228,29 @@ def show(
     status = sim_state.status(*_target(ctx, profile, unit))
     run = status.running
     if as_json:
-        emit_json({"profile": status.profile.id, "unit": status.unit, "state_file": str(status.state_file),
-                   "settings": status.settings, "pending_power_cycle": status.pending_power_cycle,
-                   "eeprom_writes": status.eeprom_writes, "running": dataclasses.asdict(run) if run else None,
-                   "missing": list(status.missing),
-                   "extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(status.profile)]})
+        emit_json(
+            {
+                "profile": status.profile.id,
+                "unit": status.unit,
+                "state_file": str(status.state_file),
+                "settings": status.settings,
+                "pending_power_cycle": status.pending_power_cycle,
+                "eeprom_writes": status.eeprom_writes,
+                "running": dataclasses.asdict(run) if run else None,
+                "missing": list(status.missing),
+                "extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(status.profile)],
+            }
+        )
         return
     _print_settings(status)
     _print_extensions(status.profile)
     if run is not None:
-        out.print(f"running state as last saved (a powered drive keeps it until a power cycle): servo "
-                  f"{'on' if run.servo_on else 'off'}, alarm {run.alarm or 'none'}, "
-                  f"position {run.position_rev:.3f} rev", markup=False)
+        out.print(
+            f"running state as last saved (a powered drive keeps it until a power cycle): servo "
+            f"{'on' if run.servo_on else 'off'}, alarm {run.alarm or 'none'}, "
+            f"position {run.position_rev:.3f} rev",
+            markup=False,
+        )
 
 
 def _on_off(value: str, option: str) -> int:
@@ -190,8 +261,12 @@ def _on_off(value: str, option: str) -> int:
 
 
 def _print_settings(status: sim_state.SimStatus) -> None:
-    t = table("Setting", "Value", "Meaning", title=f"simulated {status.profile.model} unit {status.unit} "
-              f"({status.state_file})")
+    t = table(
+        "Setting",
+        "Value",
+        "Meaning",
+        title=f"simulated {status.profile.model} unit {status.unit} ({status.state_file})",
+    )
     for name, value in status.settings.items():
         shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
         t.add_row(name, shown, SIM_SETTINGS[name][4])

@@ -21,30 +21,41 @@ from servotool.ops.trace_file import capture_json, capture_table, check_writable
 def about_lines(res: Resolved, detail: str) -> list[str]:
     """The CSV header's '# ' lines: the drive, the line settings, what was captured, when."""
     s, p = res.settings, res.profile
-    return [f"servotool trace: {p.model} (profile {p.id}) unit {res.unit}",
-            f"line: {s.port}, {s.line.describe()}, timeout {s.timeout:g} s", detail,
-            f"started: {utc_now().isoformat(timespec='seconds')}"]
+    return [
+        f"servotool trace: {p.model} (profile {p.id}) unit {res.unit}",
+        f"line: {s.port}, {s.line.describe()}, timeout {s.timeout:g} s",
+        detail,
+        f"started: {utc_now().isoformat(timespec='seconds')}",
+    ]
 
 
 def _about(res: Resolved, tracer: Tracer, expr: str | None, window: Window) -> list[str]:
     size = f"{window.samples} samples" if window.samples is not None else f"{window.duration_s:g} s"
-    trig = f"{tracer.trigger.describe()} ({expr}), {window.pre_share * 100:g} % before it" \
-        if tracer.trigger is not None else "none (free run)"
-    return about_lines(res, f"trigger: {trig}; capture {size}; {tracer.sampler.requests_per_sample} request(s) "
-                            "per sample")
+    trig = (
+        f"{tracer.trigger.describe()} ({expr}), {window.pre_share * 100:g} % before it"
+        if tracer.trigger is not None
+        else "none (free run)"
+    )
+    return about_lines(
+        res, f"trigger: {trig}; capture {size}; {tracer.sampler.requests_per_sample} request(s) per sample"
+    )
 
 
 def trace(
     ctx: typer.Context,
     codes: list[str] = typer.Argument(None, help="Entries to capture (default: the profile's key monitors)."),
-    trigger: str = typer.Option(None, "--trigger", "-t", help=f"Start the capture when {TRIGGER_FORMS}. "
-                                "Default: at once."),
+    trigger: str = typer.Option(
+        None, "--trigger", "-t", help=f"Start the capture when {TRIGGER_FORMS}. Default: at once."
+    ),
     samples: int = typer.Option(None, "--samples", "-n", help="Samples per capture (default 500 unless --duration)."),
     duration: float = typer.Option(None, "--duration", "-d", help="Seconds per capture (instead of --samples)."),
     pre: float = typer.Option(20.0, "--pre", help="Share of the capture from before the trigger, in % (0..99)."),
     repeat: int = typer.Option(1, "--repeat", help="Captures to take, each on a new trigger edge; 0: until Ctrl-C."),
-    timeout: float = typer.Option(None, "--timeout", help="Give up when the trigger has not fired this many "
-                                  "seconds after arming (default: wait until Ctrl-C)."),
+    timeout: float = typer.Option(
+        None,
+        "--timeout",
+        help="Give up when the trigger has not fired this many seconds after arming (default: wait until Ctrl-C).",
+    ),
     output: Path = typer.Option(None, "--output", "-o", help="Write the CSV here (default: stdout)."),
     force: bool = typer.Option(False, "--force", help="With --output: replace an existing file."),
     as_json: bool = typer.Option(False, "--json", help="The captures as JSON on stdout."),
@@ -73,7 +84,7 @@ def trace(
                 info(f"capture {cap.index}: {cap.timing.describe()}")
                 if plot:
                     _plot(cap, tracer, res)
-        except KeyboardInterrupt:       # the captures taken are written, then exit 130 as for any Ctrl-C
+        except KeyboardInterrupt:  # the captures taken are written, then exit 130 as for any Ctrl-C
             info(f"trace stopped by Ctrl-C after {len(captures)} capture(s)")
             interrupted = True
         except ServoError:
@@ -86,12 +97,18 @@ def trace(
     if not captures:
         b, e = tracer.buffer, tracer.trigger.entry if tracer.trigger else None
         seen = f"; {e.code} ranged {b.low:g}..{b.high:g} {e.unit}" if e is not None and b.low <= b.high else ""
-        raise ServoError(f"no capture: the trigger did not fire{' within --timeout' if tracer.timed_out else ''}"
-                         f"{seen}")
+        raise ServoError(f"no capture: the trigger did not fire{' within --timeout' if tracer.timed_out else ''}{seen}")
 
 
-def _write(captures: list[Capture], tracer: Tracer, about: list[str], output: Path | None, force: bool,
-           as_json: bool, plot: bool) -> None:
+def _write(
+    captures: list[Capture],
+    tracer: Tracer,
+    about: list[str],
+    output: Path | None,
+    force: bool,
+    as_json: bool,
+    plot: bool,
+) -> None:
     if not captures:
         return
     if output is not None:
@@ -106,8 +123,13 @@ def _write(captures: list[Capture], tracer: Tracer, about: list[str], output: Pa
 def _plot(cap: Capture, tracer: Tracer, res: Resolved) -> None:
     from servotool.report.terminal import terminal_chart
 
-    chart = terminal_chart(capture_table(cap, tracer.entries), min(out.width, 120), max(14, out.height - 4),
-                           f"capture {cap.index} ({res.profile.model})", color=sys.stdout.isatty())
+    chart = terminal_chart(
+        capture_table(cap, tracer.entries),
+        min(out.width, 120),
+        max(14, out.height - 4),
+        f"capture {cap.index} ({res.profile.model})",
+        color=sys.stdout.isatty(),
+    )
     print(chart.text)
     if chart.left_out:
         info(f"not drawn (no room): {', '.join(chart.left_out)}")

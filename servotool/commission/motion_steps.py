@@ -29,7 +29,7 @@ class JogStep(StepType):
         arg = step.arg
         if not isinstance(arg, dict) or set(arg) - JOG_KEYS or "speed" not in arg or "time" not in arg:
             raise UsageError("jog needs {speed: RPM, time: S} (optional max_travel)")
-        route = motion_route(profile, "jog")           # a JOG trigger or speed reference + servo-on
+        route = motion_route(profile, "jog")  # a JOG trigger or speed reference + servo-on
         speed = number_in(arg["speed"], "jog speed", -100_000, 100_000)
         secs = number_in(arg["time"], "jog time", 0, 600)
         if speed == 0 or secs == 0:
@@ -38,8 +38,10 @@ class JogStep(StepType):
         if "max_travel" in arg:
             limit = number_in(arg["max_travel"], "jog max_travel", 0, 10_000)
             if abs(speed) / 60 * secs > limit:
-                raise UsageError(f"a {secs:g} s JOG at {abs(speed):g} rpm travels about {abs(speed) / 60 * secs:.2f} "
-                                 f"rev, over its max_travel {limit:g} rev")
+                raise UsageError(
+                    f"a {secs:g} s JOG at {abs(speed):g} rpm travels about {abs(speed) / 60 * secs:.2f} "
+                    f"rev, over its max_travel {limit:g} rev"
+                )
         return f"jog {speed:g} rpm for {secs:g} s"
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
@@ -48,8 +50,10 @@ class JogStep(StepType):
         plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
         jogger.run(plan)
         bound = plan.dead_man
-        return Outcome(plan.describe() + (f"; {sentence(bound)}" if bound is not None else ""),
-                       {"dead_man": bound.as_json()} if bound is not None else {})
+        return Outcome(
+            plan.describe() + (f"; {sentence(bound)}" if bound is not None else ""),
+            {"dead_man": bound.as_json()} if bound is not None else {},
+        )
 
 
 def _waived(arg: Any) -> bool:
@@ -97,13 +101,19 @@ class TuneInertiaStep(StepType):
         if rigidity is not None and (isinstance(rigidity, bool) or not isinstance(rigidity, int)):
             raise UsageError(f"tune inertia rigidity must be a whole number, got {rigidity!r}")
         request = TuneRequest(
-            max_speed=number_in(opts["max_speed"], "tune inertia max_speed", 0, 100_000) if "max_speed" in opts
+            max_speed=number_in(opts["max_speed"], "tune inertia max_speed", 0, 100_000)
+            if "max_speed" in opts
             else None,
-            accel_time_ms=number_in(opts["accel_time"], "tune inertia accel_time", 20, 5000) if "accel_time" in opts
+            accel_time_ms=number_in(opts["accel_time"], "tune inertia accel_time", 20, 5000)
+            if "accel_time" in opts
             else None,
-            travel_rev=number_in(opts.get("travel", 2.0), "tune inertia travel", 0, 10_000), direction=direction,
-            repeats=None if repeats is None else int(repeats), gains=gains, rigidity=rigidity,
-            bandwidth_hz=None if bandwidth is None else number_in(bandwidth, "tune inertia bandwidth", 0, 10_000))
+            travel_rev=number_in(opts.get("travel", 2.0), "tune inertia travel", 0, 10_000),
+            direction=direction,
+            repeats=None if repeats is None else int(repeats),
+            gains=gains,
+            rigidity=rigidity,
+            bandwidth_hz=None if bandwidth is None else number_in(bandwidth, "tune inertia bandwidth", 0, 10_000),
+        )
         check_request(profile, request, "tune inertia")
         return request
 
@@ -111,10 +121,17 @@ class TuneInertiaStep(StepType):
         motion = self.request(step.arg, profile).nominal_motion(profile)
         gains = self.request(step.arg, profile).gains
         report = _report_option(step.arg)
-        reported = "" if profile.role("inertia_ratio") is not None else \
-            f"; the ratio is reported, not written ({profile.id} maps no inertia-ratio parameter)"
-        return f"tune inertia: {motion.describe()}" + ("" if gains else "; gains left as they are") + reported \
+        reported = (
+            ""
+            if profile.role("inertia_ratio") is not None
+            else f"; the ratio is reported, not written ({profile.id} maps no inertia-ratio parameter)"
+        )
+        return (
+            f"tune inertia: {motion.describe()}"
+            + ("" if gains else "; gains left as they are")
+            + reported
             + (f"; report to {report}" if report else "")
+        )
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         request = self.request(step.arg, drive.profile)
@@ -142,6 +159,8 @@ class TuneInertiaStep(StepType):
         if folder is not None:
             data["report"] = str(folder / "report.md")
         if entry is None:
-            return Outcome(f"load ratio {res.ratio:.2f} (nothing to write: {drive.profile.id} maps no "
-                           "inertia-ratio parameter)", data)
+            return Outcome(
+                f"load ratio {res.ratio:.2f} (nothing to write: {drive.profile.id} maps no inertia-ratio parameter)",
+                data,
+            )
         return Outcome(f"load ratio {res.ratio:.2f} -> {entry.code}={value:g}", data)

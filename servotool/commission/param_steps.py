@@ -40,14 +40,16 @@ class SetStep(StepType):
         if not any(st.name == "save" and st.index > step.index for st in ctx.plan.steps):
             # no later 'save:' stores it: a power-cycle parameter kept in RAM would be lost by that power cycle
             check_power_cycle(drive, [e for e, _, _ in plan.changes], None)
-        with persistence(drive, None):       # under the port's lock: no other process flips the switch meanwhile
+        with persistence(drive, None):  # under the port's lock: no other process flips the switch meanwhile
             done = params.apply_set(drive, plan)
         for r in done:
             ctx.wrote(drive, r.entry, r.new)
-        for entry, raw in plan.unchanged:      # already in RAM, maybe not in EEPROM: 'save:' stores them too
+        for entry, raw in plan.unchanged:  # already in RAM, maybe not in EEPROM: 'save:' stores them too
             ctx.wrote(drive, entry, raw)
-        return Outcome(f"{len(done)} written, {len(plan.unchanged)} already set",
-                       {"written": {r.entry.code: json_value(r.entry, r.new) for r in done}})
+        return Outcome(
+            f"{len(done)} written, {len(plan.unchanged)} already set",
+            {"written": {r.entry.code: json_value(r.entry, r.new) for r in done}},
+        )
 
 
 @dataclass(frozen=True)
@@ -109,14 +111,23 @@ class ExpectStep(StepType):
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         exps = self.expectations(step, drive.profile)
         readings = drive.read_entries([x.entry for x in exps])
-        values = {x.entry.code: r.eng for x, r in zip(exps, readings, strict=True)}     # as the entry holds it
-        bad = [f"{x.entry.code}={values[x.entry.code]:g} not in [{x.low:g}, {x.high:g}]"
-               for x in exps if not x.low <= values[x.entry.code] <= x.high]
+        values = {x.entry.code: r.eng for x, r in zip(exps, readings, strict=True)}  # as the entry holds it
+        bad = [
+            f"{x.entry.code}={values[x.entry.code]:g} not in [{x.low:g}, {x.high:g}]"
+            for x in exps
+            if not x.low <= values[x.entry.code] <= x.high
+        ]
         if bad:
             raise VerifyError("expectation failed: " + "; ".join(bad))
         meanings = {r.entry.code: r.entry.enum[r.raw] for r in readings if r.raw in r.entry.enum}
-        return Outcome("as expected", {"values": values, "units": {x.entry.code: x.entry.unit for x in exps},
-                                       **({"meanings": meanings} if meanings else {})})
+        return Outcome(
+            "as expected",
+            {
+                "values": values,
+                "units": {x.entry.code: x.entry.unit for x in exps},
+                **({"meanings": meanings} if meanings else {}),
+            },
+        )
 
 
 class _FileStep(StepType):
@@ -136,8 +147,11 @@ class BackupStep(StepType):
     def target(step: Step) -> tuple[str, bool]:
         arg = step.arg
         if isinstance(arg, dict):
-            if set(arg) - {"file", "overwrite"} or not isinstance(arg.get("file"), str) or \
-                    not isinstance(arg.get("overwrite", False), bool):
+            if (
+                set(arg) - {"file", "overwrite"}
+                or not isinstance(arg.get("file"), str)
+                or not isinstance(arg.get("overwrite", False), bool)
+            ):
                 raise UsageError("backup takes a file name, or {file: NAME, overwrite: true|false}")
             arg, overwrite = arg["file"], arg.get("overwrite", False)
         else:
@@ -153,7 +167,7 @@ class BackupStep(StepType):
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         name, overwrite = self.target(step)
         path = ctx.path(name, drive.unit)
-        if path.exists() and not overwrite:     # before reading the drive: a refusal costs nothing
+        if path.exists() and not overwrite:  # before reading the drive: a refusal costs nothing
             raise UsageError(f"{path} exists; the step must say 'overwrite: true' to replace it")
         written = backup.write_backup(drive, path, force=overwrite)
         return Outcome(f"saved to {written}", {"file": str(written)})
@@ -181,8 +195,10 @@ class SaveStep(StepType):
             profile.need_role("eeprom_save", "save")
             return "store parameters in EEPROM"
         if mode == "switchable":
-            return (f"store the values this plan wrote in EEPROM (rewritten with {profile.persistence.switch_code} "
-                    "set to EEPROM, then put back)")
+            return (
+                f"store the values this plan wrote in EEPROM (rewritten with {profile.persistence.switch_code} "
+                "set to EEPROM, then put back)"
+            )
         return "save (the drive stores every write already)"
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
@@ -194,7 +210,6 @@ class SaveStep(StepType):
         if mode == "immediate":
             return Outcome("nothing to do: the drive stores every write", {"stored": [e.code for e, _ in written]})
         with persistence(drive, save=True):
-            for entry, raw in written:     # the same value again, now with the switch set to EEPROM
+            for entry, raw in written:  # the same value again, now with the switch set to EEPROM
                 params.write_one(drive, entry, raw, raw)
-        return Outcome(f"{count(len(written), 'value')} stored in EEPROM",
-                       {"stored": [e.code for e, _ in written]})
+        return Outcome(f"{count(len(written), 'value')} stored in EEPROM", {"stored": [e.code for e, _ in written]})

@@ -21,8 +21,18 @@ TOP_KEYS = {"port", "profile", "units", "unit", "steps", "baud", "parity", "stop
 JOG_KEYS = {"speed", "time", "max_travel", "no_dead_man"}
 
 
-TUNE_KEYS = {"rigidity", "bandwidth", "travel", "max_speed", "accel_time", "direction", "repeats", "gains", "report",
-             "no_dead_man"}
+TUNE_KEYS = {
+    "rigidity",
+    "bandwidth",
+    "travel",
+    "max_speed",
+    "accel_time",
+    "direction",
+    "repeats",
+    "gains",
+    "report",
+    "no_dead_man",
+}
 
 
 @dataclass
@@ -43,7 +53,7 @@ class Plan:
     options: dict[str, Any]
     units: list[int]
     steps: list[Step]
-    problems: list[str] = field(default_factory=list)     # step errors found while loading, reported by validate
+    problems: list[str] = field(default_factory=list)  # step errors found while loading, reported by validate
 
 
 def _fail(path: Path, line: int, msg: str) -> UsageError:
@@ -63,8 +73,7 @@ def load_plan(path: Path) -> Plan:
         key_lines[k.value] = k.start_mark.line + 1
     for key in data:
         if key not in TOP_KEYS:
-            raise _fail(path, key_lines.get(str(key), 1),
-                        f"unknown key '{key}' (known: {', '.join(sorted(TOP_KEYS))})")
+            raise _fail(path, key_lines.get(str(key), 1), f"unknown key '{key}' (known: {', '.join(sorted(TOP_KEYS))})")
     try:
         options_from({k: v for k, v in data.items() if k not in ("steps", "units", "unit")}, "plan")
     except UsageError as exc:
@@ -72,8 +81,9 @@ def load_plan(path: Path) -> Plan:
         raise _fail(path, key_lines.get(bad, 1), str(exc).removeprefix("plan: ")) from None
     units = _unit_list(data.get("units", data.get("unit")))
     if units is False:
-        raise _fail(path, key_lines.get("units", key_lines.get("unit", 1)),
-                    "units must be a list of different unit ids 1..247")
+        raise _fail(
+            path, key_lines.get("units", key_lines.get("unit", 1)), "units must be a list of different unit ids 1..247"
+        )
     steps_node = next((v for k, v in root.value if k.value == "steps"), None)
     raw_steps = data.get("steps")
     if not isinstance(raw_steps, list) or not raw_steps or steps_node is None:
@@ -82,7 +92,7 @@ def load_plan(path: Path) -> Plan:
     for i, (raw, node) in enumerate(zip(raw_steps, steps_node.value, strict=True)):
         try:
             steps.append(_step(path, i, raw, node.start_mark.line + 1, units))
-        except UsageError as exc:        # every step's problem is reported, in one pass (validate raises)
+        except UsageError as exc:  # every step's problem is reported, in one pass (validate raises)
             problems.append(str(exc))
     options = {k: v for k, v in data.items() if k not in ("steps", "units", "unit")}
     return Plan(path, options, units or [], steps, problems)
@@ -93,8 +103,7 @@ def _step(path: Path, i: int, raw: Any, line: int, units: list[int] | bool | Non
         raise _fail(path, line, f"step {i + 1}: expected '- NAME: ARGUMENT'")
     names = [k for k in raw if k != "unit"]
     if len(names) != 1 or names[0] not in STEP_NAMES:
-        raise _fail(path, line, f"step {i + 1}: unknown step {names or raw!r} "
-                                f"(steps: {', '.join(STEP_NAMES)})")
+        raise _fail(path, line, f"step {i + 1}: unknown step {names or raw!r} (steps: {', '.join(STEP_NAMES)})")
     step_units = _unit_list(raw.get("unit"))
     if step_units is False:
         raise _fail(path, line, f"step {i + 1}: unit must be an id or a list of different ids 1..247")
@@ -108,7 +117,10 @@ def _unit_list(value: Any) -> list[int] | bool | None:
     if value is None:
         return None
     ids = [value] if isinstance(value, int) else value
-    ok = (isinstance(ids, list) and ids and len(set(ids)) == len(ids)
-          and all(isinstance(u, int) and not isinstance(u, bool) and 1 <= u <= 247 for u in ids))
+    ok = (
+        isinstance(ids, list)
+        and ids
+        and len(set(ids)) == len(ids)
+        and all(isinstance(u, int) and not isinstance(u, bool) and 1 <= u <= 247 for u in ids)
+    )
     return ids if ok else False
-

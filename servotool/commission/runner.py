@@ -32,25 +32,42 @@ class StepResult:
     data: dict[str, Any] = field(default_factory=dict)
 
     def as_json(self) -> dict[str, Any]:
-        return {"step": self.step.index + 1, "line": self.step.line, "name": self.step.name, "unit": self.unit,
-                "ok": self.ok, "detail": self.detail, "seconds": round(self.seconds, 3), **self.data}
+        return {
+            "step": self.step.index + 1,
+            "line": self.step.line,
+            "name": self.step.name,
+            "unit": self.unit,
+            "ok": self.ok,
+            "detail": self.detail,
+            "seconds": round(self.seconds, 3),
+            **self.data,
+        }
 
 
 class Runner:
     """Runs a validated plan on open drives, step by step (each on every axis it names), by its step type."""
 
-    def __init__(self, plan: Plan, drives: list[Drive], *, yes: bool, continue_on_error: bool,
-                 ask: Callable[[int, str], bool], log: Callable[[str], None],
-                 word: Callable[[ServoError], str] = str, clock: Clock | None = None) -> None:
+    def __init__(
+        self,
+        plan: Plan,
+        drives: list[Drive],
+        *,
+        yes: bool,
+        continue_on_error: bool,
+        ask: Callable[[int, str], bool],
+        log: Callable[[str], None],
+        word: Callable[[ServoError], str] = str,
+        clock: Clock | None = None,
+    ) -> None:
         """word turns a failed step's error into its report line (the CLI adds fix commands)."""
         self.plan, self.drives = plan, drives
         self.clock = clock or RealClock()
         self.continue_on_error, self.log, self.word = continue_on_error, log, word
         self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives}, self.clock)
         self.results: list[StepResult] = []
-        self.current: Step | None = None         # the step running (or the last one run)
+        self.current: Step | None = None  # the step running (or the last one run)
         self.auto_backups: dict[int, str] = {}
-        self.after_step: Callable[[], None] = lambda: None     # e.g. rewrite the report
+        self.after_step: Callable[[], None] = lambda: None  # e.g. rewrite the report
 
     def check_units(self) -> None:
         """Every axis answers before the first step writes anything."""
@@ -103,8 +120,13 @@ def read_report(path: Path) -> dict[str, Any] | None:
     if not isinstance(data, dict) or "status" not in data:
         return None
     pid = data.get("pid")
-    if data["status"] == "running" and data.get("host") == socket.gethostname() and isinstance(pid, int) \
-            and not isinstance(pid, bool) and process_alive(pid) is False:
+    if (
+        data["status"] == "running"
+        and data.get("host") == socket.gethostname()
+        and isinstance(pid, int)
+        and not isinstance(pid, bool)
+        and process_alive(pid) is False
+    ):
         data = {**data, "status": STALE, "ok": False}
     return data
 
@@ -118,15 +140,24 @@ class Report:
 
     def __init__(self, path: Path, runner: Runner, *, profile: str, port: str, units: list[int]) -> None:
         self.path, self.runner = path, runner
-        self.head: dict[str, Any] = {"plan": str(runner.plan.path), "profile": profile, "port": port,
-                                     "units": units, "pid": os.getpid(), "host": socket.gethostname()}
+        self.head: dict[str, Any] = {
+            "plan": str(runner.plan.path),
+            "profile": profile,
+            "port": port,
+            "units": units,
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+        }
         old = read_report(path)
         self.previous = old if old is not None and old["status"] == STALE else None
         if self.previous is not None:
             steps = self.previous.get("steps")
             self.head["previous_run"] = {
-                "status": STALE, "pid": self.previous.get("pid"), "updated": self.previous.get("updated"),
-                "steps_done": len(steps) if isinstance(steps, list) else 0}
+                "status": STALE,
+                "pid": self.previous.get("pid"),
+                "updated": self.previous.get("updated"),
+                "steps_done": len(steps) if isinstance(steps, list) else 0,
+            }
         self.t0 = runner.clock.now()
 
     def write(self, status: str) -> dict[str, Any]:
@@ -134,10 +165,16 @@ class Report:
 
         r = self.runner
         stamp = utc_now(r.clock).astimezone().strftime("%Y-%m-%dT%H:%M:%S%z")
-        report = {**self.head, "status": status, "ok": status == "ok", "tool_version": __version__,
-                  "seconds": round(r.clock.now() - self.t0, 2), "auto_backups": r.auto_backups,
-                  "finished" if status != "running" else "updated": stamp,
-                  "steps": [x.as_json() for x in r.results]}
+        report = {
+            **self.head,
+            "status": status,
+            "ok": status == "ok",
+            "tool_version": __version__,
+            "seconds": round(r.clock.now() - self.t0, 2),
+            "auto_backups": r.auto_backups,
+            "finished" if status != "running" else "updated": stamp,
+            "steps": [x.as_json() for x in r.results],
+        }
         try:
             write_atomic(self.path, json.dumps(report, indent=2, default=str) + "\n")
         except OSError as exc:

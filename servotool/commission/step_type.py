@@ -19,7 +19,7 @@ class RunContext:
     """The plan run around one step: operator answers, what the plan wrote so far (for 'save'), the clock."""
 
     plan: Plan
-    several: bool                                # more than one axis: file names get the unit
+    several: bool  # more than one axis: file names get the unit
     yes: bool
     ask: Callable[[int, str], bool]
     written: dict[int, dict[str, tuple[Entry, int]]] = field(default_factory=dict)

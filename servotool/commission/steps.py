@@ -63,9 +63,21 @@ class PromptStep(StepType):
         return Outcome(f"confirmed: {step.arg}")
 
 
-STEP_TYPES: dict[str, StepType] = {t.name: t for t in (
-    SetStep(), ExpectStep(), BackupStep(), RestoreStep(), JogStep(), TuneInertiaStep(), WaitStep(),
-    AlarmClearStep(), SaveStep(), PromptStep())}
+STEP_TYPES: dict[str, StepType] = {
+    t.name: t
+    for t in (
+        SetStep(),
+        ExpectStep(),
+        BackupStep(),
+        RestoreStep(),
+        JogStep(),
+        TuneInertiaStep(),
+        WaitStep(),
+        AlarmClearStep(),
+        SaveStep(),
+        PromptStep(),
+    )
+}
 
 
 def step_type(step: Step) -> StepType:

@@ -50,12 +50,14 @@ class _Op:
         self.what, self.retries, self.timeout, self.outcome = what, retries, timeout, outcome
         self.tries = 0
         self.faults = 0
-        self.troubled = False       # a fault or stray bytes: the line's replies need proof
+        self.troubled = False  # a fault or stray bytes: the line's replies need proof
 
     def begin(self) -> None:
         if self.tries >= 2 * (self.retries + 2):
-            raise DeviceError(f"{self.what}: no two reads in a row agreed after {self._tries()} (a value that "
-                              f"changes by itself, or stray replies on the line); nothing was used")
+            raise DeviceError(
+                f"{self.what}: no two reads in a row agreed after {self._tries()} (a value that "
+                f"changes by itself, or stray replies on the line); nothing was used"
+            )
         self.tries += 1
 
     def spend(self, fault: LineFault) -> None:
@@ -70,14 +72,20 @@ class _Op:
     def error(self, fault: LineFault) -> DeviceError:
         tries = self._tries()
         if fault.kind == "silent":
-            text = (f"no response within {self.timeout:g} s after {tries} "
-                    f"(wrong unit id, baud/parity, wiring, or the drive is off)")
+            text = (
+                f"no response within {self.timeout:g} s after {tries} "
+                f"(wrong unit id, baud/parity, wiring, or the drive is off)"
+            )
         elif fault.kind == "garbled":
-            text = (f"garbled response after {tries}, {fault.received} bytes with a bad CRC or framing "
-                    f"(noise, termination, baud/parity mismatch, or two masters on the line)")
+            text = (
+                f"garbled response after {tries}, {fault.received} bytes with a bad CRC or framing "
+                f"(noise, termination, baud/parity mismatch, or two masters on the line)"
+            )
         else:
-            text = (f"no reply that answers it after {tries}, last {fault.why} (a late or repeated reply, an "
-                    f"echoing adapter, or two masters on the line)")
+            text = (
+                f"no reply that answers it after {tries}, last {fault.why} (a late or repeated reply, an "
+                f"echoing adapter, or two masters on the line)"
+            )
         error = DeviceError(f"{self.what}: {text}{'; ' + self.outcome if self.outcome else ''}")
         error.fault = fault.kind
         return error
@@ -86,37 +94,55 @@ class _Op:
 class Exchange:
     """Reads and writes over a Wire with reply matching, quiet-and-flush after faults, and confirmation."""
 
-    def __init__(self, wire: Wire, *, timeout: float, retries: int, settle: float = 0.0, turnaround: float = 0.0,
-                 echo: bool | None = False, trace: Trace | None = None,
-                 clock: Clock | None = None) -> None:
+    def __init__(
+        self,
+        wire: Wire,
+        *,
+        timeout: float,
+        retries: int,
+        settle: float = 0.0,
+        turnaround: float = 0.0,
+        echo: bool | None = False,
+        trace: Trace | None = None,
+        clock: Clock | None = None,
+    ) -> None:
         self.wire, self.timeout, self.retries, self.settle = wire, timeout, retries, settle
-        self.turnaround = turnaround         # quiet after the last byte heard, before a request
-        self._heard = -float("inf")                         # when the last byte came
-        self.echo = echo                   # the adapter echoes what we send; None: find out
-        self.late_window = timeout         # how long after its timeout a late reply may still come
-        self.flush_gap = FRAME_GAP         # the silence that ends what is left of a failed try
+        self.turnaround = turnaround  # quiet after the last byte heard, before a request
+        self._heard = -float("inf")  # when the last byte came
+        self.echo = echo  # the adapter echoes what we send; None: find out
+        self.late_window = timeout  # how long after its timeout a late reply may still come
+        self.flush_gap = FRAME_GAP  # the silence that ends what is left of a failed try
         self.trace, self.clock = trace, clock or RealClock()
         self.requests = 0
-        self._suspect = False              # the last operation met a fault: confirm the next reads
+        self._suspect = False  # the last operation met a fault: confirm the next reads
         self._recent: deque[Request] = deque(maxlen=8)
 
     # ----- operations ----------------------------------------------------------------------------------------
     def read(self, unit: int, address: int, count: int) -> list[int]:
-        op = _Op(f"read {count} register(s) at {address} (0x{address:04X}) from unit {unit}", self.retries,
-                 self.timeout)
+        op = _Op(
+            f"read {count} register(s) at {address} (0x{address:04X}) from unit {unit}", self.retries, self.timeout
+        )
         try:
             return self._read(Request(unit, READ, address, count), op)
         finally:
             self._suspect = op.troubled
 
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True,
-              idempotent: bool = True) -> None:
+    def write(
+        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+    ) -> None:
         fc = WRITE_ONE if len(values) == 1 and not multiple else WRITE_MANY
         req = Request(unit, fc, address, len(values), tuple(values))
-        outcome = ("the drive may or may not hold the new value" if idempotent else
-                   "it may or may not have run; not sent again, since running it twice is not safe")
-        op = _Op(f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}", self.retries,
-                 self.timeout, outcome)
+        outcome = (
+            "the drive may or may not hold the new value"
+            if idempotent
+            else "it may or may not have run; not sent again, since running it twice is not safe"
+        )
+        op = _Op(
+            f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}",
+            self.retries,
+            self.timeout,
+            outcome,
+        )
         if self.echo is None and fc == WRITE_ONE:
             self._probe_echo(unit, address)
         refused: int | None = None
@@ -164,7 +190,7 @@ class Exchange:
         alone cannot tell echo from reply): any answer to a one-register read tells, even an exception."""
         try:
             self._attempt(Request(unit, READ, address, 1), _Op("echo probe", 0, self.timeout))
-        except (LineFault, DeviceError):      # ModbusException too: the reply's head already told
+        except (LineFault, DeviceError):  # ModbusException too: the reply's head already told
             pass
 
     def _holds(self, req: Request, op: _Op) -> bool:
@@ -172,25 +198,27 @@ class Exchange:
         try:
             return self._read(Request(req.unit, READ, req.address, req.count), op) == list(req.values)
         except ModbusException:
-            return False        # not readable here: cannot tell, and the write is safe to repeat
+            return False  # not readable here: cannot tell, and the write is safe to repeat
 
     def _ambiguous(self, req: Request) -> bool:
         """Whether a stale reply to a recent request could pass for this read's reply (same unit and register
         count, other address). A stale reply to the very same read carries the same registers."""
-        return any(r.fc == READ and r.unit == req.unit and r.count == req.count and r.address != req.address
-                   for r in self._recent)
+        return any(
+            r.fc == READ and r.unit == req.unit and r.count == req.count and r.address != req.address
+            for r in self._recent
+        )
 
     # ----- one try ------------------------------------------------------------------------------------------
     def _attempt(self, req: Request, op: _Op) -> list[int]:
         try:
             return self._try(req, op)
-        except OSError as exc:         # ConnectionError too: the port or socket is gone
+        except OSError as exc:  # ConnectionError too: the port or socket is gone
             raise DeviceError(f"{op.what}: link lost ({exc or type(exc).__name__})") from None
 
     def _try(self, req: Request, op: _Op) -> list[int]:
         op.begin()
         if self._take_pending(0.0):
-            op.troubled = True          # bytes nobody asked for: a late or repeated reply
+            op.troubled = True  # bytes nobody asked for: a late or repeated reply
         if (wait := self._heard + self.turnaround - self.clock.now()) > 0:
             self.clock.sleep(wait)
         self.requests += 1
@@ -230,7 +258,7 @@ class Exchange:
                 raise LineFault("garbled" if buf else "silent", len(buf), "a partial reply")
             chunk = self._recv(min(left, FRAME_GAP) if buf else left)
             if buf and not chunk:
-                raise LineFault("garbled", len(buf), "a partial reply")    # the line went quiet mid-frame
+                raise LineFault("garbled", len(buf), "a partial reply")  # the line went quiet mid-frame
             buf += chunk
 
     def _skip_echo(self, req: Request, deadline: float) -> bytes:
@@ -253,7 +281,7 @@ class Exchange:
             if len(buf) < 2 * len(sent):
                 raise LineFault("stray", len(buf), "one copy of a write that may be an echo")
         self.echo = True
-        return buf[len(sent):]
+        return buf[len(sent) :]
 
     # ----- the line -----------------------------------------------------------------------------------------
     def _quiet(self, fault: LineFault, sent_at: float) -> None:

@@ -16,7 +16,7 @@ from servotool.link.exchange import Exchange, Wire
 from servotool.link.ports import LinkSettings, Trace, open_serial, open_tcp, parse_tcp
 from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, Request
 
-if TYPE_CHECKING:     # pyserial's platform module (serialposix imports fcntl) loads only with a real port
+if TYPE_CHECKING:  # pyserial's platform module (serialposix imports fcntl) loads only with a real port
     import serial
 
 
@@ -37,8 +37,15 @@ class ModbusLink:
             self._port = open_serial(settings.port, settings.line, settings.timeout)
             wire = _SerialWire(self._port)
         silence = settings.silence if settings.silence is not None else 0.0 if tcp else _frame_gap(settings.line.baud)
-        self._exchange = Exchange(wire, timeout=settings.timeout, retries=settings.retries, settle=silence,
-                                  turnaround=settings.turnaround, echo=settings.echo, trace=trace)
+        self._exchange = Exchange(
+            wire,
+            timeout=settings.timeout,
+            retries=settings.retries,
+            settle=silence,
+            turnaround=settings.turnaround,
+            echo=settings.echo,
+            trace=trace,
+        )
 
     @property
     def requests(self) -> int:
@@ -53,8 +60,9 @@ class ModbusLink:
     def read(self, unit: int, address: int, count: int) -> list[int]:
         return self._exchange.read(unit, address, count)
 
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True,
-              idempotent: bool = True) -> None:
+    def write(
+        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+    ) -> None:
         self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent)
 
     def hurry(self) -> None:
@@ -89,7 +97,7 @@ class _SocketWire:
 
 
 class _SerialWire:
-    def __init__(self, port: serial.SerialBase) -> None:   # pyserial, opened by pymodbus
+    def __init__(self, port: serial.SerialBase) -> None:  # pyserial, opened by pymodbus
         self.port = port
 
     def send(self, data: bytes) -> None:

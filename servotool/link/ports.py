@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Protocol
 from servotool.errors import DeviceError, UsageError
 from servotool.model.profile import LineSettings
 
-if TYPE_CHECKING:     # pyserial's platform module (serialposix imports termios) loads only when a port opens
+if TYPE_CHECKING:  # pyserial's platform module (serialposix imports termios) loads only when a port opens
     import serial
 
 Trace = Callable[[bool, bytes], None]
@@ -30,8 +30,8 @@ class LinkSettings:
     line: LineSettings = field(default_factory=LineSettings)
     timeout: float = 1.0
     retries: int = 2
-    echo: bool | None = False     # the adapter echoes what it sends (None: find out from the first replies)
-    turnaround: float = 0.0       # s of quiet after a reply before the next request (slow drives' transceivers)
+    echo: bool | None = False  # the adapter echoes what it sends (None: find out from the first replies)
+    turnaround: float = 0.0  # s of quiet after a reply before the next request (slow drives' transceivers)
     silence: float | None = None  # s of quiet that ends a frame; None: RTU's 3.5 characters at the baud rate
 
 
@@ -39,11 +39,13 @@ class Link(Protocol):
     """What drive operations need from a Modbus master."""
 
     def read(self, unit: int, address: int, count: int) -> list[int]: ...
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True,
-              idempotent: bool = True) -> None:
+    def write(
+        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+    ) -> None:
         """Write registers. idempotent=False (an Fn trigger) means a write whose fate is unknown is never sent
         again; an idempotent one may be."""
         ...
+
     def close(self) -> None: ...
 
 
@@ -70,9 +72,16 @@ def open_serial(port: str, line: LineSettings, timeout: float) -> serial.Serial:
     import serial
 
     try:
-        return serial.Serial(port, baudrate=line.baud, bytesize=line.bytesize, parity=line.parity,
-                             stopbits=line.stopbits, timeout=timeout, exclusive=True)
-    except Exception as exc:       # SerialException, OSError, termios.error (not an OSError), ValueError
+        return serial.Serial(
+            port,
+            baudrate=line.baud,
+            bytesize=line.bytesize,
+            parity=line.parity,
+            stopbits=line.stopbits,
+            timeout=timeout,
+            exclusive=True,
+        )
+    except Exception as exc:  # SerialException, OSError, termios.error (not an OSError), ValueError
         raise DeviceError(f"cannot open port {port}: {port_problem(port, exc, line)}") from None
 
 
@@ -104,7 +113,7 @@ def port_problem(port: str, exc: BaseException, line: LineSettings | None = None
     tcp = parse_tcp(port) if port.startswith("tcp://") else None
     where = f"{tcp[0]}:{tcp[1]}" if tcp else port
     text, code = str(exc), _errno(exc)
-    if isinstance(exc, socket.gaierror) or (code is not None and code < 0):     # getaddrinfo's EAI_* codes
+    if isinstance(exc, socket.gaierror) or (code is not None and code < 0):  # getaddrinfo's EAI_* codes
         why = exc.strerror if isinstance(exc, socket.gaierror) else text
         return f"host name '{tcp[0] if tcp else port}' not found (DNS lookup failed: {why})"
     if isinstance(exc, ConnectionRefusedError) or code == errno.ECONNREFUSED:
@@ -127,8 +136,10 @@ def port_problem(port: str, exc: BaseException, line: LineSettings | None = None
         return "not a serial device"
     if code == errno.EINVAL and line is not None:
         if line.parity != "N":
-            return (f"the port cannot do parity {line.parity} ({PARITY_NAMES[line.parity]}) (a pty or some adapters "
-                    f"have no parity): set --parity N on both ends, or use a real serial port")
+            return (
+                f"the port cannot do parity {line.parity} ({PARITY_NAMES[line.parity]}) (a pty or some adapters "
+                f"have no parity): set --parity N on both ends, or use a real serial port"
+            )
         return f"the port cannot do {line.describe()} (baud rate, data or stop bits)"
     return text or type(exc).__name__
 
@@ -153,7 +164,9 @@ def latency_advice(port: str, sysfs: Path = SYSFS_USB_SERIAL) -> str | None:
     if ms is None or ms <= 1:
         return None
     path = sysfs / os.path.basename(os.path.realpath(port)) / "latency_timer"
-    return (f"{port}: the USB adapter holds received bytes up to {ms} ms (latency_timer), so every reply waits and "
-            f"the link makes at most about {1000 // ms} requests/s; lower it with 'echo 1 | sudo tee {path}' (until "
-            f"unplugged) or for good with a udev rule: ACTION==\"add\", SUBSYSTEM==\"usb-serial\", "
-            f"DRIVER==\"ftdi_sio\", ATTR{{latency_timer}}=\"1\"")
+    return (
+        f"{port}: the USB adapter holds received bytes up to {ms} ms (latency_timer), so every reply waits and "
+        f"the link makes at most about {1000 // ms} requests/s; lower it with 'echo 1 | sudo tee {path}' (until "
+        f'unplugged) or for good with a udev rule: ACTION=="add", SUBSYSTEM=="usb-serial", '
+        f'DRIVER=="ftdi_sio", ATTR{{latency_timer}}="1"'
+    )

@@ -99,7 +99,7 @@ class Request:
             raise ModbusException(frame[2], what)
         if self.fc == READ:
             data = frame[3:-2]
-            return [int.from_bytes(data[i:i + 2], "big") for i in range(0, len(data), 2)]
+            return [int.from_bytes(data[i : i + 2], "big") for i in range(0, len(data), 2)]
         echoed = int.from_bytes(frame[2:4], "big"), int.from_bytes(frame[4:6], "big")
         expected = (self.address, self.values[0] if self.fc == WRITE_ONE else self.count)
         if echoed != expected:

@@ -53,8 +53,14 @@ class Checker:
 
 def kind_name(kind: type | tuple[type, ...]) -> str:
     kinds = kind if isinstance(kind, tuple) else (kind,)
-    names = {int: "an integer", float: "a number", str: "a string", dict: "a mapping", list: "a list",
-             bool: "true/false"}
+    names = {
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        dict: "a mapping",
+        list: "a list",
+        bool: "true/false",
+    }
     return " or ".join(names.get(k, k.__name__) for k in kinds)
 
 

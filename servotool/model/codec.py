@@ -99,8 +99,9 @@ def field_index(entry: Entry, name: str) -> int:
     """Position of a field (0 = lowest), case-insensitive; UsageError naming the valid fields."""
     names = [f.upper() for f in entry.fields]
     if entry.format != "digits":
-        raise UsageError(f"{entry.code} ({entry.name}) has no fields: CODE.FIELD works only for two-/four-parameter "
-                         f"(d/b) entries")
+        raise UsageError(
+            f"{entry.code} ({entry.name}) has no fields: CODE.FIELD works only for two-/four-parameter (d/b) entries"
+        )
     if name.strip().upper() not in names:
         raise UsageError(f"{entry.code}: unknown field '{name.strip()}' (fields: {', '.join(reversed(entry.fields))})")
     return names.index(name.strip().upper())
@@ -113,7 +114,7 @@ def split_field(profile: Profile, text: str) -> tuple[Entry, str | None]:
         return profile.entry(text), None
     code, _, name = text.rpartition(".")
     if profile.find(code) is None:
-        return profile.entry(text), None        # unknown as a whole ('H08.00' on a drive without H08-00)
+        return profile.entry(text), None  # unknown as a whole ('H08.00' on a drive without H08-00)
     entry = profile.entry(code)
     return entry, entry.fields[field_index(entry, name)]
 
@@ -148,7 +149,7 @@ def format_value(entry: Entry, raw: int) -> str:
     """Text of a raw value in the form the manual shows."""
     if entry.format == "digits":
         if not _displayable(entry, raw):
-            return f"0x{raw & 0xFFFF:04X}"     # not a panel value (a drive fault or a foreign write): show it exactly
+            return f"0x{raw & 0xFFFF:04X}"  # not a panel value (a drive fault or a foreign write): show it exactly
         # Fields are listed from the lowest up; the panel shows the highest first, after its mode flag:
         # two-param 'd Y X' with blank leading zeros (the manual's 'd 1 21', example 5 'd_1_10'),
         # four-param 'b' and one digit per field ('b1200', example 6 'b1234').
@@ -220,9 +221,11 @@ def _parse_number(entry: Entry, text: str, *, raw: bool) -> int:
     what = f"{entry.code} ({entry.name})"
     if not raw and entry.scale != 1 and re.fullmatch(r"[+-]?0[xXbB][0-9a-fA-F]+", text):
         # A hex/binary literal is a register pattern; read as engineering units it would be off by the scale.
-        raise UsageError(f"{what}: {text} reads as a raw register value; give the value in "
-                         f"{entry.unit or 'units'} (resolution {entry.scale:g}) or use --raw")
-    if not text.isascii() or "_" in text:       # float() takes '٣', '５' and '1_0'; a drive value is plain digits
+        raise UsageError(
+            f"{what}: {text} reads as a raw register value; give the value in "
+            f"{entry.unit or 'units'} (resolution {entry.scale:g}) or use --raw"
+        )
+    if not text.isascii() or "_" in text:  # float() takes '٣', '５' and '1_0'; a drive value is plain digits
         raise UsageError(f"{what}: '{text}' is not a number (plain ASCII digits, e.g. 3 or 2.5)")
     try:
         if re.fullmatch(r"[+-]?0[xX][0-9a-fA-F]+", text):
@@ -274,17 +277,23 @@ def _parse_encoded(entry: Entry, text: str, current: int | None) -> int | None:
         if m.group(1).lower() != flag:
             kind = "two-parameter (d Y X)" if width == 8 else "four-parameter (b D C B A)"
             raise UsageError(f"{entry.code}: '{text}' has the wrong mode flag: it is a {kind} value, e.g. {example}")
-        body = [p for p in re.split(r"[\s_,]+", text[m.end():]) if p]
+        body = [p for p in re.split(r"[\s_,]+", text[m.end() :]) if p]
         if width == 4 and len(body) == 1 and len(body[0]) == n:
             body = list(body[0])
         if len(body) != n:
-            raise UsageError(f"{entry.code}: '{text}' needs {n} fields ({' '.join(reversed(entry.fields))}), "
-                             f"e.g. {example}")
+            raise UsageError(
+                f"{entry.code}: '{text}' needs {n} fields ({' '.join(reversed(entry.fields))}), e.g. {example}"
+            )
         return _pack(entry, [_field_int(entry, i, p) for i, p in enumerate(reversed(body))])
     if len(parts) == n and n > 1:
         return _pack(entry, [_field_int(entry, i, p) for i, p in enumerate(reversed(parts))])
-    if width == 4 and len(parts) == 1 and len(parts[0]) == n and parts[0].isalnum() \
-            and not parts[0].lower().startswith("0x"):
+    if (
+        width == 4
+        and len(parts) == 1
+        and len(parts[0]) == n
+        and parts[0].isalnum()
+        and not parts[0].lower().startswith("0x")
+    ):
         return _pack(entry, [_field_int(entry, i, c) for i, c in enumerate(reversed(parts[0]))])
     return None
 
@@ -304,12 +313,13 @@ def _field_int(entry: Entry, idx: int, text: str) -> int:
     except ValueError:
         v = None
     meanings = entry.field_enums.get(name.upper(), {})
-    if v is None and meanings:       # a field's meaning by name, as for a whole entry (Po001.X=bus)
+    if v is None and meanings:  # a field's meaning by name, as for a whole entry (Po001.X=bus)
         v = enum_value(meanings, text)
         if v is None:
             choices = ", ".join(f"{k}={m}" for k, m in sorted(meanings.items()))
-            raise UsageError(f"{entry.code}: field {name} value '{text}' is none of {choices}"
-                             f"{did_you_mean(text, meanings.values())}")
+            raise UsageError(
+                f"{entry.code}: field {name} value '{text}' is none of {choices}{did_you_mean(text, meanings.values())}"
+            )
     if v is None:
         raise UsageError(f"{entry.code}: field {name} value '{text}' is not a digit")
     lo, hi = field_range(entry, name)

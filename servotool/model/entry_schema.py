@@ -18,9 +18,34 @@ from servotool.model.profile import (
 )
 
 ENTRY_KEYS = {
-    "code", "class", "name", "address", "type", "word_order", "combine", "digits", "scale", "unit", "min",
-    "max", "default", "access", "effect", "group", "description", "source", "unverified", "format", "fields",
-    "field_width", "field_ranges", "field_enums", "bits", "enum", "trigger", "copy",
+    "code",
+    "class",
+    "name",
+    "address",
+    "type",
+    "word_order",
+    "combine",
+    "digits",
+    "scale",
+    "unit",
+    "min",
+    "max",
+    "default",
+    "access",
+    "effect",
+    "group",
+    "description",
+    "source",
+    "unverified",
+    "format",
+    "fields",
+    "field_width",
+    "field_ranges",
+    "field_enums",
+    "bits",
+    "enum",
+    "trigger",
+    "copy",
 }
 
 
@@ -30,8 +55,9 @@ def _typed_range(type_name: str) -> tuple[int, int]:
     return (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
 
 
-def _parse_fields(chk: Checker, raw: dict[str, Any], loc: str, fmt: str, fields: list[str], width: int,
-                  default: int | None) -> tuple[dict[str, tuple[int, int]], dict[str, dict[int, str]]]:
+def _parse_fields(
+    chk: Checker, raw: dict[str, Any], loc: str, fmt: str, fields: list[str], width: int, default: int | None
+) -> tuple[dict[str, tuple[int, int]], dict[str, dict[int, str]]]:
     """field_ranges / field_enums of a digit entry: known field names, ranges within the panel's digits, the
     default's fields inside their ranges."""
     ranges: dict[str, tuple[int, int]] = {}
@@ -56,8 +82,11 @@ def _parse_fields(chk: Checker, raw: dict[str, Any], loc: str, fmt: str, fields:
             if key == "field_enums":
                 enums[str(name).upper()] = int_map(chk, value, where)
                 continue
-            ok = isinstance(value, list) and len(value) == 2 and all(
-                isinstance(v, int) and not isinstance(v, bool) for v in value)
+            ok = (
+                isinstance(value, list)
+                and len(value) == 2
+                and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+            )
             if not ok or not 0 <= value[0] <= value[1] <= limit:
                 chk.bad(where, f"expected [lo, hi] with 0 <= lo <= hi <= {limit}")
                 continue
@@ -72,16 +101,20 @@ def _parse_fields(chk: Checker, raw: dict[str, Any], loc: str, fmt: str, fields:
     return ranges, enums
 
 
-def _check_packed_range(chk: Checker, loc: str, fields: list[str], width: int,
-                        ranges: dict[str, tuple[int, int]], vmin: int, vmax: int) -> None:
+def _check_packed_range(
+    chk: Checker, loc: str, fields: list[str], width: int, ranges: dict[str, tuple[int, int]], vmin: int, vmax: int
+) -> None:
     """min/max must admit every value the field ranges allow, or a valid field value fails with a packed-range
     message nobody can read."""
     limit = 99 if width == 8 else 15
     lows = sum(ranges.get(f.upper(), (0, limit))[0] << (width * i) for i, f in enumerate(fields))
     highs = sum(ranges.get(f.upper(), (0, limit))[1] << (width * i) for i, f in enumerate(fields))
     if vmin > lows or vmax < highs:
-        chk.bad(loc, f"min/max 0x{vmin:04X}..0x{vmax:04X} exclude field values the field ranges allow "
-                     f"(need min <= 0x{lows:04X}, max >= 0x{highs:04X})")
+        chk.bad(
+            loc,
+            f"min/max 0x{vmin:04X}..0x{vmax:04X} exclude field values the field ranges allow "
+            f"(need min <= 0x{lows:04X}, max >= 0x{highs:04X})",
+        )
 
 
 def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | None:
@@ -134,14 +167,34 @@ def parse_entry(chk: Checker, raw: Any, index: int, word_order: str) -> Entry | 
     if len(chk.problems) > before or code is None or address is None or name is None or source is None:
         return None
     return Entry(
-        code=code, cls=cls, name=name, address=address, type=type_name,
-        word_order=chk.choice(raw, "word_order", loc, WORD_ORDERS, word_order), combine=combine,
-        digits=digits, scale=float(scale), unit=str(raw.get("unit", "") or ""),
-        min=vmin, max=vmax, default=default, access=access, effect=effect, group=str(raw.get("group", "") or ""),
-        description=str(raw.get("description", "") or ""), source=source, unverified=unverified,
-        format=fmt, fields=tuple(str(f) for f in fields), field_width=field_width, field_ranges=field_ranges,
-        field_enums=field_enums, bits=bits, enum=enum,
-        trigger=trigger, copy=copy,
+        code=code,
+        cls=cls,
+        name=name,
+        address=address,
+        type=type_name,
+        word_order=chk.choice(raw, "word_order", loc, WORD_ORDERS, word_order),
+        combine=combine,
+        digits=digits,
+        scale=float(scale),
+        unit=str(raw.get("unit", "") or ""),
+        min=vmin,
+        max=vmax,
+        default=default,
+        access=access,
+        effect=effect,
+        group=str(raw.get("group", "") or ""),
+        description=str(raw.get("description", "") or ""),
+        source=source,
+        unverified=unverified,
+        format=fmt,
+        fields=tuple(str(f) for f in fields),
+        field_width=field_width,
+        field_ranges=field_ranges,
+        field_enums=field_enums,
+        bits=bits,
+        enum=enum,
+        trigger=trigger,
+        copy=copy,
     )
 
 
@@ -182,8 +235,7 @@ def _check_kind(chk: Checker, loc: str, raw: dict[str, Any], cls: str, access: s
         chk.bad(f"{loc}.access", "Un entries are read-only")
 
 
-def _check_format(chk: Checker, loc: str, fmt: str, fields: list[Any], field_width: int,
-                  bits: dict[int, str]) -> None:
+def _check_format(chk: Checker, loc: str, fmt: str, fields: list[Any], field_width: int, bits: dict[int, str]) -> None:
     """What an entry's display format asks of it."""
     if fmt == "digits" and not fields:
         chk.bad(loc, "format: digits needs 'fields'")

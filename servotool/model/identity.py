@@ -10,7 +10,7 @@ from servotool.model.profile import Entry, Identity, IdentityCheck, Limits
 CHECK_KEYS = {"code", "address", "absent", "range", "sim", "source", "unverified"}
 
 
-MAX_REQUESTS = 2   # the check runs before every command's first write: it must stay cheap
+MAX_REQUESTS = 2  # the check runs before every command's first write: it must stay cheap
 
 
 def read_plan(checks: tuple[IdentityCheck, ...], max_read: int) -> list[tuple[int, int, list[IdentityCheck]]]:
@@ -56,8 +56,11 @@ def parse_identity(chk: Checker, raw: Any, entries: dict[str, Entry], limits: Li
     if len(addresses) != len(set(addresses)):
         chk.bad("identity.checks", "two checks read the same address")
     if len(checks) == len(items) and len(read_plan(tuple(checks), limits.max_read)) > MAX_REQUESTS:
-        chk.bad("identity.checks", f"take more than {MAX_REQUESTS} read requests: keep them at adjacent addresses "
-                                   f"(at most {limits.max_read} registers a request)")
+        chk.bad(
+            "identity.checks",
+            f"take more than {MAX_REQUESTS} read requests: keep them at adjacent addresses "
+            f"(at most {limits.max_read} registers a request)",
+        )
     return Identity(tuple(checks), names.get("firmware", ""), names.get("model", ""))
 
 
@@ -97,8 +100,9 @@ def _parse_check(chk: Checker, item: Any, loc: str, entries: dict[str, Entry]) -
     return IdentityCheck(entry.address, entry.words, entry.code, False, span, sim, source, unverified)
 
 
-def _check_entry(chk: Checker, loc: str, entry: Entry, absent: bool, span: tuple[int, int] | None,
-                 sim: int | None) -> None:
+def _check_entry(
+    chk: Checker, loc: str, entry: Entry, absent: bool, span: tuple[int, int] | None, sim: int | None
+) -> None:
     if not entry.readable:
         chk.bad(loc, f"{entry.code} is write-only and cannot be read")
     if absent:
@@ -112,16 +116,16 @@ def _check_entry(chk: Checker, loc: str, entry: Entry, absent: bool, span: tuple
             chk.bad(f"{loc}.sim", f"{sim} is outside the check's range {span[0]}..{span[1]}")
         elif not entry.min <= sim <= entry.max:
             chk.bad(f"{loc}.sim", f"{sim} is outside the entry's range {entry.min}..{entry.max}")
-    elif entry.cls == "Pn" and span is not None and entry.default is not None \
-            and not span[0] <= entry.default <= span[1]:
+    elif (
+        entry.cls == "Pn" and span is not None and entry.default is not None and not span[0] <= entry.default <= span[1]
+    ):
         chk.bad(f"{loc}.range", f"the default {entry.default} (what the simulator answers) is outside it")
 
 
 def _range(chk: Checker, raw: Any, loc: str) -> tuple[int, int] | None:
     if raw is None:
         return None
-    ok = isinstance(raw, list) and len(raw) == 2 and all(isinstance(v, int) and not isinstance(v, bool)
-                                                         for v in raw)
+    ok = isinstance(raw, list) and len(raw) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
     if not ok or raw[0] > raw[1]:
         chk.bad(loc, "expected [lo, hi] raw values with lo <= hi")
         return None

@@ -22,7 +22,7 @@ from servotool.model.profile import Profile
 
 def builtin_dir() -> Path:
     """Folder of the profiles shipped with the package (or, in a source checkout, the top-level profiles/)."""
-    here = Path(__file__).resolve().parent.parent   # the servotool package
+    here = Path(__file__).resolve().parent.parent  # the servotool package
     installed = here / "profiles"
     return installed if installed.is_dir() else here.parent / "profiles"
 
@@ -40,7 +40,7 @@ def _code_stamp() -> bytes:
     """What a compiled profile depends on besides its file: this code (the model package) and the Python."""
     digest = hashlib.sha256(f"{__version__} {sys.version_info[:2]}".encode())
     here = Path(__file__).parent
-    for name in sorted(n for n in os.listdir(here) if n.endswith(".py")):     # no glob: its regex costs 10 ms
+    for name in sorted(n for n in os.listdir(here) if n.endswith(".py")):  # no glob: its regex costs 10 ms
         digest.update((here / name).read_bytes())
     return digest.digest()
 
@@ -55,7 +55,7 @@ def _cached(where: Path) -> tuple[Profile | None, list[str]] | None:
         found = pickle.loads(where.read_bytes())
     except FileNotFoundError:
         return None
-    except Exception:       # a damaged or foreign cache file is rebuilt, never trusted
+    except Exception:  # a damaged or foreign cache file is rebuilt, never trusted
         return None
     return found if isinstance(found, tuple) and len(found) == 2 else None
 

@@ -45,7 +45,7 @@ def suggest(word: str, candidates: Iterable[str], n: int = 3) -> list[str]:
     scored = []
     for c in by_upper:
         ratio = difflib.SequenceMatcher(None, w, c).ratio()
-        if ratio >= 0.6:     # ties go to the one with more characters in the same place (Pn1O1 -> Pn101)
+        if ratio >= 0.6:  # ties go to the one with more characters in the same place (Pn1O1 -> Pn101)
             scored.append((ratio + 0.01 * sum(a == b for a, b in zip(w, c, strict=False)), c))
     return [by_upper[c] for _, c in sorted(scored, key=lambda sc: (-sc[0], sc[1]))[:n]]
 
@@ -71,8 +71,12 @@ COMMON_GROUPS: dict[str, tuple[str, ...]] = {
 }
 # Where a profile has no group for a common name, entries whose name says it.
 COMMON_WORDS: dict[str, tuple[str, ...]] = {
-    "gain": ("gain",), "speed": ("speed",), "position": ("position",), "torque": ("torque",),
-    "io": ("di", "do", "input", "output"), "comm": ("communication", "modbus", "rs485", "baud"),
+    "gain": ("gain",),
+    "speed": ("speed",),
+    "position": ("position",),
+    "torque": ("torque",),
+    "io": ("di", "do", "input", "output"),
+    "comm": ("communication", "modbus", "rs485", "baud"),
     "monitor": (),
 }
 
@@ -90,8 +94,13 @@ def group_ids(own: Iterable[str], name: str) -> tuple[set[str], bool]:
     return set(), False
 
 
-_UNIT_ALIASES = {"rpm": ("r/min", "rev/min", "min-1", "min^-1", "1/min"), "s": ("sec",), "%": ("percent",),
-                 "ms": ("msec",), "1/s": ("rad/s", "s-1", "/s")}
+_UNIT_ALIASES = {
+    "rpm": ("r/min", "rev/min", "min-1", "min^-1", "1/min"),
+    "s": ("sec",),
+    "%": ("percent",),
+    "ms": ("msec",),
+    "1/s": ("rad/s", "s-1", "/s"),
+}
 _NUMBER_UNIT = re.compile(r"([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([^\d\s.+-].*)")
 
 
@@ -108,7 +117,7 @@ def split_unit(text: str, unit: str) -> tuple[str, str | None]:
     unit_matches."""
     try:
         float(text)
-        return text, None          # a number as it is (1e-300 is no '1' in 'e-300')
+        return text, None  # a number as it is (1e-300 is no '1' in 'e-300')
     except ValueError:
         pass
     m = _NUMBER_UNIT.fullmatch(text.strip())
@@ -124,6 +133,7 @@ def unit_matches(given: str, unit: str) -> bool:
 def enum_value(meanings: dict[int, str], text: str) -> int | None:
     """The value whose meaning the text names: the whole meaning, or a unique start of it (case and
     punctuation ignored); None when none or several match."""
+
     def norm(s: str) -> str:
         return re.sub(r"[^0-9a-z]+", " ", s.lower()).strip()
 

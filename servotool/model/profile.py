@@ -11,8 +11,7 @@ from servotool.model.lookup import code_key, suggest
 CLASSES = ("Pn", "Un", "Sn", "Fn")
 
 
-TYPES = {"u16": (1, False), "s16": (1, True), "u32": (2, False), "s32": (2, True),
-         "u64": (4, False), "s64": (4, True)}
+TYPES = {"u16": (1, False), "s16": (1, True), "u32": (2, False), "s32": (2, True), "u64": (4, False), "s64": (4, True)}
 
 
 ACCESS = ("rw", "ro", "wo")
@@ -65,8 +64,8 @@ class Entry:
     format: str = "dec"
     fields: tuple[str, ...] = ()
     field_width: int = 4
-    field_ranges: dict[str, tuple[int, int]] = field(default_factory=dict)   # upper-case field name -> (lo, hi)
-    field_enums: dict[str, dict[int, str]] = field(default_factory=dict)     # upper-case field name -> meanings
+    field_ranges: dict[str, tuple[int, int]] = field(default_factory=dict)  # upper-case field name -> (lo, hi)
+    field_enums: dict[str, dict[int, str]] = field(default_factory=dict)  # upper-case field name -> meanings
     bits: dict[int, str] = field(default_factory=dict)
     enum: dict[int, str] = field(default_factory=dict)
     trigger: int = 1
@@ -179,7 +178,7 @@ class DeadManRoute:
     source: str
     unverified: str = ""
     if_host_dies: str = ""
-    start_value: int = 1      # segment: the value OR-ed into role segment_start's servo-on value to start a move
+    start_value: int = 1  # segment: the value OR-ed into role segment_start's servo-on value to start a move
 
 
 @dataclass(frozen=True)
@@ -189,10 +188,10 @@ class IdentityCheck:
 
     address: int
     words: int = 1
-    code: str = ""                         # the entry read there; "" for an address this map does not have
+    code: str = ""  # the entry read there; "" for an address this map does not have
     absent: bool = False
-    range: tuple[int, int] | None = None   # raw values a drive of this family answers; None: presence only
-    sim: int | None = None                 # what the simulated drive answers (non-Pn entries)
+    range: tuple[int, int] | None = None  # raw values a drive of this family answers; None: presence only
+    sim: int | None = None  # what the simulated drive answers (non-Pn entries)
     source: str = ""
     unverified: str = ""
 
@@ -247,8 +246,12 @@ class Profile:
         found = self.find(code)
         if found is None:
             same = self._aliases().get(code_key(code) or "", [])
-            raise UnknownName("code", code, self.id, [e.code for e in same] if len(same) > 1 else
-                              suggest(code, [e.code for e in self.entries]))
+            raise UnknownName(
+                "code",
+                code,
+                self.id,
+                [e.code for e in same] if len(same) > 1 else suggest(code, [e.code for e in self.entries]),
+            )
         return found
 
     def find(self, code: str) -> Entry | None:

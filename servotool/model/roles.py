@@ -9,8 +9,13 @@ from servotool.model.profile import Entry, Profile
 
 # Status-word bit names by meaning: servotool's own names and the vendors' DO-function mnemonics (SD25 SON-O,
 # ALM, TGON), so one status role works whatever the drive calls its bits.
-STATUS_ALIASES = {"servo_on": ("servo_on", "son", "son-o", "run"), "fault": ("fault", "alm"),
-                  "moving": ("moving", "tgon"), "jog": ("jog",), "identifying": ("identifying",)}
+STATUS_ALIASES = {
+    "servo_on": ("servo_on", "son", "son-o", "run"),
+    "fault": ("fault", "alm"),
+    "moving": ("moving", "tgon"),
+    "jog": ("jog",),
+    "identifying": ("identifying",),
+}
 
 
 def status_bit(entry: Entry, meaning: str) -> int | None:
@@ -52,14 +57,23 @@ def sim_extensions(profile: Profile) -> list[SimExtension]:
     """Every simulator extension of a profile: entries and alarms servotool added, and the fake watchdog setting
     where the drive documents no communication timeout."""
     found = [SimExtension(f"entry {e.code} ({e.name})", e.source) for e in profile.entries if is_sim_extension(e)]
-    found += [SimExtension(f"alarm {a.display} ({a.name})", a.source) for a in profile.alarms
-              if a.source.strip().lower().startswith("servotool")]
+    found += [
+        SimExtension(f"alarm {a.display} ({a.name})", a.source)
+        for a in profile.alarms
+        if a.source.strip().lower().startswith("servotool")
+    ]
     if profile.role("comm_timeout") is None:
-        found.append(SimExtension("sim config --fake-watchdog", "NOT REAL, off by default: stops host motion after "
-                                  "500 ms of host silence; the real drive documents no communication timeout"))
+        found.append(
+            SimExtension(
+                "sim config --fake-watchdog",
+                "NOT REAL, off by default: stops host motion after "
+                "500 ms of host silence; the real drive documents no communication timeout",
+            )
+        )
     if profile.motor is None:
-        found.append(SimExtension("motor", "no motor data in the profile: the simulator assumes a 400 W, 3000 rpm "
-                                  "motor"))
+        found.append(
+            SimExtension("motor", "no motor data in the profile: the simulator assumes a 400 W, 3000 rpm motor")
+        )
     return found
 
 
@@ -93,8 +107,19 @@ class MotionRoute:
         return self.entries[{"trigger": "jog_speed", "segment": "segment_speed"}.get(self.kind, "speed_reference")]
 
 
-ROUTE_ROLES = ("jog", "jog_speed", "speed_reference", "servo_on", "jog_accel", "keepalive", "comm_timeout",
-               "segment_start", "segment_distance", "segment_speed", "segment_units_per_rev")
+ROUTE_ROLES = (
+    "jog",
+    "jog_speed",
+    "speed_reference",
+    "servo_on",
+    "jog_accel",
+    "keepalive",
+    "comm_timeout",
+    "segment_start",
+    "segment_distance",
+    "segment_speed",
+    "segment_units_per_rev",
+)
 SEGMENT_ROLES = ("segment_start", "segment_distance", "segment_speed", "servo_on")
 
 
@@ -111,7 +136,11 @@ def motion_route(profile: Profile, feature: str = FEATURE) -> MotionRoute:
         kind = "speed"
         found.pop("jog", None)
     else:
-        raise MissingRole(feature, "motion_route", profile.id,
-                          f"{feature} needs role 'jog' with 'jog_speed', or 'speed_reference' with 'servo_on', "
-                          f"which profile {profile.id} does not map")
+        raise MissingRole(
+            feature,
+            "motion_route",
+            profile.id,
+            f"{feature} needs role 'jog' with 'jog_speed', or 'speed_reference' with 'servo_on', "
+            f"which profile {profile.id} does not map",
+        )
     return MotionRoute(kind, found)

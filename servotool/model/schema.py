@@ -25,9 +25,28 @@ from servotool.model.profile import (
 )
 
 TOP_KEYS = {
-    "schema", "id", "model", "vendor", "version", "description", "source", "address_rule", "serial", "limits",
-    "word_order", "persistence", "motor", "unverified_note", "groups", "roles", "entries", "alarms", "conventions",
-    "motion_setup", "dead_man", "identity",
+    "schema",
+    "id",
+    "model",
+    "vendor",
+    "version",
+    "description",
+    "source",
+    "address_rule",
+    "serial",
+    "limits",
+    "word_order",
+    "persistence",
+    "motor",
+    "unverified_note",
+    "groups",
+    "roles",
+    "entries",
+    "alarms",
+    "conventions",
+    "motion_setup",
+    "dead_man",
+    "identity",
 }
 DEAD_MAN_ROUTES = ("drive_timeout", "segment", "none")
 DEAD_MAN_KEYS = {"route", "reason", "source", "unverified", "if_host_dies", "start_value"}
@@ -46,8 +65,10 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     if data.get("schema") != 1:
         chk.bad("schema", f"expected schema: 1, got {data.get('schema')!r}")
     pid = chk.need(data, "id", "top", str)
-    texts = {k: chk.need(data, k, "top", str) for k in
-             ("model", "vendor", "version", "description", "source", "address_rule")}
+    texts = {
+        k: chk.need(data, k, "top", str)
+        for k in ("model", "vendor", "version", "description", "source", "address_rule")
+    }
     word_order = chk.choice(data, "word_order", "top", WORD_ORDERS, "low_first")
     if "word_order" not in data:
         chk.bad("top", "missing required key 'word_order'")
@@ -78,14 +99,28 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
     profile = Profile(
-        id=pid, model=texts["model"], vendor=texts["vendor"], version=texts["version"],
-        description=texts["description"], source=texts["source"], address_rule=texts["address_rule"],
-        line=line, default_unit=default_unit, limits=limits, word_order=word_order, persistence=persistence,
+        id=pid,
+        model=texts["model"],
+        vendor=texts["vendor"],
+        version=texts["version"],
+        description=texts["description"],
+        source=texts["source"],
+        address_rule=texts["address_rule"],
+        line=line,
+        default_unit=default_unit,
+        limits=limits,
+        word_order=word_order,
+        persistence=persistence,
         motor=motor,
-        entries=entries, roles={str(k): str(v) for k, v in roles.items()},
-        groups={str(k): str(v) for k, v in groups.items()}, alarms=alarms,
-        conventions={str(k): str(v) for k, v in conventions.items()}, motion_setup=motion_setup,
-        unverified_note=str(data.get("unverified_note", "")), dead_man=dead_man, identity=identity,
+        entries=entries,
+        roles={str(k): str(v) for k, v in roles.items()},
+        groups={str(k): str(v) for k, v in groups.items()},
+        alarms=alarms,
+        conventions={str(k): str(v) for k, v in conventions.items()},
+        motion_setup=motion_setup,
+        unverified_note=str(data.get("unverified_note", "")),
+        dead_man=dead_man,
+        identity=identity,
     )
     return profile, []
 
@@ -167,8 +202,9 @@ def _parse_motion_setup(chk: Checker, raw: Any, entries: dict[str, Entry], broke
                 chk.bad(f"{loc}.code", f"names unknown entry {code!r}")
             continue
         if entry.cls != "Pn" or not entry.writable:
-            chk.bad(f"{loc}.code", f"{entry.code} is not a settable parameter (class {entry.cls}, "
-                                   f"access {entry.access})")
+            chk.bad(
+                f"{loc}.code", f"{entry.code} is not a settable parameter (class {entry.cls}, access {entry.access})"
+            )
             continue
         if entry.code.upper() in seen:
             chk.bad(f"{loc}.code", f"{entry.code} is listed twice")
@@ -216,8 +252,16 @@ def _parse_alarms(chk: Checker, raw: Any) -> list[Alarm]:
         if code in seen:
             chk.bad(loc, f"duplicate alarm code {code}")
         seen.add(code)
-        out.append(Alarm(code=code, display=str(item.get("display", code)), name=name,
-                         clearable=bool(item.get("clearable", True)), kind=kind, source=str(item.get("source", ""))))
+        out.append(
+            Alarm(
+                code=code,
+                display=str(item.get("display", code)),
+                name=name,
+                clearable=bool(item.get("clearable", True)),
+                kind=kind,
+                source=str(item.get("source", "")),
+            )
+        )
     return out
 
 
@@ -229,7 +273,8 @@ def _parse_serial(chk: Checker, raw: Any) -> tuple[LineSettings, int]:
     s = LineSettings(
         baud=chk.opt(raw, "baud", "serial", int, 9600),
         parity=chk.choice(raw, "parity", "serial", ("N", "E", "O"), "N"),
-        stopbits=chk.opt(raw, "stopbits", "serial", int, 1), bytesize=chk.opt(raw, "bytesize", "serial", int, 8),
+        stopbits=chk.opt(raw, "stopbits", "serial", int, 1),
+        bytesize=chk.opt(raw, "bytesize", "serial", int, 8),
     )
     unit = chk.opt(raw, "unit", "serial", int, 1)
     if s.baud <= 0:
@@ -248,7 +293,8 @@ def _parse_limits(chk: Checker, raw: Any) -> Limits:
         chk.bad("limits", "missing or not a mapping")
         return Limits()
     lim = Limits(
-        max_read=chk.opt(raw, "max_read", "limits", int, 125), max_write=chk.opt(raw, "max_write", "limits", int, 123),
+        max_read=chk.opt(raw, "max_read", "limits", int, 125),
+        max_write=chk.opt(raw, "max_write", "limits", int, 123),
         write_multiple=chk.opt(raw, "write_multiple", "limits", bool, True),
     )
     if not 1 <= lim.max_read <= 125:
@@ -270,9 +316,13 @@ def _parse_persistence(chk: Checker, raw: Any) -> Persistence:
     if mode == "switchable" and "code" not in switch:
         chk.bad("persistence.switch", "mode 'switchable' needs switch.code")
     return Persistence(
-        mode=mode, switch_code=str(switch.get("code", "")), switch_eeprom=int(switch.get("eeprom", 0)),
-        switch_ram=int(switch.get("ram", 1)), switch_digit=str(switch.get("digit", "") or ""),
-        write_limit=chk.opt(raw, "write_limit", "persistence", int, None), note=str(raw.get("note", "") or ""),
+        mode=mode,
+        switch_code=str(switch.get("code", "")),
+        switch_eeprom=int(switch.get("eeprom", 0)),
+        switch_ram=int(switch.get("ram", 1)),
+        switch_digit=str(switch.get("digit", "") or ""),
+        write_limit=chk.opt(raw, "write_limit", "persistence", int, None),
+        note=str(raw.get("note", "") or ""),
     )
 
 

@@ -23,8 +23,8 @@ class Requirement:
 
     item: SetupItem
     entry: Entry
-    wanted: int                  # raw value (only the bits of `fields` count when fields are named)
-    fields: tuple[str, ...]      # field names of a field-assignment value, () for the whole value
+    wanted: int  # raw value (only the bits of `fields` count when fields are named)
+    fields: tuple[str, ...]  # field names of a field-assignment value, () for the whole value
 
     @property
     def mask(self) -> int:
@@ -44,8 +44,11 @@ class Requirement:
         """(setting, wanted, now) for each part that differs, values as users type them."""
         if not self.fields:
             return [(self.entry.code, _short(self.entry, self.wanted), _short(self.entry, raw))]
-        return [(f"{self.entry.code}.{f}", str(self._field(self.wanted, f)), str(self._field(raw, f)))
-                for f in self.fields if self._field(raw, f) != self._field(self.wanted, f)]
+        return [
+            (f"{self.entry.code}.{f}", str(self._field(self.wanted, f)), str(self._field(raw, f)))
+            for f in self.fields
+            if self._field(raw, f) != self._field(self.wanted, f)
+        ]
 
     def assignments(self) -> list[str]:
         """The `param set` arguments that make it so (fields one by one, so the others are kept)."""
@@ -96,8 +99,9 @@ def gap(req: Requirement, raw: int | None) -> SetupGap:
     return SetupGap(req.entry.code, parts, tuple(req.assignments()), req.entry.effect == "power_cycle")
 
 
-def setup_required(profile: Profile, feature: str, missing: list[tuple[Requirement, int]],
-                   waiting: Sequence[Requirement] = ()) -> SetupRequired:
+def setup_required(
+    profile: Profile, feature: str, missing: list[tuple[Requirement, int]], waiting: Sequence[Requirement] = ()
+) -> SetupRequired:
     """The refusal for settings that differ (and those set but waiting for a power cycle)."""
     from servotool.model.profile import can_save
 
@@ -105,8 +109,12 @@ def setup_required(profile: Profile, feature: str, missing: list[tuple[Requireme
     return SetupRequired(feature, [gap(r, raw) for r, raw in missing], [gap(r, None) for r in waiting], save)
 
 
-def check(profile: Profile, feature: str, value_of: Callable[[list[Entry]], list[int]],
-          effective_of: Callable[[list[Entry]], list[int]] | None = None) -> None:
+def check(
+    profile: Profile,
+    feature: str,
+    value_of: Callable[[list[Entry]], list[int]],
+    effective_of: Callable[[list[Entry]], list[int]] | None = None,
+) -> None:
     """Refuse host motion (SetupRequired) while any motion_setup setting differs.
 
     effective_of, where the caller can know it (the simulator), gives the values in effect: a power-cycle

@@ -30,29 +30,36 @@ NO_ROUTE = DeadManRoute(route="none", reason="the profile describes no dead-man 
 class DeadManBound:
     """The dead-man facts of one motion: the route, and how far/long the motor runs on if the host dies now."""
 
-    route: str                 # drive_timeout | segment | none
+    route: str  # drive_timeout | segment | none
     speed_rpm: float
     beat_s: float
-    link_cycle_s: float        # the host's estimated time for one beat cycle on this link
-    stop_rev: float | None     # None: nothing on the drive stops the motor
+    link_cycle_s: float  # the host's estimated time for one beat cycle on this link
+    stop_rev: float | None  # None: nothing on the drive stops the motor
     stop_s: float | None
     reason: str
     source: str
     unverified: str
     if_host_dies: str
-    waived: bool = False       # route none, acknowledged with --no-dead-man
+    waived: bool = False  # route none, acknowledged with --no-dead-man
 
     @property
     def bounded(self) -> bool:
         return self.stop_rev is not None
 
     def as_json(self) -> dict[str, object]:
-        return {"route": self.route, "bounded": self.bounded,
-                "stop_within_rev": None if self.stop_rev is None else round(self.stop_rev, 3),
-                "stop_within_s": None if self.stop_s is None else round(self.stop_s, 3),
-                "speed_rpm": self.speed_rpm, "beat_s": round(self.beat_s, 4),
-                "link_cycle_s": round(self.link_cycle_s, 4), "waived": self.waived, "reason": self.reason,
-                "source": self.source, "unverified": self.unverified}
+        return {
+            "route": self.route,
+            "bounded": self.bounded,
+            "stop_within_rev": None if self.stop_rev is None else round(self.stop_rev, 3),
+            "stop_within_s": None if self.stop_s is None else round(self.stop_s, 3),
+            "speed_rpm": self.speed_rpm,
+            "beat_s": round(self.beat_s, 4),
+            "link_cycle_s": round(self.link_cycle_s, 4),
+            "waived": self.waived,
+            "reason": self.reason,
+            "source": self.source,
+            "unverified": self.unverified,
+        }
 
 
 def route_of(profile: Profile) -> DeadManRoute:
@@ -74,7 +81,7 @@ def stop_time_s(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = 
     return ramp_s * abs(speed_rpm) / reference_rpm
 
 
-SEGMENT_BEATS = 3.0      # a segment covers this many beat periods at speed, so a late beat never stutters the motion
+SEGMENT_BEATS = 3.0  # a segment covers this many beat periods at speed, so a late beat never stutters the motion
 
 
 def braking_rev(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
@@ -96,11 +103,17 @@ def drive_timeout_s(drive: Drive) -> float | None:
     return value if value > 0 else None
 
 
-UNREAD = -1.0     # timeout_s not given: read it from the drive
+UNREAD = -1.0  # timeout_s not given: read it from the drive
 
 
-def bound(drive: Drive, speed_rpm: float, beat_s: float, ramp_ms: float | None,
-          waived: bool = False, timeout_s: float | None = UNREAD) -> DeadManBound:
+def bound(
+    drive: Drive,
+    speed_rpm: float,
+    beat_s: float,
+    ramp_ms: float | None,
+    waived: bool = False,
+    timeout_s: float | None = UNREAD,
+) -> DeadManBound:
     """The dead-man bound of a motion at speed_rpm on this drive (timeout_s: the drive's communication timeout when
     already read); see check() for when it cannot be kept."""
     route = route_of(drive.profile)
@@ -111,15 +124,26 @@ def bound(drive: Drive, speed_rpm: float, beat_s: float, ramp_ms: float | None,
     if kind == "drive_timeout":
         timeout = drive_timeout_s(drive) if timeout_s == UNREAD else timeout_s
         if timeout is None:
-            kind = "none"                  # the watchdog is switched off on this drive: nothing stops the motor
+            kind = "none"  # the watchdog is switched off on this drive: nothing stops the motor
         else:
             s = timeout + stop_s
             rev = abs(speed_rpm) / 60.0 * (timeout + stop_s / 2.0)
     elif kind == "segment":
         rev = segment_rev(speed_rpm, beat_s, ramp_ms)
         s = SEGMENT_BEATS * beat_s + stop_s
-    return DeadManBound(kind, abs(speed_rpm), beat_s, cycle, rev, s, route.reason, route.source, route.unverified,
-                        route.if_host_dies, waived and kind == "none")
+    return DeadManBound(
+        kind,
+        abs(speed_rpm),
+        beat_s,
+        cycle,
+        rev,
+        s,
+        route.reason,
+        route.source,
+        route.unverified,
+        route.if_host_dies,
+        waived and kind == "none",
+    )
 
 
 def motion_bound(drive: Drive, speed_rpm: float, ramp_s: float) -> DeadManBound:
@@ -129,7 +153,7 @@ def motion_bound(drive: Drive, speed_rpm: float, ramp_s: float) -> DeadManBound:
 
     motor = drive.profile.motor
     rated = motor.rated_speed_rpm if motor is not None else 3000.0
-    ramp_ms = ramp_s * 1000.0 * rated / abs(speed_rpm)     # the ramp parameter's reading: time to rated speed
+    ramp_ms = ramp_s * 1000.0 * rated / abs(speed_rpm)  # the ramp parameter's reading: time to rated speed
     b = bound(drive, speed_rpm, min(0.1, keepalive_interval_s(drive)), ramp_ms, drive.dead_man_waived)
     check(b, drive.dead_man_waived)
     return b
@@ -141,18 +165,24 @@ def check(b: DeadManBound, waived: bool) -> None:
     if b.route == "none":
         if not waived:
             what = b.if_host_dies or "the motor keeps running until stopped at the drive"
-            raise UsageError(f"no dead-man on this drive ({b.reason}): if this program dies (kill, crash, cable), "
-                             f"{what}. Pass --no-dead-man to move anyway, with an E-stop at hand")
+            raise UsageError(
+                f"no dead-man on this drive ({b.reason}): if this program dies (kill, crash, cable), "
+                f"{what}. Pass --no-dead-man to move anyway, with an E-stop at hand"
+            )
         return
     if b.link_cycle_s * 2 > b.beat_s:
-        raise UsageError(f"this link cannot keep the dead-man beat: one beat cycle takes about "
-                         f"{b.link_cycle_s * 1000:.0f} ms, the bound needs a beat every {b.beat_s * 1000:.0f} ms; "
-                         "use a faster baud rate, a longer drive timeout or a longer segment, or a slower speed")
+        raise UsageError(
+            f"this link cannot keep the dead-man beat: one beat cycle takes about "
+            f"{b.link_cycle_s * 1000:.0f} ms, the bound needs a beat every {b.beat_s * 1000:.0f} ms; "
+            "use a faster baud rate, a longer drive timeout or a longer segment, or a slower speed"
+        )
 
 
 def sentence(b: DeadManBound) -> str:
     """The bound in words, as printed before moving."""
     if b.stop_rev is None:
-        return ("NO DEAD-MAN (--no-dead-man): if this program stops, the motor keeps running at "
-                f"{b.speed_rpm:g} rpm until stopped at the drive")
+        return (
+            "NO DEAD-MAN (--no-dead-man): if this program stops, the motor keeps running at "
+            f"{b.speed_rpm:g} rpm until stopped at the drive"
+        )
     return f"if this program stops, the motor stops within {b.stop_rev:.2f} rev ({b.stop_s:.2f} s)"

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from servotool.clock import Clock
 
-FIRST_REPEAT_S = 0.7      # longest usual keyboard repeat delay (and then some)
+FIRST_REPEAT_S = 0.7  # longest usual keyboard repeat delay (and then some)
 
 
 class HoldToRun:
@@ -30,7 +30,7 @@ class HoldToRun:
         if direction is None:
             grace = self.beat_s if self._repeating else self.first_repeat_s
             if self.direction and now - self._last_key > grace:
-                self.direction = 0              # let go: no repeat within the grace time
+                self.direction = 0  # let go: no repeat within the grace time
             return self.direction
         if direction != self.direction or direction == 0:
             self.direction = direction

@@ -15,8 +15,9 @@ def travel_estimate(speed_rpm: float, seconds: float | None) -> float:
     return abs(speed_rpm) / 60.0 * seconds if seconds is not None else 0.0
 
 
-def checked_travel(speed_rpm: float, seconds: float | None, limit_rev: float | None = None,
-                   limit_name: str = "") -> float:
+def checked_travel(
+    speed_rpm: float, seconds: float | None, limit_rev: float | None = None, limit_name: str = ""
+) -> float:
     """The travel estimate of a JOG request, its speed and time checked; over limit_rev (worded limit_name, by
     default '--max-travel limit N rev') is refused."""
     if speed_rpm == 0 or not math.isfinite(speed_rpm):
@@ -25,16 +26,18 @@ def checked_travel(speed_rpm: float, seconds: float | None, limit_rev: float | N
         raise UsageError("--time must be a number > 0")
     estimate = travel_estimate(speed_rpm, seconds)
     if limit_rev is not None and estimate > limit_rev:
-        raise UsageError(f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {estimate:.2f} rev, over "
-                         f"the {limit_name or f'--max-travel limit {limit_rev:g} rev'}")
+        raise UsageError(
+            f"a {seconds:g} s JOG at {abs(speed_rpm):g} rpm travels about {estimate:.2f} rev, over "
+            f"the {limit_name or f'--max-travel limit {limit_rev:g} rev'}"
+        )
     return estimate
 
 
 @dataclass(frozen=True)
 class JogPlan:
     speed_rpm: float
-    direction: int           # +1 forward, -1 reverse
-    seconds: float | None    # None: until stopped
+    direction: int  # +1 forward, -1 reverse
+    seconds: float | None  # None: until stopped
     max_speed_rpm: float
     accel_ms: float | None
     travel_rev: float | None  # estimate for a timed jog

@@ -28,7 +28,7 @@ from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.ops.status import servo_is_on
 
-KEY_POLL_S = 0.02      # interactive JOG polls the keys this often (key repeat comes about every 30 ms)
+KEY_POLL_S = 0.02  # interactive JOG polls the keys this often (key repeat comes about every 30 ms)
 
 
 class Jogger:
@@ -38,13 +38,14 @@ class Jogger:
     motion changes (JOG speed, ramp) are parameters and go through ops.params.write_one.
     """
 
-    def __init__(self, drive: Drive, keepalive_s: float = 0.1, feature: str = FEATURE,
-                 clock: Clock | None = None) -> None:
+    def __init__(
+        self, drive: Drive, keepalive_s: float = 0.1, feature: str = FEATURE, clock: Clock | None = None
+    ) -> None:
         self.drive = drive
         self.profile = drive.profile
         self.feature = feature
         self.route = motion_route(self.profile, feature)
-        check_setup(drive, feature)    # before anything is written: a drive not set up would ignore or misread us
+        check_setup(drive, feature)  # before anything is written: a drive not set up would ignore or misread us
         self.speed_entry = self.route.speed_entry
         self.jog = self.route.entries.get("jog")
         self.servo = self.route.entries.get("servo_on")
@@ -55,16 +56,16 @@ class Jogger:
         self.keepalive = KeepAlive(drive, keepalive_s, self.clock, resend=self._resend_command)
         self.direction = 0
         self.speed_rpm = 0.0
-        self._enabled = False          # speed route: servo switched on by us
+        self._enabled = False  # speed route: servo switched on by us
         self._saved_reference: int | None = None
-        self._journaled_reference: int | None = None   # as _journal read it for this motion (a real port only)
+        self._journaled_reference: int | None = None  # as _journal read it for this motion (a real port only)
         self._ramp_raw: int | None = None
-        self._speed_param_raw: int | None = None   # the speed parameter as this jogger last read or wrote it
+        self._speed_param_raw: int | None = None  # the speed parameter as this jogger last read or wrote it
         self._stop_wait_s = 3.0
-        self.dead_man: DeadManBound | None = None     # the bound of the fastest motion armed so far
+        self.dead_man: DeadManBound | None = None  # the bound of the fastest motion armed so far
         self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
-        self.guard = TravelGuard(drive, None)   # the soft travel limit of the planned JOG (none until plan())
-        self._timeout_s: float | None = deadman.UNREAD   # the drive's communication timeout, read once
+        self.guard = TravelGuard(drive, None)  # the soft travel limit of the planned JOG (none until plan())
+        self._timeout_s: float | None = deadman.UNREAD  # the drive's communication timeout, read once
         # Called by run() before the JOG moves with its settings to put back (code -> raw): a caller may write
         # temporary settings there, each original recorded in it, and the JOG puts them back with its own
         # (tuning.stable_hold.guard_hold: a position hold that cannot swing up on an unknown load).
@@ -85,22 +86,31 @@ class Jogger:
             limits.append(self.profile.motor.max_speed_rpm)
         return float(min(limits))
 
-    def plan(self, speed_rpm: float, seconds: float | None, max_travel_rev: float | None = None,
-             travel: TravelLimit | None = None) -> JogPlan:
+    def plan(
+        self,
+        speed_rpm: float,
+        seconds: float | None,
+        max_travel_rev: float | None = None,
+        travel: TravelLimit | None = None,
+    ) -> JogPlan:
         """Check everything before any motion: alarm, servo state, speed and travel limits, the dead-man."""
         checked_travel(speed_rpm, seconds, max_travel_rev)
         limit = self.speed_limit()
         if abs(speed_rpm) > limit:
-            raise UsageError(f"speed {abs(speed_rpm):g} rpm is over the limit {limit:g} rpm "
-                             "(drive max-speed parameter, JOG range, motor)")
+            raise UsageError(
+                f"speed {abs(speed_rpm):g} rpm is over the limit {limit:g} rpm "
+                "(drive max-speed parameter, JOG range, motor)"
+            )
         parse_value(self.speed_entry, f"{abs(speed_rpm):g}")  # resolution and range of the speed entry
         if self._speed_raw(abs(speed_rpm)) == 0:
             raise UsageError(f"speed {abs(speed_rpm):g} rpm rounds to 0 in {self.speed_entry.code}: nothing would move")
         if self.profile.role("alarm_code") is not None:
             state = alarms.current(self.drive)
             if state.active:
-                raise UsageError(f"refusing to move: alarm {state.display} {state.name} is active "
-                                 "(see 'servotool alarm', clear it first)")
+                raise UsageError(
+                    f"refusing to move: alarm {state.display} {state.name} is active "
+                    "(see 'servotool alarm', clear it first)"
+                )
         if self.servo_already_on():
             raise UsageError("refusing to JOG: the servo is already on (enabled from elsewhere); switch it off first")
         if travel is not None:
@@ -108,12 +118,20 @@ class Jogger:
         self.guard = TravelGuard(self.drive, travel)
         self.keepalive.interval_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
         accel_ms = self._ramp_ms()
-        self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * \
-            abs(speed_rpm) / (self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0)
+        self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * abs(speed_rpm) / (
+            self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0
+        )
         bound = self.arm_dead_man(abs(speed_rpm), accel_ms)
-        return JogPlan(abs(speed_rpm), 1 if speed_rpm > 0 else -1, seconds, limit,
-                       float(accel_ms) if accel_ms is not None else None,
-                       abs(speed_rpm) / 60.0 * seconds if seconds is not None else None, bound, travel)
+        return JogPlan(
+            abs(speed_rpm),
+            1 if speed_rpm > 0 else -1,
+            seconds,
+            limit,
+            float(accel_ms) if accel_ms is not None else None,
+            abs(speed_rpm) / 60.0 * seconds if seconds is not None else None,
+            bound,
+            travel,
+        )
 
     def _ramp_ms(self) -> float | None:
         accel = self.profile.role("jog_accel")
@@ -125,9 +143,14 @@ class Jogger:
         moves, the JOG's plan and each speed an identification or step check sets."""
         if self._timeout_s == deadman.UNREAD:
             self._timeout_s = deadman.drive_timeout_s(self.drive)
-        bound = deadman.bound(self.drive, speed_rpm, self.keepalive.interval_s,
-                              ramp_ms if ramp_ms is not None else self._ramp_ms_now(), self.drive.dead_man_waived,
-                              self._timeout_s)
+        bound = deadman.bound(
+            self.drive,
+            speed_rpm,
+            self.keepalive.interval_s,
+            ramp_ms if ramp_ms is not None else self._ramp_ms_now(),
+            self.drive.dead_man_waived,
+            self._timeout_s,
+        )
         deadman.check(bound, self.drive.dead_man_waived)
         if self.dead_man is None or bound.speed_rpm >= self.dead_man.speed_rpm:
             self.dead_man = bound
@@ -136,8 +159,11 @@ class Jogger:
     def servo_already_on(self) -> bool:
         """Servo on from elsewhere: the status word says so, or a servo-on held in a parameter is set."""
         return bool(servo_is_on(self.drive)) or (
-            self.servo is not None and self.servo.readable and self.servo.cls == "Pn"
-            and self.drive.read_entries([self.servo])[0].raw != 0)
+            self.servo is not None
+            and self.servo.readable
+            and self.servo.cls == "Pn"
+            and self.drive.read_entries([self.servo])[0].raw != 0
+        )
 
     def _speed_raw(self, signed_rpm: float) -> int:
         return eng_to_raw(self.speed_entry, signed_rpm)
@@ -153,7 +179,7 @@ class Jogger:
                 write_one(self.drive, self.speed_entry, raw)
                 self._speed_param_raw = raw
             if self.route.kind == "segment" and self.direction:
-                self._segment_command()          # the running move takes the new speed at once
+                self._segment_command()  # the running move takes the new speed at once
         elif self._enabled and self.direction:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
 
@@ -177,8 +203,11 @@ class Jogger:
         if self.direction and not self._enabled:
             # A reference held in a parameter (e.g. a signed JOG speed) would run at once on enable: zero it first.
             if self._saved_reference is None and self.speed_entry.readable:
-                self._saved_reference = self._journaled_reference if self._journaled_reference is not None \
+                self._saved_reference = (
+                    self._journaled_reference
+                    if self._journaled_reference is not None
                     else self.drive.read_entries([self.speed_entry])[0].raw
+                )
             self.drive.write_raw(self.speed_entry, self._speed_raw(0))
             self.drive.write_raw(self.servo, 1)
             self._enabled = True
@@ -190,11 +219,14 @@ class Jogger:
         """The segment route: servo on for the first move, then a fresh move (or a braking one) now."""
         assert self.servo is not None
         if self.direction and not self._enabled and self.segments is not None:
-            self.drive.write_raw(self.servo, 1)         # servo on, start bits off: the next write is an edge
+            self.drive.write_raw(self.servo, 1)  # servo on, start bits off: the next write is an edge
             self.segments.start_high = False
             self._enabled = True
-        if self._enabled and self.segments is not None and self.segments.move(
-                self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now()):
+        if (
+            self._enabled
+            and self.segments is not None
+            and self.segments.move(self.direction, self.speed_rpm, self.keepalive.interval_s, self._ramp_ms_now())
+        ):
             self.keepalive.sent()
 
     def _ramp_ms_now(self) -> float | None:
@@ -216,7 +248,7 @@ class Jogger:
         if self.jog is not None:
             self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
         elif self._enabled and self.servo is not None:
-            self.drive.write_raw(self.servo, 1)      # servo-on again (no EEPROM write of the reference)
+            self.drive.write_raw(self.servo, 1)  # servo-on again (no EEPROM write of the reference)
 
     def leave(self) -> None:
         """Servo off (the drive stops holding the axis) and put back a parameter-held speed reference."""
@@ -245,12 +277,16 @@ class Jogger:
             speed = self.speed()
             if speed is not None and watch.at_rest(self.clock.now(), speed):
                 break
-            self.beat()           # the watchdog keeps running while the drive ramps down
+            self.beat()  # the watchdog keeps running while the drive ramps down
             self.idle(min(0.05, self.keepalive_s))
         self.leave()
 
-    def run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
-            command: Callable[[], int | None] | None = None) -> None:
+    def run(
+        self,
+        plan: JogPlan,
+        on_sample: Callable[[float, float | None], None] | None = None,
+        command: Callable[[], int | None] | None = None,
+    ) -> None:
         """Run a planned JOG; `command` (interactive) returns a new direction (+1/-1/0) or None to quit.
 
         Ctrl-C (KeyboardInterrupt) and any link error stop the motor before propagating. The JOG's own writes
@@ -283,7 +319,7 @@ class Jogger:
     def _snapshot(self) -> dict[str, int]:
         entries = self._written_settings()
         found = {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
-        return {**found, **journal.pending_settings(self.drive)}   # a dead process's originals win
+        return {**found, **journal.pending_settings(self.drive)}  # a dead process's originals win
 
     def _put_back(self, saved: dict[str, int], failing: bool) -> None:
         """Write back what differs from `saved`; while failing, the first error stays the one reported."""
@@ -294,20 +330,24 @@ class Jogger:
                     write_one(self.drive, entry, saved[entry.code])
             journal.clear_motion(self.drive, servo_off=not self._enabled)
             if self.segments is not None:
-                self.segments.forget_distance()     # the next move writes its displacement again
+                self.segments.forget_distance()  # the next move writes its displacement again
             self._speed_param_raw = None
         except ServoError:
             if not failing:
                 raise
 
-    def _run(self, plan: JogPlan, on_sample: Callable[[float, float | None], None] | None = None,
-             command: Callable[[], int | None] | None = None) -> None:
+    def _run(
+        self,
+        plan: JogPlan,
+        on_sample: Callable[[float, float | None], None] | None = None,
+        command: Callable[[], int | None] | None = None,
+    ) -> None:
         self.set_speed(plan.speed_rpm)
         guard = self.guard
         guard.start()
         t0 = self.clock.now()
         try:
-            self.command(plan.direction if command is None else 0)   # interactive: wait for the first key
+            self.command(plan.direction if command is None else 0)  # interactive: wait for the first key
             while True:
                 elapsed = self.clock.now() - t0
                 if plan.seconds is not None and elapsed >= plan.seconds:
@@ -318,11 +358,13 @@ class Jogger:
                         break
                     if new != self.direction:
                         self.command(new)
-                if command is None or self.keepalive.due():     # interactive: keys are polled between beats
+                if command is None or self.keepalive.due():  # interactive: keys are polled between beats
                     self.beat()
                     self.check_tripped()
-                    guard.check(self.direction, deadman.braking_rev(self.speed_rpm, plan.accel_ms)
-                                + self.speed_rpm / 60.0 * self.keepalive_s)
+                    guard.check(
+                        self.direction,
+                        deadman.braking_rev(self.speed_rpm, plan.accel_ms) + self.speed_rpm / 60.0 * self.keepalive_s,
+                    )
                     if on_sample is not None:
                         on_sample(elapsed, self.speed())
                 self.idle(self.keepalive_s if command is None else min(self.keepalive_s, KEY_POLL_S))
@@ -336,8 +378,9 @@ class Jogger:
         """A JOG the drive ended with an alarm is a failure, not a finished JOG."""
         state = alarms.confirmed(self.drive)
         if state is not None:
-            raise DeviceError(f"the drive stopped the JOG with alarm {state.display} {state.name} "
-                              "(see 'servotool alarm')")
+            raise DeviceError(
+                f"the drive stopped the JOG with alarm {state.display} {state.name} (see 'servotool alarm')"
+            )
 
     def _emergency_stop(self) -> None:
         try:
@@ -363,7 +406,7 @@ class Jogger:
         e = self.speed_entry
         if self.drive.port:
             if self.route.kind == "speed" and e.readable and e.cls == "Pn":
-                self._journaled_reference = self.drive.read_entries([e])[0].raw     # command() needs it too
+                self._journaled_reference = self.drive.read_entries([e])[0].raw  # command() needs it too
             speed_ref = {e.code: self._journaled_reference} if self._journaled_reference is not None else {}
             journal.note_settings(self.drive, {**speed_ref, **saved})
             if self.servo is not None:

@@ -23,11 +23,13 @@ def keepalive_interval_s(drive: Drive, default_s: float = 0.1) -> float:
     if timeout is None:
         return default_s
     timeout_s = float(raw_to_eng(timeout, drive.read_entries([timeout])[0].raw)) / 1000.0
-    if timeout_s <= 0:          # watchdog disabled
+    if timeout_s <= 0:  # watchdog disabled
         return default_s
     if timeout_s < 0.06:
-        raise UsageError(f"the drive's host watchdog {timeout.code} = {timeout_s * 1000:g} ms is too short "
-                         "to keep a motion alive over this link (at least 60 ms)")
+        raise UsageError(
+            f"the drive's host watchdog {timeout.code} = {timeout_s * 1000:g} ms is too short "
+            "to keep a motion alive over this link (at least 60 ms)"
+        )
     return timeout_s / 3
 
 
@@ -35,8 +37,9 @@ class KeepAlive:
     """The beat of one drive: writes its keep-alive entry (role keepalive: a counter where it takes 16 bits,
     else 1); a drive without one is kept alive by re-sending the running command (`resend`), if any."""
 
-    def __init__(self, drive: Drive, interval_s: float, clock: Clock | None = None,
-                 resend: Callable[[], None] | None = None) -> None:
+    def __init__(
+        self, drive: Drive, interval_s: float, clock: Clock | None = None, resend: Callable[[], None] | None = None
+    ) -> None:
         self.drive = drive
         self.entry = drive.profile.role("keepalive")
         self.interval_s = interval_s
@@ -46,8 +49,7 @@ class KeepAlive:
         self.last = self.clock.now()
 
     @classmethod
-    def for_drive(cls, drive: Drive, clock: Clock | None = None,
-                  resend: Callable[[], None] | None = None) -> KeepAlive:
+    def for_drive(cls, drive: Drive, clock: Clock | None = None, resend: Callable[[], None] | None = None) -> KeepAlive:
         """A beat at the drive's watchdog rate (see keepalive_interval_s)."""
         return cls(drive, keepalive_interval_s(drive), clock, resend)
 

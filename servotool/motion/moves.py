@@ -21,7 +21,7 @@ WATCHDOG_FEED_SHARE = 2.0 / 3.0
 class Mover(Jogger):
     """A Jogger whose moves start from rest (start) and whose dead-man is fed by keep_alive."""
 
-    _ends_at: float | None = None     # segment route: from then on the running move's own segment brakes it
+    _ends_at: float | None = None  # segment route: from then on the running move's own segment brakes it
 
     @property
     def folds(self) -> bool:
@@ -45,9 +45,15 @@ class Mover(Jogger):
         ramp = self._ramp_entry()
         ramp_ms = float(raw_to_eng(ramp, ramp_raw))
         if ramp_raw != self._ramp_raw or self.dead_man is None or self.speed_rpm > self.dead_man.speed_rpm:
-            self.arm_dead_man(self.speed_rpm, ramp_ms)      # before anything is written
-        changes = [(e, old, new) for e, old, new in ((self.speed_entry, self.speed_param(),
-                   self._speed_raw(self.speed_rpm)), (ramp, self._ramp_raw, ramp_raw)) if old != new]
+            self.arm_dead_man(self.speed_rpm, ramp_ms)  # before anything is written
+        changes = [
+            (e, old, new)
+            for e, old, new in (
+                (self.speed_entry, self.speed_param(), self._speed_raw(self.speed_rpm)),
+                (ramp, self._ramp_raw, ramp_raw),
+            )
+            if old != new
+        ]
         if changes and self.segments is not None and direction:
             # The speed unchanged between a changed ramp and the displacement (IS620P H11-14 between H11-12/13 and
             # H11-15: a dithered cycle) goes along, so that the three go in one request instead of three.
@@ -66,8 +72,9 @@ class Mover(Jogger):
             self.segments.own_s = stop_after_s
         self.command(direction)
 
-    def _folded_distance(self, changes: list[tuple[Entry, int, int]], direction: int, ramp_ms: float,
-                         stop_after_s: float | None) -> list[tuple[Entry, int, int]]:
+    def _folded_distance(
+        self, changes: list[tuple[Entry, int, int]], direction: int, ramp_ms: float, stop_after_s: float | None
+    ) -> list[tuple[Entry, int, int]]:
         """The move's displacement as a change to write with `changes`, where it is adjacent to one of them."""
         assert self.segments is not None
         distance = self.route.entries["segment_distance"]
@@ -80,9 +87,13 @@ class Mover(Jogger):
     def _segment_command(self) -> None:
         segments = self.segments
         assert segments is not None
-        if not self.direction and segments.ends_itself and self._ends_at is not None and \
-                self.clock.now() >= self._ends_at:
-            segments.moving = 0        # the move's own segment is braking it now: nothing to write
+        if (
+            not self.direction
+            and segments.ends_itself
+            and self._ends_at is not None
+            and self.clock.now() >= self._ends_at
+        ):
+            segments.moving = 0  # the move's own segment is braking it now: nothing to write
             return
         own = segments.own_s if self.direction else None
         super()._segment_command()
@@ -107,11 +118,19 @@ class Mover(Jogger):
         own segment ends within the dead-man's bound by itself (start) and is never re-armed."""
         ka, segments, timeout = self.keepalive, self.segments, self._timeout_s
         if segments is not None and ka.entry is None:
-            if segments.moving and not segments.ends_itself and \
-                    ka.due_after((deadman.SEGMENT_BEATS - 1.0) * ka.interval_s):
+            if (
+                segments.moving
+                and not segments.ends_itself
+                and ka.due_after((deadman.SEGMENT_BEATS - 1.0) * ka.interval_s)
+            ):
                 ka.beat()
-        elif ka.entry is not None and timeout is not None and timeout > 0 and self.dead_man is not None and \
-                self.dead_man.route == "drive_timeout":
+        elif (
+            ka.entry is not None
+            and timeout is not None
+            and timeout > 0
+            and self.dead_man is not None
+            and self.dead_man.route == "drive_timeout"
+        ):
             if ka.due_after(max(ka.interval_s, WATCHDOG_FEED_SHARE * timeout - lead_s)):
                 ka.beat()
         else:

@@ -10,7 +10,7 @@ from __future__ import annotations
 # The speed stays inside the band at least this long, over at least two readings: a swing through zero at the
 # loop's usual rates (thousands of rpm/s) crosses a band of a few rpm in a few ms.
 SETTLE_S = 0.02
-STOPPED_RPM = 3.0      # the band of a stop that knows no speed noise (JOG, step check)
+STOPPED_RPM = 3.0  # the band of a stop that knows no speed noise (JOG, step check)
 
 
 class RestWatch:

@@ -21,12 +21,12 @@ class SegmentMoves:
         self.start_bits = dead_man.start_value if dead_man is not None else 1
         motor = drive.profile.motor
         self.rated_rpm = motor.rated_speed_rpm if motor is not None else 3000.0
-        self.moving = 0                       # the direction of the running move (0: none or braking)
-        self._raw: int | None = None          # the displacement last written
+        self.moving = 0  # the direction of the running move (0: none or braking)
+        self._raw: int | None = None  # the displacement last written
         self._per_rev: float | None = None
-        self.start_high = True                # the start bits may be on: a move needs them off first
-        self.ends_itself = False              # the running move's own segment stops it (see length_rev)
-        self.own_s: float | None = None       # the next fresh move accelerates this long, then stops (once)
+        self.start_high = True  # the start bits may be on: a move needs them off first
+        self.ends_itself = False  # the running move's own segment stops it (see length_rev)
+        self.own_s: float | None = None  # the next fresh move accelerates this long, then stops (once)
 
     def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
         """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own where
@@ -45,8 +45,9 @@ class SegmentMoves:
         self._start(rev)
         return True
 
-    def length_rev(self, speed_rpm: float, beat_s: float, ramp_ms: float | None, own_s: float | None
-                   ) -> tuple[float, bool]:
+    def length_rev(
+        self, speed_rpm: float, beat_s: float, ramp_ms: float | None, own_s: float | None
+    ) -> tuple[float, bool]:
         """The length of a fresh move, and whether it is the move's own. A move that accelerates for own_s and then
         stops (identification) is one segment of its own where that is no longer than the dead-man's: the drive
         brakes it at its end by itself, with no re-arm and no stop command (three writes a move on IS620P)."""
@@ -54,11 +55,12 @@ class SegmentMoves:
         if own_s is None or not ramp_ms or ramp_ms <= 0:
             return bounded, False
         to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.rated_rpm
-        own = abs(speed_rpm) / 60.0 * own_s * min(1.0, own_s / to_speed_s)   # up for own_s, down as long
+        own = abs(speed_rpm) / 60.0 * own_s * min(1.0, own_s / to_speed_s)  # up for own_s, down as long
         return (own, True) if own <= bounded else (bounded, False)
 
-    def distance_raw(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None,
-                     own_s: float | None = None) -> int:
+    def distance_raw(
+        self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None, own_s: float | None = None
+    ) -> int:
         """The displacement (raw) a fresh move in `direction` writes (see move)."""
         return self._raw_of(direction * self.length_rev(speed_rpm, beat_s, ramp_ms, own_s)[0])
 
@@ -82,8 +84,8 @@ class SegmentMoves:
             self._raw = raw
         start = self.route.entries["segment_start"]
         if self.start_high:
-            self.drive.write_raw(start, 1)                  # servo on, start bits off ...
-        self.drive.write_raw(start, 1 | self.start_bits)    # ... then on: the edge starts the move
+            self.drive.write_raw(start, 1)  # servo on, start bits off ...
+        self.drive.write_raw(start, 1 | self.start_bits)  # ... then on: the edge starts the move
         self.start_high = True
 
     def forget_distance(self) -> None:
@@ -97,7 +99,8 @@ class SegmentMoves:
             value = float(raw_to_eng(entry, self.drive.read_entries([entry])[0].raw)) if entry is not None else 0.0
             if value <= 0:
                 what = entry.code if entry is not None else "a units-per-revolution setting"
-                raise UsageError(f"{self.feature} needs {what} set (the segment displacement's units per motor "
-                                 "revolution)")
+                raise UsageError(
+                    f"{self.feature} needs {what} set (the segment displacement's units per motor revolution)"
+                )
             self._per_rev = value
         return self._per_rev

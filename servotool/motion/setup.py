@@ -10,9 +10,11 @@ from servotool.model.roles import FEATURE
 from servotool.model.setup import check as check_setup_values
 
 
-def check_setup(drive: Drive, feature: str = FEATURE,
-                effective_of: Callable[[list[Entry]], list[int]] | None = None) -> None:
+def check_setup(
+    drive: Drive, feature: str = FEATURE, effective_of: Callable[[list[Entry]], list[int]] | None = None
+) -> None:
     """Refuse host motion while the drive lacks the profile's motion_setup settings (one line naming each)."""
+
     def value_of(entries: list[Entry]) -> list[int]:
         return [r.raw for r in drive.read_entries(entries)]
 

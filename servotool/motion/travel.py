@@ -60,7 +60,7 @@ class TravelLimit:
     """A soft limit: the axis may move at most `rev` revolutions either way from where the motion started."""
 
     rev: float
-    source: str           # where the value came from: --travel, the config file, ...
+    source: str  # where the value came from: --travel, the config file, ...
 
     def describe(self) -> str:
         return f"travel limit ±{self.rev:g} rev ({self.source})"
@@ -75,8 +75,10 @@ class TravelGuard:
         if limit is not None and not (limit.rev > 0):
             raise UsageError("--travel must be a number of revolutions > 0")
         if limit is not None and not self.position.available:
-            raise UsageError(f"{limit.describe()} needs a position monitor (role position_feedback), which "
-                             f"profile {drive.profile.id} does not map")
+            raise UsageError(
+                f"{limit.describe()} needs a position monitor (role position_feedback), which "
+                f"profile {drive.profile.id} does not map"
+            )
         self.at_rev = 0.0
 
     def start(self) -> None:
@@ -91,6 +93,5 @@ class TravelGuard:
             return
         self.at_rev = self.position.update()
         ahead = self.at_rev + direction * stop_rev
-        if abs(self.at_rev) >= self.limit.rev or (direction and abs(ahead) >= self.limit.rev
-                                                   and ahead * direction > 0):
+        if abs(self.at_rev) >= self.limit.rev or (direction and abs(ahead) >= self.limit.rev and ahead * direction > 0):
             raise TravelLimitHit(f"{self.limit.describe()} reached at {self.at_rev:+.2f} rev: motor stopped")

@@ -24,8 +24,14 @@ class AlarmState:
     known: bool = True
 
     def as_json(self) -> dict[str, object]:
-        return {"code": self.code, "display": self.display, "name": self.name, "active": self.active,
-                "clearable": self.clearable, "known": self.known}
+        return {
+            "code": self.code,
+            "display": self.display,
+            "name": self.name,
+            "active": self.active,
+            "clearable": self.clearable,
+            "known": self.known,
+        }
 
 
 def describe(profile: Profile, code: int, *, active: bool | None = None) -> AlarmState:
@@ -38,8 +44,9 @@ def describe(profile: Profile, code: int, *, active: bool | None = None) -> Alar
         return AlarmState(0, "-", "no alarm", None, False)
     known = profile.alarm(code)
     if known is None:
-        return AlarmState(code, f"0x{code:04X}", f"unknown alarm (not in the {profile.id} profile)", None, is_active,
-                          known=False)
+        return AlarmState(
+            code, f"0x{code:04X}", f"unknown alarm (not in the {profile.id} profile)", None, is_active, known=False
+        )
     return AlarmState(code, known.display, known.name, known.clearable, is_active)
 
 
@@ -71,8 +78,9 @@ def history(drive: Drive) -> list[AlarmState]:
         drive.profile.need_role("alarm_history_1", "alarm history")
     readings = drive.read_entries([drive.profile.need_role(r, "alarm history") for r in roles])
     now = current(drive).code if drive.profile.role("alarm_code") is not None else 0
-    return [describe(drive.profile, r.raw, active=(n == 0 and r.raw != 0 and r.raw == now))
-            for n, r in enumerate(readings)]
+    return [
+        describe(drive.profile, r.raw, active=(n == 0 and r.raw != 0 and r.raw == now)) for n, r in enumerate(readings)
+    ]
 
 
 def clear(drive: Drive) -> AlarmState:
@@ -80,7 +88,10 @@ def clear(drive: Drive) -> AlarmState:
     drive.trigger("alarm_reset", "alarm clear")
     after = current(drive)
     if after.active:
-        why = " (not clearable: needs a power cycle or repair)" if after.clearable is False else \
-            " (its cause is still present)"
+        why = (
+            " (not clearable: needs a power cycle or repair)"
+            if after.clearable is False
+            else " (its cause is still present)"
+        )
         raise VerifyError(f"alarm {after.display} {after.name} is still active after reset{why}")
     return after

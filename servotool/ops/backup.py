@@ -35,24 +35,46 @@ class Backup:
     values: dict[str, int]
     path: Path | None = None
     warnings: list[str] = field(default_factory=list)
-    missing: list[str] = field(default_factory=list)    # Pn entries the drive lacks (not in values)
+    missing: list[str] = field(default_factory=list)  # Pn entries the drive lacks (not in values)
 
     def checksum(self) -> str:
-        canon = json.dumps({"profile": self.profile, "model": self.model, "unit": self.unit,
-                            "values": dict(sorted(self.values.items()))}, sort_keys=True, separators=(",", ":"))
+        canon = json.dumps(
+            {
+                "profile": self.profile,
+                "model": self.model,
+                "unit": self.unit,
+                "values": dict(sorted(self.values.items())),
+            },
+            sort_keys=True,
+            separators=(",", ":"),
+        )
         return hashlib.sha256(canon.encode()).hexdigest()
 
     def to_yaml(self, profile: Profile) -> str:
-        text = {code: format_value(profile.entry(code), raw) + (f" {profile.entry(code).unit}"
-                                                                 if profile.entry(code).unit else "")
-                for code, raw in self.values.items()}
-        doc = {"servotool_backup": FORMAT, "profile": self.profile, "profile_version": self.profile_version,
-               "model": self.model, "unit": self.unit, "created": self.created, "tool_version": self.tool_version,
-               "identity": self.identity, "checksum": self.checksum(), "values": self.values, "display": text}
+        text = {
+            code: format_value(profile.entry(code), raw)
+            + (f" {profile.entry(code).unit}" if profile.entry(code).unit else "")
+            for code, raw in self.values.items()
+        }
+        doc = {
+            "servotool_backup": FORMAT,
+            "profile": self.profile,
+            "profile_version": self.profile_version,
+            "model": self.model,
+            "unit": self.unit,
+            "created": self.created,
+            "tool_version": self.tool_version,
+            "identity": self.identity,
+            "checksum": self.checksum(),
+            "values": self.values,
+            "display": text,
+        }
         if self.missing:
             doc["missing"] = {code: "not on this drive" for code in self.missing}
-        return "# servotool parameter backup; values are raw register integers, 'display' is for reading only\n" + \
-            _dump(doc)
+        return (
+            "# servotool parameter backup; values are raw register integers, 'display' is for reading only\n"
+            + _dump(doc)
+        )
 
 
 def _dump(doc: dict[str, Any]) -> str:
@@ -70,8 +92,17 @@ def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
     ident = identity_entries(p)
     for r in drive.read_entries(ident, partial=True) if ident else []:
         identity[r.entry.code] = r.text
-    return Backup(p.id, p.version, p.model, drive.unit, utc_now().isoformat(timespec="seconds"),
-                  __version__, identity, values, missing=[e.code for e in select(p) if e.code in drive.missing])
+    return Backup(
+        p.id,
+        p.version,
+        p.model,
+        drive.unit,
+        utc_now().isoformat(timespec="seconds"),
+        __version__,
+        identity,
+        values,
+        missing=[e.code for e in select(p) if e.code in drive.missing],
+    )
 
 
 def identity_entries(profile: Profile) -> list[Entry]:
@@ -105,8 +136,13 @@ def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False, f
     exists = UsageError(f"{path} exists; choose another name or pass --force to replace it")
     if path.exists() and not force:
         raise exists
-    meta = {"profile": backup.profile, "model": backup.model, "unit": str(backup.unit), "created": backup.created,
-            "tool_version": backup.tool_version}
+    meta = {
+        "profile": backup.profile,
+        "model": backup.model,
+        "unit": str(backup.unit),
+        "created": backup.created,
+        "tool_version": backup.tool_version,
+    }
     text = backup_csv.to_csv(profile, meta, backup.values) if fmt == "csv" else backup.to_yaml(profile)
     try:
         write_atomic(path, text, replace=force)
@@ -118,8 +154,9 @@ def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False, f
     return path
 
 
-def write_backup(drive: Drive, path: Path, *, force: bool = False,
-                 progress: Callable[[int], None] | None = None) -> Path:
+def write_backup(
+    drive: Drive, path: Path, *, force: bool = False, progress: Callable[[int], None] | None = None
+) -> Path:
     return save(take(drive, progress), drive.profile, path, force=force)
 
 
@@ -140,8 +177,18 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
     if path.suffix.lower() == ".csv":
         meta, values, warnings = backup_csv.read(path, profile, force=force)
         unit = meta.get("unit", "")
-        return Backup(meta.get("profile", ""), "", meta.get("model", ""), int(unit) if unit.isdigit() else 0,
-                      meta.get("created", ""), meta.get("tool_version", ""), {}, values, path, warnings)
+        return Backup(
+            meta.get("profile", ""),
+            "",
+            meta.get("model", ""),
+            int(unit) if unit.isdigit() else 0,
+            meta.get("created", ""),
+            meta.get("tool_version", ""),
+            {},
+            values,
+            path,
+            warnings,
+        )
     what = str(path)
     data = load_yaml(path)
     if not isinstance(data, dict) or data.get("servotool_backup") != FORMAT:
@@ -171,10 +218,19 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
     missing = data.get("missing") or {}
     if not isinstance(missing, dict) or any(profile.find(str(c)) is None for c in missing):
         raise UsageError(f"{what}: 'missing' must map this profile's codes to a note")
-    b = Backup(data["profile"], str(data.get("profile_version", "")), data["model"], data["unit"],
-               str(data.get("created", "")), str(data.get("tool_version", "")),
-               {str(k): str(v) for k, v in (data.get("identity") or {}).items()}, values, path, warnings,
-               [profile.entry(str(c)).code for c in missing])
+    b = Backup(
+        data["profile"],
+        str(data.get("profile_version", "")),
+        data["model"],
+        data["unit"],
+        str(data.get("created", "")),
+        str(data.get("tool_version", "")),
+        {str(k): str(v) for k, v in (data.get("identity") or {}).items()},
+        values,
+        path,
+        warnings,
+        [profile.entry(str(c)).code for c in missing],
+    )
     if b.checksum() != data["checksum"]:
         msg = f"{what}: checksum mismatch: the values were edited or damaged"
         if not force:
@@ -199,9 +255,14 @@ class Difference:
 
     def as_json(self) -> dict[str, Any]:
         e = self.entry
-        out: dict[str, Any] = {"code": e.code, "name": e.name, "unit": e.unit, "effect": e.effect,
-                               "a": None if self.a is None else json_value(e, self.a),
-                               "b": None if self.b is None else json_value(e, self.b)}
+        out: dict[str, Any] = {
+            "code": e.code,
+            "name": e.name,
+            "unit": e.unit,
+            "effect": e.effect,
+            "a": None if self.a is None else json_value(e, self.a),
+            "b": None if self.b is None else json_value(e, self.b),
+        }
         for key, raw in (("a", self.a), ("b", self.b)):
             if raw is not None and raw in e.enum:
                 out[f"{key}_meaning"] = e.enum[raw]

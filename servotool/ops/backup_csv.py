@@ -69,8 +69,10 @@ def read(path: Path, profile: Profile, *, force: bool = False) -> tuple[dict[str
         raise UsageError(f"{path}: the second row must be the header {','.join(COLUMNS)}")
     warnings = [f"{path}: a CSV backup has no checksum: its values are used as they are"]
     if meta.get("profile") != profile.id or meta.get("model") != profile.model:
-        msg = f"{path}: backup of a {meta.get('model')} ({meta.get('profile')}), not of this {profile.model} " \
-              f"({profile.id})"
+        msg = (
+            f"{path}: backup of a {meta.get('model')} ({meta.get('profile')}), not of this {profile.model} "
+            f"({profile.id})"
+        )
         if not force:
             raise UsageError(msg + "; --force to restore anyway")
         warnings.append(msg)

@@ -32,15 +32,15 @@ class Health:
     """What N requests to one unit showed."""
 
     port: str
-    line: LineSettings | None           # None over tcp://
+    line: LineSettings | None  # None over tcp://
     unit: int
     address: int
     registers: int
     count: int
-    rtts: list[float] = field(default_factory=list)    # s, requests that got an answer (an exception too)
+    rtts: list[float] = field(default_factory=list)  # s, requests that got an answer (an exception too)
     exceptions: int = 0
-    failures: int = 0                   # requests with no usable answer after the retries
-    frames: int = 0                     # frames sent in all: tries and confirming reads included
+    failures: int = 0  # requests with no usable answer after the retries
+    frames: int = 0  # frames sent in all: tries and confirming reads included
     echo: bool | None = None
     seconds: float = 0.0
     latency: LatencyTimer | None = None
@@ -71,15 +71,26 @@ class Health:
 
     def as_json(self) -> dict[str, object]:
         theory = self.theoretical_rate
-        return {"port": self.port, "baud": self.line.baud if self.line else None,
-                "format": f"{self.line.bytesize}{self.line.parity}{self.line.stopbits}" if self.line else None,
-                "unit": self.unit, "address": self.address, "registers": self.registers, "requests": self.count,
-                "answered": len(self.rtts), "exceptions": self.exceptions, "failures": self.failures,
-                "error_rate": round(self.failures / self.count, 4), "retries": self.retries,
-                "retry_rate": round(self.retries / self.count, 4), "echo": self.echo, "rtt_ms": self.rtt_ms(),
-                "achieved_rate": round(self.achieved_rate, 1),
-                "theoretical_rate": round(theory, 1) if theory else None,
-                "latency_timer": {"path": self.latency.path, "ms": self.latency.ms} if self.latency else None}
+        return {
+            "port": self.port,
+            "baud": self.line.baud if self.line else None,
+            "format": f"{self.line.bytesize}{self.line.parity}{self.line.stopbits}" if self.line else None,
+            "unit": self.unit,
+            "address": self.address,
+            "registers": self.registers,
+            "requests": self.count,
+            "answered": len(self.rtts),
+            "exceptions": self.exceptions,
+            "failures": self.failures,
+            "error_rate": round(self.failures / self.count, 4),
+            "retries": self.retries,
+            "retry_rate": round(self.retries / self.count, 4),
+            "echo": self.echo,
+            "rtt_ms": self.rtt_ms(),
+            "achieved_rate": round(self.achieved_rate, 1),
+            "theoretical_rate": round(theory, 1) if theory else None,
+            "latency_timer": {"path": self.latency.path, "ms": self.latency.ms} if self.latency else None,
+        }
 
 
 def link_settings(options: ConnectOptions) -> tuple[LinkSettings, int, Profile | None]:
@@ -88,19 +99,31 @@ def link_settings(options: ConnectOptions) -> tuple[LinkSettings, int, Profile |
     if not opts.port:
         raise UsageError("doctor needs a port: --port /dev/ttyUSB0|COM3|tcp://HOST:PORT")
     if opts.port == SIM_PORT:
-        raise UsageError("doctor checks a line: start 'servotool sim serve --port tcp://127.0.0.1:0' and give its "
-                         "tcp:// port")
+        raise UsageError(
+            "doctor checks a line: start 'servotool sim serve --port tcp://127.0.0.1:0' and give its tcp:// port"
+        )
     parse_tcp(opts.port)
     profile = load_profile(opts.profile) if opts.profile else None
     line = line_settings(opts, profile.line if profile else LineSettings())
-    settings = LinkSettings(opts.port, line, timeout=opts.timeout if opts.timeout is not None else 1.0,
-                            retries=opts.retries if opts.retries is not None else 2, echo=None)
+    settings = LinkSettings(
+        opts.port,
+        line,
+        timeout=opts.timeout if opts.timeout is not None else 1.0,
+        retries=opts.retries if opts.retries is not None else 2,
+        echo=None,
+    )
     unit = check_unit(opts.unit if opts.unit is not None else (profile.default_unit if profile else 1))
     return settings, unit, profile
 
 
-def check(settings: LinkSettings, unit: int, profile: Profile | None, count: int,
-          progress: Callable[[int], None] | None = None, clock: Clock | None = None) -> Health:
+def check(
+    settings: LinkSettings,
+    unit: int,
+    profile: Profile | None,
+    count: int,
+    progress: Callable[[int], None] | None = None,
+    clock: Clock | None = None,
+) -> Health:
     """Send `count` reads to the unit and measure. The read is the profile's first identity block (what a drive
     of that family has), else one register at address 0; an exception answer is an answer."""
     if count < 1:
@@ -109,8 +132,15 @@ def check(settings: LinkSettings, unit: int, profile: Profile | None, count: int
     if profile and profile.identity:
         address, registers, _checks = read_plan(profile.identity.checks, profile.limits.max_read)[0]
     tcp = parse_tcp(settings.port) is not None
-    health = Health(settings.port, None if tcp else settings.line, unit, address, registers, count,
-                    latency=None if tcp else latency_timer(settings.port))
+    health = Health(
+        settings.port,
+        None if tcp else settings.line,
+        unit,
+        address,
+        registers,
+        count,
+        latency=None if tcp else latency_timer(settings.port),
+    )
     clock = clock or RealClock()
     link = ModbusLink(settings)
     try:
@@ -142,4 +172,3 @@ def latency_timer(port: str) -> LatencyTimer | None:
     if ms is None:
         return None
     return LatencyTimer(str(SYSFS_USB_SERIAL / os.path.basename(os.path.realpath(port)) / "latency_timer"), ms)
-

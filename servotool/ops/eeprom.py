@@ -25,8 +25,9 @@ def switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
 
 
 @contextmanager
-def _switched(drive: Drive, entry: Entry, current: int, wanted: int,
-              state: dict[str, bool] | None = None) -> Iterator[None]:
+def _switched(
+    drive: Drive, entry: Entry, current: int, wanted: int, state: dict[str, bool] | None = None
+) -> Iterator[None]:
     """Run the block with the switch at `wanted`, journaled on the host, and put it back (verified) on every exit
     path; the journal record goes only once the switch is confirmed back, else the next command finishes it.
     state['switch_back'] says whether it was put back."""
@@ -67,7 +68,7 @@ def _put_back(drive: Drive, entry: Entry, raw: int, failing: bool, state: dict[s
             if interrupt is not None:
                 raise interrupt from None
             if not failing:
-                raise      # otherwise the first error is the one to report
+                raise  # otherwise the first error is the one to report
             return
         if state is not None:
             state["switch_back"] = True
@@ -125,10 +126,17 @@ def check_power_cycle(drive: Drive, entries: list[Entry], save: bool | None) -> 
     if not later or will_persist(drive, save):
         return
     codes = ", ".join(later)
-    how = ("store it with --save" if can_save(drive.profile) and save is not False
-           else "drop --no-save" if can_save(drive.profile) else drive.profile.persistence.note)
-    raise UsageError(f"{codes} {agree(len(later), 'takes', 'take')} effect only after a power cycle, and "
-                     f"written in RAM only {agree(len(later), 'it', 'they')} would be lost by that power cycle: {how}")
+    how = (
+        "store it with --save"
+        if can_save(drive.profile) and save is not False
+        else "drop --no-save"
+        if can_save(drive.profile)
+        else drive.profile.persistence.note
+    )
+    raise UsageError(
+        f"{codes} {agree(len(later), 'takes', 'take')} effect only after a power cycle, and "
+        f"written in RAM only {agree(len(later), 'it', 'they')} would be lost by that power cycle: {how}"
+    )
 
 
 @contextmanager

@@ -44,8 +44,13 @@ class Answer:
         return f"{where} reads {self.raw}"
 
     def as_json(self) -> dict[str, object]:
-        return {"code": self.check.code or None, "address": self.check.address, "raw": self.raw,
-                "exception": self.exception, "verdict": self.verdict}
+        return {
+            "code": self.check.code or None,
+            "address": self.check.address,
+            "raw": self.raw,
+            "exception": self.exception,
+            "verdict": self.verdict,
+        }
 
 
 @dataclass(frozen=True)
@@ -86,18 +91,26 @@ class Verdict:
         out = [a.describe(self.profile.model) for a in picked if a not in missing]
         if len(missing) > 1:
             first, last = missing[0].check, missing[-1].check
-            out.insert(0, f"{', '.join(a.check.label for a in missing)} (addresses {first.address}-"
-                          f"{last.address + last.words - 1}) are not on this drive (exception 02)")
+            out.insert(
+                0,
+                f"{', '.join(a.check.label for a in missing)} (addresses {first.address}-"
+                f"{last.address + last.words - 1}) are not on this drive (exception 02)",
+            )
         elif missing:
             out.insert(0, missing[0].describe(self.profile.model))
         return out
 
     def as_json(self) -> dict[str, object]:
         ident = self.profile.identity
-        return {"profile": self.profile.id, "model": self.profile.model, "unit": self.unit, "outcome": self.outcome,
-                "firmware": {"code": ident.firmware, "raw": self.firmware} if ident and ident.firmware else None,
-                "drive_model": {"code": ident.model, "raw": self.model} if ident and ident.model else None,
-                "answers": [a.as_json() for a in self.answers]}
+        return {
+            "profile": self.profile.id,
+            "model": self.profile.model,
+            "unit": self.unit,
+            "outcome": self.outcome,
+            "firmware": {"code": ident.firmware, "raw": self.firmware} if ident and ident.firmware else None,
+            "drive_model": {"code": ident.model, "raw": self.model} if ident and ident.model else None,
+            "answers": [a.as_json() for a in self.answers],
+        }
 
 
 def probe(link: Link, unit: int, profile: Profile, *, silent_ok: bool = False) -> Verdict:
@@ -115,14 +128,16 @@ def probe(link: Link, unit: int, profile: Profile, *, silent_ok: bool = False) -
             continue
         except DeviceError as exc:
             if not silent_ok:
-                exc.args = (f"checking the drive's identity: {exc.args[0] if exc.args else exc} "
-                            f"(--no-identity-check skips the check)",)
+                exc.args = (
+                    f"checking the drive's identity: {exc.args[0] if exc.args else exc} "
+                    f"(--no-identity-check skips the check)",
+                )
                 raise
             answers += [Answer(c) for c in checks]
             continue
         for c in checks:
             off = c.address - start
-            answers.append(_judge(profile, c, words[off: off + c.words]))
+            answers.append(_judge(profile, c, words[off : off + c.words]))
     return Verdict(profile, unit, tuple(answers))
 
 
@@ -185,9 +200,13 @@ def confirm(drives: list[Drive], others: list[Profile] | None = None) -> list[Ve
             # Only profiles whose map agrees with what was already answered are worth their own reads.
             pool = [p for p in pool if p.id != drive.profile.id and consistent(p, verdict.answers)]
             better = best_fit(drive.link, drive.unit, pool)
-            raise IdentityMismatch(drive.profile.id, drive.profile.model, drive.unit,
-                                   verdict.reasons(CONTRADICTS),
-                                   (better.profile.id, better.profile.model) if better else None)
+            raise IdentityMismatch(
+                drive.profile.id,
+                drive.profile.model,
+                drive.unit,
+                verdict.reasons(CONTRADICTS),
+                (better.profile.id, better.profile.model) if better else None,
+            )
         verdicts.append(verdict)
     return verdicts
 
@@ -202,5 +221,4 @@ def warning_text(verdicts: list[Verdict]) -> str | None:
         why = "; ".join(v.reasons(UNKNOWN)) if v.answers else f"profile {v.profile.id} names no identity checks"
         parts.append(f"unit {v.unit} ({why})")
     first = unsure[0].profile
-    return (f"cannot confirm that the drive is a {first.model} (profile {first.id}): {', '.join(parts)}; "
-            f"going on")
+    return f"cannot confirm that the drive is a {first.model} (profile {first.id}): {', '.join(parts)}; going on"

@@ -34,7 +34,7 @@ from servotool.words import count
 Notice = Callable[[str], None]
 LOCK_WAIT_S = 60.0
 LOOP_ROLES = ("position_loop_gain", "speed_loop_gain", "speed_loop_integral", "inertia_ratio", "torque_filter")
-STANDSTILL_RPM = 20.0     # a motion's settings are put back only below this speed (a hold jitters a few rpm)
+STANDSTILL_RPM = 20.0  # a motion's settings are put back only below this speed (a hold jitters a few rpm)
 
 
 def journal_dir() -> Path:
@@ -56,6 +56,7 @@ def _stderr(text: str) -> None:
 
 
 # ----- the per-port lock (reentrant within a process) ------------------------------------------------------------
+
 
 @dataclass
 class _Held:
@@ -80,8 +81,10 @@ def port_lock(drive: Drive, notice: Notice | None = None, clock: Clock | None = 
         deadline = clock.now() + LOCK_WAIT_S
         while not held.lock.try_acquire():
             if clock.now() > deadline:
-                raise DeviceError(f"another servotool process has been writing to {drive.port} for "
-                                  f"{LOCK_WAIT_S:.0f} s; try again when it has finished")
+                raise DeviceError(
+                    f"another servotool process has been writing to {drive.port} for "
+                    f"{LOCK_WAIT_S:.0f} s; try again when it has finished"
+                )
             clock.sleep(0.01)
     held.depth += 1
     try:
@@ -95,6 +98,7 @@ def port_lock(drive: Drive, notice: Notice | None = None, clock: Clock | None = 
 
 
 # ----- records ---------------------------------------------------------------------------------------------------
+
 
 def read_record(drive: Drive) -> dict[str, Any] | None:
     """This drive's journal record, None when there is none; a damaged one counts as empty (and is replaced)."""
@@ -112,8 +116,12 @@ def _write(drive: Drive, data: dict[str, Any]) -> None:
     if not data:
         path.unlink(missing_ok=True)
         return
-    write_atomic(path, json.dumps({**data, "pid": os.getpid(), "port": drive.port, "unit": drive.unit,
-                                   "profile": drive.profile.id}, indent=1))
+    write_atomic(
+        path,
+        json.dumps(
+            {**data, "pid": os.getpid(), "port": drive.port, "unit": drive.unit, "profile": drive.profile.id}, indent=1
+        ),
+    )
 
 
 def _update(drive: Drive, **parts: Any) -> None:
@@ -135,8 +143,9 @@ def operation(drive: Drive, op: str, auto_backup: Path, targets: dict[str, int])
     before the record is written: the recovery its first holder runs would take this live record for a dead one's
     (and drop it)."""
     with port_lock(drive):
-        _update(drive, op={"name": op, "auto_backup": str(auto_backup), "targets": targets,
-                           "since": RealClock().wall()})
+        _update(
+            drive, op={"name": op, "auto_backup": str(auto_backup), "targets": targets, "since": RealClock().wall()}
+        )
         try:
             yield
         except BaseException:
@@ -149,6 +158,7 @@ def operation(drive: Drive, op: str, auto_backup: Path, targets: dict[str, int])
 
 # ----- recovery --------------------------------------------------------------------------------------------------
 
+
 def recover(drive: Drive, notice: Notice) -> list[str]:
     """Put right what a dead process left (call with the port lock held): the switch back to its journaled value,
     and one line on an interrupted operation. Returns the lines given to notice."""
@@ -158,7 +168,7 @@ def recover(drive: Drive, notice: Notice) -> list[str]:
     lines: list[str] = []
     pid = record.get("pid")
     keep: dict[str, Any] = {}
-    if record.get("settings") or record.get("servo"):   # before the switch: written back in RAM, as changed
+    if record.get("settings") or record.get("servo"):  # before the switch: written back in RAM, as changed
         line, keep = _end_motion(drive, record, pid)
         lines.append(line)
     switch = record.get("switch")
@@ -181,11 +191,15 @@ def _put_switch_back(drive: Drive, switch: dict[str, Any], pid: object) -> str:
     entry = drive.profile.entry(code)
     now = drive.read_entries([entry])[0].raw
     if now == original:
-        return (f"servotool: a servotool process (pid {pid}) ended while changing {entry.code}; it is "
-                f"{format_value(entry, now)} as before")
+        return (
+            f"servotool: a servotool process (pid {pid}) ended while changing {entry.code}; it is "
+            f"{format_value(entry, now)} as before"
+        )
     drive.write_verified(entry, original)
-    return (f"servotool: put {entry.code} back to {format_value(entry, original)} (was "
-            f"{format_value(entry, now)}): a servotool process (pid {pid}) ended with it changed")
+    return (
+        f"servotool: put {entry.code} back to {format_value(entry, original)} (was "
+        f"{format_value(entry, now)}): a servotool process (pid {pid}) ended with it changed"
+    )
 
 
 def _end_motion(drive: Drive, record: dict[str, Any], pid: object) -> tuple[str, dict[str, Any]]:
@@ -198,18 +212,26 @@ def _end_motion(drive: Drive, record: dict[str, Any], pid: object) -> tuple[str,
     if originals is None:
         return f"servotool: ignored a damaged journal record for unit {drive.unit} ({record_path(drive)})", {}
     found = [drive.profile.entry(code) for code in originals]
-    changed = [(e, originals[e.code], r.raw) for e, r in zip(found, drive.read_entries(found), strict=True)
-               if r.raw != originals[e.code]]
+    changed = [
+        (e, originals[e.code], r.raw)
+        for e, r in zip(found, drive.read_entries(found), strict=True)
+        if r.raw != originals[e.code]
+    ]
     head = f"servotool: a servotool process (pid {pid}) ended during a motion"
     if _moving(drive):
-        return (f"{head} and the motor still turns: the servo and {len(changed)} changed setting(s) are left "
-                "until a command finds it standing"), {k: v for k, v in record.items() if k in ("settings", "servo")}
+        return (
+            f"{head} and the motor still turns: the servo and {len(changed)} changed setting(s) are left "
+            "until a command finds it standing"
+        ), {k: v for k, v in record.items() if k in ("settings", "servo")}
     done: list[str] = []
     if servo is not None:
         drive.write_raw(servo, 0)
         done.append("switched the servo off")
-    loop = {e.code for r in LOOP_ROLES if (e := drive.profile.role(r)) is not None} \
-        if servo_is_on(drive) is not False else set()
+    loop = (
+        {e.code for r in LOOP_ROLES if (e := drive.profile.role(r)) is not None}
+        if servo_is_on(drive) is not False
+        else set()
+    )
     for entry, raw, was in changed:
         if entry.code not in loop:
             drive.write_verified(entry, raw)
@@ -217,8 +239,10 @@ def _end_motion(drive: Drive, record: dict[str, Any], pid: object) -> tuple[str,
     pending = {e.code: raw for e, raw, _was in changed if e.code in loop}
     line = f"{head}; " + ("; ".join(done) if done else "its settings are as before")
     if pending:
-        line += (f"; {', '.join(pending)} (loop gains) go back when the servo is off: the next jog or tune "
-                 "puts them back as it ends")
+        line += (
+            f"; {', '.join(pending)} (loop gains) go back when the servo is off: the next jog or tune "
+            "puts them back as it ends"
+        )
     return line, ({"settings": pending} if pending else {})
 
 
@@ -249,23 +273,29 @@ def _moving(drive: Drive) -> bool:
 def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
     auto = Path(str(op.get("auto_backup")))
     targets = op.get("targets") if isinstance(op.get("targets"), dict) else {}
-    try:        # the values section of the backup this process wrote itself (ops.backup checks a user's file)
+    try:  # the values section of the backup this process wrote itself (ops.backup checks a user's file)
         data = load_yaml(auto)
         before = {str(c): v for c, v in data["values"].items() if isinstance(v, int)}
     except (ServoError, TypeError, KeyError, AttributeError) as exc:
-        return f"servotool: a {op.get('name')} (pid {pid}) was interrupted and its automatic backup {auto} is " \
+        return (
+            f"servotool: a {op.get('name')} (pid {pid}) was interrupted and its automatic backup {auto} is "
             f"unusable ({exc})"
+        )
     entries = [e for e in (drive.profile.find(str(c)) for c in targets) if e is not None and e.readable]
     now = {r.entry.code: r.raw for r in drive.read_entries(entries)} if entries else {}
     written = [c for c, raw in now.items() if raw == targets.get(c) and before.get(c) != raw]
     differ = [c for c, raw in now.items() if before.get(c) is not None and raw != before[c]]
     if not differ:
-        return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted before changing anything: "
-                f"read back, the drive equals the automatic backup {auto}")
-    return (f"servotool: a {op.get('name')} (pid {pid}) was interrupted after writing {len(written)} of "
-            f"{count(len(targets), 'entry')}; read back, the drive differs from the "
-            f"automatic backup {auto} in {len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): "
-            f"run it again to finish, or 'servotool param restore {auto}' to go back")
+        return (
+            f"servotool: a {op.get('name')} (pid {pid}) was interrupted before changing anything: "
+            f"read back, the drive equals the automatic backup {auto}"
+        )
+    return (
+        f"servotool: a {op.get('name')} (pid {pid}) was interrupted after writing {len(written)} of "
+        f"{count(len(targets), 'entry')}; read back, the drive differs from the "
+        f"automatic backup {auto} in {len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): "
+        f"run it again to finish, or 'servotool param restore {auto}' to go back"
+    )
 
 
 def recover_at_start(drive: Drive, notice: Notice, extra_folders: tuple[Path, ...] = ()) -> None:

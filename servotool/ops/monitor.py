@@ -18,8 +18,16 @@ from servotool.model.codec import raw_to_eng
 from servotool.model.profile import Entry, Profile
 from servotool.model.roles import readable_by_role
 
-KEY_MONITOR_ROLES = ("speed_feedback", "speed_command", "torque_feedback", "position_feedback", "following_error",
-                     "load_rate", "current_rms", "bus_voltage")
+KEY_MONITOR_ROLES = (
+    "speed_feedback",
+    "speed_command",
+    "torque_feedback",
+    "position_feedback",
+    "following_error",
+    "load_rate",
+    "current_rms",
+    "bus_voltage",
+)
 
 
 def default_entries(profile: Profile) -> list[Entry]:
@@ -35,8 +43,10 @@ def default_entries(profile: Profile) -> list[Entry]:
 def check_rate(rate_hz: float) -> float:
     """A sampling rate must be a finite number of samples per second above zero."""
     if not (math.isfinite(rate_hz) and rate_hz > 0):
-        raise UsageError(f"bad --rate {rate_hz:g}: must be a number of samples per second > 0 "
-                         "(a rate above what the link can do polls as fast as it can)")
+        raise UsageError(
+            f"bad --rate {rate_hz:g}: must be a number of samples per second > 0 "
+            "(a rate above what the link can do polls as fast as it can)"
+        )
     return rate_hz
 
 
@@ -87,7 +97,7 @@ class Series:
 
 @dataclass
 class Sample:
-    t: float           # seconds since the start of monitoring
+    t: float  # seconds since the start of monitoring
     wall: datetime
     values: dict[str, float | int]
 
@@ -121,8 +131,13 @@ class Monitor:
         """Samples per second over the intervals measured so far; None until there are two samples."""
         return (self.samples - 1) / self.elapsed if self.samples > 1 and self.elapsed > 0 else None
 
-    def run(self, rate_hz: float, duration_s: float | None, samples: int | None = None,
-            stop: Callable[[], bool] | None = None) -> Iterator[Sample]:
+    def run(
+        self,
+        rate_hz: float,
+        duration_s: float | None,
+        samples: int | None = None,
+        stop: Callable[[], bool] | None = None,
+    ) -> Iterator[Sample]:
         """Yield samples at up to rate_hz (a rate the link cannot keep up with: as fast as it can) until
         duration/samples/stop."""
         period = 1.0 / check_rate(rate_hz)
@@ -167,8 +182,7 @@ class CsvLog:
             self._check_columns()
         try:
             # "x" never replaces a file; "a" never truncates one before we have a sample to put in its place.
-            self._fh: IO[str] = path.open("x" if mode == "new" else "a", newline="", encoding="utf-8",
-                                          buffering=1)
+            self._fh: IO[str] = path.open("x" if mode == "new" else "a", newline="", encoding="utf-8", buffering=1)
         except FileExistsError:
             raise UsageError(f"{path} exists; pass --force to replace it or --append to add to it") from None
         except OSError as exc:
@@ -185,8 +199,10 @@ class CsvLog:
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
             raise UsageError(f"cannot append to {self.path}: {getattr(exc, 'strerror', None) or exc}") from None
         if first is not None and first != self.header:
-            raise UsageError(f"cannot append to {self.path}: its columns ({', '.join(first[2:]) or 'none'}) "
-                             f"differ from these ({', '.join(self.header[2:])})")
+            raise UsageError(
+                f"cannot append to {self.path}: its columns ({', '.join(first[2:]) or 'none'}) "
+                f"differ from these ({', '.join(self.header[2:])})"
+            )
 
     def write(self, sample: Sample) -> None:
         if self._truncate:
@@ -195,8 +211,13 @@ class CsvLog:
         if self._header_due:
             self._writer.writerow(self.header)
             self._header_due = False
-        self._writer.writerow([sample.wall.isoformat(timespec="milliseconds"), f"{sample.t:.4f}",
-                               *[sample.values[c] for c in self._codes]])
+        self._writer.writerow(
+            [
+                sample.wall.isoformat(timespec="milliseconds"),
+                f"{sample.t:.4f}",
+                *[sample.values[c] for c in self._codes],
+            ]
+        )
         self.rows += 1
 
     def close(self) -> None:

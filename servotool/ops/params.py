@@ -61,8 +61,7 @@ def prepare_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> P
             if field is not None:
                 fields_given[entry.code] = {field}
         parsed[entry.code][1].append(text)
-    current = {r.entry.code: r.raw
-               for r in drive.read_entries([e for e, _ in parsed.values() if e.readable])}
+    current = {r.entry.code: r.raw for r in drive.read_entries([e for e, _ in parsed.values() if e.readable])}
     changes: list[tuple[Entry, int, int]] = []
     unchanged: list[tuple[Entry, int]] = []
     for entry, texts in parsed.values():
@@ -93,8 +92,10 @@ def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list
         if runs and limits.write_multiple:
             run = runs[-1]
             last = run[-1][0]
-            if entry.address == last.address + last.words and \
-                    sum(e.words for e, _, _ in run) + entry.words <= limits.max_write:
+            if (
+                entry.address == last.address + last.words
+                and sum(e.words for e, _, _ in run) + entry.words <= limits.max_write
+            ):
                 run.append(change)
                 continue
         runs.append([change])
@@ -134,8 +135,9 @@ def _naming_written(exc: ServoError, written: list[WriteResult], unsure: list[En
     """The error of a set that stopped midway, its message extended by what was written before it (same type and
     exit code); `exc.written` holds those results."""
     done = ", ".join(f"{r.entry.code}={format_value(r.entry, r.new)}" for r in written)
-    text = f"{exc}; written and verified before it stopped: {done}" if written else \
-        f"{exc}; nothing was written before it"
+    text = (
+        f"{exc}; written and verified before it stopped: {done}" if written else f"{exc}; nothing was written before it"
+    )
     if unsure:
         text += f"; {', '.join(e.code for e in unsure)} may or may not have changed (read back with 'param get')"
     exc.args = (text,)
@@ -145,9 +147,9 @@ def _naming_written(exc: ServoError, written: list[WriteResult], unsure: list[En
 
 @dataclass(frozen=True)
 class SetOutcome:
-    results: list[WriteResult]     # the changed entries, written and verified
-    stored: list[Entry]            # entries confirmed stored in EEPROM by this command (--save: all requested)
-    persisted: bool                # the values survive a power cycle
+    results: list[WriteResult]  # the changed entries, written and verified
+    stored: list[Entry]  # entries confirmed stored in EEPROM by this command (--save: all requested)
+    persisted: bool  # the values survive a power cycle
 
 
 def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome:
@@ -159,15 +161,17 @@ def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome
     check_power_cycle(drive, [e for e, _, _ in plan.changes], save)
     again = plan.unchanged if save and drive.profile.persistence.mode == "switchable" else []
     if not plan.changes and not again and not (save and drive.profile.persistence.mode == "ram"):
-        return SetOutcome([], [e for e, _ in plan.unchanged] if save else [],
-                          drive.profile.persistence.mode == "immediate")
+        return SetOutcome(
+            [], [e for e, _ in plan.unchanged] if save else [], drive.profile.persistence.mode == "immediate"
+        )
     with persistence(drive, save) as kept:
         results = apply_set(drive, plan)
-        for entry, raw in again:      # the same value again, now with the switch on EEPROM
+        for entry, raw in again:  # the same value again, now with the switch on EEPROM
             try:
                 write_one(drive, entry, raw, raw)
             except ServoError as exc:
                 raise _naming_written(exc, results, []) from None
-    stored = ([r.entry for r in results] + ([e for e, _ in plan.unchanged] if save else [])) \
-        if kept["persisted"] else []
+    stored = (
+        ([r.entry for r in results] + ([e for e, _ in plan.unchanged] if save else [])) if kept["persisted"] else []
+    )
     return SetOutcome(results, stored, kept["persisted"])

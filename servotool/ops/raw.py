@@ -45,8 +45,15 @@ def read_registers(drive: Drive, address: int, count: int) -> list[int]:
 
 def write_register(drive: Drive, address: int, value: int) -> int:
     """Write one register (FC06) and read it back; the value read. VerifyError when it differs."""
-    target = Entry(code=f"register {address}", cls="Pn", name=f"register {address} (0x{address:04X})",
-                   address=address, type="u16", min=0, max=0xFFFF)
+    target = Entry(
+        code=f"register {address}",
+        cls="Pn",
+        name=f"register {address} (0x{address:04X})",
+        address=address,
+        type="u16",
+        min=0,
+        max=0xFFFF,
+    )
     drive.write_raw(target, value)
     back = drive.link.read(drive.unit, address, 1)[0]
     if back != value:

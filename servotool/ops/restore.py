@@ -23,9 +23,9 @@ EFFECT_ORDER = {"immediate": 0, "unknown": 1, "servo_off": 2, "power_cycle": 3}
 
 @dataclass
 class RestoreChanges:
-    changes: list[tuple[Entry, int, int]]       # entry, current, target (in write order)
+    changes: list[tuple[Entry, int, int]]  # entry, current, target (in write order)
     skipped: list[tuple[Entry, str]]
-    missing: list[Entry] = field(default_factory=list)   # in the backup, but the drive lacks them
+    missing: list[Entry] = field(default_factory=list)  # in the backup, but the drive lacks them
 
     @property
     def needs_power_cycle(self) -> list[Entry]:
@@ -36,8 +36,14 @@ class RestoreChanges:
         return [e for e, _, _ in self.changes if e.effect == "servo_off"]
 
 
-def restore_changes(profile: Profile, backup: Backup, current: dict[str, int], *, only: str | None = None,
-                 include: list[str] | None = None) -> RestoreChanges:
+def restore_changes(
+    profile: Profile,
+    backup: Backup,
+    current: dict[str, int],
+    *,
+    only: str | None = None,
+    include: list[str] | None = None,
+) -> RestoreChanges:
     """Only entries that differ; axis-specific (copy: false) ones only when named; immediate ones first."""
     named = {profile.entry(c).code for c in include or []}
     if only is not None and only not in {e.group for e in profile.entries}:
@@ -49,7 +55,7 @@ def restore_changes(profile: Profile, backup: Backup, current: dict[str, int], *
             continue
         if not e.writable:
             continue
-        if code not in current:          # the drive lacks it (read_entries(partial=True) left it out)
+        if code not in current:  # the drive lacks it (read_entries(partial=True) left it out)
             missing.append(e)
             continue
         if profile.persistence.is_switch(e.code):
@@ -72,8 +78,8 @@ class RestoreReport:
     auto_backup: Path
     written: list[Entry]
     plan: RestoreChanges
-    persisted: bool = True      # False: the drive keeps the values in RAM only (lost at power-off)
-    refused: list[tuple[Entry, str]] = field(default_factory=list)   # the drive does not take writes there
+    persisted: bool = True  # False: the drive keeps the values in RAM only (lost at power-off)
+    refused: list[tuple[Entry, str]] = field(default_factory=list)  # the drive does not take writes there
 
 
 class RestoreFailed(ServoError):
@@ -90,15 +96,26 @@ class RestoreFailed(ServoError):
         "restore": "; restore the automatic backup {auto} once the cause is fixed",
     }
 
-    def __init__(self, code: str, cause: ServoError, state: str, auto_backup: Path, next_step: str | None, *,
-                 written: list[str] | None = None, rolled_back: list[str] | None = None,
-                 equals_backup: bool | None = None, differ: list[str] | None = None,
-                 switch_note: str = "", source: Path | None = None) -> None:
+    def __init__(
+        self,
+        code: str,
+        cause: ServoError,
+        state: str,
+        auto_backup: Path,
+        next_step: str | None,
+        *,
+        written: list[str] | None = None,
+        rolled_back: list[str] | None = None,
+        equals_backup: bool | None = None,
+        differ: list[str] | None = None,
+        switch_note: str = "",
+        source: Path | None = None,
+    ) -> None:
         self.code, self.cause, self.state = code, cause, state
         self.auto_backup, self.next_step = auto_backup, next_step
         self.written, self.rolled_back = written or [], rolled_back or []
         self.equals_backup, self.differ, self.switch_note = equals_backup, differ or [], switch_note
-        self.source = source          # the backup file being restored: the way to finish once the cause is fixed
+        self.source = source  # the backup file being restored: the way to finish once the cause is fixed
         self.exit_code = cause.exit_code
         super().__init__(self.facts() + self.ADVICE.get(next_step or "", "").format(auto=auto_backup))
 
@@ -116,13 +133,19 @@ def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
 
     if entries and servo_is_on(drive):
         codes = ", ".join(e.code for e in entries[:6]) + (" ..." if len(entries) > 6 else "")
-        raise UsageError(f"{what} changes {codes}, which the drive accepts only with the servo off: "
-                         f"switch the servo off first")
+        raise UsageError(
+            f"{what} changes {codes}, which the drive accepts only with the servo off: switch the servo off first"
+        )
 
 
-def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
-            progress: Callable[[Entry], None] | None = None, notice: Notice | None = None,
-            backup_progress: Callable[[int], None] | None = None) -> RestoreReport:
+def restore(
+    drive: Drive,
+    backup: Backup,
+    plan: RestoreChanges,
+    progress: Callable[[Entry], None] | None = None,
+    notice: Notice | None = None,
+    backup_progress: Callable[[int], None] | None = None,
+) -> RestoreReport:
     """Automatic backup first (backup_progress: entries read), then write and verify each change (progress: each
     entry written); on failure, roll back what was changed and raise RestoreFailed with the account of the drive's
     state."""
@@ -153,9 +176,12 @@ def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
                     try:
                         write_one(drive, entry, new, before.values.get(entry.code, old))
                     except ServoError as exc:
-                        if isinstance(exc, ModbusException) and exc.code in REFUSED_ADDRESS and \
-                                not isinstance(exc, NotOnDrive):
-                            refused.append((entry, str(exc)))     # an exception reply: nothing was written; go on
+                        if (
+                            isinstance(exc, ModbusException)
+                            and exc.code in REFUSED_ADDRESS
+                            and not isinstance(exc, NotOnDrive)
+                        ):
+                            refused.append((entry, str(exc)))  # an exception reply: nothing was written; go on
                             continue
                         # The failed entry too: a write that did not read back may still have changed it.
                         rolled, undo_failed = _roll_back(drive, [*done, entry], before.values)
@@ -164,7 +190,7 @@ def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
                     done.append(entry)
                     if progress:
                         progress(entry)
-        except ServoError as exc:           # the EEPROM switch could not be changed or put back
+        except ServoError as exc:  # the EEPROM switch could not be changed or put back
             if failed is None:
                 failed = (drive.profile.persistence.switch_code or "the EEPROM switch", exc, [], [])
         if failed is not None:
@@ -172,43 +198,72 @@ def restore(drive: Drive, backup: Backup, plan: RestoreChanges,
     return RestoreReport(auto, done, plan, bool(kept["persisted"]), refused)
 
 
-def _account(drive: Drive, failed: tuple[str, ServoError, list[str], list[str]], written: list[str],
-             snapshot: dict[str, int], auto: Path, kept: dict[str, bool],
-             source: Path | None) -> RestoreFailed:
+def _account(
+    drive: Drive,
+    failed: tuple[str, ServoError, list[str], list[str]],
+    written: list[str],
+    snapshot: dict[str, int],
+    auto: Path,
+    kept: dict[str, bool],
+    source: Path | None,
+) -> RestoreFailed:
     """The RestoreFailed for a stopped restore: the drive is read to say how it compares with the backup."""
     code, cause, rolled, undo_failed = failed
     after = _read_all(drive)
     switch_note = ""
     if kept.get("switch_back") is False:
         p = drive.profile.persistence
-        switch_note = (f"; {p.switch_code} (the EEPROM switch) could not be put back: the next servotool command "
-                       f"on this drive puts it back, from the host's journal")
+        switch_note = (
+            f"; {p.switch_code} (the EEPROM switch) could not be put back: the next servotool command "
+            f"on this drive puts it back, from the host's journal"
+        )
     listed = ", ".join(written[:6]) + (" ..." if len(written) > 6 else "")
     wrote = f"wrote {len(written)} of the planned entries" + (f" ({listed})" if written else "")
 
     def failure(state: str, next_step: str | None, equal: bool | None, differ: list[str]) -> RestoreFailed:
-        return RestoreFailed(code, cause, state, auto, next_step, written=written, rolled_back=rolled,
-                             equals_backup=equal, differ=differ, switch_note=switch_note,
-                             source=source)
+        return RestoreFailed(
+            code,
+            cause,
+            state,
+            auto,
+            next_step,
+            written=written,
+            rolled_back=rolled,
+            equals_backup=equal,
+            differ=differ,
+            switch_note=switch_note,
+            source=source,
+        )
 
     if after is None:
         return failure(f"{wrote}; the drive no longer answers, so its state is unknown", "compare", None, [])
     # The EEPROM switch is flipped for the batch on purpose (and put back when it ends): not a difference.
-    differ = [c for c, raw in snapshot.items()
-              if after.get(c) != raw and not drive.profile.persistence.is_switch(c)]
+    differ = [c for c, raw in snapshot.items() if after.get(c) != raw and not drive.profile.persistence.is_switch(c)]
     if not differ:
-        return failure(f"rolled back {len(written)} written entries; read back, the drive equals the automatic "
-                       f"backup {auto}", None, True, [])
-    shown = ", ".join(f"{c} is {format_value(drive.profile.entry(c), after[c])}, was "
-                      f"{format_value(drive.profile.entry(c), snapshot[c])}" for c in differ[:6])
+        return failure(
+            f"rolled back {len(written)} written entries; read back, the drive equals the automatic backup {auto}",
+            None,
+            True,
+            [],
+        )
+    shown = ", ".join(
+        f"{c} is {format_value(drive.profile.entry(c), after[c])}, was "
+        f"{format_value(drive.profile.entry(c), snapshot[c])}"
+        for c in differ[:6]
+    )
     more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
     why = f" (could not undo {'; '.join(undo_failed)})" if undo_failed else ""
     verb = agree(len(differ), "differs", "differ")
-    return failure(f"{wrote}; rollback incomplete{why}: {count(len(differ), 'entry')} {verb} from the automatic "
-                   f"backup {auto}: {shown}{more}", "restore", False, differ)
+    return failure(
+        f"{wrote}; rollback incomplete{why}: {count(len(differ), 'entry')} {verb} from the automatic "
+        f"backup {auto}: {shown}{more}",
+        "restore",
+        False,
+        differ,
+    )
 
 
-ATTEMPTS = 3        # a flaky line drops a request now and then: an account is worth a few more tries
+ATTEMPTS = 3  # a flaky line drops a request now and then: an account is worth a few more tries
 
 
 def _read_all(drive: Drive) -> dict[str, int] | None:
@@ -243,7 +298,7 @@ def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> 
                     if isinstance(again, DeviceError) and not isinstance(again, ModbusException):
                         dead += 1
         if dead >= 2:
-            break                        # no answer at all, twice: every further attempt would time out too
+            break  # no answer at all, twice: every further attempt would time out too
     return rolled, undo_failed
 
 
@@ -255,14 +310,15 @@ def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
     if not rplan.changes:
         return "nothing to restore: the drive already matches"
     report = restore(drive, b, rplan, notice=notice)
-    left = [f"{e.code} not on this drive" for e in rplan.missing] + \
-        [f"{e.code} refused by the drive" for e, _ in report.refused]
-    return (f"{count(len(report.written), 'entry')} restored (automatic backup {report.auto_backup})"
-            + (f"; left out: {', '.join(left)}" if left else ""))
+    left = [f"{e.code} not on this drive" for e in rplan.missing] + [
+        f"{e.code} refused by the drive" for e, _ in report.refused
+    ]
+    return f"{count(len(report.written), 'entry')} restored (automatic backup {report.auto_backup})" + (
+        f"; left out: {', '.join(left)}" if left else ""
+    )
 
 
-def factory_reset(drive: Drive, notice: Notice | None = None,
-                  progress: Callable[[int], None] | None = None) -> Path:
+def factory_reset(drive: Drive, notice: Notice | None = None, progress: Callable[[int], None] | None = None) -> Path:
     """Automatic backup (progress: entries read), then the profile's factory-reset function."""
     drive.profile.need_role("factory_reset", "param reset")
     check_servo_off(drive, [e for e in drive.profile.of_class("Pn") if e.effect == "servo_off"], "a factory reset")
@@ -275,5 +331,8 @@ def factory_reset(drive: Drive, notice: Notice | None = None,
 
 def not_at_default(drive: Drive, progress: Callable[[int], None] | None = None) -> list[tuple[Entry, int]]:
     """Readable parameters whose value differs from the profile's factory default (entry, raw)."""
-    return [(r.entry, r.raw) for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)
-            if r.entry.default is not None and r.raw != r.entry.default]
+    return [
+        (r.entry, r.raw)
+        for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)
+        if r.entry.default is not None and r.raw != r.entry.default
+    ]

@@ -16,10 +16,10 @@ from servotool.model.loader import load_profile
 from servotool.model.profile import LineSettings, Profile
 from servotool.ops.identity import MATCH, Verdict, identify, shipped_profiles
 
-SCAN_TIMEOUT = 0.1                        # s per silent id: a drive answers a 1-register read within ~20 ms at 9600
+SCAN_TIMEOUT = 0.1  # s per silent id: a drive answers a 1-register read within ~20 ms at 9600
 COMMON_BAUDS = (9600, 19200, 38400, 57600, 115200)
 COMMON_FORMATS = ("8N1", "8E1", "8O1", "8N2")
-PROBE_ADDRESS = 0                         # any answer counts, an exception too: it only has to come from the id
+PROBE_ADDRESS = 0  # any answer counts, an exception too: it only has to come from the id
 _FORMAT = re.compile(r"^([78])([NEO])([12])$")
 
 
@@ -28,9 +28,9 @@ class Found:
     """A unit that answered, and what it was identified as."""
 
     port: str
-    line: LineSettings | None             # None over tcp://, where line settings do not apply
+    line: LineSettings | None  # None over tcp://, where line settings do not apply
     unit: int
-    ranked: tuple[Verdict, ...]           # every candidate profile's verdict, best first
+    ranked: tuple[Verdict, ...]  # every candidate profile's verdict, best first
 
     @property
     def best(self) -> Verdict | None:
@@ -38,11 +38,17 @@ class Found:
 
     def as_json(self) -> dict[str, object]:
         best = self.best
-        return {"port": self.port, "baud": self.line.baud if self.line else None,
-                "format": line_format_text(self.line) if self.line else None, "unit": self.unit,
-                "profile": best.profile.id if best else None, "model": best.profile.model if best else None,
-                "drive_model": best.model if best else None, "firmware": best.firmware if best else None,
-                "candidates": [v.as_json() for v in self.ranked]}
+        return {
+            "port": self.port,
+            "baud": self.line.baud if self.line else None,
+            "format": line_format_text(self.line) if self.line else None,
+            "unit": self.unit,
+            "profile": best.profile.id if best else None,
+            "model": best.profile.model if best else None,
+            "drive_model": best.model if best else None,
+            "firmware": best.firmware if best else None,
+            "candidates": [v.as_json() for v in self.ranked],
+        }
 
 
 @dataclass
@@ -50,18 +56,24 @@ class ScanResult:
     port: str
     found: list[Found] = field(default_factory=list)
     tried: list[LineSettings | None] = field(default_factory=list)
-    noise: list[tuple[LineSettings | None, int, str]] = field(default_factory=list)   # (line, unit, fault kind)
-    unusable: list[tuple[LineSettings, str]] = field(default_factory=list)   # settings the port could not open
+    noise: list[tuple[LineSettings | None, int, str]] = field(default_factory=list)  # (line, unit, fault kind)
+    unusable: list[tuple[LineSettings, str]] = field(default_factory=list)  # settings the port could not open
     probes: int = 0
     seconds: float = 0.0
 
     def as_json(self) -> dict[str, object]:
-        return {"port": self.port, "found": [f.as_json() for f in self.found],
-                "tried": [line_format_text(s, baud=True) if s else "tcp" for s in self.tried],
-                "noise": [{"setting": line_format_text(s, baud=True) if s else "tcp", "unit": u, "fault": k}
-                          for s, u, k in self.noise],
-                "unusable": [{"setting": line_format_text(s, baud=True), "error": e} for s, e in self.unusable],
-                "probes": self.probes, "seconds": round(self.seconds, 3)}
+        return {
+            "port": self.port,
+            "found": [f.as_json() for f in self.found],
+            "tried": [line_format_text(s, baud=True) if s else "tcp" for s in self.tried],
+            "noise": [
+                {"setting": line_format_text(s, baud=True) if s else "tcp", "unit": u, "fault": k}
+                for s, u, k in self.noise
+            ],
+            "unusable": [{"setting": line_format_text(s, baud=True), "error": e} for s, e in self.unusable],
+            "probes": self.probes,
+            "seconds": round(self.seconds, 3),
+        }
 
 
 def line_format_text(line: LineSettings, *, baud: bool = False) -> str:
@@ -91,13 +103,15 @@ def parse_format(text: str) -> tuple[int, str, int]:
     return int(m[1]), m[2], int(m[3])
 
 
-def settings_to_try(profiles: list[Profile], bauds: list[int] | None = None,
-                    formats: list[str] | None = None) -> list[LineSettings]:
+def settings_to_try(
+    profiles: list[Profile], bauds: list[int] | None = None, formats: list[str] | None = None
+) -> list[LineSettings]:
     """The profiles' factory settings first, then the common ones; narrowed to the given bauds and formats."""
     shapes = [parse_format(f) for f in formats] if formats else None
     out: list[LineSettings] = []
     candidates = [p.line for p in profiles] + [
-        LineSettings(b, f[1], int(f[2]), int(f[0])) for b in COMMON_BAUDS for f in COMMON_FORMATS]
+        LineSettings(b, f[1], int(f[2]), int(f[0])) for b in COMMON_BAUDS for f in COMMON_FORMATS
+    ]
     if bauds:
         candidates += [LineSettings(b, f[1], int(f[2]), int(f[0])) for b in bauds for f in COMMON_FORMATS]
     if shapes:
@@ -112,12 +126,20 @@ def settings_to_try(profiles: list[Profile], bauds: list[int] | None = None,
     return out
 
 
-Progress = Callable[[int, int, str], None]      # (probes done, probes in all, the setting being tried)
+Progress = Callable[[int, int, str], None]  # (probes done, probes in all, the setting being tried)
 
 
-def scan(port: str, units: list[int], settings: list[LineSettings], profiles: list[Profile], *,
-         timeout: float = SCAN_TIMEOUT, progress: Progress | None = None,
-         open_link: Callable[[LinkSettings], Link] | None = None, clock: Clock | None = None) -> ScanResult:
+def scan(
+    port: str,
+    units: list[int],
+    settings: list[LineSettings],
+    profiles: list[Profile],
+    *,
+    timeout: float = SCAN_TIMEOUT,
+    progress: Progress | None = None,
+    open_link: Callable[[LinkSettings], Link] | None = None,
+    clock: Clock | None = None,
+) -> ScanResult:
     """Probe every unit id at every line setting (one setting over tcp://), and identify each unit that answers.
 
     A unit found at one setting is not probed again at the others (a drive has one setting)."""
@@ -130,7 +152,7 @@ def scan(port: str, units: list[int], settings: list[LineSettings], profiles: li
     for line in lines:
         try:
             link = (open_link or _open)(LinkSettings(port, line or LineSettings(), timeout=timeout, retries=0))
-        except DeviceError as exc:      # a setting the port cannot do (parity on a pty): the others may work
+        except DeviceError as exc:  # a setting the port cannot do (parity on a pty): the others may work
             if line is None or len(result.unusable) == len(lines) - 1:
                 raise
             result.unusable.append((line, str(exc)))
@@ -170,7 +192,7 @@ def _probe(link: Link, unit: int, result: ScanResult, line: LineSettings | None)
         return True
     except DeviceError as exc:
         if not exc.fault:
-            raise                   # not an answer's fault: the port itself failed
+            raise  # not an answer's fault: the port itself failed
         if exc.fault != "silent":
             result.noise.append((line, unit, exc.fault))
         return False
@@ -188,8 +210,9 @@ class ScanPlan:
     timeout: float
 
 
-def plan(options: ConnectOptions, units: str | None = None, bauds: list[int] | None = None,
-         formats: list[str] | None = None) -> ScanPlan:
+def plan(
+    options: ConnectOptions, units: str | None = None, bauds: list[int] | None = None, formats: list[str] | None = None
+) -> ScanPlan:
     """The scan the options ask for: the port; ids (all 1..247 by default); line settings narrowed by --baud and
     --format (or the global --baud/--parity/--stopbits); the candidate profiles (a --profile file joins the
     shipped ones and goes first); the global --timeout, else a short one."""
@@ -204,8 +227,11 @@ def plan(options: ConnectOptions, units: str | None = None, bauds: list[int] | N
         parity = PARITIES.get(opts.parity.upper()) if opts.parity else None
         if opts.parity and parity is None:
             raise UsageError(f"bad parity '{opts.parity}': use N, E or O")
-        formats = [f"8{p}{s}" for p in ([parity] if parity else ["N", "E", "O"])
-                   for s in ([opts.stopbits] if opts.stopbits else [1, 2])]
+        formats = [
+            f"8{p}{s}"
+            for p in ([parity] if parity else ["N", "E", "O"])
+            for s in ([opts.stopbits] if opts.stopbits else [1, 2])
+        ]
     bauds = bauds or ([opts.baud] if opts.baud else None)
     for b in bauds or ():
         if not 300 <= b <= 4_000_000:
@@ -213,6 +239,11 @@ def plan(options: ConnectOptions, units: str | None = None, bauds: list[int] | N
     timeout = opts.timeout if opts.timeout is not None else SCAN_TIMEOUT
     if not 0 < timeout <= 60:
         raise UsageError(f"bad timeout {timeout:g}: a scan takes > 0 and at most 60 s per id")
-    tcp = parse_tcp(opts.port) is not None       # RTU over TCP: line settings do not apply, one pass
-    return ScanPlan(opts.port, parse_units(units) if units else list(range(1, 248)),
-                    [] if tcp else settings_to_try(profiles, bauds, formats), profiles, timeout)
+    tcp = parse_tcp(opts.port) is not None  # RTU over TCP: line settings do not apply, one pass
+    return ScanPlan(
+        opts.port,
+        parse_units(units) if units else list(range(1, 248)),
+        [] if tcp else settings_to_try(profiles, bauds, formats),
+        profiles,
+        timeout,
+    )

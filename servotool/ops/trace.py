@@ -24,8 +24,10 @@ from servotool.model.profile import Entry, Profile
 from servotool.model.roles import readable_by_role
 from servotool.words import count
 
-TRIGGER_FORMS = ("CODE>LEVEL (rises through LEVEL), CODE<LEVEL (falls through LEVEL), CODE.BIT (a bit of a "
-                 "status word sets; BIT a number or the bit's name) or CODE.BIT=0 (it clears)")
+TRIGGER_FORMS = (
+    "CODE>LEVEL (rises through LEVEL), CODE<LEVEL (falls through LEVEL), CODE.BIT (a bit of a "
+    "status word sets; BIT a number or the bit's name) or CODE.BIT=0 (it clears)"
+)
 TriggerKind = Literal["rising", "falling", "bit_set", "bit_clear"]
 _LEVEL = re.compile(r"^\s*([^<>.=\s]+)\s*([<>])\s*(\S+)\s*$")
 _BIT = re.compile(r"^\s*([^<>.=\s]+)\.(\w+)\s*(?:=\s*([01]))?\s*$")
@@ -133,7 +135,7 @@ class Window:
 
 @dataclass(frozen=True)
 class TraceSample:
-    t: float                    # seconds since sampling started (the middle of the sample's reads)
+    t: float  # seconds since sampling started (the middle of the sample's reads)
     values: dict[str, float]
 
 
@@ -142,7 +144,7 @@ class Capture:
     """One capture: times relative to the trigger (the trigger sample at 0), one column per entry code."""
 
     index: int
-    trigger_t: float            # seconds since sampling started
+    trigger_t: float  # seconds since sampling started
     t: list[float]
     values: dict[str, list[float]]
     pre_samples: int
@@ -150,8 +152,9 @@ class Capture:
     @classmethod
     def of(cls, index: int, samples: list[TraceSample], trigger_at: int, codes: list[str]) -> Capture:
         t0 = samples[trigger_at].t if samples else 0.0
-        return cls(index, t0, [s.t - t0 for s in samples], {c: [s.values[c] for s in samples] for c in codes},
-                   trigger_at)
+        return cls(
+            index, t0, [s.t - t0 for s in samples], {c: [s.values[c] for s in samples] for c in codes}, trigger_at
+        )
 
     @property
     def timing(self) -> Timing:
@@ -164,7 +167,7 @@ class Timing:
 
     samples: int
     rate_hz: float | None
-    jitter_ms: float | None     # standard deviation of the intervals
+    jitter_ms: float | None  # standard deviation of the intervals
     max_gap_ms: float | None
 
     @classmethod
@@ -177,9 +180,11 @@ class Timing:
 
     def describe(self) -> str:
         if self.rate_hz is None:
-            return count(self.samples, 'sample')
-        return (f"{self.samples} samples, {self.rate_hz:.1f} samples/s, jitter {self.jitter_ms:.2f} ms "
-                f"(longest interval {self.max_gap_ms:.1f} ms)")
+            return count(self.samples, "sample")
+        return (
+            f"{self.samples} samples, {self.rate_hz:.1f} samples/s, jitter {self.jitter_ms:.2f} ms "
+            f"(longest interval {self.max_gap_ms:.1f} ms)"
+        )
 
 
 class TriggerBuffer:
@@ -192,10 +197,10 @@ class TriggerBuffer:
         self._ring: deque[TraceSample] = deque(maxlen=pre) if pre is not None else deque()
         self._pre_s = window.pre_share * window.duration_s if window.duration_s is not None and trigger else 0.0
         self._prev: float | None = None
-        self._taken: list[TraceSample] | None = None     # the capture being filled, from its first sample
+        self._taken: list[TraceSample] | None = None  # the capture being filled, from its first sample
         self._trigger_at = 0
         self.captures = 0
-        self.low, self.high = math.inf, -math.inf       # the trigger entry's range seen while armed
+        self.low, self.high = math.inf, -math.inf  # the trigger entry's range seen while armed
 
     @property
     def armed(self) -> bool:
@@ -255,14 +260,15 @@ class Sampler:
         self.requests_per_sample = len(coalesce_reads(drive.profile, entries))
         self.t0 = self.clock.now()
         self.samples: list[TraceSample] = []
-        self.keep = False            # keep every sample (a recording), not only the last
+        self.keep = False  # keep every sample (a recording), not only the last
 
     def sample(self) -> TraceSample:
         before = self.clock.now()
         readings = self.drive.read_entries(self.entries)
         after = self.clock.now()
-        s = TraceSample((before + after) / 2 - self.t0, {r.entry.code: float(raw_to_eng(r.entry, r.raw))
-                                                         for r in readings})
+        s = TraceSample(
+            (before + after) / 2 - self.t0, {r.entry.code: float(raw_to_eng(r.entry, r.raw)) for r in readings}
+        )
         if self.keep:
             self.samples.append(s)
         return s
@@ -278,8 +284,7 @@ class Sampler:
     def recording(self) -> Capture:
         """Every sample kept so far as one capture from the start (no trigger)."""
         codes = [e.code for e in self.entries]
-        return Capture(1, 0.0, [s.t for s in self.samples], {c: [s.values[c] for s in self.samples] for c in codes},
-                       0)
+        return Capture(1, 0.0, [s.t for s in self.samples], {c: [s.values[c] for s in self.samples] for c in codes}, 0)
 
 
 @dataclass
@@ -290,8 +295,8 @@ class Tracer:
     entries: list[Entry]
     trigger: Trigger | None
     window: Window
-    repeat: int = 1                      # captures to take; 0: until stopped
-    timeout_s: float | None = None       # give up when the trigger has not fired this long after arming
+    repeat: int = 1  # captures to take; 0: until stopped
+    timeout_s: float | None = None  # give up when the trigger has not fired this long after arming
     clock: Clock = field(default_factory=RealClock)
     stop: Callable[[], bool] | None = None
     timed_out: bool = False

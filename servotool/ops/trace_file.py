@@ -47,8 +47,9 @@ def _value(v: float) -> str:
     return str(int(v)) if v.is_integer() and abs(v) < 2**53 else f"{v:.10g}"
 
 
-def write_trace(path: Path, captures: list[Capture], entries: list[Entry], about: list[str],
-                replace: bool = False) -> None:
+def write_trace(
+    path: Path, captures: list[Capture], entries: list[Entry], about: list[str], replace: bool = False
+) -> None:
     """Write captures atomically (a new file unless replace)."""
     try:
         write_atomic(path, trace_csv(captures, entries, about), replace=replace, durable=False)
@@ -71,11 +72,16 @@ def check_writable(path: Path, replace: bool) -> None:
 
 def capture_json(cap: Capture, entries: list[Entry]) -> dict[str, Any]:
     tm = cap.timing
-    return {"capture": cap.index, "samples": tm.samples, "pre_trigger_samples": cap.pre_samples,
-            "rate_hz": _num(tm.rate_hz), "jitter_ms": _num(tm.jitter_ms), "max_interval_ms": _num(tm.max_gap_ms),
-            "t_s": [round(t, 5) for t in cap.t],
-            "values": {e.code: {"unit": e.unit, "values": [as_held(e, v) for v in cap.values[e.code]]}
-                       for e in entries}}
+    return {
+        "capture": cap.index,
+        "samples": tm.samples,
+        "pre_trigger_samples": cap.pre_samples,
+        "rate_hz": _num(tm.rate_hz),
+        "jitter_ms": _num(tm.jitter_ms),
+        "max_interval_ms": _num(tm.max_gap_ms),
+        "t_s": [round(t, 5) for t in cap.t],
+        "values": {e.code: {"unit": e.unit, "values": [as_held(e, v) for v in cap.values[e.code]]} for e in entries},
+    }
 
 
 def _num(x: float | None) -> float | None:
@@ -84,7 +90,7 @@ def _num(x: float | None) -> float | None:
 
 @dataclass
 class Series:
-    name: str           # the code or column name without its unit
+    name: str  # the code or column name without its unit
     unit: str
     values: list[float]
 
@@ -120,16 +126,21 @@ class TimeTable:
         by = {s.name.lower(): s for s in self.series} | {s.label.lower(): s for s in self.series}
         missing = [n for n in names if n.lower() not in by]
         if missing:
-            raise UsageError(f"{self.path} has no column {', '.join(missing)} "
-                             f"(it has {', '.join(s.name for s in self.series)})")
-        return TimeTable(self.path, self.time_name, self.t, [by[n.lower()] for n in names], self.about,
-                         self.capture)
+            raise UsageError(
+                f"{self.path} has no column {', '.join(missing)} (it has {', '.join(s.name for s in self.series)})"
+            )
+        return TimeTable(self.path, self.time_name, self.t, [by[n.lower()] for n in names], self.about, self.capture)
 
 
 def capture_table(cap: Capture, entries: list[Entry], name: str = "capture") -> TimeTable:
     """A capture as a time table (to draw it without a file)."""
-    return TimeTable(Path(name), "t_s", cap.t, [Series(e.code, e.unit, cap.values[e.code]) for e in entries],
-                     capture=[cap.index] * len(cap.t))
+    return TimeTable(
+        Path(name),
+        "t_s",
+        cap.t,
+        [Series(e.code, e.unit, cap.values[e.code]) for e in entries],
+        capture=[cap.index] * len(cap.t),
+    )
 
 
 def split_unit(header: str) -> tuple[str, str]:
@@ -152,8 +163,9 @@ def read_table(path: Path) -> TimeTable:
     header = rows[0]
     time_col = next((i for i, h in enumerate(header) if h.strip() in TIME_COLUMNS), None)
     if time_col is None:
-        raise UsageError(f"{path} has no time column ({' or '.join(TIME_COLUMNS)}): not a servotool trace or "
-                         "monitor CSV")
+        raise UsageError(
+            f"{path} has no time column ({' or '.join(TIME_COLUMNS)}): not a servotool trace or monitor CSV"
+        )
     skip = {time_col} | {i for i, h in enumerate(header) if h.strip() in ("capture", "timestamp")}
     cap_col = next((i for i, h in enumerate(header) if h.strip() == "capture"), None)
     cols = [i for i in range(len(header)) if i not in skip]

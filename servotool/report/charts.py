@@ -53,7 +53,7 @@ def table_figure(table: TimeTable, title: str = "") -> Figure:
         for s in group:
             for c, idx in segments:
                 label = s.label + (f" #{c}" if len(segments) > 1 else "")
-                idx = [i for i in idx if s.values[i] == s.values[i]]     # a column read less often: no NaN gaps
+                idx = [i for i in idx if s.values[i] == s.values[i]]  # a column read less often: no NaN gaps
                 ax.plot([table.t[i] for i in idx], [s.values[i] for i in idx], label=label, linewidth=1.2)
         ax.set_ylabel(group[0].unit or "value")
         ax.grid(True, alpha=0.3)

@@ -6,13 +6,13 @@ from dataclasses import dataclass
 
 from servotool.ops.trace_file import Series, TimeTable
 
-MIN_PANEL_ROWS = 7       # below this a panel shows no readable ticks
+MIN_PANEL_ROWS = 7  # below this a panel shows no readable ticks
 
 
 @dataclass(frozen=True)
 class TerminalChart:
-    text: str                 # with colour codes; plotext's uncolorize() strips them
-    left_out: list[str]       # series labels that found no room
+    text: str  # with colour codes; plotext's uncolorize() strips them
+    left_out: list[str]  # series labels that found no room
 
 
 def by_unit(series: list[Series]) -> list[list[Series]]:
@@ -38,7 +38,7 @@ def terminal_chart(table: TimeTable, width: int, height: int, title: str = "", c
     while fit > 1 and height // fit < max(panel_rows(len(g) * len(segments)) for g in groups[:fit]):
         fit -= 1
     shown, rest = groups[:fit], groups[fit:]
-    plt.terminal.limit(False, False)     # the caller knows the room (rich's console, a test); plotext need not guess
+    plt.terminal.limit(False, False)  # the caller knows the room (rich's console, a test); plotext need not guess
     fig = plt.figure
     fig.clear()
     fig.plot_size(max(40, width), max(MIN_PANEL_ROWS, height))
@@ -49,7 +49,7 @@ def terminal_chart(table: TimeTable, width: int, height: int, title: str = "", c
         ax.theme("simple" if color else "colorless")
         for s in group:
             for c, idx in segments:
-                pairs = [(table.t[i], s.values[i]) for i in idx if s.values[i] == s.values[i]]   # NaN: no reading
+                pairs = [(table.t[i], s.values[i]) for i in idx if s.values[i] == s.values[i]]  # NaN: no reading
                 if pairs:
                     label = s.label + (f" #{c}" if len(segments) > 1 else "")
                     ax.draw(ax.signal([p[0] for p in pairs], [p[1] for p in pairs]).label(label).lines())

@@ -34,18 +34,20 @@ def model_torque_pct(result: Result, rated_torque_nm: float) -> np.ndarray:
     band = _zero_band(rpm, est.speed_noise_rpm)
     sgn = np.where(rpm >= band, 1.0, np.where(rpm <= -band, -1.0, 0.0))
     dw = np.gradient(w, t) if t.size > 2 else np.zeros_like(w)
-    coef = [0.0 if not math.isfinite(x) else x for x in
-            (est.j_total_kgm2, est.coulomb_nm, est.viscous_nm_per_rad_s, est.load_torque_nm)]
+    coef = [
+        0.0 if not math.isfinite(x) else x
+        for x in (est.j_total_kgm2, est.coulomb_nm, est.viscous_nm_per_rad_s, est.load_torque_nm)
+    ]
     torque = coef[0] * dw + coef[1] * sgn + coef[2] * w + coef[3]
     return torque / rated_torque_nm * 100.0
 
 
 @dataclass(frozen=True)
 class MoveEstimate:
-    move: int               # 1-based, in the order run
-    direction: int          # +1 forward, -1 reverse
-    ratio: float            # this move's own J_load/J_motor
-    ratio_std: float        # its standard uncertainty (1 sigma)
+    move: int  # 1-based, in the order run
+    direction: int  # +1 forward, -1 reverse
+    ratio: float  # this move's own J_load/J_motor
+    ratio_std: float  # its standard uncertainty (1 sigma)
     samples: int
 
 
@@ -60,20 +62,35 @@ def move_estimates(result: Result, profile: Profile) -> list[MoveEstimate]:
     torque = np.asarray(result.trace.torque, dtype=float)
     band = _zero_band(rpm, est.speed_noise_rpm)
     ids = move_ids(rpm, band)
-    cfg = EstimatorSettings(min_samples=MIN_MOVE_SAMPLES, min_windows=3, window_intervals=est.window_intervals or None,
-                            max_rel_uncertainty=math.inf, min_excitation=0.0, max_rel_residual=math.inf,
-                            fit_viscous=False, fit_load_torque=False, zero_band_rpm=band,
-                            speed_noise_rpm=est.speed_noise_rpm if math.isfinite(est.speed_noise_rpm) else None,
-                            max_condition=math.inf, min_jackknife_moves=1 << 30)
+    cfg = EstimatorSettings(
+        min_samples=MIN_MOVE_SAMPLES,
+        min_windows=3,
+        window_intervals=est.window_intervals or None,
+        max_rel_uncertainty=math.inf,
+        min_excitation=0.0,
+        max_rel_residual=math.inf,
+        fit_viscous=False,
+        fit_load_torque=False,
+        zero_band_rpm=band,
+        speed_noise_rpm=est.speed_noise_rpm if math.isfinite(est.speed_noise_rpm) else None,
+        max_condition=math.inf,
+        min_jackknife_moves=1 << 30,
+    )
     out: list[MoveEstimate] = []
     for k in np.unique(ids):
         idx = np.flatnonzero(ids == k)
         direction = int(np.sign(np.median(rpm[idx])))
         if idx.size < MIN_MOVE_SAMPLES or direction == 0:
             continue
-        lo, hi = max(0, int(idx[0]) - 1), min(t.size, int(idx[-1]) + 2)    # a sample of rest either side
-        one = estimate_inertia(t[lo:hi], rpm[lo:hi], torque[lo:hi], rated_torque_nm=motor.rated_torque_nm,
-                               rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2, settings=cfg)
+        lo, hi = max(0, int(idx[0]) - 1), min(t.size, int(idx[-1]) + 2)  # a sample of rest either side
+        one = estimate_inertia(
+            t[lo:hi],
+            rpm[lo:hi],
+            torque[lo:hi],
+            rated_torque_nm=motor.rated_torque_nm,
+            rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
+            settings=cfg,
+        )
         if one.ok and math.isfinite(one.load_ratio):
             out.append(MoveEstimate(len(out) + 1, direction, one.load_ratio, one.ratio_std, int(idx.size)))
     return out

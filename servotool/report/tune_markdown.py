@@ -16,30 +16,48 @@ def _f(x: float | None, fmt: str = ".3g") -> str:
     return "n/a" if x is None or not math.isfinite(x) else format(x, fmt)
 
 
-def report_markdown(result: Result, profile: Profile, tune: TuneResult | None, moves: list[MoveEstimate],
-                    rows: list[GainRow], charts: list[tuple[str, str]], reason: str = "") -> str:
+def report_markdown(
+    result: Result,
+    profile: Profile,
+    tune: TuneResult | None,
+    moves: list[MoveEstimate],
+    rows: list[GainRow],
+    charts: list[tuple[str, str]],
+    reason: str = "",
+) -> str:
     est = result.estimate
     old = f"{result.old_ratio:.2f}" if result.old_ratio is not None else "not a drive parameter"
     lines = [f"# Inertia tune: {profile.model} (profile {profile.id})", ""]
     lines += [f"**Refused:** {reason}", ""] if reason else []
-    lines += ["| | |", "|---|---|",
-              f"| method | {result.method} |",
-              f"| load inertia ratio (J_load/J_motor) | {old} → {result.new_ratio:.2f}"
-              + (f" ± {est.ratio_std:.2f} (1σ) |" if est else " |")]
+    lines += [
+        "| | |",
+        "|---|---|",
+        f"| method | {result.method} |",
+        f"| load inertia ratio (J_load/J_motor) | {old} → {result.new_ratio:.2f}"
+        + (f" ± {est.ratio_std:.2f} (1σ) |" if est else " |"),
+    ]
     if est is not None:
-        lines += [f"| Coulomb friction | {_f(est.coulomb_nm, '.4f')} N·m |",
-                  f"| viscous friction | {_f(est.viscous_nm_per_rad_s, '.2e')} N·m·s/rad |",
-                  f"| load torque | {_f(est.load_torque_nm, '.4f')} N·m |",
-                  f"| fit residual | {_f(est.residual_rel, '.1%')} of the torque integrals |",
-                  f"| windows / excitation | {est.n_windows} / {_f(est.excitation, '.1f')}× the speed noise |"]
+        lines += [
+            f"| Coulomb friction | {_f(est.coulomb_nm, '.4f')} N·m |",
+            f"| viscous friction | {_f(est.viscous_nm_per_rad_s, '.2e')} N·m·s/rad |",
+            f"| load torque | {_f(est.load_torque_nm, '.4f')} N·m |",
+            f"| fit residual | {_f(est.residual_rel, '.1%')} of the torque integrals |",
+            f"| windows / excitation | {est.n_windows} / {_f(est.excitation, '.1f')}× the speed noise |",
+        ]
     travel = f"{result.travel_used_rev:.2f} rev" if result.travel_used_rev is not None else "n/a"
-    lines += [f"| samples | {len(result.trace.t)} at {result.samples_per_s:.0f}/s, {result.cycles} cycles, "
-              f"{result.time_used_s:.1f} s, travel {travel} |", ""]
+    lines += [
+        f"| samples | {len(result.trace.t)} at {result.samples_per_s:.0f}/s, {result.cycles} cycles, "
+        f"{result.time_used_s:.1f} s, travel {travel} |",
+        "",
+    ]
     if moves:
         ratios = [m.ratio for m in moves]
         spread = float(np.std(ratios, ddof=1)) if len(ratios) > 1 else 0.0
-        lines += [f"Per move (each fitted on its own): {len(moves)} moves, ratios "
-                  f"{min(ratios):.2f}..{max(ratios):.2f}, spread {spread:.2f} (1σ).", ""]
+        lines += [
+            f"Per move (each fitted on its own): {len(moves)} moves, ratios "
+            f"{min(ratios):.2f}..{max(ratios):.2f}, spread {spread:.2f} (1σ).",
+            "",
+        ]
     if tune is not None:
         written = "written" if tune.ratio_stored else "not written"
         gains = ("gains written" if tune.gains_written else "gains not written") if rows else "gains unchanged"
@@ -52,8 +70,10 @@ def report_markdown(result: Result, profile: Profile, tune: TuneResult | None, m
             lines.append("")
     if rows:
         lines += ["| role | code | current | new | unit | range | margin |", "|---|---|---|---|---|---|---|"]
-        lines += [f"| {r.role} | {r.code} | {r.old:g} | {r.new:g} | {r.unit} | {r.range_text} | {r.margin_text} |"
-                  for r in rows]
+        lines += [
+            f"| {r.role} | {r.code} | {r.old:g} | {r.new:g} | {r.unit} | {r.range_text} | {r.margin_text} |"
+            for r in rows
+        ]
         lines.append("")
     for name, heading in charts:
         lines += [f"## {heading}", "", f"![{heading}]({name})", ""]

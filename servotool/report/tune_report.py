@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class TuneReport:
     folder: Path
-    files: list[Path]          # the PNGs and report.md, in the order report.md shows them
+    files: list[Path]  # the PNGs and report.md, in the order report.md shows them
 
 
 def check_folder(folder: Path) -> None:
@@ -54,8 +54,9 @@ def motion_figure(result: Result) -> Figure:
     pos = [(t, x) for t, x in zip(tr.t, tr.position, strict=True) if x is not None]
     if pos:
         x0 = pos[0][1]
-        ax_x.plot([p[0] for p in pos], [p[1] - x0 for p in pos], label="travel", color="tab:green", marker=".",
-                  markersize=3)
+        ax_x.plot(
+            [p[0] for p in pos], [p[1] - x0 for p in pos], label="travel", color="tab:green", marker=".", markersize=3
+        )
     else:
         ax_x.text(0.5, 0.5, "no position feedback in this profile", ha="center", transform=ax_x.transAxes)
     if result.plan is not None:
@@ -106,8 +107,13 @@ def moves_figure(result: Result, moves: list[MoveEstimate]) -> Figure | None:
     ax.scatter(n, ratios, c=colors, zorder=3, label="per move (blue forward, purple reverse)")
     ax.plot(n, ratios, color="gray", linewidth=0.6, alpha=0.6)
     ax.axhline(est.load_ratio, color="black", label=f"fit {est.load_ratio:.2f}")
-    ax.axhspan(est.load_ratio - est.ratio_std, est.load_ratio + est.ratio_std, color="gray", alpha=0.2,
-               label=f"± {est.ratio_std:.2f} (1σ)")
+    ax.axhspan(
+        est.load_ratio - est.ratio_std,
+        est.load_ratio + est.ratio_std,
+        color="gray",
+        alpha=0.2,
+        label=f"± {est.ratio_std:.2f} (1σ)",
+    )
     spread = float(np.std(ratios, ddof=1)) if len(ratios) > 1 else 0.0
     ax.set_xlabel("move")
     ax.set_ylabel("inertia ratio J_load/J_motor")
@@ -130,8 +136,14 @@ def step_figure(before: StepResponse | None, after: StepResponse | None) -> Figu
         t_ms = [t * 1000 for t in s.t_s]
         ax.plot(t_ms, s.speed_rpm, color=color, label=f"{name}: overshoot {s.overshoot_pct:.1f} %")
         peak = int(np.argmax(s.speed_rpm))
-        ax.annotate(f"{s.overshoot_pct:.1f} %", (t_ms[peak], s.speed_rpm[peak]), textcoords="offset points",
-                    xytext=(4, 6), color=color, fontsize="small")
+        ax.annotate(
+            f"{s.overshoot_pct:.1f} %",
+            (t_ms[peak], s.speed_rpm[peak]),
+            textcoords="offset points",
+            xytext=(4, 6),
+            color=color,
+            fontsize="small",
+        )
         ax.plot([t_ms[peak]], [s.speed_rpm[peak]], marker="v", color=color)
         if s.settling_ms is not None:
             ax.axvline(s.settling_ms, color=color, linestyle=":", label=f"{name}: settled at {s.settling_ms:.0f} ms")
@@ -150,8 +162,9 @@ def gains_figure(rows: list[GainRow], title: str) -> Figure | None:
     fig, (ax,) = new_figure(1, row_in=0.3 * len(rows), sharex=False)
     ax.axis("off")
     cells = [[r.role, r.code, f"{r.old:g}", f"{r.new:g}", r.unit, r.range_text, r.margin_text] for r in rows]
-    tab = ax.table(cellText=cells, colLabels=["role", "code", "current", "new", "unit", "range", "margin"],
-                   loc="center")
+    tab = ax.table(
+        cellText=cells, colLabels=["role", "code", "current", "new", "unit", "range", "margin"], loc="center"
+    )
     tab.auto_set_font_size(False)
     tab.set_fontsize(9)
     tab.auto_set_column_width(list(range(7)))
@@ -159,8 +172,9 @@ def gains_figure(rows: list[GainRow], title: str) -> Figure | None:
     return fig
 
 
-def write_tune_report(folder: Path, result: Result, profile: Profile, tune: TuneResult | None = None,
-                      reason: str = "") -> TuneReport:
+def write_tune_report(
+    folder: Path, result: Result, profile: Profile, tune: TuneResult | None = None, reason: str = ""
+) -> TuneReport:
     """Write the charts and report.md into folder (made if needed); reason: why the result was refused, if it was."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -170,11 +184,13 @@ def write_tune_report(folder: Path, result: Result, profile: Profile, tune: Tune
     rows = gain_rows(tune) if tune is not None else []
     sugg = tune.proposal.suggestion if tune is not None else None
     gains_title = f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop bandwidth" if sugg else "gains"
-    charts = [("motion.png", "Motion", motion_figure(result) if result.trace.t else None),
-              ("fit.png", "Fit and residual", fit_figure(result, profile)),
-              ("moves.png", "Per-move estimates", moves_figure(result, moves)),
-              ("step.png", "Step response", step_figure(tune.step_before, tune.step_after) if tune else None),
-              ("gains.png", "Gains", gains_figure(rows, gains_title))]
+    charts = [
+        ("motion.png", "Motion", motion_figure(result) if result.trace.t else None),
+        ("fit.png", "Fit and residual", fit_figure(result, profile)),
+        ("moves.png", "Per-move estimates", moves_figure(result, moves)),
+        ("step.png", "Step response", step_figure(tune.step_before, tune.step_after) if tune else None),
+        ("gains.png", "Gains", gains_figure(rows, gains_title)),
+    ]
     files, shown = [], []
     for name, heading, fig in charts:
         if fig is not None:

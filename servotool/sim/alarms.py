@@ -6,7 +6,7 @@ from servotool.model.profile import Profile
 from servotool.sim.registers import RegisterBank
 
 HISTORY_LENGTH = 8
-UNLISTED_ALARM_CODE = 0xFF     # a trip the profile lists no alarm for: outside its list, so it shows as unknown
+UNLISTED_ALARM_CODE = 0xFF  # a trip the profile lists no alarm for: outside its list, so it shows as unknown
 
 
 class AlarmLog:
@@ -15,7 +15,7 @@ class AlarmLog:
     def __init__(self, profile: Profile, bank: RegisterBank) -> None:
         self.profile = profile
         self.bank = bank
-        self.recorded = False   # whether the alarm latched now is already in the history
+        self.recorded = False  # whether the alarm latched now is already in the history
 
     @property
     def history(self) -> list[int]:

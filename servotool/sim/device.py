@@ -23,19 +23,42 @@ SIM_SETTINGS: dict[str, tuple[type, float | int, float, float, str]] = {
     "brake": (int, 1, 0, 1, "holding brake (on/off): closed while the servo is off; holds any load_torque"),
     "line_baud": (int, 0, 0, 10_000_000, "emulate an RS485 line at this baud (delay answers by wire time); 0 = off"),
     # mechanics outside the rigid model (sim.mechanics); all off by default
-    "resonance_hz": (float, 0.0, 0.0, 500.0, "compliant coupling: the load sits behind a spring, motor-side "
-                     "resonance at this frequency, Hz (needs load_ratio > 0); 0 = rigid"),
+    "resonance_hz": (
+        float,
+        0.0,
+        0.0,
+        500.0,
+        "compliant coupling: the load sits behind a spring, motor-side "
+        "resonance at this frequency, Hz (needs load_ratio > 0); 0 = rigid",
+    ),
     "resonance_damping": (float, 0.05, 0.001, 1.0, "damping ratio of the coupling's resonance"),
-    "backlash_rad": (float, 0.0, 0.0, 1.0, "backlash: dead zone in the coupling, rad at the motor shaft (needs "
-                     "load_ratio > 0); 0 = none"),
-    "arm_gravity": (float, 0.0, -2.0, 2.0, "an arm through a gear: gravity torque amplitude, fraction of rated "
-                    "torque; load torque = arm_gravity * sin(load position / gear + arm_angle)"),
+    "backlash_rad": (
+        float,
+        0.0,
+        0.0,
+        1.0,
+        "backlash: dead zone in the coupling, rad at the motor shaft (needs load_ratio > 0); 0 = none",
+    ),
+    "arm_gravity": (
+        float,
+        0.0,
+        -2.0,
+        2.0,
+        "an arm through a gear: gravity torque amplitude, fraction of rated "
+        "torque; load torque = arm_gravity * sin(load position / gear + arm_angle)",
+    ),
     "arm_angle": (float, 0.0, -180.0, 180.0, "the arm's angle at position 0, degrees from hanging down"),
     "gear": (float, 10.0, 1.0, 1000.0, "gear ratio between motor and arm (motor turns per arm turn)"),
     "cogging": (float, 0.0, 0.0, 0.2, "cogging torque ripple amplitude, fraction of rated torque"),
     "cogging_periods": (int, 6, 1, 200, "cogging ripple periods per motor revolution"),
-    "fake_watchdog": (int, 0, 0, 1, "NOT REAL (on/off): stop host motion after 500 ms of host silence on a drive "
-                      "whose manual documents no communication timeout; off by default, as on the real drive"),
+    "fake_watchdog": (
+        int,
+        0,
+        0,
+        1,
+        "NOT REAL (on/off): stop host motion after 500 ms of host silence on a drive "
+        "whose manual documents no communication timeout; off by default, as on the real drive",
+    ),
 }
 
 
@@ -210,6 +233,7 @@ def sim_settings(raw: object, *, strict: bool = False) -> dict[str, float | int]
             value = default
         out[name] = value
     if strict and (out["resonance_hz"] or out["backlash_rad"]) and not out["load_ratio"]:
-        raise UsageError("sim setting resonance_hz or backlash_rad needs a load behind the coupling: set "
-                         "load_ratio > 0")
+        raise UsageError(
+            "sim setting resonance_hz or backlash_rad needs a load behind the coupling: set load_ratio > 0"
+        )
     return out

@@ -24,9 +24,9 @@ class LineFaults:
 
     rates: dict[str, float] = field(default_factory=dict)
     seed: int = 1
-    late_s: float = 0.5              # how much later than its time a "late" reply comes
-    response_delay_s: float = 0.0    # the drive's reply delay, on every reply
-    echo: bool = False               # the master hears its own transmission
+    late_s: float = 0.5  # how much later than its time a "late" reply comes
+    response_delay_s: float = 0.0  # the drive's reply delay, on every reply
+    echo: bool = False  # the master hears its own transmission
 
     def __post_init__(self) -> None:
         for kind, rate in self.rates.items():
@@ -140,16 +140,16 @@ class FaultProxy:
         rng = self._rng
         if kind == "crc":
             i = rng.randrange(len(frame))
-            return 0.0, frame[:i] + bytes([frame[i] ^ (1 << rng.randrange(8))]) + frame[i + 1:]
+            return 0.0, frame[:i] + bytes([frame[i] ^ (1 << rng.randrange(8))]) + frame[i + 1 :]
         if kind == "late":
             return self.faults.late_s, frame
         if kind == "duplicate":
             return 0.0, frame + frame
         if kind == "truncate":
-            return 0.0, frame[:rng.randrange(1, len(frame))]
+            return 0.0, frame[: rng.randrange(1, len(frame))]
         if kind == "garbage":
             return 0.0, rng.randbytes(rng.randrange(1, len(frame) + 4))
-        return 0.0, b""     # drop
+        return 0.0, b""  # drop
 
     def _pick(self) -> str | None:
         x = self._rng.random()

@@ -48,7 +48,7 @@ DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 # motion, ramped and without an alarm, when no motion-role write arrives for this long.
 FAKE_WATCHDOG_MS = 500.0
 COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
-STOP_STEP_S = 0.01           # a quiet ramp-down after host loss is checked for standstill at this resolution
+STOP_STEP_S = 0.01  # a quiet ramp-down after host loss is checked for standstill at this resolution
 
 
 class Firmware:
@@ -74,7 +74,7 @@ class Firmware:
     def _power_on(self) -> None:
         """The state right after power on: servo off, no alarm, position counter at zero, motor cold."""
         self.plant = Plant(self.motor, self._plant_settings(), self._gains(), start_time=self.clock.now())
-        self.mode = "off"        # off | jog | speed | servo | ident | stopping (host lost, no alarm kind)
+        self.mode = "off"  # off | jog | speed | servo | ident | stopping (host lost, no alarm kind)
         self.jog_dir = 0
         self.last_host = self.clock.now()
         self.ident: Identification | None = None
@@ -84,9 +84,17 @@ class Firmware:
 
     # ----- the running state, shared with other processes through the state file -----------------------------
     def _store_machine_state(self) -> None:
-        self._handover.store(self.drive.bank.extra, MachineState(
-            mode=self.mode, jog_dir=self.jog_dir, last_host=self.last_host, recorded=self.alarms.recorded,
-            ident=self.ident, plant=self.plant.state()))
+        self._handover.store(
+            self.drive.bank.extra,
+            MachineState(
+                mode=self.mode,
+                jog_dir=self.jog_dir,
+                last_host=self.last_host,
+                recorded=self.alarms.recorded,
+                ident=self.ident,
+                plant=self.plant.state(),
+            ),
+        )
 
     def _take_machine_state(self) -> None:
         """Continue from the running state another process stored (or start afresh after a power cycle)."""
@@ -103,7 +111,7 @@ class Firmware:
         if self.mode == "ident" and self.ident is None:
             self.mode = "off"
             self.plant.set_mode("off")
-        if self.mode == "segment":          # a move is not handed over: it ends here, braking at the ramp
+        if self.mode == "segment":  # a move is not handed over: it ends here, braking at the ramp
             self.plant.set_speed_command(0.0)
             self.mode = "servo"
 
@@ -118,10 +126,15 @@ class Firmware:
         s = self.drive.settings
         rated = self.motor.rated_torque_nm
         return PlantSettings(
-            load_ratio=float(s["load_ratio"]), coulomb_nm=float(s["friction"]) * rated,
-            viscous_nm_per_rad_s=float(s["viscous"]) * rated, load_torque_nm=float(s["load_torque"]) * rated,
-            noise=float(s["noise"]), seed=int(s["seed"]),
-            brake_nm=BRAKE_HOLD_X_RATED * rated if s["brake"] else 0.0, mechanics=MechanicsSettings.from_sim(s, rated))
+            load_ratio=float(s["load_ratio"]),
+            coulomb_nm=float(s["friction"]) * rated,
+            viscous_nm_per_rad_s=float(s["viscous"]) * rated,
+            load_torque_nm=float(s["load_torque"]) * rated,
+            noise=float(s["noise"]),
+            seed=int(s["seed"]),
+            brake_nm=BRAKE_HOLD_X_RATED * rated if s["brake"] else 0.0,
+            mechanics=MechanicsSettings.from_sim(s, rated),
+        )
 
     def _eng(self, role: str, default: float) -> float:
         entry = self.profile.role(role)
@@ -188,14 +201,14 @@ class Firmware:
         if self.mode == "segment" and self.segment is not None:
             if self.segment.advance(self.plant, now, self._ramp_rev_s2()):
                 self.segment = None
-                self.mode = "servo"           # the move ended: the drive holds there, servo on
+                self.mode = "servo"  # the move ended: the drive holds there, servo on
         self.plant.advance_to(now)
         if self.plant.alarm is not None:
             if self.mode != "off":
                 self.mode = "off"
                 self.ident = None
                 self.segment = None
-            self.alarms.record(self.plant.alarm)       # also alarms raised with the servo off
+            self.alarms.record(self.plant.alarm)  # also alarms raised with the servo off
         self._refresh_monitors()
 
     def _watched(self) -> bool:
@@ -204,8 +217,11 @@ class Firmware:
         --fake-watchdog, off by default) stops host-commanded motion there."""
         if self.profile.role("comm_timeout") is not None:
             return self.mode in ("jog", "speed", "servo", "segment")
-        return bool(self.drive.settings["fake_watchdog"]) and self.mode in ("jog", "speed", "segment") and (
-            self.jog_dir != 0 or self.plant.target_rpm != 0.0)
+        return (
+            bool(self.drive.settings["fake_watchdog"])
+            and self.mode in ("jog", "speed", "segment")
+            and (self.jog_dir != 0 or self.plant.target_rpm != 0.0)
+        )
 
     def _host_lost(self) -> None:
         """The watchdog expired: a documented one stops with the profile's communication alarm; the fake one ramps
@@ -215,7 +231,7 @@ class Firmware:
             return
         servo = self.profile.role("servo_on")
         if servo is not None and servo.cls == "Pn":
-            self.drive.bank.apply_parameter(servo, 0)   # a servo-on held in a parameter drops with the servo
+            self.drive.bank.apply_parameter(servo, 0)  # a servo-on held in a parameter drops with the servo
             self.drive.bank.save()
         self.segment = None
         self.plant.set_speed_command(0.0)
@@ -238,7 +254,6 @@ class Firmware:
         self.ident = None
         self.alarms.record(self.plant.alarm)
 
-
     # ----- actions (what the drive's functions trigger; see servotool.sim.functions) -------------------------
     def _host_alive(self) -> None:
         self.last_host = self.clock.now()
@@ -247,7 +262,8 @@ class Firmware:
         """No alarm and the profile's motion_setup in effect: without the setup a real drive ignores (or does
         something else with) a host JOG or servo-on, so the simulated one does not move either."""
         return self.plant.alarm is None and all(
-            r.met(self.drive.bank.effective_value(r.entry.code)) for r in self._setup)
+            r.met(self.drive.bank.effective_value(r.entry.code)) for r in self._setup
+        )
 
     def keep_alive(self) -> None:
         self.update()
@@ -257,11 +273,11 @@ class Firmware:
         """JOG in a direction (+1/-1) at the JOG speed, or stop it (0)."""
         self.keep_alive()
         if direction == 0:
-            if self.mode == "jog":       # stop, but stay excited (holding) until JOG is left with servo off
+            if self.mode == "jog":  # stop, but stay excited (holding) until JOG is left with servo off
                 self.plant.set_speed_command(0.0)
                 self.jog_dir = 0
                 if self.profile.role("servo_on") is None:
-                    self.mode = "stopping"   # nothing to leave JOG with: the drive switches off once at rest
+                    self.mode = "stopping"  # nothing to leave JOG with: the drive switches off once at rest
             return
         if self.plant.alarm is not None or self.mode not in ("off", "jog", "stopping"):
             return
@@ -335,9 +351,13 @@ class Firmware:
             return
         if self.plant.alarm is not None or self.mode != "off":
             return
-        self.ident = Identification.start(self.plant, self._eng("inertia_id_torque", 50.0),
-                                          self._eng("inertia_id_travel", 2.0), self.motor.rated_speed_rpm,
-                                          self.clock.now())
+        self.ident = Identification.start(
+            self.plant,
+            self._eng("inertia_id_torque", 50.0),
+            self._eng("inertia_id_travel", 2.0),
+            self.motor.rated_speed_rpm,
+            self.clock.now(),
+        )
         self.mode = "ident"
 
     def _advance_identification(self, ident: Identification, now: float) -> None:
@@ -365,8 +385,14 @@ class Firmware:
         self.drive.bank.save()
 
     def _refresh_monitors(self) -> None:
-        monitors.refresh(self.profile, self.drive.bank, self.plant, self.alarms, jogging=self.mode == "jog",
-                         identifying=self.mode == "ident")
+        monitors.refresh(
+            self.profile,
+            self.drive.bank,
+            self.plant,
+            self.alarms,
+            jogging=self.mode == "jog",
+            identifying=self.mode == "ident",
+        )
 
 
 def build_drive(profile: Profile, unit: int, clock: Clock | None = None, *, persist: bool = True) -> SimulatedDrive:

@@ -43,14 +43,15 @@ def motion_handlers(fw: FirmwareActions, start_value: int = 0) -> dict[str, FnHa
 def install(drive: SimulatedDrive, fw: FirmwareActions) -> None:
     """Route the drive's function writes, and writes of motion roles held in parameters, to the firmware."""
     dead_man = drive.profile.dead_man
-    motion = motion_handlers(fw, dead_man.start_value if dead_man is not None and dead_man.route == "segment"
-                             else 0)
-    drive.handlers.update({
-        **motion,
-        "alarm_reset": lambda _d, _e, raw: fw.reset_alarm() if raw else fw.update(),
-        "inertia_id": lambda _d, _e, raw: fw.identify(bool(raw)),
-        "soft_reset": _soft_reset(drive.handlers.get("soft_reset"), fw),
-    })
+    motion = motion_handlers(fw, dead_man.start_value if dead_man is not None and dead_man.route == "segment" else 0)
+    drive.handlers.update(
+        {
+            **motion,
+            "alarm_reset": lambda _d, _e, raw: fw.reset_alarm() if raw else fw.update(),
+            "inertia_id": lambda _d, _e, raw: fw.identify(bool(raw)),
+            "soft_reset": _soft_reset(drive.handlers.get("soft_reset"), fw),
+        }
+    )
     by_code: dict[str, list[FnHandler]] = {}
     for role, code in drive.profile.roles.items():
         entry = drive.profile.entry(code)
@@ -67,9 +68,11 @@ def install(drive: SimulatedDrive, fw: FirmwareActions) -> None:
 def _soft_reset(memory_reset: FnHandler | None, fw: FirmwareActions) -> FnHandler:
     """A soft reset reboots the drive: parameters take effect (the device's own handler) and the running state
     starts afresh."""
+
     def handler(drive: SimulatedDrive, entry: Entry, raw: int) -> None:
         if memory_reset is not None:
             memory_reset(drive, entry, raw)
         if raw == entry.trigger:
             fw.reboot()
+
     return handler

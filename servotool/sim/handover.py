@@ -24,11 +24,11 @@ class MachineState:
 
     mode: str = "off"
     jog_dir: int = 0
-    last_host: float | None = None          # None: unknown, keep the power-on value
-    recorded: bool = False                  # the latched alarm is already in the history
+    last_host: float | None = None  # None: unknown, keep the power-on value
+    recorded: bool = False  # the latched alarm is already in the history
     ident: Identification | None = None
-    plant: dict[str, Any] | None = None     # Plant.state()
-    plant_shift: float = 0.0                # for Plant.restore(plant, shift)
+    plant: dict[str, Any] | None = None  # Plant.state()
+    plant_shift: float = 0.0  # for Plant.restore(plant, shift)
 
 
 @dataclass(frozen=True)
@@ -45,7 +45,7 @@ class Handover:
 
     def __init__(self, clock: Clock) -> None:
         self.clock = clock
-        self.seq: int | None = None   # which stored state this process's state is (None: not stored)
+        self.seq: int | None = None  # which stored state this process's state is (None: not stored)
 
     def _wall_offset(self) -> float:
         return self.clock.wall() - self.clock.now()
@@ -56,8 +56,13 @@ class Handover:
         seq = stored.get("seq", 0) if isinstance(stored, dict) else 0
         self.seq = (seq if isinstance(seq, int) else 0) + 1
         extra[MACHINE_STATE_KEY] = {
-            "seq": self.seq, "wall_offset": self._wall_offset(), "plant": state.plant,
-            "mode": state.mode, "jog_dir": state.jog_dir, "last_host": state.last_host, "recorded": state.recorded,
+            "seq": self.seq,
+            "wall_offset": self._wall_offset(),
+            "plant": state.plant,
+            "mode": state.mode,
+            "jog_dir": state.jog_dir,
+            "last_host": state.last_host,
+            "recorded": state.recorded,
             "ident": state.ident.stored() if state.ident is not None else None,
         }
 
@@ -68,10 +73,10 @@ class Handover:
         if not isinstance(stored, dict):
             if self.seq is None:
                 return None
-            self.seq = None                    # stored before, gone now: the drive was power-cycled
+            self.seq = None  # stored before, gone now: the drive was power-cycled
             return MachineState()
         if stored.get("seq") == self.seq:
-            return None                        # our own state (the file changed for another reason)
+            return None  # our own state (the file changed for another reason)
         seq = stored.get("seq")
         self.seq = seq if isinstance(seq, int) else None
         return _unpack(stored, self._wall_offset())
@@ -88,7 +93,9 @@ def _unpack(stored: dict[str, Any], wall_offset: float) -> MachineState:
         last_host=float(last_host) + shift if _number(last_host) else None,
         recorded=stored.get("recorded") is True,
         ident=Identification.from_stored(stored.get("ident"), shift),
-        plant=plant if isinstance(plant, dict) else None, plant_shift=shift)
+        plant=plant if isinstance(plant, dict) else None,
+        plant_shift=shift,
+    )
 
 
 def running_summary(extra: dict[str, Any]) -> RunningSummary | None:
@@ -98,9 +105,11 @@ def running_summary(extra: dict[str, Any]) -> RunningSummary | None:
     if not isinstance(plant, dict):
         return None
     theta, alarm = plant.get("theta"), plant.get("alarm")
-    return RunningSummary(servo_on=plant.get("mode") not in ("off", None),
-                          alarm=alarm if isinstance(alarm, str) else None,
-                          position_rev=theta / (2 * math.pi) if _number(theta) else 0.0)
+    return RunningSummary(
+        servo_on=plant.get("mode") not in ("off", None),
+        alarm=alarm if isinstance(alarm, str) else None,
+        position_rev=theta / (2 * math.pi) if _number(theta) else 0.0,
+    )
 
 
 def _number(value: object) -> bool:
@@ -109,4 +118,3 @@ def _number(value: object) -> bool:
 
 def _int(value: object, default: int) -> int:
     return value if isinstance(value, int) and not isinstance(value, bool) else default
-

@@ -13,15 +13,15 @@ from enum import Enum
 
 from servotool.sim.plant import Plant
 
-STEP_S = 0.002          # phase switches are found to this resolution
-PHASES = 4              # accel fwd, decel fwd, accel rev, decel rev
+STEP_S = 0.002  # phase switches are found to this resolution
+PHASES = 4  # accel fwd, decel fwd, accel rev, decel rev
 MAX_TOP_RPM = 600.0
 
 
 class Progress(Enum):
     RUNNING = "running"
     DONE = "done"
-    FAILED = "failed"      # travelled too far, or the plant latched an alarm
+    FAILED = "failed"  # travelled too far, or the plant latched an alarm
 
 
 @dataclass
@@ -32,14 +32,15 @@ class Identification:
     max_rev: float
     top_rpm: float
     start_pos: float
-    phase: int = 0          # 0 accel fwd, 1 decel fwd, 2 accel rev, 3 decel rev, 4 done
+    phase: int = 0  # 0 accel fwd, 1 decel fwd, 2 accel rev, 3 decel rev, 4 done
     phase_t0: float = 0.0
     phase_w0: float = 0.0
-    estimates: list[float] = field(default_factory=list)   # inertia per finished phase, kg*m^2
+    estimates: list[float] = field(default_factory=list)  # inertia per finished phase, kg*m^2
 
     @classmethod
-    def start(cls, plant: Plant, torque_pct: float, max_rev: float, rated_speed_rpm: float,
-              now: float) -> Identification:
+    def start(
+        cls, plant: Plant, torque_pct: float, max_rev: float, rated_speed_rpm: float, now: float
+    ) -> Identification:
         """Begin on the plant: torque mode, driving forward."""
         ident = cls(torque_pct, max_rev, min(MAX_TOP_RPM, rated_speed_rpm / 3), plant.position_rev, phase_t0=now)
         plant.set_mode("torque")

@@ -15,7 +15,7 @@ from servotool.sim.registers import DEVICE_FAILURE, ILLEGAL_FUNCTION, ILLEGAL_VA
 from servotool.sim.virtual import READ_CODES, wire_time
 
 WRITE_CODES = (6, 16)
-MAX_READ, MAX_WRITE = 125, 123       # the specification's quantity limits (FC03/04 and FC16)
+MAX_READ, MAX_WRITE = 125, 123  # the specification's quantity limits (FC03/04 and FC16)
 
 
 def refusal(pdu: bytes) -> int | None:
@@ -41,13 +41,14 @@ class Line:
         self.drives = {d.unit: d for d in drives}
         self.lock = lock or threading.Lock()
 
-    def serve(self, drive: SimulatedDrive, fc: int, address: int, count: int,
-              values: list[int] | None) -> tuple[list[int] | int, float]:
+    def serve(
+        self, drive: SimulatedDrive, fc: int, address: int, count: int, values: list[int] | None
+    ) -> tuple[list[int] | int, float]:
         """Registers read (none for a write) or the exception code, and the seconds the drive's emulated line
         takes to answer (its `line_baud`; 0 without)."""
         try:
             with self.lock:
-                drive.bank.entries_in(address, count)      # an unmapped address is exception 02 before all else
+                drive.bank.entries_in(address, count)  # an unmapped address is exception 02 before all else
                 if values is not None:
                     drive.write(address, values)
                     registers: list[int] = []

@@ -27,21 +27,21 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-CONTACT_HZ = 150.0          # stiffness of a backlash's flanks when no compliant coupling is configured
+CONTACT_HZ = 150.0  # stiffness of a backlash's flanks when no compliant coupling is configured
 CONTACT_DAMPING = 0.5
 MAX_OMEGA_STEP = 0.1
-REST_RATE = 1e-6            # rad/s: a coupling moving slower than this counts as settled
-REST_TORQUE = 1e-6          # N*m
+REST_RATE = 1e-6  # rad/s: a coupling moving slower than this counts as settled
+REST_TORQUE = 1e-6  # N*m
 
 
 @dataclass(frozen=True)
 class MechanicsSettings:
     """Mechanics beyond the rigid load (all 0: rigid, the estimator's model)."""
 
-    resonance_hz: float = 0.0        # 0 = rigid coupling
+    resonance_hz: float = 0.0  # 0 = rigid coupling
     resonance_damping: float = 0.05
-    backlash_rad: float = 0.0        # dead zone at the motor shaft
-    arm_nm: float = 0.0              # arm gravity amplitude, N*m
+    backlash_rad: float = 0.0  # dead zone at the motor shaft
+    arm_nm: float = 0.0  # arm gravity amplitude, N*m
     gear: float = 1.0
     arm_phase_rad: float = 0.0
     cogging_nm: float = 0.0
@@ -50,10 +50,16 @@ class MechanicsSettings:
     @classmethod
     def from_sim(cls, s: Mapping[str, float | int], rated_nm: float) -> MechanicsSettings:
         """From the simulated drive's settings (sim config: fractions of rated torque, degrees)."""
-        return cls(resonance_hz=float(s["resonance_hz"]), resonance_damping=float(s["resonance_damping"]),
-                   backlash_rad=float(s["backlash_rad"]), arm_nm=float(s["arm_gravity"]) * rated_nm,
-                   gear=float(s["gear"]), arm_phase_rad=math.radians(float(s["arm_angle"])),
-                   cogging_nm=float(s["cogging"]) * rated_nm, cogging_periods=int(s["cogging_periods"]))
+        return cls(
+            resonance_hz=float(s["resonance_hz"]),
+            resonance_damping=float(s["resonance_damping"]),
+            backlash_rad=float(s["backlash_rad"]),
+            arm_nm=float(s["arm_gravity"]) * rated_nm,
+            gear=float(s["gear"]),
+            arm_phase_rad=math.radians(float(s["arm_angle"])),
+            cogging_nm=float(s["cogging"]) * rated_nm,
+            cogging_periods=int(s["cogging_periods"]),
+        )
 
     @property
     def coupled(self) -> bool:
@@ -117,7 +123,7 @@ class Mechanics:
         if abs(defl) <= gap:
             return 0.0
         torque = self.k * (defl - math.copysign(gap, defl)) + self.c * rate
-        return torque if (torque > 0) == (defl > 0) else 0.0      # the flanks push, they do not pull apart
+        return torque if (torque > 0) == (defl > 0) else 0.0  # the flanks push, they do not pull apart
 
     def rigid_extra_nm(self, theta: float) -> float:
         """Position-dependent load torque on a rigid load (opposing positive speed)."""
@@ -147,8 +153,10 @@ class Mechanics:
         if abs(s.defl_rate) > REST_RATE:
             return False
         spring = self.coupling_nm(s.defl, 0.0)
-        return (abs(spring - friction.load_nm - self.arm_nm(s.theta - s.defl)) <= friction.coulomb + REST_TORQUE
-                and abs(spring + self.cogging_nm(s.theta)) <= brake + REST_TORQUE)
+        return (
+            abs(spring - friction.load_nm - self.arm_nm(s.theta - s.defl)) <= friction.coulomb + REST_TORQUE
+            and abs(spring + self.cogging_nm(s.theta)) <= brake + REST_TORQUE
+        )
 
 
 def friction_step(w: float, torque: float, coulomb: float, j: float, h: float) -> float:
@@ -156,9 +164,9 @@ def friction_step(w: float, torque: float, coulomb: float, j: float, h: float) -
     holds a motor at rest against up to its value, and stops a moving one rather than reversing it."""
     if w == 0.0:
         if abs(torque) <= coulomb:
-            return 0.0                                      # stiction (or the brake) holds
+            return 0.0  # stiction (or the brake) holds
         return w + (torque - math.copysign(coulomb, torque)) / j * h
     w_new = w + (torque - math.copysign(coulomb, w)) / j * h
-    if (w_new > 0) != (w > 0):                              # friction stops the motor, it does not reverse it
+    if (w_new > 0) != (w > 0):  # friction stops the motor, it does not reverse it
         w_new = 0.0 if abs(torque) <= coulomb else w_new
     return w_new

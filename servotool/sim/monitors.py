@@ -20,15 +20,16 @@ def _set(profile: Profile, bank: RegisterBank, role: str, eng: float) -> None:
     bank.set_live(entry.code, eng_to_raw(entry, eng, clamp=False))
 
 
-def refresh(profile: Profile, bank: RegisterBank, p: Plant, alarms: AlarmLog, *, jogging: bool,
-            identifying: bool) -> None:
+def refresh(
+    profile: Profile, bank: RegisterBank, p: Plant, alarms: AlarmLog, *, jogging: bool, identifying: bool
+) -> None:
     """Write the plant's speeds, torque, position, errors and alarms into the monitor registers."""
     _set(profile, bank, "speed_feedback", p.speed_rpm)
     _set(profile, bank, "speed_command", p.speed_command_rpm)
     _set(profile, bank, "torque_feedback", p.torque_pct)
     entry = profile.role("position_feedback")
     if entry is not None and entry.cls not in ("Pn", "Fn"):
-        bank.set_live(entry.code, p.position_counts, wrap=True)   # a multi-turn counter wraps
+        bank.set_live(entry.code, p.position_counts, wrap=True)  # a multi-turn counter wraps
     _set(profile, bank, "following_error", p.following_error_counts)
     _set(profile, bank, "load_rate", p.load_rate_pct)
     _set(profile, bank, "current_rms", abs(p.torque_pct) / 100 * 2.8)
@@ -39,13 +40,17 @@ def refresh(profile: Profile, bank: RegisterBank, p: Plant, alarms: AlarmLog, *,
     _refresh_status_word(profile, bank, p, jogging=jogging, identifying=identifying)
 
 
-def _refresh_status_word(profile: Profile, bank: RegisterBank, p: Plant, *, jogging: bool,
-                         identifying: bool) -> None:
+def _refresh_status_word(profile: Profile, bank: RegisterBank, p: Plant, *, jogging: bool, identifying: bool) -> None:
     status = profile.role("servo_status")
     if status is None:
         return
-    bits = {"servo_on": p.servo_on, "fault": p.alarm is not None, "moving": abs(p.true_speed_rpm) > 1,
-            "jog": jogging, "identifying": identifying}
+    bits = {
+        "servo_on": p.servo_on,
+        "fault": p.alarm is not None,
+        "moving": abs(p.true_speed_rpm) > 1,
+        "jog": jogging,
+        "identifying": identifying,
+    }
     where = {k: status_bit(status, k) for k in bits} if status.bits else STATUS_BITS
     word = sum(1 << b for k, on in bits.items() if on and (b := where.get(k)) is not None)
     bank.set_live(status.code, word)

@@ -27,21 +27,43 @@ from dataclasses import asdict, dataclass, field
 from servotool.model.profile import Motor as MotorData
 from servotool.sim.mechanics import Friction, Mechanics, MechanicsSettings, MotorState, friction_step
 
-TS = 125e-6                 # control period, s
-SPEED_FILTER_S = 0.25e-3    # speed feedback low-pass
-CURRENT_LOOP_S = 0.2e-3     # the current loop's lag between torque command and torque (about 800 Hz)
-MAX_GAP_S = 20.0            # integrate at most this much at once; beyond it the state is carried over
+TS = 125e-6  # control period, s
+SPEED_FILTER_S = 0.25e-3  # speed feedback low-pass
+CURRENT_LOOP_S = 0.2e-3  # the current loop's lag between torque command and torque (about 800 Hz)
+MAX_GAP_S = 20.0  # integrate at most this much at once; beyond it the state is carried over
 RAD_S_PER_RPM = 2 * math.pi / 60
-OVERLOAD_LIMIT = 8.0        # I^2t budget: 300 % torque trips after 1 s, 200 % after 2.7 s
-FOLLOWING_LIMIT_REV = 3.0   # simulator default following-error limit (IS620P H0A-10's default is 3 rev of its encoder)
-BRAKE_HOLD_X_RATED = 2.5    # brake holding torque: above the largest configurable load torque, so a brake always holds
-BRAKE_ENGAGE_RPM = 30.0     # brake closes after servo off below this speed (IS620P H02-11 default) ...
-BRAKE_DELAY_S = 0.5         # ... or this long after servo off at speed (IS620P H02-12 default)
-ESTOP_MAX_S = 0.5           # an alarm stop at the torque limit lasts at most this long, then the motor is switched off
+OVERLOAD_LIMIT = 8.0  # I^2t budget: 300 % torque trips after 1 s, 200 % after 2.7 s
+FOLLOWING_LIMIT_REV = 3.0  # simulator default following-error limit (IS620P H0A-10's default is 3 rev of its encoder)
+BRAKE_HOLD_X_RATED = 2.5  # brake holding torque: above the largest configurable load torque, so a brake always holds
+BRAKE_ENGAGE_RPM = 30.0  # brake closes after servo off below this speed (IS620P H02-11 default) ...
+BRAKE_DELAY_S = 0.5  # ... or this long after servo off at speed (IS620P H02-12 default)
+ESTOP_MAX_S = 0.5  # an alarm stop at the torque limit lasts at most this long, then the motor is switched off
 # The plant's dynamic state, as persisted between processes serving one simulated drive (the drive stays powered).
-STATE_FIELDS = ("time", "w", "theta", "mode", "alarm", "_w_meas", "_theta_prev_counts", "_integral", "_t_cmd",
-                "_t_filtered", "_t_applied", "_t_delayed", "_ref", "_loop_ref", "_target", "_torque_target",
-                "_pos_ref", "_heat", "_load", "_off_s", "_estop_s", "_defl", "_defl_rate")
+STATE_FIELDS = (
+    "time",
+    "w",
+    "theta",
+    "mode",
+    "alarm",
+    "_w_meas",
+    "_theta_prev_counts",
+    "_integral",
+    "_t_cmd",
+    "_t_filtered",
+    "_t_applied",
+    "_t_delayed",
+    "_ref",
+    "_loop_ref",
+    "_target",
+    "_torque_target",
+    "_pos_ref",
+    "_heat",
+    "_load",
+    "_off_s",
+    "_estop_s",
+    "_defl",
+    "_defl_rate",
+)
 
 
 @dataclass(frozen=True)
@@ -52,10 +74,10 @@ class PlantSettings:
     coulomb_nm: float = 0.0
     viscous_nm_per_rad_s: float = 0.0
     load_torque_nm: float = 0.0
-    noise: float = 0.0       # speed std = noise * 1000 rpm, torque std = noise * 100 % of rated
+    noise: float = 0.0  # speed std = noise * 1000 rpm, torque std = noise * 100 % of rated
     seed: int = 1
-    brake_nm: float = 0.0    # holding brake torque; 0 = no brake
-    mechanics: MechanicsSettings = field(default_factory=MechanicsSettings)   # beyond the rigid load (off by default)
+    brake_nm: float = 0.0  # holding brake torque; 0 = no brake
+    mechanics: MechanicsSettings = field(default_factory=MechanicsSettings)  # beyond the rigid load (off by default)
 
 
 @dataclass(frozen=True)
@@ -69,7 +91,7 @@ class DriveGains:
     torque_filter_ms: float = 0.5
     torque_limit_pct: float = 300.0
     max_speed_rpm: float = 6000.0
-    jog_accel_ms: float = 200.0     # time from 0 to rated speed
+    jog_accel_ms: float = 200.0  # time from 0 to rated speed
     following_limit_rev: float = FOLLOWING_LIMIT_REV
 
 
@@ -79,28 +101,28 @@ class Plant:
     def __init__(self, motor: MotorData, settings: PlantSettings, gains: DriveGains, start_time: float = 0.0) -> None:
         self.motor = motor
         self.time = start_time
-        self.w = 0.0               # rad/s
-        self.theta = 0.0           # rad
-        self.mode = "off"          # off | speed | torque | position | estop
+        self.w = 0.0  # rad/s
+        self.theta = 0.0  # rad
+        self.mode = "off"  # off | speed | torque | position | estop
         self.alarm: str | None = None
         self._w_meas = 0.0
         self._theta_prev_counts = 0
         self._integral = 0.0
-        self._t_cmd = 0.0          # torque command before the filter, N*m
-        self._t_filtered = 0.0     # after the torque-command filter
-        self._t_applied = 0.0      # produced by the current loop
+        self._t_cmd = 0.0  # torque command before the filter, N*m
+        self._t_filtered = 0.0  # after the torque-command filter
+        self._t_applied = 0.0  # produced by the current loop
         self._t_delayed = 0.0
-        self._ref = 0.0            # ramped speed reference (the speed profile), rad/s
-        self._loop_ref = 0.0       # the speed loop's reference (position mode: profile + position loop output)
-        self._target = 0.0         # speed command, rad/s
+        self._ref = 0.0  # ramped speed reference (the speed profile), rad/s
+        self._loop_ref = 0.0  # the speed loop's reference (position mode: profile + position loop output)
+        self._target = 0.0  # speed command, rad/s
         self._torque_target = 0.0  # N*m (torque mode)
         self._pos_ref = 0.0
         self._heat = 0.0
         self._load = 0.0
-        self._off_s = math.inf     # time since servo off (brake timing)
-        self._estop_s = 0.0        # time in the alarm stop
-        self._defl = 0.0           # a compliant coupling's deflection (motor minus load angle), rad; 0 when rigid
-        self._defl_rate = 0.0      # and its rate, rad/s
+        self._off_s = math.inf  # time since servo off (brake timing)
+        self._estop_s = 0.0  # time in the alarm stop
+        self._defl = 0.0  # a compliant coupling's deflection (motor minus load angle), rad; 0 when rigid
+        self._defl_rate = 0.0  # and its rate, rad/s
         self.set_settings(settings)
         self.set_gains(gains)
 
@@ -211,7 +233,7 @@ class Plant:
 
     @property
     def following_error_counts(self) -> int:
-        if self.mode != "position" or self._profile_moving:     # no position loop under host motion
+        if self.mode != "position" or self._profile_moving:  # no position loop under host motion
             return 0
         return round((self._pos_ref - self.theta) / (2 * math.pi) * self.motor.counts_per_rev)
 
@@ -222,8 +244,11 @@ class Plant:
     @property
     def brake_closed(self) -> bool:
         """Whether the holding brake (if any) holds the shaft: servo off and slow enough or long enough."""
-        return self.settings.brake_nm > 0 and self.mode == "off" and (
-            self._off_s >= BRAKE_DELAY_S or abs(self.w) < BRAKE_ENGAGE_RPM * RAD_S_PER_RPM)
+        return (
+            self.settings.brake_nm > 0
+            and self.mode == "off"
+            and (self._off_s >= BRAKE_DELAY_S or abs(self.w) < BRAKE_ENGAGE_RPM * RAD_S_PER_RPM)
+        )
 
     def _friction_nm(self) -> float:
         return self.settings.coulomb_nm + self._brake_nm()
@@ -244,11 +269,14 @@ class Plant:
         if dt_total > MAX_GAP_S:
             self._cool(dt_total - MAX_GAP_S)
             self.time = t - MAX_GAP_S  # an idle gap: the state carries over, only the recent part is integrated
-        if self.mode == "off" and self.w == 0.0 and self.mech.at_rest(self._motion_state(), self._brake_nm(),
-                                                                      self._load_friction()):
+        if (
+            self.mode == "off"
+            and self.w == 0.0
+            and self.mech.at_rest(self._motion_state(), self._brake_nm(), self._load_friction())
+        ):
             self._cool(t - self.time)
             self._off_s += t - self.time
-            self.time = t              # at rest, nothing acting: nothing to integrate
+            self.time = t  # at rest, nothing acting: nothing to integrate
             self._w_meas = 0.0
             self._t_applied = self._t_filtered = self._t_cmd = self._t_delayed = 0.0
             self._load = 0.0
@@ -256,7 +284,7 @@ class Plant:
         steps = int((t - self.time) / TS + 1e-9)
         for _ in range(steps):
             self._step()
-        self.time += steps * TS        # the remainder (< one period) is integrated by the next call
+        self.time += steps * TS  # the remainder (< one period) is integrated by the next call
 
     def _cool(self, seconds: float) -> None:
         """The motor's I^2t heat over time not integrated step by step (no current: it falls by 1 per second)."""
@@ -273,9 +301,9 @@ class Plant:
         step = self._ramp * TS if mode in ("speed", "position") else math.inf
         self._ref += max(-step, min(step, self._target - self._ref))
         if mode == "position" and self._profile_moving:
-            self._pos_ref = self.theta     # a host speed reference runs under speed control ...
+            self._pos_ref = self.theta  # a host speed reference runs under speed control ...
             self._loop_ref = self._ref
-        elif mode == "position":           # ... and at rest the position loop holds where the profile stopped
+        elif mode == "position":  # ... and at rest the position loop holds where the profile stopped
             limit = self.gains.max_speed_rpm * RAD_S_PER_RPM
             correction = self.gains.position_gain_per_s * (self._pos_ref - self.theta)
             self._loop_ref = max(-limit, min(limit, correction))
@@ -326,7 +354,7 @@ class Plant:
             if abs(self.w) < 0.5 * RAD_S_PER_RPM or self._estop_s >= ESTOP_MAX_S:
                 self.mode = "off"
                 self._integral = 0.0
-                self._off_s = self._estop_s    # the brake delay runs from the alarm: at most 0.5 s to the brake
+                self._off_s = self._estop_s  # the brake delay runs from the alarm: at most 0.5 s to the brake
         if self.alarm is not None:
             return
         if abs(self.w) > 1.1 * self.gains.max_speed_rpm * RAD_S_PER_RPM:
@@ -341,8 +369,15 @@ class Plant:
 
     # ----- persistence ---------------------------------------------------------------------------------------
     def snapshot(self) -> dict[str, object]:
-        return {"time": self.time, "w": self.w, "theta": self.theta, "mode": self.mode, "alarm": self.alarm,
-                "settings": asdict(self.settings), "gains": asdict(self.gains)}
+        return {
+            "time": self.time,
+            "w": self.w,
+            "theta": self.theta,
+            "mode": self.mode,
+            "alarm": self.alarm,
+            "settings": asdict(self.settings),
+            "gains": asdict(self.gains),
+        }
 
     def state(self) -> dict[str, object]:
         """The dynamic state (JSON-safe), to carry the running machine over to another process."""

@@ -24,7 +24,7 @@ ILLEGAL_FUNCTION = 1
 ILLEGAL_ADDRESS = 2
 ILLEGAL_VALUE = 3
 DEVICE_FAILURE = 4
-MACHINE_STATE_KEY = "machine"   # extra[...]: the firmware's and plant's running state, kept while the drive is on
+MACHINE_STATE_KEY = "machine"  # extra[...]: the firmware's and plant's running state, kept while the drive is on
 
 
 class SimRefusal(Exception):
@@ -54,7 +54,7 @@ class RegisterBank:
     eeprom_writes: int = 0
     path: Path | None = None
     _by_address: dict[int, Entry] = field(default_factory=dict, repr=False)
-    _stamp: tuple[int, int, int] | None = field(default=None, repr=False)   # the state file as last read/written
+    _stamp: tuple[int, int, int] | None = field(default=None, repr=False)  # the state file as last read/written
     _held: bool = field(default=False, repr=False)
     _dirty: bool = field(default=False, repr=False)
     _file_lock: FileLock | None = field(default=None, repr=False)
@@ -64,12 +64,15 @@ class RegisterBank:
         for e in self.profile.entries:
             for a in e.addresses:
                 self._by_address[a] = e
-        defaults = {e.code: e.default if e.default is not None else max(e.min, min(0, e.max))
-                    for e in self.profile.entries if e.cls == "Pn"}
+        defaults = {
+            e.code: e.default if e.default is not None else max(e.min, min(0, e.max))
+            for e in self.profile.entries
+            if e.cls == "Pn"
+        }
         for layer in (self.eeprom, self.ram, self.effective):
             for code, value in defaults.items():
                 layer.setdefault(code, value)
-        if self.profile.identity:     # what the real drive answers for its version and type codes
+        if self.profile.identity:  # what the real drive answers for its version and type codes
             for check in self.profile.identity.checks:
                 if check.code and check.sim is not None:
                     self.live.setdefault(check.code, check.sim)
@@ -106,7 +109,7 @@ class RegisterBank:
         except FileNotFoundError:
             if self._stamp is None:
                 return False
-            self._stamp = None        # removed (sim reset --factory): factory state
+            self._stamp = None  # removed (sim reset --factory): factory state
             self._load({})
             return True
         except (OSError, UnicodeDecodeError) as exc:
@@ -120,8 +123,10 @@ class RegisterBank:
         return True
 
     def _corrupt(self, why: str) -> DeviceError:
-        return DeviceError(f"simulated drive state file {self.path} is unreadable: {why}; move it away or run "
-                           f"'servotool sim reset --factory --profile {self.profile.id} --unit {self.unit}'")
+        return DeviceError(
+            f"simulated drive state file {self.path} is unreadable: {why}; move it away or run "
+            f"'servotool sim reset --factory --profile {self.profile.id} --unit {self.unit}'"
+        )
 
     def _load(self, data: Any) -> None:
         if not isinstance(data, dict):
@@ -130,8 +135,11 @@ class RegisterBank:
             raise self._corrupt(f"it belongs to profile {data.get('profile')!r}, not {self.profile.id!r}")
         layers = {name: data.get(name) or {} for name in ("eeprom", "ram", "effective")}
         extra, writes = data.get("extra") or {}, data.get("eeprom_writes", 0)
-        if not all(isinstance(v, dict) for v in layers.values()) or not isinstance(extra, dict) \
-                or not isinstance(writes, int):
+        if (
+            not all(isinstance(v, dict) for v in layers.values())
+            or not isinstance(extra, dict)
+            or not isinstance(writes, int)
+        ):
             raise self._corrupt("unexpected layout")
         fresh = RegisterBank(self.profile, self.unit)
         for name, stored in layers.items():
@@ -175,9 +183,16 @@ class RegisterBank:
         assert self.path is not None
         for hook in self.before_write:
             hook()
-        data = {"profile": self.profile.id, "version": self.profile.version, "unit": self.unit,
-                "eeprom": self.eeprom, "ram": self.ram, "effective": self.effective,
-                "eeprom_writes": self.eeprom_writes, "extra": self.extra}
+        data = {
+            "profile": self.profile.id,
+            "version": self.profile.version,
+            "unit": self.unit,
+            "eeprom": self.eeprom,
+            "ram": self.ram,
+            "effective": self.effective,
+            "eeprom_writes": self.eeprom_writes,
+            "extra": self.extra,
+        }
         # Not fsync'ed: it is rewritten after every change, and a drive's RAM does not survive a crash either.
         st = write_atomic(self.path, json.dumps(data, indent=1, sort_keys=True), durable=False)
         self._stamp = (st.st_ino, st.st_mtime_ns, st.st_size)

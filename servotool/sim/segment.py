@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from servotool.sim.plant import Plant
 
-STEP_S = 0.002        # the move checks its braking point at this resolution
+STEP_S = 0.002  # the move checks its braking point at this resolution
 
 
 @dataclass

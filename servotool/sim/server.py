@@ -26,11 +26,12 @@ from servotool.sim.device import SimulatedDrive
 from servotool.sim.firmware import build_drive
 from servotool.sim.line import WRITE_CODES, Line, refusal
 
-if TYPE_CHECKING:     # the bad-line proxy loads only when faults are asked for (not for a plain --port sim)
+if TYPE_CHECKING:  # the bad-line proxy loads only when faults are asked for (not for a plain --port sim)
     from servotool.sim.faults import FaultProxy, LineFaults
 
 
 logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
 
 class _Datastore:
     """The line as the server's datastore (pymodbus calls it with each decoded request); a unit nobody serves stays
@@ -52,7 +53,7 @@ class _Datastore:
 
     async def async_getValues(self, device_id: int, func_code: int, address: int, count: int = 1):
         drive = self._known(device_id)
-        if func_code in WRITE_CODES:        # pymodbus reads a single write back for its reply: what was written
+        if func_code in WRITE_CODES:  # pymodbus reads a single write back for its reply: what was written
             return self._written.pop((device_id, address), [0] * count)
         return await self._serve(drive, func_code, address, count, None)
 
@@ -65,8 +66,9 @@ class _Datastore:
             self._written[(device_id, address)] = written
         return None
 
-    async def _serve(self, drive: SimulatedDrive, fc: int, address: int, count: int,
-                     values: list[int] | None) -> list[int] | ExcCodes:
+    async def _serve(
+        self, drive: SimulatedDrive, fc: int, address: int, count: int, values: list[int] | None
+    ) -> list[int] | ExcCodes:
         result, delay = self.line.serve(drive, fc, address, count, values)
         if isinstance(result, int):
             return ExcCodes(result)
@@ -104,8 +106,13 @@ class _SpecDecoder(DecodePDU):
         return super().decode(frame)
 
 
-async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lock: threading.Lock,
-                 trace: Callable[[bool, bytes], None] | None):
+async def _start(
+    port: str,
+    drives: list[SimulatedDrive],
+    line: LineSettings,
+    lock: threading.Lock,
+    trace: Callable[[bool, bytes], None] | None,
+):
     # The server wants a datastore to start with; the line takes its place below.
     devices = [SimDevice(id=d.unit, simdata=[SimData(address=0, datatype=DataType.UINT16)]) for d in drives]
 
@@ -117,27 +124,40 @@ async def _start(port: str, drives: list[SimulatedDrive], line: LineSettings, lo
     tcp = parse_tcp(port)
     server: ModbusTcpServer | ModbusSerialServer
     if tcp:
-        try:       # pymodbus says only 'Could not start listen': bind once here, where the cause gets named
+        try:  # pymodbus says only 'Could not start listen': bind once here, where the cause gets named
             socket.create_server(tcp).close()
         except OSError as exc:
             raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
         # A real RS485 slave stays silent for other unit ids, so missing devices get no answer.
-        server = ModbusTcpServer(devices, framer=FramerType.RTU, address=tcp, trace_packet=hook if trace else None,
-                                 ignore_missing_devices=True, broadcast_enable=True)
+        server = ModbusTcpServer(
+            devices,
+            framer=FramerType.RTU,
+            address=tcp,
+            trace_packet=hook if trace else None,
+            ignore_missing_devices=True,
+            broadcast_enable=True,
+        )
     else:
         # pymodbus would fail with a bare '(22, Invalid argument)' for, say, parity on a pty: open it once here,
         # where the cause gets named.
         open_serial(port, line, 0.1).close()
         server = ModbusSerialServer(
-            devices, framer=FramerType.RTU, port=port, baudrate=line.baud, parity=line.parity,
-            stopbits=line.stopbits, bytesize=line.bytesize, trace_packet=hook if trace else None,
-            ignore_missing_devices=True, broadcast_enable=True,      # unit 0: applied by every drive, unanswered
+            devices,
+            framer=FramerType.RTU,
+            port=port,
+            baudrate=line.baud,
+            parity=line.parity,
+            stopbits=line.stopbits,
+            bytesize=line.bytesize,
+            trace_packet=hook if trace else None,
+            ignore_missing_devices=True,
+            broadcast_enable=True,  # unit 0: applied by every drive, unanswered
         )
     server.context = _Datastore(Line(drives, lock))  # type: ignore[assignment]
     server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
-    except Exception as exc:        # OSError, termios.error, pyserial's errors, RuntimeError
+    except Exception as exc:  # OSError, termios.error, pyserial's errors, RuntimeError
         raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc, line)}") from None
     return server
 
@@ -147,9 +167,14 @@ def bound_port(server: ModbusTcpServer) -> int:
     return int(server.transport.sockets[0].getsockname()[1])  # type: ignore[union-attr]
 
 
-def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | None = None,
-                  trace: Callable[[bool, bytes], None] | None = None,
-                  ready: Callable[[str], None] | None = None, faults: LineFaults | None = None) -> None:
+def serve_forever(
+    port: str,
+    drives: list[SimulatedDrive],
+    line: LineSettings | None = None,
+    trace: Callable[[bool, bytes], None] | None = None,
+    ready: Callable[[str], None] | None = None,
+    faults: LineFaults | None = None,
+) -> None:
     """Serve in the foreground until interrupted; with faults, behind a bad line on the tcp:// port."""
     lock = threading.Lock()
     tcp = parse_tcp(port)
@@ -180,10 +205,17 @@ def serve_forever(port: str, drives: list[SimulatedDrive], line: LineSettings | 
     asyncio.run(main())
 
 
-def serve_units(port: str, profile: Profile, units: list[int], line: LineSettings, *, line_baud: int | None = None,
-                trace: Callable[[bool, bytes], None] | None = None,
-                ready: Callable[[str, dict[int, list[str]]], None] | None = None,
-                faults: LineFaults | None = None) -> None:
+def serve_units(
+    port: str,
+    profile: Profile,
+    units: list[int],
+    line: LineSettings,
+    *,
+    line_baud: int | None = None,
+    trace: Callable[[bool, bytes], None] | None = None,
+    ready: Callable[[str, dict[int, list[str]]], None] | None = None,
+    faults: LineFaults | None = None,
+) -> None:
     """Serve simulated drives of one profile in the foreground until interrupted. Starting them switches them on:
     ready(where, took) gets, by unit, the codes whose pending power-cycle change took effect. line_baud overrides
     the drives' own line emulation for this run; faults put them behind a bad line."""
@@ -192,8 +224,7 @@ def serve_units(port: str, profile: Profile, units: list[int], line: LineSetting
     if line_baud is not None:
         for d in drives:
             d.settings["line_baud"] = line_baud
-    serve_forever(port, drives, line, trace, ready=(lambda where: ready(where, took)) if ready else None,
-                  faults=faults)
+    serve_forever(port, drives, line, trace, ready=(lambda where: ready(where, took)) if ready else None, faults=faults)
 
 
 class EmbeddedSim:
@@ -209,7 +240,8 @@ class EmbeddedSim:
         # the start would cost a scheduling round trip each on a busy machine.
         try:
             self._server: ModbusTcpServer | None = self._loop.run_until_complete(
-                _start("tcp://127.0.0.1:0", drives, LineSettings(), self.lock, None))
+                _start("tcp://127.0.0.1:0", drives, LineSettings(), self.lock, None)
+            )
             port = bound_port(self._server)
             if faults is not None:
                 from servotool.sim.faults import FaultProxy
@@ -242,4 +274,4 @@ class EmbeddedSim:
         done = asyncio.run_coroutine_threadsafe(self._stop(), self._loop)
         self._thread.join(timeout=5)
         if done.done():
-            done.result()       # a failure to shut down is raised, as before
+            done.result()  # a failure to shut down is raised, as before

@@ -22,10 +22,10 @@ class SimStatus:
     unit: int
     state_file: Path
     settings: dict[str, float | int]
-    pending_power_cycle: list[str]     # codes whose new value waits for a power cycle
+    pending_power_cycle: list[str]  # codes whose new value waits for a power cycle
     eeprom_writes: int
-    running: RunningSummary | None     # None: just powered on (nothing running to carry over)
-    missing: tuple[str, ...] = ()      # entries the drive lacks (answered with exception 02)
+    running: RunningSummary | None  # None: just powered on (nothing running to carry over)
+    missing: tuple[str, ...] = ()  # entries the drive lacks (answered with exception 02)
 
 
 def effective_values(profile: Profile, unit: int, entries: list[Entry]) -> list[int]:
@@ -68,6 +68,13 @@ def factory_reset(profile: Profile, unit: int) -> Path:
 def _status(drive: SimulatedDrive) -> SimStatus:
     bank = drive.bank
     assert bank.path is not None
-    return SimStatus(profile=drive.profile, unit=drive.unit, state_file=bank.path, settings=dict(drive.settings),
-                     pending_power_cycle=bank.pending_power_cycle(), eeprom_writes=bank.eeprom_writes,
-                     running=running_summary(bank.extra), missing=tuple(drive.missing))
+    return SimStatus(
+        profile=drive.profile,
+        unit=drive.unit,
+        state_file=bank.path,
+        settings=dict(drive.settings),
+        pending_power_cycle=bank.pending_power_cycle(),
+        eeprom_writes=bank.eeprom_writes,
+        running=running_summary(bank.extra),
+        missing=tuple(drive.missing),
+    )

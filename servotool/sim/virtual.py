@@ -17,7 +17,7 @@ from servotool.sim.device import SimulatedDrive
 from servotool.sim.registers import SimRefusal
 
 READ_CODES = (3, 4)
-TURNAROUND_S = 0.0005        # the drive's reply delay and the host's turnaround, per request
+TURNAROUND_S = 0.0005  # the drive's reply delay and the host's turnaround, per request
 
 
 def wire_time(fc: int, count: int, baud: int) -> float:
@@ -57,8 +57,9 @@ class HostStalls:
 class VirtualLink:
     """A Link (servotool.link.ports.Link) straight into simulated drives, by unit id."""
 
-    def __init__(self, drives: list[SimulatedDrive], clock: VirtualClock, baud: int = 115200,
-                 stalls: HostStalls | None = None) -> None:
+    def __init__(
+        self, drives: list[SimulatedDrive], clock: VirtualClock, baud: int = 115200, stalls: HostStalls | None = None
+    ) -> None:
         self.drives = {d.unit: d for d in drives}
         self.clock, self.baud = clock, baud
         self.requests = 0
@@ -85,8 +86,9 @@ class VirtualLink:
         except SimRefusal as exc:
             raise ModbusException(exc.code, what) from None
 
-    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True,
-              idempotent: bool = True) -> None:
+    def write(
+        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+    ) -> None:
         what = f"write {len(values)} register(s) at {address} to unit {unit}"
         self.requests += 1
         self._stall()

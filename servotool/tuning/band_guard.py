@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-OWN_MARGIN = 2.0      # an own segment's end is predicted this many times its longest lag yet beyond it
+OWN_MARGIN = 2.0  # an own segment's end is predicted this many times its longest lag yet beyond it
 
 
 @dataclass

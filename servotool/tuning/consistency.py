@@ -57,9 +57,9 @@ from servotool.tuning.fit_numerics import (
 from servotool.tuning.lost_motion import clear_of_lost_motion
 from servotool.tuning.subsets import Windows, cause, points_off_model, torque_step, unblamed, worst_subsets
 
-POSITION_SIGMA = 4.0      # a position-dependent load term counts when beyond this many sigmas ...
-POSITION_MIN_PCT = 2.0    # ... and it changes the load by at least this % of rated torque over the travel
-COMPLIANCE_SIGMA = 4.0    # a compliance term counts when beyond this many sigmas
+POSITION_SIGMA = 4.0  # a position-dependent load term counts when beyond this many sigmas ...
+POSITION_MIN_PCT = 2.0  # ... and it changes the load by at least this % of rated torque over the travel
+COMPLIANCE_SIGMA = 4.0  # a compliance term counts when beyond this many sigmas
 COMPLIANCE_MIN_SHIFT = 0.01  # ... and moves J by more than this fraction (and 2 sigma)
 MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behind a coupling to matter
 COMPLIANCE_HINT_SIGMA = 2.0  # beyond this many it widens the uncertainty by what it would change J (one-sided 2 sigma:
@@ -73,26 +73,26 @@ UNRESOLVED_SPRING_SHARE = 1.0  # short of the hint, what a free spring term adds
 POSITION_MODEL_ERROR = 0.5  # half the position model's correction counts as uncertain where its load differs between
 #                             the directions (backlash looks like a load that varies over the travel, and that model
 #                             moved J by +3 % the wrong way) ...
-ONE_WAY_SIGMA = 2.0       # ... by more than this many sigmas (an arm's gravity is the same both ways)
-LOAD_HZ_MIN = 1.0         # a two-mass load's own resonance (against a held motor) is searched from here ...
-LOAD_HZ_PER_RATE = 0.2    # ... up to this fraction of the sampling rate and LOAD_HZ_MAX, in steps of LOAD_HZ_STEP
-LOAD_HZ_MAX = 60.0        # (stiffer couplings moved J by 0.4-1.4 %, within the uncertainty the other checks give)
-LOAD_HZ_STEP = 1.15       # then twice finer around the best (a coarse grid first: the scan runs while the drive
+ONE_WAY_SIGMA = 2.0  # ... by more than this many sigmas (an arm's gravity is the same both ways)
+LOAD_HZ_MIN = 1.0  # a two-mass load's own resonance (against a held motor) is searched from here ...
+LOAD_HZ_PER_RATE = 0.2  # ... up to this fraction of the sampling rate and LOAD_HZ_MAX, in steps of LOAD_HZ_STEP
+LOAD_HZ_MAX = 60.0  # (stiffer couplings moved J by 0.4-1.4 %, within the uncertainty the other checks give)
+LOAD_HZ_STEP = 1.15  # then twice finer around the best (a coarse grid first: the scan runs while the drive
 #                           holds between moves, and the drive's watchdog waits for no fit)
-SCAN_RATE = 400.0         # the scan integrates the load over samples at most this often (and every window's ends)
+SCAN_RATE = 400.0  # the scan integrates the load over samples at most this often (and every window's ends)
 RESONANT_DAMPING = (0.015, 0.035, 0.08, 0.18)  # a coupling's damping ratios (seen from the load), DAMPING_STEP
 DAMPING_STEP, MAX_RESONANT_DAMPING = 2.3, 0.3  # apart, refined up to MAX_RESONANT_DAMPING (beyond: a lag)
 LAG_DAMPING = (0.5, 0.9)  # heavily damped 'couplings': a lag, which rigid loads show too (the speed's filter and
 #                           the loop's transients): at 57600-115200 baud they left 0.2-0.7 of the rigid fit's residual
-CANDIDATE_SHARE = 0.95    # the coarse grid's best resonance is refined where it leaves at most this share ...
-RESONANCE_SHARE = 0.8     # ... and counts where it then leaves at most this share of the residual the rigid and the
+CANDIDATE_SHARE = 0.95  # the coarse grid's best resonance is refined where it leaves at most this share ...
+RESONANCE_SHARE = 0.8  # ... and counts where it then leaves at most this share of the residual the rigid and the
 #                           lag models leave (rigid loads: 1.2 and more; two-mass loads at 115200: 0.01-0.33, at
 #                           57600 with torque read in whole % (IS620P): 0.7-0.8; backlash: 0.8 and more, refused) ...
-RESONANCE_F = 30.0        # ... and the improvement is this many times what two free parameters get from noise
-BIRGE_WIDEN = 1.5         # subsets that disagree more than this many times their uncertainties widen it (below,
+RESONANCE_F = 30.0  # ... and the improvement is this many times what two free parameters get from noise
+BIRGE_WIDEN = 1.5  # subsets that disagree more than this many times their uncertainties widen it (below,
 #                           chance: chi2/dof of 2.25 over 2-3 subsets happens one time in ten on a rigid load)
-BIRGE_REFUSE = 3.0        # refuse when the subsets disagree this many times beyond their uncertainties ...
-GROSS_SPREAD = 0.08       # ... and their spread exceeds this fraction of J
+BIRGE_REFUSE = 3.0  # refuse when the subsets disagree this many times beyond their uncertainties ...
+GROSS_SPREAD = 0.08  # ... and their spread exceeds this fraction of J
 
 
 @dataclass(frozen=True)
@@ -100,9 +100,9 @@ class Verdict:
     j: float
     j_std: float
     notes: tuple[str, ...]
-    refuse: str = ""          # empty: usable (perhaps with a widened uncertainty)
-    widened: str = ""         # why the uncertainty was widened (words for a refusal it causes), empty if not
-    curable: bool = False     # the widening is one that stronger accelerations shrink (a remedy may be offered)
+    refuse: str = ""  # empty: usable (perhaps with a widened uncertainty)
+    widened: str = ""  # why the uncertainty was widened (words for a refusal it causes), empty if not
+    curable: bool = False  # the widening is one that stronger accelerations shrink (a remedy may be offered)
     residual: tuple[float, float] = (math.nan, math.nan)  # RMS per window of the model used's equation error and
     #                                                       of the torque integrals it explains (N*m*s)
 
@@ -110,7 +110,7 @@ class Verdict:
 def assess(fit: FitData) -> Verdict:
     """J and its uncertainty after the consistency checks, with the operator's words for what was found."""
     fit, why = clear_of_lost_motion(fit)
-    lost = len(why)             # lost motion weighs less in a stronger motion: a refusal for it alone is curable
+    lost = len(why)  # lost motion weighs less in a stronger motion: a refusal for it alone is curable
     notes: list[str] = []
     j, j_std, resid = float(fit.theta[0]), fit.j_std, fit.y - fit.x @ fit.theta
     widened = ""
@@ -118,8 +118,10 @@ def assess(fit: FitData) -> Verdict:
     position = _position_model(fit)
     if position is not None:
         x = np.column_stack([x, position[0]])
-        why.append(f"load varies over the travel (load torque changes by {position[1]:.0f} % of rated torque: an "
-                   "arm or a gravity axis on a gear?)")
+        why.append(
+            f"load varies over the travel (load torque changes by {position[1]:.0f} % of rated torque: an "
+            "arm or a gravity axis on a gear?)"
+        )
         j, j_std, resid = _take(fit, x, (j, j_std, resid), POSITION_MODEL_ERROR if position[2] else 0.0)
     mass = _two_mass(fit, x)
     spring = None if mass is not None else _compliance_model(fit, x, j, j_std)
@@ -128,20 +130,22 @@ def assess(fit: FitData) -> Verdict:
         # The fit's own uncertainty misses how far the two-mass model is from the machine: a third of the change
         # it makes counts (20 Hz couplings at 115200 baud: 0.04-0.3 of a 4-31 % change left). The load's speed is
         # the motor's low-passed, its noise mostly filtered out: no errors-in-variables correction.
-        j, j_std, resid = _take(replace(fit, y=mass.y, eiv=np.zeros_like(fit.eiv)), mass.x, (j, j_std, resid),
-                                1 / MODEL_ERROR_DIVISOR)
+        j, j_std, resid = _take(
+            replace(fit, y=mass.y, eiv=np.zeros_like(fit.eiv)), mass.x, (j, j_std, resid), 1 / MODEL_ERROR_DIVISOR
+        )
     elif spring is not None and spring.strong:
-        why.append(f"resonance or torque ripple near {spring.hz:.0f} Hz: the load follows the motor through a "
-                   "compliant coupling (or a long shaft, cogging)")
+        why.append(
+            f"resonance or torque ripple near {spring.hz:.0f} Hz: the load follows the motor through a "
+            "compliant coupling (or a long shaft, cogging)"
+        )
         # The quasi-static spring term is approximate: a third of its correction counts as uncertain (a 20 Hz
         # coupling's correction left 2-5 % of a 7-28 % bias).
         j, j_std, resid = _take(fit, np.column_stack([x, spring.col]), (j, j_std, resid), 1 / MODEL_ERROR_DIVISOR)
-    elif (spring is not None and spring.z < -COMPLIANCE_HINT_SIGMA
-          and spring.hz < RESOLVABLE_HZ_PER_RATE * _rate(fit)):
+    elif spring is not None and spring.z < -COMPLIANCE_HINT_SIGMA and spring.hz < RESOLVABLE_HZ_PER_RATE * _rate(fit):
         # A hint of a spring (a stiff coupling, 50-100 Hz): the rigid answer stands, uncertain by what the spring
         # term would change.
         hinted = _take(fit, np.column_stack([x, spring.col]), (j, j_std, resid), 0.0)
-        if j_std <= fit.max_rel * abs(j):      # else too uncertain anyway: the hint is not why
+        if j_std <= fit.max_rel * abs(j):  # else too uncertain anyway: the hint is not why
             widened = f"perhaps a resonance near {spring.hz:.0f} Hz (a compliant coupling)"
         j_std = math.hypot(j_std, hinted[0] - j)
     elif spring is not None:
@@ -162,16 +166,29 @@ def assess(fit: FitData) -> Verdict:
         if not points_off_model(name, birge, spread):
             words, causes = unblamed(name)
             notes.append(f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, {words}")
-            return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}: {causes}" if causes else text]),
-                           curable=len(why) == lost, residual=fitted)
+            return Verdict(
+                j,
+                j_std,
+                tuple(notes),
+                widened="; ".join([*why, f"{text}: {causes}" if causes else text]),
+                curable=len(why) == lost,
+                residual=fitted,
+            )
         notes.append(f"off-model: {text}; uncertainty widened to the spread ({cause(name)})")
         return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, f"{text}; {cause(name)}"]), residual=fitted)
-    return Verdict(j, j_std, tuple(notes), widened="; ".join([*why, widened] if widened else why),
-                   curable=len(why) == lost and not widened, residual=fitted)
+    return Verdict(
+        j,
+        j_std,
+        tuple(notes),
+        widened="; ".join([*why, widened] if widened else why),
+        curable=len(why) == lost and not widened,
+        residual=fitted,
+    )
 
 
-def _take(fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], model_error: float
-          ) -> tuple[float, float, np.ndarray]:
+def _take(
+    fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], model_error: float
+) -> tuple[float, float, np.ndarray]:
     """(J, sigma, residual) of the extended fit; sigma grows by model_error times the correction to J."""
     found = refit(fit, x)
     if found is None:
@@ -224,11 +241,11 @@ def _one_way(fit: FitData, cols: list[np.ndarray]) -> bool:
 
 @dataclass(frozen=True)
 class _Spring:
-    col: np.ndarray        # the compliance column (one per window)
-    hz: float              # the resonance it implies
-    z: float               # its coefficient in sigmas (negative: the sign a spring gives)
-    strong: bool           # significant and moving J
-    unresolved: float      # how much a free spring term adds to J's uncertainty (in quadrature)
+    col: np.ndarray  # the compliance column (one per window)
+    hz: float  # the resonance it implies
+    z: float  # its coefficient in sigmas (negative: the sign a spring gives)
+    strong: bool  # significant and moving J
+    unresolved: float  # how much a free spring term adds to J's uncertainty (in quadrature)
 
 
 def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float) -> _Spring | None:
@@ -257,9 +274,9 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
 
 @dataclass(frozen=True)
 class _TwoMass:
-    hz: float              # the motor-side resonance (torque to motor speed)
-    x: np.ndarray          # the regression with the load's speed change in place of the motor's
-    y: np.ndarray          # the torque integrals less what turns the motor alone (Jm times the deflection's rate)
+    hz: float  # the motor-side resonance (torque to motor speed)
+    x: np.ndarray  # the regression with the load's speed change in place of the motor's
+    y: np.ndarray  # the torque integrals less what turns the motor alone (Jm times the deflection's rate)
 
 
 def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
@@ -277,7 +294,7 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
     hz = np.exp(np.arange(math.log(LOAD_HZ_MIN), math.log(top), math.log(LOAD_HZ_STEP)))
     grid_hz, grid_z = (a.ravel() for a in np.meshgrid(hz, RESONANT_DAMPING + LAG_DAMPING, indexing="ij"))
     j, rss = _follower_fits(fit, x, grid_hz, grid_z)
-    rss0 = float(projected_fits(fit.x[:, :1], fit.y[:, None], x[:, 1:])[1][0])      # the rigid fit's
+    rss0 = float(projected_fits(fit.x[:, :1], fit.y[:, None], x[:, 1:])[1][0])  # the rigid fit's
     resonant = grid_z < min(LAG_DAMPING)
     b = int(np.flatnonzero(resonant)[np.argmin(rss[resonant])])
     reference = min(rss0, float(np.min(rss[~resonant])))
@@ -285,24 +302,31 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
         return None
     best = (float(grid_hz[b]), float(grid_z[b]), float(j[b]), float(rss[b]))
     for spread_hz, spread_z in ((LOAD_HZ_STEP, DAMPING_STEP), (LOAD_HZ_STEP ** (1 / 3), DAMPING_STEP ** (1 / 3))):
-        near_hz, near_z = (a.ravel() for a in np.meshgrid(
-            best[0] * spread_hz ** np.linspace(-1, 1, 7),
-            np.minimum(best[1] * spread_z ** np.linspace(-1, 1, 7), MAX_RESONANT_DAMPING), indexing="ij"))
+        near_hz, near_z = (
+            a.ravel()
+            for a in np.meshgrid(
+                best[0] * spread_hz ** np.linspace(-1, 1, 7),
+                np.minimum(best[1] * spread_z ** np.linspace(-1, 1, 7), MAX_RESONANT_DAMPING),
+                indexing="ij",
+            )
+        )
         j, rss = _follower_fits(fit, x, near_hz, near_z)
         b = int(np.argmin(rss))
         if rss[b] < best[3]:
             best = (float(near_hz[b]), float(near_z[b]), float(j[b]), float(rss[b]))
     dof = max(1, x.shape[0] - x.shape[1] - 2)
-    if not (best[3] <= RESONANCE_SHARE * reference and (reference - best[3]) / 2 > RESONANCE_F * best[3] / dof
-            and best[2] > 0):
+    if not (
+        best[3] <= RESONANCE_SHARE * reference
+        and (reference - best[3]) / 2 > RESONANCE_F * best[3] / dof
+        and best[2] > 0
+    ):
         return None
     dwl = _window_changes(fit, np.array(best[:1]), np.array(best[1:2]))[:, 0]
     y = fit.y - fit.jm * (fit.x[:, 0] - dwl)
     return _TwoMass(best[0] * math.sqrt(best[2] / fit.jm), np.column_stack([dwl, x[:, 1:]]), y)
 
 
-def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(J, residual sum of squares) of the two-mass model at each (hz, damping) of the load (plain least squares: a
     ranking, the chosen model is refitted)."""
     dwl = _window_changes(fit, hz, damping)
@@ -326,5 +350,3 @@ def _torque_slope(fit: FitData) -> np.ndarray:
     if fit.torque.size < 3:
         return np.zeros_like(fit.torque)
     return np.gradient(fit.torque, fit.t)
-
-

@@ -46,7 +46,7 @@ from servotool.tuning.fit_numerics import (
 )
 
 RPM_TO_RAD_S = math.pi / 30.0
-GAP_INTERVALS = 6.0   # no window spans more median intervals (a stall: a cubic misses a ringing loop's swing)
+GAP_INTERVALS = 6.0  # no window spans more median intervals (a stall: a cubic misses a ringing loop's swing)
 KGCM2_TO_KGM2 = 1e-4
 
 
@@ -143,10 +143,16 @@ class InertiaEstimate:
     """How many times short of its limit a refusal that more excitation would cure fell (else NaN)."""
 
 
-def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list[float],
-                     torque_pct: np.ndarray | list[float], *, rated_torque_nm: float, rotor_inertia_kgcm2: float,
-                     torque_limit_pct: float | None = None,
-                     settings: EstimatorSettings | None = None) -> InertiaEstimate:
+def estimate_inertia(
+    t_s: np.ndarray | list[float],
+    speed_rpm: np.ndarray | list[float],
+    torque_pct: np.ndarray | list[float],
+    *,
+    rated_torque_nm: float,
+    rotor_inertia_kgcm2: float,
+    torque_limit_pct: float | None = None,
+    settings: EstimatorSettings | None = None,
+) -> InertiaEstimate:
     """Fit J, Coulomb, viscous and load torque to a logged motion; refuse (ok=False) rather than guess.
 
     t_s: sample times in s (strictly increasing, any spacing); speed_rpm: motor speed; torque_pct: torque in % of
@@ -167,11 +173,28 @@ def estimate_inertia(t_s: np.ndarray | list[float], speed_rpm: np.ndarray | list
         fit = _excited_fit(sig, _windows(sig, cfg, r), cfg, r)
     except _Refused as exc:
         return r.refuse(str(exc), exc.advice)
-    verdict = assess(FitData(t=t, w=sig.w, kink=sig.kink, position=sig.cum_w, starts=fit.starts, ends=fit.ends,
-                             torque=sig.torque, x=fit.x, y=fit.y, eiv=fit.eiv, groups=sig.moves[fit.starts],
-                             names=tuple(fit.names),
-                             theta=fit.theta, j_std=float(fit.std[0]), min_jackknife_moves=cfg.min_jackknife_moves,
-                             rated_nm=rated_torque_nm, jm=jm, max_rel=cfg.max_rel_uncertainty))
+    verdict = assess(
+        FitData(
+            t=t,
+            w=sig.w,
+            kink=sig.kink,
+            position=sig.cum_w,
+            starts=fit.starts,
+            ends=fit.ends,
+            torque=sig.torque,
+            x=fit.x,
+            y=fit.y,
+            eiv=fit.eiv,
+            groups=sig.moves[fit.starts],
+            names=tuple(fit.names),
+            theta=fit.theta,
+            j_std=float(fit.std[0]),
+            min_jackknife_moves=cfg.min_jackknife_moves,
+            rated_nm=rated_torque_nm,
+            jm=jm,
+            max_rel=cfg.max_rel_uncertainty,
+        )
+    )
     return _conclude(r, fit, verdict, jm, cfg)
 
 
@@ -219,12 +242,15 @@ def _check_samples(r: _Partial, pct: np.ndarray, torque_limit_pct: float | None,
     if torque_limit_pct is not None:
         r.n_saturated = int(np.count_nonzero(np.abs(pct) >= cfg.saturation_fraction * torque_limit_pct))
         if r.n_saturated > cfg.max_saturated_samples:
-            raise _Refused(f"torque saturated: {r.n_saturated} samples at the {torque_limit_pct:g} % torque limit; "
-                           "use gentler acceleration or a lower test speed")
+            raise _Refused(
+                f"torque saturated: {r.n_saturated} samples at the {torque_limit_pct:g} % torque limit; "
+                "use gentler acceleration or a lower test speed"
+            )
 
 
-def _signals(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: float, cfg: EstimatorSettings,
-             r: _Partial) -> _Signals:
+def _signals(
+    t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: float, cfg: EstimatorSettings, r: _Partial
+) -> _Signals:
     """Noise, zero-speed band, kinks (torque steps) and the Hermite integrals of torque and speed."""
     noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm)
     r.speed_noise_rpm = noise_rpm
@@ -234,9 +260,18 @@ def _signals(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: f
     torque = pct / 100.0 * rated_torque_nm
     kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct, GAP_INTERVALS)
     r.n_kinks = int(np.count_nonzero(kink))
-    return _Signals(t=t, rpm=rpm, w=w, torque=torque, noise_w=noise_rpm * RPM_TO_RAD_S, band=band, kink=kink,
-                    cum_t=cumulative_hermite(t, torque, kink), cum_w=cumulative_hermite(t, w, kink),
-                    moves=move_ids(rpm, band))
+    return _Signals(
+        t=t,
+        rpm=rpm,
+        w=w,
+        torque=torque,
+        noise_w=noise_rpm * RPM_TO_RAD_S,
+        band=band,
+        kink=kink,
+        cum_t=cumulative_hermite(t, torque, kink),
+        cum_w=cumulative_hermite(t, w, kink),
+        moves=move_ids(rpm, band),
+    )
 
 
 def _windows(sig: _Signals, cfg: EstimatorSettings, r: _Partial) -> tuple[np.ndarray, np.ndarray]:
@@ -256,14 +291,15 @@ def _windows(sig: _Signals, cfg: EstimatorSettings, r: _Partial) -> tuple[np.nda
         if excitation >= cfg.min_excitation:
             break
     if r.window_intervals == 0:
-        raise _Refused(f"too few usable windows ({r.n_windows} < {cfg.min_windows}) outside the zero-speed band "
-                       f"of {sig.band:.3g} rpm and away from torque steps; log a longer motion at higher speed")
+        raise _Refused(
+            f"too few usable windows ({r.n_windows} < {cfg.min_windows}) outside the zero-speed band "
+            f"of {sig.band:.3g} rpm and away from torque steps; log a longer motion at higher speed"
+        )
     r.n_windows = int(best[0].size)
     return best
 
 
-def _excited_fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSettings, r: _Partial
-                 ) -> _Fit:
+def _excited_fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSettings, r: _Partial) -> _Fit:
     """The fit, refused first where the windows' speed changes are too close to the speed noise; made anyway to tell
     how far short the data fell (`shortfall`): the excitation passes its limit well before the precision does."""
     low = r.excitation < cfg.min_excitation
@@ -277,8 +313,11 @@ def _excited_fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: Est
         return fit
     rel = fit.std[0] / fit.theta[0] if fit is not None and fit.theta[0] > 0 else 0.0
     r.shortfall = max(cfg.min_excitation / max(r.excitation, 1e-9), rel / cfg.max_rel_uncertainty)
-    raise _Refused(f"too little acceleration: speed changes are only {r.excitation:.1f}x the speed noise "
-                   f"(need {cfg.min_excitation:g}x)", "use faster accelerations or a higher test speed")
+    raise _Refused(
+        f"too little acceleration: speed changes are only {r.excitation:.1f}x the speed noise "
+        f"(need {cfg.min_excitation:g}x)",
+        "use faster accelerations or a higher test speed",
+    )
 
 
 def _fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSettings, r: _Partial) -> _Fit:
@@ -289,8 +328,10 @@ def _fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSe
     y = sig.cum_t[ends] - sig.cum_t[starts]
     both = bool(np.count_nonzero(sgn > 0) >= 3 and np.count_nonzero(sgn < 0) >= 3)
     if cfg.fit_load_torque and not both:
-        raise _Refused("motion in one direction only: Coulomb friction and load (gravity) torque cannot be "
-                       "separated; run the test with --direction both")
+        raise _Refused(
+            "motion in one direction only: Coulomb friction and load (gravity) torque cannot be "
+            "separated; run the test with --direction both"
+        )
     names, cols = ["J", "Tc"], [dw, sgn * dt]
     if cfg.fit_viscous:
         names.append("B")
@@ -308,8 +349,10 @@ def _fit(sig: _Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSe
     sv = np.linalg.svd(xs, compute_uv=False)
     r.condition = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
     if r.condition > cfg.max_condition:
-        raise _Refused(f"regression ill-conditioned (condition {r.condition:.3g}): the motion does not separate "
-                       "inertia from friction and load torque; vary speed and acceleration in both directions")
+        raise _Refused(
+            f"regression ill-conditioned (condition {r.condition:.3g}): the motion does not separate "
+            "inertia from friction and load torque; vary speed and acceleration in both directions"
+        )
     # Speed noise in the regressor dw (variance 2 * noise^2 per window) inflates X'X and biases J low by about
     # 1/excitation^2; subtracting its expectation removes that bias (corrected least squares).
     eiv = np.zeros(p)
@@ -337,16 +380,19 @@ def _conclude(r: _Partial, fit: _Fit, verdict: Verdict, jm: float, cfg: Estimato
     r.res_rms, y_rms = verdict.residual
     r.res_rel = r.res_rms / y_rms if y_rms > 0 else math.inf
     if not cfg.fit_load_torque:
-        r.notes.append("load torque not fitted (one direction only, or told there is none): 'coulomb' is "
-                       "Coulomb + load torque")
+        r.notes.append(
+            "load torque not fitted (one direction only, or told there is none): 'coulomb' is Coulomb + load torque"
+        )
     if r.tc < -3 * r.tc_std:
         r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
     r.notes.extend(verdict.notes)
     if j <= 0:
         return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")
     if r.res_rel > cfg.max_rel_residual:
-        return r.refuse(f"model does not fit the data (relative residual {r.res_rel:.2f} > {cfg.max_rel_residual:g}): "
-                        "backlash, compliance or a torque reading that is not shaft torque")
+        return r.refuse(
+            f"model does not fit the data (relative residual {r.res_rel:.2f} > {cfg.max_rel_residual:g}): "
+            "backlash, compliance or a torque reading that is not shaft torque"
+        )
     if verdict.refuse:
         return r.refuse(verdict.refuse)
     rel = r.j_std / j
@@ -392,10 +438,29 @@ class _Partial:
 
     def result(self, *, ok: bool, reason: str, advice: str = "") -> InertiaEstimate:
         return InertiaEstimate(
-            ok=ok, reason=reason, j_total_kgm2=self.j, j_std_kgm2=self.j_std, load_ratio=self.ratio,
-            ratio_std=self.ratio_std, coulomb_nm=self.tc, coulomb_std_nm=self.tc_std, viscous_nm_per_rad_s=self.b,
-            viscous_std_nm_per_rad_s=self.b_std, load_torque_nm=self.tg, load_torque_std_nm=self.tg_std,
-            residual_rms_nms=self.res_rms, residual_rel=self.res_rel, excitation=self.excitation,
-            speed_noise_rpm=self.speed_noise_rpm, n_samples=self.n_samples, n_windows=self.n_windows,
-            n_saturated=self.n_saturated, n_kinks=self.n_kinks, window_intervals=self.window_intervals,
-            condition=self.condition, notes=tuple(self.notes), advice=advice, shortfall=self.shortfall)
+            ok=ok,
+            reason=reason,
+            j_total_kgm2=self.j,
+            j_std_kgm2=self.j_std,
+            load_ratio=self.ratio,
+            ratio_std=self.ratio_std,
+            coulomb_nm=self.tc,
+            coulomb_std_nm=self.tc_std,
+            viscous_nm_per_rad_s=self.b,
+            viscous_std_nm_per_rad_s=self.b_std,
+            load_torque_nm=self.tg,
+            load_torque_std_nm=self.tg_std,
+            residual_rms_nms=self.res_rms,
+            residual_rel=self.res_rel,
+            excitation=self.excitation,
+            speed_noise_rpm=self.speed_noise_rpm,
+            n_samples=self.n_samples,
+            n_windows=self.n_windows,
+            n_saturated=self.n_saturated,
+            n_kinks=self.n_kinks,
+            window_intervals=self.window_intervals,
+            condition=self.condition,
+            notes=tuple(self.notes),
+            advice=advice,
+            shortfall=self.shortfall,
+        )

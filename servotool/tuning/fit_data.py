@@ -17,23 +17,23 @@ class FitData:
     """What the estimator's fit saw: samples, windows, the regression and its solution (unscaled)."""
 
     t: np.ndarray
-    w: np.ndarray             # rad/s
+    w: np.ndarray  # rad/s
     kink: np.ndarray
-    position: np.ndarray      # rad, integral of w at each sample
+    position: np.ndarray  # rad, integral of w at each sample
     starts: np.ndarray
     ends: np.ndarray
-    torque: np.ndarray        # N*m
-    x: np.ndarray             # columns: J (dw), then friction and load terms
+    torque: np.ndarray  # N*m
+    x: np.ndarray  # columns: J (dw), then friction and load terms
     y: np.ndarray
-    eiv: np.ndarray           # regressor-noise variance per row of x scaled to unit column norms
-    groups: np.ndarray        # move number of each window (for the jackknife)
-    names: tuple[str, ...]    # the parameters in x's columns and theta: J, Tc, then B and Tg where fitted
+    eiv: np.ndarray  # regressor-noise variance per row of x scaled to unit column norms
+    groups: np.ndarray  # move number of each window (for the jackknife)
+    names: tuple[str, ...]  # the parameters in x's columns and theta: J, Tc, then B and Tg where fitted
     theta: np.ndarray
     j_std: float
     min_jackknife_moves: int
     rated_nm: float
-    jm: float                 # the motor's inertia, kg*m^2
-    max_rel: float = 0.02     # the estimator's limit on sigma / J (a widening names its cause only if it crosses it)
+    jm: float  # the motor's inertia, kg*m^2
+    max_rel: float = 0.02  # the estimator's limit on sigma / J (a widening names its cause only if it crosses it)
 
 
 def refit(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:

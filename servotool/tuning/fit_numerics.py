@@ -28,8 +28,11 @@ def speed_noise_rpm(t: np.ndarray, rpm: np.ndarray) -> float:
     samples (a ringing loop at 20-40 samples/s tripled the estimate), the cubic where its wider stencil spans a
     corner of a short ramp. The median ignores the few samples that disagree with both.
     """
-    estimates = [float(1.4826 * np.median(np.abs(dev) / ref))
-                 for dev, ref in (line_deviation(t, rpm), cubic_deviation(t, rpm)) if dev.size]
+    estimates = [
+        float(1.4826 * np.median(np.abs(dev) / ref))
+        for dev, ref in (line_deviation(t, rpm), cubic_deviation(t, rpm))
+        if dev.size
+    ]
     return max(min(estimates, default=0.1), 0.1)
 
 
@@ -51,8 +54,15 @@ def cubic_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return v[c] - pred, np.sqrt(1.0 + sum(w**2 for w in weights))
 
 
-def kink_mask(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, noise_rpm: float, kink_sigma: float,
-              torque_noise_floor_pct: float, gap_intervals: float) -> np.ndarray:
+def kink_mask(
+    t: np.ndarray,
+    rpm: np.ndarray,
+    pct: np.ndarray,
+    noise_rpm: float,
+    kink_sigma: float,
+    torque_noise_floor_pct: float,
+    gap_intervals: float,
+) -> np.ndarray:
     """Samples at a torque step (torque or speed further than kink_sigma noise sigmas off the line through its
     neighbours; the torque noise estimated robustly, floored) or ending a gap of more than gap_intervals median
     sampling intervals (a host stall)."""
@@ -103,8 +113,7 @@ def corrected_lstsq(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray) -> np.ndarra
     return np.linalg.solve(xs.T @ xs - xs.shape[0] * np.diag(eiv), xs.T @ y)
 
 
-def jackknife_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, groups: np.ndarray, min_groups: int
-                   ) -> np.ndarray:
+def jackknife_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, groups: np.ndarray, min_groups: int) -> np.ndarray:
     """Delete-one-group jackknife standard deviation of the (column-scaled) least-squares parameters."""
     labels = np.unique(groups)
     g = labels.size
@@ -117,7 +126,7 @@ def jackknife_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, groups: np.nda
             return np.zeros(xs.shape[1])
         try:
             thetas.append(corrected_lstsq(xs[keep], y[keep], eiv))
-        except np.linalg.LinAlgError:      # the rest cannot determine the parameters: no honest bound
+        except np.linalg.LinAlgError:  # the rest cannot determine the parameters: no honest bound
             return np.full(xs.shape[1], np.inf)
     th = np.asarray(thetas)
     return np.sqrt((g - 1) / g * np.sum((th - th.mean(axis=0)) ** 2, axis=0))
@@ -140,22 +149,22 @@ def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.nda
     d = np.zeros_like(v)
     have = np.zeros(n, dtype=bool)
     if n >= 3:
-        smooth3 = ~(kink[:-2] | kink[1:-1] | kink[2:])   # stencil samples s, s+1, s+2 all smooth
+        smooth3 = ~(kink[:-2] | kink[1:-1] | kink[2:])  # stencil samples s, s+1, s+2 all smooth
         h0, h1 = h[:-1], h[1:]
         v0, v1, v2 = v[:-2], v[1:-1], v[2:]
         central = (h0**2 * (v2 - v1) + h1**2 * (v1 - v0)) / (h0 * h1 * (h0 + h1))
-        forward = (-(2 * h0 + h1) / (h0 * (h0 + h1)) * v0 + (h0 + h1) / (h0 * h1) * v1
-                   - h0 / (h1 * (h0 + h1)) * v2)
-        backward = (h1 / (h0 * (h0 + h1)) * v0 - (h0 + h1) / (h0 * h1) * v1
-                    + (2 * h1 + h0) / (h1 * (h0 + h1)) * v2)
+        forward = -(2 * h0 + h1) / (h0 * (h0 + h1)) * v0 + (h0 + h1) / (h0 * h1) * v1 - h0 / (h1 * (h0 + h1)) * v2
+        backward = h1 / (h0 * (h0 + h1)) * v0 - (h0 + h1) / (h0 * h1) * v1 + (2 * h1 + h0) / (h1 * (h0 + h1)) * v2
         # later assignments win: central where its stencil is smooth, else one-sided into smooth data
         for idx, vals in ((np.arange(2, n), backward), (np.arange(0, n - 2), forward), (np.arange(1, n - 1), central)):
             d[idx[smooth3]] = vals[smooth3]
             have[idx[smooth3]] = True
     secant = np.diff(v) / h
     # fall back to the secant of an interval with no kink at its other end (first order, at few samples only)
-    for idx, other, vals in ((np.arange(0, n - 1), np.arange(1, n), secant), (np.arange(1, n), np.arange(0, n - 1),
-                                                                              secant)):
+    for idx, other, vals in (
+        (np.arange(0, n - 1), np.arange(1, n), secant),
+        (np.arange(1, n), np.arange(0, n - 1), secant),
+    ):
         fill = ~have[idx] & ~kink[other]
         d[idx[fill]] = vals[fill]
         have[idx[fill]] = True
@@ -163,8 +172,9 @@ def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.nda
     return out
 
 
-def ma1_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, resid: np.ndarray, starts: np.ndarray,
-            ends: np.ndarray) -> np.ndarray:
+def ma1_std(
+    xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, resid: np.ndarray, starts: np.ndarray, ends: np.ndarray
+) -> np.ndarray:
     """Standard errors of a corrected least-squares fit, in the scaled columns xs (divide by the scale). Windows
     that share an end sample have correlated errors (the shared torque sample enters both integrals, the shared
     speed sample both speed changes with opposite signs): an MA(1) error, covariance s2*(I + rho*A)."""
@@ -179,7 +189,7 @@ def ma1_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, resid: np.ndarray, s
     return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
-FOLLOWER_BLOCK_DECAY = 30.0   # follower_speed's blocks: the heaviest-damped mode decays by at most exp(-this) in one
+FOLLOWER_BLOCK_DECAY = 30.0  # follower_speed's blocks: the heaviest-damped mode decays by at most exp(-this) in one
 
 
 def follower_speed(t: np.ndarray, w: np.ndarray, hz: np.ndarray, damping: np.ndarray) -> np.ndarray:
@@ -211,13 +221,20 @@ def follower_speed(t: np.ndarray, w: np.ndarray, hz: np.ndarray, damping: np.nda
         if hi <= lo:
             continue
         m = np.cumprod(decay[which[lo:hi]], axis=0)
-        modes[lo + 1:hi + 1] = m * (z + np.cumsum(gain[which[lo:hi]] * accel[lo:hi, None] / m, axis=0))
+        modes[lo + 1 : hi + 1] = m * (z + np.cumsum(gain[which[lo:hi]] * accel[lo:hi, None] / m, axis=0))
         z = modes[hi]
     return -2.0 * (modes * lam).real + np.asarray(w, dtype=float)[:, None]
 
 
-def follower_changes(t: np.ndarray, w: np.ndarray, starts: np.ndarray, ends: np.ndarray, hz: np.ndarray,
-                     damping: np.ndarray, max_rate: float) -> np.ndarray:
+def follower_changes(
+    t: np.ndarray,
+    w: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    hz: np.ndarray,
+    damping: np.ndarray,
+    max_rate: float,
+) -> np.ndarray:
     """follower_speed's change over each window [starts, ends] (rows) for each (hz, damping) (columns), integrated
     over the windows' ends and samples between them at most max_rate apart (the load's resonance lies far below)."""
     due = np.zeros(t.size, dtype=bool)
@@ -241,12 +258,14 @@ def projected_fits(u: np.ndarray, v: np.ndarray, others: np.ndarray) -> tuple[np
     return coef, np.sum(pv * pv, axis=0) - coef * uv
 
 
-def validate_log(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated: float, rotor: float,
-                 limit: float | None) -> None:
+def validate_log(
+    t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated: float, rotor: float, limit: float | None
+) -> None:
     """Raise ValueError for a malformed log (shapes, non-finite values, time not increasing) or motor data."""
     if t.ndim != 1 or t.shape != rpm.shape or t.shape != pct.shape:
-        raise ValueError(f"t, speed and torque must be 1-D arrays of equal length (got {t.shape}, {rpm.shape}, "
-                         f"{pct.shape})")
+        raise ValueError(
+            f"t, speed and torque must be 1-D arrays of equal length (got {t.shape}, {rpm.shape}, {pct.shape})"
+        )
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(rpm)) and np.all(np.isfinite(pct))):
         raise ValueError("t, speed and torque must be finite (drop samples with failed reads instead of NaN)")
     if t.size > 1 and np.any(np.diff(t) <= 0):

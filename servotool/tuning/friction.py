@@ -22,20 +22,22 @@ RAD_S_PER_RPM = 2 * math.pi / 60
 @dataclass(frozen=True)
 class FrictionSetting:
     entry: Entry
-    value: float          # in the entry's unit, rounded to its scale
+    value: float  # in the entry's unit, rounded to its scale
     what: str
 
 
 @dataclass(frozen=True)
 class FrictionReport:
-    coulomb_pct: float              # % of rated torque
-    viscous_pct_at_rated: float     # % of rated torque at the rated speed
-    load_pct: float                 # constant load torque, % of rated (positive opposes forward motion)
+    coulomb_pct: float  # % of rated torque
+    viscous_pct_at_rated: float  # % of rated torque at the rated speed
+    load_pct: float  # constant load torque, % of rated (positive opposes forward motion)
     settings: list[FrictionSetting]
 
     def describe(self) -> str:
-        return (f"friction {self.coulomb_pct:.1f} % of rated torque (Coulomb), viscous {self.viscous_pct_at_rated:.1f}"
-                f" % at rated speed, load torque {self.load_pct:+.1f} %")
+        return (
+            f"friction {self.coulomb_pct:.1f} % of rated torque (Coulomb), viscous {self.viscous_pct_at_rated:.1f}"
+            f" % at rated speed, load torque {self.load_pct:+.1f} %"
+        )
 
 
 def friction_report(profile: Profile, est: InertiaEstimate) -> FrictionReport | None:
@@ -47,16 +49,18 @@ def friction_report(profile: Profile, est: InertiaEstimate) -> FrictionReport | 
     coulomb = est.coulomb_nm / rated * 100
     viscous = est.viscous_nm_per_rad_s * motor.rated_speed_rpm * RAD_S_PER_RPM / rated * 100
     load = est.load_torque_nm / rated * 100 if math.isfinite(est.load_torque_nm) else 0.0
-    wanted = {"friction_comp_fwd": (coulomb, "Coulomb friction, forward"),
-              "friction_comp_rev": (coulomb, "Coulomb friction, reverse"),
-              "viscous_comp_fwd": (viscous, "viscous friction at rated speed, forward"),
-              "viscous_comp_rev": (viscous, "viscous friction at rated speed, reverse"),
-              "torque_offset": (load, "constant load torque (gravity)")}
+    wanted = {
+        "friction_comp_fwd": (coulomb, "Coulomb friction, forward"),
+        "friction_comp_rev": (coulomb, "Coulomb friction, reverse"),
+        "viscous_comp_fwd": (viscous, "viscous friction at rated speed, forward"),
+        "viscous_comp_rev": (viscous, "viscous friction at rated speed, reverse"),
+        "torque_offset": (load, "constant load torque (gravity)"),
+    }
     settings = []
     for role, (value, what) in wanted.items():
         entry = profile.role(role)
         if entry is None or entry.unit != "%":
             continue
-        raw = eng_to_raw(entry, value)          # clamped to the entry's range
+        raw = eng_to_raw(entry, value)  # clamped to the entry's range
         settings.append(FrictionSetting(entry, float(raw_to_eng(entry, raw)), what))
     return FrictionReport(coulomb, viscous, load, settings)

@@ -25,7 +25,7 @@ from servotool.tuning.margins import Margins
 from servotool.tuning.preflight import preflight
 from servotool.tuning.step import StepResponse
 
-BACK_OFF_LEVELS = 1      # below the last level that passed: a margin for load changes and wear
+BACK_OFF_LEVELS = 1  # below the last level that passed: a margin for load changes and wear
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ class LevelTrial:
     speed_gain_hz: float
     margins: Margins
     response: StepResponse | None
-    failure: str | None          # None: passed
+    failure: str | None  # None: passed
 
 
 @dataclass
@@ -43,9 +43,9 @@ class GainSearch:
     start_level: int
     trials: list[LevelTrial] = field(default_factory=list)
     chosen: int | None = None
-    changes: list[GainChange] = field(default_factory=list)   # the chosen level's writes (old: before the search)
+    changes: list[GainChange] = field(default_factory=list)  # the chosen level's writes (old: before the search)
     persisted: bool | None = None
-    reason: str = ""                                         # why the search stopped where it did
+    reason: str = ""  # why the search stopped where it did
 
 
 class GainSearchFailed(ServoError):
@@ -70,9 +70,17 @@ def drive_load_ratio(drive: Drive, load_ratio: float | None) -> float:
     return drive.profile.load_ratio_from_param(float(raw_to_eng(entry, drive.read_entries([entry])[0].raw)))
 
 
-def search_gains(drive: Drive, *, load_ratio: float | None = None, start: int | None = None, top: int | None = None,
-                 travel_rev: float = 2.0, save: bool | None = None, clock: Clock | None = None,
-                 progress: Callable[[LevelTrial], None] | None = None) -> GainSearch:
+def search_gains(
+    drive: Drive,
+    *,
+    load_ratio: float | None = None,
+    start: int | None = None,
+    top: int | None = None,
+    travel_rev: float = 2.0,
+    save: bool | None = None,
+    clock: Clock | None = None,
+    progress: Callable[[LevelTrial], None] | None = None,
+) -> GainSearch:
     """Try levels from `start` (the drive's current level) up to `top` (the highest the margins allow)."""
     clock = clock or RealClock()
     p = drive.profile
@@ -108,17 +116,24 @@ def search_gains(drive: Drive, *, load_ratio: float | None = None, start: int | 
     passed = [t.level for t in search.trials if t.failure is None]
     if not passed:
         _restore(drive, original, save)
-        raise GainSearchFailed(f"level {first} already fails its step check ({search.trials[0].failure}): the "
-                               "previous gains were written back", search)
+        raise GainSearchFailed(
+            f"level {first} already fails its step check ({search.trials[0].failure}): the "
+            "previous gains were written back",
+            search,
+        )
     failed = any(t.failure is not None for t in search.trials)
     chosen = max(first, passed[-1] - BACK_OFF_LEVELS) if failed else passed[-1]
     _sugg, changes, _m = gain_writes.gain_changes(drive, ratio, rigidity=chosen, bandwidth_hz=None)
     search.chosen = chosen
     last = search.trials[-1]
-    search.reason = f"level {last.level} failed ({last.failure}): backed off to {chosen}" if failed else \
-        f"level {chosen} is the highest with 45° and 6 dB of computed margin"
-    search.changes = [GainChange(c.role, c.entry, o.old, c.new, c.raw, o.old_raw)
-                      for c, o in zip(changes, original, strict=True)]
+    search.reason = (
+        f"level {last.level} failed ({last.failure}): backed off to {chosen}"
+        if failed
+        else f"level {chosen} is the highest with 45° and 6 dB of computed margin"
+    )
+    search.changes = [
+        GainChange(c.role, c.entry, o.old, c.new, c.raw, o.old_raw) for c, o in zip(changes, original, strict=True)
+    ]
     search.persisted = _write(drive, changes, save)
     return search
 
@@ -134,4 +149,3 @@ def _restore(drive: Drive, original: list[GainChange], save: bool | None) -> Non
     with eeprom.persistence(drive, save):
         for c in original:
             write_one(drive, c.entry, c.old_raw)
-

@@ -19,8 +19,12 @@ from servotool.tuning.identify import IdentificationFailed
 from servotool.tuning.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
 from servotool.tuning.preflight import FEATURE
 
-GAIN_ROLES = {"speed_loop_gain": "speed_loop_gain_hz", "speed_loop_integral": "speed_integral_ms",
-              "position_loop_gain": "position_loop_gain_per_s", "torque_filter": "torque_filter_ms"}
+GAIN_ROLES = {
+    "speed_loop_gain": "speed_loop_gain_hz",
+    "speed_loop_integral": "speed_integral_ms",
+    "position_loop_gain": "position_loop_gain_per_s",
+    "torque_filter": "torque_filter_ms",
+}
 
 
 class MarginRefused(UsageError):
@@ -67,8 +71,9 @@ def current_level(drive: Drive, scale: RigidityScale) -> int:
     return max(scale.lowest, min(scale.highest, level))
 
 
-def gain_changes(drive: Drive, load_ratio: float, *, rigidity: int | None, bandwidth_hz: float | None,
-                 force: bool = False) -> tuple[GainSuggestion, list[GainChange], Margins]:
+def gain_changes(
+    drive: Drive, load_ratio: float, *, rigidity: int | None, bandwidth_hz: float | None, force: bool = False
+) -> tuple[GainSuggestion, list[GainChange], Margins]:
     """Gains for the identified inertia at the drive's own level (its current one when neither is given), mapped
     onto the profile's gain roles (and its rigidity parameter), with their margins; MarginRefused unless forced."""
     p = drive.profile
@@ -78,18 +83,26 @@ def gain_changes(drive: Drive, load_ratio: float, *, rigidity: int | None, bandw
     if rigidity is None and bandwidth_hz is None:
         rigidity = current_level(drive, scale)
     try:
-        sugg = suggest_gains(rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2, scale=scale,
-                             load_ratio=max(0.0, load_ratio), rigidity=rigidity, bandwidth_hz=bandwidth_hz)
+        sugg = suggest_gains(
+            rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
+            scale=scale,
+            load_ratio=max(0.0, load_ratio),
+            rigidity=rigidity,
+            bandwidth_hz=bandwidth_hz,
+        )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     found = loop_margins(p, sugg.loop, sugg.j_total_kgm2)
     if not found.ok() and not force:
         what = f"rigidity {rigidity}" if rigidity is not None else f"{bandwidth_hz:g} Hz"
         safe = safe_level(p, scale, sugg.j_total_kgm2, rigidity)
-        hint = f"the highest level that keeps them is {safe} (--rigidity {safe})" if safe is not None else \
-            "no level does"
-        raise MarginRefused(f"{what} leaves {found.describe()} on the identified inertia, under the "
-                            f"{MIN_PHASE_DEG:g}° and {MIN_GAIN_DB:g} dB minimum: {hint}; --force writes it anyway")
+        hint = (
+            f"the highest level that keeps them is {safe} (--rigidity {safe})" if safe is not None else "no level does"
+        )
+        raise MarginRefused(
+            f"{what} leaves {found.describe()} on the identified inertia, under the "
+            f"{MIN_PHASE_DEG:g}° and {MIN_GAIN_DB:g} dB minimum: {hint}; --force writes it anyway"
+        )
     entries = [(role, p.role(role)) for role in GAIN_ROLES]
     present = [(role, e) for role, e in entries if e is not None]
     if scale.parameter is not None and rigidity is not None:
@@ -99,8 +112,9 @@ def gain_changes(drive: Drive, load_ratio: float, *, rigidity: int | None, bandw
     for (role, e), reading in zip(present, current, strict=True):
         value = float(rigidity) if role == "rigidity" else from_canonical(role, e, getattr(sugg, GAIN_ROLES[role]))
         raw = eng_to_raw(e, value)
-        changes.append(GainChange(role, e, float(raw_to_eng(e, reading.raw)), float(raw_to_eng(e, raw)), raw,
-                                  reading.raw))
+        changes.append(
+            GainChange(role, e, float(raw_to_eng(e, reading.raw)), float(raw_to_eng(e, raw)), raw, reading.raw)
+        )
     return sugg, changes, found
 
 
@@ -108,14 +122,19 @@ def drive_loop(drive: Drive) -> LoopGains:
     """The gains the drive runs now, in canonical units (the factory's where a role is not mapped)."""
     p = drive.profile
     factory = rigidity_scale(p).factory
-    fallback = {"speed_loop_gain": factory.speed_hz, "speed_loop_integral": factory.integral_ms,
-                "position_loop_gain": factory.position_per_s, "torque_filter": factory.filter_ms}
+    fallback = {
+        "speed_loop_gain": factory.speed_hz,
+        "speed_loop_integral": factory.integral_ms,
+        "position_loop_gain": factory.position_per_s,
+        "torque_filter": factory.filter_ms,
+    }
     present = [(role, e) for role in GAIN_ROLES if (e := p.role(role)) is not None]
     values = dict(fallback)
     for (role, e), reading in zip(present, drive.read_entries([e for _, e in present]), strict=True):
         values[role] = to_canonical(role, e, float(raw_to_eng(e, reading.raw)))
-    return LoopGains(values["speed_loop_gain"], values["speed_loop_integral"], values["position_loop_gain"],
-                     values["torque_filter"])
+    return LoopGains(
+        values["speed_loop_gain"], values["speed_loop_integral"], values["position_loop_gain"], values["torque_filter"]
+    )
 
 
 NEAREST_SHARE = 0.02

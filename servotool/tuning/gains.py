@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from servotool.model.gain_units import to_canonical
 from servotool.model.profile import Entry, Profile
 
-LEVEL_STEP = 2.0 ** 0.25
-PANEL_LEVELS = (0, 19, 10)     # (lowest, highest, factory) where the drive has no rigidity parameter: SDC's F3
+LEVEL_STEP = 2.0**0.25
+PANEL_LEVELS = (0, 19, 10)  # (lowest, highest, factory) where the drive has no rigidity parameter: SDC's F3
 BANDWIDTH_MIN_HZ = 0.1
 BANDWIDTH_MAX_HZ = 1000.0
 """Explicit bandwidths outside this range are refused: beyond 1 kHz is above any drive's current loop."""
@@ -30,7 +30,7 @@ GENERIC_FACTORY = (40.0, 20.0, 40.0, 0.5)
 FILTER_FACTOR_MIN = 8.0
 """The torque filter's corner at least this many times the bandwidth: IS620P's and DSX7E's factory placement (8x,
 10.5x); SD25's factory filter is a placeholder (the manual prints '-') and SDC's PN50 (100 Hz at a 200 Hz gain) is a
-panel value below its own speed gain."""   # speed Hz, integral ms, position 1/s, filter ms: a profile without them
+panel value below its own speed gain."""  # speed Hz, integral ms, position 1/s, filter ms: a profile without them
 
 
 @dataclass(frozen=True)
@@ -57,12 +57,14 @@ class RigidityScale:
     highest: int
     factory_level: int
     factory: LoopGains
-    parameter: Entry | None       # the drive's rigidity parameter (written with the gains); None: not writable
+    parameter: Entry | None  # the drive's rigidity parameter (written with the gains); None: not writable
 
     def check(self, level: object) -> int:
         if isinstance(level, bool) or not isinstance(level, int) or not self.lowest <= level <= self.highest:
-            raise ValueError(f"rigidity must be {self.lowest}..{self.highest} (this drive's own levels, factory "
-                             f"{self.factory_level}), got {level!r}")
+            raise ValueError(
+                f"rigidity must be {self.lowest}..{self.highest} (this drive's own levels, factory "
+                f"{self.factory_level}), got {level!r}"
+            )
         return level
 
     def factor(self, level: int) -> float:
@@ -88,8 +90,12 @@ def _factory(profile: Profile, role: str, fallback: float) -> float:
 def rigidity_scale(profile: Profile) -> RigidityScale:
     """The profile's levels (its rigidity parameter's range and default, else PANEL_LEVELS) and factory gains."""
     s, i, p, f = GENERIC_FACTORY
-    factory = LoopGains(_factory(profile, "speed_loop_gain", s), _factory(profile, "speed_loop_integral", i),
-                        _factory(profile, "position_loop_gain", p), _factory(profile, "torque_filter", f))
+    factory = LoopGains(
+        _factory(profile, "speed_loop_gain", s),
+        _factory(profile, "speed_loop_integral", i),
+        _factory(profile, "position_loop_gain", p),
+        _factory(profile, "torque_filter", f),
+    )
     entry = profile.role("rigidity")
     if entry is None:
         return RigidityScale(*PANEL_LEVELS, factory, None)
@@ -118,13 +124,20 @@ class GainSuggestion:
 
     @property
     def loop(self) -> LoopGains:
-        return LoopGains(self.speed_loop_gain_hz, self.speed_integral_ms, self.position_loop_gain_per_s,
-                         self.torque_filter_ms)
+        return LoopGains(
+            self.speed_loop_gain_hz, self.speed_integral_ms, self.position_loop_gain_per_s, self.torque_filter_ms
+        )
 
 
-def suggest_gains(*, rotor_inertia_kgcm2: float, scale: RigidityScale, load_ratio: float | None = None,
-                  j_total_kgm2: float | None = None, rigidity: int | None = None,
-                  bandwidth_hz: float | None = None) -> GainSuggestion:
+def suggest_gains(
+    *,
+    rotor_inertia_kgcm2: float,
+    scale: RigidityScale,
+    load_ratio: float | None = None,
+    j_total_kgm2: float | None = None,
+    rigidity: int | None = None,
+    bandwidth_hz: float | None = None,
+) -> GainSuggestion:
     """Gains at a level of the drive's scale or at an explicit bandwidth (with the factory's ratios); give exactly
     one of load_ratio / j_total_kgm2 and of rigidity / bandwidth_hz. Raises ValueError with the reason."""
     if not (_finite(rotor_inertia_kgcm2) and rotor_inertia_kgcm2 > 0):
@@ -143,8 +156,10 @@ def suggest_gains(*, rotor_inertia_kgcm2: float, scale: RigidityScale, load_rati
             raise ValueError(f"total inertia must be a positive number of kg*m^2, got {j_total_kgm2!r}")
         # Allow a hair below J_motor (identification noise on a bare motor), not a real deficit.
         if j_total_kgm2 < 0.95 * jm:
-            raise ValueError(f"total inertia {j_total_kgm2:.4g} kg*m^2 is below the rotor inertia {jm:.4g} kg*m^2; "
-                             "check the motor data or repeat the identification")
+            raise ValueError(
+                f"total inertia {j_total_kgm2:.4g} kg*m^2 is below the rotor inertia {jm:.4g} kg*m^2; "
+                "check the motor data or repeat the identification"
+            )
         j_total = max(float(j_total_kgm2), jm)
         ratio = j_total / jm - 1.0
     if (rigidity is None) == (bandwidth_hz is None):
@@ -154,12 +169,19 @@ def suggest_gains(*, rotor_inertia_kgcm2: float, scale: RigidityScale, load_rati
     else:
         if not (_finite(bandwidth_hz) and BANDWIDTH_MIN_HZ <= float(bandwidth_hz) <= BANDWIDTH_MAX_HZ):  # type: ignore[arg-type]
             raise ValueError(f"bandwidth must be {BANDWIDTH_MIN_HZ:g}..{BANDWIDTH_MAX_HZ:g} Hz, got {bandwidth_hz!r}")
-        loop = scale.factory.scaled(float(bandwidth_hz) / scale.factory.speed_hz)   # type: ignore[arg-type]
+        loop = scale.factory.scaled(float(bandwidth_hz) / scale.factory.speed_hz)  # type: ignore[arg-type]
     f = loop.speed_hz
     return GainSuggestion(
-        bandwidth_hz=f, rigidity=rigidity, j_total_kgm2=j_total, load_ratio=ratio, speed_loop_gain_hz=f,
-        speed_kp_nm_s_per_rad=2.0 * math.pi * f * j_total, speed_integral_ms=loop.integral_ms,
-        position_loop_gain_per_s=loop.position_per_s, torque_filter_ms=loop.filter_ms)
+        bandwidth_hz=f,
+        rigidity=rigidity,
+        j_total_kgm2=j_total,
+        load_ratio=ratio,
+        speed_loop_gain_hz=f,
+        speed_kp_nm_s_per_rad=2.0 * math.pi * f * j_total,
+        speed_integral_ms=loop.integral_ms,
+        position_loop_gain_per_s=loop.position_per_s,
+        torque_filter_ms=loop.filter_ms,
+    )
 
 
 def _finite(x: object) -> bool:

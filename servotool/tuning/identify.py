@@ -49,7 +49,7 @@ class TravelExceeded(IdentificationFailed):
 @dataclass
 class Result:
     method: str
-    old_ratio: float | None     # None: the profile maps no inertia-ratio parameter
+    old_ratio: float | None  # None: the profile maps no inertia-ratio parameter
     new_ratio: float
     estimate: InertiaEstimate | None
     trace: Trace
@@ -66,7 +66,7 @@ class IdentificationRefused(IdentificationFailed):
     def __init__(self, message: str, result: Result, remedy: Remedy | None = None) -> None:
         super().__init__(message)
         self.result = result
-        self.remedy = remedy    # a longer travel that would likely succeed, where that is what fell short
+        self.remedy = remedy  # a longer travel that would likely succeed, where that is what fell short
 
 
 class Identifier:
@@ -77,7 +77,7 @@ class Identifier:
         self.p = drive.profile
         self.timing = timing or RealClock()
         self.keepalive_s = keepalive_s
-        self.trace = Trace()    # filled while the motion runs; kept when it fails
+        self.trace = Trace()  # filled while the motion runs; kept when it fails
 
     def _eng(self, entry: Entry) -> float:
         return float(raw_to_eng(entry, self.drive.read_entries([entry])[0].raw))
@@ -88,16 +88,16 @@ class Identifier:
         return self.p.load_ratio_from_param(self._eng(entry)) if entry is not None else None
 
     # ----- host method ---------------------------------------------------------------------------------------
-    def run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None = None,
-                 rest: RestCheck | None = None) -> Result:
+    def run_host(
+        self, plan: MotionPlan, progress: Callable[[str], None] | None = None, rest: RestCheck | None = None
+    ) -> Result:
         """Pilot cycle, then the planned cycles; fit; raise IdentificationRefused when the fit is refused.
 
         The motion's own writes (speed, ramp) stay out of EEPROM where the drive has a switch."""
         with ram_writes(self.drive):
             return self._run_host(plan, progress, rest)
 
-    def _run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None,
-                  rest: RestCheck | None) -> Result:
+    def _run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None, rest: RestCheck | None) -> Result:
         run = _HostRun(self, plan, progress, rest)
         self.trace = run.sampler.trace
         return run.run()
@@ -107,11 +107,22 @@ class Identifier:
         assert motor is not None
         # Fast links give many samples per ramp: allow windows long enough to span ~1/5 s.
         cfg = replace(settings, max_window_intervals=max(6, int(rate / 5)))
-        est = estimate_inertia(self.trace.t, self.trace.aligned_speed(), self.trace.torque,
-                               rated_torque_nm=motor.rated_torque_nm, rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
-                               torque_limit_pct=torque_limit, settings=cfg)
-        return quantization_floor(est, self.trace, self.p.need_role("torque_feedback", FEATURE).scale,
-                                  motor.rated_torque_nm, cfg.max_rel_uncertainty)
+        est = estimate_inertia(
+            self.trace.t,
+            self.trace.aligned_speed(),
+            self.trace.torque,
+            rated_torque_nm=motor.rated_torque_nm,
+            rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
+            torque_limit_pct=torque_limit,
+            settings=cfg,
+        )
+        return quantization_floor(
+            est,
+            self.trace,
+            self.p.need_role("torque_feedback", FEATURE).scale,
+            motor.rated_torque_nm,
+            cfg.max_rel_uncertainty,
+        )
 
     # ----- drive method --------------------------------------------------------------------------------------
     def run_drive(self, timeout_s: float = 30.0, keep: bool = True) -> Result:
@@ -123,8 +134,9 @@ class Identifier:
         ratio_e = p.need_role("inertia_ratio", FEATURE)
         old_raw = d.read_entries([ratio_e])[0].raw
         old = p.load_ratio_from_param(float(raw_to_eng(ratio_e, old_raw)))
-        keepalive = KeepAlive(d, self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d),
-                              self.timing)
+        keepalive = KeepAlive(
+            d, self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d), self.timing
+        )
         t0 = self.timing.now()
         d.trigger("inertia_id", FEATURE)
         status = p.role("servo_status")
@@ -155,16 +167,17 @@ class Identifier:
         return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)
 
 
-FIT_LEAD_S = 1.0      # the dead-man is fed before an estimate between moves as if it took up to this long
-REST_RAMPS = 0.5      # the axis rests this many ramp times (at least two samples) between moves
-STALL_RAMPS = 2.0     # a dithered ramp lasts at least this many of the longest gaps between samples
+FIT_LEAD_S = 1.0  # the dead-man is fed before an estimate between moves as if it took up to this long
+REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) between moves
+STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
 
 
 class _HostRun:
     """One host identification: the pilot, the planned cycles and the fit, on one Jogger and one Sampler."""
 
-    def __init__(self, ident: Identifier, plan: MotionPlan, progress: Callable[[str], None] | None,
-                 rest: RestCheck | None) -> None:
+    def __init__(
+        self, ident: Identifier, plan: MotionPlan, progress: Callable[[str], None] | None, rest: RestCheck | None
+    ) -> None:
         p, d = ident.p, ident.drive
         self.ident, self.plan, self.progress, self.timing = ident, plan, progress, ident.timing
         beat_s = ident.keepalive_s if ident.keepalive_s is not None else keepalive_interval_s(d)
@@ -181,8 +194,8 @@ class _HostRun:
         self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT
         self.ramp = plan.ramp_s
         self.guard = BandGuard(gap_s=rest.longest_gap_s if rest is not None else 0.0)
-        self.fit_s = 0.0      # the longest estimate between moves so far (host time)
-        self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")   # the test speed, its cap and bound
+        self.fit_s = 0.0  # the longest estimate between moves so far (host time)
+        self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")  # the test speed, its cap and bound
 
     def _beat(self, lead_s: float = 0.0) -> None:
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
@@ -207,9 +220,10 @@ class _HostRun:
             self.sampler.sample()
             self.guard.saw(self.sampler.pred)
         except TravelLimitReached:
-            raise TravelExceeded(f"travel limit {self.plan.travel_limit_rev:g} rev reached: motion stopped; the "
-                                 "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel"
-                                 ) from None
+            raise TravelExceeded(
+                f"travel limit {self.plan.travel_limit_rev:g} rev reached: motion stopped; the "
+                "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel"
+            ) from None
 
     def _sample_timed(self) -> None:
         """A sample inside a move, its gap from the one before kept when it is the longest yet."""
@@ -222,19 +236,23 @@ class _HostRun:
         first = len(trace.t)
         # After the pilot a segment route's move may end by itself (where it stops inside the travel band); the
         # pilot stops by command, as an early stop (BandGuard.must_stop) does.
-        jogger.start(direction, speed, eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
-                     self.ramp if guard.band is not None else None)
+        jogger.start(
+            direction,
+            speed,
+            eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
+            self.ramp if guard.band is not None else None,
+        )
         start = self.timing.now()
         guard.begin(s.pred, direction, speed, jogger.own_segment_rev())
         self.sample()
-        while self.timing.now() - start < self.ramp:   # the drive's ramp reaches the speed in ramp_s
+        while self.timing.now() - start < self.ramp:  # the drive's ramp reaches the speed in ramp_s
             self._sample_timed()
             if guard.must_stop(s.pred, abs(trace.speed[-1]), self.ramp, s.interval()):
                 break
         jogger.command(0)
         stop = self.timing.now()
         at_stop, v_stop = s.pred, abs(trace.speed[-1]) if trace.speed else 0.0
-        self.sample()          # after the stop's own writes: no stall
+        self.sample()  # after the stop's own writes: no stall
         while self.timing.now() - stop < 3 * self.ramp + 0.5:
             self._sample_timed()
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
@@ -267,7 +285,7 @@ class _HostRun:
         if self.progress:
             self.progress(f"pilot move at {pilot:.0f} rpm")
         excursion, peak = 0.0, 0.0
-        self.sample()                      # the axis's real position: the travel band is around it, not around 0
+        self.sample()  # the axis's real position: the travel band is around it, not around 0
         origin = self.sampler.pred
         for direction in plan.directions:
             excursion, pk = self.move(direction, pilot)
@@ -284,7 +302,7 @@ class _HostRun:
         """The planned speed, within the travel band and the torque share the pilot extrapolates to."""
         plan = self.plan
         both = len(plan.directions) > 1
-        speed = plan.speed_rpm     # excursion and torque grow in proportion to the speed at a fixed ramp time
+        speed = plan.speed_rpm  # excursion and torque grow in proportion to the speed at a fixed ramp time
         guard = self.guard
         if guard.stretch > 1.5:
             # The loop cannot follow the ramps (far-off inertia ratio: an under-damped loop): slower ramps at
@@ -334,8 +352,10 @@ class _HostRun:
             try:
                 for direction in plan.directions:
                     if self.progress:
-                        self.progress(f"move {rep + 1}/{plan.repeats} {'forward' if direction > 0 else 'reverse'} "
-                                      f"at {move_speed:.0f} rpm")
+                        self.progress(
+                            f"move {rep + 1}/{plan.repeats} {'forward' if direction > 0 else 'reverse'} "
+                            f"at {move_speed:.0f} rpm"
+                        )
                     self.move(direction, move_speed)
             finally:
                 self.ramp = base
@@ -367,11 +387,13 @@ class _HostRun:
         s = self.sampler
         rate = s.rate()
         est = self.ident._estimate(settings, self.torque_limit, rate)
-        result = Result("host", self.old_ratio, est.load_ratio, est, s.trace, self.plan, s.travel_rev, s.elapsed(),
-                        rate, cycles)
+        result = Result(
+            "host", self.old_ratio, est.load_ratio, est, s.trace, self.plan, s.travel_rev, s.elapsed(), rate, cycles
+        )
         if not est.ok:
             cure = remedy(self.plan.travel_limit_rev, est.shortfall, self.speed, *self.cap)
             advice = cure.words() if cure is not None else est.advice
-            raise IdentificationRefused(f"identification refused: {est.reason}" + (f"; {advice}" if advice else ""),
-                                        result, cure)
+            raise IdentificationRefused(
+                f"identification refused: {est.reason}" + (f"; {advice}" if advice else ""), result, cure
+            )
         return result

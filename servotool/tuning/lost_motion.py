@@ -23,11 +23,11 @@ import numpy as np
 
 from servotool.tuning.fit_data import FitData, refit
 
-GAP_RAD = 0.05            # the dead zone the observer assumes (at the motor shaft)
-MARGIN_INTERVALS = 1      # sampling intervals kept clear on both sides of a marked span
-STEP_S = 1e-3             # the observer's integration step (a crossing lasts tens of ms)
-LOST_MOTION_SIGMA = 3.0   # the windows clear of possible lost motion count where their J is this many sigmas apart
-MIN_WINDOWS = 12          # ... and they are at least this many
+GAP_RAD = 0.05  # the dead zone the observer assumes (at the motor shaft)
+MARGIN_INTERVALS = 1  # sampling intervals kept clear on both sides of a marked span
+STEP_S = 1e-3  # the observer's integration step (a crossing lasts tens of ms)
+LOST_MOTION_SIGMA = 3.0  # the windows clear of possible lost motion count where their J is this many sigmas apart
+MIN_WINDOWS = 12  # ... and they are at least this many
 
 
 @dataclass(frozen=True)
@@ -70,7 +70,7 @@ def coupled_intervals(t: np.ndarray, w: np.ndarray, load: LoadSide, gap: float =
             if not contact:
                 coasting = w_load - load.drag(w_load) / load.inertia * dt
                 if _sign(coasting) != _sign(w_load) and abs(load.load_torque) < load.coulomb:
-                    coasting = 0.0              # friction stops the load; it does not turn it back
+                    coasting = 0.0  # friction stops the load; it does not turn it back
                 w_load = coasting
                 defl += (w_motor - w_load) * dt
                 if abs(defl) >= half:
@@ -80,8 +80,9 @@ def coupled_intervals(t: np.ndarray, w: np.ndarray, load: LoadSide, gap: float =
     return out
 
 
-def clear_windows(starts: np.ndarray, ends: np.ndarray, coupled: np.ndarray,
-                  margin: int = MARGIN_INTERVALS) -> np.ndarray:
+def clear_windows(
+    starts: np.ndarray, ends: np.ndarray, coupled: np.ndarray, margin: int = MARGIN_INTERVALS
+) -> np.ndarray:
     """The windows [starts, ends] (sample indices) whose intervals, and margin intervals either side, all stayed
     coupled."""
     loose = np.concatenate(([0], np.cumsum(~coupled)))
@@ -112,7 +113,8 @@ def clear_of_lost_motion(fit: FitData) -> tuple[FitData, list[str]]:
     left = float(answer.theta[0] - (fit.theta[0] if wide is None else near.theta[0]))
     return replace(answer, j_std=math.hypot(answer.j_std, left)), [
         f"lost motion (backlash?) where the torque reverses or the axis first moves: J from the "
-        f"{answer.starts.size} of {fit.starts.size} windows clear of it"]
+        f"{answer.starts.size} of {fit.starts.size} windows clear of it"
+    ]
 
 
 def _clear_fit(fit: FitData, coupled: np.ndarray, margin: int) -> FitData | None:
@@ -123,7 +125,14 @@ def _clear_fit(fit: FitData, coupled: np.ndarray, margin: int) -> FitData | None
         return None
     # The errors-in-variables term is per row of the unit-norm column: the fewer rows' norm is smaller.
     eiv = fit.eiv * (np.sum(fit.x**2, axis=0) / np.maximum(np.sum(fit.x[keep] ** 2, axis=0), 1e-300))
-    clear = replace(fit, starts=fit.starts[keep], ends=fit.ends[keep], x=fit.x[keep], y=fit.y[keep], eiv=eiv,
-                    groups=fit.groups[keep])
+    clear = replace(
+        fit,
+        starts=fit.starts[keep],
+        ends=fit.ends[keep],
+        x=fit.x[keep],
+        y=fit.y[keep],
+        eiv=eiv,
+        groups=fit.groups[keep],
+    )
     found = refit(clear, clear.x)
     return None if found is None else replace(clear, theta=found[0], j_std=float(found[1][0]))

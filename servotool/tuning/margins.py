@@ -18,12 +18,12 @@ from numpy.polynomial import polynomial as P
 
 from servotool.tuning.gains import LoopGains
 
-CONTROL_PERIOD_S = 125e-6    # speed-loop period of the drives modelled (8 kHz; the simulator's)
-SPEED_FILTER_S = 0.25e-3     # speed-feedback low-pass
-CURRENT_LOOP_S = 0.2e-3      # current loop's lag (about 800 Hz)
+CONTROL_PERIOD_S = 125e-6  # speed-loop period of the drives modelled (8 kHz; the simulator's)
+SPEED_FILTER_S = 0.25e-3  # speed-feedback low-pass
+CURRENT_LOOP_S = 0.2e-3  # current loop's lag (about 800 Hz)
 MIN_PHASE_DEG = 45.0
 MIN_GAIN_DB = 6.0
-_W = 2 * math.pi * np.logspace(-2, 4, 3000)    # 0.01 Hz .. 10 kHz
+_W = 2 * math.pi * np.logspace(-2, 4, 3000)  # 0.01 Hz .. 10 kHz
 
 
 @dataclass(frozen=True)
@@ -47,29 +47,31 @@ class Margins:
 
     def describe(self) -> str:
         gm = "inf" if math.isinf(self.gain_db) else f"{self.gain_db:.1f}"
-        return f"phase margin {self.phase_deg:.0f}°, gain margin {gm} dB (speed loop crossover " \
-               f"{self.crossover_hz:.1f} Hz)"
+        return (
+            f"phase margin {self.phase_deg:.0f}°, gain margin {gm} dB (speed loop crossover {self.crossover_hz:.1f} Hz)"
+        )
 
 
 def _read(L: np.ndarray) -> tuple[float, float, float]:
     """(phase margin deg, gain margin dB, crossover Hz) of an open-loop response on _W."""
     mag = np.abs(L)
     phase = np.degrees(np.unwrap(np.angle(L)))
-    phase -= 360.0 * round((phase[0] + 90.0) / 360.0)     # low frequencies: -90 (P) .. -180 (PI): no 360 offset
+    phase -= 360.0 * round((phase[0] + 90.0) / 360.0)  # low frequencies: -90 (P) .. -180 (PI): no 360 offset
     below = np.nonzero(mag < 1.0)[0]
     if len(below) == 0 or below[0] == 0:
         pm, wc = (math.inf if len(below) else -math.inf), 0.0
     else:
         k = int(below[0])
         pm, wc = float(180.0 + phase[k]), float(_W[k] / (2 * math.pi))
-    top = int(np.argmax(phase))              # a PI's low-frequency -180 is conditional stability, not the margin
+    top = int(np.argmax(phase))  # a PI's low-frequency -180 is conditional stability, not the margin
     under = top + np.nonzero(phase[top:] <= -180.0)[0]
     gm = math.inf if len(under) == 0 else float(-20.0 * math.log10(max(mag[int(under[0])], 1e-12)))
     return pm, gm, wc
 
 
-def margins(gains: LoopGains, j_total_kgm2: float, j_configured_kgm2: float | None = None,
-            viscous_nm_per_rad_s: float = 0.0) -> Margins:
+def margins(
+    gains: LoopGains, j_total_kgm2: float, j_configured_kgm2: float | None = None, viscous_nm_per_rad_s: float = 0.0
+) -> Margins:
     """The margins of the speed and position loops with these gains on this inertia (J_conf: the drive's
     configured inertia, default the identified one, as once the ratio is written)."""
     s = 1j * _W
@@ -82,7 +84,7 @@ def margins(gains: LoopGains, j_total_kgm2: float, j_configured_kgm2: float | No
     feedback = 1 / (1 + SPEED_FILTER_S * s)
     speed_open = pi * forward * plant * feedback
     spm, sgm, wc = _read(speed_open)
-    if spm <= 0 or sgm <= 0:                 # an unstable speed loop: no position loop closes around it
+    if spm <= 0 or sgm <= 0:  # an unstable speed loop: no position loop closes around it
         return Margins(spm, sgm, wc, spm, sgm)
     closed = pi * forward * plant / (1 + speed_open)
     ppm, pgm, _ = _read(gains.position_per_s / s * closed)

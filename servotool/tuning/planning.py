@@ -17,7 +17,7 @@ from servotool.tuning.preflight import DEFAULT_SAMPLES_PER_S, RestCheck, check_a
 # square of the ramp time at a fixed travel), and a low-inertia axis with a noisy torque reading then cannot reach
 # the precision within the time budget (10 intervals: 2.0-2.7 % at 19200 baud with 0.4 % rated torque noise).
 SAMPLES_PER_RAMP = 7.0
-MIN_RAMP_S = 0.1          # ... and at least this long (a loop with factory gains on an unknown load follows them)
+MIN_RAMP_S = 0.1  # ... and at least this long (a loop with factory gains on an unknown load follows them)
 
 
 # Automatic repeats stop before the motion (with its pilot) would take longer than this.
@@ -39,8 +39,8 @@ PILOT_SHARE = 0.25
 # amount: the step error averages out over the cycles and the move jackknife sees it, where with one acceleration
 # it repeats identically and only a fixed floor (sampling.quantization_floor) can cover it.
 DITHER_MIN = 0.4
-COARSE_TORQUE_STEP_PCT = 0.5   # readings in steps this coarse (% of rated) are dithered
-MIN_SAMPLES_PER_RAMP = 5.0     # a dithered ramp keeps this many sampling intervals (else the speed is lowered)
+COARSE_TORQUE_STEP_PCT = 0.5  # readings in steps this coarse (% of rated) are dithered
+MIN_SAMPLES_PER_RAMP = 5.0  # a dithered ramp keeps this many sampling intervals (else the speed is lowered)
 # ... and at least this long. Below the planned ramps' 0.1 s floor: on a fast line (IS620P at 57600, 150 samples/s)
 # that floor, not the samples, bounded the ramp, so every dithered cycle lowered the speed instead, weakening the
 # accelerations of light loads whose acceleration torque is already near the reading's step (refused 12 of 60 on
@@ -58,8 +58,9 @@ def dither(cycle: int) -> float:
     return 1.0 - (1.0 - DITHER_MIN) * x
 
 
-def dithered(ramp_s: float, speed_rpm: float, cycle: int, samples_per_s: float,
-             min_ramp_s: float = 0.0) -> tuple[float, float]:
+def dithered(
+    ramp_s: float, speed_rpm: float, cycle: int, samples_per_s: float, min_ramp_s: float = 0.0
+) -> tuple[float, float]:
     """Ramp and speed of a dithered cycle: the ramp shortened by dither(cycle) (stronger, less travel) down to
     MIN_SAMPLES_PER_RAMP samples, DITHER_MIN_RAMP_S and min_ramp_s, below that the speed lowered (weaker; a ramp of
     fewer samples has no windows clear of its torque steps)."""
@@ -72,12 +73,12 @@ def dithered(ramp_s: float, speed_rpm: float, cycle: int, samples_per_s: float,
 @dataclass(frozen=True)
 class MotionPlan:
     speed_rpm: float
-    ramp_s: float            # time to reach speed (and to stop)
+    ramp_s: float  # time to reach speed (and to stop)
     directions: tuple[int, ...]
-    repeats: int             # move cycles; with `adaptive` the most that will run
+    repeats: int  # move cycles; with `adaptive` the most that will run
     travel_limit_rev: float
-    adaptive: bool = False   # stop repeating once the estimate is precise enough (and within TIME_BUDGET_S)
-    speed_limit_rpm: float = math.inf   # the motor's rated speed, or --max-speed below it
+    adaptive: bool = False  # stop repeating once the estimate is precise enough (and within TIME_BUDGET_S)
+    speed_limit_rpm: float = math.inf  # the motor's rated speed, or --max-speed below it
 
     @property
     def move_travel_rev(self) -> float:
@@ -94,21 +95,31 @@ class MotionPlan:
 
     @property
     def duration_s(self) -> float:
-        moves = len(self.directions) * (self.repeats + 1)   # + the pilot
+        moves = len(self.directions) * (self.repeats + 1)  # + the pilot
         return min(moves * (2 * self.ramp_s + 0.1), TIME_BUDGET_S if self.adaptive else math.inf)
 
     def describe(self) -> str:
         names = {1: "forward", -1: "reverse"}
         seq = " then ".join(names[d] for d in self.directions)
         count = f"up to {self.repeats}" if self.adaptive else f"{self.repeats}"
-        return (f"{count} x ({seq}) moves to {self.speed_rpm:.0f} rpm, {self.ramp_s * 1000:.0f} ms ramps "
-                f"({self.speed_rpm / self.ramp_s:.0f} rpm/s), {self.move_travel_rev:.2f} rev per move, "
-                f"{self.excursion_rev:.2f} rev of travel in all (limit {self.travel_limit_rev:g} rev), about "
-                f"{self.duration_s:.1f} s; a pilot move at a quarter of that speed first")
+        return (
+            f"{count} x ({seq}) moves to {self.speed_rpm:.0f} rpm, {self.ramp_s * 1000:.0f} ms ramps "
+            f"({self.speed_rpm / self.ramp_s:.0f} rpm/s), {self.move_travel_rev:.2f} rev per move, "
+            f"{self.excursion_rev:.2f} rev of travel in all (limit {self.travel_limit_rev:g} rev), about "
+            f"{self.duration_s:.1f} s; a pilot move at a quarter of that speed first"
+        )
 
 
-def plan_motion(profile: Profile, *, max_speed: float | None, accel_time_ms: float | None, travel_rev: float,
-                direction: str, repeats: int | None, samples_per_s: float | None = None) -> MotionPlan:
+def plan_motion(
+    profile: Profile,
+    *,
+    max_speed: float | None,
+    accel_time_ms: float | None,
+    travel_rev: float,
+    direction: str,
+    repeats: int | None,
+    samples_per_s: float | None = None,
+) -> MotionPlan:
     """Choose speed and ramp so the motion stays inside the travel limit; refuse what cannot.
 
     accel_time_ms None: ramps of SAMPLES_PER_RAMP sampling intervals at samples_per_s (the measured link rate).
@@ -143,25 +154,38 @@ def plan_motion(profile: Profile, *, max_speed: float | None, accel_time_ms: flo
     speed = min(speed, limit)
     plan = MotionPlan(speed, ramp, dirs, cycles, travel_rev, adaptive, limit)
     if speed < 30.0:
-        raise UsageError(f"travel limit {travel_rev:g} rev is too small for an identification with "
-                         f"{ramp * 1000:.0f} ms ramps (needs at least {30 / 60 * ramp / 0.9:.2f} rev per move); "
-                         "raise --travel, shorten --accel-time" + (" or use --direction both" if len(dirs) == 1
-                                                                    else ""))
+        raise UsageError(
+            f"travel limit {travel_rev:g} rev is too small for an identification with "
+            f"{ramp * 1000:.0f} ms ramps (needs at least {30 / 60 * ramp / 0.9:.2f} rev per move); "
+            "raise --travel, shorten --accel-time" + (" or use --direction both" if len(dirs) == 1 else "")
+        )
     if plan.excursion_rev > travel_rev:
         raise UsageError(f"the motion needs {plan.excursion_rev:.2f} rev, over the --travel limit {travel_rev:g}")
     return plan
 
 
-def plan_host_motion(drive: Drive, timing: Clock | None = None, *, max_speed: float | None = None,
-                     accel_time_ms: float | None = None, travel_rev: float = 2.0, direction: str = "both",
-                     repeats: int | None = None) -> tuple[MotionPlan, RestCheck]:
+def plan_host_motion(
+    drive: Drive,
+    timing: Clock | None = None,
+    *,
+    max_speed: float | None = None,
+    accel_time_ms: float | None = None,
+    travel_rev: float = 2.0,
+    direction: str = "both",
+    repeats: int | None = None,
+) -> tuple[MotionPlan, RestCheck]:
     """The host method's motion as every caller runs it (CLI, plans, bench): the options checked before anything is
     read, the axis checked at rest, then the plan for the sampling rate that check measured.
 
     accel_time_ms and repeats None: automatic (ramps from the sampling rate, repeats until precise enough).
     """
-    options = {"max_speed": max_speed, "accel_time_ms": accel_time_ms, "travel_rev": travel_rev,
-               "direction": direction, "repeats": repeats}
+    options = {
+        "max_speed": max_speed,
+        "accel_time_ms": accel_time_ms,
+        "travel_rev": travel_rev,
+        "direction": direction,
+        "repeats": repeats,
+    }
     plan_motion(drive.profile, **options)
     rest = check_at_rest(drive, timing)
     return plan_motion(drive.profile, **options, samples_per_s=rest.samples_per_s), rest
@@ -182,15 +206,17 @@ class Remedy:
     refusal used to suggest, more repeats, helps far less on a slow line (SD25 at 9600: 20 cycles, 46 s, left all 5
     refusals of 6 machines refused)."""
 
-    travel_rev: float       # the travel limit the motion had
-    suggested_rev: float    # the one to ask for
-    gain: float             # how many times harder the moves would accelerate with it
-    enough: bool            # whether that covers the shortfall, with REMEDY_MARGIN
-    bound: str              # what bounds the moves beyond it: "torque" or "speed" (rated or --max-speed)
+    travel_rev: float  # the travel limit the motion had
+    suggested_rev: float  # the one to ask for
+    gain: float  # how many times harder the moves would accelerate with it
+    enough: bool  # whether that covers the shortfall, with REMEDY_MARGIN
+    bound: str  # what bounds the moves beyond it: "torque" or "speed" (rated or --max-speed)
 
     def words(self) -> str:
-        said = (f"its moves were bound by the {self.travel_rev:g} rev travel: where the axis has room, --travel "
-                f"{self.suggested_rev:g} lets them accelerate {self.gain:.1f}x harder")
+        said = (
+            f"its moves were bound by the {self.travel_rev:g} rev travel: where the axis has room, --travel "
+            f"{self.suggested_rev:g} lets them accelerate {self.gain:.1f}x harder"
+        )
         if self.enough:
             return said + ": the uncertainty usually falls with it"
         limit = "the torque share of the limit" if self.bound == "torque" else "the speed limit (rated or --max-speed)"
@@ -209,6 +235,7 @@ def remedy(travel_rev: float, shortfall: float, speed_rpm: float, cap_rpm: float
     if room < MIN_REMEDY_GAIN:
         return None
     wanted = max(MIN_REMEDY_GAIN, REMEDY_MARGIN * shortfall)
-    suggested = math.ceil(travel_rev * wanted * 2.0) / 2.0 if room >= wanted else \
-        math.floor(travel_rev * room * 2.0) / 2.0
+    suggested = (
+        math.ceil(travel_rev * wanted * 2.0) / 2.0 if room >= wanted else math.floor(travel_rev * room * 2.0) / 2.0
+    )
     return Remedy(travel_rev, suggested, suggested / travel_rev, room >= wanted, bound)

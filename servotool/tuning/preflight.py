@@ -33,14 +33,16 @@ def check_profile(profile: Profile, method: str, feature: str | None = None) -> 
     for role in need:
         p.need_role(role, what)
     if method == "host":
-        motion_route(p, what)   # a JOG trigger or speed reference + servo-on
+        motion_route(p, what)  # a JOG trigger or speed reference + servo-on
     else:
         status = p.role("servo_status")
         if status is None or status_bit(status, "identifying") is None:
             # Without it the end could only be guessed: a timeout would report failure after a good run.
-            raise UsageError(f"{FEATURE} --method drive: profile {p.id} maps no status bit that shows the "
-                             "drive's identification running, so its end cannot be seen over Modbus; use "
-                             "--method host")
+            raise UsageError(
+                f"{FEATURE} --method drive: profile {p.id} maps no status bit that shows the "
+                "drive's identification running, so its end cannot be seen over Modbus; use "
+                "--method host"
+            )
     if p.motor is None:
         raise UsageError(f"{FEATURE} needs the motor data (rated torque, rotor inertia) in profile {p.id}")
 
@@ -83,8 +85,8 @@ class RestCheck:
     samples_per_s: float
     speed_noise_rpm: float
     mean_speed_rpm: float
-    drift_rev: float | None   # position change over the check (None: no position feedback)
-    longest_gap_s: float = 0.0   # the longest time between two samples: how long the host or line may stall
+    drift_rev: float | None  # position change over the check (None: no position feedback)
+    longest_gap_s: float = 0.0  # the longest time between two samples: how long the host or line may stall
 
 
 def check_at_rest(drive: Drive, timing: Clock | None = None, duration_s: float = 0.3) -> RestCheck:
@@ -114,6 +116,8 @@ def check_at_rest(drive: Drive, timing: Clock | None = None, duration_s: float =
     moving = (drift is not None and drift > 0.01) or abs(mean) > max(5.0, 4 * noise / math.sqrt(len(speeds)))
     if moving:
         what = f"{drift:.3f} rev in {elapsed:.1f} s" if drift is not None else f"{mean:.0f} rpm"
-        raise UsageError(f"refusing to move: the axis is moving with the servo off ({what}); a load torque "
-                         "(gravity?) turns it and no brake holds it: secure the axis first")
+        raise UsageError(
+            f"refusing to move: the axis is moving with the servo off ({what}); a load torque "
+            "(gravity?) turns it and no brake holds it: secure the axis first"
+        )
     return rest

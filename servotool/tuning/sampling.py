@@ -32,7 +32,7 @@ class Trace:
     t: list[float] = field(default_factory=list)
     speed: list[float] = field(default_factory=list)
     torque: list[float] = field(default_factory=list)
-    position: list[float | None] = field(default_factory=list)   # None where position was not read
+    position: list[float | None] = field(default_factory=list)  # None where position was not read
     # When speed and torque cannot share one request (SD25 reads at most 10 registers), the speed is read a
     # request earlier: its own times, to bring it onto the torque's time base before the fit.
     speed_t: list[float] = field(default_factory=list)
@@ -50,8 +50,12 @@ class Trace:
         i = np.clip(np.searchsorted(ts, t) - 1, 0, ts.size - 2)
         h = ts[i + 1] - ts[i]
         x = np.clip((t - ts[i]) / h, 0.0, 1.0)
-        out = ((2 * x**3 - 3 * x**2 + 1) * v[i] + (x**3 - 2 * x**2 + x) * h * slope[i]
-               + (3 * x**2 - 2 * x**3) * v[i + 1] + (x**3 - x**2) * h * slope[i + 1])
+        out = (
+            (2 * x**3 - 3 * x**2 + 1) * v[i]
+            + (x**3 - 2 * x**2 + x) * h * slope[i]
+            + (3 * x**2 - 2 * x**3) * v[i + 1]
+            + (x**3 - x**2) * h * slope[i + 1]
+        )
         return [float(s) for s in out]
 
     def save(self, path: Path) -> None:
@@ -72,16 +76,18 @@ class TravelLimitReached(Exception):
 class Sampler:
     """One drive's identification samples and the travel band they show."""
 
-    def __init__(self, drive: Drive, timing: Clock, travel_limit_rev: float,
-                 beat: Callable[[], None] | None = None) -> None:
+    def __init__(
+        self, drive: Drive, timing: Clock, travel_limit_rev: float, beat: Callable[[], None] | None = None
+    ) -> None:
         p = drive.profile
         self.drive, self.timing, self.limit, self.beat = drive, timing, travel_limit_rev, beat
         self.speed_e, self.torque_e = p.need_role("speed_feedback", FEATURE), p.need_role("torque_feedback", FEATURE)
         self.pos_e = p.role("position_feedback")
-        self.together = len(coalesce_reads(p, [self.speed_e, self.torque_e])) == 1    # one request carries both
+        self.together = len(coalesce_reads(p, [self.speed_e, self.torque_e])) == 1  # one request carries both
         # Position free with speed and torque (same number of requests): read it with every sample.
-        self.pos_free = self.pos_e is not None and len(coalesce_reads(p, [self.speed_e, self.torque_e, self.pos_e])) \
-            == len(coalesce_reads(p, [self.speed_e, self.torque_e]))
+        self.pos_free = self.pos_e is not None and len(
+            coalesce_reads(p, [self.speed_e, self.torque_e, self.pos_e])
+        ) == len(coalesce_reads(p, [self.speed_e, self.torque_e]))
         self.counts = p.motor.counts_per_rev if p.motor is not None else 1
         self.trace = Trace()
         self.t0 = timing.now()
@@ -119,15 +125,18 @@ class Sampler:
             readings = d.read_entries([self.speed_e])
             trace.speed_t.append(self.timing.now() - self.t0)
             readings += d.read_entries([self.torque_e])
-        return float(raw_to_eng(self.speed_e, readings[0].raw)), float(raw_to_eng(self.torque_e, readings[1].raw)), \
-            pos_raw
+        return (
+            float(raw_to_eng(self.speed_e, readings[0].raw)),
+            float(raw_to_eng(self.torque_e, readings[1].raw)),
+            pos_raw,
+        )
 
     def sample(self) -> None:
         """One sample of speed and torque (and position when due); raises TravelLimitReached past the limit."""
         trace = self.trace
         speed, torque, pos_raw = self._read()
         now = self.timing.now()
-        if trace.t:   # travel between position reads, from the speed (checked before it is reached)
+        if trace.t:  # travel between position reads, from the speed (checked before it is reached)
             self.pred += 0.5 * (speed + trace.speed[-1]) / 60.0 * (now - self.t0 - trace.t[-1])
         trace.t.append(now - self.t0)
         trace.speed.append(speed)
@@ -156,9 +165,9 @@ class Sampler:
         self.lo, self.hi = (x, x) if first else (min(self.lo, x), max(self.hi, x))
 
 
-
-def quantization_floor(est: InertiaEstimate, trace: Trace, step_pct: float, rated_nm: float,
-                       max_rel: float) -> InertiaEstimate:
+def quantization_floor(
+    est: InertiaEstimate, trace: Trace, step_pct: float, rated_nm: float, max_rel: float
+) -> InertiaEstimate:
     """The estimate with the torque reading's resolution in its uncertainty (refused where that is too much).
 
     A torque read in whole percent (SD25, SDC, IS620P) that stays on one value while the axis accelerates misreads
@@ -182,11 +191,11 @@ def quantization_floor(est: InertiaEstimate, trace: Trace, step_pct: float, rate
     pair = moving[1:] & moving[:-1]
     if np.count_nonzero(pair) < 4:
         return est
-    accel = np.diff(rpm)[pair] / np.diff(t)[pair] * np.pi / 30.0                       # rad/s^2
+    accel = np.diff(rpm)[pair] / np.diff(t)[pair] * np.pi / 30.0  # rad/s^2
     signal_pct = est.j_total_kgm2 * float(np.sqrt(np.mean(accel**2))) / rated_nm * 100.0
     stuck = float(np.mean(np.diff(pct)[pair] == 0.0))
     share, moves = _repeated_share(moving, pair, accel, est.j_total_kgm2 / rated_nm * 100.0, step_pct)
-    misread = step_pct / 12**0.5 * stuck / max(signal_pct, 1e-9)        # one reading's, relative to the signal
+    misread = step_pct / 12**0.5 * stuck / max(signal_pct, 1e-9)  # one reading's, relative to the signal
     rel_q = math.hypot(misread / 2.0 * share, misread / 2**0.5 / max(moves, 1) ** 0.5)
     rel = math.hypot(est.j_std_kgm2 / est.j_total_kgm2, rel_q)
     if rel_q <= 0:
@@ -194,23 +203,32 @@ def quantization_floor(est: InertiaEstimate, trace: Trace, step_pct: float, rate
     j_std = rel * est.j_total_kgm2
     out = replace(est, j_std_kgm2=j_std, ratio_std=j_std / est.j_total_kgm2 * (1.0 + est.load_ratio))
     if rel > max_rel:
-        return replace(out, ok=False, reason=f"inertia too uncertain ({100 * rel:.1f} % of J_total > "
-                       f"{100 * max_rel:g} %: the torque reads in {step_pct:g} % steps against an acceleration "
-                       f"torque of {signal_pct:.1f} %)", advice="use stronger accelerations or a faster line",
-                       shortfall=rel / max_rel)
+        return replace(
+            out,
+            ok=False,
+            reason=f"inertia too uncertain ({100 * rel:.1f} % of J_total > "
+            f"{100 * max_rel:g} %: the torque reads in {step_pct:g} % steps against an acceleration "
+            f"torque of {signal_pct:.1f} %)",
+            advice="use stronger accelerations or a faster line",
+            shortfall=rel / max_rel,
+        )
     return out
 
 
-def _repeated_share(moving: np.ndarray, pair: np.ndarray, accel: np.ndarray, pct_per_accel: float,
-                    step_pct: float) -> tuple[float, int]:
+def _repeated_share(
+    moving: np.ndarray, pair: np.ndarray, accel: np.ndarray, pct_per_accel: float, step_pct: float
+) -> tuple[float, int]:
     """The share of the step error that every move repeats, and the number of moves it counts. Moves whose
     acceleration torques spread evenly over a range s (in reading steps) misread it by the sawtooth's values over
     that range: their common part has, over the unknown offset, an RMS of (1 - s) of one move's for s <= 1 and at
     most 0.17 of it beyond (none at whole steps); the part that differs between moves is the jackknife's (and
     quantization_floor's). Without dithered ramps s is ~0: one."""
     run = np.cumsum(np.concatenate(([0], (moving[1:] & ~moving[:-1]).astype(int))))[1:][pair]
-    levels = [float(np.sqrt(np.mean(accel[run == k] ** 2))) * pct_per_accel for k in np.unique(run)
-              if np.count_nonzero(run == k) >= 2]
+    levels = [
+        float(np.sqrt(np.mean(accel[run == k] ** 2))) * pct_per_accel
+        for k in np.unique(run)
+        if np.count_nonzero(run == k) >= 2
+    ]
     # The pilot's weak moves carry little weight in the fit (and would stretch the range): left out.
     strong = [v for v in levels if v >= 0.5 * max(levels, default=0.0)]
     if len(strong) < 4:

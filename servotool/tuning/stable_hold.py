@@ -47,16 +47,16 @@ from servotool.tuning.margins import least_damping
 HOLD_MIN_DAMPING = 0.15
 PILOT_LIGHT_DAMPING = 0.3  # the pilot's raised ratio keeps an unloaded motor's loops at least this damped
 PILOT_RATIO_STEP = 1.25
-HEAVIEST_WITHOUT_PARAMETER = 100.0   # the heaviest load assumed where the profile maps no inertia-ratio parameter
-PILOT_SPREAD = 2.0          # after the pilot: stable for a true J_total within [J/2, 2 J] of its estimate
-PILOT_MAX_REL_STD = 0.25    # a pilot estimate with a larger relative uncertainty of J_total is not used
+HEAVIEST_WITHOUT_PARAMETER = 100.0  # the heaviest load assumed where the profile maps no inertia-ratio parameter
+PILOT_SPREAD = 2.0  # after the pilot: stable for a true J_total within [J/2, 2 J] of its estimate
+PILOT_MAX_REL_STD = 0.25  # a pilot estimate with a larger relative uncertainty of J_total is not used
 # The pilot's fit may use fewer windows than the final one (two short moves), but not smaller speed changes: at
 # 1.5x the speed noise (tried) a bare motor with 30 % friction and 1 % noise was fitted at a ratio of 811 with a
 # 'usable' uncertainty, and that ratio on the drive ended in the overload alarm.
 PILOT_MIN_WINDOWS = 4
 INTEGRAL_STEP = 1.5
 POSITION_STEP = 1.5
-MIN_POSITION_PER_S = 1.0    # never below: the hold must still pull the axis back where its move ended
+MIN_POSITION_PER_S = 1.0  # never below: the hold must still pull the axis back where its move ended
 
 
 @dataclass(frozen=True)
@@ -78,13 +78,25 @@ class StableHold:
     def __init__(self, drive: Drive, route_kind: str, saved: dict[str, int]) -> None:
         self.drive, self.saved = drive, saved
         p = drive.profile
-        self.entries: dict[str, Entry] = {role: e for role in ("inertia_ratio", "speed_loop_gain",
-                                          "speed_loop_integral", "position_loop_gain", "torque_filter")
-                                          if (e := p.role(role)) is not None}
-        self.active = route_kind == "segment" and p.motor is not None and \
-            "position_loop_gain" in self.entries and "speed_loop_integral" in self.entries
+        self.entries: dict[str, Entry] = {
+            role: e
+            for role in (
+                "inertia_ratio",
+                "speed_loop_gain",
+                "speed_loop_integral",
+                "position_loop_gain",
+                "torque_filter",
+            )
+            if (e := p.role(role)) is not None
+        }
+        self.active = (
+            route_kind == "segment"
+            and p.motor is not None
+            and "position_loop_gain" in self.entries
+            and "speed_loop_integral" in self.entries
+        )
         self.loop: LoopGains | None = None
-        self.raws: dict[str, int] = {}       # what the drive holds now (read once, then as written): requests count
+        self.raws: dict[str, int] = {}  # what the drive holds now (read once, then as written): requests count
         self.original: HoldSetting | None = None
         self.setting: HoldSetting | None = None
 
@@ -92,8 +104,12 @@ class StableHold:
     def _read(self) -> None:
         p = self.drive.profile
         factory = rigidity_scale(p).factory
-        values = {"speed_loop_gain": factory.speed_hz, "speed_loop_integral": factory.integral_ms,
-                  "position_loop_gain": factory.position_per_s, "torque_filter": factory.filter_ms}
+        values = {
+            "speed_loop_gain": factory.speed_hz,
+            "speed_loop_integral": factory.integral_ms,
+            "position_loop_gain": factory.position_per_s,
+            "torque_filter": factory.filter_ms,
+        }
         entries = list(self.entries.items())
         ratio = 0.0
         for (role, e), r in zip(entries, self.drive.read_entries([e for _, e in entries]), strict=True):
@@ -103,8 +119,12 @@ class StableHold:
                 ratio = max(0.0, p.load_ratio_from_param(eng))
             else:
                 values[role] = to_canonical(role, e, eng)
-        self.loop = LoopGains(values["speed_loop_gain"], values["speed_loop_integral"],
-                              values["position_loop_gain"], values["torque_filter"])
+        self.loop = LoopGains(
+            values["speed_loop_gain"],
+            values["speed_loop_integral"],
+            values["position_loop_gain"],
+            values["torque_filter"],
+        )
         self.original = HoldSetting(ratio, self.loop.integral_ms, self.loop.position_per_s)
         self.setting = self.original
 
@@ -199,11 +219,14 @@ class StableHold:
         """Whether the hold and the speed loop keep HOLD_MIN_DAMPING for every load ratio in [lo, hi] (checked at
         both ends and in between on a log grid of J_total)."""
         steps = max(1, math.ceil(math.log((1.0 + hi) / (1.0 + lo)) / math.log(2.0)))
-        return all(self.damping(setting, (1.0 + lo) * ((1.0 + hi) / (1.0 + lo)) ** (k / steps) - 1.0)
-                   >= HOLD_MIN_DAMPING for k in range(steps + 1))
+        return all(
+            self.damping(setting, (1.0 + lo) * ((1.0 + hi) / (1.0 + lo)) ** (k / steps) - 1.0) >= HOLD_MIN_DAMPING
+            for k in range(steps + 1)
+        )
 
-    def safe(self, start: HoldSetting, lo: float, hi: float, fallback: HoldSetting, integral: bool = True
-             ) -> HoldSetting:
+    def safe(
+        self, start: HoldSetting, lo: float, hi: float, fallback: HoldSetting, integral: bool = True
+    ) -> HoldSetting:
         """The setting nearest `start` that is stable over [lo, hi]: the position gain lowered first (down to
         MIN_POSITION_PER_S), then the integral lengthened (up to its parameter's maximum: a long integral is slow to
         break the axis away against friction; integral=False leaves it); `fallback` when none is and the fallback is
@@ -214,11 +237,13 @@ class StableHold:
         setting = start
         while not self.stable(setting, lo, hi):
             if setting.position_per_s > position_min:
-                setting = HoldSetting(setting.ratio, setting.integral_ms,
-                                      max(position_min, setting.position_per_s / POSITION_STEP))
+                setting = HoldSetting(
+                    setting.ratio, setting.integral_ms, max(position_min, setting.position_per_s / POSITION_STEP)
+                )
             elif integral and setting.integral_ms < integral_max:
-                setting = HoldSetting(setting.ratio, min(integral_max, setting.integral_ms * INTEGRAL_STEP),
-                                      setting.position_per_s)
+                setting = HoldSetting(
+                    setting.ratio, min(integral_max, setting.integral_ms * INTEGRAL_STEP), setting.position_per_s
+                )
             else:
                 return fallback if self.stable(fallback, lo, hi) else setting
         return setting
@@ -232,8 +257,10 @@ class StableHold:
         """Write what differs from the drive's present setting, each original recorded to be put back."""
         assert self.setting is not None
         p = self.drive.profile
-        wanted: list[tuple[str, float]] = [("speed_loop_integral", setting.integral_ms),
-                                           ("position_loop_gain", setting.position_per_s)]
+        wanted: list[tuple[str, float]] = [
+            ("speed_loop_integral", setting.integral_ms),
+            ("position_loop_gain", setting.position_per_s),
+        ]
         if "inertia_ratio" in self.entries:
             wanted.insert(0, ("inertia_ratio", p.param_from_load_ratio(setting.ratio)))
         for role, value in wanted:
@@ -264,5 +291,10 @@ def pilot_settings(settings: EstimatorSettings) -> EstimatorSettings:
 
 def usable(estimate: InertiaEstimate | None) -> bool:
     """A pilot estimate precise enough to configure the ratio with (it need not pass the final fit's checks)."""
-    return estimate is not None and math.isfinite(estimate.load_ratio) and math.isfinite(estimate.j_std_kgm2) \
-        and estimate.j_total_kgm2 > 0 and estimate.j_std_kgm2 <= PILOT_MAX_REL_STD * estimate.j_total_kgm2
+    return (
+        estimate is not None
+        and math.isfinite(estimate.load_ratio)
+        and math.isfinite(estimate.j_std_kgm2)
+        and estimate.j_total_kgm2 > 0
+        and estimate.j_std_kgm2 <= PILOT_MAX_REL_STD * estimate.j_total_kgm2
+    )

@@ -17,7 +17,7 @@ from servotool.tuning.identify import IdentificationFailed
 from servotool.tuning.preflight import FEATURE, active_alarm
 from servotool.tuning.stable_hold import StableHold
 
-OVERSHOOT_LIMIT_PCT = 35.0    # a PI speed loop at 45 degrees of phase margin overshoots a fast step by about 30 %
+OVERSHOOT_LIMIT_PCT = 35.0  # a PI speed loop at 45 degrees of phase margin overshoots a fast step by about 30 %
 
 
 @dataclass(frozen=True)
@@ -26,16 +26,21 @@ class StepResponse:
 
     target_rpm: float
     overshoot_pct: float
-    settling_ms: float | None     # within 5 % of the target for good; None when it never settles
+    settling_ms: float | None  # within 5 % of the target for good; None when it never settles
     samples: int
-    ripple_pct: float = 0.0       # speed's standard deviation over the second half, % of the target (ringing)
-    t_s: tuple[float, ...] = field(default=(), repr=False)       # the forward step's samples, for its chart
+    ripple_pct: float = 0.0  # speed's standard deviation over the second half, % of the target (ringing)
+    t_s: tuple[float, ...] = field(default=(), repr=False)  # the forward step's samples, for its chart
     speed_rpm: tuple[float, ...] = field(default=(), repr=False)
 
     def summary(self) -> dict[str, float | int | None]:
         """The figures without the samples."""
-        return {"target_rpm": self.target_rpm, "overshoot_pct": self.overshoot_pct, "settling_ms": self.settling_ms,
-                "samples": self.samples, "ripple_pct": self.ripple_pct}
+        return {
+            "target_rpm": self.target_rpm,
+            "overshoot_pct": self.overshoot_pct,
+            "settling_ms": self.settling_ms,
+            "samples": self.samples,
+            "ripple_pct": self.ripple_pct,
+        }
 
     def failure(self, overshoot_limit_pct: float = OVERSHOOT_LIMIT_PCT) -> str | None:
         """Why this response fails the check after writing gains (None: it passes)."""
@@ -49,25 +54,30 @@ class StepResponse:
 
     def describe(self) -> str:
         settle = f"{self.settling_ms:.0f} ms" if self.settling_ms is not None else "does not settle"
-        return f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}, " \
-               f"ripple {self.ripple_pct:.1f} %"
+        return (
+            f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}, "
+            f"ripple {self.ripple_pct:.1f} %"
+        )
 
 
 STEP_SPEED_RPM = 200.0
-RIPPLE_LIMIT_PCT = 3.0        # a loop that keeps oscillating (torque at its limit) shows as ripple, often aliased
+RIPPLE_LIMIT_PCT = 3.0  # a loop that keeps oscillating (torque at its limit) shows as ripple, often aliased
 
 
 def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> float:
     """How long the step check may run at speed_rpm inside the travel limit (it returns to where it started)."""
-    duration = min(0.6, 0.9 * travel_rev / (1.3 * speed_rpm / 60.0))   # 30 % for overshoot and the stop
+    duration = min(0.6, 0.9 * travel_rev / (1.3 * speed_rpm / 60.0))  # 30 % for overshoot and the stop
     if duration < 0.2:
-        raise UsageError(f"--step-check needs at least {1.3 * speed_rpm / 60.0 * 0.2 / 0.9:.2f} rev of --travel "
-                         f"for a {speed_rpm:g} rpm step")
+        raise UsageError(
+            f"--step-check needs at least {1.3 * speed_rpm / 60.0 * 0.2 / 0.9:.2f} rev of --travel "
+            f"for a {speed_rpm:g} rpm step"
+        )
     return duration
 
 
-def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None,
-                  load_unknown: bool = False) -> StepResponse:
+def step_response(
+    drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None, load_unknown: bool = False
+) -> StepResponse:
     """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
 
     JOG parameters are put back afterwards (their writes kept out of EEPROM where the drive has a switch); the
@@ -79,8 +89,9 @@ def step_response(drive: Drive, speed_rpm: float, duration_s: float = 0.6, timin
         return _step_response(drive, speed_rpm, duration_s, timing, load_unknown)
 
 
-def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None,
-                   load_unknown: bool) -> StepResponse:
+def _step_response(
+    drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None, load_unknown: bool
+) -> StepResponse:
     p, timing = drive.profile, timing or RealClock()
     jogger = Jogger(drive, keepalive_interval_s(drive), FEATURE, timing)
     jog_accel = p.need_role("jog_accel", FEATURE)
@@ -125,9 +136,17 @@ def _step_response(drive: Drive, speed_rpm: float, duration_s: float, timing: Cl
         jogger.leave_and_restore(saved)
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
-    settled = None if not v or (outside and outside[-1] == len(v) - 1) else \
-        (t[outside[-1] + 1] if outside else t[0]) * 1000
+    settled = (
+        None if not v or (outside and outside[-1] == len(v) - 1) else (t[outside[-1] + 1] if outside else t[0]) * 1000
+    )
     late = [x for tt, x in zip(t, v, strict=True) if tt >= duration_s / 2]
     ripple = float(np.std(late)) / speed_rpm * 100 if len(late) > 2 else 0.0
-    return StepResponse(speed_rpm, max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100), settled, len(v),
-                        ripple, tuple(t), tuple(v))
+    return StepResponse(
+        speed_rpm,
+        max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100),
+        settled,
+        len(v),
+        ripple,
+        tuple(t),
+        tuple(v),
+    )

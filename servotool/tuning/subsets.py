@@ -9,11 +9,11 @@ from dataclasses import dataclass
 import numpy as np
 
 MIN_SUBSET_WINDOWS = 6
-ACCEL_SNR = 10.0          # windows sorted by acceleration: their speed change this many times its noise or more,
-ACCEL_STEPS = 10.0        # ... and their acceleration torque this many steps of the torque reading or more
-NOISE_BIRGE = 3.0         # ... and they disagree this many times their uncertainties before backlash is blamed,
-NOISE_SPREAD = 0.05       # ... and by more than this fraction of J (points_off_model)
-BLAME_SPREAD = 0.03       # subsets of any grouping that differ by less than this fraction of J blame nothing
+ACCEL_SNR = 10.0  # windows sorted by acceleration: their speed change this many times its noise or more,
+ACCEL_STEPS = 10.0  # ... and their acceleration torque this many steps of the torque reading or more
+NOISE_BIRGE = 3.0  # ... and they disagree this many times their uncertainties before backlash is blamed,
+NOISE_SPREAD = 0.05  # ... and by more than this fraction of J (points_off_model)
+BLAME_SPREAD = 0.03  # subsets of any grouping that differ by less than this fraction of J blame nothing
 
 
 @dataclass(frozen=True)
@@ -21,12 +21,12 @@ class Windows:
     """The fit's samples and windows, as the subsets need them."""
 
     t: np.ndarray
-    w: np.ndarray             # rad/s
-    position: np.ndarray      # rad
+    w: np.ndarray  # rad/s
+    position: np.ndarray  # rad
     starts: np.ndarray
     ends: np.ndarray
-    eiv: float                # the speed change's noise variance, scaled as the fit's first column (FitData.eiv[0])
-    torque_step: float        # N*m: the torque reading's resolution where it reads on a grid (0: finer or unknown)
+    eiv: float  # the speed change's noise variance, scaled as the fit's first column (FitData.eiv[0])
+    torque_step: float  # N*m: the torque reading's resolution where it reads on a grid (0: finer or unknown)
 
 
 def worst_subsets(win: Windows, dw: np.ndarray, j: float, j_std: float, resid: np.ndarray) -> tuple[float, float, str]:
@@ -43,8 +43,10 @@ def worst_subsets(win: Windows, dw: np.ndarray, j: float, j_std: float, resid: n
 def cause(name: str) -> str:
     """The mechanics that a disagreement within the named grouping points to, in words."""
     if "acceleration" in name:
-        return "backlash (lost motion where the torque reverses) or a compliant coupling: a rigid load weighs the " \
+        return (
+            "backlash (lost motion where the torque reverses) or a compliant coupling: a rigid load weighs the "
             "same at any acceleration"
+        )
     if "braking" in name:
         return "backlash (lost motion at reversals) or a compliant coupling (resonance) outside the rigid model"
     if "travel" in name:
@@ -71,15 +73,17 @@ def unblamed(name: str) -> tuple[str, str]:
     """(the note's words, the causes a refusal names) for the named grouping's disagreement that points to no
     mechanics (points_off_model False); the causes are empty where it names none."""
     if "acceleration" in name:
-        return ("as much as the speed noise alone can make it differ on a rigid load",
-                "the speed noise, or backlash or a compliant coupling")
+        return (
+            "as much as the speed noise alone can make it differ on a rigid load",
+            "the speed noise, or backlash or a compliant coupling",
+        )
     return "too little to point to the mechanics", ""
 
 
 def _groupings(win: Windows, dw: np.ndarray, j: float) -> dict[str, np.ndarray]:
     """Subsets of the windows to compare J across, by name (as in 'inertia differs NAME'); label -1: left out."""
     sgn = np.sign(win.w[win.starts])
-    phase = np.where(sgn * dw > 0, 0, 1)                      # accelerating, braking
+    phase = np.where(sgn * dw > 0, 0, 1)  # accelerating, braking
     mid = 0.5 * (win.position[win.starts] + win.position[win.ends])
     return {
         "between accelerating and braking, forward and reverse": (sgn > 0) * 2 + phase,
@@ -104,7 +108,7 @@ def _acceleration_terciles(win: Windows, dw: np.ndarray, j: float) -> np.ndarray
     bare motor with 1 % noise), so only windows the noise cannot move between terciles are sorted. Likewise a
     torque read in whole percent misreads a weak acceleration's torque by a larger share (a bare IS620P motor with
     noise-free readings: J 19 % apart), so only windows whose acceleration torque spans ACCEL_STEPS of its steps."""
-    noise = float(np.sqrt(win.eiv * float(dw @ dw)))       # the noise of a window's speed change
+    noise = float(np.sqrt(win.eiv * float(dw @ dw)))  # the noise of a window's speed change
     accel_torque = abs(j) * np.abs(dw) / (win.t[win.ends] - win.t[win.starts])
     clear = (np.abs(dw) >= ACCEL_SNR * noise) & (accel_torque >= ACCEL_STEPS * win.torque_step)
     labels = np.full(dw.size, -1)
@@ -124,7 +128,7 @@ def _birge(j: float, j_std: float, dw: np.ndarray, resid: np.ndarray, labels: np
             continue
         js.append(j + float(dw[m] @ resid[m]) / info)
         sig.append(j_std * math.sqrt(total / info))
-    if len(js) < 2 or not (0 < j_std < math.inf) or not math.isfinite(j):    # an unbounded fit: refused elsewhere
+    if len(js) < 2 or not (0 < j_std < math.inf) or not math.isfinite(j):  # an unbounded fit: refused elsewhere
         return 1.0, 0.0
     a, s = np.asarray(js), np.asarray(sig)
     wts = 1.0 / s**2

@@ -30,31 +30,44 @@ from servotool.tuning.step import StepResponse
 class TuneRequest:
     """What to identify and what to write. Unset motion options are automatic, as `servotool tune inertia`'s."""
 
-    method: str = "host"                 # host: servotool moves and fits; drive: the drive's own identification
-    max_speed: float | None = None       # rpm; None: from the travel
-    accel_time_ms: float | None = None   # None: ramps from the link's sampling rate
+    method: str = "host"  # host: servotool moves and fits; drive: the drive's own identification
+    max_speed: float | None = None  # rpm; None: from the travel
+    accel_time_ms: float | None = None  # None: ramps from the link's sampling rate
     travel_rev: float = 2.0
     direction: str = "both"
-    repeats: int | None = None           # None: repeat until the estimate is precise enough
-    gains: bool = False                  # set matching gains (at rigidity/bandwidth, else the drive's rigidity)
+    repeats: int | None = None  # None: repeat until the estimate is precise enough
+    gains: bool = False  # set matching gains (at rigidity/bandwidth, else the drive's rigidity)
     rigidity: int | None = None
     bandwidth_hz: float | None = None
-    save: bool | None = None             # EEPROM: None as the drive is set, True store, False keep out
-    dry_run: bool = False                # identify and report; write nothing
-    step_check: bool = False             # a speed step before and after (the after one only once written)
-    verify: bool = False                 # a step check after gains are written; failed: the old gains go back
-    force: bool = False                  # write gains even with too little phase/gain margin
-    trace_path: Path | None = None       # the sampled trace, also when the identification fails
+    save: bool | None = None  # EEPROM: None as the drive is set, True store, False keep out
+    dry_run: bool = False  # identify and report; write nothing
+    step_check: bool = False  # a speed step before and after (the after one only once written)
+    verify: bool = False  # a step check after gains are written; failed: the old gains go back
+    force: bool = False  # write gains even with too little phase/gain margin
+    trace_path: Path | None = None  # the sampled trace, also when the identification fails
 
     def nominal_motion(self, profile: Profile) -> MotionPlan:
         """The host motion before the link's sampling rate is known (raises what is wrong with the options)."""
-        return planning.plan_motion(profile, max_speed=self.max_speed, accel_time_ms=self.accel_time_ms,
-                                    travel_rev=self.travel_rev, direction=self.direction, repeats=self.repeats)
+        return planning.plan_motion(
+            profile,
+            max_speed=self.max_speed,
+            accel_time_ms=self.accel_time_ms,
+            travel_rev=self.travel_rev,
+            direction=self.direction,
+            repeats=self.repeats,
+        )
 
     def host_motion(self, drive: Drive, clock: Clock) -> tuple[MotionPlan, RestCheck]:
         """The host motion for the sampling rate measured while checking the axis at rest."""
-        return planning.plan_host_motion(drive, clock, max_speed=self.max_speed, accel_time_ms=self.accel_time_ms,
-                                         travel_rev=self.travel_rev, direction=self.direction, repeats=self.repeats)
+        return planning.plan_host_motion(
+            drive,
+            clock,
+            max_speed=self.max_speed,
+            accel_time_ms=self.accel_time_ms,
+            travel_rev=self.travel_rev,
+            direction=self.direction,
+            repeats=self.repeats,
+        )
 
 
 def check_request(profile: Profile, request: TuneRequest, feature: str | None = None) -> MotionPlan | None:
@@ -70,9 +83,14 @@ def check_request(profile: Profile, request: TuneRequest, feature: str | None = 
     preflight.check_profile(profile, request.method, feature)
     if request.gains and (request.rigidity is not None or request.bandwidth_hz is not None):
         rotor = profile.motor.rotor_inertia_kgcm2 if profile.motor is not None else 1.0
-        try:   # the rules the gains will be computed with, on a nominal load
-            suggest_gains(rotor_inertia_kgcm2=rotor, scale=rigidity_scale(profile), load_ratio=1.0,
-                          rigidity=request.rigidity, bandwidth_hz=request.bandwidth_hz)
+        try:  # the rules the gains will be computed with, on a nominal load
+            suggest_gains(
+                rotor_inertia_kgcm2=rotor,
+                scale=rigidity_scale(profile),
+                load_ratio=1.0,
+                rigidity=request.rigidity,
+                bandwidth_hz=request.bandwidth_hz,
+            )
         except ValueError as exc:
             raise UsageError(f"{feature}: {exc}" if feature else str(exc)) from None
     return motion
@@ -83,11 +101,11 @@ class Proposal:
     """What the identification found and what would be written, before anything is."""
 
     identified: identify.Result
-    parameter: Entry | None              # None: the profile maps no inertia-ratio parameter (reported only)
+    parameter: Entry | None  # None: the profile maps no inertia-ratio parameter (reported only)
     parameter_raw: int | None
     suggestion: GainSuggestion | None
     gain_changes: list[GainChange]
-    margins: Margins | None = None       # of the suggested gains on the identified inertia
+    margins: Margins | None = None  # of the suggested gains on the identified inertia
     profile: Profile | None = None
 
     @property
@@ -97,8 +115,9 @@ class Proposal:
     @property
     def parameter_value(self) -> float | None:
         """The ratio parameter's new value in its unit."""
-        return None if self.parameter is None or self.parameter_raw is None else \
-            self.parameter_raw * self.parameter.scale
+        return (
+            None if self.parameter is None or self.parameter_raw is None else self.parameter_raw * self.parameter.scale
+        )
 
     @property
     def writes_ratio(self) -> bool:
@@ -111,14 +130,14 @@ class TuneResult:
     """The facts of one `tune inertia`."""
 
     proposal: Proposal
-    ratio_stored: bool                   # the drive holds the new ratio (written, or stored by the drive itself)
+    ratio_stored: bool  # the drive holds the new ratio (written, or stored by the drive itself)
     gains_written: bool
-    persisted: bool | None               # None: nothing written; else whether the writes survive a power cycle
-    seconds: float                       # the whole run: checks, rest check, identification, writes
+    persisted: bool | None  # None: nothing written; else whether the writes survive a power cycle
+    seconds: float  # the whole run: checks, rest check, identification, writes
     step_before: StepResponse | None = None
     step_after: StepResponse | None = None
-    written: list[tuple[Entry, int]] = field(default_factory=list)   # (entry, raw) in the order written
-    verified: StepResponse | None = None   # the step check after the gains were written (request.verify)
+    written: list[tuple[Entry, int]] = field(default_factory=list)  # (entry, raw) in the order written
+    verified: StepResponse | None = None  # the step check after the gains were written (request.verify)
 
     @property
     def identified(self) -> identify.Result:
@@ -143,11 +162,16 @@ class GainsRolledBack(ServoError):
         self.response = response
 
 
-def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = None,
-                 progress: Callable[[str], None] | None = None,
-                 approve_motion: Callable[[MotionPlan | None], bool] | None = None,
-                 on_proposal: Callable[[Proposal], None] | None = None,
-                 approve_write: Callable[[Proposal], bool] | None = None) -> TuneResult:
+def tune_inertia(
+    drive: Drive,
+    request: TuneRequest,
+    *,
+    clock: Clock | None = None,
+    progress: Callable[[str], None] | None = None,
+    approve_motion: Callable[[MotionPlan | None], bool] | None = None,
+    on_proposal: Callable[[Proposal], None] | None = None,
+    approve_write: Callable[[Proposal], bool] | None = None,
+) -> TuneResult:
     """Check, identify, then write the ratio and (if asked) the gains through the drive's EEPROM rule.
 
     approve_motion sees the host motion (None: the drive's own) before anything moves; False raises TuneDeclined.
@@ -167,9 +191,12 @@ def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = No
         raise TuneDeclined("nothing moved")
     before = _step(drive, step_s, clock, load_unknown=True)
     try:
-        result = ident.run_host(motion, progress=progress, rest=rest) if motion is not None else \
-            ident.run_drive(keep=not request.dry_run)
-    except ServoError:   # refused, tripped, travel exceeded, link lost: keep what was measured
+        result = (
+            ident.run_host(motion, progress=progress, rest=rest)
+            if motion is not None
+            else ident.run_drive(keep=not request.dry_run)
+        )
+    except ServoError:  # refused, tripped, travel exceeded, link lost: keep what was measured
         if request.trace_path is not None:
             ident.trace.save(request.trace_path)
         raise
@@ -180,17 +207,32 @@ def tune_inertia(drive: Drive, request: TuneRequest, *, clock: Clock | None = No
     proposal = propose(drive, result, request)
     if on_proposal is not None:
         on_proposal(proposal)
-    approved = not request.dry_run and (proposal.writes_ratio or bool(proposal.gain_changes)) and \
-        (approve_write is None or approve_write(proposal))
+    approved = (
+        not request.dry_run
+        and (proposal.writes_ratio or bool(proposal.gain_changes))
+        and (approve_write is None or approve_write(proposal))
+    )
     written, persisted = _write(drive, proposal, approved, request.save)
     # The host method stores the ratio by writing it; the drive method's drive stored its own (kept unless dry run).
     stored = (proposal.writes_ratio and written != []) if request.method == "host" else not request.dry_run
-    verified = verify_gains(drive, proposal.gain_changes, request, clock) if \
-        request.verify and approved and proposal.gain_changes else None
-    changed = stored or bool(written)     # SDC stores no ratio: its gains changed all the same
+    verified = (
+        verify_gains(drive, proposal.gain_changes, request, clock)
+        if request.verify and approved and proposal.gain_changes
+        else None
+    )
+    changed = stored or bool(written)  # SDC stores no ratio: its gains changed all the same
     after = verified or (_step(drive, step_s, clock) if before is not None and changed else None)
-    return TuneResult(proposal, stored, approved and bool(proposal.gain_changes), persisted, clock.now() - t0,
-                      before, after, written, verified)
+    return TuneResult(
+        proposal,
+        stored,
+        approved and bool(proposal.gain_changes),
+        persisted,
+        clock.now() - t0,
+        before,
+        after,
+        written,
+        verified,
+    )
 
 
 def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, clock: Clock) -> StepResponse:
@@ -208,8 +250,9 @@ def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, 
     with eeprom.persistence(drive, request.save):
         for c in changes:
             write_one(drive, c.entry, c.old_raw)
-    raise GainsRolledBack(f"step check after writing the gains failed ({fault}): the previous gains were written "
-                          "back", response)
+    raise GainsRolledBack(
+        f"step check after writing the gains failed ({fault}): the previous gains were written back", response
+    )
 
 
 def check_drive_result(drive: Drive, result: identify.Result, request: TuneRequest, clock: Clock) -> None:
@@ -230,23 +273,27 @@ def check_drive_result(drive: Drive, result: identify.Result, request: TuneReque
     raise identify.IdentificationFailed(
         f"the drive's identification gave load ratio {result.new_ratio:.2f}, implausible against the host "
         f"measurement {host.new_ratio:.2f} ± {est.ratio_std:.2f} (friction {est.coulomb_nm:.3g} N·m): the previous "
-        f"ratio {result.old_ratio:.2f} was put back; use --method host")
+        f"ratio {result.old_ratio:.2f} was put back; use --method host"
+    )
 
 
 def propose(drive: Drive, result: identify.Result, request: TuneRequest) -> Proposal:
     """The ratio parameter value (where the profile maps one; SDC does not) and the gains for the result."""
     std = result.estimate.ratio_std if result.estimate is not None else 0.0
-    entry, raw = gain_writes.ratio_raw(drive, result.new_ratio, std) if drive.profile.role("inertia_ratio") else \
-        (None, None)
+    entry, raw = (
+        gain_writes.ratio_raw(drive, result.new_ratio, std) if drive.profile.role("inertia_ratio") else (None, None)
+    )
     if not request.gains:
         return Proposal(result, entry, raw, None, [], None, drive.profile)
-    sugg, changes, found = gain_writes.gain_changes(drive, result.new_ratio, rigidity=request.rigidity,
-                                                    bandwidth_hz=request.bandwidth_hz, force=request.force)
+    sugg, changes, found = gain_writes.gain_changes(
+        drive, result.new_ratio, rigidity=request.rigidity, bandwidth_hz=request.bandwidth_hz, force=request.force
+    )
     return Proposal(result, entry, raw, sugg, changes, found, drive.profile)
 
 
-def _write(drive: Drive, proposal: Proposal, approved: bool, save: bool | None
-           ) -> tuple[list[tuple[Entry, int]], bool | None]:
+def _write(
+    drive: Drive, proposal: Proposal, approved: bool, save: bool | None
+) -> tuple[list[tuple[Entry, int]], bool | None]:
     """The approved writes, inside the drive's EEPROM rule: (written, persisted or None when nothing was)."""
     writes = [(c.entry, c.raw) for c in proposal.gain_changes]
     if proposal.writes_ratio and proposal.parameter is not None and proposal.parameter_raw is not None:
@@ -260,5 +307,4 @@ def _write(drive: Drive, proposal: Proposal, approved: bool, save: bool | None
 
 
 def _step(drive: Drive, seconds: float | None, clock: Clock, load_unknown: bool = False) -> StepResponse | None:
-    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock, load_unknown) if seconds is not None \
-        else None
+    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock, load_unknown) if seconds is not None else None

@@ -31,8 +31,14 @@ run()
 
 
 def compiled_and_used(env: dict[str, str]) -> list[int]:
-    r = subprocess.run([sys.executable, "-c", PROBE, "--port", "sim", "param", "get", "Pn004"], capture_output=True,
-                       text=True, cwd=ROOT, env={**os.environ, **env}, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", PROBE, "--port", "sim", "param", "get", "Pn004"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, **env},
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr
     return json.loads(next(x for x in r.stderr.splitlines() if x.startswith("CACHE ")).removeprefix("CACHE "))
 
@@ -40,8 +46,16 @@ def compiled_and_used(env: dict[str, str]) -> list[int]:
 def test_a_second_one_shot_compiles_no_dataclass(sim_dir, tmp_path):
     env = {"SERVOTOOL_CACHE_DIR": str(tmp_path / "cache")}
     # a program that only imports the CLI (a test run) uses the cache but leaves the file to the commands
-    subprocess.run([sys.executable, "-c", "import dataclasses, servotool.cli.main; "
-                    "assert dataclasses.exec.__self__.compiled > 40"], check=True, cwd=ROOT, env={**os.environ, **env})
+    subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import dataclasses, servotool.cli.main; assert dataclasses.exec.__self__.compiled > 40",
+        ],
+        check=True,
+        cwd=ROOT,
+        env={**os.environ, **env},
+    )
     assert not list((tmp_path / "cache").glob("dataclasses-*"))
     compiled, used = compiled_and_used(env)
     assert compiled >= 40 and used == compiled
@@ -82,8 +96,12 @@ def test_cached_code_makes_the_same_class(tmp_path, monkeypatch):
 
 def test_a_damaged_or_foreign_cache_file_is_ignored_and_rewritten(tmp_path, monkeypatch):
     path = tmp_path / "c.marshal"
-    for junk in (b"", b"not marshal at all", b"\x00\x00\r\n" + b"\xff" * 40,
-                 MAGIC_NUMBER + marshal.dumps({__name__: b"junk", "other": 5})):
+    for junk in (
+        b"",
+        b"not marshal at all",
+        b"\x00\x00\r\n" + b"\xff" * 40,
+        MAGIC_NUMBER + marshal.dumps({__name__: b"junk", "other": 5}),
+    ):
         path.write_bytes(junk)
         cache = ClassCache(path)
         assert cache.known() == {}
@@ -97,7 +115,7 @@ def test_each_module_s_classes_are_unpacked_only_when_it_defines_one(tmp_path, m
     first = ClassCache(path)
     define(first, monkeypatch)
     first.save()
-    stored = marshal.loads(path.read_bytes()[len(MAGIC_NUMBER):])
+    stored = marshal.loads(path.read_bytes()[len(MAGIC_NUMBER) :])
     assert list(stored) == [__name__]
     stored["some.other.module"] = b"damaged, and never unpacked by this test"
     path.write_bytes(MAGIC_NUMBER + marshal.dumps(stored))

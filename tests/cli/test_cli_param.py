@@ -81,7 +81,7 @@ def test_bad_input_is_one_line_and_writes_nothing(cli, sim_dir):
         assert text in r.err, (args, r.err)
         assert "Traceback" not in r.err
         assert len([ln for ln in r.err.splitlines() if ln.startswith("servotool: error")]) == 1
-    assert not list(sim_dir.glob("*.json"))    # no simulated drive was even created
+    assert not list(sim_dir.glob("*.json"))  # no simulated drive was even created
     # one bad value among good ones: nothing at all is written
     r = cli("--port", "sim", "param", "set", "Pn101=20", "Pn100=99999")
     assert r.code == 2
@@ -109,8 +109,11 @@ def test_options_from_environment_and_config_file(cli, tmp_path):
     cfg.write_text("colour: red\n")
     r = cli("param", "get", "Pn004", env={"SERVOTOOL_CONFIG": str(cfg)})
     assert r.code == 2 and "unknown option(s) colour" in r.err
-    for text, why in (("timeout: true\n", "timeout must be a number"), ("port: [\n", "line 2: invalid YAML"),
-                      ("port: s\xefm\n", "not UTF-8")):
+    for text, why in (
+        ("timeout: true\n", "timeout must be a number"),
+        ("port: [\n", "line 2: invalid YAML"),
+        ("port: s\xefm\n", "not UTF-8"),
+    ):
         cfg.write_bytes(text.encode("latin-1"))
         r = cli("param", "get", "Pn004", env={"SERVOTOOL_CONFIG": str(cfg)})
         assert r.code == 2 and why in r.err and len(r.err.splitlines()) == 1, r.err

@@ -53,7 +53,7 @@ def test_every_table_fits_80_columns_with_readable_names(cli, args):
     assert r.code in (0, 2), r.err
     assert _widest(r.out) <= 80, r.out
     name = _name_width(r.out)
-    if name is not None and _widest(r.out) == 80:      # a table at the limit: its names were not squeezed
+    if name is not None and _widest(r.out) == 80:  # a table at the limit: its names were not squeezed
         assert name >= render.NAME_MIN, r.out
 
 
@@ -77,8 +77,7 @@ def test_piped_without_a_terminal_is_not_wrapped(cli):
 
 def _wide_table() -> Table:
     t = render.table("Code", "Name", "Address", "Type", "Value", "Unit", "Effect")
-    t.add_row("Pn004", "Load inertia ratio of the motor and machine", "8196 (0x2004)", "u16", "250", "%",
-              "immediate")
+    t.add_row("Pn004", "Load inertia ratio of the motor and machine", "8196 (0x2004)", "u16", "250", "%", "immediate")
     return t
 
 
@@ -112,7 +111,7 @@ def test_progress_shows_a_bar_with_time_left_on_a_terminal_only(monkeypatch):
         advance(5)
     assert "reading parameters" in screen.getvalue()
     monkeypatch.setattr(render, "err", render.Console(file=io.StringIO(), force_terminal=False))
-    with render.progress("reading", 10) as advance:     # piped: nothing, and advancing is harmless
+    with render.progress("reading", 10) as advance:  # piped: nothing, and advancing is harmless
         advance(3)
 
 
@@ -127,4 +126,4 @@ def test_the_levels_tried_by_tune_gains_are_a_table_at_80_columns(cli):
     r = cli("--port", "sim", "tune", "gains", "--yes", "--from", "16", "--to", "17", env=NARROW)
     assert r.code == 0, r.err
     assert _widest(r.out) <= 80
-    assert any(line.startswith("│ 16") for line in r.out.splitlines()), r.out     # a row, not a block per level
+    assert any(line.startswith("│ 16") for line in r.out.splitlines()), r.out  # a row, not a block per level

@@ -23,19 +23,28 @@ def root():
     return typer.main.get_command(app)
 
 
-@pytest.mark.parametrize(("given", "hoisted"), [
-    (["param", "get", "Pn101", "--port", "sim"], ["--port", "sim", "param", "get", "Pn101"]),
-    (["param", "set", "Pn101=2", "-P", "is620p", "--save", "-vv"], ["-P", "is620p", "-vv", "param", "set",
-                                                                   "Pn101=2", "--save"]),
-    (["--port", "sim", "jog", "--speed", "-5", "--time", "1", "-q"], ["-q", "--port", "sim", "jog", "--speed", "-5",
-                                                                     "--time", "1"]),
-    (["sim", "serve", "--port", "tcp://127.0.0.1:0", "--unit", "3"], ["sim", "serve", "--port", "tcp://127.0.0.1:0",
-                                                                     "--unit", "3"]),      # serve's own options
-    (["alarm", "--json", "show", "--port", "sim"], ["--port", "sim", "alarm", "show", "--json"]),
-    (["param", "get", "--", "--port"], ["param", "get", "--", "--port"]),
-    (["--json", "--port", "sim", "param", "get", "Pn004"], ["--port", "sim", "param", "get", "--json", "Pn004"]),
-    (["-q", "--json", "alarm", "show"], ["-q", "alarm", "show", "--json"]),
-])
+@pytest.mark.parametrize(
+    ("given", "hoisted"),
+    [
+        (["param", "get", "Pn101", "--port", "sim"], ["--port", "sim", "param", "get", "Pn101"]),
+        (
+            ["param", "set", "Pn101=2", "-P", "is620p", "--save", "-vv"],
+            ["-P", "is620p", "-vv", "param", "set", "Pn101=2", "--save"],
+        ),
+        (
+            ["--port", "sim", "jog", "--speed", "-5", "--time", "1", "-q"],
+            ["-q", "--port", "sim", "jog", "--speed", "-5", "--time", "1"],
+        ),
+        (
+            ["sim", "serve", "--port", "tcp://127.0.0.1:0", "--unit", "3"],
+            ["sim", "serve", "--port", "tcp://127.0.0.1:0", "--unit", "3"],
+        ),  # serve's own options
+        (["alarm", "--json", "show", "--port", "sim"], ["--port", "sim", "alarm", "show", "--json"]),
+        (["param", "get", "--", "--port"], ["param", "get", "--", "--port"]),
+        (["--json", "--port", "sim", "param", "get", "Pn004"], ["--port", "sim", "param", "get", "--json", "Pn004"]),
+        (["-q", "--json", "alarm", "show"], ["-q", "alarm", "show", "--json"]),
+    ],
+)
 def test_global_options_after_the_sub_command_are_moved_before_it(root, given, hoisted):
     assert hoist_globals(root, given) == hoisted
 
@@ -68,8 +77,9 @@ def test_completion_options_belong_to_the_root_help_only(cli):
 
 
 def test_the_cli_module_runs_as_a_script_too(cli):
-    r = subprocess.run([sys.executable, "-m", "servotool.cli.main", "--version"], capture_output=True, text=True,
-                       cwd=ROOT, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "servotool.cli.main", "--version"], capture_output=True, text=True, cwd=ROOT, timeout=60
+    )
     assert r.returncode == 0 and r.stdout.startswith("servotool ")
 
 
@@ -91,23 +101,34 @@ def test_a_timeout_is_one_line_and_leaves_no_asyncio_noise(cli):
 
 def test_piped_monitor_streams_lines_and_ctrl_c_exits_130(sim_dir):
     env = {**os.environ, "COLUMNS": "100"}
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "monitor", "--json", "Un000"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servotool", "--port", "sim", "monitor", "--json", "Un000"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        env=env,
+    )
     try:
-        first = proc.stdout.readline()          # arrives while the command still runs: line-buffered
+        first = proc.stdout.readline()  # arrives while the command still runs: line-buffered
         assert '"Un000"' in first and '"units"' in first
         proc.send_signal(signal.SIGINT)
         rest, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
     assert proc.returncode == 130 and "servotool: interrupted" in err
-    lines = [json.loads(line) for line in (first + rest).splitlines()]     # still JSON lines, the error too
+    lines = [json.loads(line) for line in (first + rest).splitlines()]  # still JSON lines, the error too
     assert lines[-1]["error"]["exit_status"] == 130
 
 
 def test_sim_serve_at_ctrl_c_stops_and_exits_130(sim_dir):
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
     try:
         assert "serving on" in proc.stderr.readline()
         proc.send_signal(signal.SIGINT)
@@ -118,12 +139,17 @@ def test_sim_serve_at_ctrl_c_stops_and_exits_130(sim_dir):
 
 
 def test_plain_monitor_at_ctrl_c_prints_what_it_has_and_exits_130(sim_dir):
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "monitor", "Un000"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
-                            env={**os.environ, "COLUMNS": "100"})
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servotool", "--port", "sim", "monitor", "Un000"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "COLUMNS": "100"},
+    )
     try:
         assert "SIMULATED" in proc.stderr.readline()
-        first = proc.stdout.readline()          # each sample a line as it comes, through the pipe
+        first = proc.stdout.readline()  # each sample a line as it comes, through the pipe
         assert " s  Un000 " in first and first.strip().endswith("rpm"), first
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)
@@ -136,16 +162,16 @@ def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_ru
     """`monitor --csv --json` would write a file named '--json': the value was left out."""
     r = cli("--port", "sim", "monitor", "--once", "--csv", "--json")
     assert r.code == 2 and "'--json' looks like an option" in r.err and "Traceback" not in r.err
-    assert not (Path(__file__).resolve().parents[2] / "--json").exists()     # the tests run in the repository
+    assert not (Path(__file__).resolve().parents[2] / "--json").exists()  # the tests run in the repository
 
 
 def test_quiet_keeps_results_and_errors(cli, tmp_path):
     r = cli("-q", "--port", "sim", "jog", "--speed", "100", "--time", "0.2")
-    assert r.code == 0 and "JOG done: peak" in r.err and "SIMULATED" not in r.err        # the banner goes
-    assert "if this program stops" not in r.err                      # progress words go
+    assert r.code == 0 and "JOG done: peak" in r.err and "SIMULATED" not in r.err  # the banner goes
+    assert "if this program stops" not in r.err  # progress words go
     (tmp_path / "axis-1.yaml").write_text("taken\n")
     plan = tmp_path / "plan.yaml"
     plan.write_text("port: sim\nprofile: dsx7e\nsteps:\n  - backup: axis-{unit}.yaml\n")
     r = cli("-q", "run", str(plan), "--yes")
     assert r.code == 2 and "plan FAILED" in r.out
-    assert "FAIL unit 1 step 1 (backup, line 4):" in r.err and "axis-1.yaml exists" in r.err     # why, though quiet
+    assert "FAIL unit 1 step 1 (backup, line 4):" in r.err and "axis-1.yaml exists" in r.err  # why, though quiet

@@ -18,9 +18,9 @@ def test_find_searches_codes_names_and_descriptions_without_a_drive(cli):
     assert "H08-00" in codes and all("speed loop" in row["name"].lower() for row in r.json())
     r = cli("-P", "is620p", "param", "find", "H0800", "--json")
     assert [row["code"] for row in r.json()] == ["H08-00"]
-    r = cli("param", "find", "monitor", "speed", "--port", "sim", "--json")     # Un entries too
+    r = cli("param", "find", "monitor", "speed", "--port", "sim", "--json")  # Un entries too
     assert "Un000" in [row["code"] for row in r.json()]
-    r = cli("-P", "sd25", "param", "find", "CCW", "--json")          # in Po001's description only
+    r = cli("-P", "sd25", "param", "find", "CCW", "--json")  # in Po001's description only
     assert [row["code"] for row in r.json()] == ["Po001"]
 
 
@@ -29,9 +29,10 @@ def test_diff_factory_compares_the_drive_with_its_defaults(cli):
     cli("--port", "sim", "param", "set", "Pn101=25")
     r = cli("--port", "sim", "param", "diff", "--factory", "--json")
     assert r.code == 0
-    assert r.json()["differences"] == [{"code": "Pn101", "name": "Speed loop gain", "unit": "Hz",
-                                        "effect": "unknown", "a": 25.0, "b": 18.0}]
-    assert cli("--port", "sim", "param", "diff").code == 2        # neither a file nor --factory
+    assert r.json()["differences"] == [
+        {"code": "Pn101", "name": "Speed loop gain", "unit": "Hz", "effect": "unknown", "a": 25.0, "b": 18.0}
+    ]
+    assert cli("--port", "sim", "param", "diff").code == 2  # neither a file nor --factory
 
 
 def test_list_csv_is_a_spreadsheet_table(cli):
@@ -48,12 +49,13 @@ def test_a_csv_backup_edited_in_a_spreadsheet_restores(cli, tmp_path):
     assert r.code == 0 and "108 parameters saved" in r.out
     lines = path.read_text().splitlines()
     assert lines[0].startswith("servotool parameter backup,profile=dsx7e")
-    path.write_text("\n".join(line.replace("Pn101,Speed loop gain,18.0", "Pn101,Speed loop gain,22.5")
-                              for line in lines) + "\n")
+    path.write_text(
+        "\n".join(line.replace("Pn101,Speed loop gain,18.0", "Pn101,Speed loop gain,22.5") for line in lines) + "\n"
+    )
     r = cli("--port", "sim", "param", "restore", str(path), "--yes")
     assert r.code == 0, r.err
     assert "1 parameter restored" in r.out and "no checksum" in r.err
-    assert "interrupted" not in r.err           # the restore's own journal record is not taken for a dead one's
+    assert "interrupted" not in r.err  # the restore's own journal record is not taken for a dead one's
     assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 22.5
 
 
@@ -75,8 +77,9 @@ def test_raw_read_and_write_by_address(cli):
 
 
 def _complete(cli, words: str) -> list[str]:
-    r = cli(env={"_SERVOTOOL_COMPLETE": "complete_bash", "COMP_WORDS": words,
-                 "COMP_CWORD": str(len(words.split()) - 1)})
+    r = cli(
+        env={"_SERVOTOOL_COMPLETE": "complete_bash", "COMP_WORDS": words, "COMP_CWORD": str(len(words.split()) - 1)}
+    )
     return r.out.split()
 
 
@@ -91,14 +94,20 @@ def _stderr_on_a_terminal(*args: str) -> str:
     """Run servotool with stderr on a pseudo-terminal (where progress bars show); what it wrote there."""
     pty = pytest.importorskip("pty")
     master, slave = pty.openpty()
-    subprocess.run([sys.executable, "-m", "servotool", *args], stdout=subprocess.DEVNULL, stderr=slave,
-                   env={**os.environ, "COLUMNS": "100"}, timeout=60, check=False)
+    subprocess.run(
+        [sys.executable, "-m", "servotool", *args],
+        stdout=subprocess.DEVNULL,
+        stderr=slave,
+        env={**os.environ, "COLUMNS": "100"},
+        timeout=60,
+        check=False,
+    )
     os.close(slave)
     seen = b""
     while True:
         try:
             chunk = os.read(master, 65536)
-        except OSError:          # the other end is closed: all read
+        except OSError:  # the other end is closed: all read
             break
         if not chunk:
             break
@@ -113,7 +122,7 @@ def test_diff_and_restore_show_progress_while_reading_the_drive(cli, tmp_path):
     cli("--port", "sim", "param", "set", "Pn101=25")
     assert "reading the drive" in _stderr_on_a_terminal("--port", "sim", "param", "diff", "--factory")
     shown = _stderr_on_a_terminal("--port", "sim", "param", "restore", str(backup), "--yes")
-    assert "automatic backup, then writing" in shown and "109/109" in shown      # 108 read, 1 written
+    assert "automatic backup, then writing" in shown and "109/109" in shown  # 108 read, 1 written
 
 
 def test_raw_write_on_a_real_port_asks_first(cli):

@@ -35,7 +35,7 @@ def test_a_plain_table_is_drawn_as_rich_draws_it(seed):
     t = _grid(rng)
     width = rng.choice([40, 80, render.UNLIMITED])
     drawn = t.plain(width)
-    if drawn is None:       # only for a cell with spaces at an end, a table to fit or a title wider than it
+    if drawn is None:  # only for a cell with spaces at an end, a table to fit or a title wider than it
         spaced = any(c != c.strip() for col in t.columns for c in col._cells)
         assert spaced or render.fit(t, width) is not t or len(t.title or "") > 0
         return
@@ -49,12 +49,13 @@ def test_cells_rich_would_change_go_to_rich():
         assert t.plain(render.UNLIMITED) is None
 
 
-@pytest.mark.parametrize("text", ["servotool: SIMULATED drive (unit 1)", "a [bold]b[/bold] c", "x:smile:y", "",
-                                  "two\nlines", "µs 中文"])
+@pytest.mark.parametrize(
+    "text", ["servotool: SIMULATED drive (unit 1)", "a [bold]b[/bold] c", "x:smile:y", "", "two\nlines", "µs 中文"]
+)
 def test_a_plain_line_is_printed_as_rich_prints_it(text, monkeypatch):
     screen = io.StringIO()
     monkeypatch.setattr("sys.stderr", screen)
     stream = render._Stream(stderr=True)
     stream.print(text, markup=False)
-    assert stream._console is None          # no rich needed
+    assert stream._console is None  # no rich needed
     assert screen.getvalue() == _rich(text, render.UNLIMITED, markup=False, soft_wrap=True)

@@ -33,4 +33,4 @@ def test_no_identity_check_overrides(cli, sd25, how):
     args, env = (["--no-identity-check"], None) if how == "flag" else ([], {"SERVOTOOL_NO_IDENTITY_CHECK": "1"})
     r = cli("--port", port, "-P", "sdc", *args, "param", "set", "PN17=300", env=env)
     assert r.code == 0, r.err
-    assert drive.bank.value("Po017") == 300      # what the override is for: the user takes the risk
+    assert drive.bank.value("Po017") == 300  # what the override is for: the user takes the risk

@@ -24,13 +24,19 @@ def test_installed_wheel_lists_its_profiles_from_another_directory(tmp_path):
     pip = [sys.executable, "-m", "pip", "-q", "--disable-pip-version-check"]
     subprocess.run([*pip, "wheel", "--no-deps", "-w", str(wheels), str(src)], check=True, capture_output=True)
     (wheel,) = wheels.glob("servotool-*.whl")
-    subprocess.run([*pip, "install", "--no-deps", "--target", str(target), str(wheel)], check=True,
-                   capture_output=True)
-    env = {**os.environ, "PYTHONPATH": str(target), "SERVOTOOL_SIM_DIR": str(tmp_path / "sim"),
-           "SERVOTOOL_CONFIG": str(tmp_path / "none.yaml")}
-    code = ("import servotool, sys; assert servotool.__file__.startswith(sys.argv[1]), servotool.__file__; "
-            "from servotool.cli.main import run; sys.argv = ['servotool', 'profiles', 'list', '--json']; run()")
-    proc = subprocess.run([sys.executable, "-c", code, str(target)], cwd=elsewhere, env=env, capture_output=True,
-                          text=True)
+    subprocess.run([*pip, "install", "--no-deps", "--target", str(target), str(wheel)], check=True, capture_output=True)
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(target),
+        "SERVOTOOL_SIM_DIR": str(tmp_path / "sim"),
+        "SERVOTOOL_CONFIG": str(tmp_path / "none.yaml"),
+    }
+    code = (
+        "import servotool, sys; assert servotool.__file__.startswith(sys.argv[1]), servotool.__file__; "
+        "from servotool.cli.main import run; sys.argv = ['servotool', 'profiles', 'list', '--json']; run()"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(target)], cwd=elsewhere, env=env, capture_output=True, text=True
+    )
     assert proc.returncode == 0, proc.stderr
     assert {"dsx7e", "sd25", "is620p", "sdc"} <= {p["id"] for p in json.loads(proc.stdout)}

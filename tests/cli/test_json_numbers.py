@@ -26,7 +26,7 @@ def test_tune_json_gives_entry_values_and_rounded_figures(cli):
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--rigidity", "13")
     assert r.code == 0, r.err
     data = r.json()
-    assert isinstance(data["parameter_value"], int)                  # Pn004 in %, not 300.0
+    assert isinstance(data["parameter_value"], int)  # Pn004 in %, not 300.0
     rigidity = next(g for g in data["gains"] if g["code"] == "Pn003")
     assert isinstance(rigidity["old"], int) and rigidity["new"] == 13
     assert all(len(repr(abs(f)).replace(".", "").lstrip("0")) <= 8 for f in _floats(data)), data

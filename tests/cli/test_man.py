@@ -34,8 +34,11 @@ def test_every_command_and_option_is_in_the_man_page():
             missing.append(path)
         for p in cmd.params:
             for opt in getattr(p, "opts", []):
-                if opt.startswith("-") and p.name not in ("help", "install_completion", "show_completion") \
-                        and opt not in text:
+                if (
+                    opt.startswith("-")
+                    and p.name not in ("help", "install_completion", "show_completion")
+                    and opt not in text
+                ):
                     missing.append(f"{path} {opt}")
     assert not missing, f"not in man/servotool.1 (run python man/build.py): {missing}"
 
@@ -44,7 +47,7 @@ def test_man_page_is_generated_from_the_current_cli():
     spec = importlib.util.spec_from_file_location("build", PAGE.with_name("build.py"))
     build = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(build)
-    strip = lambda t: re.sub(r'^\.TH .*$', "", t, flags=re.M)  # noqa: E731 - the date line changes monthly
+    strip = lambda t: re.sub(r"^\.TH .*$", "", t, flags=re.M)  # noqa: E731 - the date line changes monthly
     assert strip(build.render()) == strip(PAGE.read_text()), "man page out of date: run python man/build.py"
 
 
@@ -58,6 +61,6 @@ def test_every_plan_step_is_documented():
     from servotool.commission.plan import STEP_NAMES, TUNE_KEYS
 
     text = _plain(PAGE.read_text())
-    section = text[text.index(".SH PLAN FILES"):text.index(".SH SHELL COMPLETION")]
+    section = text[text.index(".SH PLAN FILES") : text.index(".SH SHELL COMPLETION")]
     assert all(f"{name}:" in section for name in STEP_NAMES), section
     assert all(f"{key}:" in section for key in TUNE_KEYS), section

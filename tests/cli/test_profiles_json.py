@@ -42,8 +42,7 @@ def test_every_entry_can_be_encoded_from_the_json(cli, pid):
             lows = {f["name"]: f["range"][0] for f in e["fields"]}
             highs = {f["name"]: f["range"][1] for f in e["fields"]}
             assert pack_fields(e, lows) <= pack_fields(e, highs)
-            assert all(f["width"] in (4, 8) and set(f) >= {"name", "bit_offset", "range", "enum"}
-                       for f in e["fields"])
+            assert all(f["width"] in (4, 8) and set(f) >= {"name", "bit_offset", "range", "enum"} for f in e["fields"])
 
 
 def test_field_layout_matches_a_manual_example(cli):

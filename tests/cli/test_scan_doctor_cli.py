@@ -11,8 +11,9 @@ from servotool.sim.server import EmbeddedSim
 
 @pytest.fixture
 def line():
-    sim = EmbeddedSim([build_drive(load_profile("sdc"), 2, persist=False),
-                       build_drive(load_profile("is620p"), 4, persist=False)])
+    sim = EmbeddedSim(
+        [build_drive(load_profile("sdc"), 2, persist=False), build_drive(load_profile("is620p"), 4, persist=False)]
+    )
     yield sim.port
     sim.close()
 
@@ -20,7 +21,7 @@ def line():
 def test_scan_finds_two_drives_table_and_json(cli, line):
     r = cli("scan", "--port", line, "--units", "1-5")
     assert r.code == 0, r.err
-    rows = [ln for ln in r.out.splitlines() if line in ln and "│" in ln]       # table rows, not the title
+    rows = [ln for ln in r.out.splitlines() if line in ln and "│" in ln]  # table rows, not the title
     assert len(rows) == 2 and "sdc" in rows[0] and "SDC" in rows[0] and "4007" in rows[0]
     assert "is620p" in rows[1] and "IS620P" in rows[1]
     r = cli("scan", "--port", line, "--units", "1-5", "--json")
@@ -45,7 +46,7 @@ def test_doctor_prints_its_figures_and_json(cli, line):
     data = r.json()
     assert data["requests"] == 5 and data["answered"] == 5 and data["failures"] == 0 and data["echo"] is False
     assert data["rtt_ms"]["min"] <= data["rtt_ms"]["median"] <= data["rtt_ms"]["max"]
-    assert data["achieved_rate"] > 0 and data["theoretical_rate"] is None     # no line settings over tcp
+    assert data["achieved_rate"] > 0 and data["theoretical_rate"] is None  # no line settings over tcp
 
 
 def test_doctor_counts_failures_of_a_silent_unit(cli, line):
@@ -59,6 +60,6 @@ def test_scan_table_fits_80_columns_one_row_per_drive(cli, line):
     r = cli("scan", "--port", line, "--units", "1-5", env={"COLUMNS": "80"})
     assert r.code == 0, r.err
     lines = r.out.splitlines()
-    assert max(len(ln) for ln in lines) <= 80 and line in lines[0]        # the port is named in the title
+    assert max(len(ln) for ln in lines) <= 80 and line in lines[0]  # the port is named in the title
     rows = [ln for ln in lines if "is620p" in ln]
-    assert len(rows) == 1 and "IS620P" in rows[0]                         # a table row, not a block per drive
+    assert len(rows) == 1 and "IS620P" in rows[0]  # a table row, not a block per drive

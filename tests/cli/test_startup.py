@@ -26,8 +26,14 @@ run()
 
 
 def loaded(env: dict[str, str], *args: str, probe: str = PROBE) -> list[str]:
-    r = subprocess.run([sys.executable, "-c", probe, *args], capture_output=True, text=True, cwd=ROOT,
-                       env={**os.environ, **env}, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", probe, *args],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, **env},
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr
     line = next(x for x in r.stderr.splitlines() if x.startswith("LOADED "))
     return json.loads(line.removeprefix("LOADED "))
@@ -35,7 +41,7 @@ def loaded(env: dict[str, str], *args: str, probe: str = PROBE) -> list[str]:
 
 def test_param_get_loads_no_numpy_pydantic_yaml_or_other_commands(sim_dir, tmp_path):
     env = {"SERVOTOOL_CACHE_DIR": str(tmp_path / "cache")}
-    loaded(env, "--port", "sim", "param", "get", "Pn004")          # the first run compiles the profile
+    loaded(env, "--port", "sim", "param", "get", "Pn004")  # the first run compiles the profile
     assert loaded(env, "--port", "sim", "param", "get", "Pn004") == []
 
 
@@ -44,10 +50,10 @@ def test_param_get_on_a_real_port_loads_no_modbus_library_asyncio_or_file_lock(s
     from servotool.sim.firmware import build_drive
     from servotool.sim.server import EmbeddedSim
 
-    sim = EmbeddedSim([build_drive(load_profile("dsx7e"), 1, persist=False)])    # this process serves the drive
+    sim = EmbeddedSim([build_drive(load_profile("dsx7e"), 1, persist=False)])  # this process serves the drive
     env = {"SERVOTOOL_CACHE_DIR": str(tmp_path / "cache")}
     names = ("pymodbus", "asyncio", "filelock")
-    probe = PROBE.replace('"numpy", ', f"*{names!r}, \"numpy\", ")
+    probe = PROBE.replace('"numpy", ', f'*{names!r}, "numpy", ')
     try:
         args = ("--port", sim.port, "-P", "dsx7e", "param", "get", "Pn004")
         loaded(env, *args)
@@ -78,14 +84,15 @@ run()
 
 
 def ended(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-c", EXIT_PROBE, *args], capture_output=True, text=True, cwd=ROOT,
-                          timeout=120)
+    return subprocess.run(
+        [sys.executable, "-c", EXIT_PROBE, *args], capture_output=True, text=True, cwd=ROOT, timeout=120
+    )
 
 
 def test_a_one_shot_ends_after_its_exit_handlers_without_tearing_the_interpreter_down(sim_dir):
     r = ended("--port", "sim", "param", "get", "Pn004", "--json")
     assert r.returncode == 0 and json.loads(r.stdout)[0]["code"] == "Pn004"
-    assert "ATEXIT" in r.stderr and "TEARDOWN" not in r.stderr      # the teardown took ~20 ms
+    assert "ATEXIT" in r.stderr and "TEARDOWN" not in r.stderr  # the teardown took ~20 ms
     r = ended("--port", "sim", "param", "get", "Pn999")
     assert r.returncode == 2 and "unknown code" in r.stderr and "ATEXIT" in r.stderr
 

@@ -39,19 +39,22 @@ def test_a_trace_as_json_and_a_trigger_that_never_fires(cli):
     assert r.code == 0, r.err
     cap = r.json()["captures"][0]
     assert cap["samples"] == 5 and cap["values"]["Un000"]["unit"] == "rpm" and cap["rate_hz"] > 0
-    assert all(type(v) is int for v in cap["values"]["Un000"]["values"])      # rpm in steps of 1: -2, not -2.0
+    assert all(type(v) is int for v in cap["values"]["Un000"]["values"])  # rpm in steps of 1: -2, not -2.0
     r = cli("--port", "sim", "trace", "Un000", "--trigger", "Un000>1000", "--timeout", "0.3")
     assert r.code == 1 and "the trigger did not fire within --timeout; Un000 ranged" in r.err
     assert "Traceback" not in r.err
 
 
-@pytest.mark.parametrize("args, message", [
-    (("trace", "--trigger", "Un000=3"), "bad --trigger"),
-    (("trace", "--pre", "100"), "0..99 %"),
-    (("trace", "--samples", "10", "--duration", "1"), "not both"),
-    (("trace", "--repeat", "-1"), "bad --repeat"),
-    (("trace", "Pn999"), "Pn999"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (("trace", "--trigger", "Un000=3"), "bad --trigger"),
+        (("trace", "--pre", "100"), "0..99 %"),
+        (("trace", "--samples", "10", "--duration", "1"), "not both"),
+        (("trace", "--repeat", "-1"), "bad --repeat"),
+        (("trace", "Pn999"), "Pn999"),
+    ],
+)
 def test_bad_trace_options_fail_before_the_port_opens(cli, args, message):
     r = cli(*NO_PORT, *args)
     assert r.code == 2 and message in r.err and len(r.err.strip().splitlines()) == 1, r.err
@@ -79,10 +82,10 @@ def test_jog_trace_records_its_own_motion_on_the_same_port(cli, tmp_path):
     assert r.code == 0, r.err
     table = read_table(out)
     speed = next(s for s in table.series if s.label == "Un000 [rpm]")
-    assert max(speed.values) > 250 and abs(speed.values[-1]) < 20         # it ran and stopped
+    assert max(speed.values) > 250 and abs(speed.values[-1]) < 20  # it ran and stopped
     assert len(table.t) > 20 and json.loads(r.out)["peak_speed_rpm"] > 250
     position = next(s for s in table.series if s.name == "Un012")
-    assert position.values[-1] > position.values[0]                        # exact counts, moving forward
+    assert position.values[-1] > position.values[0]  # exact counts, moving forward
 
 
 def test_tune_report_is_refused_before_anything_moves_where_it_cannot_be_written(cli, tmp_path):
@@ -112,14 +115,19 @@ def test_the_monitor_chart_is_readable_at_80_columns_with_every_entry_in_a_legen
     text = "\n".join(lines)
     for label in ("Un000 [rpm]", "Un001 [rpm]", "Un002 [%]"):
         assert label in text
-    assert "30 samples" in lines[0] and "not drawn" not in text           # title; two units fit in 30 rows
+    assert "30 samples" in lines[0] and "not drawn" not in text  # title; two units fit in 30 rows
 
 
 def test_ctrl_c_writes_the_captures_taken_and_exits_130(sim_dir):
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", "sim", "trace", "Un000", "--samples", "20",
-                             "--repeat", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servotool", "--port", "sim", "trace", "Un000", "--samples", "20", "--repeat", "0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
     try:
-        while "capture 1:" not in proc.stderr.readline():      # one capture taken (--repeat 0: until Ctrl-C)
+        while "capture 1:" not in proc.stderr.readline():  # one capture taken (--repeat 0: until Ctrl-C)
             assert proc.poll() is None
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=30)

@@ -75,14 +75,17 @@ def test_the_fake_windows_blocks_the_posix_modules(windows):
     assert "No module named 'termios'" in r.stderr
 
 
-@pytest.mark.parametrize("args", [
-    ("--help",),
-    ("--port", "sim", "param", "get", "Pn004"),
-    ("--port", "sim", "param", "set", "Pn101=20"),
-    ("--port", "sim", "param", "backup", "-o", "b.yaml"),
-    ("--port", "sim", "monitor", "--once", "Un000"),
-    ("--port", "sim", "jog", "--speed", "100", "--time", "0.2"),
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("--help",),
+        ("--port", "sim", "param", "get", "Pn004"),
+        ("--port", "sim", "param", "set", "Pn101=20"),
+        ("--port", "sim", "param", "backup", "-o", "b.yaml"),
+        ("--port", "sim", "monitor", "--once", "Un000"),
+        ("--port", "sim", "jog", "--speed", "100", "--time", "0.2"),
+    ],
+)
 def test_main_commands_run_on_windows(windows, args):
     r = windows(*args)
     assert r.returncode == 0, r.stderr
@@ -100,8 +103,8 @@ def test_a_plan_runs_on_windows(windows, tmp_path):
 def fake_msvcrt(monkeypatch: pytest.MonkeyPatch, typed: str) -> Iterator[None]:
     pending = list(typed)
     module = type(sys)("msvcrt")
-    module.kbhit = lambda: bool(pending)              # type: ignore[attr-defined]
-    module.getwch = lambda: pending.pop(0)             # type: ignore[attr-defined]
+    module.kbhit = lambda: bool(pending)  # type: ignore[attr-defined]
+    module.getwch = lambda: pending.pop(0)  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "msvcrt", module)
     monkeypatch.setattr(sys, "platform", "win32")
     yield

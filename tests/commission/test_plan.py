@@ -37,17 +37,17 @@ def test_plan_commissions_two_axes_end_to_end(cli, tmp_path):
     r = cli("run", str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     report = r.json()
-    assert report["ok"] and len(report["steps"]) == 13          # 7 steps x 2 units, one step on unit 2 only
+    assert report["ok"] and len(report["steps"]) == 13  # 7 steps x 2 units, one step on unit 2 only
     tuned = {s["unit"]: s["ratio"] for s in report["steps"] if s["name"] == "tune inertia"}
     assert tuned[1] == pytest.approx(2.0, abs=0.15) and tuned[2] == pytest.approx(6.0, rel=0.05)
     assert json.loads((tmp_path / "plan.report.json").read_text())["ok"]
     for unit in (1, 2):
         assert (tmp_path / f"axis-{unit}.yaml").exists()
-    assert [s["unit"] for s in report["steps"] if s["line"] == 7] == [2]      # `unit: 2` step
+    assert [s["unit"] for s in report["steps"] if s["line"] == 7] == [2]  # `unit: 2` step
     first = report["steps"][0]
-    assert first["name"] == "set" and first["written"] == {"Pn101": 25.0, "Pn512": 150}   # numbers, as in param get
+    assert first["name"] == "set" and first["written"] == {"Pn101": 25.0, "Pn512": 150}  # numbers, as in param get
     r = cli("--port", "sim", "--unit", "2", "param", "get", "Pn004", "--json")
-    assert r.json()[0]["value"] == pytest.approx(700, rel=0.05)            # (1 + 6) x 100 %
+    assert r.json()[0]["value"] == pytest.approx(700, rel=0.05)  # (1 + 6) x 100 %
 
 
 def test_dry_run_touches_nothing(cli, tmp_path):
@@ -62,39 +62,44 @@ def test_dry_run_touches_nothing(cli, tmp_path):
     assert not (tmp_path / "axis-1.yaml").exists() and not (tmp_path / "plan.report.json").exists()
 
 
-@pytest.mark.parametrize(("text", "message"), [
-    ("port: sim\nsteps:\n  - set: {Pn101: 25\n", "invalid YAML"),
-    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - reboot: now\n", ":4: step 2: unknown step"),
-    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - set: {Pn999: 1}\n", "line 4): unknown code 'Pn999'"),
-    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - set: {Pn100: 99999}\n", "line 4): Pn100 (Position loop gain): value"
-     " 99999 is out of range"),
-    ("port: sim\nsteps:\n  - expect: {Pn101: {value: 1, within: 2}}\n", "unknown expect key"),
-    ("port: sim\ncolour: red\nsteps:\n  - wait: 1\n", ":2: unknown key 'colour'"),
-    ("port: sim\nsteps:\n  - wait: 1\nsteps:\n  - wait: 2\n", ":4: 'steps' is given twice"),
-    ("port: sim\nbaud: fast\nsteps:\n  - wait: 1\n", ":2: baud must be a whole number"),
-    ("port: sim\nunits: [1, 1]\nsteps:\n  - wait: 1\n", "units must be a list of different unit ids"),
-    ("port: sim\nunits: [true]\nsteps:\n  - wait: 1\n", "units must be a list"),
-    ("port: sim\nsteps:\n  - wait: 1\n    unit: 9\n", "needs the plan's 'units:' list"),
-    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - jog: {speed: fast, time: 1}\n", "jog speed must be a number"),
-    ("port: sim\nsteps:\n  - jog: {speed: 600, time: 10, max_travel: 5}\n", "over its max_travel 5 rev"),
-    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - tune inertia: {rigidity: 99}\n", "rigidity must be 0..31"),
-    ("port: sim\nsteps:\n  - tune inertia: {rigidity: 12, bandwidth: 20}\n", "exactly one of rigidity"),
-    ("port: sim\nsteps:\n  - tune inertia: {repeats: many}\n", "repeats must be a number"),
-    ("port: sim\nsteps:\n  - tune inertia: {travel: 0.05}\n", "too small for an identification"),
-    ("port: sim\nsteps:\n  - expect: {Un000: {}}\n", "give value (and tol) or min and/or max"),
-    ("port: sim\nsteps:\n  - expect: {Un000: {value: 0, tol: -1}}\n", "tol must be >= 0"),
-    ("port: sim\nsteps:\n  - expect: {Un000: {min: 5, max: 1}}\n", "min 5 is above max 1"),
-    ("port: sim\nsteps:\n  - alarm clear: now\n", "takes no argument"),
-    ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - prompt: Ready?\n", "operator prompts: run it in a terminal"),
-    ("port: sim\nsteps:\n  - wait: -1\n", "wait takes seconds"),
-    ("port: sim\nsteps: []\n", "non-empty list"),
-])
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("port: sim\nsteps:\n  - set: {Pn101: 25\n", "invalid YAML"),
+        ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - reboot: now\n", ":4: step 2: unknown step"),
+        ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - set: {Pn999: 1}\n", "line 4): unknown code 'Pn999'"),
+        (
+            "port: sim\nsteps:\n  - set: {Pn101: 25}\n  - set: {Pn100: 99999}\n",
+            "line 4): Pn100 (Position loop gain): value 99999 is out of range",
+        ),
+        ("port: sim\nsteps:\n  - expect: {Pn101: {value: 1, within: 2}}\n", "unknown expect key"),
+        ("port: sim\ncolour: red\nsteps:\n  - wait: 1\n", ":2: unknown key 'colour'"),
+        ("port: sim\nsteps:\n  - wait: 1\nsteps:\n  - wait: 2\n", ":4: 'steps' is given twice"),
+        ("port: sim\nbaud: fast\nsteps:\n  - wait: 1\n", ":2: baud must be a whole number"),
+        ("port: sim\nunits: [1, 1]\nsteps:\n  - wait: 1\n", "units must be a list of different unit ids"),
+        ("port: sim\nunits: [true]\nsteps:\n  - wait: 1\n", "units must be a list"),
+        ("port: sim\nsteps:\n  - wait: 1\n    unit: 9\n", "needs the plan's 'units:' list"),
+        ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - jog: {speed: fast, time: 1}\n", "jog speed must be a number"),
+        ("port: sim\nsteps:\n  - jog: {speed: 600, time: 10, max_travel: 5}\n", "over its max_travel 5 rev"),
+        ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - tune inertia: {rigidity: 99}\n", "rigidity must be 0..31"),
+        ("port: sim\nsteps:\n  - tune inertia: {rigidity: 12, bandwidth: 20}\n", "exactly one of rigidity"),
+        ("port: sim\nsteps:\n  - tune inertia: {repeats: many}\n", "repeats must be a number"),
+        ("port: sim\nsteps:\n  - tune inertia: {travel: 0.05}\n", "too small for an identification"),
+        ("port: sim\nsteps:\n  - expect: {Un000: {}}\n", "give value (and tol) or min and/or max"),
+        ("port: sim\nsteps:\n  - expect: {Un000: {value: 0, tol: -1}}\n", "tol must be >= 0"),
+        ("port: sim\nsteps:\n  - expect: {Un000: {min: 5, max: 1}}\n", "min 5 is above max 1"),
+        ("port: sim\nsteps:\n  - alarm clear: now\n", "takes no argument"),
+        ("port: sim\nsteps:\n  - set: {Pn101: 25}\n  - prompt: Ready?\n", "operator prompts: run it in a terminal"),
+        ("port: sim\nsteps:\n  - wait: -1\n", "wait takes seconds"),
+        ("port: sim\nsteps: []\n", "non-empty list"),
+    ],
+)
 def test_broken_plans_are_refused_before_any_write(cli, tmp_path, text, message):
     plan = tmp_path / "plan.yaml"
     plan.write_text(text)
     r = cli("-v", "run", str(plan), *(() if "prompt" in text else ("--yes",)))
     assert r.code == 2, r.err
-    assert len(r.err.strip().splitlines()) <= 2, r.err       # the error (and the SIMULATED notice)
+    assert len(r.err.strip().splitlines()) <= 2, r.err  # the error (and the SIMULATED notice)
     assert message in r.err, r.err
     assert ">> 01 06" not in r.err and ">> 01 10" not in r.err
     assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
@@ -118,7 +123,7 @@ def test_save_on_a_drive_that_keeps_writes_in_ram_stores_what_the_plan_wrote(cli
     assert cli("sim", "reset", "-P", "sd25", "--power-cycle").code == 0
     r = cli("--port", "sim", "-P", "sd25", "param", "get", "Po101", "Po102", "Po505", "--json")
     assert [v["value"] for v in r.json()[:2]] == [45.0, 30.0]
-    assert r.json()[2]["raw"] == 0x0101                       # the switch is left as it was (RAM only)
+    assert r.json()[2]["raw"] == 0x0101  # the switch is left as it was (RAM only)
 
 
 def test_unit_option_selects_one_of_the_plan_axes_and_a_silent_unit_stops_before_any_write(cli, tmp_path):
@@ -154,12 +159,14 @@ def test_every_step_name_has_one_step_type():
 
 def test_tune_steps_get_the_automatic_motion_unless_the_plan_sets_it(cli, tmp_path):
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nsteps:\n  - tune inertia: {rigidity: 12}\n"
-                    "  - tune inertia: {repeats: 3, accel_time: 200, gains: false}\n")
+    plan.write_text(
+        "port: sim\nsteps:\n  - tune inertia: {rigidity: 12}\n"
+        "  - tune inertia: {repeats: 3, accel_time: 200, gains: false}\n"
+    )
     r = cli("run", str(plan), "--dry-run", "--json")
     assert r.code == 0, r.err
     auto, fixed = (s["would"] for s in r.json()["steps"])
-    assert auto.startswith("tune inertia: up to 20 x (forward then reverse)")    # repeated until precise
+    assert auto.startswith("tune inertia: up to 20 x (forward then reverse)")  # repeated until precise
     assert "3 x (forward then reverse)" in fixed and "200 ms ramps" in fixed and "gains left as they are" in fixed
 
 
@@ -169,8 +176,10 @@ def test_a_tune_step_measures_a_drive_without_an_inertia_ratio_parameter_like_th
     plan = tmp_path / "plan.yaml"
     # max_speed: a stall of this process on a busy machine at the automatic speed (1.8 of the 2 rev per move) trips
     # the travel guard now and then (see tests/ops/test_eeprom.py); not issue 16's hold oscillation, which is gone
-    plan.write_text("port: sim\nprofile: sdc\nsteps:\n  - set: {PN4: 3}\n"
-                    "  - tune inertia: {gains: false, max_speed: 600, no_dead_man: true}\n")
+    plan.write_text(
+        "port: sim\nprofile: sdc\nsteps:\n  - set: {PN4: 3}\n"
+        "  - tune inertia: {gains: false, max_speed: 600, no_dead_man: true}\n"
+    )
     r = cli("run", str(plan), "--dry-run")
     assert r.code == 0 and "reported, not written" in r.out, r.err
     r = cli("run", str(plan), "--yes", "--json")
@@ -186,10 +195,12 @@ def test_a_tune_step_writes_by_the_drives_eeprom_rule_like_the_command(cli, tmp_
     cli("sim", "config", "--profile", "is620p", "--load-ratio", "4")
     before = cli("--port", "sim", "-P", "is620p", "param", "get", "H08-15", "--json").json()[0]["value"]
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nprofile: is620p\nsteps:\n"
-                    "  - set: {H02-00: 1, H05-00: 2, H05-02: 10000, H11-00: 0, H0C-09: 1, H17-00: 1, H17-02: 28, "
-                    "H0C-13: 0}\n"
-                    "  - tune inertia: {gains: false, max_speed: 600}\n")   # as above: host stalls
+    plan.write_text(
+        "port: sim\nprofile: is620p\nsteps:\n"
+        "  - set: {H02-00: 1, H05-00: 2, H05-02: 10000, H11-00: 0, H0C-09: 1, H17-00: 1, H17-02: 28, "
+        "H0C-13: 0}\n"
+        "  - tune inertia: {gains: false, max_speed: 600}\n"
+    )  # as above: host stalls
     r = cli("run", str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     tuned = r.json()["steps"][1]
@@ -223,7 +234,7 @@ def test_a_plan_backs_up_every_axis_first_and_its_report_says_where_it_stopped(c
     autos = data["auto_backups"]
     assert sorted(autos) == ["1", "2"] and all("before-plan" in f for f in autos.values())
     r = cli("--port", "sim", "param", "diff", autos["1"], "--json")
-    assert [d["code"] for d in r.json()["differences"]] == ["Pn101"]     # taken before the set step
+    assert [d["code"] for d in r.json()["differences"]] == ["Pn101"]  # taken before the set step
 
 
 def test_a_backup_step_never_overwrites_unless_the_step_says_so(cli, tmp_path):
@@ -242,8 +253,10 @@ def test_a_backup_step_never_overwrites_unless_the_step_says_so(cli, tmp_path):
 
 def test_validation_reports_every_problem_of_a_plan_in_one_pass(cli, tmp_path):
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nsteps:\n  - set: {Pn999: 1}\n  - reboot: now\n  - wait: -1\n"
-                    "  - set: {Pn100: 99999}\n  - alarm clear: now\n")
+    plan.write_text(
+        "port: sim\nsteps:\n  - set: {Pn999: 1}\n  - reboot: now\n  - wait: -1\n"
+        "  - set: {Pn100: 99999}\n  - alarm clear: now\n"
+    )
     r = cli("run", str(plan), "--yes")
     assert r.code == 2 and "5 problems" in r.err, r.err
     for text in ("Pn999", "unknown step", "wait takes seconds", "out of range", "takes no argument"):
@@ -268,17 +281,21 @@ def test_after_kill_9_the_report_reads_interrupted_and_the_next_run_says_so(cli,
 
     plan, report = tmp_path / "plan.yaml", tmp_path / "plan.report.json"
     plan.write_text("port: sim\nsteps:\n  - expect: {Un100: 0}\n  - wait: 60\n")
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "run", str(plan)], cwd=ROOT,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servotool", "run", str(plan)],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 60
         while not (report.exists() and json.loads(report.read_text())["steps"]) and time.monotonic() < deadline:
-            time.sleep(0.1)                       # the first step is done: the run waits in step 2
+            time.sleep(0.1)  # the first step is done: the run waits in step 2
         assert read_report(report)["status"] == "running"
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
-    assert json.loads(report.read_text())["status"] == "running"       # what the killed process left
+    assert json.loads(report.read_text())["status"] == "running"  # what the killed process left
     assert read_report(report)["status"] == STALE
     plan.write_text("port: sim\nsteps:\n  - expect: {Un100: 0}\n")
     r = cli("run", str(plan), "--json")

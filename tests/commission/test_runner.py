@@ -19,15 +19,22 @@ def virtual_runner(tmp_path, steps: str) -> tuple[Runner, VirtualClock]:
     clock = VirtualClock(5000.0)
     profile = load_profile("dsx7e")
     drive = Drive(VirtualLink([build_drive(profile, 1, clock, persist=False)], clock), profile, 1)
-    runner = Runner(load_plan(plan_file), [drive], yes=True, continue_on_error=False, ask=lambda _u, _q: True,
-                    log=lambda _line: None, clock=clock)
+    runner = Runner(
+        load_plan(plan_file),
+        [drive],
+        yes=True,
+        continue_on_error=False,
+        ask=lambda _u, _q: True,
+        log=lambda _line: None,
+        clock=clock,
+    )
     return runner, clock
 
 
 def test_a_wait_step_and_the_report_run_on_the_runners_clock(tmp_path):
     runner, clock = virtual_runner(tmp_path, "  - wait: 3600\n  - expect: {Un100: 0}\n")
     report = Report(tmp_path / "r.json", runner, profile="dsx7e", port="virtual", units=[1])
-    assert runner.run()                          # an hour of virtual time: no real waiting
+    assert runner.run()  # an hour of virtual time: no real waiting
     data = report.final(True)
     assert clock.now() >= 8600 and runner.results[0].seconds == 3600
     assert data["seconds"] >= 3600 and json.loads((tmp_path / "r.json").read_text())["status"] == "ok"
@@ -48,9 +55,9 @@ def test_a_running_report_whose_process_is_gone_reads_as_interrupted(tmp_path):
     report = {"status": "running", "ok": False, "pid": gone.pid, "host": socket.gethostname(), "steps": [{}]}
     path.write_text(json.dumps(report))
     assert read_report(path)["status"] == STALE and read_report(path)["ok"] is False
-    path.write_text(json.dumps({**report, "pid": os.getpid()}))              # still under way
+    path.write_text(json.dumps({**report, "pid": os.getpid()}))  # still under way
     assert read_report(path)["status"] == "running"
-    path.write_text(json.dumps({**report, "host": "another-host"}))          # cannot be told from here
+    path.write_text(json.dumps({**report, "host": "another-host"}))  # cannot be told from here
     assert read_report(path)["status"] == "running"
     path.write_text(json.dumps(report))
     runner, _clock = virtual_runner(tmp_path, "  - wait: 1\n")

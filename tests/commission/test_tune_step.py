@@ -19,4 +19,4 @@ def test_a_plan_tune_step_without_rigidity_leaves_the_gains_as_they_were(cli, tm
     assert r.code == 0, r.err
     step = r.json()["steps"][0]
     assert step["ratio"] == pytest.approx(4.0, rel=0.05) and "gains" not in step
-    assert gains() == before                  # the ratio was written, the gains left alone
+    assert gains() == before  # the ratio was written, the gains left alone

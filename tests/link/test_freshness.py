@@ -65,7 +65,7 @@ class ScriptedLine:
             return frame
         count = int.from_bytes(frame[4:6], "big")
         for i in range(count):
-            self.regs[address + i] = int.from_bytes(frame[7 + 2 * i: 9 + 2 * i], "big")
+            self.regs[address + i] = int.from_bytes(frame[7 + 2 * i : 9 + 2 * i], "big")
         return with_crc(frame[:6])
 
 
@@ -138,7 +138,7 @@ def test_a_trigger_whose_acknowledgement_is_lost_is_never_sent_again():
 
 def test_an_acknowledgement_of_another_value_is_not_accepted():
     line = ScriptedLine({30: 0}, ["lost"])
-    line.inject(0.01, with_crc(bytes([1, 6, 0, 30, 0, 7])))     # a stray acknowledgement of another write
+    line.inject(0.01, with_crc(bytes([1, 6, 0, 30, 0, 7])))  # a stray acknowledgement of another write
     with pytest.raises(DeviceError, match="no reply that answers it after 1 try, last an acknowledgement of 7"):
         exchange(line, retries=0).write(1, 30, [9], multiple=False)
 
@@ -149,7 +149,7 @@ def test_tries_are_bounded(op):
     ex = exchange(line, retries=2)
     with pytest.raises(DeviceError, match=r"no response within 0\.1 s after 3 tries"):
         ex.read(1, 10, 1) if op == "read" else ex.write(1, 10, [2])
-    assert len(line.sent) == 3 and line.writes() == (1 if op == "write" else 0)    # a write, then read-backs
+    assert len(line.sent) == 3 and line.writes() == (1 if op == "write" else 0)  # a write, then read-backs
 
 
 def test_an_echoing_adapter_is_recognised_and_its_echo_never_taken_for_a_reply():
@@ -164,7 +164,7 @@ def test_an_echoing_adapter_is_recognised_and_its_echo_never_taken_for_a_reply()
     ex.write(1, 10, [5], multiple=False)
     assert line.regs[10] == 5 and ex.echo is True
     line.script.append("lost")
-    with pytest.raises(DeviceError, match="no response"):    # the echo alone is no acknowledgement
+    with pytest.raises(DeviceError, match="no response"):  # the echo alone is no acknowledgement
         ex.write(1, 10, [6], multiple=False)
 
 
@@ -188,15 +188,15 @@ class QueuedLine:
 def test_after_a_fault_an_exception_reply_counts_only_when_repeated():
     from servotool.errors import ModbusException
 
-    stale_02 = with_crc(bytes([1, 0x83, 2]))        # names no address: could answer any earlier read
+    stale_02 = with_crc(bytes([1, 0x83, 2]))  # names no address: could answer any earlier read
     data = with_crc(bytes([1, 3, 2, 0, 42]))
-    line = QueuedLine([b"", stale_02, data, data])      # after a fault, data is confirmed by a second read
+    line = QueuedLine([b"", stale_02, data, data])  # after a fault, data is confirmed by a second read
     ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=LineClock(line))
     with pytest.raises(DeviceError, match="no response"):
-        ex.read(1, 0x10, 1)                          # silent: its reply may still come
-    assert ex.read(1, 0x20, 1) == [42]               # the exception that came first was not believed
+        ex.read(1, 0x10, 1)  # silent: its reply may still come
+    assert ex.read(1, 0x20, 1) == [42]  # the exception that came first was not believed
     line = QueuedLine([stale_02, stale_02])
     ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=LineClock(line))
     with pytest.raises(ModbusException):
-        ex.read(1, 0x20, 1)                          # a clean line: believed at once
+        ex.read(1, 0x20, 1)  # a clean line: believed at once
     assert line.sent == 1

@@ -38,8 +38,16 @@ def exercise(profile, sim_drive, sim: EmbeddedSim, link: ModbusLink, seed: int) 
     rng = random.Random(seed)
     drive = Drive(link, profile, 1)
     params = [e for e in profile.of_class("Pn") if e.readable]
-    settable = [e for e in params if e.writable and not e.fields and not e.enum and not e.bits and e.max > e.min
-                and e.code not in profile.roles.values()]
+    settable = [
+        e
+        for e in params
+        if e.writable
+        and not e.fields
+        and not e.enum
+        and not e.bits
+        and e.max > e.min
+        and e.code not in profile.roles.values()
+    ]
     done, wrong = 0, []
     for i in range(16):
         try:
@@ -65,9 +73,9 @@ def test_no_fault_kind_makes_the_link_return_a_wrong_value(line, kind):
         done, wrong = exercise(profile, sim_drive, sim, link, seed=3)
     finally:
         link.close()
-    assert sim.proxy.applied.get(kind, 0) >= 3       # the line really was bad
+    assert sim.proxy.applied.get(kind, 0) >= 3  # the line really was bad
     assert wrong == []
-    assert done >= 8                                  # and the retries still got most operations through
+    assert done >= 8  # and the retries still got most operations through
 
 
 def test_an_echoing_adapter_on_a_bad_line_is_found_and_never_taken_for_the_drive(line):
@@ -84,8 +92,10 @@ def test_an_echoing_adapter_on_a_bad_line_is_found_and_never_taken_for_the_drive
 def test_a_trigger_without_an_acknowledgement_is_sent_once(line):
     profile, _sim_drive, sim = line
     sent: list[bytes] = []
-    link = ModbusLink(LinkSettings(sim.port, timeout=0.1, retries=2),
-                      trace=lambda sending, data: sent.append(data) if sending else None)
+    link = ModbusLink(
+        LinkSettings(sim.port, timeout=0.1, retries=2),
+        trace=lambda sending, data: sent.append(data) if sending else None,
+    )
     sim.proxy.set_faults(LineFaults({"drop": 1.0}))
     try:
         with pytest.raises(DeviceError, match=r"Fn030.*may or may not have run; not sent again"):

@@ -47,7 +47,7 @@ def test_reading_every_parameter_is_coalesced_within_the_drive_limit(sim_dir, pr
 def test_a_modbus_exception_names_the_entry_and_the_exception(cli, sim_dir):
     build_drive(load_profile("dsx7e"), 1).inject_fault("Pn101", 4)
     r = cli("--port", "sim", "param", "set", "Pn101=30")
-    assert r.code == 1 and len(r.err.strip().splitlines()) == 2     # the SIMULATED notice and the error
+    assert r.code == 1 and len(r.err.strip().splitlines()) == 2  # the SIMULATED notice and the error
     assert "Pn101" in r.err and "Modbus exception 04 (slave device failure)" in r.err
 
 
@@ -73,8 +73,20 @@ def test_a_crc_error_is_reported_as_a_garbled_response_not_as_silence(cli, sim_d
     sim = EmbeddedSim([build_drive(load_profile("dsx7e"), 1, persist=False)])
     try:
         port = _garbling_proxy(int(sim.port.rsplit(":", 1)[1]))
-        r = cli("--port", f"tcp://127.0.0.1:{port}", "-P", "dsx7e", "--timeout", "0.3", "--retries", "0",
-                "--no-identity-check", "param", "get", "Pn004")
+        r = cli(
+            "--port",
+            f"tcp://127.0.0.1:{port}",
+            "-P",
+            "dsx7e",
+            "--timeout",
+            "0.3",
+            "--retries",
+            "0",
+            "--no-identity-check",
+            "param",
+            "get",
+            "Pn004",
+        )
     finally:
         sim.close()
     assert r.code == 1 and len(r.err.strip().splitlines()) == 1

@@ -32,16 +32,19 @@ def refused_port() -> int:
     """A local TCP port where nothing listens (bound, never listening)."""
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
-    refused_port.keep = s          # type: ignore[attr-defined]   # held until the next call
+    refused_port.keep = s  # type: ignore[attr-defined]   # held until the next call
     return s.getsockname()[1]
 
 
-@pytest.mark.parametrize(("port", "cause"), [
-    ("/dev/ttyNOPE7", "not found: no such device"),
-    ("{file}", "not a serial device"),
-    ("tcp://no-such-host.invalid:502", "host name 'no-such-host.invalid' not found (DNS lookup failed"),
-    ("tcp://127.0.0.1:{refused}", "connection refused: nothing listens on 127.0.0.1:"),
-])
+@pytest.mark.parametrize(
+    ("port", "cause"),
+    [
+        ("/dev/ttyNOPE7", "not found: no such device"),
+        ("{file}", "not a serial device"),
+        ("tcp://no-such-host.invalid:502", "host name 'no-such-host.invalid' not found (DNS lookup failed"),
+        ("tcp://127.0.0.1:{refused}", "connection refused: nothing listens on 127.0.0.1:"),
+    ],
+)
 def test_a_port_that_will_not_open_names_the_cause(cli, tmp_path, port, cause):
     regular = tmp_path / "not-a-tty"
     regular.write_text("x")
@@ -66,8 +69,9 @@ def test_sim_serve_names_why_it_cannot_listen(cli):
 @pytest.fixture
 def pty_pair(tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
-    socat = subprocess.Popen(["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
-                             stderr=subprocess.DEVNULL)
+    socat = subprocess.Popen(
+        ["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"], stderr=subprocess.DEVNULL
+    )
     end = time.monotonic() + 5
     while not (a.exists() and b.exists()) and time.monotonic() < end:
         time.sleep(0.02)
@@ -115,15 +119,15 @@ def test_latency_timer_above_1ms_is_advised_with_the_fix(tmp_path):
     assert f"echo 1 | sudo tee {tmp_path}/ttyUSB3/latency_timer" in advice and "udev rule" in advice
     (tmp_path / "ttyUSB3" / "latency_timer").write_text("1\n")
     assert latency_advice("/dev/ttyUSB3", tmp_path) is None
-    assert latency_advice("/dev/ttyUSB9", tmp_path) is None               # no such file: nothing
-    assert latency_advice("/dev/ttyS0", tmp_path) is None                 # not a USB adapter
+    assert latency_advice("/dev/ttyUSB9", tmp_path) is None  # no such file: nothing
+    assert latency_advice("/dev/ttyS0", tmp_path) is None  # not a USB adapter
     assert latency_advice("tcp://127.0.0.1:502", tmp_path) is None
 
 
 def test_rs485_options_reach_the_link_settings(sim_dir, monkeypatch):
     s = resolve(ConnectOptions(port="sim", echo="on", turnaround_ms=5, silence_ms=2.5)).settings
     assert (s.echo, s.turnaround, s.silence) == (True, 0.005, 0.0025)
-    assert resolve(ConnectOptions(port="sim")).settings.echo is None           # auto by default
+    assert resolve(ConnectOptions(port="sim")).settings.echo is None  # auto by default
     monkeypatch.setenv("SERVOTOOL_ECHO", "off")
     monkeypatch.setenv("SERVOTOOL_TURNAROUND_MS", "3")
     s = resolve(ConnectOptions(port="sim")).settings
@@ -177,7 +181,7 @@ def test_echo_auto_finds_an_echoing_adapter_on_the_first_exchange(sim_dir, first
     try:
         link = ModbusLink(LinkSettings(sim.port, timeout=0.2, retries=1, echo=None))
         entry = profile.entry("Pn004")
-        if first == "write":                  # an FC06 reply repeats the request: a probe tells echo from reply
+        if first == "write":  # an FC06 reply repeats the request: a probe tells echo from reply
             link.write(1, entry.address, [300], multiple=False)
         assert link.read(1, entry.address, 1) == [300 if first == "write" else 250]
         assert link.echo is True

@@ -11,17 +11,25 @@ from servotool.model.loader import load_profile
 from servotool.ops.params import select
 
 
-@pytest.mark.parametrize(("profile", "typed", "code"), [
-    ("is620p", "H08.00", "H08-00"), ("is620p", "H0800", "H08-00"), ("is620p", "h0c-09", "H0C-09"),
-    ("dsx7e", "Pn4", "Pn004"), ("dsx7e", "PN004", "Pn004"), ("sdc", "PN017", "PN17"), ("sd25", "So58", "So-58"),
-])
+@pytest.mark.parametrize(
+    ("profile", "typed", "code"),
+    [
+        ("is620p", "H08.00", "H08-00"),
+        ("is620p", "H0800", "H08-00"),
+        ("is620p", "h0c-09", "H0C-09"),
+        ("dsx7e", "Pn4", "Pn004"),
+        ("dsx7e", "PN004", "Pn004"),
+        ("sdc", "PN017", "PN17"),
+        ("sd25", "So58", "So-58"),
+    ],
+)
 def test_the_manuals_other_spellings_find_the_entry(profile, typed, code):
     assert load_profile(profile).entry(typed).code == code
 
 
 def test_a_spelling_two_entries_share_is_refused_naming_both():
     p = load_profile("dsx7e")
-    p._aliases()["PN4"] = [p.entry("Pn004"), p.entry("Pn100")]       # as if two codes had the same key
+    p._aliases()["PN4"] = [p.entry("Pn004"), p.entry("Pn100")]  # as if two codes had the same key
     try:
         with pytest.raises(UnknownName) as caught:
             p.entry("Pn4")
@@ -50,10 +58,16 @@ def test_groups_any_case_and_common_names_on_every_profile():
         select(load_profile("dsx7e"), group="sped")
 
 
-@pytest.mark.parametrize(("code", "typed", "raw"), [
-    ("Pn027", "3000rpm", 3000), ("Pn027", "3000 r/min", 3000), ("Pn101", "25Hz", 250), ("Pn101", "25", 250),
-    ("Pn004", "300%", 300),
-])
+@pytest.mark.parametrize(
+    ("code", "typed", "raw"),
+    [
+        ("Pn027", "3000rpm", 3000),
+        ("Pn027", "3000 r/min", 3000),
+        ("Pn101", "25Hz", 250),
+        ("Pn101", "25", 250),
+        ("Pn004", "300%", 300),
+    ],
+)
 def test_a_value_with_its_unit(code, typed, raw):
     assert parse_value(load_profile("dsx7e").entry(code), typed) == raw
 
@@ -69,7 +83,7 @@ def test_a_value_in_another_unit_is_refused_naming_the_right_one():
     with pytest.raises(UsageError, match=r"'3000Hz' is in Hz, but Pn027 is in rpm \(e.g. 3000rpm\)"):
         parse_value(entry, "3000Hz")
     with pytest.raises(UsageError, match=r"'3krpm' is in krpm, but Pn027 is in rpm \(give it in rpm\)"):
-        parse_value(entry, "3krpm")                 # not 'e.g. 3rpm'
+        parse_value(entry, "3krpm")  # not 'e.g. 3rpm'
 
 
 def test_enum_names_whole_or_a_unique_start_and_typos_get_suggestions():
@@ -77,7 +91,7 @@ def test_enum_names_whole_or_a_unique_start_and_typos_get_suggestions():
     assert parse_value(entry, "jog") == 3 and parse_value(entry, "ENCODER") == 4
     with pytest.raises(UsageError, match=r"is none of .*3=jog"):
         parse_value(entry, "jgo")
-    assert lookup.enum_value({0: "speed mode", 1: "speed trial"}, "speed") is None      # ambiguous
+    assert lookup.enum_value({0: "speed mode", 1: "speed trial"}, "speed") is None  # ambiguous
 
 
 def test_did_you_mean_wording():

@@ -26,6 +26,7 @@ def copy(tmp_path):
 def _no_parsing(monkeypatch):
     def refuse(*_args, **_kwargs):
         raise AssertionError("parsed the YAML although the compiled profile was cached")
+
     monkeypatch.setattr(loader, "parse_yaml", refuse)
 
 
@@ -58,7 +59,7 @@ def test_a_damaged_cache_file_is_rebuilt(cache, copy):
 def test_an_unwritable_cache_is_no_error(tmp_path, monkeypatch, copy):
     blocker = tmp_path / "file"
     blocker.write_text("")
-    monkeypatch.setenv("SERVOTOOL_CACHE_DIR", str(blocker / "cache"))     # a folder below a file: cannot exist
+    monkeypatch.setenv("SERVOTOOL_CACHE_DIR", str(blocker / "cache"))  # a folder below a file: cannot exist
     profile, problems = loader.read_profile(copy)
     assert profile is not None and not problems
 

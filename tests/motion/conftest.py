@@ -14,9 +14,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def serve(profile: str):
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0",
-                             "--profile", profile], cwd=ROOT, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0", "--profile", profile],
+        cwd=ROOT,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ),
+    )
     line = proc.stderr.readline()
     m = re.search(r"(tcp://127\.0\.0\.1:\d+)", line)
     assert m, line

@@ -29,21 +29,21 @@ def _virtual(profile_id: str = "dsx7e"):
 def test_hold_to_run_keeps_moving_across_the_repeat_delay_and_stops_within_a_beat_of_the_last_repeat():
     clock = VirtualClock()
     hold = HoldToRun(clock, beat_s=0.1)
-    assert hold.key(None) == 0                     # nothing pressed: nothing moves
-    assert hold.key(1) == 1                        # pressed
+    assert hold.key(None) == 0  # nothing pressed: nothing moves
+    assert hold.key(1) == 1  # pressed
     clock.advance(0.5)
-    assert hold.key(None) == 1                     # the keyboard's repeat delay
+    assert hold.key(None) == 1  # the keyboard's repeat delay
     clock.advance(0.1)
-    assert hold.key(1) == 1                        # repeating
+    assert hold.key(1) == 1  # repeating
     clock.advance(0.09)
     assert hold.key(None) == 1
     clock.advance(0.02)
-    assert hold.key(None) == 0                     # no repeat for more than a beat: let go
+    assert hold.key(None) == 0  # no repeat for more than a beat: let go
     assert hold.key(-1) == -1 and hold.key(0) == 0  # space stops at once
     clock.advance(1.0)
     assert hold.key(1) == 1
     clock.advance(0.71)
-    assert hold.key(None) == 0                     # a tap moves at most the first repeat delay
+    assert hold.key(None) == 0  # a tap moves at most the first repeat delay
 
 
 def test_a_held_key_jogs_and_letting_go_stops_within_a_beat(sim_dir):
@@ -59,8 +59,8 @@ def test_a_held_key_jogs_and_letting_go_stops_within_a_beat(sim_dir):
         t = clock.now() - t0
         polls[0] += 1
         if t > 3.0:
-            return None                            # quit
-        pressed = 1 if polls[0] == 1 or 0.6 <= t < 1.5 else None   # press, repeat delay, repeats until 1.5 s
+            return None  # quit
+        pressed = 1 if polls[0] == 1 or 0.6 <= t < 1.5 else None  # press, repeat delay, repeats until 1.5 s
         direction = hold.key(pressed)
         if direction == 0 and not stopped_at and t > 0.1:
             stopped_at.append(t)
@@ -77,7 +77,7 @@ def test_the_travel_limit_stops_an_interactive_jog_before_it_passes_the_limit(si
     plan = jogger.plan(600, None, travel=TravelLimit(3.0, "--travel"))
     start = sim.firmware.plant.position_rev
     with pytest.raises(TravelLimitHit, match=r"travel limit ±3 rev \(--travel\) reached at \+\d\.\d\d rev"):
-        jogger.run(plan, command=lambda: 1)        # a key that never lets go
+        jogger.run(plan, command=lambda: 1)  # a key that never lets go
     clock.advance(2.0)
     d.read_entries([d.profile.need_role("speed_feedback", "test")])
     assert abs(sim.firmware.plant.position_rev - start) <= 3.0
@@ -95,9 +95,9 @@ def test_the_axis_position_is_tracked_across_the_counter_wrap(sim_dir):
     _sim, d, _clock = _virtual()
     pos = AxisPosition(d)
     per_rev = d.profile.motor.counts_per_rev
-    top = (1 << 31) - per_rev // 2                 # half a turn below the s32 counter's top
+    top = (1 << 31) - per_rev // 2  # half a turn below the s32 counter's top
     pos.update(top)
-    assert pos.update(top + per_rev - (1 << 32)) == pytest.approx(1.0)   # wrapped to negative: +1 rev
+    assert pos.update(top + per_rev - (1 << 32)) == pytest.approx(1.0)  # wrapped to negative: +1 rev
     assert pos.update(top - (1 << 32) + 3 * per_rev) == pytest.approx(3.0)
     assert pos.update(top + per_rev // 2) == pytest.approx(-0.5 + 0.0, abs=1.0)  # and back across it
     assert pos.update(top) == pytest.approx(0.0)
@@ -105,11 +105,11 @@ def test_the_axis_position_is_tracked_across_the_counter_wrap(sim_dir):
 
 def test_the_bound_is_facts_from_route_speed_beat_and_ramp(sim_dir):
     _sim, d, _clock = _virtual()
-    b = deadman.bound(d, 600, 0.1, 200.0)          # DSX7E: its watchdog Pn620 = 500 ms
+    b = deadman.bound(d, 600, 0.1, 200.0)  # DSX7E: its watchdog Pn620 = 500 ms
     assert b.route == "drive_timeout" and b.stop_rev == pytest.approx(10 * (0.5 + 0.12 / 2))
     assert b.stop_s == pytest.approx(0.62) and deadman.sentence(b).endswith("within 5.60 rev (0.62 s)")
     _sim, d, _clock = _virtual("is620p")
-    b = deadman.bound(d, 600, 0.1, 100.0)          # a segment: 3 beats at speed plus the stop
+    b = deadman.bound(d, 600, 0.1, 100.0)  # a segment: 3 beats at speed plus the stop
     assert b.route == "segment" and b.stop_rev == pytest.approx(10 * 0.3 + 10 * 0.06 / 2)
     _sim, d, _clock = _virtual("sdc")
     b = deadman.bound(d, 600, 0.1, 100.0)
@@ -141,7 +141,7 @@ def test_a_speed_route_on_a_real_port_reads_its_parameter_held_reference_once_an
     clock = VirtualClock(10.0)
     sim = build_drive(profile, 1, clock, persist=False)
     make_motion_setup(sim)
-    d = Drive(VirtualLink([sim], clock), profile, 1, port="COM7")      # a real port: the journal is kept
+    d = Drive(VirtualLink([sim], clock), profile, 1, port="COM7")  # a real port: the journal is kept
     d.dead_man_waived = True
     before = sim.bank.effective_value("PN22")
     reads: list[str] = []
@@ -151,7 +151,7 @@ def test_a_speed_route_on_a_real_port_reads_its_parameter_held_reference_once_an
         reads.extend(e.code for e in entries)
         return read_entries(entries, *args, **kwargs)
 
-    d.read_entries = counted                                               # type: ignore[method-assign]
+    d.read_entries = counted  # type: ignore[method-assign]
     jogger = Jogger(d, clock=clock)
     jogger.run(jogger.plan(200, 0.5))
     # For the journal; to see whether it needs putting back; the put-back's verifying read. Not again at enable.

@@ -43,7 +43,7 @@ def test_a_beat_is_due_once_its_period_has_passed_since_the_last_write(sim_dir):
     beat.beat()
     assert not beat.due()
     clock.advance(0.2)
-    beat.sent()                           # a motion command counts as a beat
+    beat.sent()  # a motion command counts as a beat
     assert not beat.due()
 
 
@@ -54,11 +54,11 @@ def test_beats_keep_a_jog_running_and_silence_stops_it_with_the_comm_alarm(sim_d
     jogger.set_speed(300)
     jogger.command(1)
     end = clock.now() + 2.0
-    while clock.now() < end:             # reads advance the virtual clock by their wire time
+    while clock.now() < end:  # reads advance the virtual clock by their wire time
         speed = jogger.speed()
         jogger.keepalive.beat_if_due()
     assert speed == pytest.approx(300, abs=30) and not alarms.current(d).active
-    clock.advance(0.5)                   # the host goes quiet for longer than the watchdog
+    clock.advance(0.5)  # the host goes quiet for longer than the watchdog
     state = alarms.current(d)
     assert state.active and state.code == d.profile.alarm_of_kind("comm_timeout").code
     assert sim_drive.firmware.mode != "jog"

@@ -45,8 +45,13 @@ def moved_rev(profile: str, before: int, after: int) -> float:
 
 def start_motion(port: str, profile: str, *args: str) -> tuple[subprocess.Popen, float, float]:
     """Start a motion command; returns the process and the bound (rev, s) it printed before moving."""
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", port, "--profile", profile, *args],
-                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servotool", "--port", port, "--profile", profile, *args],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     assert proc.stderr is not None
     deadline = time.monotonic() + 20
     while time.monotonic() < deadline:
@@ -57,13 +62,14 @@ def start_motion(port: str, profile: str, *args: str) -> tuple[subprocess.Popen,
     raise AssertionError("no dead-man bound printed")
 
 
-def kill_and_measure(proc: subprocess.Popen, port: str, profile: str, min_rpm: float,
-                     stop_s: float) -> tuple[float, float]:
+def kill_and_measure(
+    proc: subprocess.Popen, port: str, profile: str, min_rpm: float, stop_s: float
+) -> tuple[float, float]:
     """Wait until the motor runs, kill -9 the command, wait for the bound's time; (rev moved, speed now)."""
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline and abs(sample(port, profile)[0]) < min_rpm:
         time.sleep(0.05)
-    _speed, before = sample(port, profile)        # read first: the kill comes after, so this over-counts
+    _speed, before = sample(port, profile)  # read first: the kill comes after, so this over-counts
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     time.sleep(stop_s + 0.3)
@@ -79,7 +85,7 @@ def test_kill_9_of_a_jog_stops_within_the_printed_bound(cli, served_as, profile)
     proc, rev, s = start_motion(port, profile, "jog", "--speed", "600", "--time", "30", "--yes")
     moved, speed = kill_and_measure(proc, port, profile, 500, s)
     print(f"\n{profile}: moved {moved:.3f} rev after the kill, bound {rev} rev ({s} s), speed now {speed}")
-    assert abs(speed) < 10                        # stopped
+    assert abs(speed) < 10  # stopped
     assert 0 < moved <= rev, (moved, rev)
 
 
@@ -105,16 +111,34 @@ def test_a_drive_without_dead_man_refuses_and_a_killed_jog_runs_on_as_the_real_d
     r = cli("--port", port, "--profile", profile, "tune", "inertia", "--yes", "--dry-run")
     assert r.code == 2 and "no dead-man on this drive" in r.err and "keeps running" in r.err
     assert abs(sample(port, profile)[0]) < 10
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "--port", port, "--profile", profile, "jog",
-                             "--speed", "300", "--time", "30", "--yes", "--no-dead-man"], cwd=ROOT,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "servotool",
+            "--port",
+            port,
+            "--profile",
+            profile,
+            "jog",
+            "--speed",
+            "300",
+            "--time",
+            "30",
+            "--yes",
+            "--no-dead-man",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline and sample(port, profile)[0] < 250:
         time.sleep(0.05)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     time.sleep(1.0)
-    assert sample(port, profile)[0] > 250         # nothing on the drive stops it
+    assert sample(port, profile)[0] > 250  # nothing on the drive stops it
 
 
 @pytest.mark.parametrize("profile", BOUNDED)
@@ -133,7 +157,7 @@ def test_settings_a_killed_jog_changed_are_put_back_by_the_next_command(cli, ser
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline and abs(sample(port, profile)[0]) < 600:
         time.sleep(0.05)
-    assert read(port, code, profile=profile)[0] == 700      # a second client does not recover a live holder's
+    assert read(port, code, profile=profile)[0] == 700  # a second client does not recover a live holder's
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     time.sleep(stop_s + 0.3)
@@ -142,7 +166,7 @@ def test_settings_a_killed_jog_changed_are_put_back_by_the_next_command(cli, ser
     assert f"put {code} to" in r.err and "ended during a motion" in r.err, r.err
     assert read(port, code, profile=profile)[0] == before
     # A loop gain the JOG lowered (IS620P's hold) waits for the servo to be off: the next JOG puts it back.
-    assert cli("--port", port, "--profile", profile, "alarm", "clear").code == 0     # DSX7E's dead-man tripped
+    assert cli("--port", port, "--profile", profile, "alarm", "clear").code == 0  # DSX7E's dead-man tripped
     r = cli("--port", port, "--profile", profile, "jog", "--speed", "100", "--time", "0.3", "--yes")
     assert r.code == 0, r.err
     assert read(port, *gains, profile=profile) == gains_before

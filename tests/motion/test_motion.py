@@ -28,8 +28,9 @@ PROFILES = ("dsx7e", "sd25", "is620p", "sdc")
 # The drive setup each profile's motion_setup asks for, as a user does it (None: a power cycle).
 SETUP = {
     "dsx7e": [],
-    "is620p": [["param", "set", "H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1",
-                "H17-02=28"]],
+    "is620p": [
+        ["param", "set", "H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1", "H17-02=28"]
+    ],
     "sdc": [["param", "set", "PN4=3"]],
     "sd25": [["param", "set", "--save", "Po407.X=26", "Po408.X=27"], None, ["param", "set", "So-58.X=1"]],
 }
@@ -43,8 +44,11 @@ def ack(profile: str) -> list[str]:
 def set_up(cli, profile: str, port: str = "sim") -> None:
     """Set the drive up for host motion through the CLI (on a served drive too: it shares the state file)."""
     for args in SETUP[profile]:
-        cmd = ("sim", "reset", "-P", profile, "--power-cycle") if args is None else \
-            ("--port", port, "--profile", profile, *args)
+        cmd = (
+            ("sim", "reset", "-P", profile, "--power-cycle")
+            if args is None
+            else ("--port", port, "--profile", profile, *args)
+        )
         r = cli(*cmd)
         assert r.code == 0, r.err
 
@@ -65,8 +69,13 @@ def test_a_served_drive_and_port_sim_are_one_drive(cli, served):
 def test_restarting_sim_serve_is_a_power_on(cli, sim_dir):
     assert cli("--port", "sim", "param", "set", "Pn008=20000").code == 0
     assert cli("sim", "show", "--json").json()["pending_power_cycle"] == ["Pn008"]
-    proc = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
-                            cwd=ROOT, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0"],
+        cwd=ROOT,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ),
+    )
     try:
         assert "serving on" in proc.stderr.readline()
         assert "unit 1 powered on; now in effect: Pn008" in proc.stderr.readline()
@@ -89,7 +98,7 @@ def test_jog_reaches_the_commanded_speed_and_stops(cli, served):
 def test_reverse_jog_and_refusals(cli, served):
     base = ("--port", served, "--profile", "dsx7e")
     r = cli(*base, "jog", "--speed", "-300", "--time", "0.8", "--json", "--yes")
-    assert r.code == 0 and r.json()["peak_speed_rpm"] < -250          # a reverse JOG peaks at a negative speed
+    assert r.code == 0 and r.json()["peak_speed_rpm"] < -250  # a reverse JOG peaks at a negative speed
     r = cli(*base, "jog", "--speed", "9000", "--time", "1")
     assert r.code == 2 and "over the limit" in r.err
     r = cli(*base, "jog", "--speed", "600", "--time", "10", "--max-travel", "5")
@@ -99,19 +108,36 @@ def test_reverse_jog_and_refusals(cli, served):
 
 
 def test_killed_client_leaves_the_motor_stopped_with_a_comm_alarm(cli, served):
-    jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", served, "--profile", "dsx7e", "jog",
-                            "--speed", "800", "--time", "30", "--yes"], cwd=ROOT, stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL)
+    jog = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "servotool",
+            "--port",
+            served,
+            "--profile",
+            "dsx7e",
+            "jog",
+            "--speed",
+            "800",
+            "--time",
+            "30",
+            "--yes",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.monotonic() + 15
     while time.monotonic() < deadline and read(served, "Un000")[0] < 700:
         time.sleep(0.1)
     assert read(served, "Un000")[0] > 700
     jog.send_signal(signal.SIGKILL)
     jog.wait()
-    time.sleep(0.5 + 0.4)                      # Pn620 watchdog 500 ms + the stop itself
+    time.sleep(0.5 + 0.4)  # Pn620 watchdog 500 ms + the stop itself
     speed, alarm = read(served, "Un000", "Un100")
     assert abs(speed) < 10
-    assert alarm == 0x25                       # E25 communication with master lost
+    assert alarm == 0x25  # E25 communication with master lost
     r = cli("--port", served, "--profile", "dsx7e", "jog", "--speed", "100", "--time", "1", "--yes")
     assert r.code == 2 and "alarm E25" in r.err
     r = cli("--port", served, "--profile", "dsx7e", "alarm", "clear")
@@ -121,13 +147,44 @@ def test_killed_client_leaves_the_motor_stopped_with_a_comm_alarm(cli, served):
 
 
 def test_monitor_csv_while_jogging(cli, served, tmp_path):
-    jog = subprocess.Popen([sys.executable, "-m", "servotool", "--port", served, "--profile", "dsx7e", "jog",
-                            "--speed", "500", "--time", "3", "--yes"], cwd=ROOT, stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL)
+    jog = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "servotool",
+            "--port",
+            served,
+            "--profile",
+            "dsx7e",
+            "jog",
+            "--speed",
+            "500",
+            "--time",
+            "3",
+            "--yes",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         out = tmp_path / "log.csv"
-        r = cli("--port", served, "--profile", "dsx7e", "monitor", "Un000", "Un002", "Un027", "--rate", "20",
-                "--duration", "2", "--csv", str(out))
+        r = cli(
+            "--port",
+            served,
+            "--profile",
+            "dsx7e",
+            "monitor",
+            "Un000",
+            "Un002",
+            "Un027",
+            "--rate",
+            "20",
+            "--duration",
+            "2",
+            "--csv",
+            str(out),
+        )
         assert r.code == 0, r.err
         assert "samples/s achieved" in r.err
     finally:
@@ -141,8 +198,8 @@ def test_monitor_csv_while_jogging(cli, served, tmp_path):
     speeds = [float(r[2]) for r in data]
     running = sorted(v for v in speeds if v > 400)
     assert len(running) > 10
-    assert running[len(running) // 2] == pytest.approx(500, abs=15)   # it was jogging at 500 rpm
-    assert all(-350 < float(r[3]) < 350 for r in data)     # torque within the torque limit
+    assert running[len(running) // 2] == pytest.approx(500, abs=15)  # it was jogging at 500 rpm
+    assert all(-350 < float(r[3]) < 350 for r in data)  # torque within the torque limit
 
 
 def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
@@ -153,12 +210,14 @@ def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
         pytest.skip("needs tmux (installed by .ci/run)")
     out = tmp_path / "out.txt"
     session = f"servotool-jog-{os.getpid()}"
-    cmd = (f"cd {ROOT} && SERVOTOOL_SIM_DIR={sim_dir} {sys.executable} -m servotool --port sim jog --speed 300 "
-           f"--interactive --json > {out} 2>/dev/null; echo $? >> {out}")
+    cmd = (
+        f"cd {ROOT} && SERVOTOOL_SIM_DIR={sim_dir} {sys.executable} -m servotool --port sim jog --speed 300 "
+        f"--interactive --json > {out} 2>/dev/null; echo $? >> {out}"
+    )
     subprocess.run(["tmux", "new-session", "-d", "-s", session, "-x", "120", "-y", "20", cmd], check=True)
     try:
         time.sleep(2.5)
-        for _ in range(40):                      # a held key: the terminal repeats it about every 30 ms
+        for _ in range(40):  # a held key: the terminal repeats it about every 30 ms
             subprocess.run(["tmux", "send-keys", "-t", session, "Left"], check=True)
             time.sleep(0.03)
         time.sleep(1.0)
@@ -175,10 +234,10 @@ def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
 
 
 def test_a_long_stop_ramp_keeps_the_host_alive_and_a_trip_fails_the_jog(cli):
-    assert cli("--port", "sim", "param", "set", "Pn513=3000").code == 0      # 3 s ramp, watchdog 500 ms
+    assert cli("--port", "sim", "param", "set", "Pn513=3000").code == 0  # 3 s ramp, watchdog 500 ms
     r = cli("--port", "sim", "jog", "--speed", "1000", "--time", "1")
-    assert r.code == 0 and "JOG done" in r.err, r.err                        # no self-inflicted E25
-    assert cli("sim", "config", "--viscous", "0.05").code == 0              # a heavy load: the drive overloads
+    assert r.code == 0 and "JOG done" in r.err, r.err  # no self-inflicted E25
+    assert cli("sim", "config", "--viscous", "0.05").code == 0  # a heavy load: the drive overloads
     r = cli("--port", "sim", "jog", "--speed", "500", "--time", "4")
     assert r.code == 1 and "stopped the JOG with alarm E09" in r.err
     r = cli("--port", "sim", "jog", "--speed", "100", "--time", "nan")
@@ -194,19 +253,18 @@ def test_jog_reaches_the_speed_on_every_profile(cli, profile):
     assert r.code == 0, r.err
     assert r.json()["dead_man"]["route"] == route_of(load_profile(profile)).route
     assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
-    assert r.json()["peak_speed_rpm"] < 160              # SDC/IS620P ramps default to 0: the step overshoots
+    assert r.json()["peak_speed_rpm"] < 160  # SDC/IS620P ramps default to 0: the step overshoots
     assert abs(r.json()["final_speed_rpm"]) < 10
-    assert "unverified" not in r.err and "caution" not in r.err          # the simulator never asks
+    assert "unverified" not in r.err and "caution" not in r.err  # the simulator never asks
 
 
 def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
     """tcp:// could be a real drive: without --yes (and no terminal) nothing moves and the caveats are named."""
     port = served_as("sd25")
     r = cli("--port", port, "--profile", "sd25", "jog", "--speed", "300", "--time", "1", "--yes")
-    assert r.code == 2 and "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.err    # --yes skips no setup
+    assert r.code == 2 and "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.err  # --yes skips no setup
     set_up(cli, "sd25", port)
-    r = cli("--port", port, "--profile", "sd25", "--explain", "jog", "--speed", "300", "--time", "1",
-            "--no-dead-man")
+    r = cli("--port", port, "--profile", "sd25", "--explain", "jog", "--speed", "300", "--time", "1", "--no-dead-man")
     assert r.code == 2 and "--yes" in r.err
     assert "So-57 (jog)" in r.err and "Po407.X = 26" in r.err
     assert "no communication timeout" in r.err
@@ -215,44 +273,59 @@ def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
     assert abs(read(port, "speed_feedback", profile="sd25")[0]) < 10
 
 
-@pytest.mark.parametrize(("profile", "differs"), [
-    ("is620p", ["H02-00 = 1 (now 8)", "H05-00 = 2 (now 0)", "H05-02 = 10000 (now 0)", "H11-00 = 0 (now 1)",
-                "H0C-09 = 1 (now 0)", "H17-00 = 1 (now 0)", "H17-02 = 28 (now 0)"]),
-    ("sdc", ["PN4 = 3 (now 0)"]),
-    ("sd25", ["Po407.X = 26 (now 0)", "Po408.X = 27 (now 0)", "So-58.X = 1 (now 0)"]),
-])
+@pytest.mark.parametrize(
+    ("profile", "differs"),
+    [
+        (
+            "is620p",
+            [
+                "H02-00 = 1 (now 8)",
+                "H05-00 = 2 (now 0)",
+                "H05-02 = 10000 (now 0)",
+                "H11-00 = 0 (now 1)",
+                "H0C-09 = 1 (now 0)",
+                "H17-00 = 1 (now 0)",
+                "H17-02 = 28 (now 0)",
+            ],
+        ),
+        ("sdc", ["PN4 = 3 (now 0)"]),
+        ("sd25", ["Po407.X = 26 (now 0)", "Po408.X = 27 (now 0)", "So-58.X = 1 (now 0)"]),
+    ],
+)
 def test_a_drive_not_set_up_refuses_in_one_line_and_its_fix_lets_the_jog_run(cli, profile, differs):
     """The refusal names every setting that differs and the commands that fix them; following them, JOG runs."""
     r = cli("--port", "sim", "--profile", profile, "-v", "jog", "--speed", "100", "--time", "0.5", "--yes")
     assert r.code == 2
     [line] = [x for x in r.err.splitlines() if x.startswith("servotool: error:")]
     assert "JOG needs drive setup first: " + ", ".join(differs) + " — " in line
-    assert ">> 01 06" not in r.err and ">> 01 10" not in r.err           # nothing written: not the setup either
+    assert ">> 01 06" not in r.err and ">> 01 10" not in r.err  # nothing written: not the setup either
     running = cli("sim", "show", "-P", profile, "--json").json()["running"]
     assert running is None or not running["servo_on"]
-    for command in re.findall(r"'(servotool [^']*)'", line):              # do exactly what the message says
-        assert command.startswith(f"servotool --port sim --profile {profile} ")   # the user's own connection
+    for command in re.findall(r"'(servotool [^']*)'", line):  # do exactly what the message says
+        assert command.startswith(f"servotool --port sim --profile {profile} ")  # the user's own connection
         r = cli(*shlex.split(command)[1:])
         assert r.code == 0, r.err
         if "power-cycle the drive" in line and "--save" in command:
             assert cli("sim", "reset", "-P", profile, "--power-cycle").code == 0
-    r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--json",
-            *ack(profile))
+    r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--json", *ack(profile))
     assert r.code == 0, r.err
     assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
 
 
 def test_a_power_cycle_setting_written_but_not_in_effect_is_named_on_the_simulator(cli):
-    assert cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po407.X=26", "Po408.X=27",
-               "So-58.X=1").code == 0
+    assert (
+        cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po407.X=26", "Po408.X=27", "So-58.X=1").code == 0
+    )
     r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--no-dead-man")
     assert r.code == 2
-    assert ("Po407.X = 26 (set, in effect after a power cycle), Po408.X = 27 (set, in effect after a power cycle)"
-            " — power-cycle the drive ('servotool --port sim --profile sd25 sim reset --power-cycle' on the "
-            "simulator)") in r.err
+    assert (
+        "Po407.X = 26 (set, in effect after a power cycle), Po408.X = 27 (set, in effect after a power cycle)"
+        " — power-cycle the drive ('servotool --port sim --profile sd25 sim reset --power-cycle' on the "
+        "simulator)"
+    ) in r.err
     assert cli("sim", "reset", "-P", "sd25", "--power-cycle").code == 0
     r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--json", "--no-dead-man")
-    assert r.code == 0, r.err                                   # --save kept So-58 too (the simulator stores it)
+    assert r.code == 0, r.err  # --save kept So-58 too (the simulator stores it)
     assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
 
 
@@ -269,8 +342,10 @@ def test_a_tune_and_a_plan_jog_refuse_the_same_way(cli, tmp_path):
 def test_a_plan_jogs_a_drive_moved_by_segments(cli, tmp_path):
     """IS620P has no JOG trigger: a plan's jog step goes through the same segment route as `servotool jog`."""
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nprofile: is620p\nsteps:\n  - set: {H02-00: 1, H05-00: 2, H05-02: 10000, H11-00: 0, "
-                    "H0C-09: 1, H17-00: 1, H17-02: 28}\n  - jog: {speed: 200, time: 0.5}\n")
+    plan.write_text(
+        "port: sim\nprofile: is620p\nsteps:\n  - set: {H02-00: 1, H05-00: 2, H05-02: 10000, H11-00: 0, "
+        "H0C-09: 1, H17-00: 1, H17-02: 28}\n  - jog: {speed: 200, time: 0.5}\n"
+    )
     r = cli("run", str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     assert [s["ok"] for s in r.json()["steps"]] == [True, True]
@@ -278,18 +353,22 @@ def test_a_plan_jogs_a_drive_moved_by_segments(cli, tmp_path):
 
 def test_motion_routes_and_their_unverified_entries():
     routes = {p: motion_route(load_profile(p)) for p in PROFILES}
-    assert {p: r.kind for p, r in routes.items()} == {"dsx7e": "trigger", "sd25": "trigger", "is620p": "segment",
-                                                       "sdc": "speed"}
+    assert {p: r.kind for p, r in routes.items()} == {
+        "dsx7e": "trigger",
+        "sd25": "trigger",
+        "is620p": "segment",
+        "sdc": "speed",
+    }
     assert routes["sd25"].speed_entry.code == "So-13" and routes["sdc"].speed_entry.code == "PN22"
-    assert jog_codes(routes["sd25"].entries["jog"]) == {1: 1, -1: 2, 0: 0}       # forced DI1 = JOGU, DI2 = JOGD
+    assert jog_codes(routes["sd25"].entries["jog"]) == {1: 1, -1: 2, 0: 0}  # forced DI1 = JOGU, DI2 = JOGD
     assert jog_codes(routes["dsx7e"].entries["jog"]) == {1: 1, -1: -1, 0: 0}
     listed = {p: {e.code for _, e, _ in motion_caveats(load_profile(p)).unverified} for p in PROFILES}
     assert {"So-57", "Po109"} <= listed["sd25"]
     assert {"H31-00"} <= listed["is620p"]
     assert {"PN22", "PN95", "PN29"} <= listed["sdc"]
-    assert {"Fn001", "Fn032", "Pn620"} <= listed["dsx7e"]                    # simulator extensions count too
-    assert "So-13" not in listed["sd25"]                                     # documented entries are not listed
-    for p in PROFILES:                                                        # no drive documents a Modbus watchdog
+    assert {"Fn001", "Fn032", "Pn620"} <= listed["dsx7e"]  # simulator extensions count too
+    assert "So-13" not in listed["sd25"]  # documented entries are not listed
+    for p in PROFILES:  # no drive documents a Modbus watchdog
         assert motion_caveats(load_profile(p)).drive_timeout is None
 
 

@@ -27,8 +27,10 @@ def _jogger(sim_dir):
     saved = jogger.settings_to_restore()
     writes: list[tuple[int, list[int]]] = []
     write = d.link.write
-    d.link.write = lambda unit, address, values, **kw: (writes.append((address, list(values))),
-                                                        write(unit, address, values, **kw))[1]
+    d.link.write = lambda unit, address, values, **kw: (
+        writes.append((address, list(values))),
+        write(unit, address, values, **kw),
+    )[1]
     return sim, jogger, clock, writes, saved
 
 
@@ -42,12 +44,12 @@ def test_a_move_that_stops_after_its_ramp_is_one_segment_and_needs_no_stop_write
     distance = jogger.profile.entry("H11-12")
     jogger.start(1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=0.1)
     block = [v for a, v in writes if a == distance.address]
-    assert len(block) == 1 and len(block[0]) == 4          # displacement, speed and ramp in one request
-    assert block[0][0] == pytest.approx(600.0 / 60.0 * 0.1 * 10000, abs=2)    # up 0.1 s, down as long
+    assert len(block) == 1 and len(block[0]) == 4  # displacement, speed and ramp in one request
+    assert block[0][0] == pytest.approx(600.0 / 60.0 * 0.1 * 10000, abs=2)  # up 0.1 s, down as long
     writes.clear()
-    clock.advance(0.35)                                     # longer than two beats: never re-armed
+    clock.advance(0.35)  # longer than two beats: never re-armed
     jogger.keep_alive()
-    jogger.command(0)                                       # at the ramp's end: the segment brakes by itself
+    jogger.command(0)  # at the ramp's end: the segment brakes by itself
     assert writes == []
     clock.advance(0.5)
     assert abs(sim.firmware.plant.true_speed_rpm) < 5.0
@@ -60,7 +62,7 @@ def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_d
     jogger.start(1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=0.1)
     clock.advance(0.03)
     writes.clear()
-    jogger.command(0)                                       # before its end: a braking segment now
+    jogger.command(0)  # before its end: a braking segment now
     assert [a for a, _v in writes].count(distance.address) == 1
     clock.advance(0.5)
     # A move longer than the dead-man's segment is not one of its own: beat-sized, re-armed before it would end.
@@ -71,9 +73,9 @@ def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_d
     writes.clear()
     clock.advance(1.5 * BEAT_S)
     jogger.keep_alive()
-    assert writes == []                                     # one beat and a half: the segment still runs
+    assert writes == []  # one beat and a half: the segment still runs
     clock.advance(0.5 * BEAT_S)
     jogger.keep_alive()
-    assert len(writes) == 2                                 # two beats: re-armed (the start edge)
+    assert len(writes) == 2  # two beats: re-armed (the start edge)
     jogger.command(0)
     jogger.leave_and_restore(saved)

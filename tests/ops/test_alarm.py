@@ -34,7 +34,7 @@ def test_history_marks_past_alarms_inactive_and_unknown_codes_honestly(cli, sim_
     assert r.code == 0, r.err
     items = r.json()
     assert [i["display"] for i in items[:2]] == ["E09", "0x1234"]
-    assert not any(i["active"] for i in items)                 # no alarm now: nothing in the history is active
+    assert not any(i["active"] for i in items)  # no alarm now: nothing in the history is active
     assert items[1]["known"] is False and "not in the dsx7e profile" in items[1]["name"]
     r = cli("--port", "sim", "alarm", "history")
     assert "unknown alarm (not in the dsx7e profile)" in r.out and "active" not in r.out
@@ -46,7 +46,7 @@ def test_history_marks_only_the_current_alarm_active(sim_dir):
     sim = EmbeddedSim([sim_drive])
     try:
         sim_drive.firmware.alarm_history[:] = [0x09]
-        sim_drive.firmware.trip("overload")                   # E09 again: now current and the newest entry
+        sim_drive.firmware.trip("overload")  # E09 again: now current and the newest entry
         link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
         items = alarms.history(Drive(link, profile, 1))
         link.close()

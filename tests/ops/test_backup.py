@@ -19,10 +19,28 @@ from servotool.ops import backup, params, restore
 from servotool.session import open_drives
 from servotool.sim.device import SimulatedDrive
 
-CHANGES = {"Pn003": "20", "Pn004": "600", "Pn025": "250.0", "Pn026": "260.0", "Pn027": "5000", "Pn036": "90",
-           "Pn043": "400", "Pn044": "30", "Pn047": "150", "Pn100": "45.0", "Pn101": "30.0", "Pn102": "25.0",
-           "Pn106": "50.0", "Pn120": "-5.0", "Pn128": "1.00", "Pn417": "5", "Pn512": "300", "Pn513": "150",
-           "Pn514": "80", "Pn008": "20000"}
+CHANGES = {
+    "Pn003": "20",
+    "Pn004": "600",
+    "Pn025": "250.0",
+    "Pn026": "260.0",
+    "Pn027": "5000",
+    "Pn036": "90",
+    "Pn043": "400",
+    "Pn044": "30",
+    "Pn047": "150",
+    "Pn100": "45.0",
+    "Pn101": "30.0",
+    "Pn102": "25.0",
+    "Pn106": "50.0",
+    "Pn120": "-5.0",
+    "Pn128": "1.00",
+    "Pn417": "5",
+    "Pn512": "300",
+    "Pn513": "150",
+    "Pn514": "80",
+    "Pn008": "20000",
+}
 WRITE_FRAME = re.compile(r">> 01 (06|10) ")
 
 
@@ -67,13 +85,13 @@ def test_round_trip_restores_every_value_and_a_second_restore_writes_nothing(aut
     with sim() as d:
         auto = restore.factory_reset(d)
         assert restore.not_at_default(d) == []
-        assert backup.load(auto, d.profile).values == wanted       # the automatic backup holds the pre-reset state
+        assert backup.load(auto, d.profile).values == wanted  # the automatic backup holds the pre-reset state
         b = backup.load(f, d.profile)
         current = backup.take(d).values
         plan = restore.restore_changes(d.profile, b, current)
         assert {e.code for e, _, _ in plan.changes} == set(CHANGES)
         effects = [e.effect for e, _, _ in plan.changes]
-        assert effects == sorted(effects, key=restore.EFFECT_ORDER.__getitem__)   # power-cycle entries last
+        assert effects == sorted(effects, key=restore.EFFECT_ORDER.__getitem__)  # power-cycle entries last
         notes: list[str] = []
         report = restore.restore(d, b, plan, notice=notes.append)
         assert notes == [f"automatic backup of the drive's current state: {report.auto_backup}"]
@@ -91,7 +109,7 @@ def test_fault_midway_rolls_back_to_the_automatic_backup(auto_dir, tmp_path, cli
         restore.factory_reset(d)
         before = backup.take(d).values
         order = [e.code for e, _, _ in restore.restore_changes(d.profile, backup.load(f, d.profile), before).changes]
-    victim = order[len(order) // 2]                 # half of the plan is written before the refusal
+    victim = order[len(order) // 2]  # half of the plan is written before the refusal
     SimulatedDrive(load_profile("dsx7e"), 1).inject_fault(victim)
     r = cli("--port", "sim", "param", "restore", str(f), "--yes")
     assert r.code == 1, r.err
@@ -114,7 +132,7 @@ def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
         real = d.write_raw
         misbehave = [1]
 
-        def off_by_one(entry, raw):                 # the drive stores something else than asked
+        def off_by_one(entry, raw):  # the drive stores something else than asked
             wrong = entry is victim and bool(misbehave)
             real(entry, raw + 1 if wrong else raw)
             if wrong:
@@ -127,25 +145,26 @@ def test_a_value_that_does_not_read_back_is_rolled_back_too(auto_dir, tmp_path):
         assert "rolled back 3 written entries; read back, the drive equals the automatic backup" in str(exc.value)
         assert backup.take(d).values == before
 
-        misbehave[:] = [1] * 10                     # now it keeps storing the wrong value: say so, exactly
+        misbehave[:] = [1] * 10  # now it keeps storing the wrong value: say so, exactly
         with pytest.raises(restore.RestoreFailed) as exc:
             restore.restore(d, backup.load(f, d.profile), plan)
         now = d.read_one(victim.code)
         assert now.raw == before[victim.code] + 1
-        assert (f"rollback incomplete (could not undo {victim.code} ({victim.code}: wrote" in str(exc.value))
+        assert f"rollback incomplete (could not undo {victim.code} ({victim.code}: wrote" in str(exc.value)
         assert f"1 entry differs from the automatic backup {auto_dir}" in str(exc.value)
         assert f"{victim.code} is {now.text}, was " in str(exc.value)
-        assert exc.value.next_step == "restore"         # the CLI words it with the user's connection options
+        assert exc.value.next_step == "restore"  # the CLI words it with the user's connection options
         auto = exc.value.auto_backup
         assert error_text(exc.value, ConnectOptions(port="sim", unit=1)).endswith(
-            f"; run 'servotool --port sim --unit 1 param restore {auto}' once the cause is fixed")
+            f"; run 'servotool --port sim --unit 1 param restore {auto}' once the cause is fixed"
+        )
 
 
 def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back(auto_dir, tmp_path):
     f = tmp_path / "sd25.yaml"
     opts = resolve(ConnectOptions(port="sim", profile="sd25"))
     with open_drives(opts, notice=lambda _m: None) as (d,):
-        switch = d.read_one("Po505").raw                  # factory: writes stay in RAM
+        switch = d.read_one("Po505").raw  # factory: writes stay in RAM
         params.apply_set(d, params.prepare_set(d, ["Po301=50"]))
         backup.write_backup(d, f)
         restore.factory_reset(d)
@@ -154,7 +173,7 @@ def test_restore_stores_in_eeprom_on_a_switchable_drive_and_puts_the_switch_back
         assert [e.code for e in report.written] == ["Po301"] and report.persisted
         assert d.read_one("Po505").raw == switch
     drive = SimulatedDrive(load_profile("sd25"), 1)
-    assert drive.bank.eeprom["Po301"] == 50                 # survives a power cycle
+    assert drive.bank.eeprom["Po301"] == 50  # survives a power cycle
     drive.power_cycle()
     assert drive.bank.value("Po301") == 50
 
@@ -163,9 +182,9 @@ def test_the_eeprom_switch_in_a_backup_never_redirects_the_restore(auto_dir, tmp
     f = tmp_path / "is620p.yaml"
     with open_drives(resolve(ConnectOptions(port="sim", profile="is620p")), notice=lambda _m: None) as (d,):
         params.apply_set(d, params.prepare_set(d, ["H08-00=30.0", "H08-02=50.0"]))
-        d.write_raw(d.profile.entry("H0C-13"), 0)        # this axis kept Modbus writes in RAM when backed up
+        d.write_raw(d.profile.entry("H0C-13"), 0)  # this axis kept Modbus writes in RAM when backed up
         backup.write_backup(d, f)
-        restore.factory_reset(d)                              # H0C-13 back to 1 (store in EEPROM)
+        restore.factory_reset(d)  # H0C-13 back to 1 (store in EEPROM)
         b = backup.load(f, d.profile)
         plan = restore.restore_changes(d.profile, b, backup.take(d).values)
         assert [e.code for e, _ in plan.skipped] == ["H0C-13"]
@@ -200,10 +219,16 @@ def _edits() -> list[tuple[str, object, str]]:
         ("float", lambda t: t.replace("Pn004: 250", "Pn004: 250.5"), "is not an integer"),
         ("bool", lambda t: t.replace("Pn004: 250", "Pn004: true"), "is not an integer"),
         ("unit type", lambda t: t.replace("unit: 1", "unit: one"), "'unit' is missing or of the wrong type"),
-        ("unknown code", lambda t: t.replace("Pn004: 250", "Pn004: 250\n  Pn999: 1")
-         .replace("display:", "display:\n  Pn999: x"), "unknown parameter Pn999"),
-        ("monitor code", lambda t: t.replace("Pn004: 250", "Pn004: 250\n  Un000: 1")
-         .replace("display:", "display:\n  Un000: x"), "unknown parameter Un000"),
+        (
+            "unknown code",
+            lambda t: t.replace("Pn004: 250", "Pn004: 250\n  Pn999: 1").replace("display:", "display:\n  Pn999: x"),
+            "unknown parameter Pn999",
+        ),
+        (
+            "monitor code",
+            lambda t: t.replace("Pn004: 250", "Pn004: 250\n  Un000: 1").replace("display:", "display:\n  Un000: x"),
+            "unknown parameter Un000",
+        ),
         ("out of range", lambda t: t.replace("Pn004: 250", "Pn004: 99"), "outside 100..12000"),
         ("other model", lambda t: t.replace("model: DSX7E", "model: OTHER"), "not of this DSX7E"),
         ("other profile", lambda t: t.replace("profile: dsx7e", "profile: sd25"), "not of this DSX7E"),
@@ -284,7 +309,7 @@ def test_backup_file_has_the_metadata_and_a_checksum_of_the_values(auto_dir, tmp
     data = yaml.safe_load(f.read_text())
     assert data["profile"] == "dsx7e" and data["profile_version"] == "1.0" and data["model"] == "DSX7E"
     assert data["unit"] == 1 and data["tool_version"] and data["created"].endswith("+00:00")
-    assert list(data["identity"]) == ["Un200", "Un201", "Un202", "Un203", "Un204", "Un205"]   # the identity checks
+    assert list(data["identity"]) == ["Un200", "Un201", "Un202", "Un203", "Un204", "Un205"]  # the identity checks
     assert len(data["values"]) == 108 and data["display"]["Pn100"] == "32.0 1/s"
     assert re.fullmatch(r"[0-9a-f]{64}", data["checksum"])
 
@@ -349,10 +374,10 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     assert r.code == 2 and "not both" in r.err
     edited = tmp_path / "edited.yaml"
     edited.write_text(b.read_text().replace("Pn100: 450", "Pn100: 460"))
-    r = cli("param", "diff", str(a), str(edited), "--json")           # a diff writes nothing: compared anyway
+    r = cli("param", "diff", str(a), str(edited), "--json")  # a diff writes nothing: compared anyway
     assert r.code == 0 and "checksum mismatch" in r.err and "warning" in r.err
     assert {x["code"]: x["b"] for x in r.json()["differences"]}["Pn100"] == 46.0
-    r = cli("--port", "sim", "param", "reset")                    # no --yes and stdin is not a terminal
+    r = cli("--port", "sim", "param", "reset")  # no --yes and stdin is not a terminal
     assert r.code == 2 and "pass --yes" in r.err
     r = cli("--port", "sim", "param", "reset", "--yes")
     assert r.code == 0 and "automatic backup of the drive's current state:" in r.err, r.err
@@ -366,7 +391,7 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     assert [x["code"] for x in r.json()["changes"]] == ["Pn100", "Pn008"] and r.json()["written"] == []
     r = cli("--port", "sim", "-q", "param", "restore", str(b), "--yes")
     assert r.code == 0 and "2 parameters restored" in r.out, r.err
-    assert "automatic backup of the drive's current state:" in r.err          # even with --quiet
+    assert "automatic backup of the drive's current state:" in r.err  # even with --quiet
     assert "power-cycle the drive for: Pn008" in r.out
     r = cli("--port", "sim", "-v", "param", "restore", str(b), "--yes", "--json")
     assert r.code == 0 and r.json()["written"] == [] and not WRITE_FRAME.search(r.err)
@@ -386,4 +411,4 @@ def test_backup_checks_its_output_before_any_drive_io(cli, tmp_path):
     assert r.code == 2 and "looks like an option" in r.err
     assert not (Path(__file__).resolve().parents[2] / "--help").exists()
     assert cli("--port", "sim", "param", "backup", "-o", str(taken), "--force").code == 0
-    assert taken.stat().st_mode & 0o777 == 0o644          # replaced, mode kept
+    assert taken.stat().st_mode & 0o777 == 0o644  # replaced, mode kept

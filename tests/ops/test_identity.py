@@ -43,20 +43,23 @@ def test_simulated_drive_answers_the_manuals_identity_values(bus):
     sd25 = identify(link, IDS.index("sd25") + 1, [load_profile("sd25")])[0]
     dsx7e = identify(link, IDS.index("dsx7e") + 1, [load_profile("dsx7e")])[0]
     sdc = identify(link, IDS.index("sdc") + 1, [load_profile("sdc")])[0]
-    assert sd25.firmware == 100                      # So-00: "100 = V1.00"
+    assert sd25.firmware == 100  # So-00: "100 = V1.00"
     assert dsx7e.model == 0x31 and sdc.firmware == 4007
 
 
-@pytest.mark.parametrize(("actual", "claimed", "code"), [("sd25", "sdc", "PN17"), ("dsx7e", "is620p", "H02-00"),
-                                                         ("is620p", "sd25", "Po017")])
+@pytest.mark.parametrize(
+    ("actual", "claimed", "code"), [("sd25", "sdc", "PN17"), ("dsx7e", "is620p", "H02-00"), ("is620p", "sd25", "Po017")]
+)
 def test_mismatch_is_refused_before_anything_is_written(sim_dir, actual, claimed, code):
     drive = build_drive(load_profile(actual), 1, persist=False)
     before = (dict(drive.bank.ram), drive.bank.eeprom_writes)
     sim = EmbeddedSim([drive])
     try:
         writes = []
-        with pytest.raises(IdentityMismatch) as err, \
-                open_drives(resolve(ConnectOptions(port=sim.port, profile=claimed))) as (d,):
+        with (
+            pytest.raises(IdentityMismatch) as err,
+            open_drives(resolve(ConnectOptions(port=sim.port, profile=claimed))) as (d,),
+        ):
             writes.append(d.write_raw(d.profile.entry(code), 1))
     finally:
         sim.close()
@@ -85,8 +88,9 @@ def test_inconclusive_check_warns_once_for_all_units(sim_dir, tmp_path):
     sim = EmbeddedSim([build_drive(load_profile("sd25"), u, persist=False) for u in (1, 2)])
     notes: list[str] = []
     try:
-        with open_drives(resolve(ConnectOptions(port=sim.port, profile=str(path))), [1, 2],
-                         notice=notes.append) as drives:
+        with open_drives(
+            resolve(ConnectOptions(port=sim.port, profile=str(path))), [1, 2], notice=notes.append
+        ) as drives:
             assert len(drives) == 2
     finally:
         sim.close()
@@ -99,12 +103,15 @@ def sd25_data():
     return yaml.safe_load((builtin_dir() / "sd25.yaml").read_text(encoding="utf-8"))
 
 
-@pytest.mark.parametrize(("change", "problem"), [
-    ({"checks": [{"code": "So-00", "range": [100, 9999], "sim": 5, "source": "x"}]}, "outside the check's range"),
-    ({"checks": [{"address": 800, "absent": True, "source": "x"}]}, "belongs to an entry"),
-    ({"firmware": "So-60", "checks": [{"code": "So-00", "source": "x"}]}, "must also be one of the checks"),
-    ({"checks": [{"code": c, "source": "x"} for c in ("So-00", "So-46", "So-60")]}, "more than 2 read requests"),
-])
+@pytest.mark.parametrize(
+    ("change", "problem"),
+    [
+        ({"checks": [{"code": "So-00", "range": [100, 9999], "sim": 5, "source": "x"}]}, "outside the check's range"),
+        ({"checks": [{"address": 800, "absent": True, "source": "x"}]}, "belongs to an entry"),
+        ({"firmware": "So-60", "checks": [{"code": "So-00", "source": "x"}]}, "must also be one of the checks"),
+        ({"checks": [{"code": c, "source": "x"} for c in ("So-00", "So-46", "So-60")]}, "more than 2 read requests"),
+    ],
+)
 def test_schema_refuses_a_broken_identity_section(sd25_data, change, problem):
     profile, problems = parse_profile({**sd25_data, "identity": change}, "sd25.yaml")
     assert profile is None and len(problems) == 1 and problem in problems[0] and "identity" in problems[0]
@@ -135,6 +142,6 @@ def test_answers_for_one_profile_rule_out_maps_that_cannot_give_them(bus):
     from servotool.ops.identity import consistent, probe
 
     _sim, link = bus
-    answers = probe(link, IDS.index("sd25") + 1, load_profile("sdc")).answers     # PN1/PN2 read from an SD25
+    answers = probe(link, IDS.index("sd25") + 1, load_profile("sdc")).answers  # PN1/PN2 read from an SD25
     assert consistent(load_profile("sd25"), answers)
     assert not consistent(load_profile("is620p"), answers) and not consistent(load_profile("dsx7e"), answers)

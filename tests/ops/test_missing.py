@@ -13,7 +13,7 @@ from servotool.ops import backup
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.virtual import VirtualLink
 
-LACKING = ["Pn101", "Pn512"]        # one in the middle of a coalesced block, one near the end of another
+LACKING = ["Pn101", "Pn512"]  # one in the middle of a coalesced block, one near the end of another
 
 
 def virtual_drive(missing: list[str]) -> tuple[Drive, VirtualLink]:
@@ -37,7 +37,7 @@ def test_split_reads_find_each_missing_entry_and_remember_it(sim_dir):
     before = link.requests
     with pytest.raises(NotOnDrive):
         d.read("Pn101")
-    assert link.requests == before      # remembered: no request at all
+    assert link.requests == before  # remembered: no request at all
 
 
 def test_once_found_a_hole_costs_no_splitting_again(sim_dir):
@@ -45,7 +45,7 @@ def test_once_found_a_hole_costs_no_splitting_again(sim_dir):
     full, full_link = virtual_drive([])
     backup.take(d)
     start = link.requests
-    backup.take(d)                      # known holes: never asked for, never coalesced across
+    backup.take(d)  # known holes: never asked for, never coalesced across
     backup.take(full)
     assert link.requests - start <= full_link.requests + 2 * len(LACKING)
 
@@ -81,10 +81,10 @@ def test_backup_list_and_diff_complete_and_name_the_missing_entries_once(cli, tm
 def test_restore_across_missing_and_refused_entries_writes_the_rest(cli, tmp_path):
     f = tmp_path / "full.yaml"
     assert cli("--port", "sim", "param", "set", "Pn100=45.0", "Pn101=30.0", "Pn102=25.0", "Pn417=5").code == 0
-    assert cli("--port", "sim", "param", "backup", "-o", str(f)).code == 0      # complete: taken before
+    assert cli("--port", "sim", "param", "backup", "-o", str(f)).code == 0  # complete: taken before
     assert cli("--port", "sim", "param", "reset", "--yes").code == 0
     lack("dsx7e", ["Pn101"])
-    SimulatedDrive(load_profile("dsx7e"), 1).inject_fault("Pn417", 2)        # refuses writes there
+    SimulatedDrive(load_profile("dsx7e"), 1).inject_fault("Pn417", 2)  # refuses writes there
     r = cli("--port", "sim", "param", "restore", str(f), "--yes", "--json")
     assert r.code == 0, r.err
     data = r.json()

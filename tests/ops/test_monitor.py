@@ -36,11 +36,11 @@ def test_live_view_fits_80_columns_with_a_trend(sim_dir, profile):
     mon = _polled(profile)
     lines = _render(mon, 80)
     assert max(len(line) for line in lines) <= 80
-    assert len(lines) == len(mon.entries) + 5                  # title, 3 header rules/row, bottom: no row wraps
+    assert len(lines) == len(mon.entries) + 5  # title, 3 header rules/row, bottom: no row wraps
     assert "Trend" in lines[2]
     first_row = lines[4]
     trend = first_row.rstrip(" │").rsplit("│", 1)[1].strip()
-    assert 8 <= len(trend) < 40                                # shrunk to the room left, not folded
+    assert 8 <= len(trend) < 40  # shrunk to the room left, not folded
     wide = _render(mon, 200)
     assert len(wide[4].rstrip(" │").rsplit("│", 1)[1].strip()) == 40
 
@@ -54,7 +54,7 @@ def test_live_view_fits_80_columns_with_the_widest_values(sim_dir, profile):
     lines = _render(mon, 80)
     assert max(len(line) for line in lines) <= 80
     assert len(lines) == len(mon.entries) + 5
-    for e in mon.entries:                                      # values are never cut, names may be
+    for e in mon.entries:  # values are never cut, names may be
         assert any(line.startswith(f"│ {e.code} ") for line in lines)
 
 
@@ -65,9 +65,19 @@ def test_once_shows_no_rate_for_a_single_sample(cli):
     assert "samples/s" not in r.err
 
 
-@pytest.mark.parametrize("args", [("--rate", "nan"), ("--rate", "inf"), ("--rate", "0"), ("--rate", "-5"),
-                                  ("--duration", "nan"), ("--duration", "0"), ("--duration", "-1"),
-                                  ("--duration", "inf")])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("--rate", "nan"),
+        ("--rate", "inf"),
+        ("--rate", "0"),
+        ("--rate", "-5"),
+        ("--duration", "nan"),
+        ("--duration", "0"),
+        ("--duration", "-1"),
+        ("--duration", "inf"),
+    ],
+)
 def test_bad_rate_or_duration_is_a_usage_error_before_the_port_opens(cli, args):
     r = cli(*NO_PORT, "monitor", *args)
     assert r.code == 2
@@ -89,7 +99,7 @@ def test_csv_refuses_an_existing_file_and_an_unwritable_path_before_the_port_ope
     assert old.read_text() == "precious\n"
     r = cli(*NO_PORT, "monitor", "--csv", str(tmp_path / "no-such-dir" / "log.csv"))
     assert r.code == 2 and r.err.count("\n") == 1 and "cannot write" in r.err
-    r = cli(*NO_PORT, "monitor", "--csv", str(old), "--append")    # another tool's file: other columns
+    r = cli(*NO_PORT, "monitor", "--csv", str(old), "--append")  # another tool's file: other columns
     assert r.code == 2 and "cannot append" in r.err
     r = cli(*NO_PORT, "monitor", "--force")
     assert r.code == 2 and "--csv" in r.err
@@ -100,10 +110,10 @@ def test_csv_force_keeps_the_old_file_until_a_sample_replaces_it(cli, tmp_path):
     old.write_text("precious\n")
     r = cli(*NO_PORT, "monitor", "--csv", str(old), "--force")
     assert r.code == 1 and "cannot open port" in r.err
-    assert old.read_text() == "precious\n"                     # the failed run replaced nothing
+    assert old.read_text() == "precious\n"  # the failed run replaced nothing
     new = tmp_path / "new.csv"
     r = cli(*NO_PORT, "monitor", "--csv", str(new))
-    assert r.code == 1 and not new.exists()                    # and left no empty file behind
+    assert r.code == 1 and not new.exists()  # and left no empty file behind
     r = cli("--port", "sim", "monitor", "Un000", "--once", "--csv", str(old), "--force")
     assert r.code == 0, r.err
     rows = list(csv.reader(old.open()))
@@ -117,7 +127,7 @@ def test_csv_append_adds_rows_under_one_header(cli, tmp_path):
         assert r.code == 0, r.err
     rows = list(csv.reader(log.open()))
     assert rows[0] == ["timestamp", "elapsed_s", "Un000 [rpm]", "Un045 [V]"]
-    assert len(rows) == 3 and all(abs(float(row[3]) - 311) < 20 for row in rows[1:])   # DC bus near 311 V
+    assert len(rows) == 3 and all(abs(float(row[3]) - 311) < 20 for row in rows[1:])  # DC bus near 311 V
     r = cli("--port", "sim", "monitor", "Un000", "--once", "--csv", str(log), "--append")
     assert r.code == 2 and "columns" in r.err
     assert len(list(csv.reader(log.open()))) == 3

@@ -14,12 +14,19 @@ from servotool.sim.server import EmbeddedSim
 
 
 def test_two_drives_of_different_profiles_are_found_and_identified():
-    sim = EmbeddedSim([build_drive(load_profile("sd25"), 3, persist=False),
-                       build_drive(load_profile("dsx7e"), 6, persist=False)])
+    sim = EmbeddedSim(
+        [build_drive(load_profile("sd25"), 3, persist=False), build_drive(load_profile("dsx7e"), 6, persist=False)]
+    )
     seen: list[int] = []
     try:
-        result = scan(sim.port, list(range(1, 9)), [], shipped_profiles(), timeout=0.1,
-                      progress=lambda done, _total, _setting: seen.append(done))
+        result = scan(
+            sim.port,
+            list(range(1, 9)),
+            [],
+            shipped_profiles(),
+            timeout=0.1,
+            progress=lambda done, _total, _setting: seen.append(done),
+        )
     finally:
         sim.close()
     found = {f.unit: f for f in result.found}
@@ -36,8 +43,10 @@ def test_factory_settings_come_first_and_options_narrow():
     tried = settings_to_try(profiles)
     assert tried[:2] == [LineSettings(9600, "O", 1, 8), LineSettings(57600, "N", 2, 8)]
     assert len(tried) == len(set(tried)) and LineSettings(115200, "E", 1, 8) in tried
-    assert settings_to_try(profiles, [19200], ["8N1", "8e1"]) == [LineSettings(19200, "N", 1, 8),
-                                                                  LineSettings(19200, "E", 1, 8)]
+    assert settings_to_try(profiles, [19200], ["8N1", "8e1"]) == [
+        LineSettings(19200, "N", 1, 8),
+        LineSettings(19200, "E", 1, 8),
+    ]
     assert settings_to_try(profiles, None, ["8O1"])[0] == LineSettings(9600, "O", 1, 8)
 
 

@@ -38,7 +38,7 @@ def test_rising_trigger_keeps_the_pre_trigger_share_from_the_ring_buffer():
 
 def test_falling_trigger_ignores_rising_crossings_and_a_level_already_below():
     trig = parse_trigger(P, f"{SPEED.code}<-5")
-    values = [-10, -20, 0, 10, -3, -8, -9, -10]     # starts below: no edge; first fall through -5 is at index 5
+    values = [-10, -20, 0, 10, -3, -8, -9, -10]  # starts below: no edge; first fall through -5 is at index 5
     (cap,) = _feed(TriggerBuffer(trig, Window(samples=3, pre_share=0), [SPEED.code]), _samples(values))
     assert cap.values[SPEED.code] == [-8, -9, -10]
 
@@ -46,21 +46,19 @@ def test_falling_trigger_ignores_rising_crossings_and_a_level_already_below():
 def test_bit_triggers_by_name_and_number_on_set_and_clear():
     moving = next(b for b, n in STATUS.bits.items() if n == "moving")
     words = [0, 1, 1 | 1 << moving, 1 | 1 << moving, 1, 1, 1]
-    for expr, first in ((f"{STATUS.code}.moving", 2), (f"{STATUS.code}.{moving}", 2),
-                        (f"{STATUS.code}.moving=0", 4)):
+    for expr, first in ((f"{STATUS.code}.moving", 2), (f"{STATUS.code}.{moving}", 2), (f"{STATUS.code}.moving=0", 4)):
         trig = parse_trigger(P, expr)
-        (cap,) = _feed(TriggerBuffer(trig, Window(samples=2, pre_share=0), [STATUS.code]),
-                       _samples(words, STATUS.code))
+        (cap,) = _feed(TriggerBuffer(trig, Window(samples=2, pre_share=0), [STATUS.code]), _samples(words, STATUS.code))
         assert cap.trigger_t == pytest.approx(first * 0.01), expr
 
 
 def test_repeat_needs_a_new_edge_and_a_duration_window_keeps_its_pre_time():
     trig = parse_trigger(P, f"{SPEED.code}>50")
-    wave = ([0] * 5 + [100] * 10) * 3                  # three rising edges, 0.15 s apart
+    wave = ([0] * 5 + [100] * 10) * 3  # three rising edges, 0.15 s apart
     caps = _feed(TriggerBuffer(trig, Window(duration_s=0.1, pre_share=0.2), [SPEED.code]), _samples(wave))
     assert len(caps) == 3
     for cap in caps:
-        assert cap.t[0] == pytest.approx(-0.02)           # 20 % of 0.1 s before the trigger
+        assert cap.t[0] == pytest.approx(-0.02)  # 20 % of 0.1 s before the trigger
         assert cap.t[-1] >= 0.08 - 1e-9
         assert cap.values[SPEED.code][cap.pre_samples] == 100
     assert [c.index for c in caps] == [1, 2, 3]
@@ -72,19 +70,30 @@ def test_without_a_trigger_the_capture_starts_at_once():
     assert cap2.values[SPEED.code] == [4, 5, 6, 7]
 
 
-@pytest.mark.parametrize("expr, message", [
-    ("Un000=5", "use CODE>LEVEL"), ("Un000>fast", "not a level"), (f"{STATUS.code}.nosuch", "no bit"),
-    (f"{STATUS.code}.99", "bits 0..15"), ("Pn999>1", "Pn999"),
-])
+@pytest.mark.parametrize(
+    "expr, message",
+    [
+        ("Un000=5", "use CODE>LEVEL"),
+        ("Un000>fast", "not a level"),
+        (f"{STATUS.code}.nosuch", "no bit"),
+        (f"{STATUS.code}.99", "bits 0..15"),
+        ("Pn999>1", "Pn999"),
+    ],
+)
 def test_bad_trigger_expressions_say_what_is_wrong(expr, message):
     with pytest.raises(UsageError, match=message):
         parse_trigger(P, expr)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({}, "--samples N or --duration"), ({"samples": 1}, "at least 2"), ({"duration_s": -1}, "> 0"),
-    ({"samples": 10, "pre_share": 1.0}, "0..99"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({}, "--samples N or --duration"),
+        ({"samples": 1}, "at least 2"),
+        ({"duration_s": -1}, "> 0"),
+        ({"samples": 10, "pre_share": 1.0}, "0..99"),
+    ],
+)
 def test_bad_windows_are_refused(kwargs, message):
     with pytest.raises(UsageError, match=message):
         Window(**kwargs)
@@ -105,7 +114,7 @@ def test_a_trace_of_a_jog_on_the_simulator_catches_the_start_with_its_rate(sim_d
     plan = jogger.plan(300, 0.6)
     started = {"n": 0}
 
-    def start_jog_after_a_while() -> bool:          # the JOG starts while the trace is armed
+    def start_jog_after_a_while() -> bool:  # the JOG starts while the trace is armed
         started["n"] += 1
         if started["n"] == 50:
             jogger.set_speed(plan.speed_rpm)
@@ -114,17 +123,24 @@ def test_a_trace_of_a_jog_on_the_simulator_catches_the_start_with_its_rate(sim_d
             jogger.beat()
         return False
 
-    tracer = Tracer(d, [SPEED, torque], parse_trigger(P, f"{SPEED.code}>150"), Window(samples=200, pre_share=0.25),
-                    clock=clock, stop=start_jog_after_a_while, timeout_s=5)
+    tracer = Tracer(
+        d,
+        [SPEED, torque],
+        parse_trigger(P, f"{SPEED.code}>150"),
+        Window(samples=200, pre_share=0.25),
+        clock=clock,
+        stop=start_jog_after_a_while,
+        timeout_s=5,
+    )
     (cap,) = list(tracer.run())
     jogger.stop()
     speed = cap.values[SPEED.code]
     assert cap.pre_samples == 50 and len(speed) == 200
-    assert speed[49] < 150 <= speed[50]                    # the trigger sample at t = 0
+    assert speed[49] < 150 <= speed[50]  # the trigger sample at t = 0
     assert max(speed) > 250 and cap.values[torque.code][0] == pytest.approx(0, abs=5)
-    assert tracer.sampler.requests_per_sample == 1         # speed and torque in one coalesced read
+    assert tracer.sampler.requests_per_sample == 1  # speed and torque in one coalesced read
     tm = cap.timing
-    assert tm.rate_hz > 200 and tm.jitter_ms is not None   # 115200 baud: one read is ~2 ms of wire time
+    assert tm.rate_hz > 200 and tm.jitter_ms is not None  # 115200 baud: one read is ~2 ms of wire time
     out = tmp_path / "jog.csv"
     write_trace(out, [cap], tracer.entries, ["servotool trace: test"])
     table = read_table(out)
@@ -137,8 +153,7 @@ def test_a_trace_of_a_jog_on_the_simulator_catches_the_start_with_its_rate(sim_d
 
 def test_a_trigger_that_never_fires_times_out_with_the_range_seen(sim_dir):
     d, clock = _virtual()
-    tracer = Tracer(d, [SPEED], parse_trigger(P, f"{SPEED.code}>100"), Window(samples=10), clock=clock,
-                    timeout_s=0.5)
+    tracer = Tracer(d, [SPEED], parse_trigger(P, f"{SPEED.code}>100"), Window(samples=10), clock=clock, timeout_s=0.5)
     assert list(tracer.run()) == []
     assert tracer.timed_out and tracer.buffer.high < 100
 

@@ -31,15 +31,27 @@ def assert_png(path: Path) -> tuple[int, int]:
 
 
 def lines_of(fig) -> dict[str, tuple[list[float], list[float]]]:
-    return {ln.get_label(): (list(ln.get_xdata()), list(ln.get_ydata())) for ax in fig.axes for ln in ax.get_lines()
-            if not ln.get_label().startswith("_")}
+    return {
+        ln.get_label(): (list(ln.get_xdata()), list(ln.get_ydata()))
+        for ax in fig.axes
+        for ln in ax.get_lines()
+        if not ln.get_label().startswith("_")
+    }
 
 
 def _table() -> TimeTable:
     t = [i * 0.01 - 0.2 for i in range(100)]
-    return TimeTable(Path("known.csv"), "t_s", t, [
-        Series("Un000", "rpm", [3.0 * i for i in range(100)]), Series("Un001", "rpm", [2.0 * i for i in range(100)]),
-        Series("Un002", "%", [50.0 - i for i in range(100)])], capture=[1] * 100)
+    return TimeTable(
+        Path("known.csv"),
+        "t_s",
+        t,
+        [
+            Series("Un000", "rpm", [3.0 * i for i in range(100)]),
+            Series("Un001", "rpm", [2.0 * i for i in range(100)]),
+            Series("Un002", "%", [50.0 - i for i in range(100)]),
+        ],
+        capture=[1] * 100,
+    )
 
 
 def test_a_table_chart_has_one_panel_per_unit_and_each_column_s_data(tmp_path):
@@ -62,8 +74,9 @@ def test_the_terminal_chart_fits_80_columns_with_a_legend_and_names_what_found_n
 
 def test_reading_a_monitor_and_a_tune_csv(tmp_path):
     mon = tmp_path / "mon.csv"
-    mon.write_text("timestamp,elapsed_s,Un000 [rpm],5E00h\n2026-01-01T00:00:00.000,0.0,1,3\n"
-                   "2026-01-01T00:00:00.100,0.1,2,3\n")
+    mon.write_text(
+        "timestamp,elapsed_s,Un000 [rpm],5E00h\n2026-01-01T00:00:00.000,0.0,1,3\n2026-01-01T00:00:00.100,0.1,2,3\n"
+    )
     table = read_table(mon)
     assert [s.label for s in table.series] == ["Un000 [rpm]", "5E00h"] and table.t == [0.0, 0.1]
     tune = tmp_path / "tune.csv"
@@ -72,7 +85,7 @@ def test_reading_a_monitor_and_a_tune_csv(tmp_path):
     assert [s.label for s in table.series] == ["speed [rpm]", "torque [%]", "position [rev]"]
     assert math.isnan(table.series[2].values[0])
     position = lines_of(table_figure(table))["position [rev]"]
-    assert position == ([0.01], [0.5])                          # drawn where it was read, no NaN gap
+    assert position == ([0.01], [0.5])  # drawn where it was read, no NaN gap
     with pytest.raises(UsageError, match="no column Un999"):
         table.select(["Un999"])
     (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
@@ -106,7 +119,7 @@ def test_every_tune_chart_shows_the_tune_s_data(tuned, tmp_path):
 
     moves = move_estimates(result, profile)
     assert len(moves) >= 4 and {m.direction for m in moves} == {1, -1}
-    assert all(abs(m.ratio - 3.0) < 0.5 for m in moves)          # the simulated load ratio is 3
+    assert all(abs(m.ratio - 3.0) < 0.5 for m in moves)  # the simulated load ratio is 3
     fig = tune_report.moves_figure(result, moves)
     assert list(fig.axes[0].collections[-1].get_offsets()[:, 1]) == pytest.approx([m.ratio for m in moves])
 
@@ -114,7 +127,8 @@ def test_every_tune_chart_shows_the_tune_s_data(tuned, tmp_path):
     before = next(v for k, v in step.items() if k.startswith("before: overshoot"))
     assert before == ([t * 1000 for t in res.step_before.t_s], list(res.step_before.speed_rpm))
     assert step[f"after: settled at {res.step_after.settling_ms:.0f} ms"][0][0] == pytest.approx(
-        res.step_after.settling_ms)
+        res.step_after.settling_ms
+    )
     assert res.step_after.overshoot_pct < res.step_before.overshoot_pct
 
     rows = gain_rows(res)

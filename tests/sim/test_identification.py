@@ -12,7 +12,7 @@ from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink
 
 FEATURE = "drive-side identification test"
-IDENTIFYING = 1 << 5            # DSX7E status word bit 5
+IDENTIFYING = 1 << 5  # DSX7E status word bit 5
 
 
 def drive_with_load(load_ratio: float) -> tuple[Drive, VirtualClock]:
@@ -47,11 +47,11 @@ def test_the_identification_measures_the_load_and_stores_the_ratio(sim_dir, true
     assert status(d) & IDENTIFYING
     wait_while_identifying(d, clock)
     assert d.read_role("alarm_code", FEATURE).raw == 0
-    assert load_ratio(d) == pytest.approx(true_ratio, abs=0.5)       # within half a motor inertia
+    assert load_ratio(d) == pytest.approx(true_ratio, abs=0.5)  # within half a motor inertia
 
 
 def test_more_travel_than_allowed_fails_with_the_identification_alarm(sim_dir):
-    d, clock = drive_with_load(50.0)             # a heavy load travels far before it reaches the top speed
+    d, clock = drive_with_load(50.0)  # a heavy load travels far before it reaches the top speed
     d.write_verified(*d.parse_assignment("Pn515=1"))
     before = load_ratio(d)
     d.trigger("inertia_id", FEATURE)

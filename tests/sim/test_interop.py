@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.skipif(not (shutil.which("socat") and shutil.which("mbpoll")),
-                                reason="needs socat and mbpoll (installed by .ci/run)")
+pytestmark = pytest.mark.skipif(
+    not (shutil.which("socat") and shutil.which("mbpoll")), reason="needs socat and mbpoll (installed by .ci/run)"
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -30,13 +31,32 @@ def _wait_for(path: Path, seconds: float = 5) -> None:
 def pty_line(tmp_path, sim_dir):
     """(drive side, master side) of a pty pair with two simulated drives (units 1 and 2) serving."""
     a, b = tmp_path / "drive", tmp_path / "master"
-    socat = subprocess.Popen(["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
-                             stderr=subprocess.DEVNULL)
+    socat = subprocess.Popen(
+        ["socat", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"], stderr=subprocess.DEVNULL
+    )
     _wait_for(a)
     _wait_for(b)
-    server = subprocess.Popen([sys.executable, "-m", "servotool", "sim", "serve", "--port", str(a), "--baud", "19200",
-                               "--unit", "1", "--unit", "2"], cwd=ROOT, stderr=subprocess.PIPE, text=True,
-                              env=dict(os.environ))
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "servotool",
+            "sim",
+            "serve",
+            "--port",
+            str(a),
+            "--baud",
+            "19200",
+            "--unit",
+            "1",
+            "--unit",
+            "2",
+        ],
+        cwd=ROOT,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ),
+    )
     line = server.stderr.readline()
     assert "serving on" in line, line
     yield a, b
@@ -46,46 +66,116 @@ def pty_line(tmp_path, sim_dir):
     socat.wait(timeout=10)
 
 
-
 def read(port: Path, ref: int, count: int = 1, unit: int = 1) -> list[int]:
-    proc = subprocess.run(["mbpoll", "-m", "rtu", "-a", str(unit), "-b", "19200", "-P", "none", "-t", "4", "-0", "-1",
-                           "-o", "1", "-r", str(ref), "-c", str(count), str(port)],
-                          capture_output=True, text=True, timeout=30)
+    proc = subprocess.run(
+        [
+            "mbpoll",
+            "-m",
+            "rtu",
+            "-a",
+            str(unit),
+            "-b",
+            "19200",
+            "-P",
+            "none",
+            "-t",
+            "4",
+            "-0",
+            "-1",
+            "-o",
+            "1",
+            "-r",
+            str(ref),
+            "-c",
+            str(count),
+            str(port),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return [int(ln.split(":")[1]) for ln in proc.stdout.splitlines() if ln.startswith("[")]
 
 
 def write(port: Path, ref: int, *values: int, unit: int = 1) -> subprocess.CompletedProcess:
-    return subprocess.run(["mbpoll", "-m", "rtu", "-a", str(unit), "-b", "19200", "-P", "none", "-t", "4", "-0", "-1",
-                           "-o", "1", "-r", str(ref), str(port), *map(str, values)],
-                          capture_output=True, text=True, timeout=30)
+    return subprocess.run(
+        [
+            "mbpoll",
+            "-m",
+            "rtu",
+            "-a",
+            str(unit),
+            "-b",
+            "19200",
+            "-P",
+            "none",
+            "-t",
+            "4",
+            "-0",
+            "-1",
+            "-o",
+            "1",
+            "-r",
+            str(ref),
+            str(port),
+            *map(str, values),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
 
 
 def test_mbpoll_reads_and_writes_documented_addresses(pty_line):
     _, master = pty_line
-    assert read(master, 0x2004) == [250]                 # Pn004 load inertia ratio default
-    assert read(master, 0x2008, 2) == [10000, 0]         # Pn008 u32, low word first
-    assert read(master, 0x2100, 3) == [320, 180, 310]    # Pn100..Pn102 in one request
+    assert read(master, 0x2004) == [250]  # Pn004 load inertia ratio default
+    assert read(master, 0x2008, 2) == [10000, 0]  # Pn008 u32, low word first
+    assert read(master, 0x2100, 3) == [320, 180, 310]  # Pn100..Pn102 in one request
     ok = write(master, 0x2004, 300)
     assert ok.returncode == 0, ok.stdout + ok.stderr
     assert read(master, 0x2004) == [300]
-    assert read(master, 0x2004, unit=2) == [250]         # the second drive on the line is separate
-    two = write(master, 0x2008, 20000, 0)                # FC16 over both words
+    assert read(master, 0x2004, unit=2) == [250]  # the second drive on the line is separate
+    two = write(master, 0x2008, 20000, 0)  # FC16 over both words
     assert two.returncode == 0
     assert read(master, 0x2008, 2) == [20000, 0]
 
 
 def test_mbpoll_gets_exception_responses(pty_line):
     _, master = pty_line
-    out_of_range = write(master, 0x2004, 50)           # Pn004 min is 100
+    out_of_range = write(master, 0x2004, 50)  # Pn004 min is 100
     assert out_of_range.returncode != 0 and "Illegal data value" in out_of_range.stderr
-    unmapped = subprocess.run(["mbpoll", "-m", "rtu", "-a", "1", "-b", "19200", "-P", "none", "-t", "4", "-0", "-1",
-                               "-o", "1", "-r", "100", "-c", "1", str(master)], capture_output=True, text=True,
-                              timeout=30)
+    unmapped = subprocess.run(
+        [
+            "mbpoll",
+            "-m",
+            "rtu",
+            "-a",
+            "1",
+            "-b",
+            "19200",
+            "-P",
+            "none",
+            "-t",
+            "4",
+            "-0",
+            "-1",
+            "-o",
+            "1",
+            "-r",
+            "100",
+            "-c",
+            "1",
+            str(master),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert unmapped.returncode != 0 and "Illegal data address" in unmapped.stderr
-    read_only = write(master, 0x4000, 5)                # Un000 motor speed
+    read_only = write(master, 0x4000, 5)  # Un000 motor speed
     assert read_only.returncode != 0 and "Illegal data address" in read_only.stderr
-    assert read(master, 0x2004) == [250]                # nothing changed
+    assert read(master, 0x2004) == [250]  # nothing changed
 
 
 def test_servotool_client_over_the_same_line(pty_line, cli):
@@ -109,12 +199,26 @@ def _libmodbus(port: Path):
     lib = ctypes.CDLL(ctypes.util.find_library("modbus") or "libmodbus.so.5", use_errno=True)
     lib.modbus_new_rtu.restype = ctypes.c_void_p
     lib.modbus_new_rtu.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_char, ctypes.c_int, ctypes.c_int]
-    for name in ("modbus_set_slave", "modbus_connect", "modbus_write_register", "modbus_send_raw_request",
-                 "modbus_receive_confirmation", "modbus_set_response_timeout", "modbus_close", "modbus_free"):
-        getattr(lib, name).argtypes = [ctypes.c_void_p, *{
-            "modbus_set_slave": [ctypes.c_int], "modbus_write_register": [ctypes.c_int, ctypes.c_uint16],
-            "modbus_send_raw_request": [ctypes.c_char_p, ctypes.c_int], "modbus_receive_confirmation":
-            [ctypes.c_char_p], "modbus_set_response_timeout": [ctypes.c_uint32, ctypes.c_uint32]}.get(name, [])]
+    for name in (
+        "modbus_set_slave",
+        "modbus_connect",
+        "modbus_write_register",
+        "modbus_send_raw_request",
+        "modbus_receive_confirmation",
+        "modbus_set_response_timeout",
+        "modbus_close",
+        "modbus_free",
+    ):
+        getattr(lib, name).argtypes = [
+            ctypes.c_void_p,
+            *{
+                "modbus_set_slave": [ctypes.c_int],
+                "modbus_write_register": [ctypes.c_int, ctypes.c_uint16],
+                "modbus_send_raw_request": [ctypes.c_char_p, ctypes.c_int],
+                "modbus_receive_confirmation": [ctypes.c_char_p],
+                "modbus_set_response_timeout": [ctypes.c_uint32, ctypes.c_uint32],
+            }.get(name, []),
+        ]
     ctx = lib.modbus_new_rtu(str(port).encode(), 19200, b"N", 8, 1)
     assert ctx and lib.modbus_connect(ctx) == 0
     lib.modbus_set_response_timeout(ctx, 0, 300_000)
@@ -130,7 +234,7 @@ def _raw_exchange(lib, ctx, unit: int, pdu: bytes) -> bytes:
     assert lib.modbus_send_raw_request(ctx, req, len(req)) > 0
     buf = ctypes.create_string_buffer(260)
     n = lib.modbus_receive_confirmation(ctx, buf)
-    return buf.raw[:max(n, 0)]
+    return buf.raw[: max(n, 0)]
 
 
 def test_libmodbus_broadcast_write_is_applied_by_every_drive_and_unanswered(pty_line):
@@ -138,7 +242,7 @@ def test_libmodbus_broadcast_write_is_applied_by_every_drive_and_unanswered(pty_
     lib, ctx = _libmodbus(master)
     try:
         lib.modbus_set_slave(ctx, 0)
-        lib.modbus_write_register(ctx, 0x2004, 321)          # Pn004 on unit 0: every drive on the line
+        lib.modbus_write_register(ctx, 0x2004, 321)  # Pn004 on unit 0: every drive on the line
         # The reply to a broadcast would be a frame from unit 0: nothing may come back.
         assert _raw_exchange(lib, ctx, 0, bytes([6, 0x20, 0x04, 0x01, 0x41])) == b""
     finally:
@@ -149,14 +253,14 @@ def test_libmodbus_broadcast_write_is_applied_by_every_drive_and_unanswered(pty_
 
 
 SPEC_EXCEPTIONS = [
-    (bytes([3, 0x20, 0x04, 0, 0]), 3),                 # read 0 registers
-    (bytes([3, 0x20, 0x04, 0, 126]), 3),               # read 126
-    (bytes([4, 0x20, 0x04, 0, 200]), 3),               # FC04 likewise
-    (bytes([16, 0x20, 0x04, 0, 0, 0]), 3),             # write 0 registers
-    (bytes([16, 0x20, 0x04, 0, 124, 2, 0, 1]), 3),      # write 124 (an RTU frame cannot carry them all)
-    (bytes([1, 0, 100, 0, 1]), 1),                     # read coils: unsupported, at an unmapped address
-    (bytes([5, 0x20, 0x04, 0xFF, 0]), 1),              # write coil at a mapped address
-    (bytes([23, 0x20, 0x04, 0, 1, 0x20, 0x04, 0, 1, 2, 0, 5]), 1),   # read/write multiple
+    (bytes([3, 0x20, 0x04, 0, 0]), 3),  # read 0 registers
+    (bytes([3, 0x20, 0x04, 0, 126]), 3),  # read 126
+    (bytes([4, 0x20, 0x04, 0, 200]), 3),  # FC04 likewise
+    (bytes([16, 0x20, 0x04, 0, 0, 0]), 3),  # write 0 registers
+    (bytes([16, 0x20, 0x04, 0, 124, 2, 0, 1]), 3),  # write 124 (an RTU frame cannot carry them all)
+    (bytes([1, 0, 100, 0, 1]), 1),  # read coils: unsupported, at an unmapped address
+    (bytes([5, 0x20, 0x04, 0xFF, 0]), 1),  # write coil at a mapped address
+    (bytes([23, 0x20, 0x04, 0, 1, 0x20, 0x04, 0, 1, 2, 0, 5]), 1),  # read/write multiple
 ]
 
 
@@ -174,7 +278,30 @@ def test_libmodbus_gets_the_specified_exceptions(pty_line):
 
 def test_mbpoll_unsupported_function_is_illegal_function_at_any_address(pty_line):
     _, master = pty_line
-    for ref in ("100", str(0x2004)):                   # unmapped and mapped
-        coils = subprocess.run(["mbpoll", "-m", "rtu", "-a", "1", "-b", "19200", "-P", "none", "-t", "0", "-0", "-1",
-                                "-o", "1", "-r", ref, str(master)], capture_output=True, text=True, timeout=30)
+    for ref in ("100", str(0x2004)):  # unmapped and mapped
+        coils = subprocess.run(
+            [
+                "mbpoll",
+                "-m",
+                "rtu",
+                "-a",
+                "1",
+                "-b",
+                "19200",
+                "-P",
+                "none",
+                "-t",
+                "0",
+                "-0",
+                "-1",
+                "-o",
+                "1",
+                "-r",
+                ref,
+                str(master),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         assert coils.returncode != 0 and "Illegal function" in coils.stderr, coils.stderr

@@ -10,13 +10,17 @@ import pytest
 from servotool.sim.mechanics import MechanicsSettings
 from servotool.sim.plant import TS, DriveGains, MotorData, Plant, PlantSettings
 
-MOTOR = MotorData(rated_torque_nm=1.27, rated_speed_rpm=3000, max_speed_rpm=6000, rotor_inertia_kgcm2=0.62,
-                  counts_per_rev=131072)
+MOTOR = MotorData(
+    rated_torque_nm=1.27, rated_speed_rpm=3000, max_speed_rpm=6000, rotor_inertia_kgcm2=0.62, counts_per_rev=131072
+)
 
 
 def plant(load_ratio: float = 4.0, gains: DriveGains | None = None, **mechanics: float) -> Plant:
-    return Plant(MOTOR, PlantSettings(load_ratio=load_ratio, mechanics=MechanicsSettings(**mechanics)),
-                 gains or DriveGains(inertia_ratio_configured=load_ratio))
+    return Plant(
+        MOTOR,
+        PlantSettings(load_ratio=load_ratio, mechanics=MechanicsSettings(**mechanics)),
+        gains or DriveGains(inertia_ratio_configured=load_ratio),
+    )
 
 
 def record(p: Plant, seconds: float, what, dt: float = TS) -> np.ndarray:
@@ -28,7 +32,7 @@ def record(p: Plant, seconds: float, what, dt: float = TS) -> np.ndarray:
 
 
 def dominant_hz(signal: np.ndarray, dt: float, above_hz: float = 4.0) -> float:
-    x = np.diff(signal)          # the rate of change: a ramp becomes a constant, an oscillation stays
+    x = np.diff(signal)  # the rate of change: a ramp becomes a constant, an oscillation stays
     freq = np.fft.rfftfreq(x.size, dt)
     spectrum = np.abs(np.fft.rfft(x * np.hanning(x.size))) * (freq > above_hz)
     return float(freq[int(np.argmax(spectrum))])
@@ -65,15 +69,18 @@ def test_backlash_is_lost_motion_the_motor_crosses_alone():
     # the motor crossed (almost) half the gap (it starts centred) alone: the load did not move, and the motor
     # accelerated as its own inertia alone lets it
     assert p.theta - p._defl == 0.0
-    assert p.w ** 2 / (2 * p.theta) == pytest.approx(0.2 * 1.27 / 0.62e-4, rel=0.15)
+    assert p.w**2 / (2 * p.theta) == pytest.approx(0.2 * 1.27 / 0.62e-4, rel=0.15)
     record(p, 0.3, lambda q: q.theta)
-    assert p._defl == pytest.approx(gap / 2, abs=0.01)       # then it pushes the load on the flank
+    assert p._defl == pytest.approx(gap / 2, abs=0.01)  # then it pushes the load on the flank
 
 
 def test_backlash_shows_as_lost_motion_when_the_motor_reverses():
     gap = 0.1
-    p = Plant(MOTOR, PlantSettings(load_ratio=4.0, coulomb_nm=0.05 * 1.27, mechanics=MechanicsSettings(
-        backlash_rad=gap)), DriveGains(inertia_ratio_configured=4.0))
+    p = Plant(
+        MOTOR,
+        PlantSettings(load_ratio=4.0, coulomb_nm=0.05 * 1.27, mechanics=MechanicsSettings(backlash_rad=gap)),
+        DriveGains(inertia_ratio_configured=4.0),
+    )
     p.set_mode("speed")
     p.set_speed_command(100.0)
     record(p, 0.5, lambda q: 0.0, dt=0.001)
@@ -90,7 +97,7 @@ def test_arm_gravity_varies_with_position_through_the_gear(position):
     amplitude, gear = 0.3 * 1.27, 10.0
     p = plant(load_ratio=3.0, arm_nm=amplitude, gear=gear, arm_phase_rad=math.radians(30))
     p.theta = position * 2 * math.pi
-    p.set_mode("torque")                      # no torque, no friction: only the arm acts
+    p.set_mode("torque")  # no torque, no friction: only the arm acts
     p.advance_to(p.time + 0.002)
     accel = p.w / 0.002
     expected = -amplitude * math.sin(position * 2 * math.pi / gear + math.radians(30)) / (0.62e-4 * 4)
@@ -100,11 +107,11 @@ def test_arm_gravity_varies_with_position_through_the_gear(position):
 def test_cogging_ripples_at_periods_times_speed():
     p = plant(load_ratio=1.0, cogging_nm=0.05 * 1.27, cogging_periods=6)
     p.set_mode("speed")
-    p.set_speed_command(120.0)                # 2 rev/s: 12 ripples per second
+    p.set_speed_command(120.0)  # 2 rev/s: 12 ripples per second
     record(p, 0.5, lambda q: 0.0, dt=0.001)
     torque = record(p, 1.0, lambda q: q.true_torque_pct, dt=0.001)
     assert dominant_hz(torque, 0.001) == pytest.approx(12.0, abs=1.0)
-    assert 2.0 < np.ptp(torque) < 15.0        # about the +-5 % ripple the loop has to cancel
+    assert 2.0 < np.ptp(torque) < 15.0  # about the +-5 % ripple the loop has to cancel
 
 
 def test_the_coupling_state_is_carried_over_and_a_stale_state_starts_rigid():

@@ -8,8 +8,9 @@ import pytest
 
 from servotool.sim.plant import RAD_S_PER_RPM, DriveGains, MotorData, Plant, PlantSettings
 
-MOTOR = MotorData(rated_torque_nm=1.27, rated_speed_rpm=3000, max_speed_rpm=6000, rotor_inertia_kgcm2=0.62,
-                  counts_per_rev=131072)
+MOTOR = MotorData(
+    rated_torque_nm=1.27, rated_speed_rpm=3000, max_speed_rpm=6000, rotor_inertia_kgcm2=0.62, counts_per_rev=131072
+)
 
 
 def plant(**settings) -> Plant:
@@ -30,7 +31,7 @@ def test_constant_torque_gives_the_right_acceleration():
     p = plant(load_ratio=3.0)
     p.set_mode("torque")
     p.set_torque_command(50.0)
-    run(p, 0.01)                       # let the torque filter and current loop settle
+    run(p, 0.01)  # let the torque filter and current loop settle
     w0, t0 = p.true_speed_rpm, p.time
     run(p, 0.1)
     accel = (p.true_speed_rpm - w0) * RAD_S_PER_RPM / (p.time - t0)
@@ -46,13 +47,13 @@ def test_coulomb_friction_coasts_down_in_the_expected_time_and_stays_stopped():
     t_stop = 1000 * RAD_S_PER_RPM * j / 0.05
     stopped_at = next(i for i, v in enumerate(speeds) if v == 0.0) * 0.001
     assert stopped_at == pytest.approx(t_stop, abs=0.002)
-    assert all(v == 0.0 for v in speeds[int(t_stop * 1000) + 3:])
+    assert all(v == 0.0 for v in speeds[int(t_stop * 1000) + 3 :])
 
 
 def test_gravity_pulls_when_off_and_is_held_by_the_speed_loop():
     p = plant(load_ratio=2.0, coulomb_nm=0.01, load_torque_nm=0.3)
     run(p, 0.05)
-    assert p.true_speed_rpm < -10                      # servo off: the load falls back
+    assert p.true_speed_rpm < -10  # servo off: the load falls back
     p = plant(load_ratio=2.0, coulomb_nm=0.01, load_torque_nm=0.3)
     p.set_mode("speed")
     p.set_speed_command(0)
@@ -62,19 +63,27 @@ def test_gravity_pulls_when_off_and_is_held_by_the_speed_loop():
 
 
 def ripple(true_ratio: float, configured: float, hz: float = 80.0) -> tuple[float, float]:
-    p = plant(load_ratio=true_ratio, coulomb_nm=0.02,
-              gains=DriveGains(inertia_ratio_configured=configured, speed_gain_hz=hz, speed_integral_ms=20,
-                               torque_filter_ms=0.5, jog_accel_ms=200))
+    p = plant(
+        load_ratio=true_ratio,
+        coulomb_nm=0.02,
+        gains=DriveGains(
+            inertia_ratio_configured=configured,
+            speed_gain_hz=hz,
+            speed_integral_ms=20,
+            torque_filter_ms=0.5,
+            jog_accel_ms=200,
+        ),
+    )
     p.set_mode("speed")
     p.set_speed_command(300)
     speeds = run(p, 1.0, dt=0.00025)
-    tail = speeds[len(speeds) // 2:]
+    tail = speeds[len(speeds) // 2 :]
     return max(speeds) - 300, max(tail) - min(tail)
 
 
 def test_matched_inertia_settles_and_ten_times_too_high_oscillates():
     overshoot, tail = ripple(5.0, 5.0)
-    assert overshoot < 30 and tail < 1.0   # a PI step overshoot that dies out
+    assert overshoot < 30 and tail < 1.0  # a PI step overshoot that dies out
     _, tail_bad = ripple(5.0, 50.0)
     assert tail_bad > 30, "a 10x too high inertia ratio must make the speed loop oscillate"
 
@@ -97,7 +106,7 @@ def test_overspeed_latches_stops_and_clears_only_when_gone():
 
 
 def test_overload_latches_and_needs_cooling():
-    p = plant(load_ratio=0.0, load_torque_nm=3.5)   # a load the motor can hold only at ~280 % torque
+    p = plant(load_ratio=0.0, load_torque_nm=3.5)  # a load the motor can hold only at ~280 % torque
     p.set_mode("speed")
     p.set_speed_command(0)
     run(p, 2.0)
@@ -120,13 +129,13 @@ def tripped_then_unloaded() -> Plant:
 
 def test_overload_clears_after_cooling():
     p = tripped_then_unloaded()
-    run(p, 6.0)                                     # no current: about 1 unit of I^2t per second
+    run(p, 6.0)  # no current: about 1 unit of I^2t per second
     assert p.clear_alarms() and p.alarm is None
 
 
 def test_an_idle_gap_cools_the_motor_too():
     p = tripped_then_unloaded()
-    for _ in range(12):                             # requests every 10 s: each gap is skipped as 'at rest'
+    for _ in range(12):  # requests every 10 s: each gap is skipped as 'at rest'
         p.advance_to(p.time + 10.0)
     assert p.clear_alarms()
 
@@ -141,6 +150,7 @@ def test_same_seed_same_readouts():
             run(p, 0.01)
             out.append(p.speed_rpm)
         return out
+
     assert readings(7) == readings(7)
     assert readings(7) != readings(8)
 
@@ -156,8 +166,12 @@ def test_idle_gap_is_cheap():
 
 
 def test_position_mode_moves_under_speed_control_then_holds_where_the_profile_stopped():
-    p = plant(load_ratio=2.0, coulomb_nm=0.01, load_torque_nm=0.5,
-              gains=DriveGains(inertia_ratio_configured=2.0, speed_gain_hz=40))
+    p = plant(
+        load_ratio=2.0,
+        coulomb_nm=0.01,
+        load_torque_nm=0.5,
+        gains=DriveGains(inertia_ratio_configured=2.0, speed_gain_hz=40),
+    )
     p.set_mode("position")
     p.set_speed_command(300)
     run(p, 0.5)
@@ -167,14 +181,18 @@ def test_position_mode_moves_under_speed_control_then_holds_where_the_profile_st
     stopped = p.position_rev
     run(p, 1.0)
     assert abs(p.position_rev - stopped) < 0.01 and abs(p.following_error_counts) < 0.001 * MOTOR.counts_per_rev
-    assert p.true_torque_pct == pytest.approx(0.5 / 1.27 * 100, abs=2)     # holding the gravity load
+    assert p.true_torque_pct == pytest.approx(0.5 / 1.27 * 100, abs=2)  # holding the gravity load
 
 
 def test_a_closed_brake_holds_and_an_alarm_stop_ends_in_it():
-    p = plant(load_ratio=2.0, load_torque_nm=2.5, brake_nm=3.0,      # twice the rated torque: more than the drive
-              gains=DriveGains(torque_limit_pct=150))
+    p = plant(
+        load_ratio=2.0,
+        load_torque_nm=2.5,
+        brake_nm=3.0,  # twice the rated torque: more than the drive
+        gains=DriveGains(torque_limit_pct=150),
+    )
     run(p, 1.0)
-    assert p.w == 0.0 and p.theta == 0.0                             # servo off: the brake holds
+    assert p.w == 0.0 and p.theta == 0.0  # servo off: the brake holds
     p.set_mode("position")
     run(p, 2.0)
     assert p.alarm == "following_error" and not p.servo_on and p.brake_closed

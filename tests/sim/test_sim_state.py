@@ -28,7 +28,7 @@ def test_a_factory_reset_erases_the_drive_and_its_history(sim_dir, regs):
     clock = VirtualClock(10.0)
     r = regs(build_drive(profile, 1, clock))
     r.write("Pn101", 250)
-    r.write("Fn001", 1)                        # JOG, then silence: comm timeout into the history
+    r.write("Fn001", 1)  # JOG, then silence: comm timeout into the history
     clock.advance(2.0)
     assert r.read("Un100") and state.status(profile, 1).running is not None
     path = state.factory_reset(profile, 1)
@@ -57,14 +57,14 @@ def test_a_corrupt_state_file_is_an_error_not_silent_factory_defaults(sim_dir, c
         r = cli("--port", "sim", "param", "get", "Pn004")
         assert r.code == 1 and "state file" in r.err and "unreadable" in r.err and len(r.err.splitlines()) == 1
         r = cli("--port", "sim", "param", "set", "Pn004=300")
-        assert r.code == 1 and state_file.read_text(encoding="latin-1") == broken     # nothing overwritten
+        assert r.code == 1 and state_file.read_text(encoding="latin-1") == broken  # nothing overwritten
     state_file.write_text(good)
     assert cli("--port", "sim", "param", "get", "Pn004", "--json").json()[0]["value"] == 400
 
 
 def test_an_alarm_latched_by_one_sim_process_is_seen_by_the_next(sim_dir, cli):
-    assert cli("sim", "config", "--load-torque", "-1.5", "--brake", "on").code == 0     # pushes forward
-    assert cli("--port", "sim", "param", "set", "Pn025=20", "Pn026=20").code == 0      # too weak to hold it
+    assert cli("sim", "config", "--load-torque", "-1.5", "--brake", "on").code == 0  # pushes forward
+    assert cli("--port", "sim", "param", "set", "Pn025=20", "Pn026=20").code == 0  # too weak to hold it
     r = cli("--port", "sim", "jog", "--speed", "100", "--time", "0.5")
     assert r.code == 1 and "E17" in r.err
     r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
@@ -74,8 +74,8 @@ def test_an_alarm_latched_by_one_sim_process_is_seen_by_the_next(sim_dir, cli):
     assert "alarm overspeed" in cli("sim", "show").out
     assert cli("sim", "reset", "--power-cycle").code == 0
     r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
-    assert [v["value"] for v in r.json()] == [0, 23]            # power on clears the alarm, not the history
-    assert cli("sim", "show", "--json").json()["running"] is None             # fresh from power on
+    assert [v["value"] for v in r.json()] == [0, 23]  # power on clears the alarm, not the history
+    assert cli("sim", "show", "--json").json()["running"] is None  # fresh from power on
 
 
 def test_sim_config_sets_the_brake_and_sim_show_displays_it(cli):
@@ -90,8 +90,12 @@ def test_sim_config_sets_the_brake_and_sim_show_displays_it(cli):
 def test_sim_reset_factory_removes_the_state_and_reports_it(sim_dir, cli):
     assert cli("--port", "sim", "param", "set", "Pn101=25").code == 0
     r = cli("sim", "reset", "--factory", "--json")
-    assert r.code == 0 and r.json() == {"profile": "dsx7e", "unit": 1, "reset": "factory",
-                                        "state_file": str(sim_dir / "dsx7e-unit1.json")}
+    assert r.code == 0 and r.json() == {
+        "profile": "dsx7e",
+        "unit": 1,
+        "reset": "factory",
+        "state_file": str(sim_dir / "dsx7e-unit1.json"),
+    }
     assert not (sim_dir / "dsx7e-unit1.json").exists()
     assert cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"] == 18.0
 
@@ -107,12 +111,14 @@ def test_every_simulator_extension_is_listed_and_the_fake_watchdog_is_off_and_la
     text = cli("sim", "show", "-P", "sdc").out
     assert "fake_watchdog" in text and "simulator extensions" in text
     dsx = cli("sim", "show", "-P", "dsx7e", "--json").json()["extensions"]
-    assert {"entry Pn620 (Host communication watchdog timeout)", "entry Fn032 (Host keep-alive (any write "
-            "refreshes the watchdog))"} <= {x["what"] for x in dsx}
-    assert not any("fake" in x["what"] for x in dsx)                  # DSX7E's map documents its watchdog
+    assert {
+        "entry Pn620 (Host communication watchdog timeout)",
+        "entry Fn032 (Host keep-alive (any write refreshes the watchdog))",
+    } <= {x["what"] for x in dsx}
+    assert not any("fake" in x["what"] for x in dsx)  # DSX7E's map documents its watchdog
     r = cli("profiles", "show", "is620p", "--unverified")
     assert "dead-man route: segment" in r.out and "simulator extensions (not in the manual):" in r.out
-    assert "SIM.COMM" not in r.out                                   # the invented alarm is gone
+    assert "SIM.COMM" not in r.out  # the invented alarm is gone
     assert cli("profiles", "show", "sd25", "--json").json()["dead_man"]["route"] == "none"
 
 

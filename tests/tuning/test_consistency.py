@@ -16,12 +16,16 @@ from inertia_accuracy import identify_once
 from off_model import identify
 
 
-@pytest.mark.parametrize("profile_id,baud,ratio,friction,viscous,gravity,noise,seed", [
-    ("sd25", 19200, 10.0, 0.1, 0.001, -0.4, 0.0, 10),      # bench --profiles --quick, SD25 19200 row, machine 9
-    ("sdc", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 12),        # SDC 19200 row, machine 11
-])
-def test_a_rigid_load_on_a_slow_line_is_not_refused_for_a_resonance(sim_dir, profile_id, baud, ratio, friction,
-                                                                     viscous, gravity, noise, seed):
+@pytest.mark.parametrize(
+    "profile_id,baud,ratio,friction,viscous,gravity,noise,seed",
+    [
+        ("sd25", 19200, 10.0, 0.1, 0.001, -0.4, 0.0, 10),  # bench --profiles --quick, SD25 19200 row, machine 9
+        ("sdc", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 12),  # SDC 19200 row, machine 11
+    ],
+)
+def test_a_rigid_load_on_a_slow_line_is_not_refused_for_a_resonance(
+    sim_dir, profile_id, baud, ratio, friction, viscous, gravity, noise, seed
+):
     """These were refused 'inertia too uncertain (2.1-2.5 %): perhaps a resonance near 41-43 Hz' although the
     plant is rigid: the spring term's hint fired at half a sigma, and its column is the shape of the integration's
     own curvature correction. Now accepted, with the truth inside the stated 3 sigma and no off-model note, or (the
@@ -38,11 +42,18 @@ def test_a_rigid_load_on_a_slow_line_is_not_refused_for_a_resonance(sim_dir, pro
     assert not any(n.startswith("off-model:") for n in est.notes), est.notes
 
 
-@pytest.mark.parametrize("machine,baud,seed", [
-    ({"backlash_rad": 0.05}, 19200, 8),                             # was flagged +4.24 % vs 3 sigma 2.43 %
-    ({"resonance_hz": 100.0, "resonance_damping": 0.05}, 19200, 22),  # was accepted +1.36 % vs 3 sigma 1.02 %
-    ({"resonance_hz": 100.0, "resonance_damping": 0.05}, 115200, 54),  # without the unresolved spring: +1.08 vs 0.95
-])
+@pytest.mark.parametrize(
+    "machine,baud,seed",
+    [
+        ({"backlash_rad": 0.05}, 19200, 8),  # was flagged +4.24 % vs 3 sigma 2.43 %
+        ({"resonance_hz": 100.0, "resonance_damping": 0.05}, 19200, 22),  # was accepted +1.36 % vs 3 sigma 1.02 %
+        (
+            {"resonance_hz": 100.0, "resonance_damping": 0.05},
+            115200,
+            54,
+        ),  # without the unresolved spring: +1.08 vs 0.95
+    ],
+)
 def test_the_off_model_rows_once_outside_their_3_sigma_are_covered_or_refused(sim_dir, machine, baud, seed):
     """bench/off_model.py's violations (ratio 10, the bench's seeds): backlash looked like a load varying over the
     travel and that model moved J the wrong way; a stiff coupling's term was too weak to see. At 115200 the two-mass
@@ -55,13 +66,17 @@ def test_the_off_model_rows_once_outside_their_3_sigma_are_covered_or_refused(si
         assert abs(est.load_ratio - 10.0) <= 3 * est.ratio_std, (outcome, est.load_ratio, est.ratio_std, why)
 
 
-@pytest.mark.parametrize("profile_id,baud,ratio,friction,viscous,gravity,noise,seed", [
-    ("sd25", 19200, 10.0, 0.05, 0.0, 0.2, 0.005, 11),       # SD25 19200 row, machine 10
-    ("is620p", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 14),      # IS620P 19200 row, machine 11 with another noise seed
-    # (its own seed, 12, is accepted within 3 sigma since a move's own segment ends it: longer moves)
-])
-def test_a_rigid_load_too_uncertain_anyway_is_not_blamed_on_a_resonance(sim_dir, profile_id, baud, ratio, friction,
-                                                                        viscous, gravity, noise, seed):
+@pytest.mark.parametrize(
+    "profile_id,baud,ratio,friction,viscous,gravity,noise,seed",
+    [
+        ("sd25", 19200, 10.0, 0.05, 0.0, 0.2, 0.005, 11),  # SD25 19200 row, machine 10
+        ("is620p", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 14),  # IS620P 19200 row, machine 11 with another noise seed
+        # (its own seed, 12, is accepted within 3 sigma since a move's own segment ends it: longer moves)
+    ],
+)
+def test_a_rigid_load_too_uncertain_anyway_is_not_blamed_on_a_resonance(
+    sim_dir, profile_id, baud, ratio, friction, viscous, gravity, noise, seed
+):
     """Refused 'perhaps a resonance near N Hz (a compliant coupling)' on a rigid plant whose fit was too uncertain
     before the spring hint (or with the hint below 2 sigma): the refusal now gives the usual remedy instead."""
     with pytest.raises(IdentificationRefused) as caught:

@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 from inertia_accuracy import identify_once
 
 RATED_NM = 1.27
-J = 2e-4     # kg*m^2
+J = 2e-4  # kg*m^2
 
 
 def test_dither_spreads_cycles_over_the_range() -> None:
@@ -52,23 +52,45 @@ def _trace(accels: list[float]) -> Trace:
 
 def _estimate() -> InertiaEstimate:
     nan = math.nan
-    return InertiaEstimate(True, "", J, 0.001 * J, J / 2.6e-5 - 1, 0.0, nan, nan, nan, nan, nan, nan, nan, nan, 10.0,
-                           0.5, 20, 100, 0, 3, 0, 10.0)
+    return InertiaEstimate(
+        True,
+        "",
+        J,
+        0.001 * J,
+        J / 2.6e-5 - 1,
+        0.0,
+        nan,
+        nan,
+        nan,
+        nan,
+        nan,
+        nan,
+        nan,
+        nan,
+        10.0,
+        0.5,
+        20,
+        100,
+        0,
+        3,
+        0,
+        10.0,
+    )
 
 
 def test_dithered_accelerations_leave_less_step_error_repeated() -> None:
     same = quantization_floor(_estimate(), _trace([60.0] * 8), 1.0, RATED_NM, 0.02)
     spread = quantization_floor(_estimate(), _trace([60.0 * dither(n) ** -1 for n in range(8)]), 1.0, RATED_NM, 0.02)
     assert spread.j_std_kgm2 < 0.6 * same.j_std_kgm2
-    assert same.j_std_kgm2 > 0.001 * J * 1.5      # the repeated step error is in the uncertainty
+    assert same.j_std_kgm2 > 0.001 * J * 1.5  # the repeated step error is in the uncertainty
 
 
 def test_a_fast_line_dithers_by_shorter_ramps_below_the_planned_floor() -> None:
     """At 150 samples/s the planned ramp sits at its 0.1 s floor: the dither shortens it further (a stronger
     acceleration at the same speed) instead of lowering the speed; a slow line keeps MIN_SAMPLES_PER_RAMP samples."""
-    ramp, speed = dithered(0.1, 1000.0, 3, 150.0)          # dither(3) = 0.55
+    ramp, speed = dithered(0.1, 1000.0, 3, 150.0)  # dither(3) = 0.55
     assert ramp == 0.1 * dither(3) and speed == 1000.0
-    ramp, speed = dithered(0.1, 1000.0, 1, 40.0)           # 5 samples at 40/s: 0.125 > 0.1, the speed is lowered
+    ramp, speed = dithered(0.1, 1000.0, 1, 40.0)  # 5 samples at 40/s: 0.125 > 0.1, the speed is lowered
     assert ramp == 0.1 and speed < 1000.0
     assert dithered(0.06, 1000.0, 3, 1000.0)[0] == DITHER_MIN_RAMP_S
 

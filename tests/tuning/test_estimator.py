@@ -27,11 +27,28 @@ NOISY = {"fs": 25.0, "jitter": 0.4, "speed_noise_rpm": 2.0, "torque_noise_pct": 
 
 
 @lru_cache(maxsize=64)
-def simulate(ratio: float, *, coulomb: float = TC, viscous: float = B, load: float = 0.0, direction: str = "both",
-             top_rpm: float | None = None, ramp_s: float = 0.4, cruise_s: float = 0.3, dwell_s: float = 0.2,
-             cycles: int = 3, torque_limit_pct: float = 300.0, fs: float = 40.0, jitter: float = 0.0,
-             speed_noise_rpm: float = 0.0, torque_noise_pct: float = 0.0, quantize: bool = False, seed: int = 1,
-             dt: float = 2e-4, loop_ratio: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def simulate(
+    ratio: float,
+    *,
+    coulomb: float = TC,
+    viscous: float = B,
+    load: float = 0.0,
+    direction: str = "both",
+    top_rpm: float | None = None,
+    ramp_s: float = 0.4,
+    cruise_s: float = 0.3,
+    dwell_s: float = 0.2,
+    cycles: int = 3,
+    torque_limit_pct: float = 300.0,
+    fs: float = 40.0,
+    jitter: float = 0.0,
+    speed_noise_rpm: float = 0.0,
+    torque_noise_pct: float = 0.0,
+    quantize: bool = False,
+    seed: int = 1,
+    dt: float = 2e-4,
+    loop_ratio: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t s, speed rpm, torque %) of back-and-forth trapezoid moves; the top speed is chosen for ~30 % rated
     acceleration torque (capped at 3000 rpm) unless given. loop_ratio: the inertia ratio the speed loop is tuned
     for (None: the true one); a heavier load than that makes the loop ring after every ramp corner."""
@@ -162,8 +179,18 @@ def test_ringing_loop_at_slow_sampling_is_not_biased() -> None:
     # second: the trapezoid rule shrank those oscillations' integrals and J came out ~1 % low on every seed.
     errors = []
     for seed in (1, 2, 3, 4):
-        r = estimate(simulate(50.0, loop_ratio=0.0, fs=25.0, jitter=0.3, speed_noise_rpm=1.0, torque_noise_pct=0.1,
-                              quantize=True, seed=seed))
+        r = estimate(
+            simulate(
+                50.0,
+                loop_ratio=0.0,
+                fs=25.0,
+                jitter=0.3,
+                speed_noise_rpm=1.0,
+                torque_noise_pct=0.1,
+                quantize=True,
+                seed=seed,
+            )
+        )
         assert r.ok, r.reason
         errors.append((r.load_ratio - 50.0) / 51.0)
         assert abs(r.load_ratio - 50.0) <= 3 * r.ratio_std, r
@@ -183,8 +210,9 @@ def test_speed_noise_does_not_bias_inertia_low() -> None:
 def test_speed_noise_is_estimated_through_a_ringing_loop() -> None:
     # 1 rpm noise plus the integer-rpm rounding; the ringing speed curves enough between samples to read as 8 rpm
     # of noise against the line through the neighbours
-    r = estimate(simulate(50.0, loop_ratio=0.0, fs=40.0, jitter=0.3, speed_noise_rpm=1.0, torque_noise_pct=0.1,
-                          quantize=True))
+    r = estimate(
+        simulate(50.0, loop_ratio=0.0, fs=40.0, jitter=0.3, speed_noise_rpm=1.0, torque_noise_pct=0.1, quantize=True)
+    )
     assert 0.9 < r.speed_noise_rpm < 1.6, r.speed_noise_rpm
 
 
@@ -281,10 +309,15 @@ def test_speed_read_a_request_before_the_torque_is_brought_onto_the_torques_time
     """SD25 cannot read speed and torque in one request: the speed is older than the torque by one request."""
     from servotool.tuning.identify import Trace
 
-    trace = Trace(t=[0.1, 0.2, 0.3], speed=[0.0, 100.0, 200.0], torque=[1.0, 1.0, 1.0], position=[None] * 3,
-                  speed_t=[0.05, 0.15, 0.25])
-    assert trace.aligned_speed() == pytest.approx([50.0, 150.0, 200.0])     # the last one is held, not guessed
-    assert Trace(t=[0.1, 0.2], speed=[1.0, 2.0]).aligned_speed() == [1.0, 2.0]   # read together: unchanged
+    trace = Trace(
+        t=[0.1, 0.2, 0.3],
+        speed=[0.0, 100.0, 200.0],
+        torque=[1.0, 1.0, 1.0],
+        position=[None] * 3,
+        speed_t=[0.05, 0.15, 0.25],
+    )
+    assert trace.aligned_speed() == pytest.approx([50.0, 150.0, 200.0])  # the last one is held, not guessed
+    assert Trace(t=[0.1, 0.2], speed=[1.0, 2.0]).aligned_speed() == [1.0, 2.0]  # read together: unchanged
 
 
 def test_a_curving_speed_is_brought_onto_the_torques_times_by_a_cubic_not_a_line():
@@ -292,11 +325,10 @@ def test_a_curving_speed_is_brought_onto_the_torques_times_by_a_cubic_not_a_line
     torque's time (SD25 at 19200 gave J 2-3 % high with it)."""
     from servotool.tuning.identify import Trace
 
-    ts = np.arange(0.0, 1.0, 0.035)                          # SD25 at 19200: a speed read every 35 ms
-    t = ts + 0.0175                                          # the torque a request later
+    ts = np.arange(0.0, 1.0, 0.035)  # SD25 at 19200: a speed read every 35 ms
+    t = ts + 0.0175  # the torque a request later
     speed = 1000.0 * np.sin(2 * np.pi * 1.5 * ts)
-    trace = Trace(t=list(t), speed=list(speed), torque=[0.0] * ts.size, position=[None] * ts.size,
-                  speed_t=list(ts))
+    trace = Trace(t=list(t), speed=list(speed), torque=[0.0] * ts.size, position=[None] * ts.size, speed_t=list(ts))
     truth = 1000.0 * np.sin(2 * np.pi * 1.5 * t[:-1])
     cubic = np.abs(np.asarray(trace.aligned_speed())[:-1] - truth)
     line = np.abs(np.interp(t[:-1], ts, speed) - truth)
@@ -307,8 +339,7 @@ def test_a_host_stall_while_the_loop_rings_is_left_out_of_every_window() -> None
     """The host stalls for 70 ms (14 intervals at 200 samples/s) just after every ramp corner, while a loop tuned
     for half the inertia rings there: a cubic across the stall misses the swing, and the window over it weighs
     heavily with its large speed change. J read 3 % off and was refused at 2.0 % before no window spanned a gap."""
-    t, rpm, pct = simulate(3.0, loop_ratio=1.0, fs=200.0, jitter=0.2, speed_noise_rpm=0.5, torque_noise_pct=0.1,
-                           seed=2)
+    t, rpm, pct = simulate(3.0, loop_ratio=1.0, fs=200.0, jitter=0.2, speed_noise_rpm=0.5, torque_noise_pct=0.1, seed=2)
     corners = np.cumsum(np.tile([0.2, 0.4, 0.3, 0.4], 6))
     keep = ~np.any((t[:, None] > corners + 0.02) & (t[:, None] < corners + 0.09), axis=1)
     r = estimate((t[keep], rpm[keep], pct[keep]))

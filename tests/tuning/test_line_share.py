@@ -45,14 +45,14 @@ def test_is620p_identification_writes_no_segment_re_arm_or_setting_it_does_not_n
     tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     p = d.profile
     distance, speed, ramp, start = (p.entry(c) for c in ("H11-12", "H11-14", "H11-15", "H31-00"))
-    assert re_arms == []                       # each identification move's ramp is shorter than two beats
+    assert re_arms == []  # each identification move's ramp is shorter than two beats
     moves = [v for _t, op, a, v in log if op == "W" and a == start.address and v == [3]]
     assert len(moves) >= 8
     alone = [a for _t, op, a, v in log if op == "W" and a in (speed.address, ramp.address)]
-    assert len(alone) <= 2                     # only the put-back at the end: a dithered cycle's shorter ramp at the
+    assert len(alone) <= 2  # only the put-back at the end: a dithered cycle's shorter ramp at the
     # same speed goes with the speed and the move's displacement in one request (H11-12..H11-15)
     reads = [a for _t, op, a, _v in log if op == "R" and a == speed.address]
-    assert len(reads) <= 2                     # the snapshot and the put-back, not one a move
+    assert len(reads) <= 2  # the snapshot and the put-back, not one a move
     # Every displacement stays within the dead-man's segment at the speed and ramp it runs with (no stop needed).
     units = sim.bank.effective_value("H05-02") or 10000
     v_rpm = ramp_ms = 0.0
@@ -99,7 +99,7 @@ def test_is620p_moves_end_by_their_own_segment_where_it_stops_inside_the_travel_
     start = d.profile.entry("H31-00").address
     edges = sum(1 for _t, op, a, v in log if op == "W" and a == start and v == [3])
     moves = sum(1 for m in said if m.startswith("move "))
-    braked = edges - moves - 4                 # the pilot's two moves stop by command: a start and a braking edge each
-    assert moves >= 4 and 0 <= braked <= moves // 2     # before: 6 of 8 moves braked by a segment of their own
+    braked = edges - moves - 4  # the pilot's two moves stop by command: a start and a braking edge each
+    assert moves >= 4 and 0 <= braked <= moves // 2  # before: 6 of 8 moves braked by a segment of their own
     assert r.identified.travel_used_rev <= 2.0 and r.identified.estimate.load_ratio == pytest.approx(10.0, rel=0.03)
     assert sim.firmware.plant.alarm is None

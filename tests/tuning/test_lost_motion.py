@@ -25,7 +25,7 @@ def test_the_motor_crosses_the_gap_alone_where_the_braking_torque_reverses_the_f
     assert coupled[13:29].all()
     loose = [i for i in range(29, 40) if not coupled[i]]
     assert loose and loose[0] in (29, 30) and len(loose) <= 5
-    assert coupled[loose[-1] + 1:].all()
+    assert coupled[loose[-1] + 1 :].all()
 
 
 def test_friction_that_brakes_the_load_harder_than_the_ramp_keeps_it_on_its_flank():
@@ -40,7 +40,7 @@ def test_a_load_with_no_inertia_of_its_own_is_always_coupled():
 
 
 def test_windows_near_a_loose_interval_are_not_clear():
-    coupled = np.array([True] * 5 + [False] + [True] * 5)          # interval 5 (samples 5 to 6) loose
+    coupled = np.array([True] * 5 + [False] + [True] * 5)  # interval 5 (samples 5 to 6) loose
     starts = np.arange(11)
     ends = starts + 1
 

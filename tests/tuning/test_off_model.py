@@ -28,25 +28,29 @@ def _outcome(sim, d, clock):
 def test_an_arm_on_a_gear_is_fitted_with_a_load_that_varies_over_the_travel(sim_dir):
     """The constant-load model put J 14 % off with a 1 % uncertainty; now the load varies with position in the fit,
     the result says so, and the truth is inside the stated 3 sigma."""
-    sim, d, clock = set_up("dsx7e", 19200, load_ratio=5.0, friction=0.02, noise=0.002, seed=6,
-                           arm_gravity=0.1, gear=10.0)
+    sim, d, clock = set_up(
+        "dsx7e", 19200, load_ratio=5.0, friction=0.02, noise=0.002, seed=6, arm_gravity=0.1, gear=10.0
+    )
     outcome, est = _outcome(sim, d, clock)
     assert outcome == "accepted", est
     assert any("load varies over the travel" in n for n in est.notes)
     assert abs(est.load_ratio - 5.0) <= 3 * est.ratio_std
 
 
-@pytest.mark.parametrize("machine", [
-    {"arm_gravity": 0.4, "gear": 10.0, "arm_angle": 30.0, "seed": 7},
-    {"backlash_rad": 0.05, "seed": 4},
-    {"resonance_hz": 20.0, "seed": 3},        # was accepted 15-24 % off with a 1 % uncertainty
-    {"resonance_hz": 50.0, "seed": 12, "load_ratio": 10.0},
-    # Backlash 0.1 rad on a light load: accepted +7.9 and +8.9 % off with a stated 3 sigma of 5.8 and 6.3 % (7 of
-    # 14 accepted runs of bench/off_model.py's machine outside their 3 sigma) until J was compared across weak,
-    # medium and strong accelerations (the motor crosses the gap alone where the torque reverses)
-    {"backlash_rad": 0.1, "seed": 9, "load_ratio": 2.0},
-    {"backlash_rad": 0.1, "seed": 10, "load_ratio": 2.0},
-])
+@pytest.mark.parametrize(
+    "machine",
+    [
+        {"arm_gravity": 0.4, "gear": 10.0, "arm_angle": 30.0, "seed": 7},
+        {"backlash_rad": 0.05, "seed": 4},
+        {"resonance_hz": 20.0, "seed": 3},  # was accepted 15-24 % off with a 1 % uncertainty
+        {"resonance_hz": 50.0, "seed": 12, "load_ratio": 10.0},
+        # Backlash 0.1 rad on a light load: accepted +7.9 and +8.9 % off with a stated 3 sigma of 5.8 and 6.3 % (7 of
+        # 14 accepted runs of bench/off_model.py's machine outside their 3 sigma) until J was compared across weak,
+        # medium and strong accelerations (the motor crosses the gap alone where the torque reverses)
+        {"backlash_rad": 0.1, "seed": 9, "load_ratio": 2.0},
+        {"backlash_rad": 0.1, "seed": 10, "load_ratio": 2.0},
+    ],
+)
 def test_an_off_model_load_is_refused_or_flagged_in_words_never_wrong_and_tight(sim_dir, machine):
     machine = {"load_ratio": 5.0, **machine}
     ratio = machine["load_ratio"]
@@ -81,8 +85,10 @@ def test_speed_noise_sorted_with_the_acceleration_widens_a_rigid_load_without_bl
 
 
 def test_through_the_cli_an_arm_load_is_right_flagged_or_refused_with_its_reason(cli):
-    assert cli("sim", "config", "--load-ratio", "5", "--arm-gravity", "0.15", "--gear", "10",
-               "--friction", "0.02").code == 0
+    assert (
+        cli("sim", "config", "--load-ratio", "5", "--arm-gravity", "0.15", "--gear", "10", "--friction", "0.02").code
+        == 0
+    )
     for _attempt in range(3):
         # In real time under load the motion sometimes trips the travel guard before any fit (issue 16's motion
         # items, on rigid loads too); that outcome says nothing about the fit, so it is run again.
@@ -107,7 +113,7 @@ def test_through_the_cli_backlash_is_identified_clear_of_its_lost_motion_and_fla
     assert cli("sim", "config", "--load-ratio", "2", "--backlash-rad", "0.1", "--friction", "0.02").code == 0
     for _attempt in range(3):
         r = cli("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--json")
-        if "travel limit" not in r.out:      # real time under load: see the arm's test above
+        if "travel limit" not in r.out:  # real time under load: see the arm's test above
             break
     assert r.code == 0, r.out
     data = r.json()
@@ -120,6 +126,7 @@ def test_a_torque_read_in_whole_percent_does_not_pass_for_backlash(sim_dir):
     accelerations misread by a larger share of a step read J 19 % apart from the strong ones, refused as backlash
     until only windows whose acceleration torque spans 10 steps were sorted by acceleration."""
     from bench.inertia_accuracy import identify_once
+
     try:
         identify_once(0.0, 0.2, -0.4, 0.0, 57600, seed=39, profile_id="is620p", viscous=0.0)
     except IdentificationRefused as exc:
@@ -128,7 +135,7 @@ def test_a_torque_read_in_whole_percent_does_not_pass_for_backlash(sim_dir):
 
 def test_the_torque_step_is_found_from_readings_on_a_grid():
     assert torque_step(np.array([3.0, -1.0, 0.0, 7.0, 3.0]) * 0.0127) == pytest.approx(0.0127)
-    assert torque_step(np.array([0.1, 0.27, 0.7, 1.31])) == 0.0       # not on one grid
+    assert torque_step(np.array([0.1, 0.27, 0.7, 1.31])) == 0.0  # not on one grid
     assert torque_step(np.array([0.5, 0.5])) == 0.0
 
 
@@ -137,8 +144,9 @@ def test_a_refusal_widened_by_the_accelerations_names_a_travel_that_then_identif
     uncertainty is refused, and the refusal used to suggest nothing. It names a longer travel (noise sorting weighs
     less in a stronger motion); followed, it gives a result within its 3 sigma. (Backlash 0.1 rad on a light load
     was this test's machine until lost motion was fitted around: it now identifies at 2 rev.)"""
-    _refused_then_followed({"load_ratio": 5.0, "friction": 0.05, "noise": 0.01, "seed": 1},
-                           "inertia differs with the acceleration")
+    _refused_then_followed(
+        {"load_ratio": 5.0, "friction": 0.05, "noise": 0.01, "seed": 1}, "inertia differs with the acceleration"
+    )
 
 
 def _refused_then_followed(machine: dict[str, float], words: str) -> None:
@@ -149,8 +157,9 @@ def _refused_then_followed(machine: dict[str, float], words: str) -> None:
     assert words in str(refused.value)
     assert refused.value.remedy is not None, str(refused.value)
     _sim, d, clock = set_up("dsx7e", 19200, **machine)
-    est = tune_inertia(d, TuneRequest(dry_run=True, travel_rev=refused.value.remedy.suggested_rev),
-                       clock=clock).identified.estimate
+    est = tune_inertia(
+        d, TuneRequest(dry_run=True, travel_rev=refused.value.remedy.suggested_rev), clock=clock
+    ).identified.estimate
     assert abs(est.load_ratio - machine["load_ratio"]) <= 3 * est.ratio_std
 
 
@@ -160,8 +169,7 @@ def test_backlash_is_fitted_clear_of_its_lost_motion_or_refused_naming_it(sim_di
     the braking torque reverses, the motor crossed the gap alone and those windows, through the friction every
     window shares, pulled J 5 % low in every subset alike; accepted outside its 3 sigma in 3 of 3 runs, no note. The
     windows clear of the lost motion now give J, or the refusal names it."""
-    _sim, d, clock = set_up("is620p", 57600, load_ratio=2.0, friction=0.02, noise=0.002, seed=seed,
-                            backlash_rad=0.2)
+    _sim, d, clock = set_up("is620p", 57600, load_ratio=2.0, friction=0.02, noise=0.002, seed=seed, backlash_rad=0.2)
     outcome, found = _outcome(_sim, d, clock)
     if outcome == "refused":
         assert "lost motion (backlash?) where the torque reverses" in found, found
@@ -172,5 +180,7 @@ def test_backlash_is_fitted_clear_of_its_lost_motion_or_refused_naming_it(sim_di
 
 def test_a_refusal_for_lost_motion_names_a_travel_that_then_identifies(sim_dir):
     """A stronger motion crosses the gap faster: fewer windows are lost to it, and the refusal says how far."""
-    _refused_then_followed({"load_ratio": 2.0, "friction": 0.02, "noise": 0.002, "seed": 6, "backlash_rad": 0.1},
-                           "lost motion (backlash?) where the torque reverses")
+    _refused_then_followed(
+        {"load_ratio": 2.0, "friction": 0.02, "noise": 0.002, "seed": 6, "backlash_rad": 0.1},
+        "lost motion (backlash?) where the torque reverses",
+    )

@@ -16,7 +16,7 @@ from tests.tuning.test_tune_robustness import set_up
 def test_a_travel_bound_refusal_suggests_a_travel_that_covers_its_shortfall():
     cure = remedy(2.0, 3.0, 300.0, 3000.0, "speed")
     assert cure is not None and cure.enough
-    assert cure.suggested_rev == math.ceil(2.0 * 3.0 * REMEDY_MARGIN * 2) / 2      # 10 rev, in half revolutions
+    assert cure.suggested_rev == math.ceil(2.0 * 3.0 * REMEDY_MARGIN * 2) / 2  # 10 rev, in half revolutions
     assert cure.gain == pytest.approx(cure.suggested_rev / 2.0)
     assert "--travel 10 " in cure.words() and "usually falls with it" in cure.words()
 
@@ -27,16 +27,20 @@ def test_a_small_shortfall_still_asks_for_a_clear_step():
 
 
 def test_where_the_torque_or_speed_limit_stops_short_the_remedy_says_it_may_not_be_enough():
-    cure = remedy(2.0, 5.0, 300.0, 1200.0, "torque")         # 4x harder at most
+    cure = remedy(2.0, 5.0, 300.0, 1200.0, "torque")  # 4x harder at most
     assert cure is not None and not cure.enough
     assert cure.suggested_rev == 8.0
     assert "torque share of the limit" in cure.words() and "may not be enough" in cure.words()
 
 
-@pytest.mark.parametrize("shortfall, speed, cap", [
-    (math.nan, 300.0, 3000.0),      # refused for something more travel does not cure
-    (0.9, 300.0, 3000.0),           # not short at all
-    (3.0, 2000.0, 3000.0)])         # the moves nearly reach the cap already
+@pytest.mark.parametrize(
+    "shortfall, speed, cap",
+    [
+        (math.nan, 300.0, 3000.0),  # refused for something more travel does not cure
+        (0.9, 300.0, 3000.0),  # not short at all
+        (3.0, 2000.0, 3000.0),
+    ],
+)  # the moves nearly reach the cap already
 def test_no_travel_is_suggested_where_it_would_not_help(shortfall, speed, cap):
     assert remedy(2.0, shortfall, speed, cap, "speed") is None
 
@@ -44,8 +48,15 @@ def test_no_travel_is_suggested_where_it_would_not_help(shortfall, speed, cap):
 def test_sd25_at_its_factory_9600_baud_is_refused_with_a_travel_that_then_succeeds(sim_dir):
     """SD25 at 9600 (18 samples/s): a load of 37 with gravity is too uncertain within 2 rev (3.8 %). The old advice,
     repeat the motion, could not help; the suggested travel does, and the result is within its 3 sigma."""
-    machine = {"load_ratio": 37.0, "friction": 0.1, "viscous": 0.001, "load_torque": 0.4, "noise": 0.002, "seed": 9,
-               "brake": 1}
+    machine = {
+        "load_ratio": 37.0,
+        "friction": 0.1,
+        "viscous": 0.001,
+        "load_torque": 0.4,
+        "noise": 0.002,
+        "seed": 9,
+        "brake": 1,
+    }
     _sim, d, clock = set_up("sd25", 9600, **machine)
     with pytest.raises(IdentificationRefused) as refused:
         tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
@@ -60,6 +71,6 @@ def test_sd25_at_its_factory_9600_baud_is_refused_with_a_travel_that_then_succee
 
 
 def test_a_speed_bound_remedy_names_the_speed_limit():
-    cure = remedy(2.0, 5.0, 300.0, 900.0, "speed")            # 3x at most: rated speed or --max-speed
+    cure = remedy(2.0, 5.0, 300.0, 900.0, "speed")  # 3x at most: rated speed or --max-speed
     assert cure is not None and not cure.enough and cure.suggested_rev == 6.0
     assert "the speed limit (rated or --max-speed)" in cure.words()

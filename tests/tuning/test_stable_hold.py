@@ -23,8 +23,8 @@ from tests.tuning.test_tune_robustness import set_up
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 from hold_stability import GROWTH, run_once
 
-JM = 0.26e-4                                          # IS620P profile's rotor, kg m^2
-FACTORY = LoopGains(25.0, 31.83, 40.0, 0.79)          # H08-00, H08-01, H08-02, H07-05
+JM = 0.26e-4  # IS620P profile's rotor, kg m^2
+FACTORY = LoopGains(25.0, 31.83, 40.0, 0.79)  # H08-00, H08-01, H08-02, H07-05
 
 
 def test_the_factory_hold_grows_beyond_a_load_of_16_at_the_factory_ratio():
@@ -32,12 +32,12 @@ def test_the_factory_hold_grows_beyond_a_load_of_16_at_the_factory_ratio():
     at = {r: least_damping(FACTORY, JM * (1 + r), JM * 2.0) for r in (0.0, 10.0, 20.0, 37.0, 49.0)}
     assert at[0.0] > 0.5 and at[10.0] > 0.05
     assert at[20.0] < 0 and at[37.0] < 0 and at[49.0] < 0
-    assert least_damping(FACTORY, JM * 50, JM * 2.0, position=False) > 0     # the speed loop alone is stable
+    assert least_damping(FACTORY, JM * 50, JM * 2.0, position=False) > 0  # the speed loop alone is stable
 
 
 def _drive(profile_id: str, baud: int = 115200, **machine: float):
     d = set_up(profile_id, baud, **machine)[1]
-    d.dead_man_waived = False        # the hold is tested on the drive's own route
+    d.dead_man_waived = False  # the hold is tested on the drive's own route
     return d
 
 
@@ -58,8 +58,8 @@ def test_before_the_pilot_the_hold_is_damped_for_any_load_the_ratio_parameter_ho
     gains = LoopGains(25.0, setting.integral_ms, setting.position_per_s, 0.79)
     for load in (0.0, 1.0, 5.0, 20.0, 50.0, 120.0):
         assert least_damping(gains, JM * (1 + load), JM * (1 + setting.ratio)) >= HOLD_MIN_DAMPING - 1e-9, load
-    assert setting.ratio > 1.0 and setting.position_per_s < 40.0       # a stiffer speed loop, a softer hold
-    assert _raws(d, HOLD_CODES) != before                                # written to the drive ...
+    assert setting.ratio > 1.0 and setting.position_per_s < 40.0  # a stiffer speed loop, a softer hold
+    assert _raws(d, HOLD_CODES) != before  # written to the drive ...
     assert saved == {c: r for c, r in zip(HOLD_CODES, before, strict=True) if c in saved} and len(saved) >= 2
 
 
@@ -73,7 +73,7 @@ def test_after_the_pilot_the_estimate_is_the_ratio_and_the_drives_own_hold_comes
     assert setting is not None and setting.ratio == pytest.approx(est.load_ratio, abs=0.01)
     assert (setting.integral_ms, setting.position_per_s) == (31.83, 40.0)
     assert _raws(d, HOLD_CODES) == [round(est.load_ratio * 100), 3183, 400]
-    assert hold.after_pilot(None) is None                                # no estimate: nothing changes
+    assert hold.after_pilot(None) is None  # no estimate: nothing changes
 
 
 def _estimate(load: float):
@@ -83,10 +83,10 @@ def _estimate(load: float):
     for k in range(800):
         time = k * 0.005
         phase, sign = time % 0.4, 1.0 if time % 0.8 < 0.4 else -1.0
-        accel = 300.0 if phase < 0.1 else -300.0 if phase < 0.2 else 0.0          # rad/s^2
+        accel = 300.0 if phase < 0.1 else -300.0 if phase < 0.2 else 0.0  # rad/s^2
         speed = 300.0 * min(phase, max(0.0, 0.2 - phase)) if phase < 0.2 else 0.0
         t.append(time)
-        v.append(sign * speed * 30 / math.pi + 0.1 * math.sin(7.0 * k))           # a little "noise"
+        v.append(sign * speed * 30 / math.pi + 0.1 * math.sin(7.0 * k))  # a little "noise"
         q.append(sign * j * accel / 1.27 * 100 + 0.05 * math.cos(5.0 * k))
     est = estimate_inertia(t, v, q, rated_torque_nm=1.27, rotor_inertia_kgcm2=0.26, torque_limit_pct=300.0)
     assert math.isfinite(est.load_ratio)
@@ -106,8 +106,10 @@ def test_a_route_without_a_position_hold_is_left_alone(sim_dir):
     assert not hold.active and hold.before_pilot() is None and hold.after_pilot(_estimate(5.0)) is None
 
 
-@pytest.mark.parametrize(("profile_id", "load", "friction", "seed"), [
-    ("is620p", 43.0, 0.1, 3), ("is620p", 50.0, 0.1, 2), ("is620p", 20.0, 0.3, 5), ("sdc", 50.0, 0.1, 1)])
+@pytest.mark.parametrize(
+    ("profile_id", "load", "friction", "seed"),
+    [("is620p", 43.0, 0.1, 3), ("is620p", 50.0, 0.1, 2), ("is620p", 20.0, 0.3, 5), ("sdc", 50.0, 0.1, 1)],
+)
 def test_a_seeded_sample_of_the_sweep_neither_swings_nor_trips(sim_dir, profile_id, load, friction, seed):
     """Without the stable hold the first swung to 1.7x the planned speed and the second ran into the travel guard."""
     run = run_once(profile_id, load, friction, 0.002, seed, baud=57600 if profile_id == "is620p" else 115200)
@@ -124,8 +126,8 @@ def test_the_step_check_before_tuning_shows_the_slow_loop_without_the_hold_swing
     peak = [0.0]
     sim.on_read.append(lambda _d: peak.__setitem__(0, max(peak[0], abs(sim.firmware.plant.true_speed_rpm))))
     res = tune_inertia(d, TuneRequest(step_check=True), clock=d.link.clock)
-    assert res.step_before is not None and res.step_before.failure() is not None      # the slow loop, seen
-    assert res.step_after is not None and res.step_after.failure() is None            # ... and fixed by the ratio
+    assert res.step_before is not None and res.step_before.failure() is not None  # the slow loop, seen
+    assert res.step_after is not None and res.step_after.failure() is None  # ... and fixed by the ratio
     assert peak[0] < 1.3 * res.identified.plan.speed_rpm
     assert _raws(d, ("H08-00", "H08-01", "H08-02")) == gains and res.ratio == pytest.approx(37.0, rel=0.05)
 

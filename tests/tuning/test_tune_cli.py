@@ -28,6 +28,7 @@ def test_tune_identifies_the_configured_load_and_writes_it(cli, ratio):
 # The IS620P segment route's setup (profiles/is620p.yaml motion_setup), as a user types it.
 IS620P_SETUP = ("H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1", "H17-02=28")
 
+
 def test_tune_sets_gains_for_a_rigidity_and_saves_the_trace(cli, tmp_path):
     cli("sim", "config", "--load-ratio", "4")
     trace = tmp_path / "trace.csv"
@@ -35,7 +36,7 @@ def test_tune_sets_gains_for_a_rigidity_and_saves_the_trace(cli, tmp_path):
     assert r.code == 0, r.err
     gains = {g["role"]: g for g in r.json()["gains"]}
     assert set(gains) == {"speed_loop_gain", "speed_loop_integral", "position_loop_gain", "torque_filter", "rigidity"}
-    assert gains["rigidity"]["code"] == "Pn003" and gains["rigidity"]["new"] == 14     # DSX7E's own level, written
+    assert gains["rigidity"]["code"] == "Pn003" and gains["rigidity"]["new"] == 14  # DSX7E's own level, written
     assert r.json()["phase_margin_deg"] >= 45 and r.json()["gain_margin_db"] >= 6
     now = cli("--port", "sim", "param", "get", "Pn101", "--json").json()[0]["value"]
     assert now == pytest.approx(gains["speed_loop_gain"]["new"])
@@ -80,24 +81,27 @@ def test_drive_method_dry_run_puts_the_old_ratio_back(cli):
     assert r.code == 0, r.err
     data = r.json()
     assert data["written"] is False and data["ratio"] == pytest.approx(5.0, rel=0.08)
-    assert data["travel_rev"] is None       # JSON null, not NaN
+    assert data["travel_rev"] is None  # JSON null, not NaN
     assert _params(cli, "Pn004")["Pn004"] == 250
 
 
-@pytest.mark.parametrize("args, message", [
-    (("--travel", "nan"), "--travel must be a number"),
-    (("--rigidity", "40"), "rigidity must be 0..31 (this drive's own levels, factory 13)"),
-    (("--bandwidth", "5000"), "bandwidth must be"),
-    (("--save-trace", "/nonexistent-dir/t.csv"), "cannot write the trace"),
-    (("--step-check", "--travel", "0.5"), "--step-check needs"),
-    (("--direction", "sideways"), "--direction must be"),
-    (("--accel-time", "nan"), "--accel-time must be"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (("--travel", "nan"), "--travel must be a number"),
+        (("--rigidity", "40"), "rigidity must be 0..31 (this drive's own levels, factory 13)"),
+        (("--bandwidth", "5000"), "bandwidth must be"),
+        (("--save-trace", "/nonexistent-dir/t.csv"), "cannot write the trace"),
+        (("--step-check", "--travel", "0.5"), "--step-check needs"),
+        (("--direction", "sideways"), "--direction must be"),
+        (("--accel-time", "nan"), "--accel-time must be"),
+    ],
+)
 def test_bad_options_are_refused_before_anything_moves(cli, args, message):
     cli("sim", "config", "--load-ratio", "3")
     r = cli("--port", "sim", "tune", "inertia", "--yes", *args)
     assert r.code == 2 and message in r.err and "Traceback" not in r.err
-    assert len(r.err.strip().splitlines()) <= 2         # the sim banner and one error line
+    assert len(r.err.strip().splitlines()) <= 2  # the sim banner and one error line
     assert "pilot" not in r.err
 
 
@@ -113,7 +117,7 @@ def test_falling_axis_is_refused_before_any_motion_and_identified_once_a_brake_h
     cli("sim", "config", "--load-ratio", "3", "--friction", "0.01", "--load-torque", "0.1", "--brake", "off")
     r = cli("--port", "sim", "tune", "inertia", "--yes")
     assert r.code == 2 and "moving with the servo off" in r.err and "pilot" not in r.err
-    cli("sim", "reset", "--power-cycle")                 # the fallen axis at rest again
+    cli("sim", "reset", "--power-cycle")  # the fallen axis at rest again
     cli("sim", "config", "--brake", "on")
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json")
     assert r.code == 0, r.err
@@ -123,8 +127,20 @@ def test_falling_axis_is_refused_before_any_motion_and_identified_once_a_brake_h
 def test_refusal_writes_the_trace_and_a_json_reason(cli, tmp_path):
     cli("sim", "config", "--load-ratio", "3", "--noise", "0.03")
     trace = tmp_path / "t.csv"
-    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--repeats", "1", "--travel", "1",
-            "--save-trace", str(trace))
+    r = cli(
+        "--port",
+        "sim",
+        "tune",
+        "inertia",
+        "--yes",
+        "--json",
+        "--repeats",
+        "1",
+        "--travel",
+        "1",
+        "--save-trace",
+        str(trace),
+    )
     assert r.code == 1
     data = r.json()
     assert data["ok"] is False and "refused" in data["reason"] and data["written"] is False
@@ -148,10 +164,10 @@ def test_refusals(cli):
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--travel", "0.05")
     assert r.code == 2 and "too small" in r.err
     r = cli("--port", "sim", "tune", "inertia", "--json")
-    assert r.code == 2 and "--yes" in r.err                    # no TTY, no --yes: nothing moves
+    assert r.code == 2 and "--yes" in r.err  # no TTY, no --yes: nothing moves
     r = cli("--port", "tcp://127.0.0.1:9", "--profile", "dsx7e", "tune", "inertia", "--yes")
     assert r.code == 1 and "cannot open port" in r.err
-    with socket.socket() as silent:                            # a gateway that accepts but never answers
+    with socket.socket() as silent:  # a gateway that accepts but never answers
         silent.bind(("127.0.0.1", 0))
         silent.listen()
         port = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
@@ -167,20 +183,45 @@ def test_a_drive_without_an_inertia_ratio_parameter_is_identified_and_nothing_is
     """SDC maps no inertia-ratio parameter (PN60's meaning is unknown) and no usable position feedback: the host
     method still measures the load, tracking travel from the speed, and reports it without writing."""
     cli("sim", "config", "--profile", "sdc", "--load-ratio", "5")
-    assert cli("--port", "sim", "--profile", "sdc", "param", "set", "PN4=3").code == 0      # the JOG route's setup
+    assert cli("--port", "sim", "--profile", "sdc", "param", "set", "PN4=3").code == 0  # the JOG route's setup
     # A moderate speed: at the automatic speed a move covers 1.8 of the 2 rev, and a stall of this process on a busy
     # machine (60-200 ms measured) lets the real-time simulated motor run past the travel guard (or, without
     # position feedback, makes the travel integrated from the speed overshoot it). Not issue 16's growing hold
     # oscillation, which is gone (bench/hold_stability.py). This test is about a drive without a ratio parameter,
     # so its travel limit leaves room for a 200 ms stall at full speed (2 rev at 600 rpm; CI failed once with 2).
-    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--json", "--max-speed", "600",
-            "--travel", "4", "--no-dead-man")
+    r = cli(
+        "--port",
+        "sim",
+        "--profile",
+        "sdc",
+        "tune",
+        "inertia",
+        "--yes",
+        "--json",
+        "--max-speed",
+        "600",
+        "--travel",
+        "4",
+        "--no-dead-man",
+    )
     assert r.code == 0, r.err
     res = r.json()
     assert res["ratio"] == pytest.approx(5.0, rel=0.05) and res["travel_rev"] <= 4.0
     assert res["old_ratio"] is None and res["parameter"] is None and res["written"] is False
-    r = cli("--port", "sim", "--profile", "sdc", "tune", "inertia", "--yes", "--max-speed", "600", "--travel", "4",
-            "--no-dead-man")
+    r = cli(
+        "--port",
+        "sim",
+        "--profile",
+        "sdc",
+        "tune",
+        "inertia",
+        "--yes",
+        "--max-speed",
+        "600",
+        "--travel",
+        "4",
+        "--no-dead-man",
+    )
     assert r.code == 0 and "not a drive parameter" in r.out and "nothing to write" in r.out
 
 
@@ -190,11 +231,11 @@ def test_step_check_shows_the_better_response_after_tuning(cli):
     assert r.code == 0, r.err
     before, after = r.json()["step_before"], r.json()["step_after"]
     assert before["samples"] > 20 and after["samples"] > 20
-    assert after["overshoot_pct"] < before["overshoot_pct"]       # default ratio 1.5 vs true 10: under-damped
+    assert after["overshoot_pct"] < before["overshoot_pct"]  # default ratio 1.5 vs true 10: under-damped
 
 
 def test_motion_stays_inside_a_small_travel_limit(cli):
-    cli("sim", "config", "--load-ratio", "30")       # far from the configured 1.5: the loop overshoots
+    cli("sim", "config", "--load-ratio", "30")  # far from the configured 1.5: the loop overshoots
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--travel", "1", "--no-gains")
     assert r.json()["travel_rev"] <= 1.0
 
@@ -202,7 +243,7 @@ def test_motion_stays_inside_a_small_travel_limit(cli):
 def test_identification_works_wherever_the_axis_stands(cli):
     """The travel band is set around the axis's real position, not around position 0."""
     cli("sim", "config", "--load-ratio", "5")
-    assert cli("--port", "sim", "jog", "--speed", "-300", "--time", "1").code == 0     # 5 rev below zero
+    assert cli("--port", "sim", "jog", "--speed", "-300", "--time", "1").code == 0  # 5 rev below zero
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json")
     assert r.code == 0, r.err
     assert r.json()["ratio"] == pytest.approx(5.0, rel=0.05) and r.json()["travel_rev"] <= 2.0
@@ -218,21 +259,19 @@ def test_drive_method_is_refused_up_front_where_its_end_cannot_be_seen(cli):
 
 def test_an_axis_switched_on_from_elsewhere_is_not_moved_nor_switched_off(cli):
     """IS620P's servo-on is a parameter (VDI H31-00): set by someone else, tune must refuse and leave it on."""
-    assert cli("--port", "sim", "--profile", "is620p", "param", "set", *IS620P_SETUP,
-               "H31-00=1").code == 0
+    assert cli("--port", "sim", "--profile", "is620p", "param", "set", *IS620P_SETUP, "H31-00=1").code == 0
     r = cli("--port", "sim", "--profile", "is620p", "tune", "inertia", "--yes")
     assert r.code == 2 and "servo is on" in r.err
     r = cli("--port", "sim", "--profile", "is620p", "param", "get", "H31-00", "H08-15", "--json")
-    assert [row["changed"] for row in r.json()] == [True, False]            # still on, ratio untouched
+    assert [row["changed"] for row in r.json()] == [True, False]  # still on, ratio untouched
 
 
 def test_tune_gains_prints_the_levels_tried_and_keeps_one(cli):
     cli("sim", "config", "--load-ratio", "3")
-    assert cli("--port", "sim", "param", "set", "Pn004=400").code == 0       # as tune inertia would write it
+    assert cli("--port", "sim", "param", "set", "Pn004=400").code == 0  # as tune inertia would write it
     r = cli("--port", "sim", "tune", "gains", "--yes", "--json", "--from", "16", "--to", "18")
     assert r.code == 0, r.err
     res = r.json()
     assert [row["level"] for row in res["levels"]] == [16, 17, 18] and res["chosen"] == 18
     assert all(row["phase_margin_deg"] >= 45 and row["failure"] is None for row in res["levels"])
     assert _params(cli, "Pn003")["Pn003"] == 18
-

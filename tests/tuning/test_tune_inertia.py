@@ -56,12 +56,12 @@ def test_alarm_in_the_middle_of_the_motion_stops_it_and_refuses(sim_dir):
     ident = identify.Identifier(d, timing)
     with pytest.raises(identify.IdentificationFailed, match="alarm E09"):
         _run_host(ident, timing)
-    assert "t" in tripped                                   # the alarm came during the motion
+    assert "t" in tripped  # the alarm came during the motion
     trace_t0 = timing.now() - ident.trace.t[-1]
     # the identification gave up within the move the alarm ended (no further moves were started) ...
     assert ident.trace.t[-1] + trace_t0 - tripped["t"] < 1.0
     late = [abs(v) for t, v in zip(ident.trace.t, ident.trace.speed, strict=True) if t + trace_t0 > tripped["t"] + 0.2]
-    assert max(late, default=0.0) < 5.0                     # ... and nothing moved once the drive had stopped
+    assert max(late, default=0.0) < 5.0  # ... and nothing moved once the drive had stopped
     # the servo is off and the JOG parameters are back as they were
     assert sim_drive.firmware.mode == "off" and not sim_drive.firmware.plant.servo_on
     assert [r.raw for r in d.read_entries([p.role("jog_speed"), p.role("jog_accel")])] == [r.raw for r in jog_params]
@@ -81,7 +81,7 @@ def test_travel_check_stops_an_axis_that_runs_away(sim_dir):
         _run_host(identify.Identifier(d, timing), timing)
     plant = sim_drive.firmware.plant
     assert sim_drive.firmware.mode == "off" and not plant.servo_on
-    assert sim_drive.firmware.plant.alarm is None            # stopped by the identification, not by a drive alarm
+    assert sim_drive.firmware.plant.alarm is None  # stopped by the identification, not by a drive alarm
 
 
 def test_an_active_alarm_refuses_before_any_motion(sim_dir):
@@ -109,9 +109,10 @@ def test_a_dry_run_identifies_and_writes_nothing(sim_dir):
 def test_the_ratio_and_gains_are_written_once_approved_and_not_when_declined(sim_dir):
     _sim, d, clock = _virtual(ratio=4.0)
     seen = []
-    res = tune_inertia(d, TuneRequest(gains=True, rigidity=14), clock=clock,
-                       on_proposal=seen.append, approve_write=lambda _p: False)
-    assert len(seen) == 1 and res.written == [] and _raw(d, "Pn004") == 250     # the factory 1.5
+    res = tune_inertia(
+        d, TuneRequest(gains=True, rigidity=14), clock=clock, on_proposal=seen.append, approve_write=lambda _p: False
+    )
+    assert len(seen) == 1 and res.written == [] and _raw(d, "Pn004") == 250  # the factory 1.5
     res = tune_inertia(d, TuneRequest(gains=True, rigidity=14), clock=clock)
     assert res.ratio_stored and res.gains_written
     assert res.written[0][0].code == "Pn004" and _raw(d, "Pn004") == res.proposal.parameter_raw
@@ -130,8 +131,15 @@ def test_the_writes_follow_the_drives_eeprom_rule(sim_dir):
     """IS620P stores every write while H0C-13 = 1: save=False keeps the result out of EEPROM (a power cycle loses
     it) and puts the switch back."""
     sim_drive, d, clock = _virtual(ratio=4.0, profile_id="is620p")
-    for code, raw in (("H02-00", 1), ("H05-00", 2), ("H05-02", 10000), ("H11-00", 0), ("H0C-09", 1), ("H17-00", 1),
-                      ("H17-02", 28)):                                  # the segment route's setup
+    for code, raw in (
+        ("H02-00", 1),
+        ("H05-00", 2),
+        ("H05-02", 10000),
+        ("H11-00", 0),
+        ("H0C-09", 1),
+        ("H17-00", 1),
+        ("H17-02", 28),
+    ):  # the segment route's setup
         d.write_verified(d.profile.entry(code), raw)
     old = _raw(d, "H08-15")
     res = tune_inertia(d, TuneRequest(save=False), clock=clock)
@@ -139,7 +147,7 @@ def test_the_writes_follow_the_drives_eeprom_rule(sim_dir):
     assert _raw(d, "H0C-13") == 1
     sim_drive.power_cycle()
     assert _raw(d, "H08-15") == old
-    res = tune_inertia(d, TuneRequest(), clock=clock)                    # as the drive is set: stored
+    res = tune_inertia(d, TuneRequest(), clock=clock)  # as the drive is set: stored
     assert res.persisted is True
     sim_drive.power_cycle()
     assert _raw(d, "H08-15") == res.proposal.parameter_raw
@@ -147,8 +155,8 @@ def test_the_writes_follow_the_drives_eeprom_rule(sim_dir):
 
 def test_a_profile_without_an_inertia_ratio_parameter_is_measured_and_nothing_written(sim_dir):
     _sim, d, clock = _virtual(ratio=5.0, profile_id="sdc")
-    d.write_verified(d.profile.entry("PN4"), 3)                          # the JOG route's setup
-    d.dead_man_waived = True                                             # SDC has no dead-man route
+    d.write_verified(d.profile.entry("PN4"), 3)  # the JOG route's setup
+    d.dead_man_waived = True  # SDC has no dead-man route
     res = tune_inertia(d, TuneRequest(), clock=clock)
     assert res.ratio == pytest.approx(5.0, rel=0.05) and res.identified.old_ratio is None
     assert res.proposal.parameter is None and res.written == [] and res.persisted is None
@@ -163,7 +171,7 @@ def test_the_drive_method_keeps_the_dead_man_rule_of_the_host_method(sim_dir):
     d.profile = replace(d.profile, dead_man=DeadManRoute(route="none", reason="no watchdog here", source="test"))
     with pytest.raises(UsageError, match="no dead-man on this drive"):
         tune_inertia(d, TuneRequest(method="drive", dry_run=True), clock=clock)
-    assert sim_drive.firmware.plant.position_rev == 0.0 and sim_drive.firmware.ident is None     # nothing moved
+    assert sim_drive.firmware.plant.position_rev == 0.0 and sim_drive.firmware.ident is None  # nothing moved
     d.dead_man_waived = True
     res = tune_inertia(d, TuneRequest(method="drive", dry_run=True), clock=clock)
     assert res.ratio == pytest.approx(3.0, rel=0.1)

@@ -29,7 +29,7 @@ def set_up(profile_id: str, baud: int = 115200, stalls: HostStalls | None = None
     sim.firmware.reconfigure()
     make_motion_setup(sim)
     d = Drive(VirtualLink([sim], clock, baud, stalls), profile, 1)
-    d.dead_man_waived = True    # SD25 and SDC have no dead-man route (issue 15); these tests are about the estimate
+    d.dead_man_waived = True  # SD25 and SDC have no dead-man route (issue 15); these tests are about the estimate
     return sim, d, clock
 
 
@@ -48,8 +48,8 @@ def test_is620p_with_a_heavy_load_identifies_instead_of_oscillating_after_the_pi
     res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - ratio) <= 3 * est.ratio_std
-    assert peak[0] < 1.3 * res.identified.plan.speed_rpm          # no swing beyond the planned speed
-    assert _raws(d, IS620P_HOLD) == before                         # a dry run leaves the drive as it was
+    assert peak[0] < 1.3 * res.identified.plan.speed_rpm  # no swing beyond the planned speed
+    assert _raws(d, IS620P_HOLD) == before  # a dry run leaves the drive as it was
 
 
 GAIN_CODES = ("Pn101", "Pn102", "Pn100", "Pn128", "Pn003")
@@ -83,8 +83,7 @@ def test_gains_at_a_safe_level_pass_the_step_check_and_stay(sim_dir):
     res = tune_inertia(d, TuneRequest(gains=True, rigidity=18, verify=True), clock=clock)
     assert res.verified is not None and res.verified.failure() is None
     assert res.proposal.margins is not None and res.proposal.margins.ok()
-    assert _raws(d)[-1] == 18 and res.gains_written                   # the drive's own rigidity parameter too
-
+    assert _raws(d)[-1] == 18 and res.gains_written  # the drive's own rigidity parameter too
 
 
 def test_tune_gains_raises_the_level_until_a_step_check_fails_and_backs_off(sim_dir):
@@ -93,11 +92,11 @@ def test_tune_gains_raises_the_level_until_a_step_check_fails_and_backs_off(sim_
     _sim, d, clock = set_up("dsx7e", load_ratio=0.0, friction=0.02, noise=0.002)
     res = search_gains(d, load_ratio=20.0, clock=clock)
     failed = [t for t in res.trials if t.failure]
-    assert len(failed) == 1 and failed[0] is res.trials[-1]                     # stopped at the first failure
+    assert len(failed) == 1 and failed[0] is res.trials[-1]  # stopped at the first failure
     assert [t.level for t in res.trials] == list(range(13, failed[0].level + 1))  # from the drive's own level up
     assert res.chosen == failed[0].level - 2 and "backed off" in res.reason
-    assert all(t.margins.ok() for t in res.trials)                              # never beyond the margins
-    assert _raws(d)[-1] == res.chosen                                            # Pn003 holds the level kept
+    assert all(t.margins.ok() for t in res.trials)  # never beyond the margins
+    assert _raws(d)[-1] == res.chosen  # Pn003 holds the level kept
     assert _raws(d)[0] == next(c.raw for c in res.changes if c.entry.code == "Pn101")
 
 
@@ -114,7 +113,7 @@ def test_friction_is_reported_in_drive_units_with_the_drives_compensation_entrie
     res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     report = friction_report(d.profile, res.identified.estimate)
     assert report is not None and report.coulomb_pct == pytest.approx(10.0, abs=1.0)
-    assert report.viscous_pct_at_rated == pytest.approx(0.0005 * 100 * 2 * math.pi * 50, rel=0.25)   # 15.7 %
+    assert report.viscous_pct_at_rated == pytest.approx(0.0005 * 100 * 2 * math.pi * 50, rel=0.25)  # 15.7 %
     suggested = {s.entry.code: s.value for s in report.settings}
     assert set(suggested) == {"PN137", "PN138", "PN139", "PN140"}
     assert suggested["PN137"] == pytest.approx(report.coulomb_pct, abs=0.1)
@@ -132,15 +131,26 @@ def test_a_drive_side_result_fooled_by_friction_is_put_back_and_refused(sim_dir)
     assert tune_inertia(d, TuneRequest(method="drive"), clock=clock).ratio == pytest.approx(5.0, rel=0.1)
 
 
-UNMET_AT_FACTORY = "issue 16 item 1 unmet on SD25 at 9600: speed and torque take two requests under its 10-register " \
-    "limit (18 samples/s at most) and its torque reads in 1 % steps, while 2 rev of travel allow only a few % of " \
+UNMET_AT_FACTORY = (
+    "issue 16 item 1 unmet on SD25 at 9600: speed and torque take two requests under its 10-register "
+    "limit (18 samples/s at most) and its torque reads in 1 % steps, while 2 rev of travel allow only a few % of "
     "rated torque; see bench/inertia_accuracy.py --profiles"
+)
 
 
-@pytest.mark.parametrize("profile_id, baud", [
-    pytest.param("sd25", 9600, marks=pytest.mark.xfail(reason=UNMET_AT_FACTORY, strict=False)),
-    ("sd25", 19200), ("sdc", 9600), ("sdc", 19200), ("is620p", 57600), ("is620p", 19200), ("dsx7e", 115200),
-    ("dsx7e", 19200)])
+@pytest.mark.parametrize(
+    "profile_id, baud",
+    [
+        pytest.param("sd25", 9600, marks=pytest.mark.xfail(reason=UNMET_AT_FACTORY, strict=False)),
+        ("sd25", 19200),
+        ("sdc", 9600),
+        ("sdc", 19200),
+        ("is620p", 57600),
+        ("is620p", 19200),
+        ("dsx7e", 115200),
+        ("dsx7e", 19200),
+    ],
+)
 def test_identification_at_each_drives_factory_line_speed(sim_dir, profile_id, baud):
     """A load of 20: with a load under about 10 the torque that 2 rev of motion takes on these small rotors is a few
     % of rated, against torque readings in 1 % steps (SD25, SDC, IS620P): refused as too uncertain, honestly
@@ -162,7 +172,7 @@ def test_identification_samples_at_the_pace_the_line_carries(sim_dir, profile_id
     line = 1.0 / sum(wire_time(3, count, baud) + TURNAROUND_S for _a, count, _g in coalesce_reads(p, entries))
     try:
         ident = tune_inertia(d, TuneRequest(dry_run=True), clock=clock).identified
-    except IdentificationRefused as exc:      # SD25 at 9600 may refuse (issue 16): the pace is what is tested here
+    except IdentificationRefused as exc:  # SD25 at 9600 may refuse (issue 16): the pace is what is tested here
         ident = exc.result
     assert ident.samples_per_s >= 0.8 * line
 
@@ -183,9 +193,17 @@ def test_a_torque_read_in_whole_percent_is_not_trusted_beyond_its_steps(sim_dir)
     assert est is not None and abs(res.ratio - 10.0) <= 3 * est.ratio_std
 
 
-@pytest.mark.parametrize("profile_id, baud, ratio, seed", [
-    ("dsx7e", 115200, 0.0, 2), ("dsx7e", 115200, 0.0, 3), ("dsx7e", 115200, 1.0, 2), ("dsx7e", 115200, 1.0, 4),
-    ("dsx7e", 115200, 10.0, 4), ("is620p", 57600, 1.0, 2)])     # the last two: in a dithered cycle's short ramp
+@pytest.mark.parametrize(
+    "profile_id, baud, ratio, seed",
+    [
+        ("dsx7e", 115200, 0.0, 2),
+        ("dsx7e", 115200, 0.0, 3),
+        ("dsx7e", 115200, 1.0, 2),
+        ("dsx7e", 115200, 1.0, 4),
+        ("dsx7e", 115200, 10.0, 4),
+        ("is620p", 57600, 1.0, 2),
+    ],
+)  # the last two: in a dithered cycle's short ramp
 def test_a_host_that_stalls_does_not_carry_the_axis_past_its_travel(sim_dir, profile_id, baud, ratio, seed):
     """At the automatic speed (DSX7E about 900 rpm: 0.2 rev of margin is 13 ms) on a host that stalls 10-50 ms before
     2 % of its requests: the stop guard foresees a check as late as the longest gap it has seen, and a dithered
@@ -205,6 +223,7 @@ def test_a_slow_fit_between_moves_does_not_starve_the_drives_watchdog(sim_dir, m
     after the last beat and the drive trip E25. The dead-man is fed before each such fit."""
     from servotool.tuning.identify import Identifier
     from servotool.tuning.preflight import active_alarm
+
     sim, d, clock = set_up("dsx7e", load_ratio=4.0, seed=2)
     d.dead_man_waived = False
     fit, silent = Identifier._estimate, []
@@ -217,7 +236,7 @@ def test_a_slow_fit_between_moves_does_not_starve_the_drives_watchdog(sim_dir, m
     monkeypatch.setattr(Identifier, "_estimate", slow_fit)
     res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     assert res.ratio == pytest.approx(4.0, rel=0.1)
-    assert silent and max(silent[:-1]) <= 0.2, silent     # the last fit comes after the motion
+    assert silent and max(silent[:-1]) <= 0.2, silent  # the last fit comes after the motion
     assert active_alarm(d) is None
 
 
