@@ -98,7 +98,7 @@ class Storm:
     def _prepare(self, baud: int) -> None:
         """In-process (through the library, as the CLI would): a target backup, then a drive that differs from it
         with its switch on RAM only and one value already in RAM, on a slow line."""
-        from servotool.config import ConnectOptions, resolve
+        from servotool.connection import ConnectOptions, resolve
         from servotool.ops import backup, params, restore
         from servotool.session import open_drives
         from servotool.sim import state as sim_state

@@ -1,5 +1,5 @@
 """Does servotool ever accept a wrong value on a bad line? Param get, set, backup, restore and monitor-like reads
-through the real client path (ModbusLink + Drive, RTU over TCP) to simulated drives behind a fault-injecting line
+through the real client path (RtuMaster + Drive, RTU over TCP) to simulated drives behind a fault-injecting line
 (servotool.sim.faults), at 1, 5 and 20 % of replies for each fault kind and mixed, on every profile. Every value is
 checked against the simulator's true state; a restore that fails must not claim a state the drive is not in.
 
@@ -23,7 +23,7 @@ from collections.abc import Callable
 
 from servotool.drive import Drive
 from servotool.errors import ServoError, VerifyError
-from servotool.link.modbus import ModbusLink
+from servotool.link.master import RtuMaster
 from servotool.link.ports import LinkSettings
 from servotool.model.codec import words_to_raw
 from servotool.model.loader import load_profile
@@ -143,9 +143,7 @@ class Bench:
         """One try of op on a fresh link: its outcome (one of OUTCOMES)."""
         assert self.sim.proxy is not None
         self.sim.proxy.set_faults(faults)
-        link = ModbusLink(
-            LinkSettings(self.sim.port, timeout=TIMEOUT_S, retries=2, echo=None if faults.echo else False)
-        )
+        link = RtuMaster(LinkSettings(self.sim.port, timeout=TIMEOUT_S, retries=2, echo=None if faults.echo else False))
         drive = Drive(link, self.profile, self.profile.default_unit)
         outcome = _guarded(lambda: getattr(self, op)(drive))
         if outcome != "hang":

@@ -15,7 +15,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.session import open_drives
 
 

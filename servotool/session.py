@@ -7,9 +7,9 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import replace
 
-from servotool.config import Resolved
+from servotool.connection import Resolved
 from servotool.drive import Drive
-from servotool.link.modbus import ModbusLink
+from servotool.link.master import RtuMaster
 from servotool.link.ports import Trace, latency_advice
 
 _ADVISED: set[str] = set()
@@ -50,7 +50,7 @@ def open_drives(
         _ADVISED.add(settings.port)  # once a run, however many times the port opens
         (notice or _stderr)(f"servotool: warning: {advice}")
     try:
-        link = ModbusLink(settings, trace=trace)
+        link = RtuMaster(settings, trace=trace)
     except Exception:
         if sim:
             sim.close()

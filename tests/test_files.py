@@ -12,7 +12,7 @@ import pytest
 
 from servotool import files
 from servotool.commission.plan import load_plan
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile, read_profile
 from servotool.ops.backup import load as load_backup

@@ -16,7 +16,7 @@ import pytest
 
 from servotool.commission.plan import load_plan
 from servotool.commission.steps import validate
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.errors import ServoError
 from servotool.model.loader import builtin_dir, load_profile
 from servotool.ops import backup

@@ -19,7 +19,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("servotool", "servotool.errors", "servotool.clock", "servotool.files", "servotool.words"),
     ("servotool.model",),
     ("servotool.link",),
-    ("servotool.config",),  # option layering: pure data over the model and port parsing (plans use it too)
+    ("servotool.connection",),  # option layering: pure data over the model and port parsing (plans use it too)
     ("servotool.drive",),
     ("servotool.ops",),
     ("servotool.motion",),
@@ -37,14 +37,14 @@ SIM = "servotool.sim"
 SIM_MAY_IMPORT = (*LAYERS[0], "servotool.model", "servotool.link.ports", SIM)
 SIM_IMPORTED_BY = ("servotool.session", "servotool.cli", SIM)
 CLIENT_SIDE = (
-    "servotool.link.modbus",
+    "servotool.link.master",
     "servotool.drive",
     "servotool.ops",
     "servotool.motion",
     "servotool.tuning",
     "servotool.report",
     "servotool.commission",
-    "servotool.config",
+    "servotool.connection",
     "servotool.session",
     "servotool.cli",
     "pymodbus.client",

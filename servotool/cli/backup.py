@@ -9,7 +9,7 @@ import typer
 
 from servotool.cli.common import JSON_OPT, confirm, drive, state
 from servotool.cli.render import emit_json, err, info, out, progress, table, warn
-from servotool.config import resolve
+from servotool.connection import resolve
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile

@@ -11,7 +11,7 @@ import typer
 
 from servotool.cli import render
 from servotool.cli.render import Verbosity, info, trace_frame, warn
-from servotool.config import ConnectOptions, Resolved, resolve
+from servotool.connection import ConnectOptions, Resolved, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.session import open_drives

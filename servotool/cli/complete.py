@@ -11,7 +11,7 @@ from servotool.model.lookup import COMMON_GROUPS
 
 
 def _profile(ctx: Any) -> Any:
-    from servotool.config import ConnectOptions, resolve
+    from servotool.connection import ConnectOptions, resolve
 
     root = ctx.find_root() if ctx is not None else None
     given = (root.params.get("profile") if root is not None else None) or None

@@ -17,7 +17,7 @@ from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, state
 from servotool.cli.lazy import lazy, lazy_group
 from servotool.cli.render import Verbosity, emit_json, err, json_emitted
-from servotool.config import ConnectOptions
+from servotool.connection import ConnectOptions
 from servotool.errors import ServoError
 
 fastparse.install()

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from dataclasses import fields
 from typing import TYPE_CHECKING
 
-from servotool.config import ConnectOptions
+from servotool.connection import ConnectOptions
 from servotool.errors import MissingRole, ServoError, SetupGap, SetupRequired, UnknownName
 from servotool.words import agree
 

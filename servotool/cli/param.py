@@ -10,7 +10,7 @@ import typer
 from servotool.cli import complete
 from servotool.cli.common import JSON_OPT, drive, state
 from servotool.cli.render import emit_json, info, out, progress, table, warn
-from servotool.config import resolve
+from servotool.connection import resolve
 from servotool.drive import Reading
 from servotool.errors import UnknownName
 from servotool.model.codec import format_field, format_value, get_field, json_value, split_field

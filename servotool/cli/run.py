@@ -14,7 +14,7 @@ from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_
 from servotool.commission.plan import Plan, load_plan
 from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
-from servotool.config import Resolved, merge, options_from, resolve
+from servotool.connection import Resolved, merge, options_from, resolve
 from servotool.errors import ServoError, UsageError
 from servotool.session import open_drives
 from servotool.words import count

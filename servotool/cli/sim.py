@@ -8,7 +8,7 @@ import typer
 
 from servotool.cli.common import state
 from servotool.cli.render import Verbosity, emit_json, info, out, table, trace_frame
-from servotool.config import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit, line_format, merge
+from servotool.connection import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit, line_format, merge
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile

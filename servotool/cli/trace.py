@@ -11,7 +11,7 @@ import typer
 from servotool.cli.common import drive, resolved
 from servotool.cli.render import info, out
 from servotool.clock import utc_now
-from servotool.config import Resolved
+from servotool.connection import Resolved
 from servotool.errors import ServoError, UsageError
 from servotool.ops.monitor import resolve_entries
 from servotool.ops.trace import TRIGGER_FORMS, Capture, Tracer, Window, parse_trigger

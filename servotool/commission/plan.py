@@ -8,7 +8,7 @@ from typing import Any
 
 import yaml
 
-from servotool.config import options_from
+from servotool.connection import options_from
 from servotool.errors import UsageError
 from servotool.files import compose_yaml, parse_yaml, read_text
 

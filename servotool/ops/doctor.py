@@ -9,9 +9,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from servotool.clock import Clock, RealClock
-from servotool.config import SIM_PORT, ConnectOptions, check_unit, effective, line_settings
+from servotool.connection import SIM_PORT, ConnectOptions, check_unit, effective, line_settings
 from servotool.errors import DeviceError, ModbusException, UsageError
-from servotool.link.modbus import ModbusLink
+from servotool.link.master import RtuMaster
 from servotool.link.ports import SYSFS_USB_SERIAL, LinkSettings, parse_tcp, usb_latency_ms
 from servotool.model.identity import read_plan
 from servotool.model.loader import load_profile
@@ -142,7 +142,7 @@ def check(
         latency=None if tcp else latency_timer(settings.port),
     )
     clock = clock or RealClock()
-    link = ModbusLink(settings)
+    link = RtuMaster(settings)
     try:
         start = clock.now()
         for i in range(count):

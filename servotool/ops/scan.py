@@ -8,9 +8,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from servotool.clock import Clock, RealClock
-from servotool.config import PARITIES, SIM_PORT, ConnectOptions, effective
+from servotool.connection import PARITIES, SIM_PORT, ConnectOptions, effective
 from servotool.errors import DeviceError, ModbusException, UsageError
-from servotool.link.modbus import ModbusLink
+from servotool.link.master import RtuMaster
 from servotool.link.ports import Link, LinkSettings, parse_tcp
 from servotool.model.loader import load_profile
 from servotool.model.profile import LineSettings, Profile
@@ -178,7 +178,7 @@ def scan(
 
 
 def _open(settings: LinkSettings) -> Link:
-    link = ModbusLink(settings)
+    link = RtuMaster(settings)
     link.hurry()
     return link
 

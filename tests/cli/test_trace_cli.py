@@ -101,7 +101,7 @@ def test_the_monitor_chart_is_readable_at_80_columns_with_every_entry_in_a_legen
     from rich.console import Console
 
     from servotool.cli.monitor import monitor_chart
-    from servotool.config import ConnectOptions, resolve
+    from servotool.connection import ConnectOptions, resolve
     from servotool.ops.monitor import Monitor
     from servotool.session import open_drives
 

@@ -6,7 +6,7 @@ import json
 
 from servotool.cli import render
 from servotool.cli.messages import error_text, plain
-from servotool.config import ConnectOptions
+from servotool.connection import ConnectOptions
 from servotool.errors import MissingRole, ServoError
 
 

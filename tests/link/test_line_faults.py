@@ -1,4 +1,4 @@
-"""Each fault kind of a bad line (servotool.sim.faults), at fixed seeds, through the real client path (ModbusLink +
+"""Each fault kind of a bad line (servotool.sim.faults), at fixed seeds, through the real client path (RtuMaster +
 Drive over RTU-over-TCP to the simulated drive): no wrong value is ever returned or written."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 
 from servotool.drive import Drive
 from servotool.errors import DeviceError, UsageError
-from servotool.link.modbus import ModbusLink
+from servotool.link.master import RtuMaster
 from servotool.link.ports import LinkSettings
 from servotool.model.codec import words_to_raw
 from servotool.model.loader import load_profile
@@ -33,7 +33,7 @@ def truth(sim: EmbeddedSim, drive, entry) -> int:
         return words_to_raw(entry, drive.read(entry.address, entry.words))
 
 
-def exercise(profile, sim_drive, sim: EmbeddedSim, link: ModbusLink, seed: int) -> tuple[int, list[str]]:
+def exercise(profile, sim_drive, sim: EmbeddedSim, link: RtuMaster, seed: int) -> tuple[int, list[str]]:
     """Reads and verified writes of random parameters: (operations that succeeded, wrong values accepted)."""
     rng = random.Random(seed)
     drive = Drive(link, profile, 1)
@@ -68,7 +68,7 @@ def exercise(profile, sim_drive, sim: EmbeddedSim, link: ModbusLink, seed: int) 
 def test_no_fault_kind_makes_the_link_return_a_wrong_value(line, kind):
     profile, sim_drive, sim = line
     sim.proxy.set_faults(LineFaults({kind: 0.3}, seed=7, late_s=0.15))
-    link = ModbusLink(LinkSettings(sim.port, timeout=0.1, retries=2))
+    link = RtuMaster(LinkSettings(sim.port, timeout=0.1, retries=2))
     try:
         done, wrong = exercise(profile, sim_drive, sim, link, seed=3)
     finally:
@@ -81,7 +81,7 @@ def test_no_fault_kind_makes_the_link_return_a_wrong_value(line, kind):
 def test_an_echoing_adapter_on_a_bad_line_is_found_and_never_taken_for_the_drive(line):
     profile, sim_drive, sim = line
     sim.proxy.set_faults(LineFaults(parse_rates("mixed:20%"), seed=11, late_s=0.15, echo=True))
-    link = ModbusLink(LinkSettings(sim.port, timeout=0.1, retries=2, echo=None))
+    link = RtuMaster(LinkSettings(sim.port, timeout=0.1, retries=2, echo=None))
     try:
         done, wrong = exercise(profile, sim_drive, sim, link, seed=5)
     finally:
@@ -92,7 +92,7 @@ def test_an_echoing_adapter_on_a_bad_line_is_found_and_never_taken_for_the_drive
 def test_a_trigger_without_an_acknowledgement_is_sent_once(line):
     profile, _sim_drive, sim = line
     sent: list[bytes] = []
-    link = ModbusLink(
+    link = RtuMaster(
         LinkSettings(sim.port, timeout=0.1, retries=2),
         trace=lambda sending, data: sent.append(data) if sending else None,
     )
@@ -109,7 +109,7 @@ def test_a_drive_slower_than_the_timeout_gives_a_clean_error_then_recovers(line)
     profile, sim_drive, sim = line
     entry = profile.entry("Pn004")
     sim.proxy.set_faults(LineFaults(response_delay_s=0.15))
-    link = ModbusLink(LinkSettings(sim.port, timeout=0.1, retries=1))
+    link = RtuMaster(LinkSettings(sim.port, timeout=0.1, retries=1))
     try:
         with pytest.raises(DeviceError, match=r"no response within 0\.1 s after 2 tries"):
             Drive(link, profile, 1).read_entries([entry])
@@ -125,7 +125,7 @@ def test_the_same_seed_damages_the_same_replies(line):
     for _ in range(2):
         sim.proxy.applied.clear()
         sim.proxy.set_faults(LineFaults(parse_rates("mixed:30%"), seed=4, late_s=0.05))
-        link = ModbusLink(LinkSettings(sim.port, timeout=0.2, retries=2))
+        link = RtuMaster(LinkSettings(sim.port, timeout=0.2, retries=2))
         try:
             for _ in range(10):
                 link.read(1, profile.entry("Pn004").address, 1)

@@ -96,10 +96,10 @@ def test_a_crc_error_is_reported_as_a_garbled_response_not_as_silence(cli, sim_d
 def test_silence_is_reported_as_no_response(sim_dir):
     sim = EmbeddedSim([build_drive(load_profile("dsx7e"), 1, persist=False)])
     try:
-        from servotool.link.modbus import ModbusLink
+        from servotool.link.master import RtuMaster
         from servotool.link.ports import LinkSettings
 
-        link = ModbusLink(LinkSettings(port=sim.port, timeout=0.2, retries=0))
+        link = RtuMaster(LinkSettings(port=sim.port, timeout=0.2, retries=0))
         with pytest.raises(DeviceError, match=r"no response within 0.2 s after 1 try \(wrong unit id"):
             link.read(9, 0x2004, 1)
         link.close()

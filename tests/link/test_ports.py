@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.errors import DeviceError, UsageError
 from servotool.link.exchange import Exchange
-from servotool.link.modbus import ModbusLink
+from servotool.link.master import RtuMaster
 from servotool.link.ports import LinkSettings, latency_advice, open_serial, usb_latency_ms
 from servotool.link.rtu import with_crc
 from servotool.model.loader import load_profile
@@ -179,14 +179,14 @@ def test_echo_auto_finds_an_echoing_adapter_on_the_first_exchange(sim_dir, first
     profile = load_profile("dsx7e")
     sim = EmbeddedSim([build_drive(profile, 1, persist=False)], LineFaults(echo=True))
     try:
-        link = ModbusLink(LinkSettings(sim.port, timeout=0.2, retries=1, echo=None))
+        link = RtuMaster(LinkSettings(sim.port, timeout=0.2, retries=1, echo=None))
         entry = profile.entry("Pn004")
         if first == "write":  # an FC06 reply repeats the request: a probe tells echo from reply
             link.write(1, entry.address, [300], multiple=False)
         assert link.read(1, entry.address, 1) == [300 if first == "write" else 250]
         assert link.echo is True
         link.close()
-        off = ModbusLink(LinkSettings(sim.port, timeout=0.1, retries=0, echo=False))
+        off = RtuMaster(LinkSettings(sim.port, timeout=0.1, retries=0, echo=False))
         with pytest.raises(Exception, match="no reply that answers it"):
             off.read(1, entry.address, 1)
         off.close()

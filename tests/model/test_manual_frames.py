@@ -9,11 +9,11 @@ import pytest
 
 from servotool.drive import Drive
 from servotool.errors import DeviceError, VerifyError
-from servotool.link.modbus import parse_response_frame, read_request_frame, write_request_frame
 from servotool.model.codec import format_value, raw_to_words, words_to_raw
 from servotool.model.loader import load_profile
 from servotool.model.profile import Limits
 from servotool.ops import params
+from tests.frames import parse_response_frame, read_request_frame, write_request_frame
 
 
 def hexb(text: str) -> bytes:

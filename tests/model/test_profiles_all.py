@@ -75,7 +75,7 @@ def test_the_readme_table_states_each_profiles_real_counts():
 
 def test_sd25_alarms_are_the_manuals_list_and_the_simulator_reports_them_by_kind(sim_dir):
     from servotool.drive import Drive
-    from servotool.link.modbus import ModbusLink
+    from servotool.link.master import RtuMaster
     from servotool.link.ports import LinkSettings
     from servotool.ops import alarms
     from servotool.sim.firmware import build_drive
@@ -96,7 +96,7 @@ def test_sd25_alarms_are_the_manuals_list_and_the_simulator_reports_them_by_kind
     sim = EmbeddedSim([sim_drive])
     try:
         sim_drive.firmware.trip("overspeed")
-        link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
+        link = RtuMaster(LinkSettings(port=sim.port, timeout=0.5, retries=0))
         state = alarms.current(Drive(link, p, 1))  # register 926 holds the AL number
         assert (state.code, state.display, state.name) == (7, "AL-07", "Overspeed")
         link.close()

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.model.loader import load_profile
 from servotool.model.roles import motion_route
 from servotool.motion.deadman import route_of

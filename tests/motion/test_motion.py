@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
 from servotool.model.roles import jog_codes, motion_route

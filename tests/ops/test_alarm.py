@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from servotool.drive import Drive
-from servotool.link.modbus import ModbusLink
+from servotool.link.master import RtuMaster
 from servotool.link.ports import LinkSettings
 from servotool.model.loader import load_profile
 from servotool.ops import alarms
@@ -47,7 +47,7 @@ def test_history_marks_only_the_current_alarm_active(sim_dir):
     try:
         sim_drive.firmware.alarm_history[:] = [0x09]
         sim_drive.firmware.trip("overload")  # E09 again: now current and the newest entry
-        link = ModbusLink(LinkSettings(port=sim.port, timeout=0.5, retries=0))
+        link = RtuMaster(LinkSettings(port=sim.port, timeout=0.5, retries=0))
         items = alarms.history(Drive(link, profile, 1))
         link.close()
     finally:

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from servotool.cli.messages import error_text
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile

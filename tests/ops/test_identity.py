@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.errors import IdentityMismatch
-from servotool.link.modbus import ModbusLink
+from servotool.link.master import RtuMaster
 from servotool.link.ports import LinkSettings
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile
 from servotool.model.schema import parse_profile
@@ -23,7 +23,7 @@ IDS = builtin_ids()
 def bus():
     """One simulated drive of every shipped profile on one line, unit n+1 for the n-th profile."""
     sim = EmbeddedSim([build_drive(load_profile(pid), i + 1, persist=False) for i, pid in enumerate(IDS)])
-    link = ModbusLink(LinkSettings(port=sim.port, timeout=0.3, retries=0))
+    link = RtuMaster(LinkSettings(port=sim.port, timeout=0.3, retries=0))
     yield sim, link
     link.close()
     sim.close()

@@ -8,7 +8,7 @@ import pytest
 from rich.console import Console
 
 from servotool.cli.monitor import monitor_table
-from servotool.config import ConnectOptions, resolve
+from servotool.connection import ConnectOptions, resolve
 from servotool.ops.monitor import Monitor, default_entries
 from servotool.session import open_drives
 

@@ -61,14 +61,14 @@ def test_a_setting_the_port_cannot_open_is_skipped_not_fatal():
     from dataclasses import replace
 
     from servotool.errors import DeviceError
-    from servotool.link.modbus import ModbusLink
+    from servotool.link.master import RtuMaster
 
     sim = EmbeddedSim([build_drive(load_profile("sdc"), 2, persist=False)])
 
     def open_link(settings):
         if settings.line.parity == "E":
             raise DeviceError("cannot open port /dev/fake: parity E")
-        return ModbusLink(replace(settings, port=sim.port))
+        return RtuMaster(replace(settings, port=sim.port))
 
     lines = [LineSettings(9600, "E", 1, 8), LineSettings(9600, "O", 1, 8)]
     try:

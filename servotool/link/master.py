@@ -1,8 +1,7 @@
-"""The client side of the link: open a port (serial or RTU over TCP) and read/write registers over it, with
-servotool's own reply matching (link/exchange.py); decode an RTU reply frame (pymodbus' framer, the one use of
-pymodbus on this side, imported there: a command talking to a drive needs no pymodbus).
+"""servotool's own RTU master: open a port (serial or RTU over TCP) and read/write registers over it, every reply
+matched to its request by link/exchange.py. No pymodbus on this side: pymodbus serves only the simulated slave.
 
-Everything else in servotool talks to `Link`, never to pymodbus directly, because pymodbus' API churns."""
+Everything else in servotool talks to `Link`, never to a port directly."""
 
 from __future__ import annotations
 
@@ -10,17 +9,14 @@ import select
 import socket
 from typing import TYPE_CHECKING
 
-from servotool.errors import DeviceError
-from servotool.errors import ModbusException as DriveException
 from servotool.link.exchange import Exchange, Wire
 from servotool.link.ports import LinkSettings, Trace, open_serial, open_tcp, parse_tcp
-from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, Request
 
 if TYPE_CHECKING:  # pyserial's platform module (serialposix imports fcntl) loads only with a real port
     import serial
 
 
-class ModbusLink:
+class RtuMaster:
     """RTU frames over a serial line or a TCP socket; every exchange goes through `Exchange`, which accepts only
     replies that provably answer their request. The port is opened here (pyserial, socket) so that an error names
     its real cause (link.ports.port_problem)."""
@@ -97,7 +93,7 @@ class _SocketWire:
 
 
 class _SerialWire:
-    def __init__(self, port: serial.SerialBase) -> None:  # pyserial, opened by pymodbus
+    def __init__(self, port: serial.SerialBase) -> None:  # pyserial, opened by link.ports.open_serial
         self.port = port
 
     def send(self, data: bytes) -> None:
@@ -112,30 +108,3 @@ class _SerialWire:
             self.port.timeout = timeout
         data = self.port.read(1)
         return data + self.port.read(self.port.in_waiting) if data and self.port.in_waiting else data
-
-
-def read_request_frame(unit: int, address: int, count: int) -> bytes:
-    """The RTU frame (with CRC) of an FC03 request, as this tool sends it."""
-    return Request(unit, READ, address, count).frame
-
-
-def write_request_frame(unit: int, address: int, values: list[int], *, multiple: bool = True) -> bytes:
-    """The RTU frame of an FC06 (single, multiple=False) or FC16 write request."""
-    fc = WRITE_ONE if len(values) == 1 and not multiple else WRITE_MANY
-    return Request(unit, fc, address, len(values), tuple(values)).frame
-
-
-def parse_response_frame(frame: bytes) -> tuple[int, int, list[int]]:
-    """(unit, function code, registers) of a response frame; DeviceError on a bad CRC or an exception reply."""
-    import logging
-
-    from pymodbus.framer import FramerRTU
-    from pymodbus.pdu import DecodePDU, ExceptionResponse
-
-    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # it logs a dropped frame as an error; ours says why
-    _used, pdu = FramerRTU(DecodePDU(is_server=False)).handleFrame(frame, 0, 0)
-    if pdu is None:
-        raise DeviceError(f"not a valid RTU response frame (CRC or length): {frame.hex(' ')}")
-    if isinstance(pdu, ExceptionResponse):
-        raise DriveException(pdu.exception_code, f"unit {pdu.dev_id}")
-    return pdu.dev_id, pdu.function_code, list(getattr(pdu, "registers", []))
