@@ -15,12 +15,11 @@ from servotool.link.ports import Trace, latency_advice
 _ADVISED: set[str] = set()
 
 
-def sim_notice(resolved: Resolved, units: list[int]) -> str:
+def sim_notice(resolved: Resolved, units: list[int], timing: str) -> str:
+    """The banner of the embedded simulator: which drive, and whether its line is emulated ('line emulated at
+    9600 baud 8N1', 'line NOT emulated: fast')."""
     ids = ",".join(str(u) for u in units)
-    return (
-        f"servotool: SIMULATED drive ({resolved.profile.model} profile '{resolved.profile.id}', unit {ids}); "
-        f"no real hardware is involved"
-    )
+    return f"servotool: SIMULATED drive {resolved.profile.id} unit{'s' if len(units) > 1 else ''} {ids}, {timing}"
 
 
 @contextmanager
@@ -43,9 +42,9 @@ def open_drives(
         from servotool.sim.firmware import build_drive
         from servotool.sim.server import EmbeddedSim
 
-        sim = EmbeddedSim([build_drive(resolved.profile, u) for u in units])
+        sim = EmbeddedSim([build_drive(resolved.profile, u) for u in units], line=settings.line)
         settings = replace(settings, port=sim.port)
-        (notice or _stderr)(sim_notice(resolved, units))
+        (notice or _stderr)(sim_notice(resolved, units, sim.line.describe()))
     elif (advice := latency_advice(settings.port)) and settings.port not in _ADVISED:
         _ADVISED.add(settings.port)  # once a run, however many times the port opens
         (notice or _stderr)(f"servotool: warning: {advice}")

@@ -26,14 +26,25 @@ class Result:
 
 @pytest.fixture
 def sim_dir(tmp_path, monkeypatch) -> Path:
-    """Each test gets its own simulated drives (state files), automatic-backup folder and no user config."""
+    """Each test gets its own simulated drives (state files), automatic-backup folder and no user config; its
+    simulated drives answer without the wire time of their line (SERVOTOOL_SIM_LINE_BAUD=fast) unless their
+    `sim config --line-baud` names one; the `factory_line` fixture gives them the default, their factory line."""
     d = tmp_path / "sim"
     monkeypatch.setenv("SERVOTOOL_SIM_DIR", str(d))
     monkeypatch.setenv("SERVOTOOL_BACKUP_DIR", str(tmp_path / "auto-backups"))
     monkeypatch.setenv("SERVOTOOL_CONFIG", str(tmp_path / "no-config.yaml"))
+    monkeypatch.setenv("SERVOTOOL_SIM_LINE_BAUD", "fast")
     for var in ("SERVOTOOL_PORT", "SERVOTOOL_PROFILE", "SERVOTOOL_UNIT", "SERVOTOOL_BAUD"):
         monkeypatch.delenv(var, raising=False)
     return d
+
+
+@pytest.fixture
+def factory_line(sim_dir, monkeypatch) -> Path:
+    """sim_dir with the simulator as a user gets it: each drive's line emulated unless its sim config says
+    otherwise."""
+    monkeypatch.delenv("SERVOTOOL_SIM_LINE_BAUD", raising=False)
+    return sim_dir
 
 
 @pytest.fixture
