@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -65,3 +66,32 @@ def cli(sim_dir):
         return Result(proc.returncode, proc.stdout, proc.stderr)
 
     return run
+
+
+@pytest.fixture
+def sim_serve(sim_dir):
+    """Start `servotool sim serve --port tcp://127.0.0.1:0 ARGS` in its own process; returns its tcp:// port. Each
+    one is stopped (Ctrl-C) at the end of the test."""
+    procs: list[subprocess.Popen] = []
+
+    def start(*args: str) -> str:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0", *args],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=ROOT,
+        )
+        procs.append(proc)
+        banner = proc.stderr.readline()
+        assert "serving on tcp://" in banner, banner
+        return banner.split("serving on ")[1].split()[0]
+
+    yield start
+    for proc in procs:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()

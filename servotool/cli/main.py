@@ -14,7 +14,7 @@ import typer
 from servotool import __version__
 from servotool.cli import classcache, complete, fastparse
 from servotool.cli.argv import hoist_globals
-from servotool.cli.common import State, state
+from servotool.cli.common import State, take_options
 from servotool.cli.lazy import lazy, lazy_group
 from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.connection import ConnectOptions
@@ -99,7 +99,8 @@ def main(
         "--profile",
         "-P",
         autocompletion=complete.profiles,
-        help="Drive profile id or YAML file (default for sim: dsx7e). Env: SERVOTOOL_PROFILE.",
+        help="Drive profile id or YAML file (default: found from the drive's answers; for sim: dsx7e). "
+        "Env: SERVOTOOL_PROFILE.",
     ),
     no_identity_check: bool = typer.Option(
         None,
@@ -124,19 +125,22 @@ def main(
     Options also come from SERVOTOOL_* environment variables and the config file (~/.config/servotool/config.yaml
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
-    state(ctx).options = ConnectOptions(
-        port=port,
-        baud=baud,
-        parity=parity,
-        stopbits=stopbits,
-        unit=unit,
-        timeout=timeout,
-        retries=retries,
-        profile=profile,
-        echo=echo,
-        turnaround_ms=turnaround_ms,
-        silence_ms=silence_ms,
-        no_identity_check=no_identity_check or None,
+    take_options(
+        ctx,
+        ConnectOptions(
+            port=port,
+            baud=baud,
+            parity=parity,
+            stopbits=stopbits,
+            unit=unit,
+            timeout=timeout,
+            retries=retries,
+            profile=profile,
+            echo=echo,
+            turnaround_ms=turnaround_ms,
+            silence_ms=silence_ms,
+            no_identity_check=no_identity_check or None,
+        ),
     )
     Verbosity.level = -1 if quiet else verbose
     Verbosity.explain = explain
