@@ -28,6 +28,8 @@ class State:
     options: ConnectOptions = field(default_factory=ConnectOptions)
     resolved: Resolved | None = None
     bus: Bus | None = None
+    # in the shell: a typed line's global options over the shell's own, checked (cli.shell.ShellBus.line_options)
+    line_options: Callable[[ConnectOptions], tuple[ConnectOptions, Resolved]] | None = None
 
 
 def state(ctx: typer.Context) -> State:
@@ -40,10 +42,8 @@ def state(ctx: typer.Context) -> State:
 def take_options(ctx: typer.Context, given: ConnectOptions) -> None:
     """The global options of a command line; in the shell, over those it was opened with (cli.shell)."""
     st = state(ctx)
-    if st.bus is not None:
-        from servotool.cli.shell import line_options
-
-        st.options, st.resolved = line_options(st.bus, given)
+    if st.line_options is not None:
+        st.options, st.resolved = st.line_options(given)
         return
     st.options, st.resolved = given, None
 

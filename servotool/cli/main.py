@@ -41,6 +41,7 @@ COMMANDS = {
     "doctor": lazy("servotool.cli.doctor:doctor"),
     "trace": lazy("servotool.cli.trace:trace"),
     "plot": lazy("servotool.cli.plot:plot"),
+    "shell": lazy("servotool.cli.shell:shell"),
 }
 
 app = typer.Typer(
@@ -154,12 +155,17 @@ def run() -> None:
 
 def _run() -> int:
     classcache.save_at_exit()
-    given = State()  # the options given on the command line, filled in by main(); fix commands repeat them
     _interrupt_on_termination()
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)  # streamed lines reach a pipe as they are made
+    return dispatch(sys.argv[1:], State())  # the options given, filled in by main(); fix commands repeat them
+
+
+def dispatch(argv: list[str], given: State) -> int:
+    """Run one command line through the app (the process's, or one typed in `servotool shell`, whose `given`
+    holds the port it keeps open): its exit status, every failure said in one line."""
     root = typer.main.get_command(app)
-    args = hoist_globals(root, sys.argv[1:])
+    args = hoist_globals(root, argv)
     as_json = "--json" in args[: args.index("--")] if "--" in args else "--json" in args
     try:
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
