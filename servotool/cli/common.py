@@ -28,7 +28,7 @@ class State:
     options: ConnectOptions = field(default_factory=ConnectOptions)
     resolved: Resolved | None = None
     bus: Bus | None = None
-    # in the shell: a typed line's global options over the shell's own, checked (cli.shell.ShellBus.line_options)
+    # in the shell: a typed line's global options over the shell's own, checked (cli.shell.line_options)
     line_options: Callable[[ConnectOptions], tuple[ConnectOptions, Resolved]] | None = None
 
 
@@ -65,9 +65,11 @@ def resolved_from(options: ConnectOptions) -> Resolved:
 
 def found_text(found: Found, res: Resolved) -> str:
     """'servotool: found: Inovance IS620P (profile is620p) by H01-00 = 0, H01-01 = 0 and 1 more'."""
+    from servotool.ops.identity import FITS
+
     p = res.profile
     verdict = next(v for v in found.ranked if v.profile.id == p.id)
-    fits = sorted((a for a in verdict.answers if a.verdict == "fits"), key=lambda a: a.check.range is None)
+    fits = sorted((a for a in verdict.answers if a.verdict == FITS), key=lambda a: a.check.range is None)
     said = [f"{a.check.label} = {a.raw}" if a.raw is not None else f"{a.check.label} absent" for a in fits]
     by = ", ".join(said[:2]) + (f" and {len(said) - 2} more" if len(said) > 2 else "")
     vendor = "" if p.vendor.startswith("unknown") else p.vendor.split(" (")[0] + " "
@@ -115,6 +117,23 @@ def _drives(ctx: typer.Context, units: list[int] | None) -> Iterator[list[Drive]
 @contextmanager
 def drives(ctx: typer.Context, units: list[int]) -> Iterator[list[Drive]]:
     with _drives(ctx, units) as found:
+        yield found
+
+
+@contextmanager
+def drives_for(ctx: typer.Context, res: Resolved, units: list[int]) -> Iterator[list[Drive]]:
+    """Drives for what a command resolved itself (run: a plan's options under the command line's); in the shell,
+    on its open port, which must be the one resolved."""
+    if (bus := state(ctx).bus) is not None:
+        open_on = bus.resolved
+        if (res.settings.port, res.profile.id) != (open_on.settings.port, open_on.profile.id):
+            raise UsageError(
+                f"the shell keeps {open_on.settings.port} open ({open_on.profile.id}), not "
+                f"{res.settings.port} ({res.profile.id}): leave it to use another"
+            )
+        yield bus.drives(units)
+        return
+    with open_drives(res, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)) as found:
         yield found
 
 

@@ -78,7 +78,8 @@ def line_options(bus: ShellBus, given: ConnectOptions) -> tuple[ConnectOptions, 
                 f"leave it (Ctrl-D) and start it with the options wanted"
             )
     res = bus.resolved if given.unit is None else replace(bus.resolved, unit=check_unit(given.unit))
-    return merge(given, bus.options), res
+    # the profile in force, found or given, as if given on the line (a plan's own yields to it, as to -P)
+    return merge(given, bus.options, ConnectOptions(profile=res.profile.id)), res
 
 
 def _in_force(bus: Bus) -> dict[str, Any]:

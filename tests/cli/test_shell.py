@@ -144,10 +144,13 @@ def test_completion_offers_commands_options_codes_and_names(sim_dir, root):
     assert candidates(root, ["--profile", "sd25"], ["param", "get"], "Po01")[0][0] == "Po010"
 
 
-def test_lines_from_a_pipe_run_in_turn_on_one_open_port(cli):
+def test_lines_from_a_pipe_run_in_turn_on_one_open_port(cli, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("port: sim\nsteps:\n  - expect: {Pn101: 20.0}\n")
     script = "\n".join(
         [
             "param set Pn101=20",
+            f"run {plan} --yes",  # a plan on the shell's port, not a second simulator
             "-v param get Pn101",  # the frames of a typed -v
             "--port /dev/ttyS9 param get Pn101",  # another port: refused, the shell goes on
             "-u 2 param get Pn101",  # a unit the simulator does not serve
@@ -160,6 +163,7 @@ def test_lines_from_a_pipe_run_in_turn_on_one_open_port(cli):
     assert r.err.count("SIMULATED") == 1  # one simulator, one port, for every line
     assert "the shell keeps sim open" in r.err and "unit 1, not 2" in r.err and "already in the shell" in r.err
     assert "<< 01 03 02 00 c8" in r.err  # Pn101 = 20.0 Hz, read under -v
+    assert "plan completed: 1/1 steps ok" in r.out
     assert r.out.rstrip().endswith("]") and '"value": 20.0' in r.out
 
 
