@@ -1,4 +1,5 @@
-"""Opening drives for a resolved connection, starting the embedded simulator for --port sim."""
+"""Opening drives for a resolved connection (a Bus: the link, the embedded simulator for --port sim, each unit's
+identity checked once), and finding the profile of a drive on a real port when none is given."""
 
 from __future__ import annotations
 
