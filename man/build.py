@@ -127,6 +127,11 @@ the environment.
 Where simulated drives keep their parameters and machine settings (default \fIsim\fR in the user state folder:
 \fI~/.local/state/servotool/sim\fR on Linux, following \fB$XDG_STATE_HOME\fR).
 .TP
+.B SERVOTOOL_SIM_LINE_BAUD
+\fBfast\fR, \fBfactory\fR or a baud rate: the line whose wire time delays each answer of a simulated drive whose
+\fBsim config \-\-line\-baud\fR is left at \fBfactory\fR (the default: the connection's line, the profile's
+factory settings unless given).
+.TP
 .B SERVOTOOL_BACKUP_DIR
 Where automatic backups are written before a restore or a factory reset (default \fIbackups\fR in the user data
 folder: \fI~/.local/share/servotool/backups\fR on Linux, following \fB$XDG_DATA_HOME\fR).

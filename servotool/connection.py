@@ -69,6 +69,7 @@ def _convert(name: str, value: Any, where: str) -> Any:
 
 
 MAX_RETRIES = 20
+REAL_TIMEOUT, REAL_RETRIES = 1.0, 2  # a real port's defaults: s to wait for an answer, tries after a timeout
 
 
 def _number(value: Any, *, whole: bool) -> int | float:
@@ -139,6 +140,7 @@ class Resolved:
     unit: int
     travel: float | None = None  # soft travel limit (rev) from the environment or config file
     identity_check: bool = True  # check the drive answering against the profile before any write
+    confirmed: frozenset[int] = frozenset()  # units whose identity checks were read when the profile was found
 
     @property
     def simulated(self) -> bool:
@@ -169,8 +171,8 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         line=line_format(opts, profile),
         # the embedded simulator's only delay is this host's own CPU, which a loaded machine can hold up for
         # longer than a real drive ever takes to answer
-        timeout=opts.timeout if opts.timeout is not None else (2.0 if port == SIM_PORT else 1.0),
-        retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else 2),
+        timeout=opts.timeout if opts.timeout is not None else (2.0 if port == SIM_PORT else REAL_TIMEOUT),
+        retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else REAL_RETRIES),
         **rs485(opts),
     )
     if not (math.isfinite(settings.timeout) and 0 < settings.timeout <= 3600):

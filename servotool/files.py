@@ -62,6 +62,11 @@ def backup_dir() -> Path:
     return platformdirs.user_data_path(APP, appauthor=False) / "backups"
 
 
+def shell_history_file() -> Path:
+    """The lines typed in `servotool shell` (in the user state folder, beside the simulated drives)."""
+    return platformdirs.user_state_path(APP, appauthor=False) / "shell-history"
+
+
 def cache_dir() -> Path:
     """Where servotool keeps what it can rebuild (SERVOTOOL_CACHE_DIR, else the user cache folder)."""
     if env := os.environ.get("SERVOTOOL_CACHE_DIR"):

@@ -7,9 +7,8 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from servotool.cli.common import JSON_OPT, confirm, drive, state
+from servotool.cli.common import JSON_OPT, confirm, drive, resolved, state
 from servotool.cli.render import emit_json, err, info, out, progress, table, warn
-from servotool.connection import resolve
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
@@ -179,7 +178,7 @@ def restore_cmd(
     """Write only the differing entries, verified, after an automatic backup; roll back on failure."""
     from servotool.ops import backup, restore
 
-    profile = resolve(state(ctx).options).profile
+    profile = resolved(ctx).profile
     b = backup.load(file, profile, force=force)  # every file problem is refused before connecting
     for w in b.warnings:
         warn(w)

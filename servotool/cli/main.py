@@ -14,7 +14,7 @@ import typer
 from servotool import __version__
 from servotool.cli import classcache, complete, fastparse
 from servotool.cli.argv import hoist_globals
-from servotool.cli.common import State, state
+from servotool.cli.common import State, take_options
 from servotool.cli.lazy import lazy, lazy_group
 from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.connection import ConnectOptions
@@ -41,6 +41,7 @@ COMMANDS = {
     "doctor": lazy("servotool.cli.doctor:doctor"),
     "trace": lazy("servotool.cli.trace:trace"),
     "plot": lazy("servotool.cli.plot:plot"),
+    "shell": lazy("servotool.cli.shell:shell"),
 }
 
 app = typer.Typer(
@@ -99,7 +100,8 @@ def main(
         "--profile",
         "-P",
         autocompletion=complete.profiles,
-        help="Drive profile id or YAML file (default for sim: dsx7e). Env: SERVOTOOL_PROFILE.",
+        help="Drive profile id or YAML file (default: found from the drive's answers; for sim: dsx7e). "
+        "Env: SERVOTOOL_PROFILE.",
     ),
     no_identity_check: bool = typer.Option(
         None,
@@ -124,19 +126,22 @@ def main(
     Options also come from SERVOTOOL_* environment variables and the config file (~/.config/servotool/config.yaml
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
-    state(ctx).options = ConnectOptions(
-        port=port,
-        baud=baud,
-        parity=parity,
-        stopbits=stopbits,
-        unit=unit,
-        timeout=timeout,
-        retries=retries,
-        profile=profile,
-        echo=echo,
-        turnaround_ms=turnaround_ms,
-        silence_ms=silence_ms,
-        no_identity_check=no_identity_check or None,
+    take_options(
+        ctx,
+        ConnectOptions(
+            port=port,
+            baud=baud,
+            parity=parity,
+            stopbits=stopbits,
+            unit=unit,
+            timeout=timeout,
+            retries=retries,
+            profile=profile,
+            echo=echo,
+            turnaround_ms=turnaround_ms,
+            silence_ms=silence_ms,
+            no_identity_check=no_identity_check or None,
+        ),
     )
     Verbosity.level = -1 if quiet else verbose
     Verbosity.explain = explain
@@ -150,12 +155,17 @@ def run() -> None:
 
 def _run() -> int:
     classcache.save_at_exit()
-    given = State()  # the options given on the command line, filled in by main(); fix commands repeat them
     _interrupt_on_termination()
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)  # streamed lines reach a pipe as they are made
+    return dispatch(sys.argv[1:], State())  # the options given, filled in by main(); fix commands repeat them
+
+
+def dispatch(argv: list[str], given: State) -> int:
+    """Run one command line through the app (the process's, or one typed in `servotool shell`, whose `given`
+    holds the port it keeps open): its exit status, every failure said in one line."""
     root = typer.main.get_command(app)
-    args = hoist_globals(root, sys.argv[1:])
+    args = hoist_globals(root, argv)
     as_json = "--json" in args[: args.index("--")] if "--" in args else "--json" in args
     try:
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)

@@ -8,15 +8,14 @@ from pathlib import Path
 
 import typer
 
-from servotool.cli.common import notice_for, state
+from servotool.cli.common import drives_for, resolved_from, state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame, warn
+from servotool.cli.render import Verbosity, emit_json, info, notice, out, warn
 from servotool.commission.plan import Plan, load_plan
 from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
-from servotool.connection import Resolved, merge, options_from, resolve
+from servotool.connection import Resolved, merge, options_from
 from servotool.errors import ServoError, UsageError
-from servotool.session import open_drives
 from servotool.words import count
 
 
@@ -34,7 +33,7 @@ def run(
     """Validate a commissioning plan completely, then run its steps on one or more axes."""
     plan = load_plan(plan_file)
     cli_opts = state(ctx).options
-    resolved = resolve(merge(cli_opts, options_from(plan.options, str(plan_file))))
+    resolved = resolved_from(merge(cli_opts, options_from(plan.options, str(plan_file))))
     units = _units(plan, cli_opts.unit, resolved.unit)
     lines = validate(plan, resolved.profile)
     if dry_run:
@@ -49,9 +48,7 @@ def run(
     def ask(unit: int, question: str) -> bool:
         return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
 
-    with open_drives(
-        resolved, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)
-    ) as drives:
+    with drives_for(ctx, resolved, units) as drives:
         runner = Runner(
             plan,
             drives,

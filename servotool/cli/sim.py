@@ -14,7 +14,8 @@ from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
 from servotool.model.roles import sim_extensions
 from servotool.sim import state as sim_state
-from servotool.sim.device import SIM_SETTINGS
+from servotool.sim.device import SIM_SETTINGS, line_choice
+from servotool.sim.line import LINE_ENV, Line, env_choice
 
 app = typer.Typer(no_args_is_help=True, help="The simulated drive: serve it, configure its machine, reset it.")
 
@@ -47,10 +48,11 @@ def serve(
     baud: int = typer.Option(None, "--baud", "-b", help="Serial baud rate (default: the profile's)."),
     parity: str = typer.Option(None, "--parity", help="N, E or O (default: the profile's)."),
     stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's)."),
-    line_baud: int = typer.Option(
+    line_baud: str = typer.Option(
         None,
         "--line-baud",
-        help="Delay each answer by its wire time at this baud (overrides 'sim config --line-baud'; 0 = off).",
+        help="factory|fast|BAUD: delay each answer by its wire time on this line (default: as 'sim config "
+        "--line-baud' says, then SERVOTOOL_SIM_LINE_BAUD, then factory; on a serial port its own timing).",
     ),
     faults: str = typer.Option(
         None,
@@ -71,14 +73,13 @@ def serve(
     ids = [check_unit(u) for u in units or [p.default_unit]]
     if len(set(ids)) != len(ids):
         raise UsageError("each --unit may be given once")
-    if line_baud is not None and line_baud < 0:
-        raise UsageError("--line-baud must be >= 0")
+    choice = _line_choice(line_baud)
     line = line_format(ConnectOptions(baud=baud, parity=parity, stopbits=stopbits), p)
 
-    def ready(where: str, took: dict[int, list[str]]) -> None:
+    def ready(where: str, served: Line, took: dict[int, list[str]]) -> None:
         info(
             f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "
-            f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); Ctrl-C stops"
+            f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); {served.describe()}; Ctrl-C stops"
         )
         for u, codes in took.items():
             if codes:
@@ -99,7 +100,7 @@ def serve(
             p,
             ids,
             line,
-            line_baud=line_baud,
+            line_baud=choice,
             trace=trace_frame if Verbosity.level > 0 else None,
             ready=ready,
             faults=bad_line,
@@ -154,7 +155,7 @@ def config(
     load_torque: float = typer.Option(None, "--load-torque", help=SIM_SETTINGS["load_torque"][4]),
     noise: float = typer.Option(None, "--noise", help=SIM_SETTINGS["noise"][4]),
     seed: int = typer.Option(None, "--seed", help=SIM_SETTINGS["seed"][4]),
-    line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
+    line_baud: str = typer.Option(None, "--line-baud", help=f"factory|fast|BAUD: {SIM_SETTINGS['line_baud'][4]}."),
     resonance_hz: float = typer.Option(None, "--resonance-hz", help=SIM_SETTINGS["resonance_hz"][4]),
     resonance_damping: float = typer.Option(None, "--resonance-damping", help=SIM_SETTINGS["resonance_damping"][4]),
     backlash_rad: float = typer.Option(None, "--backlash-rad", help=SIM_SETTINGS["backlash_rad"][4]),
@@ -199,7 +200,7 @@ def config(
         load_torque=load_torque,
         noise=noise,
         seed=seed,
-        line_baud=line_baud,
+        line_baud=_line_choice(line_baud),
         brake=brake_on,
         fake_watchdog=fake_on,
         resonance_hz=resonance_hz,
@@ -253,6 +254,15 @@ def show(
         )
 
 
+def _line_choice(value: str | None) -> str | int | None:
+    if value is None:
+        return None
+    try:
+        return line_choice(value)
+    except ValueError as exc:
+        raise UsageError(f"--line-baud: {exc}") from None
+
+
 def _on_off(value: str, option: str) -> int:
     choices = {"on": 1, "off": 0}
     if value.lower() not in choices:
@@ -268,7 +278,11 @@ def _print_settings(status: sim_state.SimStatus) -> None:
         title=f"simulated {status.profile.model} unit {status.unit} ({status.state_file})",
     )
     for name, value in status.settings.items():
-        shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
+        if name == "line_baud":
+            over = env_choice() if value == "factory" else None
+            shown = str(value) if over is None else f"{over} ({LINE_ENV})"
+        else:
+            shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
     if status.missing:
