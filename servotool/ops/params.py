@@ -164,13 +164,16 @@ def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome
         return SetOutcome(
             [], [e for e, _ in plan.unchanged] if save else [], drive.profile.persistence.mode == "immediate"
         )
-    with persistence(drive, save) as kept:
-        results = apply_set(drive, plan)
-        for entry, raw in again:  # the same value again, now with the switch on EEPROM
-            try:
+    results: list[WriteResult] = []
+    try:
+        with persistence(drive, save) as kept:
+            results = apply_set(drive, plan)
+            for entry, raw in again:  # the same value again, now with the switch on EEPROM
                 write_one(drive, entry, raw, raw)
-            except ServoError as exc:
-                raise _naming_written(exc, results, []) from None
+    except ServoError as exc:
+        # apply_set names its own writes; the switch read back when the writes ended, or a value written again
+        # for EEPROM, fails after them
+        raise exc if hasattr(exc, "written") or not results else _naming_written(exc, results, []) from None
     stored = (
         ([r.entry for r in results] + ([e for e, _ in plan.unchanged] if save else [])) if kept["persisted"] else []
     )
