@@ -77,6 +77,19 @@ def prepare_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> P
     return PreparedSet(changes, unchanged)
 
 
+def set_assignments(
+    drive: Drive, assignments: list[str], *, raw: bool = False, save: bool | None = None
+) -> tuple[PreparedSet, SetOutcome]:
+    """`param set`: parse, read the current values and write them under the drive's EEPROM rule, all under the
+    port's lock. A field (Po018.A=1) is written as the whole register read before it, so no other process may
+    write that register between this read and this write: two field writes in two processes both land."""
+    from servotool.ops.journal import port_lock
+
+    with port_lock(drive):
+        plan = prepare_set(drive, assignments, raw=raw)
+        return plan, set_values(drive, plan, save)
+
+
 def write_one(drive: Drive, entry: Entry, raw: int, old: int | None = None) -> WriteResult:
     """The one path every parameter write takes (set, restore, plans): write, then verify by read-back."""
     return drive.write_verified(entry, raw, old)
