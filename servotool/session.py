@@ -10,7 +10,7 @@ from dataclasses import replace
 from servotool.connection import Resolved
 from servotool.drive import Drive
 from servotool.link.master import RtuMaster
-from servotool.link.ports import Trace, latency_advice
+from servotool.link.ports import Trace, bus_identity, latency_advice
 
 _ADVISED: set[str] = set()
 
@@ -37,8 +37,9 @@ def open_drives(
     units = units or [resolved.unit]
     sim = None
     settings = resolved.settings
-    # The name the host's journal and write lock know this bus by (a simulator by its state folder).
-    port = f"sim:{sim_state_dir().resolve()}" if resolved.simulated else settings.port
+    # The name the host's journal and write lock know this bus by, whatever its spelling (a simulated drive by its
+    # state folder and profile: each profile's simulated drive is a drive of its own).
+    port = sim_bus(resolved.profile.id) if resolved.simulated else bus_identity(settings.port)
     if resolved.simulated:
         from servotool.sim.firmware import build_drive
         from servotool.sim.server import EmbeddedSim
@@ -71,6 +72,14 @@ def open_drives(
         link.close()
         if sim:
             sim.close()
+
+
+def sim_bus(profile_id: str) -> str:
+    """The bus name (Drive.port) of `--port sim`: the simulator's state folder and the profile, since each
+    profile's simulated drive is a drive of its own."""
+    from servotool.files import sim_state_dir
+
+    return f"sim:{sim_state_dir().resolve()}#{profile_id}"
 
 
 def _stderr(text: str) -> None:

@@ -119,21 +119,13 @@ def test_tune_says_when_its_result_is_in_ram_only_and_save_stores_it(cli):
 
 def test_a_switch_left_changed_by_a_dead_process_is_put_back_by_the_next_command(cli, sim_dir):
     """The host's journal says Po505 was d 1 1 (RAM only) before a process that died changed it to EEPROM."""
-    from servotool.files import sim_state_dir
-    from servotool.model.loader import load_profile
+    from servotool.connection import ConnectOptions, resolve
     from servotool.ops import journal
-    from servotool.sim.device import SimulatedDrive
+    from servotool.session import open_drives
 
-    drive = SimulatedDrive(load_profile("sd25"), 1)
-    with drive.session():
-        drive.bank.ram["Po505"] = drive.bank.eeprom["Po505"] = 0x0100  # left on EEPROM
-        drive.bank.save()
-
-    class Port:  # what the journal needs of a drive: its port name and unit
-        port, unit = f"sim:{sim_state_dir().resolve()}", 1
-        profile = load_profile("sd25")
-
-    journal.note_switch(Port(), "Po505", 0x0101)  # type: ignore[arg-type]
+    with open_drives(resolve(ConnectOptions(port="sim", profile="sd25")), notice=lambda _m: None) as (d,):
+        d.write_raw(d.profile.entry("Po505"), 0x0100)  # left on EEPROM
+        journal.note_switch(d, "Po505", 0x0101)
     (journal.journal_dir() / ".x.json.999999999.abc.tmp").write_text("left by a kill")
     r = cli("--port", "sim", "-P", "sd25", "param", "get", "Po505", "--json")
     assert r.code == 0 and r.json()[0]["value"] == "d 1 1", r.err
@@ -150,12 +142,12 @@ def test_writes_of_one_drive_wait_for_another_process_that_has_its_port(cli, sim
     import sys
     import time
 
-    from servotool.files import sim_state_dir
     from servotool.model.loader import load_profile
     from servotool.ops import journal
+    from servotool.session import sim_bus
 
-    class Port:
-        port, unit, profile = f"sim:{sim_state_dir().resolve()}", 1, load_profile("sd25")
+    class Port:  # what the lock needs of a drive: its bus, profile and unit
+        port, unit, profile = sim_bus("sd25"), 1, load_profile("sd25")
 
     with journal.port_lock(Port()):  # type: ignore[arg-type]
         proc = subprocess.Popen(
