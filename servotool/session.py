@@ -62,8 +62,12 @@ def open_drives(
         # simulator is built from the profile itself.
         if resolved.identity_check and not resolved.simulated:
             from servotool.ops.identity import confirm, warning_text
+            from servotool.ops.journal import know_identity
 
-            if text := warning_text(confirm(drives)):
+            verdicts = confirm(drives)
+            for d, verdict in zip(drives, verdicts, strict=True):  # the journal's records name the drive by them
+                know_identity(d, {a.check.code: a.raw for a in verdict.answers if a.check.code and a.raw is not None})
+            if text := warning_text(verdicts):
                 (notice or _stderr)(f"servotool: warning: {text}")
         for d in drives:  # what a killed servotool process left on these drives is put right first
             recover_at_start(d, notice or _stderr, (sim_state_dir(),) if sim else ())

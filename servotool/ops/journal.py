@@ -158,6 +158,14 @@ def _update(drive: Drive, **parts: Any) -> None:
 _IDENTITIES: dict[tuple[str, int, str], dict[str, int]] = {}
 
 
+def know_identity(drive: Drive, values: dict[str, int]) -> None:
+    """The identity entries as the identity check read them (code -> raw), when it read them all: no second read."""
+    if {e.code for e in identity_entries(drive.profile)} <= set(values):
+        _IDENTITIES[(drive.port, drive.unit, drive.profile.id)] = {
+            e.code: values[e.code] for e in identity_entries(drive.profile)
+        }
+
+
 def drive_identity(drive: Drive) -> dict[str, int]:
     """The drive's identity entries (code -> raw: the profile's firmware and model registers), read once a process;
     a record carries them so that one left under a port name that is gone is taken up only by the same drive.
@@ -173,15 +181,26 @@ def drive_identity(drive: Drive) -> dict[str, int]:
 
 
 @contextmanager
-def operation(drive: Drive, op: str, auto_backup: Path, targets: dict[str, int]) -> Iterator[None]:
-    """Record an operation that writes many values (a restore) with its automatic backup and targets, so that a
-    kill midway is reported by the next command with the drive's state read from it. The port is held from
+def operation(
+    drive: Drive,
+    op: str,
+    auto_backup: Path | None,
+    targets: dict[str, int],
+    before: dict[str, int] | None = None,
+) -> Iterator[None]:
+    """Record an operation that writes several values, before its first write: its targets (code -> raw) and
+    what they were, as an automatic backup (a restore) or inline (`before`, a param set), so that a kill midway is
+    reported by the next command with what was written and what was not, read from the drive. The record goes
+    when the block ends, also by an exception (which reaches the user with its own account). The port is held from
     before the record is written: the recovery its first holder runs would take this live record for a dead one's
     (and drop it)."""
+    record: dict[str, Any] = {"name": op, "targets": targets, "since": RealClock().wall()}
+    if auto_backup is not None:
+        record["auto_backup"] = str(auto_backup)
+    if before is not None:
+        record["before"] = before
     with port_lock(drive):
-        _update(
-            drive, op={"name": op, "auto_backup": str(auto_backup), "targets": targets, "since": RealClock().wall()}
-        )
+        _update(drive, op=record)
         try:
             yield
         except BaseException:
@@ -414,8 +433,11 @@ def _moving(drive: Drive) -> bool:
 
 
 def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
-    auto = Path(str(op.get("auto_backup")))
+    """The line on an operation a dead process left midway: what it wrote and what not, read from the drive."""
     targets = op.get("targets") if isinstance(op.get("targets"), dict) else {}
+    if isinstance(op.get("before"), dict):
+        return _interrupted_set(drive, op, targets, op["before"], pid)
+    auto = Path(str(op.get("auto_backup")))
     try:  # the values section of the backup this process wrote itself (ops.backup checks a user's file)
         data = load_yaml(auto)
         before = {str(c): v for c, v in data["values"].items() if isinstance(v, int)}
@@ -439,6 +461,37 @@ def _interrupted(drive: Drive, op: dict[str, Any], pid: object) -> str:
         f"automatic backup {auto} in {len(differ)} ({', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''}): "
         f"run it again to finish, or 'servotool param restore {auto}' to go back"
     )
+
+
+def _interrupted_set(
+    drive: Drive, op: dict[str, Any], targets: dict[str, Any], before: dict[str, Any], pid: object
+) -> str:
+    """A killed param set: each value as read now, against what it was and what the command was writing."""
+    head = f"servotool: a {op.get('name')} (pid {pid}) was interrupted"
+    wanted, was = _valid_settings(drive, targets), _valid_settings(drive, before)
+    if wanted is None or was is None:
+        return f"servotool: ignored a damaged journal record for unit {drive.unit} ({record_path(drive)})"
+    entries = [drive.profile.entry(c) for c in wanted]
+    now = {r.entry.code: r.raw for r in drive.read_entries([e for e in entries if e.readable])}
+    written, untouched, other = [], [], []
+    for e in entries:
+        value = now.get(e.code)
+        if value is None:
+            other.append(f"{e.code} (write-only: unknown)")
+        elif value == wanted[e.code]:
+            written.append(f"{e.code} = {format_value(e, value)} (was {format_value(e, was.get(e.code, value))})")
+        elif value == was.get(e.code):
+            untouched.append(f"{e.code} (still {format_value(e, value)})")
+        else:
+            other.append(f"{e.code} reads {format_value(e, value)}, neither the old nor the new value")
+    if not written and not other:
+        return f"{head} before changing anything: {', '.join(untouched)}"
+    parts = [f"it wrote {', '.join(written)}" if written else "it wrote none of its values"]
+    if untouched:
+        parts.append(f"not written: {', '.join(untouched)}")
+    if other:
+        parts.append("; ".join(other))
+    return f"{head}: {'; '.join(parts)}; run it again to finish"
 
 
 def recover_at_start(drive: Drive, notice: Notice, extra_folders: tuple[Path, ...] = ()) -> None:

@@ -169,6 +169,7 @@ def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome
     """Write a prepared set under the drive's EEPROM rule. save=True stores every requested value, also one RAM
     already holds (RAM and EEPROM may differ, and only a write under the EEPROM setting or the drive's store
     command puts it in EEPROM). A power-cycle parameter that would stay in RAM only is refused before writing."""
+    from servotool.ops import journal
     from servotool.ops.eeprom import check_power_cycle, persistence
 
     check_power_cycle(drive, [e for e, _, _ in plan.changes], save)
@@ -178,8 +179,10 @@ def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome
             [], [e for e, _ in plan.unchanged] if save else [], drive.profile.persistence.mode == "immediate"
         )
     results: list[WriteResult] = []
-    try:
-        with persistence(drive, save) as kept:
+    targets = {e.code: new for e, _old, new in plan.changes}
+    before = {e.code: old for e, old, _new in plan.changes}
+    try:  # journaled before the first write: a kill midway is named by the next command, value by value
+        with journal.operation(drive, "param set", None, targets, before), persistence(drive, save) as kept:
             results = apply_set(drive, plan)
             for entry, raw in again:  # the same value again, now with the switch on EEPROM
                 write_one(drive, entry, raw, raw)

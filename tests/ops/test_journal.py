@@ -173,3 +173,29 @@ def test_a_record_of_another_profile_on_the_same_port_is_named_not_dropped(cli, 
     r = cli("--port", port, "-P", "sd25", "param", "get", "Po505")
     assert r.code == 0 and "using profile is620p ended with unit 1 of this port changed" in r.err, r.err
     assert path.exists()
+
+
+def test_a_param_set_killed_between_writes_is_named_value_by_value_by_the_next_command(cli, serve):
+    """kill -9 between the writes of one param set left some values written (6 of 12) and the next command named
+    only the switch: the set is journaled before its first write, and the next command reads each value back."""
+    from servotool.ops.journal import journal_dir
+
+    port = serve("sd25", "--response-delay", "40")
+    wanted = {"Po003": (3, 21, "21", "16"), "Po101": (101, 300, "30.0", "60.0"), "Po110": (110, 50, "50", "200")}
+    wanted["Po200"] = (200, 500, "500", "1000")  # code: address, raw, as set, as before; four separate writes
+    args = ["--port", port, "-P", "sd25", "param", "set", *(f"{c}={v[2]}" for c, v in wanted.items())]
+    kill_after_reply(args, "01 06 00 65")  # Po101 (address 0x65) written: Po110 and Po200 are not
+    assert list(journal_dir().glob("*.json")), "no record of the set was left"
+    landed = {c: read_registers(port, v[0]) == [v[1]] for c, v in wanted.items()}
+    assert landed["Po003"] and landed["Po101"] and not landed["Po200"], landed
+    r = cli("--port", port, "-P", "sd25", "param", "get", "Po505")
+    assert r.code == 0, r.err
+    line = next(x for x in r.err.splitlines() if "a param set (pid" in x)
+    wrote, _, rest = line.partition("not written:")
+    for code, (_address, _raw, new, old) in wanted.items():
+        if landed[code]:
+            assert f"{code} = {new} (was {old})" in wrote, line
+        else:
+            assert f"{code} (still {old})" in rest, line
+    assert line.endswith("run it again to finish")
+    assert not list(journal_dir().glob("*.json"))
