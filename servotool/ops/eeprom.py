@@ -121,6 +121,18 @@ def ram_writes(drive: Drive) -> Iterator[None]:
             yield
 
 
+def reads_are_stored(profile: Profile) -> bool:
+    """Whether a value read from the drive is also the one it stores: only on a drive that stores every write.
+    Elsewhere a read shows RAM, which a RAM-only write (or one stored and then changed in RAM) sets apart from
+    EEPROM, and EEPROM cannot be read over Modbus."""
+    return profile.persistence.mode == "immediate"
+
+
+def compared_memory(profile: Profile) -> str:
+    """What a comparison with the drive's values compares, for the user: 'RAM' or 'RAM (= EEPROM ...)'."""
+    return "RAM (= EEPROM: the drive stores every write)" if reads_are_stored(profile) else "RAM"
+
+
 def ram_only_warning(profile: Profile) -> str:
     """What to tell the user when written values are in RAM only, and how to make them survive a power cycle."""
     hint = "use --save" if can_save(profile) else profile.persistence.note

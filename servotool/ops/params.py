@@ -120,12 +120,13 @@ def write_changes(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[W
     (write_runs), each run verified by one read-back; the others by write_one."""
     results: list[WriteResult] = []
     for run in write_runs(drive, sorted(changes, key=lambda c: c[0].address)):
-        results.extend(_write_run(drive, run))
+        results.extend(write_run(drive, run))
     return results
 
 
-def _write_run(drive: Drive, run: list[tuple[Entry, int, int]]) -> list[WriteResult]:
-    """One run of write_runs: a lone entry by write_one, adjacent ones in one verified FC16 request."""
+def write_run(drive: Drive, run: list[tuple[Entry, int, int]]) -> list[WriteResult]:
+    """One run of write_runs (entry, old, new): a lone entry by write_one, adjacent ones in one verified FC16
+    request."""
     if len(run) == 1:
         entry, old, new = run[0]
         return [write_one(drive, entry, new, old)]
@@ -138,7 +139,7 @@ def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
     results: list[WriteResult] = []
     for run in write_runs(drive, plan.changes):
         try:
-            results.extend(_write_run(drive, run))
+            results.extend(write_run(drive, run))
         except ServoError as exc:
             raise _naming_written(exc, results, [e for e, _, _ in run]) from None
     return results

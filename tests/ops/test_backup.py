@@ -412,3 +412,66 @@ def test_backup_checks_its_output_before_any_drive_io(cli, tmp_path):
     assert not (Path(__file__).resolve().parents[2] / "--help").exists()
     assert cli("--port", "sim", "param", "backup", "-o", str(taken), "--force").code == 0
     assert taken.stat().st_mode & 0o777 == 0o644  # replaced, mode kept
+
+
+def eeprom_and_ram(profile: str, code: str) -> tuple[int, int]:
+    """(RAM, EEPROM) of one entry, from the simulated drive's own state file (no servotool reads)."""
+    drive = SimulatedDrive(load_profile(profile), 1)
+    return drive.bank.ram[code], drive.bank.eeprom[code]
+
+
+@pytest.mark.parametrize(
+    ("profile", "code", "stored", "in_ram", "raw"),
+    [("sd25", "Po003", "20", "16", 16), ("is620p", "H08-00", "30.0", "25.0", 250)],
+)
+def test_restore_stores_a_value_ram_holds_but_eeprom_does_not(
+    cli, auto_dir, tmp_path, profile, code, stored, in_ram, raw
+):
+    """Issue 30 item 5: after set --save CODE=a and set --no-save CODE=b, restore of a backup holding b said
+    "nothing to restore: the drive already matches", and a power cycle brought a back."""
+    f = tmp_path / "b.yaml"
+    p = ("--port", "sim", "-P", profile)
+    assert cli(*p, "param", "set", "--save", f"{code}={stored}").code == 0
+    assert cli(*p, "param", "set", "--no-save", f"{code}={in_ram}").code == 0
+    assert cli(*p, "param", "backup", "-o", str(f)).code == 0
+    assert eeprom_and_ram(profile, code) == (raw, int(float(stored) * (10 if "." in stored else 1)))
+    r = cli(*p, "param", "diff", str(f), "--json")
+    assert r.code == 0 and r.json()["compared"] == "RAM" and r.json()["differences"] == []
+    r = cli(*p, "param", "diff", str(f))
+    assert "compared with the drive's RAM: what EEPROM holds" in r.err and "drive RAM" in r.out, r.err
+    r = cli(*p, "param", "restore", str(f), "--yes", "--ram-only")
+    assert r.code == 0 and "nothing to restore: the drive's RAM already matches (--ram-only" in r.out, r.out
+    assert eeprom_and_ram(profile, code)[1] != raw  # --ram-only left EEPROM as it was
+    r = cli(*p, "param", "restore", str(f), "--yes", "--json")
+    assert r.code == 0, r.err
+    assert r.json()["written"] == [] and code in r.json()["stored_again"] and r.json()["persisted"] is True
+    assert eeprom_and_ram(profile, code) == (raw, raw)
+    assert cli("sim", "reset", "-P", profile, "--power-cycle").code == 0
+    assert eeprom_and_ram(profile, code) == (raw, raw)
+
+
+def test_a_drive_that_stores_every_write_is_compared_and_restored_as_read(cli, auto_dir, tmp_path):
+    """DSX7E stores every write: RAM is the stored copy, so a restore writes only what differs and says so."""
+    f = tmp_path / "b.yaml"
+    assert cli("--port", "sim", "param", "backup", "-o", str(f)).code == 0
+    r = cli("--port", "sim", "param", "diff", str(f), "--json")
+    assert r.json()["compared"] == "RAM (= EEPROM: the drive stores every write)"
+    r = cli("--port", "sim", "-v", "param", "restore", str(f), "--yes")
+    assert r.code == 0 and "nothing to restore: the drive already matches" in r.out and not WRITE_FRAME.search(r.err)
+
+
+def test_values_written_again_in_blocks_skip_an_address_the_drive_refuses(auto_dir, tmp_path):
+    """The values RAM holds go in FC16 blocks; a block the drive refuses at one address is split, the refused
+    entry reported, and the rest stored."""
+    opts = resolve(ConnectOptions(port="sim", profile="sd25"))
+    with open_drives(opts, notice=lambda _m: None) as (d,):
+        b = backup.take(d)
+        plan = restore.restore_changes(d.profile, b, b.values)
+        assert plan.changes == [] and len(plan.again) > 100
+        victim = plan.again[len(plan.again) // 2][0]
+        SimulatedDrive(load_profile("sd25"), 1).inject_fault(victim.code, exception=2)
+        writes = count_writes(d)
+        report = restore.restore(d, b, plan)
+    assert [e.code for e, _ in report.refused] == [victim.code]
+    assert {e.code for e in report.stored_again} == {e.code for e, _ in plan.again} - {victim.code}
+    assert len(writes) < len(plan.again) / 3  # blocks, not one request a value
