@@ -189,7 +189,7 @@ def restore(
         notice(f"automatic backup of the drive's current state: {auto}")
     done: list[Entry] = []
     again: list[Entry] = []
-    failed: tuple[str, ServoError, list[str], list[str]] | None = None
+    failed: tuple[str, ServoError, list[str], dict[str, str]] | None = None
     refused: list[tuple[Entry, str]] = []
     kept: dict[str, bool] = {}
     targets = {e.code: new for e, _, new in plan.changes}
@@ -223,7 +223,7 @@ def restore(
                             progress(entry)
         except ServoError as exc:  # the EEPROM switch could not be changed or put back
             if failed is None:
-                failed = (drive.profile.persistence.switch_code or "the EEPROM switch", exc, [], [])
+                failed = (drive.profile.persistence.switch_code or "the EEPROM switch", exc, [], {})
         if failed is not None:
             raise _account(drive, failed, [e.code for e in done], before.values, auto, kept, backup.path)
     return RestoreReport(auto, done, plan, bool(kept["persisted"]), refused, again)
@@ -236,16 +236,17 @@ def _refused_address(exc: ServoError) -> bool:
 
 def _account(
     drive: Drive,
-    failed: tuple[str, ServoError, list[str], list[str]],
+    failed: tuple[str, ServoError, list[str], dict[str, str]],
     written: list[str],
     snapshot: dict[str, int],
     auto: Path,
     kept: dict[str, bool],
     source: Path | None,
 ) -> RestoreFailed:
-    """The RestoreFailed for a stopped restore: the drive is read to say how it compares with the backup."""
+    """The RestoreFailed for a stopped restore. The rollback read back every entry the restore touched (equal to
+    the automatic backup, or written back and verified): that is the account, and only the entries it could not
+    undo are read again, so a fault on one last read never hides what was rolled back."""
     code, cause, rolled, undo_failed = failed
-    after = _read_all(drive)
     switch_note = ""
     if kept.get("switch_back") is False:
         p = drive.profile.persistence
@@ -271,28 +272,41 @@ def _account(
             source=source,
         )
 
-    if after is None:
-        return failure(f"{wrote}; the drive no longer answers, so its state is unknown", "compare", None, [])
-    # The EEPROM switch is flipped for the batch on purpose (and put back when it ends): not a difference.
-    differ = [c for c, raw in snapshot.items() if after.get(c) != raw and not drive.profile.persistence.is_switch(c)]
-    if not differ:
+    now = {c: _read_again(drive, c) for c in undo_failed}
+    unknown = [c for c, raw in now.items() if raw is None]
+    differ = [c for c, raw in now.items() if raw is not None and raw != snapshot[c]]
+    if not unknown and not differ:
+        if not written and not rolled and not undo_failed:
+            state = f"nothing was changed: the drive is as the automatic backup {auto} recorded it"
+            return failure(state, None, True, [])
         return failure(
             f"rolled back {len(written)} written entries; read back, the drive equals the automatic backup {auto}",
             None,
             True,
             [],
         )
+    back = f"rolled back {', '.join(rolled)} (verified by read-back)" if rolled else "rolled back nothing"
     shown = ", ".join(
-        f"{c} is {format_value(drive.profile.entry(c), after[c])}, was "
+        f"{c} is {format_value(drive.profile.entry(c), now[c] or 0)}, was "
         f"{format_value(drive.profile.entry(c), snapshot[c])}"
         for c in differ[:6]
     )
     more = f" and {len(differ) - 6} more" if len(differ) > 6 else ""
-    why = f" (could not undo {'; '.join(undo_failed)})" if undo_failed else ""
     verb = agree(len(differ), "differs", "differ")
+    if unknown:
+        whys = "; ".join(f"{c}: {undo_failed[c]}" for c in unknown)
+        also = f"; {count(len(differ), 'entry')} {verb} from the automatic backup {auto}: {shown}{more}"
+        return failure(
+            f"{wrote}; {back}; {', '.join(unknown)} could not be undone nor read back, so "
+            f"{agree(len(unknown), 'its', 'their')} state is UNKNOWN ({whys}){also if differ else ''}",
+            "compare",
+            None,
+            differ,
+        )
+    whys = "; ".join(f"{c} ({undo_failed[c]})" for c in differ)
     return failure(
-        f"{wrote}; rollback incomplete{why}: {count(len(differ), 'entry')} {verb} from the automatic "
-        f"backup {auto}: {shown}{more}",
+        f"{wrote}; rollback incomplete (could not undo {whys}): {count(len(differ), 'entry')} {verb} from the "
+        f"automatic backup {auto}: {shown}{more}",
         "restore",
         False,
         differ,
@@ -302,25 +316,29 @@ def _account(
 ATTEMPTS = 3  # a flaky line drops a request now and then: an account is worth a few more tries
 
 
-def _read_all(drive: Drive) -> dict[str, int] | None:
-    """Every parameter as read from the drive, None when it does not answer after a few tries."""
+def _read_again(drive: Drive, code: str) -> int | None:
+    """One entry as read from the drive, None when it does not answer after a few tries."""
     for _ in range(ATTEMPTS):
         try:
-            return read_settings(drive)
+            return drive.read_entries([drive.profile.entry(code)])[0].raw
         except ServoError:
             continue
     return None
 
 
-def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> tuple[list[str], list[str]]:
+def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> tuple[list[str], dict[str, str]]:
     """Put touched entries back to the snapshot, newest first (each tried a few times); returns (the entries
-    written back, those that could not be undone with why)."""
+    written back, each verified by read-back; code -> why for those that could not be undone). Every other
+    touched entry was read back equal to the snapshot."""
     from servotool.ops.params import write_one
 
     rolled: list[str] = []
-    undo_failed: list[str] = []
+    undo_failed: dict[str, str] = {}
     dead = 0
     for e in reversed(touched):
+        if dead >= 2:  # no answer at all, twice: every further attempt would time out too
+            undo_failed[e.code] = "not tried: the drive stopped answering"
+            continue
         for attempt in range(ATTEMPTS):
             try:
                 now = drive.read_entries([e])[0].raw
@@ -330,11 +348,9 @@ def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> 
                 break
             except ServoError as again:
                 if attempt == ATTEMPTS - 1:
-                    undo_failed.append(f"{e.code} ({again})")
+                    undo_failed[e.code] = str(again)
                     if isinstance(again, DeviceError) and not isinstance(again, ModbusException):
                         dead += 1
-        if dead >= 2:
-            break  # no answer at all, twice: every further attempt would time out too
     return rolled, undo_failed
 
 

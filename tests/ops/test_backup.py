@@ -13,7 +13,7 @@ import yaml
 from servotool.cli.messages import error_text
 from servotool.connection import ConnectOptions, resolve
 from servotool.drive import Drive
-from servotool.errors import UsageError
+from servotool.errors import DeviceError, ModbusException, UsageError
 from servotool.model.loader import load_profile
 from servotool.ops import backup, params, restore
 from servotool.session import open_drives
@@ -475,3 +475,75 @@ def test_values_written_again_in_blocks_skip_an_address_the_drive_refuses(auto_d
     assert [e.code for e, _ in report.refused] == [victim.code]
     assert {e.code for e in report.stored_again} == {e.code for e, _ in plan.again} - {victim.code}
     assert len(writes) < len(plan.again) / 3  # blocks, not one request a value
+
+
+class Flaky:
+    """A Link over a virtual SD25 whose write of one value is refused (exception 03, so the restore rolls back)
+    and which then times out on `reads_lost` of the reads that follow (a burst of faults on the line)."""
+
+    def __init__(self, refuse: tuple[int, int], reads_lost: set[int], writes_lost: set[int] = frozenset()) -> None:
+        from servotool.clock import VirtualClock
+        from servotool.sim.firmware import build_drive
+        from servotool.sim.virtual import VirtualLink
+
+        self.profile = load_profile("sd25")
+        clock = VirtualClock()
+        self.sim = build_drive(self.profile, 1, clock, persist=False)
+        self.link = VirtualLink([self.sim], clock)
+        self.refuse, self.reads_lost, self.writes_lost = refuse, reads_lost, writes_lost
+        self.after = None  # reads (and writes) counted from the refusal on
+        self.armed = False
+
+    def read(self, unit, address, count):
+        if self.after is not None:
+            self.after["reads"] += 1
+            if self.after["reads"] in self.reads_lost:
+                raise DeviceError(f"read {count} register(s) at {address}: no response within 1 s")
+        return self.link.read(unit, address, count)
+
+    def write(self, unit, address, values, **kw):
+        if self.armed and (address, values) == (self.refuse[0], [self.refuse[1]]):
+            self.after = {"reads": 0, "writes": 0}
+            raise ModbusException(3, f"write 1 register(s) at {address}")
+        if self.after is not None:
+            self.after["writes"] += 1
+            if self.after["writes"] in self.writes_lost:
+                raise DeviceError(f"write 1 register(s) at {address}: no response within 1 s")
+        self.link.write(unit, address, values, **kw)
+
+    def close(self):
+        pass
+
+
+def _failing_restore(link: Flaky) -> tuple[restore.RestoreFailed, Drive]:
+    d = Drive(link, link.profile, 1, port="virtual-line")
+    params.set_values(d, params.prepare_set(d, ["Po003=20", "Po101=30", "Po110=40"]), True)
+    b = backup.take(d)
+    params.set_values(d, params.prepare_set(d, ["Po003=16", "Po101=60", "Po110=200"]), True)
+    link.armed = True
+    with pytest.raises(restore.RestoreFailed) as caught:
+        restore.restore(d, b, restore.restore_changes(d.profile, b, params.read_settings(d)))
+    return caught.value, d
+
+
+def test_a_rolled_back_restore_says_so_though_a_later_read_meets_a_fault(sim_dir):
+    """Issue 30 item 7: after a rollback the drive had answered (15 of 15 cases), one final read met a fault and the
+    account said "the drive no longer answers, so its state is unknown". The rollback's own read-backs are the
+    account; a fault after them changes nothing."""
+    link = Flaky(refuse=(110, 40), reads_lost=set(range(7, 40)))  # every read after the rollback's is lost
+    exc, _d = _failing_restore(link)
+    assert "the drive no longer answers" not in str(exc)
+    assert "rolled back 2 written entries; read back, the drive equals the automatic backup" in str(exc), exc
+    assert exc.equals_backup is True and sorted(exc.rolled_back) == ["Po003", "Po101"]
+    assert {c: link.sim.bank.ram[c] for c in ("Po003", "Po101", "Po110")} == {"Po003": 16, "Po101": 600, "Po110": 200}
+
+
+def test_an_entry_the_rollback_could_not_undo_nor_read_is_named_unknown_beside_what_was_rolled_back(sim_dir):
+    """The rollback goes newest first: Po101 is written back and verified, then the line loses Po003's write back
+    and every read after it: Po003's state is UNKNOWN, and the account still says that Po101 was rolled back."""
+    link = Flaky(refuse=(110, 40), reads_lost=set(range(5, 100)), writes_lost={2, 3, 4})
+    exc, _d = _failing_restore(link)
+    text = str(exc)
+    assert "Po003 could not be undone nor read back, so its state is UNKNOWN" in text, text
+    assert "rolled back Po101 (verified by read-back)" in text, text
+    assert exc.equals_backup is None and exc.next_step == "compare"
