@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 from servotool.drive import Drive, WriteResult
@@ -182,8 +183,10 @@ def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome
     results: list[WriteResult] = []
     targets = {e.code: new for e, _old, new in plan.changes}
     before = {e.code: old for e, old, _new in plan.changes}
-    try:  # journaled before the first write: a kill midway is named by the next command, value by value
-        with journal.operation(drive, "param set", None, targets, before), persistence(drive, save) as kept:
+    # Journaled before the first write: a kill midway is named by the next command, value by value.
+    record = journal.operation(drive, "param set", None, targets, before) if targets else nullcontext()
+    try:
+        with record, persistence(drive, save) as kept:
             results = apply_set(drive, plan)
             for entry, raw in again:  # the same value again, now with the switch on EEPROM
                 write_one(drive, entry, raw, raw)
