@@ -316,9 +316,12 @@ def _bus_of(record: dict[str, Any]) -> str:
 
 
 def _gone(bus: str) -> bool:
-    """Whether the serial device a record names is no longer attached. A tcp:// or simulated bus is never gone:
-    its records are finished only under its own name."""
-    if bus.startswith(("tcp://", "sim:")):
+    """Whether the serial device a record names is no longer attached, as after a replug that named the adapter
+    anew. A tcp:// or simulated bus never is: its records are finished only under its own name; nor is a
+    /dev/serial/by-id name, which names the adapter itself (its USB serial number) and comes back with it."""
+    from servotool.link.ports import SERIAL_BY_ID
+
+    if bus.startswith(("tcp://", "sim:", f"{SERIAL_BY_ID}/")):
         return False
     if re.fullmatch(r"COM\d+", bus):
         from serial.tools.list_ports import comports

@@ -199,3 +199,42 @@ def test_a_param_set_killed_between_writes_is_named_value_by_value_by_the_next_c
             assert f"{code} (still {old})" in rest, line
     assert line.endswith("run it again to finish")
     assert not list(journal_dir().glob("*.json"))
+
+
+@pytest.mark.parametrize(
+    ("old_bus", "identity", "adopted"),
+    [
+        ("ttyUSB0", None, True),  # gone, same drive: finished here
+        ("/dev/serial/by-id/usb-FTDI_FT232R_A1-if00-port0", None, False),  # that adapter would come back by name
+        ("ttyUSB0", {"So-00": 101, "So-46": 100}, False),  # another firmware: another drive
+    ],
+)
+def test_a_record_under_a_gone_device_is_taken_up_only_by_the_same_drive(sim_dir, tmp_path, old_bus, identity, adopted):
+    from servotool.clock import VirtualClock
+    from servotool.drive import Drive
+    from servotool.model.loader import load_profile
+    from servotool.ops import journal
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.virtual import VirtualLink
+
+    profile = load_profile("sd25")
+    clock = VirtualClock()
+    sim = build_drive(profile, 1, clock, persist=False)
+    link = VirtualLink([sim], clock)
+    bus = old_bus if old_bus.startswith("/dev/") else str(tmp_path / old_bus)  # never existing
+    old = Drive(link, profile, 1, port=bus)
+    journal.note_switch(old, "Po505", 0x0101)
+    if identity is not None:
+        record = json.loads(journal.record_path(old).read_text())
+        journal.record_path(old).write_text(json.dumps({**record, "identity": identity}))
+    old.write_raw(profile.entry("Po505"), 0x0100)  # and then the process died
+    new = Drive(link, profile, 1, port=str(tmp_path / "ttyUSB1"))
+    lines: list[str] = []
+    with journal.port_lock(new, notice=lines.append):
+        pass
+    assert (sim.bank.ram["Po505"] == 0x0101) is adopted, lines
+    assert journal.record_path(old).exists() is not adopted
+    if adopted:
+        assert f"through {bus}, which is no longer there" in lines[0] and "put Po505 back" in lines[1]
+    else:
+        assert lines == []
