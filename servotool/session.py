@@ -13,7 +13,7 @@ from servotool.connection import SIM_PORT, ConnectOptions, Resolved, effective, 
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.link.master import RtuMaster
-from servotool.link.ports import Trace, latency_advice
+from servotool.link.ports import Trace, bus_identity, latency_advice
 
 if TYPE_CHECKING:
     from servotool.ops.scan import Found
@@ -68,14 +68,13 @@ class Bus:
         trace: Trace | None = None,
         notice: Callable[[str], None] | None = None,
     ) -> None:
-        from servotool.files import sim_state_dir
-
         self.resolved, self.notice = resolved, notice or _stderr
         self.units = units or [resolved.unit]
         self.sim = None
         settings = resolved.settings
-        # The name the host's journal and write lock know this bus by (a simulator by its state folder).
-        self.port = f"sim:{sim_state_dir().resolve()}" if resolved.simulated else settings.port
+        # The name the host's journal and write lock know this bus by, whatever its spelling (a simulated drive by its
+        # state folder and profile: each profile's simulated drive is a drive of its own).
+        self.port = sim_bus(resolved.profile.id) if resolved.simulated else bus_identity(settings.port)
         if resolved.simulated:
             from servotool.sim.firmware import build_drive
             from servotool.sim.server import EmbeddedSim
@@ -110,8 +109,12 @@ class Bus:
         unchecked = [d for d in drives if d.unit not in self.checked]
         if self.resolved.identity_check and not self.resolved.simulated and unchecked:
             from servotool.ops.identity import confirm, warning_text
+            from servotool.ops.journal import know_identity
 
-            if text := warning_text(confirm(unchecked)):
+            verdicts = confirm(unchecked)
+            for d, verdict in zip(unchecked, verdicts, strict=True):  # the journal's records name the drive by them
+                know_identity(d, {a.check.code: a.raw for a in verdict.answers if a.check.code and a.raw is not None})
+            if text := warning_text(verdicts):
                 self.notice(f"servotool: warning: {text}")
         self.checked.update(units)
         for d in drives:  # what a killed servotool process left on these drives is put right first
@@ -139,6 +142,14 @@ def open_drives(
         yield bus.drives()
     finally:
         bus.close()
+
+
+def sim_bus(profile_id: str) -> str:
+    """The bus name (Drive.port) of `--port sim`: the simulator's state folder and the profile, since each
+    profile's simulated drive is a drive of its own."""
+    from servotool.files import sim_state_dir
+
+    return f"sim:{sim_state_dir().resolve()}#{profile_id}"
 
 
 def _stderr(text: str) -> None:

@@ -13,8 +13,9 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
+from servotool.ops.eeprom import compared_memory
 from servotool.ops.params import read_settings, select
-from servotool.words import count
+from servotool.words import agree, count
 
 if TYPE_CHECKING:  # imported by the commands that use them: `param get` and `set` share this group
     from servotool.drive import Drive
@@ -106,7 +107,11 @@ def diff_cmd(
             current = _read_all(d, as_json)
             missing = list(d.missing)
         _show_diff(
-            backup.diff(profile, current, backup.defaults(profile)), ("drive", "factory default"), missing, as_json
+            backup.diff(profile, current, backup.defaults(profile)),
+            ("drive", "factory default"),
+            missing,
+            as_json,
+            compared_memory(profile),
         )
         return
 
@@ -117,6 +122,7 @@ def diff_cmd(
         return b
 
     missing: list[str] = []  # entries the drive lacks (a drive diff only)
+    compared: str | None = None  # the drive's memory a drive diff compared
     if file2 is not None or from_default:
         name = opts.profile or backup.profile_of(file)
         if name is None:
@@ -134,7 +140,8 @@ def diff_cmd(
             missing = list(d.missing)
         labels = ("drive", str(file))
         diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
-    _show_diff(diffs, labels, missing, as_json)
+        compared = compared_memory(profile)
+    _show_diff(diffs, labels, missing, as_json, compared)
 
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
@@ -143,10 +150,27 @@ def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
         return read_settings(d, advance)
 
 
-def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing: list[str], as_json: bool) -> None:
+def _show_diff(
+    diffs: list[backup.Difference],
+    labels: tuple[str, str],
+    missing: list[str],
+    as_json: bool,
+    compared: str | None = None,
+) -> None:
+    """The differences; compared names the drive's memory a drive diff read (RAM, which may not be EEPROM)."""
     if as_json:
-        emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs], "missing": missing})
+        data = {"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs], "missing": missing}
+        emit_json({**data, **({"compared": compared} if compared else {})})
         return
+    if compared == "RAM":
+        info(
+            "compared with the drive's RAM: what EEPROM holds (what a power cycle brings back) cannot be read over "
+            "Modbus and may differ ('param restore' writes every value under the EEPROM setting)"
+        )
+    elif compared:
+        info(f"compared with the drive's {compared}")
+    drive = f"drive {compared.split()[0]}" if compared else ""
+    labels = (drive or labels[0], labels[1])
     if not diffs:
         out.print(f"no differences between {labels[0]} and {labels[1]}", markup=False)
         return
@@ -173,9 +197,19 @@ def restore_cmd(
     force: bool = typer.Option(False, "--force", help="Accept a file of another model or with a bad checksum."),
     only: str = typer.Option(None, "--only", help="Restore only this group (a portable subset)."),
     include: list[str] = typer.Option(None, "--include", help="Also restore this axis-specific entry (repeatable)."),
+    ram_only: bool = typer.Option(
+        False,
+        "--ram-only",
+        help="Compare with the drive's RAM only and write what differs there; by default a drive whose EEPROM "
+        "cannot be read gets every value written again under the EEPROM setting.",
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Write only the differing entries, verified, after an automatic backup; roll back on failure."""
+    """Write the differing entries, verified, after an automatic backup; roll back on failure.
+
+    Reads show the drive's RAM: where EEPROM may hold something else (SD25, IS620P), every other backup value is
+    written again under the EEPROM setting, as 'param set --save' does, unless --ram-only.
+    """
     from servotool.ops import backup, restore
 
     profile = resolved(ctx).profile
@@ -186,30 +220,33 @@ def restore_cmd(
         entries = select(d.profile)
         with progress("reading the drive", len(entries), enabled=not as_json) as advance:
             current = {r.entry.code: r.raw for r in d.read_entries(entries, partial=True, progress=advance)}
-        plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [])
+        plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [], ram_only=ram_only)
+        compared = compared_memory(d.profile)
         if not as_json:
-            _show_plan(plan)
-        if dry_run or not plan.changes:
+            _show_plan(plan, compared)
+        if dry_run or plan.empty:
             if as_json:
                 emit_json(
                     {
                         "dry_run": dry_run,
+                        "compared": compared,
                         "changes": _changes_json(plan),
+                        "store_again": [e.code for e, _ in plan.again],
                         "written": [],
+                        "stored_again": [],
                         "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
                         "missing": [e.code for e in plan.missing],
                         "refused": [],
                     }
                 )
-            elif not plan.changes:
-                out.print("nothing to restore: the drive already matches", markup=False)
+            elif plan.empty:
+                out.print(_nothing_to_restore(plan, compared), markup=False)
             return
-        if not confirm(f"Write {count(len(plan.changes), 'parameter')}?", yes):
+        total = len(plan.changes) + len(plan.again)
+        if not confirm(f"Write {count(total, 'parameter')}?", yes):
             raise ServoError("restore cancelled: nothing was written")
         # The automatic backup reads every entry before the first write: at a slow baud rate that is most of it.
-        with progress(
-            "automatic backup, then writing", len(entries) + len(plan.changes), enabled=not as_json
-        ) as advance:
+        with progress("automatic backup, then writing", len(entries) + total, enabled=not as_json) as advance:
             report = restore.restore(
                 d, b, plan, progress=lambda _entry: advance(1), notice=_where, backup_progress=advance
             )
@@ -217,8 +254,11 @@ def restore_cmd(
         emit_json(
             {
                 "dry_run": False,
+                "compared": compared,
                 "changes": _changes_json(plan),
+                "store_again": [e.code for e, _ in plan.again],
                 "written": [e.code for e in report.written],
+                "stored_again": [e.code for e in report.stored_again],
                 "auto_backup": str(report.auto_backup),
                 "persisted": report.persisted,
                 "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
@@ -229,7 +269,16 @@ def restore_cmd(
         return
     for e, why in report.refused:
         warn(f"{e.code} ({e.name}) not restored: the drive refuses writes there ({why})")
-    out.print(f"{count(len(report.written), 'parameter')} restored and verified by read-back", markup=False)
+    if report.written or not report.stored_again:
+        out.print(f"{count(len(report.written), 'parameter')} restored and verified by read-back", markup=False)
+    if report.stored_again:
+        out.print(
+            f"{count(len(report.stored_again), 'value')} RAM already held written again under the EEPROM setting "
+            f"and verified by read-back, to store {agree(len(report.stored_again), 'it', 'them')}",
+            markup=False,
+        )
+    if plan.ram_only and report.persisted:
+        warn("--ram-only: values that differ only in EEPROM were not compared, and stay as they are")
     if not report.persisted:
         # restore asks for EEPROM, so this is a drive that cannot store over Modbus
         warn(f"the drive keeps these values in RAM only, lost at power-off: {d.profile.persistence.note}")
@@ -244,16 +293,36 @@ def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
     ]
 
 
-def _show_plan(plan: restore.RestoreChanges) -> None:
+def _show_plan(plan: restore.RestoreChanges, compared: str) -> None:
     if plan.changes:
         t = table(
-            "Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{count(len(plan.changes), 'change')}, in order"
+            "Code",
+            "Name",
+            f"Drive {compared.split()[0]}",
+            "Backup",
+            "Unit",
+            "Needs",
+            title=f"{count(len(plan.changes), 'change')}, in order",
         )
         for e, old, new in plan.changes:
             t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
         out.print(t)
+    if plan.again:
+        info(
+            f"and {count(len(plan.again), 'value')} the drive's RAM already holds, written again under the EEPROM "
+            "setting: what EEPROM holds cannot be read over Modbus (--ram-only writes only what differs in RAM)"
+        )
+    if plan.store:
+        info("the drive's store function runs at the end: what its EEPROM holds cannot be read over Modbus")
     for e, why in plan.skipped:
         info(f"skipped {e.code}: {why}")
+
+
+def _nothing_to_restore(plan: restore.RestoreChanges, compared: str) -> str:
+    if compared != "RAM":
+        return "nothing to restore: the drive already matches"
+    why = " (--ram-only: what EEPROM holds was not compared)" if plan.ram_only else ""
+    return f"nothing to restore: the drive's RAM already matches{why}"
 
 
 @app.command("reset")

@@ -90,10 +90,11 @@ def set_(
     persisted, stored = None, []
     with drive(ctx) as d:
         eeprom.check_save_request(d.profile, save)
-        plan = params.prepare_set(d, assignments, raw=raw)
         results = []
-        if not dry_run:
-            outcome = params.set_values(d, plan, save)
+        if dry_run:
+            plan = params.prepare_set(d, assignments, raw=raw)
+        else:
+            plan, outcome = params.set_assignments(d, assignments, raw=raw, save=save)
             results, stored = outcome.results, outcome.stored
             persisted = outcome.persisted if plan.changes or save else None
     if as_json:

@@ -12,6 +12,7 @@ from servotool.model.codec import format_value, json_value, parse_value, raw_to_
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup, params, restore
 from servotool.ops.eeprom import check_power_cycle, persistence
+from servotool.ops.journal import port_lock
 from servotool.words import count
 
 
@@ -36,12 +37,14 @@ class SetStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         texts = [f"{e.code}={raw}" for e, raw in self.assignments(step, drive.profile)]
-        plan = params.prepare_set(drive, texts, raw=True)
-        if not any(st.name == "save" and st.index > step.index for st in ctx.plan.steps):
-            # no later 'save:' stores it: a power-cycle parameter kept in RAM would be lost by that power cycle
-            check_power_cycle(drive, [e for e, _, _ in plan.changes], None)
-        with persistence(drive, None):  # under the port's lock: no other process flips the switch meanwhile
-            done = params.apply_set(drive, plan)
+        # Read and written under the port's lock: no other process writes these or flips the switch meanwhile.
+        with port_lock(drive):
+            plan = params.prepare_set(drive, texts, raw=True)
+            if not any(st.name == "save" and st.index > step.index for st in ctx.plan.steps):
+                # no later 'save:' stores it: a power-cycle parameter kept in RAM would be lost by that power cycle
+                check_power_cycle(drive, [e for e, _, _ in plan.changes], None)
+            with persistence(drive, None):
+                done = params.apply_set(drive, plan)
         for r in done:
             ctx.wrote(drive, r.entry, r.new)
         for entry, raw in plan.unchanged:  # already in RAM, maybe not in EEPROM: 'save:' stores them too

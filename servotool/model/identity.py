@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from servotool.model.checker import Checker
-from servotool.model.profile import Entry, Identity, IdentityCheck, Limits
+from servotool.model.profile import Entry, Identity, IdentityCheck, Limits, Profile
 
 CHECK_KEYS = {"code", "address", "absent", "range", "sim", "source", "unverified"}
 
@@ -130,3 +130,12 @@ def _range(chk: Checker, raw: Any, loc: str) -> tuple[int, int] | None:
         chk.bad(loc, "expected [lo, hi] raw values with lo <= hi")
         return None
     return raw[0], raw[1]
+
+
+def identity_entries(profile: Profile) -> list[Entry]:
+    """The entries that name a drive (a backup records them; the host's journal keys its records by them): those
+    the profile's identity section checks (its firmware and model entries among them), in the section's order."""
+    if profile.identity is None:
+        return []
+    codes = [c.code for c in profile.identity.checks if c.code]
+    return [e for e in (profile.find(c) for c in codes) if e is not None and e.readable]

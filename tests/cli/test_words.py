@@ -132,14 +132,19 @@ def test_a_fields_meaning_is_accepted_by_name(cli):
 
 def test_what_a_killed_restore_left_is_told_with_quiet_and_the_users_options(cli, sim_dir, tmp_path):
     from servotool.files import backup_dir
-    from servotool.ops.journal import journal_dir, port_key
+    from servotool.model.loader import load_profile
+    from servotool.ops.journal import journal_dir, record_path
+    from servotool.session import sim_bus
+
+    class Drive:  # what names a drive's record: its bus, profile and unit
+        port, unit, profile = sim_bus("dsx7e"), 1, load_profile("dsx7e")
 
     auto = tmp_path / "auto.yaml"
     assert cli("--port", "sim", "param", "backup", "-o", str(auto)).code == 0
     assert cli("--port", "sim", "param", "set", "Pn101=25").code == 0  # the dead restore's one write
     assert journal_dir() == backup_dir() / "journal"
     journal_dir().mkdir(parents=True, exist_ok=True)
-    record = journal_dir() / f"{port_key(f'sim:{sim_dir.resolve()}')}-unit1.json"
+    record = record_path(Drive())  # type: ignore[arg-type]
     record.write_text(
         json.dumps({"op": {"name": "restore", "auto_backup": str(auto), "targets": {"Pn101": 250}}, "pid": 1})
     )
