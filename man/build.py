@@ -192,9 +192,7 @@ def placeholder(p) -> str:
     """What an option's value is called on the page: its metavar, FILE for paths, else the option's own name."""
     if p.metavar:
         return p.metavar
-    # typer 0.29 keeps the annotation in type_descriptor, older releases a click type in .type
-    annotation = getattr(getattr(p, "type_descriptor", None), "annotation", None)
-    if annotation is Path or type(getattr(p, "type", None)).__name__ == "Path":
+    if getattr(p.type, "name", None) == "path":  # click's Path type (typer's for a pathlib.Path annotation)
         return "FILE"
     longest = max(p.opts, key=len).lstrip("-")
     return longest.upper().replace("-", "_")

@@ -12,15 +12,13 @@ from typing import NoReturn
 import typer
 
 from servotool import __version__
-from servotool.cli import classcache, complete, fastparse
+from servotool.cli import complete
 from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, state
 from servotool.cli.lazy import lazy, lazy_group
 from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.connection import ConnectOptions
 from servotool.errors import ServoError
-
-fastparse.install()
 
 # Each command's module is imported when that command runs (a typer app or a command function, "module:name").
 COMMANDS = {
@@ -149,15 +147,15 @@ def run() -> None:
 
 
 def _run() -> int:
-    classcache.save_at_exit()
     given = State()  # the options given on the command line, filled in by main(); fix commands repeat them
     _interrupt_on_termination()
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)  # streamed lines reach a pipe as they are made
     root = typer.main.get_command(app)
-    args = hoist_globals(root, sys.argv[1:])
+    args = sys.argv[1:]
     as_json = "--json" in args[: args.index("--")] if "--" in args else "--json" in args
     try:
+        args = hoist_globals(root, args)
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
         from servotool.cli.messages import error_code, error_text  # words for a failure, loaded on one
