@@ -5,7 +5,6 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 
 import typer
 
@@ -17,9 +16,11 @@ from servotool.errors import UsageError
 from servotool.session import open_drives
 
 
-@dataclass
 class State:
-    options: ConnectOptions = field(default_factory=ConnectOptions)
+    """What the root command's options said (a plain class: each dataclass compiles its methods at start-up)."""
+
+    def __init__(self, options: ConnectOptions | None = None) -> None:
+        self.options = options if options is not None else ConnectOptions()
 
 
 def state(ctx: typer.Context) -> State:

@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import copy
 import importlib
-from dataclasses import dataclass
 from difflib import get_close_matches
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import typer
 from typer.core import TyperGroup
@@ -24,19 +23,17 @@ from typer.core import TyperGroup
 from servotool.cli import examples
 
 
-@dataclass(frozen=True)
-class Lazy:
+class Lazy(NamedTuple):
     """One sub-command: where it lives, and its one line of help (also the whole help of a merged group)."""
 
     targets: tuple[str, ...]
     help: str
-    merged_help: bool = False
 
 
 def lazy(*targets: str, help: str) -> Lazy:
     """A sub-command by "module:attribute"; `help` is what `servotool --help` lists (the help of a group made of
     several targets)."""
-    return Lazy(targets, help, merged_help=len(targets) > 1)
+    return Lazy(targets, help)
 
 
 def _load(target: str) -> Any:
@@ -57,7 +54,7 @@ def build(name: str, spec: Lazy) -> Any:
         command = _app_group(objects, name)
     command.name = name
     command.short_help = spec.help  # as `servotool --help` lists it before anything is imported
-    if spec.merged_help:
+    if len(spec.targets) > 1:  # a merged group has no help of its own
         command.help = spec.help
     if hasattr(command, "commands") and not command.invoke_without_command:
         command.no_args_is_help = True  # a bare group name shows its help, once

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import sys
 
 import typer
@@ -16,7 +15,6 @@ from servotool.errors import UnknownName
 from servotool.model.codec import format_field, format_value, get_field, json_value, split_field
 from servotool.model.lookup import class_name, search, suggest
 from servotool.ops import eeprom, params
-from servotool.ops.backup_csv import value_text
 from servotool.words import count
 
 app = typer.Typer(help="Read, set and list drive parameters.")
@@ -240,6 +238,10 @@ def find(
 
 def _csv(readings: list[Reading]) -> None:
     """The table as CSV on stdout, for a spreadsheet."""
+    import csv  # only for --csv
+
+    from servotool.ops.backup_csv import value_text
+
     w = csv.writer(sys.stdout, lineterminator="\n")
     w.writerow(["code", "name", "value", "unit", "meaning", "default", "changed", "raw"])
     for r in readings:
