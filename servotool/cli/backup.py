@@ -14,7 +14,6 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
-from servotool.ops.params import read_settings, select
 from servotool.words import count
 
 if TYPE_CHECKING:  # imported by the commands that use them: `param get` and `set` share this group
@@ -48,6 +47,7 @@ def backup_cmd(
 ) -> None:
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
     from servotool.ops import backup
+    from servotool.ops.params import select
 
     kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
     if kind not in ("yaml", "yml", "csv"):
@@ -140,6 +140,8 @@ def diff_cmd(
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
     """Every readable parameter of the drive (code -> raw), with a progress bar on a terminal."""
+    from servotool.ops.params import read_settings, select
+
     with progress("reading the drive", len(select(d.profile)), enabled=not as_json) as advance:
         return read_settings(d, advance)
 
@@ -178,6 +180,7 @@ def restore_cmd(
 ) -> None:
     """Write only the differing entries, verified, after an automatic backup; roll back on failure."""
     from servotool.ops import backup, restore
+    from servotool.ops.params import select
 
     profile = resolve(state(ctx).options).profile
     b = backup.load(file, profile, force=force)  # every file problem is refused before connecting
@@ -265,6 +268,7 @@ def reset_cmd(
 ) -> None:
     """Factory defaults through the drive's own function, after an automatic backup."""
     from servotool.ops import backup, restore
+    from servotool.ops.params import select
 
     with drive(ctx) as d:
         d.profile.need_role("factory_reset", "param reset")

@@ -14,7 +14,6 @@ from servotool.drive import Reading
 from servotool.errors import UnknownName
 from servotool.model.codec import format_field, format_value, get_field, json_value, split_field
 from servotool.model.lookup import class_name, search, suggest
-from servotool.ops import eeprom, params
 from servotool.words import count
 
 app = typer.Typer(help="Read, set and list drive parameters.")
@@ -87,6 +86,8 @@ def set_(
     """Validate every value against the profile, write the ones that differ, read back to verify."""
     persisted, stored = None, []
     with drive(ctx) as d:
+        from servotool.ops import eeprom, params  # only for writes: `param get` starts without them
+
         eeprom.check_save_request(d.profile, save)
         plan = params.prepare_set(d, assignments, raw=raw)
         results = []
@@ -168,6 +169,8 @@ def list_(
 ) -> None:
     """Read and show a whole group of entries, with defaults and a changed mark."""
     classes = ("Pn",) if cls is None and group is None else ("Pn", "Un", "Sn") if cls is None else (_class(cls),)
+    from servotool.ops import params
+
     with drive(ctx) as d:
         entries = params.select(d.profile, group=group, classes=classes)
         with progress("reading", len(entries), enabled=not (as_json or as_csv)) as advance:
