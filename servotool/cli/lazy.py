@@ -27,12 +27,12 @@ class Lazy(NamedTuple):
     """One sub-command: where it lives, and its one line of help (also the whole help of a merged group)."""
 
     targets: tuple[str, ...]
-    help: str
+    help: str | None
 
 
-def lazy(*targets: str, help: str) -> Lazy:
+def lazy(*targets: str, help: str | None = None) -> Lazy:
     """A sub-command by "module:attribute"; `help` is what `servotool --help` lists (the help of a group made of
-    several targets)."""
+    several targets). Without it, --help imports the command to ask (tests/cli/test_examples.py wants it given)."""
     return Lazy(targets, help)
 
 
@@ -53,9 +53,10 @@ def build(name: str, spec: Lazy) -> Any:
     else:
         command = _app_group(objects, name)
     command.name = name
-    command.short_help = spec.help  # as `servotool --help` lists it before anything is imported
-    if len(spec.targets) > 1:  # a merged group has no help of its own
-        command.help = spec.help
+    if spec.help is not None:
+        command.short_help = spec.help  # as `servotool --help` lists it before anything is imported
+        if len(spec.targets) > 1:  # a merged group has no help of its own
+            command.help = spec.help
     if hasattr(command, "commands") and not command.invoke_without_command:
         command.no_args_is_help = True  # a bare group name shows its help, once
     return command
@@ -139,11 +140,10 @@ def lazy_group(commands: dict[str, Lazy]) -> type[TyperGroup]:
             """The commands and their one-line help, from the registry for those not loaded."""
             rows = []
             for name in self.list_commands(ctx):
-                if name in self.commands:
-                    if not self.commands[name].hidden:
-                        rows.append((name, self.commands[name].get_short_help_str(formatter.width)))
-                else:
-                    rows.append((name, self.registry[name].help))
+                if name not in self.commands and (known := self.registry[name].help) is not None:
+                    rows.append((name, known))
+                elif not (command := self.get_command(ctx, name)).hidden:
+                    rows.append((name, command.get_short_help_str(formatter.width)))
             if rows:
                 with formatter.section("Commands"):
                     formatter.write_dl(rows)

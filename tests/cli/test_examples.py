@@ -64,6 +64,14 @@ def test_help_shows_the_examples_within_80_columns_and_no_type_on_flags(commands
         )
 
 
+def test_every_command_has_its_one_line_help_in_the_registry():
+    from servotool.cli.main import COMMANDS
+
+    missing = [name for name, spec in COMMANDS.items() if not spec.help]
+    assert not missing, f"give lazy(..., help=...) in cli/main.py: {missing}"
+    assert all(len(f"  {name:10}{spec.help}") <= WIDTH for name, spec in COMMANDS.items())
+
+
 def test_root_help_lists_every_command_without_loading_one(cli):
     r = cli("--help")
     assert r.code == 0 and "Usage:" in r.out and "<bool>" not in r.out
