@@ -3,6 +3,7 @@ the simulator (after the README's motion set-up), ending as it says."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -170,7 +171,7 @@ def _run(line: str, until_ctrl_c: bool, cwd: Path, env: dict[str, str]) -> tuple
             os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=240)
         return proc.returncode, err
-    finally:
-        if proc.poll() is None:
+    finally:  # a command left in the background (`A & B` where B failed) goes too
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        proc.wait()
