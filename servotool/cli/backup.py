@@ -13,8 +13,6 @@ from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
-from servotool.ops.eeprom import compared_memory
-from servotool.ops.params import read_settings, select
 from servotool.words import agree, count
 
 if TYPE_CHECKING:  # imported by the commands that use them: `param get` and `set` share this group
@@ -48,6 +46,7 @@ def backup_cmd(
 ) -> None:
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
     from servotool.ops import backup
+    from servotool.ops.params import select
 
     kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
     if kind not in ("yaml", "yml", "csv"):
@@ -95,6 +94,7 @@ def diff_cmd(
     A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning.
     """
     from servotool.ops import backup
+    from servotool.ops.eeprom import compared_memory
 
     opts = state(ctx).options
     if file2 is not None and from_default:
@@ -146,6 +146,8 @@ def diff_cmd(
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
     """Every readable parameter of the drive (code -> raw), with a progress bar on a terminal."""
+    from servotool.ops.params import read_settings, select
+
     with progress("reading the drive", len(select(d.profile)), enabled=not as_json) as advance:
         return read_settings(d, advance)
 
@@ -211,6 +213,8 @@ def restore_cmd(
     written again under the EEPROM setting, as 'param set --save' does, unless --ram-only.
     """
     from servotool.ops import backup, restore
+    from servotool.ops.eeprom import compared_memory
+    from servotool.ops.params import select
 
     profile = resolved(ctx).profile
     b = backup.load(file, profile, force=force)  # every file problem is refused before connecting
@@ -333,6 +337,7 @@ def reset_cmd(
 ) -> None:
     """Factory defaults through the drive's own function, after an automatic backup."""
     from servotool.ops import backup, restore
+    from servotool.ops.params import select
 
     with drive(ctx) as d:
         d.profile.need_role("factory_reset", "param reset")

@@ -5,7 +5,6 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import typer
@@ -21,15 +20,21 @@ if TYPE_CHECKING:
     from servotool.ops.scan import Found
 
 
-@dataclass
 class State:
-    """One command's options, and what they resolved to; in `servotool shell`, the bus it keeps open."""
+    """One command's options, and what they resolved to; in `servotool shell`, the bus it keeps open. A plain
+    class: each dataclass compiles its methods at start-up."""
 
-    options: ConnectOptions = field(default_factory=ConnectOptions)
-    resolved: Resolved | None = None
-    bus: Bus | None = None
-    # in the shell: a typed line's global options over the shell's own, checked (cli.shell.line_options)
-    line_options: Callable[[ConnectOptions], tuple[ConnectOptions, Resolved]] | None = None
+    def __init__(
+        self,
+        options: ConnectOptions | None = None,
+        bus: Bus | None = None,
+        line_options: Callable[[ConnectOptions], tuple[ConnectOptions, Resolved]] | None = None,
+    ) -> None:
+        self.options = options if options is not None else ConnectOptions()
+        self.resolved: Resolved | None = None
+        self.bus = bus
+        # in the shell: a typed line's global options over the shell's own, checked (cli.shell.line_options)
+        self.line_options = line_options
 
 
 def state(ctx: typer.Context) -> State:

@@ -12,7 +12,7 @@ from typing import NoReturn
 import typer
 
 from servotool import __version__
-from servotool.cli import classcache, complete, fastparse
+from servotool.cli import complete
 from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, take_options
 from servotool.cli.lazy import lazy, lazy_group
@@ -20,28 +20,27 @@ from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.connection import ConnectOptions
 from servotool.errors import ServoError
 
-fastparse.install()
-
-# Each command's module is imported when that command runs (a typer app or a command function, "module:name").
+# Each command's module is imported when that command runs (a typer app or a command function, "module:name"); the
+# help is the one line `servotool --help` lists.
 COMMANDS = {
     "param": lazy(
         "servotool.cli.param:app",
         "servotool.cli.backup:app",
         help="Read, set, list, back up and restore drive parameters.",
     ),
-    "profiles": lazy("servotool.cli.profiles:app"),
-    "sim": lazy("servotool.cli.sim:app"),
-    "alarm": lazy("servotool.cli.alarm:app"),
-    "tune": lazy("servotool.cli.tune:app"),
-    "monitor": lazy("servotool.cli.monitor:monitor"),
-    "jog": lazy("servotool.cli.jog:jog"),
-    "run": lazy("servotool.cli.run:run"),
-    "raw": lazy("servotool.cli.raw:app"),
-    "scan": lazy("servotool.cli.scan:scan"),
-    "doctor": lazy("servotool.cli.doctor:doctor"),
-    "trace": lazy("servotool.cli.trace:trace"),
-    "plot": lazy("servotool.cli.plot:plot"),
-    "shell": lazy("servotool.cli.shell:shell"),
+    "profiles": lazy("servotool.cli.profiles:app", help="List, show and check drive profiles."),
+    "sim": lazy("servotool.cli.sim:app", help="The simulated drive: serve it, configure its machine, reset it."),
+    "alarm": lazy("servotool.cli.alarm:app", help="Show, clear and list the drive's alarms."),
+    "tune": lazy("servotool.cli.tune:app", help="Identify load inertia and set gains."),
+    "monitor": lazy("servotool.cli.monitor:monitor", help="Watch live values with units, min/max and a trend."),
+    "jog": lazy("servotool.cli.jog:jog", help="JOG the motor, timed or by keys; first says what stops it."),
+    "run": lazy("servotool.cli.run:run", help="Validate a commissioning plan, then run it on one or more axes."),
+    "raw": lazy("servotool.cli.raw:app", help="Read and write registers by address (outside the profile)."),
+    "scan": lazy("servotool.cli.scan:scan", help="Find drives on a bus and the profile each matches."),
+    "doctor": lazy("servotool.cli.doctor:doctor", help="Link health: round trips, echo, errors, adapter latency."),
+    "trace": lazy("servotool.cli.trace:trace", help="Capture entries around a trigger, as fast as the line allows."),
+    "plot": lazy("servotool.cli.plot:plot", help="Draw any servotool CSV in the terminal or as a PNG."),
+    "shell": lazy("servotool.cli.shell:shell", help="One open port, the same commands at a prompt, live status."),
 }
 
 app = typer.Typer(
@@ -49,6 +48,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help: rich's panels load markdown and pygments (cli/lazy.py)
     help="Commission and tune AC servo drives over Modbus RTU (real or simulated).",
     context_settings={"help_option_names": ["-h", "--help"]},
     cls=lazy_group(COMMANDS),
@@ -154,7 +154,6 @@ def run() -> None:
 
 
 def _run() -> int:
-    classcache.save_at_exit()
     _interrupt_on_termination()
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)  # streamed lines reach a pipe as they are made
@@ -165,9 +164,10 @@ def dispatch(argv: list[str], given: State) -> int:
     """Run one command line through the app (the process's, or one typed in `servotool shell`, whose `given`
     holds the port it keeps open): its exit status, every failure said in one line."""
     root = typer.main.get_command(app)
-    args = hoist_globals(root, argv)
+    args = list(argv)
     as_json = "--json" in args[: args.index("--")] if "--" in args else "--json" in args
     try:
+        args = hoist_globals(root, args)
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
         from servotool.cli.messages import error_code, error_text  # words for a failure, loaded on one

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import sys
 
 import typer
@@ -15,8 +14,6 @@ from servotool.drive import Reading
 from servotool.errors import UnknownName
 from servotool.model.codec import format_field, format_value, get_field, json_value, split_field
 from servotool.model.lookup import class_name, search, suggest
-from servotool.ops import eeprom, params
-from servotool.ops.backup_csv import value_text
 from servotool.words import count
 
 app = typer.Typer(help="Read, set and list drive parameters.")
@@ -89,6 +86,8 @@ def set_(
     """Validate every value against the profile, write the ones that differ, read back to verify."""
     persisted, stored = None, []
     with drive(ctx) as d:
+        from servotool.ops import eeprom, params  # only for writes: `param get` starts without them
+
         eeprom.check_save_request(d.profile, save)
         results = []
         if dry_run:
@@ -171,6 +170,8 @@ def list_(
 ) -> None:
     """Read and show a whole group of entries, with defaults and a changed mark."""
     classes = ("Pn",) if cls is None and group is None else ("Pn", "Un", "Sn") if cls is None else (_class(cls),)
+    from servotool.ops import params
+
     with drive(ctx) as d:
         entries = params.select(d.profile, group=group, classes=classes)
         with progress("reading", len(entries), enabled=not (as_json or as_csv)) as advance:
@@ -241,6 +242,10 @@ def find(
 
 def _csv(readings: list[Reading]) -> None:
     """The table as CSV on stdout, for a spreadsheet."""
+    import csv  # only for --csv
+
+    from servotool.ops.backup_csv import value_text
+
     w = csv.writer(sys.stdout, lineterminator="\n")
     w.writerow(["code", "name", "value", "unit", "meaning", "default", "changed", "raw"])
     for r in readings:

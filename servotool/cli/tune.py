@@ -155,6 +155,7 @@ def inertia(
     report: Path = typer.Option(
         None,
         "--report",
+        metavar="DIR",
         help="Write a report folder: PNG charts of the motion, the fit, "
         "each move, the step response and the gains, with report.md (needs servotool[plot]).",
     ),

@@ -100,10 +100,11 @@ def test_a_session_in_a_terminal(sim_dir, sim_serve, tmp_path):
         term.type("jog --speed 300 --time 60 --yes")
         term.keys("Enter")
         term.wait_for("speed=")
-        deadline = time.monotonic() + 10
-        while abs(_speed_rpm(port)) < 250 and time.monotonic() < deadline:
+        deadline, seen = time.monotonic() + 10, 0.0
+        while abs(seen) < 250 and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert _speed_rpm(port) == pytest.approx(300, abs=30)  # it runs
+            seen = _speed_rpm(port)
+        assert 250 <= seen <= 400  # it runs (forward; a speed loop may overshoot its 300 rpm on the way)
         term.keys("C-c")
         term.wait_for("JOG stopped by Ctrl-C")
         term.wait_for("servotool>", count=4)  # the prompt again: still in the shell
