@@ -1,8 +1,8 @@
 """Turning an identified inertia into the drive's inertia-ratio, gain and rigidity parameter values, with margins.
 
 Before anything is written the margins of the suggested gains are computed on the identified inertia
-(tuning.margins); gains with less than 45 degrees of phase or 6 dB of gain margin are refused, naming the highest
-level that keeps them, unless forced.
+(tuning.control.margins); gains with less than 45 degrees of phase or 6 dB of gain margin are refused, naming the
+highest level that keeps them, unless forced.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from servotool.errors import UsageError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import from_canonical, to_canonical
 from servotool.model.profile import Entry, Profile
-from servotool.tuning.gains import GainSuggestion, LoopGains, RigidityScale, rigidity_scale, suggest_gains
+from servotool.tuning.control.gains import GainSuggestion, LoopGains, RigidityScale, rigidity_scale, suggest_gains
+from servotool.tuning.control.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
 from servotool.tuning.identify import IdentificationFailed
-from servotool.tuning.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
 from servotool.tuning.preflight import FEATURE
 
 GAIN_ROLES = {

@@ -5,7 +5,7 @@ gain from the *configured* inertia ratio (H08-00 is a bandwidth in Hz, which it 
 describes), while the position gain H08-02 and the speed integral H08-01 are absolute. With a load far above the
 configured ratio the speed loop is slow, the position loop and the integral are not, and the hold swings with
 growing amplitude: at the factory gains (25.0 Hz, 31.83 ms, 40.0) and ratio 1.00 the closed loop's poles
-(tuning.margins.least_damping) grow for any load above about 16; issue 16 saw 37 and 49 run into the travel guard.
+(control.margins.least_damping) grow for any load above about 16; issue 16 saw 37 and 49 run into the travel guard.
 The CANopen manual prints the gains and H08-15 (0.00~120.00, default 1.00, "load moment-of-inertia ratio";
 L3260-3272) but no formula for how the ratio enters the speed loop (the usual Kp = 2 pi f J_motor (1 + ratio) is
 assumed, as in the simulator); its commissioning runs velocity mode at low speed before the gains are adjusted
@@ -39,9 +39,9 @@ from servotool.model.profile import Entry
 from servotool.motion.jogger import Jogger
 from servotool.ops import journal
 from servotool.ops.params import write_one
-from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate
-from servotool.tuning.gains import LoopGains, rigidity_scale
-from servotool.tuning.margins import least_damping
+from servotool.tuning.control.gains import LoopGains, rigidity_scale
+from servotool.tuning.control.margins import least_damping
+from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate
 
 # The least damping ratio the loops' poles may have: a swing shrinks to 40 % or less each cycle (exp(-2 pi z)).
 HOLD_MIN_DAMPING = 0.15

@@ -18,9 +18,9 @@ from servotool.model.profile import Entry, Profile
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, identify, planning, preflight, step
+from servotool.tuning.control.gains import GainSuggestion, rigidity_scale, suggest_gains
+from servotool.tuning.control.margins import Margins
 from servotool.tuning.gain_writes import GainChange
-from servotool.tuning.gains import GainSuggestion, rigidity_scale, suggest_gains
-from servotool.tuning.margins import Margins
 from servotool.tuning.planning import MotionPlan
 from servotool.tuning.preflight import RestCheck
 from servotool.tuning.step import StepResponse

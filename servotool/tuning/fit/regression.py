@@ -1,5 +1,5 @@
-"""What the inertia fit saw (tuning.estimator), and the fit again with more columns or fewer windows: shared by the
-checks on the rigid model (tuning.consistency, tuning.lost_motion)."""
+"""What the inertia fit saw (tuning.fit.estimate), and the fit again with more columns or fewer windows: shared by the
+checks on the rigid model (tuning.fit.checks, tuning.fit.lost_motion)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from servotool.tuning.fit_numerics import corrected_lstsq, jackknife_std
+from servotool.tuning.fit.signals import corrected_lstsq, jackknife_std
 
 MODEL_ERROR_DIVISOR = 3.0  # a correction by an extended model counts as uncertain by a third of its size
 

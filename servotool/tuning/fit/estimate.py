@@ -31,9 +31,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from servotool.tuning.consistency import Verdict, assess
-from servotool.tuning.fit_data import FitData
-from servotool.tuning.fit_numerics import (
+from servotool.tuning.fit.checks import Verdict, assess
+from servotool.tuning.fit.regression import FitData
+from servotool.tuning.fit.signals import (
     corrected_lstsq,
     cumulative_hermite,
     jackknife_std,

@@ -1,5 +1,5 @@
 """Lost motion: where a coupling with backlash may leave the motor turning alone, and the fit clear of it (the first
-of tuning.consistency's checks).
+of tuning.fit.checks's checks).
 
 Where the torque through the coupling reverses (a move's braking after its acceleration, a start against the flank
 the last stop left), the motor crosses the gap alone: it needs only its own inertia's torque, while the load coasts
@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from servotool.tuning.fit_data import FitData, refit
+from servotool.tuning.fit.regression import FitData, refit
 
 GAP_RAD = 0.05  # the dead zone the observer assumes (at the motor shaft)
 MARGIN_INTERVALS = 1  # sampling intervals kept clear on both sides of a marked span

@@ -1,4 +1,4 @@
-"""J compared across subsets of the fit's windows (tuning.consistency): the rigid model says one J fits every
+"""J compared across subsets of the fit's windows (tuning.fit.checks): the rigid model says one J fits every
 subset; backlash, compliance and loads that vary make them disagree."""
 
 from __future__ import annotations

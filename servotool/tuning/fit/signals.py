@@ -1,4 +1,4 @@
-"""Numerical building blocks of the inertia fit (tuning.estimator): speed-noise estimates from sample deviations,
+"""Numerical building blocks of the inertia fit (tuning.fit.estimate): speed-noise estimates from sample deviations,
 windows of constant speed sign, least squares corrected for a noisy regressor, the jackknife, and integrals of
 the piecewise-cubic interpolant over uneven sample times."""
 

@@ -1,9 +1,9 @@
-"""Is the rigid model right for this load? Consistency checks on the inertia fit (tuning.estimator).
+"""Is the rigid model right for this load? Consistency checks on the inertia fit (tuning.fit.estimate).
 
 Mechanics outside the model (a compliant coupling, backlash, gravity that changes with position, cogging) leave
 the fit's noise-based uncertainty tight while the answer is wrong. These checks see them:
 
-- lost motion (tuning.lost_motion): where the windows clear of the spans in which the motor may have turned without
+- lost motion (tuning.fit.lost_motion): where the windows clear of the spans in which the motor may have turned without
   its load give a J 3 sigmas apart from the whole fit's, they alone are fitted from there on, flagged ("lost
   motion (backlash?) where the torque reverses"), with what a margin twice as wide still changes counted as
   uncertain.
@@ -28,7 +28,7 @@ the fit's noise-based uncertainty tight while the answer is wrong. These checks 
   and at the stops (beyond half a sigma in half the runs, beyond two in a fifth to a third). So the rigid answer
   keeps the uncertainty it has with a free spring term, without words: a 100 Hz coupling at ratio 10 biased J by
   1.1-1.4 % with its term at -0.4 sigma.
-- subsets (tuning.subsets): J is taken from each subset of the windows with the friction and load fitted on all of
+- subsets (tuning.fit.subsets): J is taken from each subset of the windows with the friction and load fitted on all of
   them (forward/reverse x accelerating/braking, the start/middle/end of the travel, weak/medium/strong
   accelerations). Where the subsets disagree more than their uncertainties allow, the uncertainty is widened by
   the Birge ratio sqrt(chi2/dof); where they disagree grossly (by more than GROSS_SPREAD of J, well beyond their
@@ -48,14 +48,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from servotool.tuning.fit_data import MODEL_ERROR_DIVISOR, FitData, refit
-from servotool.tuning.fit_numerics import (
+from servotool.tuning.fit.lost_motion import clear_of_lost_motion
+from servotool.tuning.fit.regression import MODEL_ERROR_DIVISOR, FitData, refit
+from servotool.tuning.fit.signals import (
     cumulative_hermite,
     follower_changes,
     projected_fits,
 )
-from servotool.tuning.lost_motion import clear_of_lost_motion
-from servotool.tuning.subsets import Windows, cause, points_off_model, torque_step, unblamed, worst_subsets
+from servotool.tuning.fit.subsets import Windows, cause, points_off_model, torque_step, unblamed, worst_subsets
 
 POSITION_SIGMA = 4.0  # a position-dependent load term counts when beyond this many sigmas ...
 POSITION_MIN_PCT = 2.0  # ... and it changes the load by at least this % of rated torque over the travel
