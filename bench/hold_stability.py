@@ -34,7 +34,7 @@ from servotool.model.loader import load_profile
 from servotool.motion.jogger import Jogger
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
-from servotool.tuning.identify import TravelExceeded
+from servotool.tuning.errors import TravelExceeded
 from servotool.tuning.stable_hold import guard_hold
 from servotool.tuning.tune import TuneRequest, tune_inertia
 

@@ -16,7 +16,7 @@ from servotool.model.gain_units import from_canonical, to_canonical
 from servotool.model.profile import Entry, Profile
 from servotool.tuning.control.gains import GainSuggestion, LoopGains, RigidityScale, rigidity_scale, suggest_gains
 from servotool.tuning.control.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
-from servotool.tuning.identify import IdentificationFailed
+from servotool.tuning.errors import IdentificationFailed, MarginRefused
 from servotool.tuning.preflight import FEATURE
 
 GAIN_ROLES = {
@@ -25,10 +25,6 @@ GAIN_ROLES = {
     "position_loop_gain": "position_loop_gain_per_s",
     "torque_filter": "torque_filter_ms",
 }
-
-
-class MarginRefused(UsageError):
-    """The suggested gains would leave too little phase or gain margin."""
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from servotool.motion.rest import RestWatch
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.tuning.band_guard import BandGuard
+from servotool.tuning.errors import IdentificationFailed, TravelExceeded
 from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
@@ -33,17 +34,7 @@ from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
 from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
 from servotool.tuning.stable_hold import StableHold, pilot_settings
 
-__all__ = ["IdentificationFailed", "IdentificationRefused", "Identifier", "Result", "Trace", "TravelExceeded"]
-
-
-class IdentificationFailed(ServoError):
-    """The motion ran but the result is not trustworthy (or the drive reported failure)."""
-
-    exit_code = 1
-
-
-class TravelExceeded(IdentificationFailed):
-    """The axis moved further than the travel limit; the motion was stopped."""
+__all__ = ["IdentificationRefused", "Identifier", "Result", "Trace"]
 
 
 @dataclass

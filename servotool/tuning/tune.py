@@ -20,6 +20,7 @@ from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, identify, planning, preflight, step
 from servotool.tuning.control.gains import GainSuggestion, rigidity_scale, suggest_gains
 from servotool.tuning.control.margins import Margins
+from servotool.tuning.errors import IdentificationFailed, TuneDeclined
 from servotool.tuning.gain_writes import GainChange
 from servotool.tuning.planning import MotionPlan
 from servotool.tuning.preflight import RestCheck
@@ -148,10 +149,6 @@ class TuneResult:
         return self.proposal.ratio
 
 
-class TuneDeclined(ServoError):
-    """The operator said no before anything moved."""
-
-
 class GainsRolledBack(ServoError):
     """The step check after writing the gains failed; the previous gains were written back."""
 
@@ -270,7 +267,7 @@ def check_drive_result(drive: Drive, result: identify.Result, request: TuneReque
         entry, raw = gain_writes.ratio_raw(drive, result.old_ratio)
         with eeprom.persistence(drive, request.save):
             write_one(drive, entry, raw)
-    raise identify.IdentificationFailed(
+    raise IdentificationFailed(
         f"the drive's identification gave load ratio {result.new_ratio:.2f}, implausible against the host "
         f"measurement {host.new_ratio:.2f} ± {est.ratio_std:.2f} (friction {est.coulomb_nm:.3g} N·m): the previous "
         f"ratio {result.old_ratio:.2f} was put back; use --method host"

@@ -13,10 +13,10 @@ from servotool.model.loader import load_profile
 from servotool.ops.params import write_one
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import TURNAROUND_S, HostStalls, VirtualLink, make_motion_setup, wire_time
+from servotool.tuning.errors import IdentificationFailed, MarginRefused
 from servotool.tuning.friction import friction_report
 from servotool.tuning.gain_search import GainSearchFailed, search_gains
-from servotool.tuning.gain_writes import MarginRefused
-from servotool.tuning.identify import IdentificationFailed, IdentificationRefused
+from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
 
 
