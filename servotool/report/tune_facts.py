@@ -10,8 +10,8 @@ import numpy as np
 
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import Profile
-from servotool.tuning.fit.estimate import RPM_TO_RAD_S, EstimatorSettings, estimate_inertia
-from servotool.tuning.fit.signals import move_ids
+from servotool.tuning.fit import EstimatorSettings, estimate_inertia
+from servotool.tuning.fit.signals import RPM_TO_RAD_S, move_ids
 from servotool.tuning.identify import Result
 from servotool.tuning.tune import TuneResult
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry, Profile
-from servotool.tuning.fit.estimate import InertiaEstimate
+from servotool.tuning.fit import InertiaEstimate
 
 RAD_S_PER_RPM = 2 * math.pi / 60
 

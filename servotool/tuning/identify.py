@@ -18,7 +18,7 @@ from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded
-from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
     MIN_RAMP_S,

@@ -15,7 +15,7 @@ from servotool.clock import Clock
 from servotool.drive import Drive, coalesce_reads
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
-from servotool.tuning.fit.estimate import InertiaEstimate
+from servotool.tuning.fit import InertiaEstimate
 from servotool.tuning.preflight import FEATURE
 
 # Position costs a request of its own on every profile (no profile maps it next to speed and torque with readable

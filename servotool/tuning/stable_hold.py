@@ -41,7 +41,7 @@ from servotool.ops import journal
 from servotool.ops.params import write_one
 from servotool.tuning.control.gains import LoopGains, rigidity_scale
 from servotool.tuning.control.margins import least_damping
-from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate
+from servotool.tuning.fit import EstimatorSettings, InertiaEstimate
 
 # The least damping ratio the loops' poles may have: a swing shrinks to 40 % or less each cycle (exp(-2 pi z)).
 HOLD_MIN_DAMPING = 0.15

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from servotool.tuning.fit.estimate import InertiaEstimate
+from servotool.tuning.fit import InertiaEstimate
 from servotool.tuning.planning import DITHER_MIN, DITHER_MIN_RAMP_S, dither, dithered
 from servotool.tuning.sampling import Trace, quantization_floor
 

@@ -14,7 +14,7 @@ from servotool.motion.jogger import Jogger
 from servotool.ops.params import write_one
 from servotool.tuning.control.gains import LoopGains
 from servotool.tuning.control.margins import least_damping
-from servotool.tuning.fit.estimate import estimate_inertia
+from servotool.tuning.fit import estimate_inertia
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.stable_hold import HOLD_MIN_DAMPING, StableHold, guard_hold
 from servotool.tuning.tune import TuneRequest, tune_inertia

@@ -1,12 +1,63 @@
-"""Numerical building blocks of the inertia fit (tuning.fit.estimate): speed-noise estimates from sample deviations,
-windows of constant speed sign, least squares corrected for a noisy regressor, the jackknife, and integrals of
-the piecewise-cubic interpolant over uneven sample times."""
+"""Second stage of the fit: the log in SI units with what the windows and the regression need.
+
+Speed noise, the zero-speed band, the kinks (torque steps and host stalls, which no interpolant places between slow
+samples) and the integrals of the piecewise-cubic interpolant over the uneven sample times: the trapezoid rule
+would miss the curvature between slow samples (a ringing loop) and bias J.
+"""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
+
+from servotool.tuning.fit.estimate import EstimatorSettings, Partial
+
+RPM_TO_RAD_S = math.pi / 30.0
+GAP_INTERVALS = 6.0  # no window spans more median intervals (a stall: a cubic misses a ringing loop's swing)
+
+
+@dataclass(frozen=True)
+class Signals:
+    """The log in SI units, with what the windows and integrals need."""
+
+    t: np.ndarray
+    rpm: np.ndarray
+    w: np.ndarray
+    torque: np.ndarray
+    noise_w: float
+    band: float
+    kink: np.ndarray
+    cum_t: np.ndarray
+    cum_w: np.ndarray
+    moves: np.ndarray
+
+
+def signals(
+    t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: float, cfg: EstimatorSettings, r: Partial
+) -> Signals:
+    """Noise, zero-speed band, kinks (torque steps) and the Hermite integrals of torque and speed."""
+    noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm)
+    r.speed_noise_rpm = noise_rpm
+    peak = float(np.max(np.abs(rpm)))
+    band = cfg.zero_band_rpm if cfg.zero_band_rpm is not None else max(0.02 * peak, 3.0 * noise_rpm)
+    w = rpm * RPM_TO_RAD_S
+    torque = pct / 100.0 * rated_torque_nm
+    kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct, GAP_INTERVALS)
+    r.n_kinks = int(np.count_nonzero(kink))
+    return Signals(
+        t=t,
+        rpm=rpm,
+        w=w,
+        torque=torque,
+        noise_w=noise_rpm * RPM_TO_RAD_S,
+        band=band,
+        kink=kink,
+        cum_t=cumulative_hermite(t, torque, kink),
+        cum_w=cumulative_hermite(t, w, kink),
+        moves=move_ids(rpm, band),
+    )
 
 
 def line_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -76,60 +127,12 @@ def kink_mask(
     return kink
 
 
-def sign_windows(rpm: np.ndarray, band: float, kink: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Disjoint windows of k sampling intervals whose samples all lie outside the zero band with one sign.
-
-    A torque kink sample gets sign 0 too, which cuts the intervals on both sides of it out of every window.
-    """
-    sign = np.where(rpm >= band, 1, np.where(rpm <= -band, -1, 0))
-    sign[kink] = 0
-    starts: list[int] = []
-    i, n = 0, rpm.size
-    while i < n - 1:
-        if sign[i] == 0:
-            i += 1
-            continue
-        j = i
-        while j + 1 < n and sign[j + 1] == sign[i]:
-            j += 1
-        # samples i..j form one run of constant sign
-        for s in range(i, j - k + 1, k):
-            starts.append(s)
-        i = j + 1
-    st = np.asarray(starts, dtype=int)
-    return st, st + k
-
-
 def move_ids(rpm: np.ndarray, band: float) -> np.ndarray:
     """Number of each sample's move: a new move starts wherever the speed enters, leaves or crosses the zero band."""
     sign = np.where(rpm >= band, 1, np.where(rpm <= -band, -1, 0))
     ids = np.zeros(rpm.size, dtype=int)
     ids[1:] = np.cumsum(sign[1:] != sign[:-1])
     return ids
-
-
-def corrected_lstsq(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray) -> np.ndarray:
-    """Least squares with the expected regressor-noise variance per row (eiv) taken out of X'X."""
-    return np.linalg.solve(xs.T @ xs - xs.shape[0] * np.diag(eiv), xs.T @ y)
-
-
-def jackknife_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, groups: np.ndarray, min_groups: int) -> np.ndarray:
-    """Delete-one-group jackknife standard deviation of the (column-scaled) least-squares parameters."""
-    labels = np.unique(groups)
-    g = labels.size
-    if g < max(min_groups, 2):
-        return np.zeros(xs.shape[1])
-    thetas = []
-    for label in labels:
-        keep = groups != label
-        if np.count_nonzero(keep) <= xs.shape[1]:
-            return np.zeros(xs.shape[1])
-        try:
-            thetas.append(corrected_lstsq(xs[keep], y[keep], eiv))
-        except np.linalg.LinAlgError:  # the rest cannot determine the parameters: no honest bound
-            return np.full(xs.shape[1], np.inf)
-    th = np.asarray(thetas)
-    return np.sqrt((g - 1) / g * np.sum((th - th.mean(axis=0)) ** 2, axis=0))
 
 
 def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.ndarray:
@@ -170,109 +173,3 @@ def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.nda
         have[idx[fill]] = True
     out[1:] = np.cumsum(0.5 * h * (v[1:] + v[:-1]) + h * h / 12.0 * (d[:-1] - d[1:]))
     return out
-
-
-def ma1_std(
-    xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, resid: np.ndarray, starts: np.ndarray, ends: np.ndarray
-) -> np.ndarray:
-    """Standard errors of a corrected least-squares fit, in the scaled columns xs (divide by the scale). Windows
-    that share an end sample have correlated errors (the shared torque sample enters both integrals, the shared
-    speed sample both speed changes with opposite signs): an MA(1) error, covariance s2*(I + rho*A)."""
-    dof = y.size - xs.shape[1]
-    s2 = float(resid @ resid) / dof
-    adj = np.flatnonzero(ends[:-1] == starts[1:])
-    rho = float(np.sum(resid[adj] * resid[adj + 1]) / (s2 * dof)) if adj.size else 0.0
-    rho = min(max(rho, -0.5), 0.5)
-    xtx_inv = np.linalg.inv(xs.T @ xs - xs.shape[0] * np.diag(eiv))
-    meat = xs.T @ xs + rho * (xs[adj].T @ xs[adj + 1] + xs[adj + 1].T @ xs[adj])
-    cov = s2 * (xtx_inv @ meat @ xtx_inv)
-    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
-
-
-FOLLOWER_BLOCK_DECAY = 30.0  # follower_speed's blocks: the heaviest-damped mode decays by at most exp(-this) in one
-
-
-def follower_speed(t: np.ndarray, w: np.ndarray, hz: np.ndarray, damping: np.ndarray) -> np.ndarray:
-    """Speed of a load that follows the motor speed w through a spring and a damper, for each (hz, damping): the
-    load's own resonance against a held motor and its damping ratio (below 1). The load's speed is w through the
-    low-pass (2 zeta wa s + wa^2) / (s^2 + 2 zeta wa s + wa^2), driven by w linear between samples and integrated
-    exactly (over interval lengths rounded to 0.1 %). Rows: samples; columns: one per (hz, damping); it starts
-    with w[0] and no deflection."""
-    wa = 2 * np.pi * np.asarray(hz, dtype=float)
-    zeta = np.asarray(damping, dtype=float)
-    lam = wa * (-zeta + 1j * np.sqrt(1.0 - zeta * zeta))
-    beta = -0.5j / lam.imag
-    # State: deflection d (motor minus load angle) and e = load speed - motor speed; with the motor's acceleration a
-    # constant over an interval, d' = -e and e' = k d - c e - a. In the mode z of eigenvalue lam, (d, e) =
-    # 2 Re((1, -lam) z) and z' = lam z + beta a, exactly: z(h) = exp(lam h) z(0) + beta a (exp(lam h) - 1) / lam.
-    span = np.diff(t)
-    # One map per interval length, lengths binned to 0.1 % (jittery real-time logs have no two alike)
-    bins, which = np.unique(np.round(np.log(span) / 1e-3), return_inverse=True)
-    decay = np.exp(np.exp(bins * 1e-3)[:, None] * lam)
-    gain = beta * (decay - 1.0) / lam
-    accel = np.diff(w) / span
-    modes = np.zeros((t.size, *wa.shape), dtype=complex)
-    # In blocks, z after each interval is M (z0 + cumsum(gain a / M)) with M the running product of the decays:
-    # vectorised over a block's intervals, and short enough blocks keep 1 / M within exp(FOLLOWER_BLOCK_DECAY).
-    block = FOLLOWER_BLOCK_DECAY / max(float(np.max(-lam.real)), 1e-9)
-    cuts = np.searchsorted(np.cumsum(span), np.arange(block, float(np.sum(span)), block))
-    z = np.zeros(wa.shape, dtype=complex)
-    for lo, hi in zip(np.concatenate(([0], cuts)), np.concatenate((cuts, [span.size])), strict=True):
-        if hi <= lo:
-            continue
-        m = np.cumprod(decay[which[lo:hi]], axis=0)
-        modes[lo + 1 : hi + 1] = m * (z + np.cumsum(gain[which[lo:hi]] * accel[lo:hi, None] / m, axis=0))
-        z = modes[hi]
-    return -2.0 * (modes * lam).real + np.asarray(w, dtype=float)[:, None]
-
-
-def follower_changes(
-    t: np.ndarray,
-    w: np.ndarray,
-    starts: np.ndarray,
-    ends: np.ndarray,
-    hz: np.ndarray,
-    damping: np.ndarray,
-    max_rate: float,
-) -> np.ndarray:
-    """follower_speed's change over each window [starts, ends] (rows) for each (hz, damping) (columns), integrated
-    over the windows' ends and samples between them at most max_rate apart (the load's resonance lies far below)."""
-    due = np.zeros(t.size, dtype=bool)
-    due[starts] = due[ends] = True
-    due[0] = due[-1] = True
-    ticks = np.floor((t - t[0]) * max_rate)
-    due[1:] |= ticks[1:] != ticks[:-1]
-    keep = np.flatnonzero(due)
-    w_load = follower_speed(t[keep], w[keep], hz, damping)
-    return w_load[np.searchsorted(keep, ends)] - w_load[np.searchsorted(keep, starts)]
-
-
-def projected_fits(u: np.ndarray, v: np.ndarray, others: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(coefficient, residual sum of squares) of v[:, g] on u[:, g] for every column g, with the columns `others`
-    fitted alongside (projected out once for all)."""
-    q, _r = np.linalg.qr(others / np.where(np.linalg.norm(others, axis=0) > 0, np.linalg.norm(others, axis=0), 1.0))
-    pu, pv = u - q @ (q.T @ u), v - q @ (q.T @ v)
-    uu, uv = np.sum(pu * pu, axis=0), np.sum(pu * pv, axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        coef = np.where(uu > 0, uv / uu, 0.0)
-    return coef, np.sum(pv * pv, axis=0) - coef * uv
-
-
-def validate_log(
-    t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated: float, rotor: float, limit: float | None
-) -> None:
-    """Raise ValueError for a malformed log (shapes, non-finite values, time not increasing) or motor data."""
-    if t.ndim != 1 or t.shape != rpm.shape or t.shape != pct.shape:
-        raise ValueError(
-            f"t, speed and torque must be 1-D arrays of equal length (got {t.shape}, {rpm.shape}, {pct.shape})"
-        )
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(rpm)) and np.all(np.isfinite(pct))):
-        raise ValueError("t, speed and torque must be finite (drop samples with failed reads instead of NaN)")
-    if t.size > 1 and np.any(np.diff(t) <= 0):
-        raise ValueError("sample times must be strictly increasing")
-    if not (math.isfinite(rated) and rated > 0):
-        raise ValueError(f"rated torque must be a positive number of N*m, got {rated!r}")
-    if not (math.isfinite(rotor) and rotor > 0):
-        raise ValueError(f"rotor inertia must be a positive number of kg*cm^2, got {rotor!r}")
-    if limit is not None and not (math.isfinite(limit) and limit > 0):
-        raise ValueError(f"torque limit must be a positive % of rated torque, got {limit!r}")

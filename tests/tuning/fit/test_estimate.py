@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
 
 RATED_NM = 1.27
 ROTOR_KGCM2 = 0.29

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from servotool.tuning.fit.signals import follower_speed
+from servotool.tuning.fit.checks import follower_speed
 
 
 def test_a_load_behind_a_spring_rings_at_its_own_resonance_when_the_motor_starts_to_accelerate():

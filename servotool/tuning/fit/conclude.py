@@ -1,0 +1,50 @@
+"""Last stage of the fit: the estimate, with the checks' J and notes, and the refusals only the whole result decides
+(a non-physical J, a model that does not fit, an uncertainty over the limit)."""
+
+from __future__ import annotations
+
+import math
+
+from servotool.tuning.fit.checks import Verdict
+from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, Partial
+from servotool.tuning.fit.regression import Regression
+
+
+def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: EstimatorSettings) -> InertiaEstimate:
+    """The estimate with the model check's J, notes and the refusals that only the whole result can decide."""
+    est = dict(zip(fit.names, fit.theta, strict=True))
+    err = dict(zip(fit.names, fit.std, strict=True))
+    j = float(verdict.j)
+    r.j, r.j_std = j, float(verdict.j_std)
+    r.ratio, r.ratio_std = j / jm - 1.0, r.j_std / jm
+    r.tc, r.tc_std = float(est["Tc"]), float(err["Tc"])
+    r.b, r.b_std = float(est.get("B", 0.0)), float(err.get("B", 0.0))
+    r.tg, r.tg_std = float(est.get("Tg", 0.0)), float(err.get("Tg", 0.0))
+    # The model the checks settled on is what must fit (the windows clear of lost motion, a two-mass load's)
+    r.res_rms, y_rms = verdict.residual
+    r.res_rel = r.res_rms / y_rms if y_rms > 0 else math.inf
+    if not cfg.fit_load_torque:
+        r.notes.append(
+            "load torque not fitted (one direction only, or told there is none): 'coulomb' is Coulomb + load torque"
+        )
+    if r.tc < -3 * r.tc_std:
+        r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
+    r.notes.extend(verdict.notes)
+    if j <= 0:
+        return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")
+    if r.res_rel > cfg.max_rel_residual:
+        return r.refuse(
+            f"model does not fit the data (relative residual {r.res_rel:.2f} > {cfg.max_rel_residual:g}): "
+            "backlash, compliance or a torque reading that is not shaft torque"
+        )
+    if verdict.refuse:
+        return r.refuse(verdict.refuse)
+    rel = r.j_std / j
+    if rel > cfg.max_rel_uncertainty:
+        # noise sorting and backlash weigh less in a stronger motion (0.1 rad, ratio 2: within 1 % at 5.5 rev)
+        r.shortfall = rel / cfg.max_rel_uncertainty if not verdict.widened or verdict.curable else math.nan
+        said = f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %)"
+        if verdict.widened:
+            return r.refuse(f"{said}: {verdict.widened}")
+        return r.refuse(said, "use stronger accelerations or more moves")
+    return r.result(ok=True, reason="")
