@@ -31,7 +31,7 @@ from servotool.tuning.planning import (
     remedy,
 )
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
-from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
+from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached
 from servotool.tuning.stable_hold import StableHold, pilot_settings
 
 __all__ = ["IdentificationRefused", "Identifier", "Result", "Trace"]
@@ -97,8 +97,12 @@ class Identifier:
         motor = self.p.motor
         assert motor is not None
         # Fast links give many samples per ramp: allow windows long enough to span ~1/5 s.
-        cfg = replace(settings, max_window_intervals=max(6, int(rate / 5)))
-        est = estimate_inertia(
+        cfg = replace(
+            settings,
+            max_window_intervals=max(6, int(rate / 5)),
+            torque_step_pct=self.p.need_role("torque_feedback", FEATURE).scale,
+        )
+        return estimate_inertia(
             self.trace.t,
             self.trace.aligned_speed(),
             self.trace.torque,
@@ -106,13 +110,6 @@ class Identifier:
             rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
             torque_limit_pct=torque_limit,
             settings=cfg,
-        )
-        return quantization_floor(
-            est,
-            self.trace,
-            self.p.need_role("torque_feedback", FEATURE).scale,
-            motor.rated_torque_nm,
-            cfg.max_rel_uncertainty,
         )
 
     # ----- drive method --------------------------------------------------------------------------------------

@@ -37,7 +37,7 @@ PILOT_SHARE = 0.25
 # (a shorter ramp at the same speed, or a lower speed where the ramp would get too few samples). The reading then
 # misreads the acceleration torque by a different fraction of its step in every cycle instead of by the same
 # amount: the step error averages out over the cycles and the move jackknife sees it, where with one acceleration
-# it repeats identically and only a fixed floor (sampling.quantization_floor) can cover it.
+# it repeats identically and only a fixed floor (fit.quantization) can cover it.
 DITHER_MIN = 0.4
 COARSE_TORQUE_STEP_PCT = 0.5  # readings in steps this coarse (% of rated) are dithered
 MIN_SAMPLES_PER_RAMP = 5.0  # a dithered ramp keeps this many sampling intervals (else the speed is lowered)

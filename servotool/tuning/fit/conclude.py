@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import math
 
-from servotool.tuning.fit.checks import Verdict
 from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, Partial
 from servotool.tuning.fit.regression import Regression
+from servotool.tuning.fit.verdict import Verdict
 
 
 def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: EstimatorSettings) -> InertiaEstimate:
@@ -47,4 +47,17 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
         if verdict.widened:
             return r.refuse(f"{said}: {verdict.widened}")
         return r.refuse(said, "use stronger accelerations or more moves")
+    floor = verdict.floor
+    if floor is not None:
+        rel = math.hypot(r.j_std / j, floor.rel)
+        r.j_std = rel * j
+        r.ratio_std = r.j_std / j * (1.0 + r.ratio)
+        if rel > cfg.max_rel_uncertainty:
+            r.shortfall = rel / cfg.max_rel_uncertainty
+            return r.refuse(
+                f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %: the "
+                f"torque reads in {floor.step_pct:g} % steps against an acceleration torque of "
+                f"{floor.signal_pct:.1f} %)",
+                "use stronger accelerations or a faster line",
+            )
     return r.result(ok=True, reason="")

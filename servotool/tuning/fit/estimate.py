@@ -51,6 +51,9 @@ class EstimatorSettings:
     """Samples with |speed| below this are left out. None: max(2 % of the peak speed, 3 * speed noise)."""
     speed_noise_rpm: float | None = None
     """Speed measurement noise (1 sigma). None: estimated from the log (floored at 0.1 rpm)."""
+    torque_step_pct: float | None = None
+    """The torque reading's resolution (% of rated), as the drive's register states it. None: found from the log
+    (signals.torque_step: the grid its readings lie on, 0 if none)."""
     fit_viscous: bool = True
     """Fit B; with False, B is held at 0."""
     fit_load_torque: bool = True

@@ -22,8 +22,6 @@ import numpy as np
 from servotool.tuning.fit.estimate import EstimatorSettings, Partial, Refused
 from servotool.tuning.fit.signals import Signals
 
-MODEL_ERROR_DIVISOR = 3.0  # a correction by an extended model counts as uncertain by a third of its size
-
 
 @dataclass(frozen=True)
 class Regression:
@@ -113,6 +111,9 @@ class FitData:
     """What the estimator's fit saw: samples, windows, the regression and its solution (unscaled)."""
 
     t: np.ndarray
+    rpm: np.ndarray  # the speed as logged
+    pct: np.ndarray  # the torque as logged, % of rated
+    torque_step_pct: float  # the torque reading's resolution, % of rated (0: finer or unknown)
     w: np.ndarray  # rad/s
     kink: np.ndarray
     position: np.ndarray  # rad, integral of w at each sample
@@ -136,6 +137,9 @@ def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: fl
     """What the fit saw, for the model checks: the signals, the windows and the regression's solution."""
     return FitData(
         t=sig.t,
+        rpm=sig.rpm,
+        pct=sig.pct,
+        torque_step_pct=sig.torque_step_pct,
         w=sig.w,
         kink=sig.kink,
         position=sig.cum_w,

@@ -25,7 +25,9 @@ class Signals:
     t: np.ndarray
     rpm: np.ndarray
     w: np.ndarray
-    torque: np.ndarray
+    pct: np.ndarray  # the torque reading, % of rated
+    torque: np.ndarray  # N*m
+    torque_step_pct: float  # the torque reading's resolution, % of rated (0: finer than the log shows, or unknown)
     noise_w: float
     band: float
     kink: np.ndarray
@@ -37,7 +39,8 @@ class Signals:
 def signals(
     t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: float, cfg: EstimatorSettings, r: Partial
 ) -> Signals:
-    """Noise, zero-speed band, kinks (torque steps) and the Hermite integrals of torque and speed."""
+    """Noise, zero-speed band, the torque reading's step, kinks (torque steps) and the Hermite integrals of torque
+    and speed."""
     noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm)
     r.speed_noise_rpm = noise_rpm
     peak = float(np.max(np.abs(rpm)))
@@ -50,7 +53,9 @@ def signals(
         t=t,
         rpm=rpm,
         w=w,
+        pct=pct,
         torque=torque,
+        torque_step_pct=cfg.torque_step_pct if cfg.torque_step_pct is not None else torque_step(pct),
         noise_w=noise_rpm * RPM_TO_RAD_S,
         band=band,
         kink=kink,
@@ -173,3 +178,13 @@ def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.nda
         have[idx[fill]] = True
     out[1:] = np.cumsum(0.5 * h * (v[1:] + v[:-1]) + h * h / 12.0 * (d[:-1] - d[1:]))
     return out
+
+
+def torque_step(torque: np.ndarray) -> float:
+    """The step of a reading where every value lies on one grid (a torque read in whole percent), else 0."""
+    values = np.unique(torque)
+    if values.size < 3:
+        return 0.0
+    step = float(np.min(np.diff(values)))
+    grid = (values - values[0]) / step
+    return step if float(np.max(np.abs(grid - np.round(grid)))) < 0.01 else 0.0

@@ -1,14 +1,29 @@
-"""J compared across subsets of the fit's windows (tuning.fit.checks): the rigid model says one J fits every
-subset; backlash, compliance and loads that vary make them disagree."""
+"""Model check: J compared across subsets of the fit's windows. The rigid model says one J fits every subset;
+backlash, compliance and loads that vary make them disagree.
+
+J is taken from each subset with the friction and load fitted on all windows, for three groupings: accelerating and
+braking in each direction, the start, middle and end of the travel, and weak, medium and strong accelerations.
+Where a grouping's subsets disagree more than their uncertainties allow, the uncertainty is widened by the Birge
+ratio sqrt(chi2/dof); where they disagree grossly, the result is refused. Backlash the lost-motion check misses
+shows as a lower J while braking or a higher one at weak accelerations, a compliant coupling as J that differs
+between the phases of a move.
+"""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import replace
 
 import numpy as np
 
+from servotool.tuning.fit.regression import FitData
+from servotool.tuning.fit.verdict import Cause, Verdict
+
 MIN_SUBSET_WINDOWS = 6
+BIRGE_WIDEN = 1.5  # subsets that disagree more than this many times their uncertainties widen it (below: chance,
+#                    as chi2/dof of 2.25 over 2-3 subsets is on a rigid load) ...
+BIRGE_REFUSE = 3.0  # ... refuse where they disagree this many times beyond their uncertainties ...
+GROSS_SPREAD = 0.08  # ... and their spread exceeds this fraction of J
 ACCEL_SNR = 10.0  # windows sorted by acceleration: their speed change this many times its noise or more,
 ACCEL_STEPS = 10.0  # ... and their acceleration torque this many steps of the torque reading or more
 NOISE_BIRGE = 3.0  # ... and they disagree this many times their uncertainties before backlash is blamed,
@@ -16,24 +31,32 @@ NOISE_SPREAD = 0.05  # ... and by more than this fraction of J (points_off_model
 BLAME_SPREAD = 0.03  # subsets of any grouping that differ by less than this fraction of J blame nothing
 
 
-@dataclass(frozen=True)
-class Windows:
-    """The fit's samples and windows, as the subsets need them."""
+def check(v: Verdict) -> Verdict:
+    """The uncertainty widened by the worst grouping's disagreement, with its words: refused where gross, an
+    off-model note where it points to the mechanics, else a note that it may be the speed noise."""
+    fit = v.fit
+    birge, spread, name = worst_subsets(fit, fit.x[:, 0], v.j, v.j_std, v.resid)
+    if birge <= BIRGE_WIDEN:
+        return v
+    j_std = v.j_std * birge
+    text = f"inertia differs {name} by {100 * spread:.0f} % ({birge:.1f}x its uncertainty)"
+    if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
+        return replace(v, j_std=j_std, refuse="; ".join([*(c.words for c in v.fitted), f"{text}: {cause(name)}"]))
+    if not points_off_model(name, birge, spread):
+        words, causes = unblamed(name)
+        note = f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, {words}"
+        widening = Cause(f"{text}: {causes}" if causes else text, curable=True)
+    else:
+        note = f"off-model: {text}; uncertainty widened to the spread ({cause(name)})"
+        widening = Cause(f"{text}; {cause(name)}", curable=False)
+    return replace(v, j_std=j_std, widening=widening, remarks=(*v.remarks, note))
 
-    t: np.ndarray
-    w: np.ndarray  # rad/s
-    position: np.ndarray  # rad
-    starts: np.ndarray
-    ends: np.ndarray
-    eiv: float  # the speed change's noise variance, scaled as the fit's first column (FitData.eiv[0])
-    torque_step: float  # N*m: the torque reading's resolution where it reads on a grid (0: finer or unknown)
 
-
-def worst_subsets(win: Windows, dw: np.ndarray, j: float, j_std: float, resid: np.ndarray) -> tuple[float, float, str]:
+def worst_subsets(fit: FitData, dw: np.ndarray, j: float, j_std: float, resid: np.ndarray) -> tuple[float, float, str]:
     """(Birge ratio, relative spread, grouping's name) of the grouping whose subsets disagree most; (1, 0, '')
     where none disagrees beyond chance."""
     worst: tuple[float, float, str] = (1.0, 0.0, "")
-    for name, labels in _groupings(win, dw, j).items():
+    for name, labels in _groupings(fit, dw, j).items():
         birge, spread = _birge(j, j_std, dw, resid, labels)
         if birge > worst[0]:
             worst = (birge, spread, name)
@@ -57,13 +80,11 @@ def cause(name: str) -> str:
 def points_off_model(name: str, birge: float, spread: float) -> bool:
     """Whether subsets that disagree this much (Birge ratio, relative spread of J) point to mechanics outside the
     rigid model, or may be the speed noise: windows sorted by their own speed change sort its noise too, and the
-    weak ones read J high on a rigid load. The artefact is a bias, so with many windows it stands out in sigmas
-    (rigid loads, acceleration grouping beyond 1.5: 48 % of 60 runs at 115200; 3.3-4.9 sigmas on the simulated
-    drive's 2000 samples/s) though its spread stays small (at most 3.9 % of J there), and with few it spreads far
-    but within its sigmas (DSX7E at 19200: 5.8-11.6 % at 1.5-3). Such a grouping's disagreement still widens the
-    uncertainty; it blames the mechanics only beyond both NOISE_BIRGE and NOISE_SPREAD. No grouping blames them for
-    a spread within BLAME_SPREAD: on thousands of windows a rigid load's travel or phases differ by 1 % at 1.5-5
-    sigmas (the loop's own transients), a difference no setting depends on."""
+    weak ones read J high on a rigid load. That artefact is a bias, so with many windows it stands out in sigmas
+    though its spread stays small, and with few it spreads far but within its sigmas: an acceleration grouping
+    blames the mechanics only beyond both NOISE_BIRGE and NOISE_SPREAD. No grouping blames them for a spread within
+    BLAME_SPREAD, a difference no setting depends on (a rigid load's loop transients make its travel or phases
+    differ that much)."""
     if spread <= BLAME_SPREAD:
         return False
     return (birge > NOISE_BIRGE and spread > NOISE_SPREAD) or "acceleration" not in name
@@ -80,15 +101,15 @@ def unblamed(name: str) -> tuple[str, str]:
     return "too little to point to the mechanics", ""
 
 
-def _groupings(win: Windows, dw: np.ndarray, j: float) -> dict[str, np.ndarray]:
+def _groupings(fit: FitData, dw: np.ndarray, j: float) -> dict[str, np.ndarray]:
     """Subsets of the windows to compare J across, by name (as in 'inertia differs NAME'); label -1: left out."""
-    sgn = np.sign(win.w[win.starts])
+    sgn = np.sign(fit.w[fit.starts])
     phase = np.where(sgn * dw > 0, 0, 1)  # accelerating, braking
-    mid = 0.5 * (win.position[win.starts] + win.position[win.ends])
+    mid = 0.5 * (fit.position[fit.starts] + fit.position[fit.ends])
     return {
         "between accelerating and braking, forward and reverse": (sgn > 0) * 2 + phase,
         "over the travel (start, middle, end)": _terciles(mid),
-        "with the acceleration (weak, medium, strong)": _acceleration_terciles(win, dw, j),
+        "with the acceleration (weak, medium, strong)": _acceleration_terciles(fit, dw, j),
     }
 
 
@@ -97,20 +118,19 @@ def _terciles(v: np.ndarray) -> np.ndarray:
     return np.searchsorted(np.quantile(v, [1 / 3, 2 / 3]), v) if v.size else np.zeros(0, dtype=int)
 
 
-def _acceleration_terciles(win: Windows, dw: np.ndarray, j: float) -> np.ndarray:
+def _acceleration_terciles(fit: FitData, dw: np.ndarray, j: float) -> np.ndarray:
     """Terciles of the windows' accelerations (their speed changes: every window spans as many sampling intervals,
     and a jittered interval would sort its length in too), of the windows whose speed change stands ACCEL_SNR times
-    above its noise (-1: the others).
+    above its noise and whose acceleration torque spans ACCEL_STEPS steps of the torque reading (-1: the others).
 
-    Backlash: the motor crosses the gap alone where the torque reverses, and the weakly accelerating windows there
-    read J high (+14-18 % where the whole fit was +7-9 % off with a 3 sigma of 5-6 %). Sorting by the speed change
-    itself sorts its noise too: a window whose noise shrank it lands among the weak ones and reads J high (+7 % on a
-    bare motor with 1 % noise), so only windows the noise cannot move between terciles are sorted. Likewise a
-    torque read in whole percent misreads a weak acceleration's torque by a larger share (a bare IS620P motor with
-    noise-free readings: J 19 % apart), so only windows whose acceleration torque spans ACCEL_STEPS of its steps."""
-    noise = float(np.sqrt(win.eiv * float(dw @ dw)))  # the noise of a window's speed change
-    accel_torque = abs(j) * np.abs(dw) / (win.t[win.ends] - win.t[win.starts])
-    clear = (np.abs(dw) >= ACCEL_SNR * noise) & (accel_torque >= ACCEL_STEPS * win.torque_step)
+    Backlash makes the weakly accelerating windows read J high, where the torque reverses. But sorting by the speed
+    change sorts its noise too (a window whose noise shrank it lands among the weak ones and reads J high), and a
+    coarse torque reading misreads a weak acceleration's torque by a larger share: only windows that neither can
+    move between terciles are sorted."""
+    noise = float(np.sqrt(float(fit.eiv[0]) * float(dw @ dw)))  # the noise of a window's speed change
+    accel_torque = abs(j) * np.abs(dw) / (fit.t[fit.ends] - fit.t[fit.starts])
+    step_nm = fit.torque_step_pct / 100.0 * fit.rated_nm
+    clear = (np.abs(dw) >= ACCEL_SNR * noise) & (accel_torque >= ACCEL_STEPS * step_nm)
     labels = np.full(dw.size, -1)
     if np.count_nonzero(clear) >= 3 * MIN_SUBSET_WINDOWS:
         labels[clear] = _terciles(np.abs(dw)[clear])
@@ -135,14 +155,3 @@ def _birge(j: float, j_std: float, dw: np.ndarray, resid: np.ndarray, labels: np
     mean = float(np.sum(wts * a) / np.sum(wts))
     chi2 = float(np.sum(wts * (a - mean) ** 2))
     return math.sqrt(chi2 / (a.size - 1)), float(np.ptp(a)) / abs(j)
-
-
-def torque_step(torque: np.ndarray) -> float:
-    """The torque reading's step (N*m) where every reading lies on one grid (whole percent: SD25, SDC, IS620P), else
-    0."""
-    values = np.unique(torque)
-    if values.size < 3:
-        return 0.0
-    step = float(np.min(np.diff(values)))
-    grid = (values - values[0]) / step
-    return step if float(np.max(np.abs(grid - np.round(grid)))) < 0.01 else 0.0
