@@ -56,6 +56,11 @@ class Trace:
         )
         return [float(s) for s in out]
 
+    def rate(self) -> float:
+        """Samples per second, first to last."""
+        t = self.t
+        return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else 0.0
+
     def save(self, path: Path) -> None:
         try:
             with path.open("w", newline="") as fh:
@@ -103,8 +108,7 @@ class Sampler:
 
     def rate(self) -> float:
         """Samples per second so far, first to last (the motion's own set-up and put-back writes left out)."""
-        t = self.trace.t
-        return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else 0.0
+        return self.trace.rate()
 
     def interval(self) -> float:
         """The last sampling interval (0 before the second sample)."""
