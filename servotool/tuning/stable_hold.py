@@ -21,7 +21,7 @@ So, on a route that holds position, the identification
     how far the loop lags its ramps, which a slower loop would exceed) and takes the position gain and integral
     back to the drive's own as far as a load within PILOT_SPREAD of that estimate allows.
 A motion that must show or keep the drive's own speed loop while the load is unknown (the step check before
-identification, a JOG: guard_hold) lowers only the position gain (soften_position).
+identification, a JOG: guarded_jogger) lowers only the position gain (soften_position).
 Each change is a parameter written through ops.params.write_one (RAM only where the drive has a switch: the
 identification runs inside ops.eeprom.ram_writes), its original value recorded in the motion's settings to put
 back (motion.jogger.Jogger.leave_and_restore), so the drive ends as it was found.
@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from servotool.clock import Clock
 from servotool.drive import Drive
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import from_canonical, to_canonical
@@ -276,11 +277,12 @@ class StableHold:
         self.setting = setting
 
 
-def guard_hold(jogger: Jogger) -> Jogger:
-    """The jogger, its JOGs made with the position gain lowered as the step check's (StableHold.soften_position)
-    where its route holds position: IS620P at the factory ratio with a load of 37 swung from a 100 rpm JOG up to
-    1250 rpm after the stop. The gain is put back with the JOG's other settings."""
-    jogger.prepare = lambda saved: StableHold(jogger.drive, jogger.route.kind, saved).soften_position()
+def guarded_jogger(drive: Drive, clock: Clock | None = None) -> Jogger:
+    """The Jogger every JOG of an unknown load runs on (`servotool jog`, a plan's jog step): where its route holds
+    position, each JOG lowers the position gain as the step check does (StableHold.soften_position), since a hold
+    tuned for a lighter load swings up after the stop; the gain goes back with the JOG's other settings."""
+    jogger = Jogger(drive, clock=clock)
+    jogger.prepare = lambda saved: StableHold(drive, jogger.route.kind, saved).soften_position()
     return jogger
 
 
