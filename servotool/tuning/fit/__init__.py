@@ -5,7 +5,7 @@ order). It imports numpy, the standard library and servotool.model only (tests/t
 on any log, live or saved.
 """
 
-from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate
+from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, MoveEstimate
 from servotool.tuning.fit.pipeline import estimate_inertia
 
-__all__ = ["EstimatorSettings", "InertiaEstimate", "estimate_inertia"]
+__all__ = ["EstimatorSettings", "InertiaEstimate", "MoveEstimate", "estimate_inertia"]

@@ -5,8 +5,11 @@ from __future__ import annotations
 
 import math
 
-from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, Partial
+import numpy as np
+
+from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, MoveEstimate, Partial
 from servotool.tuning.fit.regression import Regression
+from servotool.tuning.fit.subsets import subset_js
 from servotool.tuning.fit.verdict import Verdict
 
 
@@ -30,6 +33,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     if r.tc < -3 * r.tc_std:
         r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
     r.notes.extend(verdict.notes)
+    r.moves = per_move(verdict, jm)
     if j <= 0:
         return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")
     if r.res_rel > cfg.max_rel_residual:
@@ -61,3 +65,18 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
                 "use stronger accelerations or a faster line",
             )
     return r.result(ok=True, reason="")
+
+
+MIN_MOVE_WINDOWS = 3  # a move shown on its own needs this many windows (fewer than a subset compared: a picture)
+
+
+def per_move(verdict: Verdict, jm: float) -> tuple[MoveEstimate, ...]:
+    """Each move's J, as the subset check takes a subset's (fit.subsets.subset_js): from its own windows of the model
+    the checks settled on, the other parameters held at the whole fit's; moves too small for a J of their own are
+    left out."""
+    fit = verdict.fit
+    out = []
+    for move in subset_js(fit.x[:, 0], verdict.j, verdict.j_std, verdict.resid, fit.groups, MIN_MOVE_WINDOWS):
+        direction = int(np.sign(fit.w[fit.starts[fit.groups == move.label][0]]))
+        out.append(MoveEstimate(direction, move.j / jm - 1.0, move.j_std / jm, move.windows))
+    return tuple(out)

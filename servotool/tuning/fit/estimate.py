@@ -66,6 +66,17 @@ class EstimatorSettings:
 
 
 @dataclass(frozen=True)
+class MoveEstimate:
+    """The load ratio one move (a run of one speed sign) gives on its own: J from its windows, with friction and load
+    torque held at the whole fit's (so the moves can be compared with each other and with the whole)."""
+
+    direction: int  # +1 forward, -1 reverse
+    load_ratio: float
+    ratio_std: float  # 1 sigma: the whole fit's, scaled by the share of the speed change this move carries
+    windows: int
+
+
+@dataclass(frozen=True)
 class InertiaEstimate:
     """Result of `estimate_inertia`. Values are NaN where the fit did not get far enough to compute them."""
 
@@ -105,6 +116,8 @@ class InertiaEstimate:
     """What would cure a refusal, in general terms; the caller that planned the motion may say it in its own."""
     shortfall: float = math.nan
     """How many times short of its limit a refusal that more excitation would cure fell (else NaN)."""
+    moves: tuple[MoveEstimate, ...] = ()
+    """Each move's own ratio, in the order run (none where the fit stopped before its checks)."""
 
 
 class Refused(Exception):
@@ -141,6 +154,7 @@ class Partial:
     res_rel: float = math.nan
     notes: list[str] = field(default_factory=list)
     shortfall: float = math.nan
+    moves: tuple[MoveEstimate, ...] = ()
 
     def refuse(self, reason: str, advice: str = "") -> InertiaEstimate:
         return self.result(ok=False, reason=reason, advice=advice)
@@ -172,4 +186,5 @@ class Partial:
             notes=tuple(self.notes),
             advice=advice,
             shortfall=self.shortfall,
+            moves=self.moves,
         )

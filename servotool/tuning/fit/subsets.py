@@ -12,7 +12,7 @@ between the phases of a move.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from servotool.tuning.fit.regression import FitData
 from servotool.tuning.fit.verdict import Cause, Verdict
 
 MIN_SUBSET_WINDOWS = 6
+MIN_SUBSET_SHARE = 0.02  # a subset with less of the speed changes' information gives no J of its own
 BIRGE_WIDEN = 1.5  # subsets that disagree more than this many times their uncertainties widen it (below: chance,
 #                    as chi2/dof of 2.25 over 2-3 subsets is on a rigid load) ...
 BIRGE_REFUSE = 3.0  # ... refuse where they disagree this many times beyond their uncertainties ...
@@ -137,20 +138,44 @@ def _acceleration_terciles(fit: FitData, dw: np.ndarray, j: float) -> np.ndarray
     return labels
 
 
-def _birge(j: float, j_std: float, dw: np.ndarray, resid: np.ndarray, labels: np.ndarray) -> tuple[float, float]:
-    """(Birge ratio, relative spread) of J taken from each subset (label >= 0) with the other parameters held."""
+@dataclass(frozen=True)
+class SubsetJ:
+    """J from one subset of the windows, the other parameters held at the whole fit's."""
+
+    label: int
+    j: float
+    j_std: float  # the whole fit's, scaled by the share of the speed changes' information (sum dw^2) it carries
+    windows: int
+
+
+def subset_js(
+    dw: np.ndarray,
+    j: float,
+    j_std: float,
+    resid: np.ndarray,
+    labels: np.ndarray,
+    min_windows: int = MIN_SUBSET_WINDOWS,
+) -> list[SubsetJ]:
+    """J of each subset (label >= 0) that has min_windows windows and MIN_SUBSET_SHARE of the information:
+    J + sum(dw * residual) / sum(dw^2) over its windows, from the regressor dw and residual of the model used."""
     total = float(dw @ dw)
-    js, sig = [], []
+    out = []
     for label in np.unique(labels[labels >= 0]):
         m = labels == label
         info = float(dw[m] @ dw[m])
-        if np.count_nonzero(m) < MIN_SUBSET_WINDOWS or info <= 0.02 * total:
+        count = int(np.count_nonzero(m))
+        if count < min_windows or info <= MIN_SUBSET_SHARE * total:
             continue
-        js.append(j + float(dw[m] @ resid[m]) / info)
-        sig.append(j_std * math.sqrt(total / info))
-    if len(js) < 2 or not (0 < j_std < math.inf) or not math.isfinite(j):  # an unbounded fit: refused elsewhere
+        out.append(SubsetJ(int(label), j + float(dw[m] @ resid[m]) / info, j_std * math.sqrt(total / info), count))
+    return out
+
+
+def _birge(j: float, j_std: float, dw: np.ndarray, resid: np.ndarray, labels: np.ndarray) -> tuple[float, float]:
+    """(Birge ratio, relative spread) of J taken from each subset (label >= 0) with the other parameters held."""
+    found = subset_js(dw, j, j_std, resid, labels)
+    if len(found) < 2 or not (0 < j_std < math.inf) or not math.isfinite(j):  # an unbounded fit: refused elsewhere
         return 1.0, 0.0
-    a, s = np.asarray(js), np.asarray(sig)
+    a, s = np.asarray([f.j for f in found]), np.asarray([f.j_std for f in found])
     wts = 1.0 / s**2
     mean = float(np.sum(wts * a) / np.sum(wts))
     chi2 = float(np.sum(wts * (a - mean) ** 2))

@@ -125,6 +125,14 @@ def test_clean_jittery_log_recovers_ratio_within_1_percent(ratio: float) -> None
     assert r.n_windows >= 50 and r.n_samples > r.n_windows
 
 
+def test_each_move_gives_its_own_ratio_in_the_order_run() -> None:
+    r = estimate(simulate(3.0, **NOISY))
+    assert r.ok, r.reason
+    assert [m.direction for m in r.moves] == [1, -1] * NOISY["cycles"]
+    assert all(abs(m.load_ratio - 3.0) < 4 * m.ratio_std for m in r.moves), r.moves
+    assert all(m.ratio_std > r.ratio_std and m.windows >= 3 for m in r.moves)
+
+
 @pytest.mark.parametrize("ratio", [0.0, 3.0, 20.0, 50.0])
 def test_noisy_slow_jittery_log_recovers_ratio_within_3_percent(ratio: float) -> None:
     r = estimate(simulate(ratio, **NOISY))
