@@ -18,8 +18,8 @@ from servotool.tuning.preflight import FEATURE
 
 # Position costs a request of its own on every profile (no profile maps it next to speed and torque with readable
 # registers between): it is read at most this share of the link's time, and at least every POSITION_MAX_GAP_S.
-# Between reads the travel is predicted from the speed. At 9600 baud a position read every 50 ms (the old pace)
-# took 60 % of the line: the samples the estimator needs came at half the rate the line carries.
+# Between reads the travel is predicted from the speed: on a slow line a fixed fast pace of position reads would
+# take the samples the estimator needs.
 POSITION_SHARE = 0.06
 POSITION_MIN_GAP_S = 0.05
 POSITION_MAX_GAP_S = 0.5
@@ -27,6 +27,8 @@ POSITION_MAX_GAP_S = 0.5
 
 @dataclass
 class Trace:
+    """What an identification sampled: times (s from its start), speed (rpm), torque (% of rated), position (rev)."""
+
     t: list[float] = field(default_factory=list)
     speed: list[float] = field(default_factory=list)
     torque: list[float] = field(default_factory=list)
@@ -39,8 +41,8 @@ class Trace:
         """Speed at the torque's sample times; the speed itself if read together.
 
         Cubic (Hermite, slopes from the neighbours) between speed reads, held after the last: a straight line
-        between reads half an interval away misplaces a curving speed (a sluggish loop rings through its ramps), and
-        SD25 at 19200 gave J 2-3 % high, outside its 3 sigma, with it (the cubic: within 1 %)."""
+        between reads half an interval away misplaces a curving speed (a sluggish loop rings through its ramps) and
+        biases J."""
         if len(self.speed_t) != len(self.t) or len(self.t) < 2:
             return list(self.speed)
         ts, v, t = np.asarray(self.speed_t), np.asarray(self.speed), np.asarray(self.t)

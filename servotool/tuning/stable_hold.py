@@ -1,16 +1,12 @@
-"""A position hold that stays stable while the load is still unknown: identification on a position-mode route.
+"""A position hold that stays stable while the load is still unknown, for motion on a route that holds position.
 
-IS620P's segment route (issue 15) ends every move in the drive's position hold. The drive computes its speed-loop
-gain from the *configured* inertia ratio (H08-00 is a bandwidth in Hz, which it only is for the inertia H08-15
-describes), while the position gain H08-02 and the speed integral H08-01 are absolute. With a load far above the
-configured ratio the speed loop is slow, the position loop and the integral are not, and the hold swings with
-growing amplitude: at the factory gains (25.0 Hz, 31.83 ms, 40.0) and ratio 1.00 the closed loop's poles
-(control.margins.least_damping) grow for any load above about 16; issue 16 saw 37 and 49 run into the travel guard.
-The CANopen manual prints the gains and H08-15 (0.00~120.00, default 1.00, "load moment-of-inertia ratio";
-L3260-3272) but no formula for how the ratio enters the speed loop (the usual Kp = 2 pi f J_motor (1 + ratio) is
-assumed, as in the simulator); its commissioning runs velocity mode at low speed before the gains are adjusted
-(section 4.4 steps 8-9, L1447-1448), and the drive's own offline identification (H09-05..H09-09) runs a speed
-profile, not a position hold.
+A segment route (IS620P's) ends every move in the drive's position hold. The drive computes its speed-loop gain
+from the *configured* inertia ratio (H08-00 is a bandwidth in Hz only for the inertia H08-15 describes), while the
+position gain H08-02 and the speed integral H08-01 are absolute: with a load far above the configured ratio the speed
+loop is slow, the position loop and the integral are not, and the hold swings up (at the factory gains and ratio the
+closed loop's poles, control.margins.least_damping, grow for any load above about 16). unverified: the CANopen manual
+prints the gains and H08-15 (0.00~120.00, default 1.00; L3260-3272) but no formula for how the ratio enters the
+speed loop; the usual Kp = 2 pi f J_motor (1 + ratio) is assumed, as in the simulator.
 
 So, on a route that holds position, the identification
   - before the pilot: sets the ratio as high as an unloaded motor stays well damped (PILOT_LIGHT_DAMPING: a
@@ -51,9 +47,9 @@ PILOT_RATIO_STEP = 1.25
 HEAVIEST_WITHOUT_PARAMETER = 100.0  # the heaviest load assumed where the profile maps no inertia-ratio parameter
 PILOT_SPREAD = 2.0  # after the pilot: stable for a true J_total within [J/2, 2 J] of its estimate
 PILOT_MAX_REL_STD = 0.25  # a pilot estimate with a larger relative uncertainty of J_total is not used
-# The pilot's fit may use fewer windows than the final one (two short moves), but not smaller speed changes: at
-# 1.5x the speed noise (tried) a bare motor with 30 % friction and 1 % noise was fitted at a ratio of 811 with a
-# 'usable' uncertainty, and that ratio on the drive ended in the overload alarm.
+# The pilot's fit may use fewer windows than the final one (two short moves), but not smaller speed changes: a fit on
+# speed changes near the noise can give a far too high ratio with a 'usable' uncertainty, and that ratio written to
+# the drive trips its overload alarm.
 PILOT_MIN_WINDOWS = 4
 INTEGRAL_STEP = 1.5
 POSITION_STEP = 1.5
@@ -163,7 +159,7 @@ class StableHold:
     def _pilot_ratio(self) -> float:
         """The highest ratio that keeps an unloaded motor's loops damped by PILOT_LIGHT_DAMPING: raised from the
         configured one (a stiffer speed loop breaks a heavy load away against friction in the pilot), or lowered
-        where the configured one is far above a light load (H08-15 = 30 on a bare motor ended in the overload
+        where the configured one is far above a light load (a loop that stiff drives a bare motor into the overload
         alarm)."""
         assert self.original is not None
         e = self.entries.get("inertia_ratio")

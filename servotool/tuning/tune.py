@@ -253,9 +253,9 @@ def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, 
 
 
 def check_drive_result(drive: Drive, result: identify.Result, request: TuneRequest, clock: Clock) -> None:
-    """A drive-side result is checked before it is kept: the host method measures the same load (it also fits the
-    friction the drive's method may mistake for inertia, +71 % at 30 % friction on the simulated DSX7E); a result
-    outside the host's 3 sigma (plus 5 % of J_total) is put back to the previous value and refused."""
+    """A drive-side result is checked before it is kept: the host method measures the same load, and also fits the
+    friction the drive's own method may mistake for inertia; a result outside the host's 3 sigma (plus 5 % of
+    J_total) is put back to the previous value and refused."""
     motion, rest = request.host_motion(drive, clock)
     host = identify.Identifier(drive, clock).run_host(motion, rest=rest)
     est = host.estimate

@@ -23,7 +23,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     r.tc, r.tc_std = float(est["Tc"]), float(err["Tc"])
     r.b, r.b_std = float(est.get("B", 0.0)), float(err.get("B", 0.0))
     r.tg, r.tg_std = float(est.get("Tg", 0.0)), float(err.get("Tg", 0.0))
-    # The model the checks settled on is what must fit (the windows clear of lost motion, a two-mass load's)
+    # The model the checks settled on is what must fit (the windows clear of lost motion, a two-mass load's).
     r.res_rms, y_rms = verdict.residual
     r.res_rel = r.res_rms / y_rms if y_rms > 0 else math.inf
     if not cfg.fit_load_torque:
@@ -45,7 +45,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
         return r.refuse(verdict.refuse)
     rel = r.j_std / j
     if rel > cfg.max_rel_uncertainty:
-        # noise sorting and backlash weigh less in a stronger motion (0.1 rad, ratio 2: within 1 % at 5.5 rev)
+        # noise sorting and backlash weigh less in a stronger motion: a longer travel may cure the refusal
         r.shortfall = rel / cfg.max_rel_uncertainty if not verdict.widened or verdict.curable else math.nan
         said = f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %)"
         if verdict.widened:

@@ -25,13 +25,12 @@ class EstimatorSettings:
     and lose the intervals left over at the end of each run)."""
     max_window_intervals: int = 6
     max_rel_uncertainty: float = 0.02
-    """Refuse when the 1-sigma uncertainty of J_total exceeds this fraction of J_total. Equivalently the ratio's
-    standard uncertainty may be at most 0.02 * (1 + ratio): +-0.02 at ratio 0, +-0.08 at ratio 3. Gain tuning
-    tolerates ~10 % inertia error, so 2 % (1 sigma) leaves margin."""
+    """Refuse when the 1-sigma uncertainty of J_total exceeds this fraction of J_total (the ratio's may be at most
+    this times 1 + ratio). Gain tuning tolerates several times this error, so the limit leaves margin."""
     min_excitation: float = 10.0
     """Refuse when the speed changes within windows (RMS) are less than this many times the speed noise of a
-    window (sqrt(2) * noise). Plain least squares would bias J low by about 1/excitation^2 (1 % at 10); the fit
-    removes that bias with the estimated noise, so this bounds what an error in that estimate can cost."""
+    window (sqrt(2) * noise). Plain least squares would bias J low by about 1/excitation^2; the fit removes that
+    bias with the estimated noise, so this bounds what an error in that estimate can cost."""
     max_rel_residual: float = 0.3
     """Refuse when RMS(equation error) / RMS(integrated torque) exceeds this: the model does not fit (backlash,
     compliance, a torque reading that is not the shaft torque)."""
@@ -42,9 +41,9 @@ class EstimatorSettings:
     kink_sigma: float = 5.0
     """A torque or speed sample further than this many noise sigmas off the line through its neighbours marks a
     torque step (start/end of an acceleration: a kink in speed); the intervals on both sides are left out. No
-    interpolant can integrate a step that falls somewhere between two slow samples, and its error is
-    correlated with the window's speed change, which biases J low by about 2 % at 25-40 samples/s. Speed shows
-    the kink even when the torque step is buried in torque noise."""
+    interpolant can integrate a step that falls somewhere between two slow samples, and its error is correlated
+    with the window's speed change, which biases J low. Speed shows the kink even when the torque step is buried in
+    torque noise."""
     torque_noise_floor_pct: float = 0.05
     """Floor of the estimated torque noise (% of rated) used for the kink test, so clean data is not all kinks."""
     zero_band_rpm: float | None = None

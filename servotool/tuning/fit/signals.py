@@ -81,8 +81,8 @@ def speed_noise_rpm(t: np.ndarray, rpm: np.ndarray) -> float:
     each sample's two neighbours and from the cubic through its four.
 
     Motion adds to both deviations, so each overestimates the noise: the line where the speed curves between
-    samples (a ringing loop at 20-40 samples/s tripled the estimate), the cubic where its wider stencil spans a
-    corner of a short ramp. The median ignores the few samples that disagree with both.
+    samples (a ringing loop), the cubic where its wider stencil spans a corner of a short ramp. The median ignores
+    the few samples that disagree with both.
     """
     estimates = [
         float(1.4826 * np.median(np.abs(dev) / ref))
@@ -146,8 +146,8 @@ def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.nda
 
     The trapezoid rule alone is biased wherever the signal curves between samples: the plain trapezoid shrinks the
     integral of an oscillation by (x cot x) with x half its phase advance per sample, and the loop's response to
-    a ramp corner (ringing of a loop tuned for the wrong inertia) is such an oscillation; at 20-40 samples/s that
-    biased J low by 1-3 %. Intervals touching a kink sample come out wrong but are never inside a window.
+    a ramp corner (ringing of a loop tuned for the wrong inertia) is such an oscillation, which biases J low at slow
+    sampling. Intervals touching a kink sample come out wrong but are never inside a window.
     """
     n = v.size
     out = np.zeros_like(v)
