@@ -19,8 +19,8 @@ from servotool.model.profile import Profile
 from servotool.motion import deadman
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
+from servotool.tuning.control.friction import friction_report
 from servotool.tuning.errors import TuneDeclined
-from servotool.tuning.friction import friction_report
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
 

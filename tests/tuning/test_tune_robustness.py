@@ -13,8 +13,8 @@ from servotool.model.loader import load_profile
 from servotool.ops.params import write_one
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import TURNAROUND_S, HostStalls, VirtualLink, make_motion_setup, wire_time
+from servotool.tuning.control.friction import friction_report
 from servotool.tuning.errors import IdentificationFailed, MarginRefused
-from servotool.tuning.friction import friction_report
 from servotool.tuning.gain_search import GainSearchFailed, search_gains
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
