@@ -313,36 +313,6 @@ def test_malformed_input_raises() -> None:
         estimate_inertia(t, rpm, pct, rated_torque_nm=RATED_NM, rotor_inertia_kgcm2=0.0)
 
 
-def test_speed_read_a_request_before_the_torque_is_brought_onto_the_torques_times():
-    """SD25 cannot read speed and torque in one request: the speed is older than the torque by one request."""
-    from servotool.tuning.identify import Trace
-
-    trace = Trace(
-        t=[0.1, 0.2, 0.3],
-        speed=[0.0, 100.0, 200.0],
-        torque=[1.0, 1.0, 1.0],
-        position=[None] * 3,
-        speed_t=[0.05, 0.15, 0.25],
-    )
-    assert trace.aligned_speed() == pytest.approx([50.0, 150.0, 200.0])  # the last one is held, not guessed
-    assert Trace(t=[0.1, 0.2], speed=[1.0, 2.0]).aligned_speed() == [1.0, 2.0]  # read together: unchanged
-
-
-def test_a_curving_speed_is_brought_onto_the_torques_times_by_a_cubic_not_a_line():
-    """A sluggish loop rings through its ramps: between two speed reads a straight line misplaces the speed at the
-    torque's time (SD25 at 19200 gave J 2-3 % high with it)."""
-    from servotool.tuning.identify import Trace
-
-    ts = np.arange(0.0, 1.0, 0.035)  # SD25 at 19200: a speed read every 35 ms
-    t = ts + 0.0175  # the torque a request later
-    speed = 1000.0 * np.sin(2 * np.pi * 1.5 * ts)
-    trace = Trace(t=list(t), speed=list(speed), torque=[0.0] * ts.size, position=[None] * ts.size, speed_t=list(ts))
-    truth = 1000.0 * np.sin(2 * np.pi * 1.5 * t[:-1])
-    cubic = np.abs(np.asarray(trace.aligned_speed())[:-1] - truth)
-    line = np.abs(np.interp(t[:-1], ts, speed) - truth)
-    assert cubic.max() < 0.2 * line.max()
-
-
 def test_a_host_stall_while_the_loop_rings_is_left_out_of_every_window() -> None:
     """The host stalls for 70 ms (14 intervals at 200 samples/s) just after every ramp corner, while a loop tuned
     for half the inertia rings there: a cubic across the stall misses the swing, and the window over it weighs
