@@ -135,8 +135,8 @@ def drive_loop(drive: Drive) -> LoopGains:
 
 NEAREST_SHARE = 0.02
 """A ratio just outside the parameter's range is written as the nearest end when that is within this share of
-J_total or the estimate's 3 sigma: SD25's Po013 starts at 0.01, so a bare motor (0.00 or a little below) was
-refused (issue 16's sweep at 115200 baud: half the runs at load 0)."""
+J_total or the estimate's 3 sigma: SD25's Po013 starts at 0.01, and a bare motor (0.00 or a little below) must not
+be refused for it."""
 
 
 def ratio_raw(drive: Drive, load_ratio: float, std: float = 0.0) -> tuple[Entry, int]:

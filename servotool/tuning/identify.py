@@ -268,8 +268,8 @@ class _HostRun:
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
                 break
         # At rest for two samples and, where the next move's settings go in fewer requests (Mover.folds), half a
-        # ramp: the loop settles, as those requests used to let it (without it DSX7E at 19200 was accepted less
-        # often; the speed route, unchanged, keeps its rest: more changed SDC's result on a borderline machine).
+        # ramp: the loop gets the time to settle that those requests' own time gave it (the speed route keeps its
+        # rest).
         rest = self.timing.now() + (REST_RAMPS * self.ramp if self.jogger.folds else 0.0)
         self.sample()
         self.sample()
@@ -330,14 +330,13 @@ class _HostRun:
 
     def _dithered(self, cycle: int, speed: float) -> tuple[float, float]:
         """Ramp and speed of a cycle: a torque read in coarse steps gets a different acceleration in every cycle
-        (planning.dithered). A finer reading only where the planned ramp sits at its floor (a fast line: DSX7E at
-        115200), by the same shorter ramps at the same speed: stronger accelerations for light loads, where the
-        floor, not the samples a ramp needs, kept them weak (bench: 55 -> 59 of 60 accepted); on slower lines
-        (DSX7E 19200: 53 -> 50, one travel trip) the planned ramps stay."""
+        (planning.dithered). A finer reading only where the planned ramp sits at its floor (a fast line), by the same
+        shorter ramps at the same speed: stronger accelerations for light loads, where the floor, not the samples a
+        ramp needs, kept them weak; on slower lines the planned ramps stay."""
         if not self.coarse and self.plan.ramp_s > MIN_RAMP_S:
             return self.ramp, speed
         # No shorter than twice the longest gap yet: a host stall must not take a whole ramp before the stop guard
-        # sees the axis again (bench/host_stalls.py).
+        # sees the axis again.
         ramp, slower = dithered(self.ramp, speed, cycle, self.sampler.rate(), STALL_RAMPS * self.guard.gap_s)
         return ramp, slower if self.coarse else speed
 
