@@ -21,8 +21,8 @@ from servotool.tuning.fit.verdict import Cause, Verdict
 
 MIN_SUBSET_WINDOWS = 6
 MIN_SUBSET_SHARE = 0.02  # a subset with less of the speed changes' information gives no J of its own
-BIRGE_WIDEN = 1.5  # subsets that disagree more than this many times their uncertainties widen it (below: chance,
-#                    as chi2/dof of 2.25 over 2-3 subsets is on a rigid load) ...
+BIRGE_WIDEN = 1.5  # subsets that disagree more than this many times their uncertainties widen it (below that:
+#                    chance, since a chi2/dof of 2.25 over 2-3 subsets is common on a rigid load) ...
 BIRGE_REFUSE = 3.0  # ... refuse where they disagree this many times beyond their uncertainties ...
 GROSS_SPREAD = 0.08  # ... and their spread exceeds this fraction of J
 ACCEL_SNR = 10.0  # windows sorted by acceleration: their speed change this many times its noise or more,
