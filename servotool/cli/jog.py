@@ -21,13 +21,12 @@ from servotool.motion.caveats import motion_caveats
 from servotool.motion.deadman import sentence
 from servotool.motion.hold import HoldToRun
 from servotool.motion.jog_plan import JogPlan
-from servotool.motion.jogger import Jogger
 from servotool.motion.setup import check_setup
 from servotool.motion.travel import TravelLimit
 from servotool.ops.trace import Sampler, motion_entries
 from servotool.ops.trace_file import check_writable, write_trace
 from servotool.sim.state import effective_values
-from servotool.tuning.stable_hold import guard_hold
+from servotool.tuning.stable_hold import guarded_jogger
 
 KEYS = "→/d forward  ←/a reverse  space stop  q quit"
 
@@ -126,7 +125,7 @@ def jog(
     _check_options(seconds, interactive, toggle, trace_file)
     with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
         d.dead_man_waived = no_dead_man
-        jogger = guard_hold(Jogger(d))
+        jogger = guarded_jogger(d)
         if sampler is not None:
             jogger.idle = sampler.sample_for
         plan = jogger.plan(speed, seconds, max_travel, travel_limit(ctx, travel))

@@ -19,7 +19,8 @@ from servotool.model.profile import Profile
 from servotool.motion import deadman
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
-from servotool.tuning.friction import friction_report
+from servotool.tuning.control.friction import friction_report
+from servotool.tuning.errors import TuneDeclined
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
 
@@ -228,7 +229,7 @@ def inertia(
                 on_proposal=ask.show,
                 approve_write=ask.approve_write,
             )
-        except tune.TuneDeclined:
+        except TuneDeclined:
             raise typer.Exit(1) from None
         except ServoError as exc:  # refused, tripped, travel exceeded, link lost
             _failed(exc, report, d.profile, as_json and ask.moving)

@@ -12,11 +12,10 @@ from servotool.model.codec import parse_value
 from servotool.model.profile import Profile
 from servotool.model.roles import motion_route
 from servotool.motion.deadman import sentence
-from servotool.motion.jogger import Jogger
 from servotool.report.charts import need_matplotlib
 from servotool.report.tune_report import write_tune_report
 from servotool.tuning.identify import IdentificationRefused
-from servotool.tuning.stable_hold import guard_hold
+from servotool.tuning.stable_hold import guarded_jogger
 from servotool.tuning.tune import TuneRequest, check_request, tune_inertia
 
 
@@ -46,7 +45,7 @@ class JogStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         drive.dead_man_waived = _waived(step.arg)
-        jogger = guard_hold(Jogger(drive))
+        jogger = guarded_jogger(drive)
         plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
         jogger.run(plan)
         bound = plan.dead_man

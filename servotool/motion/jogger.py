@@ -68,7 +68,7 @@ class Jogger:
         self._timeout_s: float | None = deadman.UNREAD  # the drive's communication timeout, read once
         # Called by run() before the JOG moves with its settings to put back (code -> raw): a caller may write
         # temporary settings there, each original recorded in it, and the JOG puts them back with its own
-        # (tuning.stable_hold.guard_hold: a position hold that cannot swing up on an unknown load).
+        # (tuning.stable_hold.guarded_jogger: a position hold that cannot swing up on an unknown load).
         self.prepare: Callable[[dict[str, int]], object] | None = None
 
     @property

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from servotool.model.profile import Profile
-from servotool.report.tune_facts import GainRow, MoveEstimate
+from servotool.report.tune_facts import GainRow
 from servotool.tuning.identify import Result
 from servotool.tuning.tune import TuneResult
 
@@ -20,7 +20,6 @@ def report_markdown(
     result: Result,
     profile: Profile,
     tune: TuneResult | None,
-    moves: list[MoveEstimate],
     rows: list[GainRow],
     charts: list[tuple[str, str]],
     reason: str = "",
@@ -50,11 +49,11 @@ def report_markdown(
         f"{result.time_used_s:.1f} s, travel {travel} |",
         "",
     ]
-    if moves:
-        ratios = [m.ratio for m in moves]
+    if est is not None and est.moves:
+        ratios = [m.load_ratio for m in est.moves]
         spread = float(np.std(ratios, ddof=1)) if len(ratios) > 1 else 0.0
         lines += [
-            f"Per move (each fitted on its own): {len(moves)} moves, ratios "
+            f"Per move (friction and load held at the fit): {len(est.moves)} moves, ratios "
             f"{min(ratios):.2f}..{max(ratios):.2f}, spread {spread:.2f} (1σ).",
             "",
         ]

@@ -16,7 +16,7 @@ import numpy as np
 from servotool.errors import UsageError
 from servotool.model.profile import Profile
 from servotool.report.charts import new_figure, save
-from servotool.report.tune_facts import GainRow, MoveEstimate, gain_rows, model_torque_pct, move_estimates
+from servotool.report.tune_facts import GainRow, gain_rows, model_torque_pct
 from servotool.tuning.identify import Result
 from servotool.tuning.step import StepResponse
 from servotool.tuning.tune import TuneResult
@@ -94,14 +94,15 @@ def fit_figure(result: Result, profile: Profile) -> Figure | None:
     return fig
 
 
-def moves_figure(result: Result, moves: list[MoveEstimate]) -> Figure | None:
+def moves_figure(result: Result) -> Figure | None:
     """Each move's own inertia ratio (friction and load held at the fit) around the overall estimate."""
     est = result.estimate
-    if est is None or not moves:
+    if est is None or not est.moves:
         return None
+    moves = est.moves
     fig, (ax,) = new_figure(1, row_in=3.6)
-    n = [m.move for m in moves]
-    ratios = [m.ratio for m in moves]
+    n = list(range(1, len(moves) + 1))
+    ratios = [m.load_ratio for m in moves]
     colors = ["tab:blue" if m.direction > 0 else "tab:purple" for m in moves]
     ax.errorbar(n, ratios, yerr=[m.ratio_std for m in moves], fmt="none", ecolor="gray", capsize=3)
     ax.scatter(n, ratios, c=colors, zorder=3, label="per move (blue forward, purple reverse)")
@@ -180,14 +181,13 @@ def write_tune_report(
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UsageError(f"cannot make {folder}: {exc.strerror or exc}") from None
-    moves = move_estimates(result, profile)
     rows = gain_rows(tune) if tune is not None else []
     sugg = tune.proposal.suggestion if tune is not None else None
     gains_title = f"gains for {sugg.bandwidth_hz:.1f} Hz speed-loop bandwidth" if sugg else "gains"
     charts = [
         ("motion.png", "Motion", motion_figure(result) if result.trace.t else None),
         ("fit.png", "Fit and residual", fit_figure(result, profile)),
-        ("moves.png", "Per-move estimates", moves_figure(result, moves)),
+        ("moves.png", "Per-move estimates", moves_figure(result)),
         ("step.png", "Step response", step_figure(tune.step_before, tune.step_after) if tune else None),
         ("gains.png", "Gains", gains_figure(rows, gains_title)),
     ]
@@ -200,7 +200,7 @@ def write_tune_report(
 
     md = folder / "report.md"
     try:
-        md.write_text(report_markdown(result, profile, tune, moves, rows, shown, reason), encoding="utf-8")
+        md.write_text(report_markdown(result, profile, tune, rows, shown, reason), encoding="utf-8")
     except OSError as exc:
         raise UsageError(f"cannot write {md}: {exc.strerror or exc}") from None
     return TuneReport(folder, [*files, md])

@@ -1,7 +1,7 @@
 """`tune gains`: raise the drive's own rigidity level step by step with a step check at each, as vendors'
 one-parameter auto-tuning does; stop at the first level that overshoots, rings or trips, back off, keep a safe level.
 
-Levels are tried only where the computed margins allow them (tuning.margins): the search never writes gains the
+Levels are tried only where the computed margins allow them (tuning.control.margins): the search never writes gains the
 margin check refuses. Each level's gains are written to RAM where the drive lets us keep them out of EEPROM; the
 chosen level is written last by the drive's EEPROM rule (save). When even the first level fails, the gains the
 drive had go back and the search fails.
@@ -19,9 +19,9 @@ from servotool.model.codec import raw_to_eng
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, step
+from servotool.tuning.control.gains import rigidity_scale
+from servotool.tuning.control.margins import Margins
 from servotool.tuning.gain_writes import GainChange
-from servotool.tuning.gains import rigidity_scale
-from servotool.tuning.margins import Margins
 from servotool.tuning.preflight import preflight
 from servotool.tuning.step import StepResponse
 

@@ -1,8 +1,8 @@
 """Turning an identified inertia into the drive's inertia-ratio, gain and rigidity parameter values, with margins.
 
 Before anything is written the margins of the suggested gains are computed on the identified inertia
-(tuning.margins); gains with less than 45 degrees of phase or 6 dB of gain margin are refused, naming the highest
-level that keeps them, unless forced.
+(tuning.control.margins); gains with less than 45 degrees of phase or 6 dB of gain margin are refused, naming the
+highest level that keeps them, unless forced.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from servotool.errors import UsageError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import from_canonical, to_canonical
 from servotool.model.profile import Entry, Profile
-from servotool.tuning.gains import GainSuggestion, LoopGains, RigidityScale, rigidity_scale, suggest_gains
-from servotool.tuning.identify import IdentificationFailed
-from servotool.tuning.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
+from servotool.tuning.control.gains import GainSuggestion, LoopGains, RigidityScale, rigidity_scale, suggest_gains
+from servotool.tuning.control.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
+from servotool.tuning.errors import IdentificationFailed, MarginRefused
 from servotool.tuning.preflight import FEATURE
 
 GAIN_ROLES = {
@@ -25,10 +25,6 @@ GAIN_ROLES = {
     "position_loop_gain": "position_loop_gain_per_s",
     "torque_filter": "torque_filter_ms",
 }
-
-
-class MarginRefused(UsageError):
-    """The suggested gains would leave too little phase or gain margin."""
 
 
 @dataclass(frozen=True)
@@ -139,8 +135,8 @@ def drive_loop(drive: Drive) -> LoopGains:
 
 NEAREST_SHARE = 0.02
 """A ratio just outside the parameter's range is written as the nearest end when that is within this share of
-J_total or the estimate's 3 sigma: SD25's Po013 starts at 0.01, so a bare motor (0.00 or a little below) was
-refused (issue 16's sweep at 115200 baud: half the runs at load 0)."""
+J_total or the estimate's 3 sigma: SD25's Po013 starts at 0.01, and a bare motor (0.00 or a little below) must not
+be refused for it."""
 
 
 def ratio_raw(drive: Drive, load_ratio: float, std: float = 0.0) -> tuple[Entry, int]:

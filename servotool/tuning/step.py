@@ -13,7 +13,7 @@ from servotool.model.codec import raw_to_eng
 from servotool.motion.jogger import Jogger
 from servotool.motion.keepalive import keepalive_interval_s
 from servotool.ops.eeprom import ram_writes
-from servotool.tuning.identify import IdentificationFailed
+from servotool.tuning.errors import IdentificationFailed
 from servotool.tuning.preflight import FEATURE, active_alarm
 from servotool.tuning.stable_hold import StableHold
 

@@ -18,9 +18,10 @@ from servotool.model.profile import Entry, Profile
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, identify, planning, preflight, step
+from servotool.tuning.control.gains import GainSuggestion, rigidity_scale, suggest_gains
+from servotool.tuning.control.margins import Margins
+from servotool.tuning.errors import IdentificationFailed, TuneDeclined
 from servotool.tuning.gain_writes import GainChange
-from servotool.tuning.gains import GainSuggestion, rigidity_scale, suggest_gains
-from servotool.tuning.margins import Margins
 from servotool.tuning.planning import MotionPlan
 from servotool.tuning.preflight import RestCheck
 from servotool.tuning.step import StepResponse
@@ -148,10 +149,6 @@ class TuneResult:
         return self.proposal.ratio
 
 
-class TuneDeclined(ServoError):
-    """The operator said no before anything moved."""
-
-
 class GainsRolledBack(ServoError):
     """The step check after writing the gains failed; the previous gains were written back."""
 
@@ -256,9 +253,9 @@ def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, 
 
 
 def check_drive_result(drive: Drive, result: identify.Result, request: TuneRequest, clock: Clock) -> None:
-    """A drive-side result is checked before it is kept: the host method measures the same load (it also fits the
-    friction the drive's method may mistake for inertia, +71 % at 30 % friction on the simulated DSX7E); a result
-    outside the host's 3 sigma (plus 5 % of J_total) is put back to the previous value and refused."""
+    """A drive-side result is checked before it is kept: the host method measures the same load, and also fits the
+    friction the drive's own method may mistake for inertia; a result outside the host's 3 sigma (plus 5 % of
+    J_total) is put back to the previous value and refused."""
     motion, rest = request.host_motion(drive, clock)
     host = identify.Identifier(drive, clock).run_host(motion, rest=rest)
     est = host.estimate
@@ -270,7 +267,7 @@ def check_drive_result(drive: Drive, result: identify.Result, request: TuneReque
         entry, raw = gain_writes.ratio_raw(drive, result.old_ratio)
         with eeprom.persistence(drive, request.save):
             write_one(drive, entry, raw)
-    raise identify.IdentificationFailed(
+    raise IdentificationFailed(
         f"the drive's identification gave load ratio {result.new_ratio:.2f}, implausible against the host "
         f"measurement {host.new_ratio:.2f} ± {est.ratio_std:.2f} (friction {est.coulomb_nm:.3g} N·m): the previous "
         f"ratio {result.old_ratio:.2f} was put back; use --method host"

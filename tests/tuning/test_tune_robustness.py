@@ -13,10 +13,10 @@ from servotool.model.loader import load_profile
 from servotool.ops.params import write_one
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import TURNAROUND_S, HostStalls, VirtualLink, make_motion_setup, wire_time
-from servotool.tuning.friction import friction_report
+from servotool.tuning.control.friction import friction_report
+from servotool.tuning.errors import IdentificationFailed, MarginRefused
 from servotool.tuning.gain_search import GainSearchFailed, search_gains
-from servotool.tuning.gain_writes import MarginRefused
-from servotool.tuning.identify import IdentificationFailed, IdentificationRefused
+from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import GainsRolledBack, TuneRequest, tune_inertia
 
 
@@ -221,19 +221,24 @@ def test_a_slow_fit_between_moves_does_not_starve_the_drives_watchdog(sim_dir, m
     """tune inertia fits between moves while DSX7E holds with its 500 ms watchdog (Pn620) running, and feeds it at
     the last safe moment (a third of it spare): a fit of 0.3 s (the two-mass scan on a busy host) could start 0.32 s
     after the last beat and the drive trip E25. The dead-man is fed before each such fit."""
-    from servotool.tuning.identify import Identifier
+    from servotool.tuning import identify
     from servotool.tuning.preflight import active_alarm
 
     sim, d, clock = set_up("dsx7e", load_ratio=4.0, seed=2)
     d.dead_man_waived = False
-    fit, silent = Identifier._estimate, []
+    made, silent = identify.trace_estimate, []
 
-    def slow_fit(self, *args, **kwargs):
-        silent.append(clock.now() - sim.firmware.last_host)
-        clock.advance(0.3)
-        return fit(self, *args, **kwargs)
+    def slow_estimate(profile, torque_limit):
+        fit = made(profile, torque_limit)
 
-    monkeypatch.setattr(Identifier, "_estimate", slow_fit)
+        def slow_fit(trace, settings):
+            silent.append(clock.now() - sim.firmware.last_host)
+            clock.advance(0.3)
+            return fit(trace, settings)
+
+        return slow_fit
+
+    monkeypatch.setattr(identify, "trace_estimate", slow_estimate)
     res = tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
     assert res.ratio == pytest.approx(4.0, rel=0.1)
     assert silent and max(silent[:-1]) <= 0.2, silent  # the last fit comes after the motion

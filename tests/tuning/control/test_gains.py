@@ -8,8 +8,8 @@ from itertools import pairwise
 import pytest
 
 from servotool.model.loader import load_profile
-from servotool.tuning.gains import LEVEL_STEP, GainSuggestion, rigidity_scale, suggest_gains
-from servotool.tuning.margins import margins
+from servotool.tuning.control.gains import LEVEL_STEP, GainSuggestion, rigidity_scale, suggest_gains
+from servotool.tuning.control.margins import margins
 
 ROTOR_KGCM2 = 0.29
 JM = ROTOR_KGCM2 * 1e-4

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.polynomial import polynomial as P
 
-from servotool.tuning.gains import LoopGains
+from servotool.tuning.control.gains import LoopGains
 
 CONTROL_PERIOD_S = 125e-6  # speed-loop period of the drives modelled (8 kHz; the simulator's)
 SPEED_FILTER_S = 0.25e-3  # speed-feedback low-pass

@@ -6,7 +6,7 @@ LEVEL_STEP (2^(1/4): four levels per doubling, the spacing of vendors' published
 one below. The speed-loop gain (Hz, which is bandwidth once the inertia ratio is set) and the position gain scale with
 the bandwidth; the integral time and the torque-filter time constant scale inversely. So every level keeps the
 factory's own ratios: the PI zero where the factory puts it, the position loop as far below the speed loop, and the
-torque filter 8-10x above the bandwidth (IS620P 8x, DSX7E 10.5x at their defaults), never the old generic 4x.
+torque filter 8-10x above the bandwidth (IS620P 8x, DSX7E 10.5x at their defaults).
 
 A drive without a rigidity parameter (SDC: its panel function F3 has levels 0..19, factory 10, and no register,
 sdc.md section 4) gets the levels of F3 around its factory gains; the level itself is not written there.

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from servotool.tuning.lost_motion import LoadSide, clear_windows, coupled_intervals
+from servotool.tuning.fit.lost_motion import LoadSide, clear_windows, coupled_intervals
 
 T = np.arange(0.0, 0.61, 0.01)
 # rad/s: at rest, forward at 300 rad/s^2 for 0.2 s, braking as hard, at rest

@@ -11,12 +11,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry, Profile
-from servotool.tuning.estimator import InertiaEstimate
 
 RAD_S_PER_RPM = 2 * math.pi / 60
+
+
+class FittedFriction(Protocol):
+    """The friction and load torque a fit found (fit.InertiaEstimate has them), in SI units."""
+
+    @property
+    def coulomb_nm(self) -> float: ...
+    @property
+    def viscous_nm_per_rad_s(self) -> float: ...
+    @property
+    def load_torque_nm(self) -> float: ...
 
 
 @dataclass(frozen=True)
@@ -40,7 +51,7 @@ class FrictionReport:
         )
 
 
-def friction_report(profile: Profile, est: InertiaEstimate) -> FrictionReport | None:
+def friction_report(profile: Profile, est: FittedFriction) -> FrictionReport | None:
     """The estimate's friction in drive units with the profile's compensation entries; None without a motor."""
     motor = profile.motor
     if motor is None or not all(math.isfinite(x) for x in (est.coulomb_nm, est.viscous_nm_per_rad_s)):

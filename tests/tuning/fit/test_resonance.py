@@ -1,10 +1,10 @@
-"""Numerical building blocks of the inertia fit (tuning.fit_numerics)."""
+"""The resonance check's model of a load behind a spring (tuning.fit.resonance)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from servotool.tuning.fit_numerics import follower_speed
+from servotool.tuning.fit.resonance import follower_speed
 
 
 def test_a_load_behind_a_spring_rings_at_its_own_resonance_when_the_motor_starts_to_accelerate():

@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
 
 RATED_NM = 1.27
 ROTOR_KGCM2 = 0.29
@@ -123,6 +123,14 @@ def test_clean_jittery_log_recovers_ratio_within_1_percent(ratio: float) -> None
     assert ratio_error(r, ratio) < 0.01, r
     assert r.j_total_kgm2 == pytest.approx(JM * (1 + ratio), rel=0.01)
     assert r.n_windows >= 50 and r.n_samples > r.n_windows
+
+
+def test_each_move_gives_its_own_ratio_in_the_order_run() -> None:
+    r = estimate(simulate(3.0, **NOISY))
+    assert r.ok, r.reason
+    assert [m.direction for m in r.moves] == [1, -1] * NOISY["cycles"]
+    assert all(abs(m.load_ratio - 3.0) < 4 * m.ratio_std for m in r.moves), r.moves
+    assert all(m.ratio_std > r.ratio_std and m.windows >= 3 for m in r.moves)
 
 
 @pytest.mark.parametrize("ratio", [0.0, 3.0, 20.0, 50.0])
@@ -303,36 +311,6 @@ def test_malformed_input_raises() -> None:
         estimate((t, rpm, bad))
     with pytest.raises(ValueError, match="rotor inertia"):
         estimate_inertia(t, rpm, pct, rated_torque_nm=RATED_NM, rotor_inertia_kgcm2=0.0)
-
-
-def test_speed_read_a_request_before_the_torque_is_brought_onto_the_torques_times():
-    """SD25 cannot read speed and torque in one request: the speed is older than the torque by one request."""
-    from servotool.tuning.identify import Trace
-
-    trace = Trace(
-        t=[0.1, 0.2, 0.3],
-        speed=[0.0, 100.0, 200.0],
-        torque=[1.0, 1.0, 1.0],
-        position=[None] * 3,
-        speed_t=[0.05, 0.15, 0.25],
-    )
-    assert trace.aligned_speed() == pytest.approx([50.0, 150.0, 200.0])  # the last one is held, not guessed
-    assert Trace(t=[0.1, 0.2], speed=[1.0, 2.0]).aligned_speed() == [1.0, 2.0]  # read together: unchanged
-
-
-def test_a_curving_speed_is_brought_onto_the_torques_times_by_a_cubic_not_a_line():
-    """A sluggish loop rings through its ramps: between two speed reads a straight line misplaces the speed at the
-    torque's time (SD25 at 19200 gave J 2-3 % high with it)."""
-    from servotool.tuning.identify import Trace
-
-    ts = np.arange(0.0, 1.0, 0.035)  # SD25 at 19200: a speed read every 35 ms
-    t = ts + 0.0175  # the torque a request later
-    speed = 1000.0 * np.sin(2 * np.pi * 1.5 * ts)
-    trace = Trace(t=list(t), speed=list(speed), torque=[0.0] * ts.size, position=[None] * ts.size, speed_t=list(ts))
-    truth = 1000.0 * np.sin(2 * np.pi * 1.5 * t[:-1])
-    cubic = np.abs(np.asarray(trace.aligned_speed())[:-1] - truth)
-    line = np.abs(np.interp(t[:-1], ts, speed) - truth)
-    assert cubic.max() < 0.2 * line.max()
 
 
 def test_a_host_stall_while_the_loop_rings_is_left_out_of_every_window() -> None:

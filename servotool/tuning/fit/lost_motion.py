@@ -1,17 +1,13 @@
-"""Lost motion: where a coupling with backlash may leave the motor turning alone, and the fit clear of it (the first
-of tuning.consistency's checks).
+"""Model check: lost motion (backlash), the first of the checks (fit.checks), since it changes the windows every
+later check stands on.
 
-Where the torque through the coupling reverses (a move's braking after its acceleration, a start against the flank
-the last stop left), the motor crosses the gap alone: it needs only its own inertia's torque, while the load coasts
-on, slowed by its friction, until the other flank takes it up. Windows there read J far low, and with them the
-friction the fit shares with every window (IS620P, backlash 0.2 rad at ratio 2: J 5 % low in every subset alike,
-the accelerating windows through an inflated Coulomb term). An observer follows the load through a dead zone behind
-the measured motor speed, with the load's inertia and friction from the rigid fit, and marks the sampling
-intervals in which the motor and the load may not have turned together; the gap it assumes is small, and the
-windows it keeps clear of stay clear by a margin, so a larger gap's lost motion falls inside the marked spans too
-(the windows clear of them gave J within 0.3 % at 0.05-0.2 rad of backlash for an assumed 0.05 rad). Where those
-windows' J stands apart from the whole fit's, they alone are fitted, with what a wider margin still changes counted
-as uncertain.
+Where the torque through a coupling with backlash reverses (a move's braking after its acceleration, a start against
+the flank the last stop left), the motor crosses the gap alone: windows there read J far low, and with them the
+friction every window shares. An observer follows the load through a small dead zone behind the measured motor
+speed, with the load's inertia and friction from the rigid fit, and marks the sampling intervals in which the motor
+and the load may not have turned together; a larger gap's lost motion falls inside the spans it marks too. Where the
+windows clear of them (by a margin) give a J apart from the whole fit's, they alone are fitted from there on, with
+what a wider margin still changes counted as uncertain.
 """
 
 from __future__ import annotations
@@ -21,7 +17,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from servotool.tuning.fit_data import FitData, refit
+from servotool.tuning.fit.regression import FitData, refit
+from servotool.tuning.fit.verdict import Cause, Verdict
 
 GAP_RAD = 0.05  # the dead zone the observer assumes (at the motor shaft)
 MARGIN_INTERVALS = 1  # sampling intervals kept clear on both sides of a marked span
@@ -91,30 +88,44 @@ def clear_windows(
     return (loose[hi] - loose[lo]) == 0
 
 
-def clear_of_lost_motion(fit: FitData) -> tuple[FitData, list[str]]:
+def check(v: Verdict) -> Verdict:
+    """The verdict on the windows clear of lost motion where their J stands apart (clear_of_lost_motion); a cause that
+    stronger accelerations cure, since lost motion weighs less in a stronger motion."""
+    fit, words = clear_of_lost_motion(v.fit)
+    if not words:
+        return v
+    return replace(
+        v,
+        fit=fit,
+        x=fit.x,
+        j=float(fit.theta[0]),
+        j_std=fit.j_std,
+        resid=fit.y - fit.x @ fit.theta,
+        fitted=(*v.fitted, Cause(words, curable=True)),
+    )
+
+
+def clear_of_lost_motion(fit: FitData) -> tuple[FitData, str]:
     """The fit over the windows clear of where the motor may have turned without its load, with the words for it,
     where their J stands LOST_MOTION_SIGMA of its uncertainty apart from the whole fit's (lost motion reads J low
     where the motor crosses the gap alone, high where a window ends as the flank takes the load up); else the fit
-    as it is, and no words. Where the load rests in the gap is unknown, so the first motion counts as a crossing:
-    on a rigid load a breakaway there that no other window shares (SD25 at 19200, 2 of 60 machines: J 13 % off
-    with one window of 43) is left out too, hence the question mark."""
+    as it is, and no words. Where the load rests in the gap is unknown, so the first motion counts as a crossing: a
+    breakaway there on a rigid load is left out too, hence the question mark in the words."""
     est = dict(zip(fit.names, (float(v) for v in fit.theta), strict=True))
     load = LoadSide(est["J"] - fit.jm, est["Tc"], est.get("B", 0.0), est.get("Tg", 0.0))
     coupled = coupled_intervals(fit.t, fit.w, load)
     near = _clear_fit(fit, coupled, MARGIN_INTERVALS)
     if near is None or not abs(near.theta[0] - fit.theta[0]) > LOST_MOTION_SIGMA * near.j_std:
-        return fit, []
-    # How far J moves again when the windows keep twice as clear is what the narrower margin may have left in (DSX7E
-    # at 19200, backlash 0.1 rad: J 1.4-2.9 % high with one interval, 0.4-1.5 % with two; at 921600, 0.2 rad:
-    # -1.6 and -0.9 %, then 0.0 and +0.2 %). Too few windows for that: the whole change counts instead (DSX7E at
-    # 19200, 0.1 rad at ratio 10: the 33 of 72 windows one interval clear read +2.3 % where all read +0.9 %).
+        return fit, ""
+    # How far J moves again when the windows keep twice as clear is what the narrower margin may have left in; with
+    # too few windows for that, the whole change counts instead.
     wide = _clear_fit(fit, coupled, 2 * MARGIN_INTERVALS)
     answer = near if wide is None else wide
     left = float(answer.theta[0] - (fit.theta[0] if wide is None else near.theta[0]))
-    return replace(answer, j_std=math.hypot(answer.j_std, left)), [
+    return replace(answer, j_std=math.hypot(answer.j_std, left)), (
         f"lost motion (backlash?) where the torque reverses or the axis first moves: J from the "
         f"{answer.starts.size} of {fit.starts.size} windows clear of it"
-    ]
+    )
 
 
 def _clear_fit(fit: FitData, coupled: np.ndarray, margin: int) -> FitData | None:

@@ -1,4 +1,4 @@
-"""The rigid-model checks (tuning.consistency) on the benches' own rows: no false resonance on a rigid load at a
+"""The rigid-model checks (tuning.fit.checks) on the benches' own rows: no false resonance on a rigid load at a
 slow line, and the off-model rows that were accepted outside their 3 sigma now covered or refused (issue 16)."""
 
 from __future__ import annotations
