@@ -57,6 +57,9 @@ def open_drives(
         raise
     try:
         drives = [Drive(link, resolved.profile, u, port=port) for u in units]
+        line = link.control_line()
+        for d in drives:  # one line for the bus: a relay per adapter, wired to every drive's enable or contactor
+            d.heartbeat_line, d.heartbeat_timeout_s = line, resolved.heartbeat_timeout_s
         # Before anything is written: the drive answering must be the one the profile describes. The embedded
         # simulator is built from the profile itself.
         if resolved.identity_check and not resolved.simulated:

@@ -182,6 +182,7 @@ class _HostRun:
         self.ident, self.plan, self.progress, self.timing = ident, plan, progress, ident.timing
         beat_s = ident.keepalive_s if ident.keepalive_s is not None else keepalive_interval_s(d)
         self.jogger = Mover(d, beat_s, FEATURE, self.timing)
+        self.jogger.protect_for(plan.speed_rpm, plan.travel_limit_rev)  # the drive's own, set with the settings
         self.jog_accel = p.need_role("jog_accel", FEATURE)
         assert p.motor is not None
         self.rated_rpm = p.motor.rated_speed_rpm
@@ -198,6 +199,7 @@ class _HostRun:
         self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")  # the test speed, its cap and bound
 
     def _beat(self, lead_s: float = 0.0) -> None:
+        self.jogger.watch_inputs()
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
         # take samples' time on a slow line.
         bound = self.jogger.dead_man
