@@ -112,7 +112,10 @@ def plan(drive: Drive, peak_rpm: float, fence_rev: float | None) -> Protections:
         raw = min(now["max_speed"], eng_to_raw(e, limit))
         tighten("max_speed", raw)
         speed = (_eng(e, raw), e.code)
-    if fence_rev is not None and all(r in entries for r in (*FENCE_ROLES, "encoder_counts", "encoder_turns")):
+    fenced = all(r in entries for r in (*FENCE_ROLES, "encoder_counts", "encoder_turns"))
+    if fenced and fence_rev is None:
+        skipped.append("no overtravel fence: the motion's extent is not known (an interactive JOG: give --travel)")
+    elif fenced and fence_rev is not None:
         fence = _fence(p, entries, now, fence_rev)
         if isinstance(fence, str):
             skipped.append(fence)
