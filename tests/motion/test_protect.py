@@ -156,3 +156,30 @@ def test_sd25s_forced_inputs_are_released_after_ctrl_c(cli, served_as):
         assert proc.returncode == 130, err
         assert not forcing(r) and r.raw("So-57") == 0b1000_0000
         assert wait_standing(r) == pytest.approx(0, abs=5)
+
+
+def test_an_identification_sets_them_for_its_duration_too(cli, served_as):
+    """SDC through `tune inertia`: the speed limit near the test speed, the saturation trip and the overload multiple
+    while it moves, the drive's own values after it."""
+    port = served_as("sdc")
+    set_up(cli, "sdc", port)
+    with Reader(port, "sdc") as r:
+        codes = ("PN20", "PN65", "PN79", "PN120")
+        before = {c: r.raw(c) for c in codes}
+        tune = ["tune", "inertia", "--yes", "--dry-run", "--no-dead-man", "--max-speed", "600"]
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "servotool", "--port", port, "-P", "sdc", *tune],
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        wait_running(r, 100)
+        during = {c: r.raw(c) for c in codes}
+        fastest = abs(r.eng("speed_feedback"))
+        _out, err = proc.communicate(timeout=120)
+        after = {c: r.raw(c) for c in codes}
+    assert fastest <= during["PN20"] <= 600 * SPEED_LIMIT_MARGIN + 1, (during, err)
+    assert (during["PN65"], during["PN79"], during["PN120"]) == (200, 50, 0)
+    assert after == before, err
+    assert "the drive's speed limit PN20 at" in err and "trips AL-6 after 0.5 s" in err
