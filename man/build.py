@@ -48,9 +48,14 @@ l l l.
 Drive	If the host dies	Bound
 DSX7E	its host watchdog Pn620 (kept alive by Fn032) stops the motor with E25	speed x (Pn620 + ramp/2)
 IS620P	the running multi\-segment position move (H11 segment 1) ends and stops	one segment: 3 beats at speed + stop
-SD25	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR
-SDC	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR
+SD25	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
+SDC	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
 .TE
+With \fB\-\-heartbeat dtr|rts\fR a control line of the USB\-RS485 adapter toggles at every beat of a motion for a
+retriggerable watchdog relay on the drive's main contactor; the bound is then the relay's time
+(\fB\-\-heartbeat\-timeout\-ms\fR). For a motion's duration servotool also sets the drive's own protections
+where the profile maps them (speed limit, SD25's overtravel fence and locked\-rotor trip, SDC's saturation trip) and
+puts them back; SD25's DIs are forced while it moves, so its wired inputs are ignored (main power still stops it).
 The IS620P route is unverified (the start of a segment is the general IS620P manual's); see
 \fBservotool profiles show \fIID\fB \-\-unverified\fR for each profile's route, its manual lines and the simulator's
 extensions. The simulator stops nothing the manual does not: \fBsim config \-\-fake\-watchdog on\fR (NOT REAL, off

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from itertools import pairwise
 
 from servotool.errors import DeviceError, ModbusException, UsageError, VerifyError
-from servotool.link.ports import Link
+from servotool.link.ports import ControlLine, Link
 from servotool.model.codec import (
     fields_json,
     format_value,
@@ -143,6 +143,10 @@ class Drive:
         self.link = link
         # The user acknowledged host motion without a dead-man on this drive (--no-dead-man): see motion/deadman.
         self.dead_man_waived = False
+        # A hardware dead-man (--heartbeat): the adapter's control line a watchdog relay watches, toggled at each
+        # keep-alive beat (motion/keepalive), and the relay's time in seconds.
+        self.heartbeat_line: ControlLine | None = None
+        self.heartbeat_timeout_s: float | None = None
         self.profile = profile
         self.unit = unit
         self.port = port

@@ -104,6 +104,9 @@ class Bus:
             served = ",".join(map(str, self.units))
             raise UsageError(f"the simulated drives here are unit {served}, not {','.join(map(str, others))}")
         drives = [Drive(self.link, self.resolved.profile, u, port=self.port) for u in units]
+        line = self.link.control_line()
+        for d in drives:  # one line for the bus: a relay per adapter, wired to every drive's enable or contactor
+            d.heartbeat_line, d.heartbeat_timeout_s = line, self.resolved.heartbeat_timeout_s
         # Before anything is written: the drive answering must be the one the profile describes. The embedded
         # simulator is built from the profile itself.
         unchecked = [d for d in drives if d.unit not in self.checked]

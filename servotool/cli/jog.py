@@ -18,7 +18,7 @@ from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
-from servotool.motion.deadman import sentence
+from servotool.motion.deadman import lines
 from servotool.motion.hold import HoldToRun
 from servotool.motion.jog_plan import JogPlan
 from servotool.motion.setup import check_setup
@@ -134,7 +134,8 @@ def jog(
             plan.describe() + ("" if not interactive else f"  [{'toggle' if toggle else 'hold a key to move'}: {KEYS}]")
         )
         if plan.dead_man is not None:
-            info(sentence(plan.dead_man))
+            for line in lines(plan.dead_man):
+                info(line)
         show = _Speeds(seconds)
         try:
             if interactive:

@@ -95,6 +95,21 @@ def main(
         "--silence-ms",
         help="Silence that ends a frame (default: 3.5 characters at the baud rate). Env: SERVOTOOL_SILENCE_MS.",
     ),
+    heartbeat: str = typer.Option(
+        None,
+        "--heartbeat",
+        help="dtr|rts: a hardware dead-man. Toggle this control line of the USB-RS485 adapter at each keep-alive "
+        "beat of a motion, for a retriggerable watchdog relay wired to the drive's enable input or main contactor "
+        "(README: the hardware dead-man); it stops toggling when the motion ends, on a late beat and on every exit. "
+        "RTS only where the adapter does not use RTS to switch its RS485 driver's direction. Serial ports only. "
+        "Env: SERVOTOOL_HEARTBEAT.",
+    ),
+    heartbeat_timeout_ms: float = typer.Option(
+        None,
+        "--heartbeat-timeout-ms",
+        help="The watchdog relay's time: it drops the drive this long after the last toggle (default 1000). "
+        "Env: SERVOTOOL_HEARTBEAT_TIMEOUT_MS.",
+    ),
     profile: str = typer.Option(
         None,
         "--profile",
@@ -140,6 +155,8 @@ def main(
             echo=echo,
             turnaround_ms=turnaround_ms,
             silence_ms=silence_ms,
+            heartbeat=heartbeat,
+            heartbeat_timeout_ms=heartbeat_timeout_ms,
             no_identity_check=no_identity_check or None,
         ),
     )

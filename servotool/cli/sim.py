@@ -177,6 +177,13 @@ def config(
         "motion after 500 ms of host silence on a drive whose manual documents no "
         "communication timeout. The real drive keeps running.",
     ),
+    inputs: int = typer.Option(None, "--inputs", help=SIM_SETTINGS["inputs"][4] + ".", min=0, max=255),
+    di_monitor: str = typer.Option(
+        None,
+        "--di-monitor",
+        help="forced|terminals, NOT IN THE MANUAL as terminals (default forced): what the input monitor shows while "
+        "the inputs are forced; the manual's words read as the forced levels.",
+    ),
     missing: str = typer.Option(
         None,
         "--missing",
@@ -188,6 +195,7 @@ def config(
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
     fake_on = None if fake_watchdog is None else _on_off(fake_watchdog, "--fake-watchdog")
+    monitor = None if di_monitor is None else _choice(di_monitor, "--di-monitor", DI_MONITOR)
     p, u = _target(ctx, profile, unit)
     if missing is not None:
         sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
@@ -203,6 +211,8 @@ def config(
         line_baud=_line_choice(line_baud),
         brake=brake_on,
         fake_watchdog=fake_on,
+        inputs=inputs,
+        di_monitor=monitor,
         resonance_hz=resonance_hz,
         resonance_damping=resonance_damping,
         backlash_rad=backlash_rad,
@@ -263,11 +273,20 @@ def _line_choice(value: str | None) -> str | int | None:
         raise UsageError(f"--line-baud: {exc}") from None
 
 
+DI_MONITOR = ("forced", "terminals")
+
+
 def _on_off(value: str, option: str) -> int:
-    choices = {"on": 1, "off": 0}
-    if value.lower() not in choices:
-        raise UsageError(f"{option} must be on or off, not {value!r}")
-    return choices[value.lower()]
+    return _choice(value, option, ("off", "on"))
+
+
+def _choice(value: str, option: str, names: tuple[str, ...]) -> int:
+    """The index of a named choice (off/on, forced/terminals); UsageError naming the choices."""
+    if value.lower() not in names:
+        raise UsageError(
+            f"{option} must be {' or '.join(names[::-1] if names == ('off', 'on') else names)}, not {value!r}"
+        )
+    return names.index(value.lower())
 
 
 def _print_settings(status: sim_state.SimStatus) -> None:
@@ -283,6 +302,7 @@ def _print_settings(status: sim_state.SimStatus) -> None:
             shown = str(value) if over is None else f"{over} ({LINE_ENV})"
         else:
             shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
+        shown = DI_MONITOR[int(value)] if name == "di_monitor" else shown
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
     if status.missing:

@@ -16,7 +16,7 @@ from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import as_held, raw_to_eng
 from servotool.model.profile import Profile
-from servotool.motion import deadman
+from servotool.motion import deadman, protect
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
 from servotool.tuning.control.friction import friction_report
@@ -290,11 +290,14 @@ class _Dialog:
                 "and back, before and after"
             )
         if self.method == "host" and motion is not None:
-            self.dead_man = deadman.motion_bound(self.d, motion.speed_rpm, motion.ramp_s)
+            bound = deadman.motion_bound(self.d, motion.speed_rpm, motion.ramp_s)
+            self.dead_man = protect.planned_bound(self.d, bound, motion.speed_rpm, motion.travel_limit_rev)
         elif self.step_check:
-            self.dead_man = deadman.motion_bound(self.d, step.STEP_SPEED_RPM, 0.0)
+            bound = deadman.motion_bound(self.d, step.STEP_SPEED_RPM, 0.0)
+            self.dead_man = protect.planned_bound(self.d, bound, step.STEP_SPEED_RPM, self.travel)
         if self.dead_man is not None:
-            info(deadman.sentence(self.dead_man))
+            for line in deadman.lines(self.dead_man):
+                info(line)
         self.moving = confirm("Move the axis now?", self.yes)
         return self.moving
 

@@ -10,7 +10,7 @@ import socket
 from typing import TYPE_CHECKING
 
 from servotool.link.exchange import Exchange, Wire
-from servotool.link.ports import LinkSettings, Trace, open_serial, open_tcp, parse_tcp
+from servotool.link.ports import ControlLine, LinkSettings, Trace, open_serial, open_tcp, parse_tcp
 
 if TYPE_CHECKING:  # pyserial's platform module (serialposix imports fcntl) loads only with a real port
     import serial
@@ -30,7 +30,7 @@ class RtuMaster:
             self._port = open_tcp(settings.port, settings.timeout)
             wire = _SocketWire(self._port)
         else:
-            self._port = open_serial(settings.port, settings.line, settings.timeout)
+            self._port = open_serial(settings.port, settings.line, settings.timeout, settings.heartbeat)
             wire = _SerialWire(self._port)
         silence = settings.silence if settings.silence is not None else 0.0 if tcp else _frame_gap(settings.line.baud)
         self._exchange = Exchange(
@@ -60,6 +60,13 @@ class RtuMaster:
         self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
     ) -> None:
         self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent)
+
+    def control_line(self) -> ControlLine | None:
+        """The control line the settings name for a heartbeat (held low since the port opened), None without."""
+        name = self.settings.heartbeat
+        if name is None or parse_tcp(self.settings.port):
+            return None
+        return ControlLine(self._port, name)  # type: ignore[arg-type]
 
     def hurry(self) -> None:
         """For a bus scan, where most ids are silent by design: after a silent try, neither wait for a late reply

@@ -32,7 +32,17 @@ PERSISTENCE = ("immediate", "ram", "switchable")
 DEFAULT_ACCESS = {"Pn": "rw", "Un": "ro", "Sn": "ro", "Fn": "wo"}
 
 
-ALARM_KINDS = ("overspeed", "overload", "following_error", "comm_timeout", "inertia_id_failed", "other")
+ALARM_KINDS = (
+    "overspeed",
+    "overload",
+    "following_error",
+    "comm_timeout",
+    "inertia_id_failed",
+    "overtravel",
+    "locked_rotor",
+    "saturation",
+    "other",
+)
 
 
 CONVENTIONS = {"inertia_ratio": ("load_over_motor", "total_over_motor")}
@@ -181,6 +191,26 @@ class DeadManRoute:
     start_value: int = 1  # segment: the value OR-ed into role segment_start's servo-on value to start a move
 
 
+FORCED_MONITOR = ("forced", "terminals")
+
+
+@dataclass(frozen=True)
+class ForcedInputs:
+    """Host motion asserts its trigger by forcing the drive's digital inputs (profile key forced_inputs, SD25
+    So-57/So-58): while forcing is on, the `levels` entry replaces every input's level. `monitor` is the input-level
+    monitor, and `monitor_shows` what it shows while forcing is on: the forced levels, or still the terminals."""
+
+    switch_code: str
+    levels_code: str
+    monitor_code: str
+    source: str
+    digit: str = ""  # the switch's field (digits format) that turns forcing on
+    on: int = 1
+    off: int = 0
+    monitor_shows: str = "forced"
+    unverified: str = ""
+
+
 @dataclass(frozen=True)
 class IdentityCheck:
     """One read-only address a drive of this family answers in a known way (or, `absent`, refuses with exception
@@ -233,6 +263,7 @@ class Profile:
     conventions: dict[str, str] = field(default_factory=dict)
     motion_setup: list[SetupItem] = field(default_factory=list)
     dead_man: DeadManRoute | None = None
+    forced_inputs: ForcedInputs | None = None
     unverified_note: str = ""
     identity: Identity | None = None
     path: Path | None = None

@@ -11,11 +11,13 @@ from servotool.model.identity import parse_identity
 from servotool.model.profile import (
     ALARM_KINDS,
     CONVENTIONS,
+    FORCED_MONITOR,
     PERSISTENCE,
     WORD_ORDERS,
     Alarm,
     DeadManRoute,
     Entry,
+    ForcedInputs,
     Limits,
     LineSettings,
     Motor,
@@ -46,10 +48,12 @@ TOP_KEYS = {
     "conventions",
     "motion_setup",
     "dead_man",
+    "forced_inputs",
     "identity",
 }
 DEAD_MAN_ROUTES = ("drive_timeout", "segment", "none")
 DEAD_MAN_KEYS = {"route", "reason", "source", "unverified", "if_host_dies", "start_value"}
+FORCED_KEYS = {"switch", "levels", "monitor", "monitor_shows", "source", "unverified"}
 
 
 SETUP_KEYS = {"code", "value", "reason", "source", "unverified"}
@@ -95,6 +99,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     conventions = _parse_conventions(chk, data.get("conventions"))
     motion_setup = _parse_motion_setup(chk, data.get("motion_setup"), {e.code.upper(): e for e in entries}, broken)
     dead_man = _parse_dead_man(chk, data.get("dead_man"))
+    forced = _parse_forced_inputs(chk, data.get("forced_inputs"), {e.code.upper(): e for e in entries}, broken)
     identity = parse_identity(chk, data.get("identity"), {e.code.upper(): e for e in entries}, limits)
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
@@ -120,6 +125,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         motion_setup=motion_setup,
         unverified_note=str(data.get("unverified_note", "")),
         dead_man=dead_man,
+        forced_inputs=forced,
         identity=identity,
     )
     return profile, []
@@ -177,6 +183,42 @@ def _parse_dead_man(chk: Checker, raw: Any) -> DeadManRoute | None:
         chk.bad("dead_man", "needs a reason and a source (the manual lines it relies on)")
     start_value = chk.opt(raw, "start_value", "dead_man", int, 1)
     return DeadManRoute(route=route, start_value=start_value, **texts)
+
+
+def _parse_forced_inputs(chk: Checker, raw: Any, entries: dict[str, Entry], broken: set[str]) -> ForcedInputs | None:
+    """forced_inputs: the switch that forces the inputs (code, digit, on/off values), the forced levels' entry, the
+    input monitor and what it shows while forcing is on; every code an entry of the profile."""
+    if raw is None:
+        return None
+    shape = "{switch: {code, digit, forced, released}, levels, monitor, monitor_shows, source}"
+    if not isinstance(raw, dict) or not isinstance(raw.get("switch"), dict):
+        chk.bad("forced_inputs", f"expected a mapping {shape}")
+        return None
+    chk.known_keys(raw, FORCED_KEYS, "forced_inputs")
+    switch = raw["switch"]
+    chk.known_keys(switch, {"code", "digit", "forced", "released"}, "forced_inputs.switch")
+    codes = {
+        "switch": chk.need(switch, "code", "forced_inputs.switch", str),
+        "levels": chk.need(raw, "levels", "forced_inputs", str),
+        "monitor": chk.need(raw, "monitor", "forced_inputs", str),
+    }
+    source = chk.need(raw, "source", "forced_inputs", str)
+    for what, code in codes.items():
+        if code is not None and code.upper() not in entries and code.upper() not in broken:
+            chk.bad(f"forced_inputs.{what}", f"names unknown entry {code!r}")
+    if None in codes.values() or source is None:
+        return None
+    return ForcedInputs(
+        switch_code=str(codes["switch"]),
+        levels_code=str(codes["levels"]),
+        monitor_code=str(codes["monitor"]),
+        source=source,
+        digit=chk.opt(switch, "digit", "forced_inputs.switch", str, ""),
+        on=chk.opt(switch, "forced", "forced_inputs.switch", int, 1),
+        off=chk.opt(switch, "released", "forced_inputs.switch", int, 0),
+        monitor_shows=chk.choice(raw, "monitor_shows", "forced_inputs", FORCED_MONITOR, "forced"),
+        unverified=chk.opt(raw, "unverified", "forced_inputs", str, ""),
+    )
 
 
 def _parse_motion_setup(chk: Checker, raw: Any, entries: dict[str, Entry], broken: set[str]) -> list[SetupItem]:

@@ -59,6 +59,22 @@ SIM_SETTINGS: dict[str, tuple[type, float | int | str, float, float, str]] = {
     "gear": (float, 10.0, 1.0, 1000.0, "gear ratio between motor and arm (motor turns per arm turn)"),
     "cogging": (float, 0.0, 0.0, 0.2, "cogging torque ripple amplitude, fraction of rated torque"),
     "cogging_periods": (int, 6, 1, 200, "cogging ripple periods per motor revolution"),
+    "inputs": (
+        int,
+        0,
+        0,
+        255,
+        "wired digital input levels, bit n = DI n+1 (e.g. 4 = DI3 closed); the drive acts on them unless its "
+        "inputs are forced",
+    ),
+    "di_monitor": (
+        int,
+        0,
+        0,
+        1,
+        "NOT IN THE MANUAL (forced/terminals): what the input monitor shows while the inputs are forced; the manual's "
+        "words read as the forced levels (forced, the default)",
+    ),
     "fake_watchdog": (
         int,
         0,

@@ -40,6 +40,16 @@ def refresh(
     _refresh_status_word(profile, bank, p, jogging=jogging, identifying=identifying)
 
 
+def refresh_inputs(profile: Profile, bank: RegisterBank, monitor: int, encoder: tuple[int, int]) -> None:
+    """The input monitor (forced_inputs.monitor) and the absolute encoder's single-turn counts and multi-turn count."""
+    if profile.forced_inputs is not None:
+        bank.set_live(profile.forced_inputs.monitor_code, monitor)
+    for role, value in zip(("encoder_counts", "encoder_turns"), encoder, strict=True):
+        entry = profile.role(role)
+        if entry is not None:
+            bank.set_live(entry.code, value)
+
+
 def _refresh_status_word(profile: Profile, bank: RegisterBank, p: Plant, *, jogging: bool, identifying: bool) -> None:
     status = profile.role("servo_status")
     if status is None:

@@ -195,6 +195,7 @@ class _HostRun:
         p = d.profile
         self.drive, self.jogger, self.timing, self.plan, self.progress = d, jogger, timing, plan, progress
         self.estimate, self.torque_limit, self.old_ratio = estimate, torque_limit, old_ratio
+        jogger.protect_for(plan.speed_rpm, plan.travel_limit_rev)  # the drive's own, set with the settings
         self.jog_accel = p.need_role("jog_accel", FEATURE)
         assert p.motor is not None
         self.rated_rpm = p.motor.rated_speed_rpm
@@ -208,6 +209,7 @@ class _HostRun:
         self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")  # the test speed, its cap and bound
 
     def _beat(self, lead_s: float = 0.0) -> None:
+        self.jogger.watch_inputs()
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
         # take samples' time on a slow line.
         bound = self.jogger.dead_man

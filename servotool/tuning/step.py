@@ -94,6 +94,8 @@ def _step_response(
 ) -> StepResponse:
     p, timing = drive.profile, timing or RealClock()
     jogger = Jogger(drive, keepalive_interval_s(drive), FEATURE, timing)
+    # The drive's own protections for the step and back (it stays within the travel step_duration_s allowed it).
+    jogger.protect_for(speed_rpm, 1.3 * speed_rpm / 60.0 * duration_s / 0.9)
     jog_accel = p.need_role("jog_accel", FEATURE)
     speed_e = p.need_role("speed_feedback", FEATURE)
     saved = jogger.settings_to_restore()
@@ -103,6 +105,7 @@ def _step_response(
     def speed() -> float:
         value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
         jogger.keepalive.beat_if_due()
+        jogger.watch_inputs()
         return value
 
     def stop() -> None:

@@ -203,7 +203,10 @@ def test_motion_setup_values_read_as_users_type_them():
     po407 = reqs["sd25"]["Po407"]
     assert po407.fields == ("X",) and po407.met(0x011A) and po407.met(26) and not po407.met(0x1B)
     assert po407.assignments() == ["Po407.X=26"]
-    assert reqs["sd25"]["So-58"].item.unverified  # the digit meaning is a figure
+    assert "So-58" not in reqs["sd25"]  # servotool forces the DIs itself for a motion (forced_inputs)
+    forced = load_profile("sd25").forced_inputs
+    assert forced is not None and forced.switch_code == "So-58" and forced.levels_code == "So-57"
+    assert forced.monitor_shows == "forced" and "which digit" in forced.unverified  # the digit meaning is a figure
 
 
 @pytest.mark.parametrize(

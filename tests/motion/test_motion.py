@@ -32,7 +32,7 @@ SETUP = {
         ["param", "set", "H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", "H17-00=1", "H17-02=28"]
     ],
     "sdc": [["param", "set", "PN4=3"]],
-    "sd25": [["param", "set", "--save", "Po407.X=26", "Po408.X=27"], None, ["param", "set", "So-58.X=1"]],
+    "sd25": [["param", "set", "--save", "Po407.X=26", "Po408.X=27"], None],  # servotool forces the DIs itself
 }
 
 
@@ -269,7 +269,7 @@ def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
     assert "So-57 (jog)" in r.err and "Po407.X = 26" in r.err
     assert "no communication timeout" in r.err
     assert "Po407, Po408 take effect only after a power cycle" in r.err
-    assert "So-58 (setup): which digit" in r.err
+    assert "So-58 (forced inputs): which digit" in r.err
     assert abs(read(port, "speed_feedback", profile="sd25")[0]) < 10
 
 
@@ -289,7 +289,7 @@ def test_a_real_port_names_the_unverified_route_and_asks(cli, served_as):
             ],
         ),
         ("sdc", ["PN4 = 3 (now 0)"]),
-        ("sd25", ["Po407.X = 26 (now 0)", "Po408.X = 27 (now 0)", "So-58.X = 1 (now 0)"]),
+        ("sd25", ["Po407.X = 26 (now 0)", "Po408.X = 27 (now 0)"]),
     ],
 )
 def test_a_drive_not_set_up_refuses_in_one_line_and_its_fix_lets_the_jog_run(cli, profile, differs):
@@ -313,9 +313,7 @@ def test_a_drive_not_set_up_refuses_in_one_line_and_its_fix_lets_the_jog_run(cli
 
 
 def test_a_power_cycle_setting_written_but_not_in_effect_is_named_on_the_simulator(cli):
-    assert (
-        cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po407.X=26", "Po408.X=27", "So-58.X=1").code == 0
-    )
+    assert cli("--port", "sim", "-P", "sd25", "param", "set", "--save", "Po407.X=26", "Po408.X=27").code == 0
     r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--no-dead-man")
     assert r.code == 2
     assert (
@@ -325,7 +323,7 @@ def test_a_power_cycle_setting_written_but_not_in_effect_is_named_on_the_simulat
     ) in r.err
     assert cli("sim", "reset", "-P", "sd25", "--power-cycle").code == 0
     r = cli("--port", "sim", "-P", "sd25", "jog", "--speed", "100", "--time", "0.5", "--json", "--no-dead-man")
-    assert r.code == 0, r.err  # --save kept So-58 too (the simulator stores it)
+    assert r.code == 0, r.err  # servotool forced the DIs itself (So-58, cleared at power-up)
     assert r.json()["median_speed_rpm"] == pytest.approx(100, abs=8)
 
 

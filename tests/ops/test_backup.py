@@ -307,7 +307,7 @@ def test_backup_file_has_the_metadata_and_a_checksum_of_the_values(auto_dir, tmp
     with sim() as d:
         backup.write_backup(d, f)
     data = yaml.safe_load(f.read_text())
-    assert data["profile"] == "dsx7e" and data["profile_version"] == "1.0" and data["model"] == "DSX7E"
+    assert data["profile"] == "dsx7e" and data["profile_version"] == "1.1" and data["model"] == "DSX7E"
     assert data["unit"] == 1 and data["tool_version"] and data["created"].endswith("+00:00")
     assert list(data["identity"]) == ["Un200", "Un201", "Un202", "Un203", "Un204", "Un205"]  # the identity checks
     assert len(data["values"]) == 108 and data["display"]["Pn100"] == "32.0 1/s"
