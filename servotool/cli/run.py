@@ -12,6 +12,7 @@ from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame, warn
 from servotool.commission.plan import Plan, load_plan
 from servotool.commission.plan_files import report_problem
+from servotool.commission.prerequisites import motion_setup
 from servotool.commission.runner import Report, Runner, writes_to_drives
 from servotool.commission.steps import Checked, validate
 from servotool.connection import Resolved, merge, options_from, resolve
@@ -81,6 +82,7 @@ def run(
         ok: bool | None = None
         try:
             runner.check_units()
+            runner.check_setup()
             runner.back_up(notice)
             ok = runner.run()
         except ServoError:
@@ -138,6 +140,7 @@ def _show_dry_run(
                 "files": [f.as_json() for f in checked.files],
                 "report": str(report_path),
                 "auto_backups": None if autos is None else {"units": units, "folder": str(autos)},
+                "drive_setup": [a for r in motion_setup(plan, resolved.profile) for a in r.assignments()],
             }
         )
         return
@@ -157,6 +160,9 @@ def _show_dry_run(
     out.print(f"  {report_path} (the run's report)", markup=False)
     for f in (f for f in checked.files if not f.writes):
         out.print(f"Would read: {f.path} ({f.kind}, step {f.step.index + 1}, unit {f.unit})", markup=False)
+    if needed := motion_setup(plan, resolved.profile):
+        settings = ", ".join(", ".join(r.assignments()) for r in needed)
+        out.print(f"Would check on each axis first, before anything moves: {settings} (host motion)", markup=False)
 
 
 def _report_path(plan_file: Path, report: Path | None, force: bool) -> Path:

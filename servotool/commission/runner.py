@@ -80,6 +80,18 @@ class Runner:
             except DeviceError as exc:
                 raise DeviceError(f"unit {d.unit} does not answer, so nothing was run: {exc}") from None
 
+    def check_setup(self) -> None:
+        """The drive settings every motion step needs, on every axis, before anything is written: one UsageError
+        naming each step, axis and setting (worded as a failed step would be), not a refusal after the plan has
+        already written and moved."""
+        from servotool.commission.prerequisites import unmet
+
+        problems = [
+            f"{step.where()}, unit {d.unit}: {self.word(exc)}" for d in self.drives for step, exc in unmet(self.plan, d)
+        ]
+        if problems:
+            raise UsageError("nothing was run: " + "; ".join(problems))
+
     def back_up(self, notice: Callable[[str], None]) -> None:
         """An automatic backup of every axis before the plan's first write (a plan that only reads needs none)."""
         from servotool.ops.backup import auto_backup
