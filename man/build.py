@@ -109,6 +109,8 @@ The whole plan is checked before the first step runs, the same way by \fB\-\-dry
 every file the run would write: each step against the profile, each file (outside the folder, existing without
 overwrite, written twice, a restore whose file neither exists nor is written by an earlier step); every
 problem is reported at once and names the plan's line.
+Once the port is open, before anything is written, the run also reads the settings each motion step needs
+(the profile's motion setup, with what earlier \fBset\fR steps write) and refuses a step the drive is not set up for.
 A run writes a JSON report (steps, values written, results, timing) next to the plan as
 \fIPLAN\fB.report.json\fR (replaced by each run) or to \fB\-\-report\fR (an existing file that is not a plan
 report only with \fB\-\-force\fR), also when it fails or is interrupted.
