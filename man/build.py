@@ -75,8 +75,9 @@ cannot tell warns once.
 TAIL = r""".SH PLAN FILES
 A plan for \fBservotool run\fR is YAML (loaded safely: values are data, nothing but these steps can run).
 Optional top keys \fBport\fR, \fBprofile\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR,
-\fBretries\fR (the command line wins) and \fBunits\fR (a list of unit ids: several axes on one line; each step
-runs on every axis in turn, \fB\-\-unit\fR picks one of them); then \fBsteps\fR, a list run in order:
+\fBretries\fR (the command line wins), \fBunits\fR (a list of unit ids: several axes on one line; each step
+runs on every axis in turn, \fB\-\-unit\fR picks one of them), \fBallow_outside\fR and \fBoverwrite\fR (see
+below); then \fBsteps\fR, a list run in order:
 .TP
 .B "set: {CODE: VALUE, ...}"
 Write parameters in engineering units, verified by read\-back; unchanged values are not rewritten.
@@ -85,9 +86,9 @@ Write parameters in engineering units, verified by read\-back; unchanged values 
 Read parameters or monitors and fail (exit 3) unless each is within the bounds (a bare VALUE allows half a
 resolution step).
 .TP
-.BR "backup: FILE" ", " "restore: FILE"
-Back up to or restore from FILE, relative to the plan; \fB{unit}\fR in the name is replaced by the unit id, and
-with several units a name without it gets \fB\-unit\fIN\fR before its suffix.
+.BR "backup: FILE | {file: FILE, overwrite: BOOL}" ", " "restore: FILE"
+Back up to or restore from FILE; \fB{unit}\fR in the name is replaced by the unit id, and with several units a
+name without it gets \fB\-unit\fIN\fR before its suffix.
 .TP
 .B "jog: {speed: RPM, time: S, max_travel: REV, no_dead_man: BOOL}"
 A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBservotool jog\fR;
@@ -107,9 +108,18 @@ Make the plan's writes survive a power cycle the way the drive does it: its save
 with its EEPROM switch set (nothing to do on drives that store every write).
 .PP
 Any step may carry \fBunit: N\fR or a list to run on some axes only.
-The whole plan is checked against the profile before the first step runs; an error names the plan's line.
+A file a plan names is relative to the plan's folder (\fB~\fR is the home folder) and must stay inside that
+folder, symbolic links followed, unless the plan says \fBallow_outside: true\fR; a file (or report folder) that
+exists is replaced only where the step or the plan says \fBoverwrite: true\fR, or \fB\-\-force\fR does.
+The whole plan is checked before the first step runs, the same way by \fB\-\-dry\-run\fR, which also lists
+every file the run would write: each step against the profile, each file (outside the folder, existing without
+overwrite, written twice, a restore whose file neither exists nor is written by an earlier step); every
+problem is reported at once and names the plan's line.
+Once the port is open, before anything is written, the run also reads the settings each motion step needs
+(the profile's motion setup, with what earlier \fBset\fR steps write) and refuses a step the drive is not set up for.
 A run writes a JSON report (steps, values written, results, timing) next to the plan as
-\fIPLAN\fB.report.json\fR or to \fB\-\-report\fR, also when it fails or is interrupted.
+\fIPLAN\fB.report.json\fR (replaced by each run) or to \fB\-\-report\fR (an existing file that is not a plan
+report only with \fB\-\-force\fR), also when it fails or is interrupted.
 .SH SHELL COMPLETION
 \fBservotool \-\-install\-completion\fR installs completion for the current shell;
 \fBservotool \-\-show\-completion\fR prints the script instead.

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from servotool.commission.plan import JOG_KEYS, TUNE_KEYS, Step
+from servotool.commission.plan_files import FileUse
 from servotool.commission.step_type import Outcome, RunContext, StepType, number_in
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -131,6 +132,10 @@ class TuneInertiaStep(StepType):
             + reported
             + (f"; report to {report}" if report else "")
         )
+
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
+        report = _report_option(step.arg)
+        return [FileUse(report, "tune report")] if report else []
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         request = self.request(step.arg, drive.profile)

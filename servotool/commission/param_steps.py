@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servotool.commission.plan import Step
+from servotool.commission.plan_files import FileUse
 from servotool.commission.step_type import Outcome, RunContext, StepType, no_argument
 from servotool.drive import Drive
 from servotool.errors import UsageError, VerifyError
@@ -167,11 +168,15 @@ class BackupStep(StepType):
         name, overwrite = self.target(step)
         return f"backup {name}" + (" (replacing an existing file)" if overwrite else "")
 
-    def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
         name, overwrite = self.target(step)
-        path = ctx.path(name, drive.unit)
-        if path.exists() and not overwrite:  # before reading the drive: a refusal costs nothing
-            raise UsageError(f"{path} exists; the step must say 'overwrite: true' to replace it")
+        return [FileUse(name, "backup", overwrite)]
+
+    def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+        name, step_says = self.target(step)
+        path, overwrite = ctx.path(name, drive.unit), ctx.may_replace(step_says)
+        if path.exists() and not overwrite:  # checked before the run; a file made meanwhile is still kept
+            raise UsageError(f"{path} exists; say 'overwrite: true' (in the step or the plan) or pass --force")
         written = backup.write_backup(drive, path, force=overwrite)
         return Outcome(f"saved to {written}", {"file": str(written)})
 
@@ -180,6 +185,10 @@ class RestoreStep(_FileStep):
     """`restore: FILE`: a backup file put back completely."""
 
     name = "restore"
+
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
+        self.describe(step, profile)
+        return [FileUse(step.arg, "restore")]
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         path = ctx.path(step.arg, drive.unit)

@@ -332,9 +332,8 @@ def test_a_tune_and_a_plan_jog_refuse_the_same_way(cli, tmp_path):
     assert r.code == 2 and "tune inertia needs drive setup first: H02-00 = 1 (now 8)" in r.err, r.err
     plan = tmp_path / "plan.yaml"
     plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - jog: {speed: 100, time: 0.5}\n")
-    r = cli("run", str(plan), "--yes", "--json")
-    assert r.code != 0
-    assert "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.json()["steps"][0]["detail"]
+    r = cli("run", str(plan), "--yes", "--json")  # refused before anything runs (commission.prerequisites)
+    assert r.code == 2 and "JOG needs drive setup first: Po407.X = 26 (now 0)" in r.err, r.err
 
 
 def test_a_plan_jogs_a_drive_moved_by_segments(cli, tmp_path):
