@@ -22,6 +22,7 @@ from servotool.model.roles import jog_codes, motion_route
 from servotool.motion.caveats import motion_caveats
 from servotool.motion.deadman import route_of
 from servotool.session import open_drives
+from tests.terminal import Terminal
 
 ROOT = Path(__file__).resolve().parents[2]
 PROFILES = ("dsx7e", "sd25", "is620p", "sdc")
@@ -209,24 +210,23 @@ def test_interactive_jog_in_a_terminal(sim_dir, tmp_path):
     if not shutil.which("tmux"):
         pytest.skip("needs tmux (installed by .ci/run)")
     out = tmp_path / "out.txt"
-    session = f"servotool-jog-{os.getpid()}"
     cmd = (
         f"cd {ROOT} && SERVOTOOL_SIM_DIR={sim_dir} {sys.executable} -m servotool --port sim jog --speed 300 "
         f"--interactive --json > {out} 2>/dev/null; echo $? >> {out}"
     )
-    subprocess.run(["tmux", "new-session", "-d", "-s", session, "-x", "120", "-y", "20", cmd], check=True)
+    term = Terminal(cmd, tmp_path, width=120, height=20)
     try:
         time.sleep(2.5)
         for _ in range(40):  # a held key: the terminal repeats it about every 30 ms
-            subprocess.run(["tmux", "send-keys", "-t", session, "Left"], check=True)
+            term.keys("Left")
             time.sleep(0.03)
         time.sleep(1.0)
-        subprocess.run(["tmux", "send-keys", "-t", session, "q"], check=True)
+        term.keys("q")
         deadline = time.monotonic() + 15
         while time.monotonic() < deadline and not out.read_text().strip().endswith("0"):
             time.sleep(0.2)
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True)
+        term.close()
     text = out.read_text()
     assert text.strip().endswith("0"), text
     result = json.loads(text[: text.rindex("}") + 1])
