@@ -47,6 +47,10 @@ TOP_KEYS = {
     "motion_setup",
     "dead_man",
     "identity",
+    "io",
+    "alarm_causes",
+    "alarm_log",
+    "unverified_values",
 }
 DEAD_MAN_ROUTES = ("drive_timeout", "segment", "none")
 DEAD_MAN_KEYS = {"route", "reason", "source", "unverified", "if_host_dies", "start_value"}
@@ -96,6 +100,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     motion_setup = _parse_motion_setup(chk, data.get("motion_setup"), {e.code.upper(): e for e in entries}, broken)
     dead_man = _parse_dead_man(chk, data.get("dead_man"))
     identity = parse_identity(chk, data.get("identity"), {e.code.upper(): e for e in entries}, limits)
+    extras = _parse_extras(chk, data, {e.code.upper(): e for e in entries}, {a.code for a in alarms})
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
     profile = Profile(
@@ -121,8 +126,25 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         unverified_note=str(data.get("unverified_note", "")),
         dead_man=dead_man,
         identity=identity,
+        **extras,
     )
     return profile, []
+
+
+def _parse_extras(
+    chk: Checker, data: dict[str, Any], entries: dict[str, Entry], alarm_codes: set[int]
+) -> dict[str, Any]:
+    """The sections beyond the register map: inputs and outputs, alarm causes and log, unverified values."""
+    from servotool.model.alarm_notes import parse_alarm_causes, parse_alarm_log
+    from servotool.model.terminals import parse_io
+    from servotool.model.unverified_values import parse_unverified_values
+
+    return {
+        "io": parse_io(chk, data.get("io"), entries),
+        "alarm_causes": parse_alarm_causes(chk, data.get("alarm_causes"), alarm_codes),
+        "alarm_log": parse_alarm_log(chk, data.get("alarm_log"), entries),
+        "unverified_values": parse_unverified_values(chk, data.get("unverified_values"), entries),
+    }
 
 
 def _parse_entries(chk: Checker, raw_entries: Any, word_order: str) -> tuple[list[Entry], set[str]]:
