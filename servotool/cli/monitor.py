@@ -157,6 +157,40 @@ def _show(
         out.print(monitor_table(mon, out.width))
 
 
+def _monitor_io(
+    ctx: typer.Context,
+    codes: list[str] | None,
+    rate: float,
+    duration: float | None,
+    *,
+    once: bool,
+    as_json: bool,
+    others: tuple[Path | None, bool],
+) -> None:
+    """monitor --io: the terminals, live (cli/io_view.py)."""
+    from servotool.cli.io_view import show_io
+    from servotool.ops.terminals import TerminalReader
+
+    if codes:
+        raise UsageError("--io shows the drive's inputs and outputs: give no codes with it")
+    if others[0] is not None or others[1]:
+        raise UsageError("--io does not take --csv or --plot")
+    if resolved(ctx).profile.io is None:
+        TerminalReader.refuse(resolved(ctx).profile)
+    interrupted = False
+    with drive(ctx) as d:
+        reader = TerminalReader(d)
+        mon = Monitor(d, reader.monitors)
+        try:
+            show_io(reader, mon, rate, duration, once=once, as_json=as_json)
+        except KeyboardInterrupt:
+            interrupted = True
+    if not once:
+        info(f"{count(mon.samples, 'sample')} in {mon.elapsed:.2f} s")
+    if interrupted:
+        raise typer.Exit(130)
+
+
 def monitor(
     ctx: typer.Context,
     codes: list[str] = typer.Argument(
@@ -185,10 +219,19 @@ def monitor(
         help="A scrolling chart instead of the table (one panel per unit); "
         "plain lines when the output is not a terminal.",
     ),
+    io: bool = typer.Option(
+        False,
+        "--io",
+        help="The digital inputs and outputs instead: each terminal's level and the function the drive's "
+        "parameters assign it, as the manual names it.",
+    ),
 ) -> None:
     """Watch live values with units, min/max and a trend; report the sample rate achieved."""
     check_rate(rate)
     check_duration(duration)
+    if io:
+        _monitor_io(ctx, codes, rate, duration, once=once, as_json=as_json, others=(csv_file, plot))
+        return
     mode = _csv_mode(csv_file, force, append)
     # Everything the user typed is checked before the port is opened: codes against the profile, the CSV path.
     entries = resolve_entries(resolved(ctx).profile, codes or [])

@@ -28,7 +28,8 @@ if TYPE_CHECKING:
 
 NAME_MIN = 20  # a wrapped name or description keeps at least this many columns: readable
 UNLIMITED = 10_000  # "no width": nothing wraps
-WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note", "Result"}  # text columns: these wrap
+# text columns: these wrap
+WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note", "Result", "Function", "Recorded"}
 # Columns dropped first when a table is too wide, least useful first; tables may give their own order.
 DROP_ORDER = (
     "Address",
@@ -59,6 +60,64 @@ def _stdout_width() -> int | None:
         return os.get_terminal_size(sys.stderr.fileno()).columns
     except (OSError, ValueError, AttributeError):
         return UNLIMITED
+
+
+def text_width(stderr: bool = False) -> int:
+    """The width plain text is wrapped to on stdout (or stderr): its terminal's, else COLUMNS; piped stdout takes
+    stderr's terminal, and with no terminal at all nothing is wrapped (UNLIMITED)."""
+    stream = sys.stderr if stderr else sys.stdout
+    if _isatty(stream):
+        return _columns(stream)
+    if (columns := os.environ.get("COLUMNS", "")).isdigit() and int(columns) > 0:
+        return int(columns)
+    if not stderr and _isatty(sys.stderr):
+        return _columns(sys.stderr)
+    return UNLIMITED
+
+
+def _columns(stream: IO[str]) -> int:
+    try:
+        return os.get_terminal_size(stream.fileno()).columns
+    except (OSError, ValueError, AttributeError):
+        return UNLIMITED
+
+
+def _isatty(stream: IO[str]) -> bool:
+    try:
+        return stream.isatty()
+    except (ValueError, AttributeError):
+        return False
+
+
+def cells(text: str) -> int:
+    """Columns a text takes on a terminal: East Asian wide characters take two (the manuals' 本次 in a note)."""
+    import unicodedata
+
+    return sum(2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text)
+
+
+def wrap(text: str, width: int | None = None, *, indent: str = "", hanging: str = "  ") -> str:
+    """Text broken between words to fit `width` columns (default: stdout's text_width): the first line after
+    `indent`, the rest after `indent` + `hanging`. A word longer than the width stays whole."""
+    width = text_width() if width is None else width
+    out: list[str] = []
+    for paragraph in text.split("\n"):
+        if cells(indent + paragraph) <= width:
+            out.append(indent + paragraph)
+            continue
+        words = paragraph.lstrip(" ")
+        lead = indent + paragraph[: len(paragraph) - len(words)]
+        line, used = lead, cells(lead)
+        for word in words.split(" "):
+            size = cells(word)
+            if line.strip() and used + 1 + size > width:
+                out.append(line.rstrip(" "))
+                line, used = lead + hanging + word, cells(lead + hanging) + size
+            else:
+                sep = " " if line.strip() else ""
+                line, used = line + sep + word, used + len(sep) + size
+        out.append(line.rstrip(" "))
+    return "\n".join(out)
 
 
 def _is_terminal(file: IO[str]) -> bool:

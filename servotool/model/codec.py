@@ -119,6 +119,19 @@ def split_field(profile: Profile, text: str) -> tuple[Entry, str | None]:
     return entry, entry.fields[field_index(entry, name)]
 
 
+def part_value(entry: Entry, raw: int, part: str | None) -> int:
+    """The value of CODE.PART in a raw value: a digit field (Po407.X), a named bit (Pn408.DI1), or the whole value."""
+    if part is None:
+        return raw
+    upper = part.upper()
+    if entry.format == "digits":
+        names = [f.upper() for f in entry.fields]
+        index = names.index(upper)
+        return (raw >> (entry.field_width * index)) & ((1 << entry.field_width) - 1)
+    bit = next(b for b, name in entry.bits.items() if name.upper() == upper)
+    return raw >> bit & 1
+
+
 def fields_json(entry: Entry, raw: int) -> dict[str, int] | None:
     """{field: value}, highest field first, for a displayable digit value; None otherwise."""
     if entry.format != "digits" or not _displayable(entry, raw):

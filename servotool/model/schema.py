@@ -135,9 +135,12 @@ def _parse_extras(
     chk: Checker, data: dict[str, Any], entries: dict[str, Entry], alarm_codes: set[int]
 ) -> dict[str, Any]:
     """The sections beyond the register map: inputs and outputs, alarm causes and log, unverified values."""
-    from servotool.model.alarm_notes import parse_alarm_causes, parse_alarm_log
-    from servotool.model.terminals import parse_io
-    from servotool.model.unverified_values import parse_unverified_values
+    from servotool.model.section_schema import (
+        parse_alarm_causes,
+        parse_alarm_log,
+        parse_io,
+        parse_unverified_values,
+    )
 
     return {
         "io": parse_io(chk, data.get("io"), entries),
