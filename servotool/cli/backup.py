@@ -9,6 +9,7 @@ import typer
 
 from servotool.cli.common import JSON_OPT, confirm, drive, resolved, state
 from servotool.cli.render import emit_json, err, info, out, progress, table, warn
+from servotool.cli.values import footnote, json_mark, texts, unit_text
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
@@ -106,7 +107,11 @@ def diff_cmd(
             current = _read_all(d, as_json)
             missing = list(d.missing)
         _show_diff(
-            backup.diff(profile, current, backup.defaults(profile)), ("drive", "factory default"), missing, as_json
+            profile,
+            backup.diff(profile, current, backup.defaults(profile)),
+            ("drive", "factory default"),
+            missing,
+            as_json,
         )
         return
 
@@ -134,7 +139,7 @@ def diff_cmd(
             missing = list(d.missing)
         labels = ("drive", str(file))
         diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
-    _show_diff(diffs, labels, missing, as_json)
+    _show_diff(profile, diffs, labels, missing, as_json)
 
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
@@ -143,9 +148,12 @@ def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
         return read_settings(d, advance)
 
 
-def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing: list[str], as_json: bool) -> None:
+def _show_diff(
+    profile: Profile, diffs: list[backup.Difference], labels: tuple[str, str], missing: list[str], as_json: bool
+) -> None:
     if as_json:
-        emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs], "missing": missing})
+        differences = [{**x.as_json(), "value_unverified": json_mark(profile, x.entry)} for x in diffs]
+        emit_json({"a": labels[0], "b": labels[1], "differences": differences, "missing": missing})
         return
     if not diffs:
         out.print(f"no differences between {labels[0]} and {labels[1]}", markup=False)
@@ -158,10 +166,12 @@ def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing:
             e.name,
             "" if x.a is None else format_value(e, x.a),
             "" if x.b is None else format_value(e, x.b),
-            e.unit,
+            unit_text(profile, e),
             MARK.get(e.effect, ""),
         )
     out.print(t)
+    if (note := footnote(profile, [x.entry for x in diffs])) is not None:
+        out.print(note, markup=False)
 
 
 @app.command("restore")
@@ -188,13 +198,13 @@ def restore_cmd(
             current = {r.entry.code: r.raw for r in d.read_entries(entries, partial=True, progress=advance)}
         plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [])
         if not as_json:
-            _show_plan(plan)
+            _show_plan(d.profile, plan)
         if dry_run or not plan.changes:
             if as_json:
                 emit_json(
                     {
                         "dry_run": dry_run,
-                        "changes": _changes_json(plan),
+                        "changes": _changes_json(d.profile, plan),
                         "written": [],
                         "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
                         "missing": [e.code for e in plan.missing],
@@ -217,7 +227,7 @@ def restore_cmd(
         emit_json(
             {
                 "dry_run": False,
-                "changes": _changes_json(plan),
+                "changes": _changes_json(d.profile, plan),
                 "written": [e.code for e in report.written],
                 "auto_backup": str(report.auto_backup),
                 "persisted": report.persisted,
@@ -237,21 +247,38 @@ def restore_cmd(
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 
 
-def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
+def _changes_json(profile: Profile, plan: restore.RestoreChanges) -> list[dict[str, object]]:
     return [
-        {"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit, "effect": e.effect}
+        {
+            "code": e.code,
+            "old": json_value(e, old),
+            "new": json_value(e, new),
+            **texts(e, old=old, new=new),
+            "unit": e.unit,
+            "effect": e.effect,
+            "value_unverified": json_mark(profile, e),
+        }
         for e, old, new in plan.changes
     ]
 
 
-def _show_plan(plan: restore.RestoreChanges) -> None:
+def _show_plan(profile: Profile, plan: restore.RestoreChanges) -> None:
     if plan.changes:
         t = table(
             "Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{count(len(plan.changes), 'change')}, in order"
         )
         for e, old, new in plan.changes:
-            t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
+            t.add_row(
+                e.code,
+                e.name,
+                format_value(e, old),
+                format_value(e, new),
+                unit_text(profile, e),
+                MARK.get(e.effect, ""),
+            )
         out.print(t)
+        if (note := footnote(profile, [e for e, _, _ in plan.changes])) is not None:
+            out.print(note, markup=False)
     for e, why in plan.skipped:
         info(f"skipped {e.code}: {why}")
 

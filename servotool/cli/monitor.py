@@ -15,6 +15,7 @@ from rich.text import Text
 from servotool.cli import complete
 from servotool.cli.common import drive, resolved
 from servotool.cli.render import emit_json_line, info, out, table
+from servotool.cli.values import json_mark
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
 from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
@@ -34,8 +35,11 @@ def _fmt(value: float, decimals: int) -> str:
 def _title(mon: Monitor) -> str:
     rate = mon.achieved_rate
     count = f"{mon.samples} sample{'' if mon.samples == 1 else 's'}"
-    return f"{mon.drive.profile.model} unit {mon.drive.unit}: {count}" + (
-        f", {rate:.1f} Hz" if rate is not None else ""
+    marked = any(mon.drive.profile.value_unverified(e) for e in mon.entries)
+    return (
+        f"{mon.drive.profile.model} unit {mon.drive.unit}: {count}"
+        + (f", {rate:.1f} Hz" if rate is not None else "")
+        + ("; * unit or scale unverified" if marked else "")
     )
 
 
@@ -44,7 +48,8 @@ def monitor_table(mon: Monitor, width: int) -> Table:
     rows = []
     for s in mon.series.values():
         d = decimals(s.entry)
-        rows.append([s.entry.code, s.entry.name, _fmt(s.last, d), s.entry.unit, _fmt(s.low, d), _fmt(s.high, d)])
+        unit = s.entry.unit + ("*" if mon.drive.profile.value_unverified(s.entry) else "")  # the title says why
+        rows.append([s.entry.code, s.entry.name, _fmt(s.last, d), unit, _fmt(s.low, d), _fmt(s.high, d)])
     heads = ["Code", "Name", "Value", "Unit", "Min", "Max"]
     natural = [max([len(h)] + [len(r[i]) for r in rows]) for i, h in enumerate(heads)]
     fixed = sum(natural) - natural[1]
@@ -66,18 +71,18 @@ def monitor_table(mon: Monitor, width: int) -> Table:
 
 
 def _sample_json(mon: Monitor, s: Sample) -> dict[str, object]:
-    """One JSON line: values rounded to each entry's resolution, with their units."""
-    series = mon.series
-    values = {
-        c: round(v, decimals(series[c].entry)) if isinstance(v, float) and c in series else v
-        for c, v in s.values.items()
-    }
-    return {
-        "t": round(s.t, 4),
-        "time": s.wall.isoformat(timespec="milliseconds"),
-        "values": values,
-        "units": {c: series[c].entry.unit for c in s.values if c in series},
-    }
+    """One JSON line: each value rounded to its entry's resolution, with its unit (and, where the manual leaves
+    its scale or meaning open, why)."""
+    profile = mon.drive.profile
+    values: dict[str, object] = {}
+    for c, v in s.values.items():
+        entry = mon.series[c].entry
+        values[c] = {
+            "value": round(v, decimals(entry)) if isinstance(v, float) else v,
+            "unit": entry.unit,
+            "value_unverified": json_mark(profile, entry),
+        }
+    return {"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"), "values": values}
 
 
 def monitor_chart(mon: Monitor, history: deque[Sample], width: int, height: int) -> Text:

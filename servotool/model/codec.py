@@ -182,11 +182,16 @@ def format_value(entry: Entry, raw: int) -> str:
     return text
 
 
-def json_value(entry: Entry, raw: int) -> int | float | str:
-    """Value for machine-readable output: engineering number, or the manual's text for encoded formats."""
-    if entry.format in ("digits", "hex"):
-        return format_value(entry, raw)
+def json_value(entry: Entry, raw: int) -> int | float:
+    """Value for machine-readable output: always a number (the engineering value; for an encoded entry, two-/four-
+    parameter digits, hex, a bit field, the register's value); json_text gives the manual's form beside it."""
     return raw_to_eng(entry, raw)
+
+
+def json_text(entry: Entry, raw: int) -> str | None:
+    """The manual's form of an encoded value ('d 1 21', 'b1200', '0x0003 [DI1 DI2]') for a `text` field beside the
+    number; None for a plain number."""
+    return format_value(entry, raw) if entry.format in ("digits", "hex", "bits") else None
 
 
 def parse_value(entry: Entry, text: str, *, raw: bool = False, current: int | None = None) -> int:

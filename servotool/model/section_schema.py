@@ -297,19 +297,32 @@ def _selector(chk: Checker, raw: Any, entries: dict[str, Entry]) -> RecordSelect
 
 
 def parse_unverified_values(chk: Checker, raw: Any, entries: dict[str, Entry]) -> dict[str, str]:
-    """Entry code (upper case) -> why its value's scale or meaning is unverified."""
+    """Entry code (upper case) -> why its value's scale or meaning is unverified. Each item is a code (the entry's
+    own `unverified` text says why) or a one-key mapping {code: reason}."""
     if raw is None:
         return {}
-    if not isinstance(raw, dict):
-        chk.bad("unverified_values", "expected a mapping of entry code -> reason")
+    if not isinstance(raw, list):
+        chk.bad("unverified_values", "expected a list of entry codes or {code: reason}")
         return {}
     out: dict[str, str] = {}
-    for code, reason in raw.items():
+    for i, item in enumerate(raw):
+        loc = f"unverified_values[{i}]"
+        if isinstance(item, dict) and len(item) == 1:
+            code, reason = next(iter(item.items()))
+        elif isinstance(item, str):
+            code, reason = item, None
+        else:
+            chk.bad(loc, "expected an entry code or {code: reason}")
+            continue
         entry = entries.get(str(code).upper())
         if entry is None:
-            chk.bad(f"unverified_values.{code}", f"names unknown entry {code!r}")
-        elif not isinstance(reason, str) or not reason.strip():
-            chk.bad(f"unverified_values.{code}", "expected the reason, as text")
+            chk.bad(loc, f"names unknown entry {code!r}")
+            continue
+        reason = entry.unverified if reason is None else reason
+        if not isinstance(reason, str) or not reason.strip():
+            chk.bad(loc, f"{entry.code}: give the reason (the entry has no 'unverified' text to stand for it)")
+        elif entry.code.upper() in out:
+            chk.bad(loc, f"{entry.code} is listed twice")
         else:
-            out[entry.code.upper()] = reason.strip()
+            out[entry.code.upper()] = " ".join(reason.split())
     return out

@@ -40,20 +40,22 @@ def refresh(
     _set(profile, bank, "load_rate", p.load_rate_pct)
     _set(profile, bank, "current_rms", abs(p.torque_pct) / 100 * RATED_CURRENT_A)
     _set(profile, bank, "bus_voltage", BUS_VOLTAGE_V)
-    terminals.refresh_outputs(profile, bank, terminals.DriveState(p.alarm is not None, p.servo_on, p.speed_rpm))
+    # The true speed, not the measured one: a measurement draws from the noise generator, and the outputs (read
+    # on every refresh) must not shift the noise a seeded run sees in its readings.
+    terminals.refresh_outputs(profile, bank, terminals.DriveState(p.alarm is not None, p.servo_on, p.true_speed_rpm))
     _refresh_alarm_log(profile, bank, alarms, p.alarm)
     _refresh_status_word(profile, bank, p, jogging=jogging, identifying=identifying)
 
 
 def alarm_context(profile: Profile, bank: RegisterBank, p: Plant, run_time_s: float) -> dict[str, float]:
     """What the drive records beside an alarm as it trips (the profile's alarm_log says which it keeps)."""
-    current = abs(p.torque_pct) / 100 * RATED_CURRENT_A
+    current = abs(p.true_torque_pct) / 100 * RATED_CURRENT_A  # true values: no draw from the noise generator
     io = profile.io
-    state = terminals.DriveState(True, p.servo_on, p.speed_rpm)
+    state = terminals.DriveState(True, p.servo_on, p.true_speed_rpm)
     outputs = terminals.output_word(profile, bank, state)
     return {
         "time": run_time_s,
-        "speed": p.speed_rpm,
+        "speed": p.true_speed_rpm,
         "bus_voltage": BUS_VOLTAGE_V,
         "current": current,
         "current_u": current * 2**0.5,  # a phase's peak, the motor standing at the angle of the U phase's peak
