@@ -194,6 +194,7 @@ def list_(
         entries = params.select(d.profile, group=group, classes=classes)
         with progress("reading", len(entries), enabled=not (as_json or as_csv)) as advance:
             readings = d.read_entries(entries, partial=True, progress=advance)
+    read = len(readings)
     if changed:
         readings = [r for r in readings if r.changed]
     if as_csv:
@@ -207,6 +208,10 @@ def list_(
                 for e in d.missing.values()
             ]
         )
+        return
+    if not readings:  # a line, not a table with no rows
+        what = "differs from its factory default" if changed else "could be read"
+        out.print(f"{d.profile.model} unit {d.unit}: no entry {what} ({count(read, 'entry')} read)", markup=False)
         return
     t = table("Code", "Name", "Value", "Unit", "Default", "", title=f"{d.profile.model} unit {d.unit}")
     for r in readings:

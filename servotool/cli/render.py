@@ -195,6 +195,7 @@ class _Stream:
         return sys.stderr if self._stderr else sys.stdout
 
     def print(self, *objects: Any, **kwargs: Any) -> None:
+        objects = self._wrapped(objects, kwargs)
         text = self._plain(objects, kwargs) if self._console is None else None
         if text is None:
             self.console.print(*objects, **kwargs)
@@ -202,6 +203,17 @@ class _Stream:
         file = self._file()
         file.write(text)
         file.flush()
+
+    def _wrapped(self, objects: tuple[Any, ...], kwargs: dict[str, Any]) -> tuple[Any, ...]:
+        """A line of text broken between words to the stream's width (its terminal's, or COLUMNS), the rest of a
+        long line indented: a terminal would break it anywhere, mid-word. Not wrapped without any width (a file, a
+        script's pipe), nor text with markup, whose width is rich's to count."""
+        if len(objects) != 1 or type(objects[0]) is not str or set(kwargs) - {"markup", "style"}:
+            return objects
+        if "[" in objects[0] and kwargs.get("markup", True) is not False:
+            return objects
+        width = text_width(self._stderr)
+        return objects if width >= UNLIMITED else (wrap(objects[0], width),)
 
     def _plain(self, objects: tuple[Any, ...], kwargs: dict[str, Any]) -> str | None:
         """What rich would print for these, when it is plain text; None when rich must print it."""
