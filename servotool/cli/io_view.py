@@ -49,10 +49,13 @@ def io_json(reader: TerminalReader, levels: Levels, sample: Sample | None = None
     def rows(direction: str) -> list[dict[str, object]]:
         return [{**a.as_json(), "level": levels.of(direction)[a.terminal.name]} for a in reader.assignments[direction]]
 
-    data: dict[str, object] = {} if sample is None else {"t": round(sample.t, 4), "time": sample.wall.isoformat()}
+    data: dict[str, object] = (
+        {} if sample is None else {"t": round(sample.t, 4), "time": sample.wall.isoformat(timespec="milliseconds")}
+    )
     for group in reader.groups:
         data[group.direction] = rows(group.direction)
         data[f"{group.direction}_monitor"] = group.monitor
+        data[f"{group.direction}_unverified"] = group.unverified or None  # what the manual leaves open of them all
     return data
 
 
