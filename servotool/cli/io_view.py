@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from servotool.cli.render import emit_json_line, out, table
+from servotool.cli.render import emit_json_line, fit, out, table
 from servotool.ops.monitor import Monitor, Sample
 from servotool.ops.terminals import Levels, TerminalReader
 
@@ -78,7 +78,7 @@ def show_io(reader: TerminalReader, mon: Monitor, rate: float, duration: float |
         with Live(console=out, refresh_per_second=8, transient=False) as view:
             for s in samples:
                 levels = reader.levels(s.values)
-                view.update(Group(*io_tables(reader, levels)))
+                view.update(Group(*(fit(t, out.width) for t in io_tables(reader, levels))))
     else:
         last = ""
         for s in samples:

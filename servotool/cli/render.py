@@ -76,10 +76,15 @@ def text_width(stderr: bool = False) -> int:
 
 
 def _columns(stream: IO[str]) -> int:
+    """A terminal's width; one that reports none (0, a pty nobody sized) is read as COLUMNS, else 80, as rich does."""
     try:
-        return os.get_terminal_size(stream.fileno()).columns
+        columns = os.get_terminal_size(stream.fileno()).columns
     except (OSError, ValueError, AttributeError):
-        return UNLIMITED
+        columns = 0
+    if columns > 0:
+        return columns
+    given = os.environ.get("COLUMNS", "")
+    return int(given) if given.isdigit() and int(given) > 0 else 80
 
 
 def _isatty(stream: IO[str]) -> bool:
