@@ -194,6 +194,8 @@ class AlarmHistory:
             "slots": self.slots,
             "kept_in": self.kept_in,
             "excludes_current": self.excludes_current,
+            "source": self.source or None,
+            "unverified": self.unverified or None,
         }
 
 
