@@ -9,6 +9,7 @@ import typer
 
 from servotool.cli.common import JSON_OPT, confirm, drive, resolved, state
 from servotool.cli.render import emit_json, err, info, out, progress, table, warn
+from servotool.cli.values import footnote, json_mark, texts, unit_text
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
@@ -107,6 +108,7 @@ def diff_cmd(
             current = _read_all(d, as_json)
             missing = list(d.missing)
         _show_diff(
+            profile,
             backup.diff(profile, current, backup.defaults(profile)),
             ("drive", "factory default"),
             missing,
@@ -141,7 +143,7 @@ def diff_cmd(
         labels = ("drive", str(file))
         diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
         compared = compared_memory(profile)
-    _show_diff(diffs, labels, missing, as_json, compared)
+    _show_diff(profile, diffs, labels, missing, as_json, compared)
 
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
@@ -153,6 +155,7 @@ def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
 
 
 def _show_diff(
+    profile: Profile,
     diffs: list[backup.Difference],
     labels: tuple[str, str],
     missing: list[str],
@@ -161,7 +164,8 @@ def _show_diff(
 ) -> None:
     """The differences; compared names the drive's memory a drive diff read (RAM, which may not be EEPROM)."""
     if as_json:
-        data = {"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs], "missing": missing}
+        differences = [{**x.as_json(), "value_unverified": json_mark(profile, x.entry)} for x in diffs]
+        data = {"a": labels[0], "b": labels[1], "differences": differences, "missing": missing}
         emit_json({**data, **({"compared": compared} if compared else {})})
         return
     if compared == "RAM":
@@ -184,10 +188,12 @@ def _show_diff(
             e.name,
             "" if x.a is None else format_value(e, x.a),
             "" if x.b is None else format_value(e, x.b),
-            e.unit,
+            unit_text(profile, e),
             MARK.get(e.effect, ""),
         )
     out.print(t)
+    if (note := footnote(profile, [x.entry for x in diffs])) is not None:
+        out.print(note, markup=False)
 
 
 @app.command("restore")
@@ -227,14 +233,14 @@ def restore_cmd(
         plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [], ram_only=ram_only)
         compared = compared_memory(d.profile)
         if not as_json:
-            _show_plan(plan, compared)
+            _show_plan(d.profile, plan, compared)
         if dry_run or plan.empty:
             if as_json:
                 emit_json(
                     {
                         "dry_run": dry_run,
                         "compared": compared,
-                        "changes": _changes_json(plan),
+                        "changes": _changes_json(d.profile, plan),
                         "store_again": [e.code for e, _ in plan.again],
                         "written": [],
                         "stored_again": [],
@@ -259,7 +265,7 @@ def restore_cmd(
             {
                 "dry_run": False,
                 "compared": compared,
-                "changes": _changes_json(plan),
+                "changes": _changes_json(d.profile, plan),
                 "store_again": [e.code for e, _ in plan.again],
                 "written": [e.code for e in report.written],
                 "stored_again": [e.code for e in report.stored_again],
@@ -290,14 +296,22 @@ def restore_cmd(
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 
 
-def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
+def _changes_json(profile: Profile, plan: restore.RestoreChanges) -> list[dict[str, object]]:
     return [
-        {"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit, "effect": e.effect}
+        {
+            "code": e.code,
+            "old": json_value(e, old),
+            "new": json_value(e, new),
+            **texts(e, old=old, new=new),
+            "unit": e.unit,
+            "effect": e.effect,
+            "value_unverified": json_mark(profile, e),
+        }
         for e, old, new in plan.changes
     ]
 
 
-def _show_plan(plan: restore.RestoreChanges, compared: str) -> None:
+def _show_plan(profile: Profile, plan: restore.RestoreChanges, compared: str) -> None:
     if plan.changes:
         t = table(
             "Code",
@@ -309,8 +323,17 @@ def _show_plan(plan: restore.RestoreChanges, compared: str) -> None:
             title=f"{count(len(plan.changes), 'change')}, in order",
         )
         for e, old, new in plan.changes:
-            t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
+            t.add_row(
+                e.code,
+                e.name,
+                format_value(e, old),
+                format_value(e, new),
+                unit_text(profile, e),
+                MARK.get(e.effect, ""),
+            )
         out.print(t)
+        if (note := footnote(profile, [e for e, _, _ in plan.changes])) is not None:
+            out.print(note, markup=False)
     if plan.again:
         info(
             f"and {count(len(plan.again), 'value')} the drive's RAM already holds, written again under the EEPROM "

@@ -101,10 +101,15 @@ def show(
     if p.unverified_note:
         out.print(f"[yellow]note:[/yellow] {p.unverified_note}")
     if unverified:
-        t = table("Code", "Name", "Why unverified", title=count(len(entries), "unverified entry", "unverified entries"))
-        for e in entries:
-            t.add_row(e.code, e.name, e.unverified)
-        out.print(t)
+        if entries:
+            t = table(
+                "Code", "Name", "Why unverified", title=count(len(entries), "unverified entry", "unverified entries")
+            )
+            for e in entries:
+                t.add_row(e.code, e.name, e.unverified)
+            out.print(t)
+        else:
+            out.print("no unverified entry", markup=False)
         _print_dead_man(p)
         _print_identity(p, only_unverified=True)
         found = sim_extensions(p)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import typer
 
 from servotool.cli.common import state
@@ -12,6 +10,7 @@ from servotool.connection import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
+from servotool.model.quantity import quantity
 from servotool.model.roles import sim_extensions
 from servotool.sim import state as sim_state
 from servotool.sim.device import SIM_SETTINGS, line_choice
@@ -247,7 +246,13 @@ def show(
                 "settings": status.settings,
                 "pending_power_cycle": status.pending_power_cycle,
                 "eeprom_writes": status.eeprom_writes,
-                "running": dataclasses.asdict(run) if run else None,
+                "running": {
+                    "servo_on": run.servo_on,
+                    "alarm": run.alarm,
+                    "position": quantity(run.position_rev, "rev"),
+                }
+                if run
+                else None,
                 "missing": list(status.missing),
                 "extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(status.profile)],
             }

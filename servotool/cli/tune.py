@@ -12,10 +12,12 @@ import typer
 from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
+from servotool.cli.values import json_mark, spoken, unit_text
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import as_held, raw_to_eng
 from servotool.model.profile import Profile
+from servotool.model.quantity import quantity
 from servotool.motion import deadman, protect
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
@@ -45,7 +47,7 @@ def _rounded(value: float | None, decimals: int) -> float | None:
     return None if value is None or not math.isfinite(value) else round(value, decimals)
 
 
-def _gains_json(changes: Any) -> list[dict[str, Any]]:
+def _gains_json(changes: Any, profile: Profile | None = None) -> list[dict[str, Any]]:
     return [
         {
             "role": c.role,
@@ -53,6 +55,7 @@ def _gains_json(changes: Any) -> list[dict[str, Any]]:
             "old": as_held(c.entry, c.old),
             "new": as_held(c.entry, c.new),
             "unit": c.entry.unit,
+            "value_unverified": json_mark(profile, c.entry) if profile is not None else None,
         }
         for c in changes
     ]
@@ -61,8 +64,13 @@ def _gains_json(changes: Any) -> list[dict[str, Any]]:
 def _step_json(response: step.StepResponse | None) -> dict[str, Any] | None:
     if response is None:
         return None
-    summary = response.summary()
-    return {**summary, **{k: _rounded(summary[k], 2) for k in ("overshoot_pct", "settling_ms", "ripple_pct")}}
+    return {
+        "target": quantity(response.target_rpm, "rpm"),
+        "overshoot": quantity(_rounded(response.overshoot_pct, 2), "%"),
+        "settling": quantity(_rounded(response.settling_ms, 2), "ms"),
+        "samples": response.samples,
+        "ripple": quantity(_rounded(response.ripple_pct, 2), "%"),
+    }
 
 
 def _check_options(
@@ -92,17 +100,15 @@ def _estimate_json(result: identify.Result) -> dict[str, Any]:
         "method": result.method,
         "old_ratio": round(result.old_ratio, 4) if result.old_ratio is not None else None,
         "ratio_std": _sig(est.ratio_std) if est else None,
-        "coulomb_nm": _sig(est.coulomb_nm) if est else None,
-        "coulomb_std_nm": _sig(est.coulomb_std_nm) if est else None,
-        "viscous_nm_per_rad_s": _sig(est.viscous_nm_per_rad_s) if est else None,
-        "load_torque_nm": _sig(est.load_torque_nm) if est else None,
-        "load_torque_std_nm": _sig(est.load_torque_std_nm) if est else None,
+        "coulomb": quantity(_sig(est.coulomb_nm), "N·m", std=_sig(est.coulomb_std_nm)) if est else None,
+        "viscous": quantity(_sig(est.viscous_nm_per_rad_s), "N·m·s/rad") if est else None,
+        "load_torque": quantity(_sig(est.load_torque_nm), "N·m", std=_sig(est.load_torque_std_nm)) if est else None,
         "residual_rel": _rounded(est.residual_rel, 4) if est else None,
         "notes": list(est.notes) if est else [],
         "samples": len(result.trace.t),
-        "samples_per_s": round(result.samples_per_s, 1),
-        "travel_rev": round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None,
-        "time_s": round(result.time_used_s, 2),
+        "sample_rate": quantity(round(result.samples_per_s, 1), "Hz"),
+        "travel": quantity(round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None, "rev"),
+        "time": quantity(round(result.time_used_s, 2), "s"),
         "cycles": result.cycles,
     }
 
@@ -257,7 +263,7 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
                     **(_estimate_json(refused) if refused else {}),
                     "ratio": refused.new_ratio if refused else None,
                     "written": False,
-                    "suggested_travel_rev": cure.suggested_rev if cure is not None else None,
+                    "suggested_travel": quantity(cure.suggested_rev if cure is not None else None, "rev"),
                 }
             )
         )
@@ -324,11 +330,17 @@ def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:
     report = friction_report(profile, est) if est is not None else None
     if report is None:
         return None
+    rated = "% of rated torque"
     return {
-        "coulomb_pct": _rounded(report.coulomb_pct, 2),
-        "viscous_pct_at_rated_speed": _rounded(report.viscous_pct_at_rated, 2),
-        "load_pct": _rounded(report.load_pct, 2),
-        "compensation": {s.entry.code: as_held(s.entry, s.value) for s in report.settings},
+        "coulomb": quantity(_rounded(report.coulomb_pct, 2), rated),
+        "viscous_at_rated_speed": quantity(_rounded(report.viscous_pct_at_rated, 2), rated),
+        "load": quantity(_rounded(report.load_pct, 2), rated),
+        "compensation": {
+            s.entry.code: quantity(
+                as_held(s.entry, s.value), s.entry.unit, value_unverified=json_mark(profile, s.entry)
+            )
+            for s in report.settings
+        },
     }
 
 
@@ -356,17 +368,23 @@ def _render(
                     "ratio": round(res.ratio, 4),
                     "friction": _friction_json(profile, res.identified.estimate),
                     "parameter": entry.code if entry else None,
-                    "parameter_value": raw_to_eng(entry, proposal.parameter_raw)
+                    "parameter_value": quantity(
+                        raw_to_eng(entry, proposal.parameter_raw),
+                        entry.unit,
+                        value_unverified=json_mark(profile, entry),
+                    )
                     if entry and proposal.parameter_raw is not None
                     else None,
                     "written": res.ratio_stored,
                     "persisted": res.persisted,
-                    "gains": _gains_json(changes),
+                    "gains": _gains_json(changes, profile),
                     "gains_written": res.gains_written,
-                    "bandwidth_hz": _rounded(sugg.bandwidth_hz, 2) if sugg else None,
+                    "bandwidth": quantity(_rounded(sugg.bandwidth_hz, 2), "Hz") if sugg else None,
                     "rigidity": sugg.rigidity if sugg else None,
-                    "phase_margin_deg": _rounded(proposal.margins.phase_deg, 1) if proposal.margins else None,
-                    "gain_margin_db": _rounded(proposal.margins.gain_db, 1) if proposal.margins else None,
+                    "phase_margin": quantity(_rounded(proposal.margins.phase_deg, 1), "°")
+                    if proposal.margins
+                    else None,
+                    "gain_margin": quantity(_rounded(proposal.margins.gain_db, 1), "dB") if proposal.margins else None,
                     "step_before": _step_json(res.step_before),
                     "step_after": _step_json(res.step_after),
                     "dead_man": dead_man.as_json() if dead_man is not None else None,
@@ -405,7 +423,7 @@ def _show(proposal: tune.Proposal) -> None:
     result, entry, sugg, changes = proposal.identified, proposal.parameter, proposal.suggestion, proposal.gain_changes
     est = result.estimate
     old = f"{result.old_ratio:.2f}" if result.old_ratio is not None else "(not a drive parameter)"
-    param = f"  ({entry.code} = {proposal.parameter_value:g} {entry.unit})" if entry is not None else ""
+    param = f"  ({entry.code} = {spoken(proposal.profile, entry, f'{proposal.parameter_value:g}')})" if entry else ""
     out.print(
         f"load inertia ratio (J_load/J_motor): {old} -> {result.new_ratio:.2f}"
         + (f" ± {est.ratio_std:.2f}" if est else "")
@@ -427,8 +445,8 @@ def _show(proposal: tune.Proposal) -> None:
             out.print(f"in drive units: {report.describe()}", markup=False)
             for s in report.settings:
                 out.print(
-                    f"  friction compensation (suggested, not written): {s.entry.code} = {s.value:g} "
-                    f"{s.entry.unit} ({s.what})",
+                    f"  friction compensation (suggested, not written): {s.entry.code} = "
+                    f"{spoken(proposal.profile, s.entry, f'{s.value:g}')} ({s.what})",
                     markup=False,
                 )
     if changes and sugg is not None:
@@ -442,7 +460,8 @@ def _show(proposal: tune.Proposal) -> None:
             + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else ""),
         )
         for c in changes:
-            t.add_row(c.entry.code, c.entry.name, f"{c.old:g}", f"{c.new:g}", c.entry.unit)  # the role: in JSON
+            unit = unit_text(proposal.profile, c.entry)
+            t.add_row(c.entry.code, c.entry.name, f"{c.old:g}", f"{c.new:g}", unit)  # the role: in JSON
         out.print(t)
         if proposal.margins is not None:
             out.print(f"margins on the identified inertia: {proposal.margins.describe()}", markup=False)
@@ -511,12 +530,12 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
     rows = [
         {
             "level": t.level,
-            "speed_gain_hz": round(t.speed_gain_hz, 2),
-            "phase_margin_deg": round(t.margins.phase_deg, 1),
-            "gain_margin_db": _clean(round(t.margins.gain_db, 1)),
-            "overshoot_pct": _rounded(t.response.overshoot_pct, 2) if t.response else None,
-            "settling_ms": _rounded(t.response.settling_ms, 2) if t.response else None,
-            "ripple_pct": round(t.response.ripple_pct, 2) if t.response else None,
+            "speed_gain": quantity(round(t.speed_gain_hz, 2), "Hz"),
+            "phase_margin": quantity(round(t.margins.phase_deg, 1), "°"),
+            "gain_margin": quantity(_rounded(t.margins.gain_db, 1), "dB"),
+            "overshoot": quantity(_rounded(t.response.overshoot_pct, 2), "%") if t.response else None,
+            "settling": quantity(_rounded(t.response.settling_ms, 2), "ms") if t.response else None,
+            "ripple": quantity(round(t.response.ripple_pct, 2), "%") if t.response else None,
             "failure": t.failure,
         }
         for t in res.trials
@@ -548,13 +567,13 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
         title=f"rigidity levels tried (load ratio {res.load_ratio:.2f})",
     )
     for r in rows:
-        settle = f"{r['settling_ms']:.0f} ms" if r["settling_ms"] is not None else "-"
-        over = f"{r['overshoot_pct']:.0f} %" if r["overshoot_pct"] is not None else "-"
-        gm = f"{r['gain_margin_db']:.1f} dB" if r["gain_margin_db"] is not None else "inf"
+        settle = f"{r['settling']['value']:.0f} ms" if r["settling"] is not None else "-"
+        over = f"{r['overshoot']['value']:.0f} %" if r["overshoot"] is not None else "-"
+        gm = f"{r['gain_margin']['value']:.1f} dB" if r["gain_margin"] is not None else "inf"
         t.add_row(
             str(r["level"]),
-            f"{r['speed_gain_hz']:.1f} Hz",
-            f"{r['phase_margin_deg']:.0f}°, {gm}",
+            f"{r['speed_gain']['value']:.1f} Hz",
+            f"{r['phase_margin']['value']:.0f}°, {gm}",
             over,
             settle,
             r["failure"] or "ok",

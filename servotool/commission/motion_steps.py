@@ -11,6 +11,7 @@ from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import parse_value
 from servotool.model.profile import Profile
+from servotool.model.quantity import quantity
 from servotool.model.roles import motion_route
 from servotool.motion.deadman import sentence
 from servotool.report.charts import need_matplotlib
@@ -156,9 +157,9 @@ class TuneInertiaStep(StepType):
         entry, value = proposal.parameter, proposal.parameter_value
         data: dict[str, Any] = {"ratio": round(res.ratio, 4)}
         if entry is not None:
-            data[entry.code] = value
+            data[entry.code] = quantity(value, entry.unit)
         if request.gains:
-            data["gains"] = {c.entry.code: c.new for c in proposal.gain_changes}
+            data["gains"] = {c.entry.code: quantity(c.new, c.entry.unit) for c in proposal.gain_changes}
         data["persisted"] = res.persisted
         if folder is not None:
             data["report"] = str(folder / "report.md")

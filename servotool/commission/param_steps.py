@@ -123,15 +123,16 @@ class ExpectStep(StepType):
         ]
         if bad:
             raise VerifyError("expectation failed: " + "; ".join(bad))
-        meanings = {r.entry.code: r.entry.enum[r.raw] for r in readings if r.raw in r.entry.enum}
-        return Outcome(
-            "as expected",
-            {
-                "values": values,
-                "units": {x.entry.code: x.entry.unit for x in exps},
-                **({"meanings": meanings} if meanings else {}),
-            },
-        )
+        # Each value with its unit (the one way JSON gives units), and its meaning where the entry names it.
+        found = {
+            r.entry.code: {
+                "value": values[r.entry.code],
+                "unit": r.entry.unit,
+                **({"meaning": r.entry.enum[r.raw]} if r.raw in r.entry.enum else {}),
+            }
+            for r in readings
+        }
+        return Outcome("as expected", {"values": found})
 
 
 class _FileStep(StepType):

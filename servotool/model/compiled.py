@@ -7,9 +7,13 @@ turns what it holds back into the same objects the schema built, and raises Valu
 
 from __future__ import annotations
 
+import dataclasses
+import types
+import typing
 from dataclasses import fields
 from typing import Any
 
+from servotool.model.alarm_notes import AlarmCauses, AlarmLog
 from servotool.model.profile import (
     Alarm,
     DeadManRoute,
@@ -24,8 +28,17 @@ from servotool.model.profile import (
     Profile,
     SetupItem,
 )
+from servotool.model.terminals import IoMap
 
 ENTRY_FIELDS = tuple(f.name for f in fields(Entry))
+# The sections beyond the register map, as nested frozen dataclasses: stored field by field (_encode) and rebuilt by
+# their annotations (_decode), so a field added to one of them is carried without a line here.
+SECTIONS: dict[str, Any] = {
+    "io": IoMap | None,
+    "alarm_causes": AlarmCauses | None,
+    "alarm_log": AlarmLog | None,
+    "unverified_values": dict[str, str],
+}
 TEXTS = ("id", "model", "vendor", "version", "description", "source", "address_rule", "word_order", "unverified_note")
 
 
@@ -68,6 +81,7 @@ def _profile(p: Profile) -> dict[str, Any]:
         "motion_setup": [vars(s) for s in p.motion_setup],
         "dead_man": None if p.dead_man is None else vars(p.dead_man),
         "forced_inputs": None if p.forced_inputs is None else vars(p.forced_inputs),
+        **{name: _encode(getattr(p, name)) for name in SECTIONS},
         "identity": None
         if p.identity is None
         else {
@@ -126,6 +140,7 @@ def _build(p: dict[str, Any]) -> Profile:
         motion_setup=[SetupItem(**s) for s in p["motion_setup"]],
         dead_man=None if p["dead_man"] is None else DeadManRoute(**p["dead_man"]),
         forced_inputs=None if p["forced_inputs"] is None else ForcedInputs(**p["forced_inputs"]),
+        **{name: _decode(kind, p[name]) for name, kind in SECTIONS.items()},
         identity=None
         if identity is None
         else Identity(
@@ -137,3 +152,35 @@ def _build(p: dict[str, Any]) -> Profile:
             identity["model"],
         ),
     )
+
+
+def _encode(value: Any) -> Any:
+    """A section's value as JSON data: a dataclass as its fields, a tuple as a list, a mapping as [key, value]
+    pairs (its keys may be numbers, which JSON keys are not)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _encode(getattr(value, f.name)) for f in fields(value)}
+    if isinstance(value, tuple | list):
+        return [_encode(v) for v in value]
+    if isinstance(value, dict):
+        return [[_encode(k), _encode(v)] for k, v in value.items()]
+    return value
+
+
+def _decode(kind: Any, data: Any) -> Any:
+    """The inverse of _encode for a value of the annotated kind; ValueError on data of another shape."""
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if origin in (types.UnionType, typing.Union):
+        if data is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _decode(inner, data)
+    if origin is tuple:
+        return tuple(_decode(args[0], v) for v in data)
+    if origin is dict:
+        return {_decode(args[0], k): _decode(args[1], v) for k, v in data}
+    if dataclasses.is_dataclass(kind):
+        hints = typing.get_type_hints(kind)
+        return kind(**{name: _decode(hints[name], v) for name, v in data.items()})
+    if kind in (str, int, float, bool) and isinstance(data, kind) and (kind is bool or not isinstance(data, bool)):
+        return data
+    raise ValueError(f"not a {kind}: {data!r}")

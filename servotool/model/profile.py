@@ -4,9 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from servotool.errors import MissingRole, UnknownName
 from servotool.model.lookup import code_key, suggest
+
+if TYPE_CHECKING:
+    from servotool.model.alarm_notes import AlarmCauses, AlarmLog
+    from servotool.model.terminals import IoMap
 
 CLASSES = ("Pn", "Un", "Sn", "Fn")
 
@@ -266,6 +271,10 @@ class Profile:
     forced_inputs: ForcedInputs | None = None
     unverified_note: str = ""
     identity: Identity | None = None
+    io: IoMap | None = None  # the drive's digital inputs and outputs (model.terminals)
+    alarm_causes: AlarmCauses | None = None  # the manual's causes and remedies (model.alarm_notes)
+    alarm_log: AlarmLog | None = None  # what the drive records with its past alarms (model.alarm_notes)
+    unverified_values: dict[str, str] = field(default_factory=dict)  # CODE -> why its scale/meaning is open
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
 
@@ -325,6 +334,10 @@ class Profile:
 
     def alarm_of_kind(self, kind: str) -> Alarm | None:
         return next((a for a in self.alarms if a.kind == kind), None)
+
+    def value_unverified(self, entry: Entry) -> str:
+        """Why this entry's value (its scale, unit or meaning) is not confirmed by the manual; "" when it is."""
+        return self.unverified_values.get(entry.code.upper(), "")
 
     def load_ratio_from_param(self, eng: float) -> float:
         """J_load/J_motor from the inertia-ratio parameter's engineering value, per the profile's convention."""

@@ -50,6 +50,10 @@ TOP_KEYS = {
     "dead_man",
     "forced_inputs",
     "identity",
+    "io",
+    "alarm_causes",
+    "alarm_log",
+    "unverified_values",
 }
 ID_PATTERN = re.compile(r"[a-z0-9][a-z0-9_-]*")
 ROLE_PATTERN = re.compile(r"[a-z][a-z0-9_]*")
@@ -112,6 +116,10 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     motion_setup = _parse_motion_setup(chk, data, by_code, broken)
     forced = _parse_forced_inputs(chk, _section(chk, data, "forced_inputs", required=False), by_code, broken)
     identity = parse_identity(chk, data.get("identity"), by_code, limits, broken) if "identity" in data else None
+    # with an alarm broken, which codes the alarm causes may name is not known: its own problem says what to fix
+    listed = data.get("alarms", [])
+    alarm_codes = {a.code for a in alarms} if isinstance(listed, list) and len(alarms) == len(listed) else None
+    extras = _parse_extras(chk, data, by_code, broken, alarm_codes)
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
     profile = Profile(
@@ -138,6 +146,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         dead_man=dead_man,
         forced_inputs=forced,
         identity=identity,
+        **extras,
     )
     return profile, []
 
@@ -178,6 +187,30 @@ def _names(chk: Checker, data: dict[str, Any], key: str, pattern: re.Pattern[str
         else:
             out[name] = text
     return out
+
+
+def _parse_extras(
+    chk: Checker, data: dict[str, Any], by_code: dict[str, Entry], broken: set[str], alarm_codes: set[int] | None
+) -> dict[str, Any]:
+    """The sections beyond the register map: inputs and outputs, alarm causes and log, unverified values."""
+    from servotool.model.section_schema import (
+        Known,
+        parse_alarm_causes,
+        parse_alarm_log,
+        parse_io,
+        parse_unverified_values,
+    )
+
+    entries = Known(by_code, broken)
+    for key in ("io", "alarm_causes", "alarm_log", "unverified_values"):
+        if key in data and data[key] is None:  # given empty: not the same as left out
+            chk.bad(key, f"expected {'a list' if key == 'unverified_values' else 'a mapping'}, got {shown(None)}")
+    return {
+        "io": parse_io(chk, data.get("io"), entries),
+        "alarm_causes": parse_alarm_causes(chk, data.get("alarm_causes"), alarm_codes),
+        "alarm_log": parse_alarm_log(chk, data.get("alarm_log"), entries),
+        "unverified_values": parse_unverified_values(chk, data.get("unverified_values"), entries),
+    }
 
 
 def _parse_entries(chk: Checker, raw_entries: list[Any], word_order: str) -> tuple[list[tuple[int, Entry]], set[str]]:

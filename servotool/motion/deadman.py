@@ -13,6 +13,7 @@ from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import DeadManRoute, Profile
+from servotool.model.quantity import quantity
 
 # Exchanges one beat cycle of host motion makes (the beat, at most two writes re-arming a segment, the alarm check and
 # the speed read).
@@ -56,11 +57,11 @@ class DeadManBound:
         return {
             "route": self.route,
             "bounded": self.bounded,
-            "stop_within_rev": None if self.stop_rev is None else round(self.stop_rev, 3),
-            "stop_within_s": None if self.stop_s is None else round(self.stop_s, 3),
-            "speed_rpm": self.speed_rpm,
-            "beat_s": round(self.beat_s, 4),
-            "link_cycle_s": round(self.link_cycle_s, 4),
+            "stop_within": quantity(None if self.stop_rev is None else round(self.stop_rev, 3), "rev"),
+            "stop_within_time": quantity(None if self.stop_s is None else round(self.stop_s, 3), "s"),
+            "speed": quantity(self.speed_rpm, "rpm"),
+            "beat": quantity(round(self.beat_s, 4), "s"),
+            "link_cycle": quantity(round(self.link_cycle_s, 4), "s"),
             "waived": self.waived,
             "reason": self.reason,
             "source": self.source,

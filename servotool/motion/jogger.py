@@ -18,7 +18,7 @@ from servotool.model.roles import FEATURE, jog_codes, motion_route
 from servotool.motion import deadman, protect
 from servotool.motion.deadman import DeadManBound
 from servotool.motion.forced_inputs import ForcedInputs
-from servotool.motion.jog_plan import JogPlan, checked_travel, travel_estimate
+from servotool.motion.jog_plan import JogPlan, checked_travel, ramp_words, travel_estimate
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.rest import STOPPED_RPM, RestWatch
 from servotool.motion.segments import SegmentMoves
@@ -142,6 +142,7 @@ class Jogger:
             abs(speed_rpm) / 60.0 * seconds if seconds is not None else None,
             bound,
             travel,
+            ramp_words(self.profile, float(accel_ms) if accel_ms is not None else None),
         )
 
     def _fence_rev(

@@ -15,7 +15,7 @@ from servotool.clock import utc_now
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.files import backup_dir, load_yaml, write_atomic
-from servotool.model.codec import format_value, json_value
+from servotool.model.codec import format_value, json_text, json_value
 from servotool.model.identity import identity_entries
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup_csv
@@ -255,6 +255,9 @@ class Difference:
             "a": None if self.a is None else json_value(e, self.a),
             "b": None if self.b is None else json_value(e, self.b),
         }
+        for key, raw in (("a", self.a), ("b", self.b)):  # an encoded value's manual form beside its number
+            if raw is not None and (text := json_text(e, raw)) is not None:
+                out[f"{key}_text"] = text
         for key, raw in (("a", self.a), ("b", self.b)):
             if raw is not None and raw in e.enum:
                 out[f"{key}_meaning"] = e.enum[raw]

@@ -222,7 +222,7 @@ class Firmware:
                 self.mode = "off"
                 self.ident = None
                 self.segment = None
-            self.alarms.record(self.plant.alarm)  # also alarms raised with the servo off
+            self.alarms.record(self.plant.alarm, self._alarm_context())  # also alarms raised with the servo off
         self._refresh_monitors()
 
     def _watched(self) -> bool:
@@ -266,7 +266,7 @@ class Firmware:
         self.plant.raise_alarm(kind)
         self.mode = "off"
         self.ident = None
-        self.alarms.record(self.plant.alarm)
+        self.alarms.record(self.plant.alarm, self._alarm_context())
 
     # ----- actions (what the drive's functions trigger; see servotool.sim.functions) -------------------------
     def _host_alive(self) -> None:
@@ -406,6 +406,11 @@ class Firmware:
         self.drive.bank.apply_parameter(entry, raw)
         self.plant.set_gains(self._gains())
         self.drive.bank.save()
+
+    def _alarm_context(self) -> dict[str, float]:
+        """What the drive records beside an alarm now; its run time counts from the simulated drive's first start."""
+        started = self.drive.bank.extra.setdefault("first_start", self.clock.now())
+        return monitors.alarm_context(self.profile, self.drive.bank, self.plant, self.clock.now() - started)
 
     def _refresh_monitors(self) -> None:
         monitors.refresh(

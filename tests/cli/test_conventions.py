@@ -111,7 +111,7 @@ def test_piped_monitor_streams_lines_and_ctrl_c_exits_130(sim_dir):
     )
     try:
         first = proc.stdout.readline()  # arrives while the command still runs: line-buffered
-        assert '"Un000"' in first and '"units"' in first
+        assert '"Un000"' in first and '"unit": "rpm"' in first
         proc.send_signal(signal.SIGINT)
         rest, err = proc.communicate(timeout=30)
     finally:

@@ -97,7 +97,7 @@ def test_without_matplotlib_the_message_is_one_line(monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(UsageError) as exc:
         need_matplotlib()
-    assert str(exc.value) == MISSING and "servotool[plot]" in MISSING
+    assert str(exc.value) == MISSING and "pip install '.[plot]'" in MISSING
 
 
 def test_every_tune_chart_shows_the_tune_s_data(tuned, tmp_path):
