@@ -44,6 +44,7 @@ class ConnectOptions:
     echo: str | None = None  # auto, on or off
     turnaround_ms: float | None = None
     silence_ms: float | None = None
+    boost: bool | None = None  # raise the line where the profile allows (True: even beside other devices)
 
 
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
@@ -52,7 +53,7 @@ ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
-    if name == "no_identity_check":
+    if name in ("no_identity_check", "boost"):
         return _flag(value, where)
     if name == "echo" and isinstance(value, bool):  # YAML reads a bare on/off as a boolean
         return "on" if value else "off"
@@ -141,6 +142,7 @@ class Resolved:
     travel: float | None = None  # soft travel limit (rev) from the environment or config file
     identity_check: bool = True  # check the drive answering against the profile before any write
     confirmed: frozenset[int] = frozenset()  # units whose identity checks were read when the profile was found
+    boost: bool | None = None  # a faster line for long exchanges: True even beside other devices, False never
 
     @property
     def simulated(self) -> bool:
@@ -187,6 +189,7 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         check_unit(opts.unit if opts.unit is not None else profile.default_unit),
         identity_check=not opts.no_identity_check,
         travel=opts.travel,
+        boost=opts.boost,
     )
 
 

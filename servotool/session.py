@@ -91,6 +91,8 @@ class Bus:
             if self.sim:
                 self.sim.close()
             raise
+        if self.sim:  # the simulated drives hear the speed the master speaks (a line boost changes it)
+            self.link.line_listeners.append(self.sim.host_speaks)
         self.checked: set[int] = set(resolved.confirmed)
 
     def drives(self, units: list[int] | None = None) -> list[Drive]:
@@ -104,9 +106,13 @@ class Bus:
             served = ",".join(map(str, self.units))
             raise UsageError(f"the simulated drives here are unit {served}, not {','.join(map(str, others))}")
         drives = [Drive(self.link, self.resolved.profile, u, port=self.port) for u in units]
+        unchecked = [d for d in drives if d.unit not in self.checked]
+        if unchecked and self.resolved.profile.boost.available:  # a line a killed process left raised comes first
+            from servotool.ops.boost import recover_boost
+
+            recover_boost(unchecked, self.notice)
         # Before anything is written: the drive answering must be the one the profile describes. The embedded
         # simulator is built from the profile itself.
-        unchecked = [d for d in drives if d.unit not in self.checked]
         if self.resolved.identity_check and not self.resolved.simulated and unchecked:
             from servotool.ops.identity import confirm, warning_text
             from servotool.ops.journal import know_identity

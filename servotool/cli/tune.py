@@ -9,7 +9,7 @@ from typing import Any
 
 import typer
 
-from servotool.cli.common import confirm, drive, resolved
+from servotool.cli.common import boosted, confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.drive import Drive
@@ -217,7 +217,7 @@ def inertia(
     if step_check:
         step.step_duration_s(travel)  # refused before the drive is opened
 
-    with drive(ctx) as d:
+    with drive(ctx) as d, boosted(ctx, [d], "the identification"):
         d.dead_man_waived = no_dead_man
         ask = _Dialog(ctx, d, yes=yes, method=method, step_check=step_check, travel=travel, as_json=as_json)
         try:

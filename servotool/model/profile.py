@@ -109,6 +109,27 @@ class LineSettings:
 
 
 @dataclass(frozen=True)
+class LineBoost:
+    """Whether and how the drive's own line can be raised for a long exchange (profile `serial.boost`): the baud
+    entry, its codes (raw -> baud) and the speed to raise it to; `none` says why a drive has no boost."""
+
+    code: str = ""
+    rates: dict[int, int] = field(default_factory=dict)
+    to_baud: int = 0
+    source: str = ""
+    unverified: str = ""
+    none: str = ""
+
+    @property
+    def available(self) -> bool:
+        return bool(self.code) and self.to_baud > 0
+
+    def code_of(self, baud: int) -> int | None:
+        """The entry's raw value for a baud rate (None: the drive has no code for it)."""
+        return next((raw for raw, b in self.rates.items() if b == baud), None)
+
+
+@dataclass(frozen=True)
 class Limits:
     max_read: int = 125
     max_write: int = 123
@@ -235,6 +256,7 @@ class Profile:
     dead_man: DeadManRoute | None = None
     unverified_note: str = ""
     identity: Identity | None = None
+    boost: LineBoost = field(default_factory=LineBoost)
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
 

@@ -17,6 +17,7 @@ from servotool.model.profile import (
     DeadManRoute,
     Entry,
     Limits,
+    LineBoost,
     LineSettings,
     Motor,
     Persistence,
@@ -96,6 +97,8 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     motion_setup = _parse_motion_setup(chk, data.get("motion_setup"), {e.code.upper(): e for e in entries}, broken)
     dead_man = _parse_dead_man(chk, data.get("dead_man"))
     identity = parse_identity(chk, data.get("identity"), {e.code.upper(): e for e in entries}, limits)
+    serial = data.get("serial") if isinstance(data.get("serial"), dict) else {}
+    boost = _parse_boost(chk, serial.get("boost"), {e.code.upper(): e for e in entries}, broken, line, persistence)
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
     profile = Profile(
@@ -121,6 +124,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         unverified_note=str(data.get("unverified_note", "")),
         dead_man=dead_man,
         identity=identity,
+        boost=boost,
     )
     return profile, []
 
@@ -236,7 +240,8 @@ def _mappings(chk: Checker, raw: Any, name: str, shape: str = "") -> list[tuple[
 
 
 ALARM_KEYS = {"code", "name", "clearable", "display", "source", "kind"}
-SERIAL_KEYS = {"baud", "parity", "stopbits", "bytesize", "unit"}
+SERIAL_KEYS = {"baud", "parity", "stopbits", "bytesize", "unit", "boost"}
+BOOST_KEYS = {"code", "rates", "to", "source", "unverified", "none"}
 
 
 def _parse_alarms(chk: Checker, raw: Any) -> list[Alarm]:
@@ -286,6 +291,61 @@ def _parse_serial(chk: Checker, raw: Any) -> tuple[LineSettings, int]:
     if not 0 <= unit <= 247:
         chk.bad("serial.unit", "must be 0..247")
     return s, unit
+
+
+def _parse_boost(
+    chk: Checker,
+    raw: Any,
+    entries: dict[str, Entry],
+    broken: set[str],
+    line: LineSettings,
+    persistence: Persistence,
+) -> LineBoost:
+    """serial.boost: {code, rates: {raw: baud}, to, source, unverified} where the drive documents a baud entry
+    that takes effect at once, or {none: why} where it does not. The factory line must be one of the codes, the
+    entry immediate and writable, and the drive able to keep the change out of EEPROM (a power cycle must bring
+    back the factory line)."""
+    loc = "serial.boost"
+    if raw is None:
+        return LineBoost()
+    if not isinstance(raw, dict):
+        chk.bad(loc, "expected a mapping")
+        return LineBoost()
+    chk.known_keys(raw, BOOST_KEYS, loc)
+    texts = {k: chk.opt(raw, k, loc, str, "") for k in ("source", "unverified", "none")}
+    if texts["none"]:
+        if set(raw) - {"none", "source", "unverified"}:
+            chk.bad(loc, "'none' (no boost, and why) goes without code, rates and to")
+        return LineBoost(**texts)
+    code, to = chk.need(raw, "code", loc, str), chk.need(raw, "to", loc, int)
+    rates: dict[int, int] = {}
+    given = chk.need(raw, "rates", loc, dict) or {}
+    for key, baud in given.items():
+        if isinstance(key, bool) or not isinstance(key, int) or isinstance(baud, bool) or not isinstance(baud, int):
+            chk.bad(f"{loc}.rates", f"expected raw code: baud (integers), got {key!r}: {baud!r}")
+        elif baud <= 0:
+            chk.bad(f"{loc}.rates", f"baud {baud} must be positive")
+        else:
+            rates[key] = baud
+    if not texts["source"]:
+        chk.bad(loc, "missing required key 'source' (the manual's lines)")
+    entry = entries.get(str(code).upper()) if code else None
+    if code and entry is None and str(code).upper() not in broken:
+        chk.bad(f"{loc}.code", f"names unknown entry {code!r}")
+    if entry is not None:
+        if entry.effect != "immediate" or not entry.writable:
+            chk.bad(f"{loc}.code", f"{entry.code} must be a writable entry that takes effect immediately")
+        if any(not entry.min <= r <= entry.max for r in rates):
+            chk.bad(f"{loc}.rates", f"a code outside {entry.code}'s range {entry.min}..{entry.max}")
+    if rates and line.baud not in rates.values():
+        chk.bad(f"{loc}.rates", f"no code for the factory line's {line.baud} baud")
+    if to is not None and rates and to not in rates.values():
+        chk.bad(f"{loc}.to", f"{to} baud has no code in rates")
+    if persistence.mode == "immediate":
+        chk.bad(loc, "a drive that stores every write would keep the raised line after a power cycle")
+    if code is None or to is None:
+        return LineBoost()
+    return LineBoost(str(code), rates, to, texts["source"], texts["unverified"])
 
 
 def _parse_limits(chk: Checker, raw: Any) -> Limits:
