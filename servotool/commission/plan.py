@@ -30,6 +30,7 @@ TUNE_KEYS = {
     "direction",
     "repeats",
     "gains",
+    "check",
     "report",
     "no_dead_man",
 }
