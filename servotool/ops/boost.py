@@ -233,9 +233,15 @@ def _trial(link: RtuMaster, drives: list[Drive], entry: Entry, code: int) -> str
 
 
 def _back(drives: list[Drive], entry: Entry, originals: dict[int, int]) -> bool:
-    """Whether every drive answers at the master's speed now with its original code."""
+    """Whether every drive answers at the master's speed now with its original code. A drive that answers here
+    with another code (its port kept this speed: a simulator on a serial port, a drive that ignored the change)
+    gets the original written at this speed."""
     try:
-        return all(d.read_entries([entry])[0].raw == originals[d.unit] for d in drives)
+        for d in drives:
+            if d.read_entries([entry])[0].raw != originals[d.unit]:
+                with eeprom.persistence(d, False):
+                    d.write_verified(entry, originals[d.unit])
+        return True
     except ServoError:
         return False
 
