@@ -109,7 +109,14 @@ def search_gains(
     first = scale.check(start) if start is not None else gain_writes.current_level(drive, scale)
     highest = gain_writes.safe_level(p, scale, j_total, scale.check(top) if top is not None else None, configured)
     if highest is None or highest < first:
-        raise UsageError(f"no level from {first} up keeps 45° and 6 dB of margin on load ratio {ratio:.2f}")
+        held = p.role("inertia_ratio")
+        under = (
+            f" under the drive's own ratio {own:.2f} ({held.code}), by which it scales its gains: write "
+            f"{held.code} = {p.param_from_load_ratio(ratio):g} first, or run tune inertia"
+            if configured is not None and held is not None and own is not None
+            else ""
+        )
+        raise UsageError(f"no level from {first} up keeps 45° and 6 dB of margin on load ratio {ratio:.2f}{under}")
     preflight(drive, "host")
     search = GainSearch(ratio, first, own_ratio=own)
     original: list[GainChange] = []
