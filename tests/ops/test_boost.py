@@ -251,3 +251,14 @@ def test_drives_on_a_virtual_link_are_not_raised(sim_dir):
     link = VirtualLink([build_drive(profile, 1, persist=False)], VirtualClock())
     with boost.line_boost([Drive(link, profile, 1)], True) as facts:
         assert not facts.raised and facts.baud == 9600
+
+
+def test_a_plan_with_a_backup_runs_raised_and_one_without_does_not(cli, sim_dir, tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(f"port: sim\nprofile: sd25\nsteps:\n  - backup: {tmp_path / 'b.yaml'}\n")
+    r = cli("run", str(plan), "--yes")
+    assert r.code == 0 and "line raised to 57600 baud for the plan" in r.err, r.err
+    assert _ram_value(sim_dir, "Po504") == FACTORY
+    plan.write_text("port: sim\nprofile: sd25\nsteps:\n  - wait: 0.1\n")
+    r = cli("run", str(plan), "--yes")
+    assert r.code == 0 and "raised" not in r.err, r.err
