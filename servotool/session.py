@@ -99,7 +99,7 @@ class Bus:
         """A Drive for each unit (the bus's own by default), on this link; UsageError for a unit the embedded
         simulator does not serve."""
         from servotool.files import sim_state_dir
-        from servotool.ops.journal import recover_at_start
+        from servotool.ops.journal import boost_record, recover_at_start
 
         units = units or self.units
         if self.sim and (others := [u for u in units if u not in self.units]):
@@ -107,7 +107,8 @@ class Bus:
             raise UsageError(f"the simulated drives here are unit {served}, not {','.join(map(str, others))}")
         drives = [Drive(self.link, self.resolved.profile, u, port=self.port) for u in units]
         unchecked = [d for d in drives if d.unit not in self.checked]
-        if unchecked and self.resolved.profile.boost.available:  # a line a killed process left raised comes first
+        raised = self.resolved.profile.boost.available and any(boost_record(d) for d in unchecked)
+        if raised:  # a line a killed process left raised comes first (ops.boost loads only then)
             from servotool.ops.boost import recover_boost
 
             recover_boost(unchecked, self.notice)
