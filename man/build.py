@@ -95,9 +95,11 @@ A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBs
 \fBno_dead_man: true\fR acknowledges a drive without one (SD25, SDC), as \fB\-\-no\-dead\-man\fR does.
 .TP
 .B "tune inertia: {rigidity: N | bandwidth: HZ, travel: REV, max_speed: RPM, \
-accel_time: MS, direction: D, repeats: N, gains: BOOL, report: DIR, no_dead_man: BOOL}"
+accel_time: MS, direction: D, repeats: N, gains: BOOL, check: BOOL, report: DIR, no_dead_man: BOOL}"
 Identify the load inertia and write it, then the matching gains only with \fBrigidity\fR or \fBbandwidth\fR
-(or \fBgains: true\fR: at the drive's current level); without them the gains are left as they are. \fBreport\fR
+(or \fBgains: true\fR: at the drive's current level); without them the gains are left as they are. Gains written
+are step-checked: a failed check writes the previous ones back and fails the step, with the reason in the report;
+\fBcheck: false\fR leaves the check out. \fBreport\fR
 writes the same folder of charts as \fBtune inertia \-\-report\fR (beside the plan, one per axis).
 .TP
 .BR "wait: S" ", " "alarm clear:" ", " "prompt: QUESTION"

@@ -48,6 +48,7 @@ class ConnectOptions:
     silence_ms: float | None = None
     heartbeat: str | None = None  # dtr or rts: a control line toggled at each keep-alive beat (a watchdog relay)
     heartbeat_timeout_ms: float | None = None  # the relay's time
+    boost: bool | None = None  # raise the line where the profile allows (True: even beside other devices)
 
 
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
@@ -56,7 +57,7 @@ ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
-    if name == "no_identity_check":
+    if name in ("no_identity_check", "boost"):
         return _flag(value, where)
     if name == "echo" and isinstance(value, bool):  # YAML reads a bare on/off as a boolean
         return "on" if value else "off"
@@ -146,6 +147,7 @@ class Resolved:
     identity_check: bool = True  # check the drive answering against the profile before any write
     confirmed: frozenset[int] = frozenset()  # units whose identity checks were read when the profile was found
     heartbeat_timeout_s: float | None = None  # the watchdog relay's time, where settings.heartbeat names a line
+    boost: bool | None = None  # a faster line for long exchanges: True even beside other devices, False never
 
     @property
     def simulated(self) -> bool:
@@ -194,6 +196,7 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         identity_check=not opts.no_identity_check,
         travel=opts.travel,
         heartbeat_timeout_s=heartbeat_timeout_s(opts) if settings.heartbeat else None,
+        boost=opts.boost,
     )
 
 

@@ -91,13 +91,15 @@ class Bus:
             if self.sim:
                 self.sim.close()
             raise
+        if self.sim:  # the simulated drives hear the speed the master speaks (a line boost changes it)
+            self.link.line_listeners.append(self.sim.host_speaks)
         self.checked: set[int] = set(resolved.confirmed)
 
     def drives(self, units: list[int] | None = None) -> list[Drive]:
         """A Drive for each unit (the bus's own by default), on this link; UsageError for a unit the embedded
         simulator does not serve."""
         from servotool.files import sim_state_dir
-        from servotool.ops.journal import recover_at_start
+        from servotool.ops.journal import boost_record, recover_at_start
 
         units = units or self.units
         if self.sim and (others := [u for u in units if u not in self.units]):
@@ -107,9 +109,14 @@ class Bus:
         line = self.link.control_line()
         for d in drives:  # one line for the bus: a relay per adapter, wired to every drive's enable or contactor
             d.heartbeat_line, d.heartbeat_timeout_s = line, self.resolved.heartbeat_timeout_s
+        unchecked = [d for d in drives if d.unit not in self.checked]
+        raised = self.resolved.profile.boost.available and any(boost_record(d) for d in unchecked)
+        if raised:  # a line a killed process left raised comes first (ops.boost loads only then)
+            from servotool.ops.boost import recover_boost
+
+            recover_boost(unchecked, self.notice)
         # Before anything is written: the drive answering must be the one the profile describes. The embedded
         # simulator is built from the profile itself.
-        unchecked = [d for d in drives if d.unit not in self.checked]
         if self.resolved.identity_check and not self.resolved.simulated and unchecked:
             from servotool.ops.identity import confirm, warning_text
             from servotool.ops.journal import know_identity

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from servotool.cli.common import JSON_OPT, confirm, drive, resolved, state
+from servotool.cli.common import JSON_OPT, boosted, confirm, drive, resolved, state
 from servotool.cli.render import emit_json, err, info, out, progress, table, warn
 from servotool.cli.values import footnote, json_mark, texts, unit_text
 from servotool.errors import ServoError, UsageError
@@ -55,7 +55,10 @@ def backup_cmd(
     backup.check_output(output or Path(f"new.{kind}"), force=force)  # before reading the drive (24 s at 1200 Bd)
     with drive(ctx) as d:
         entries = select(d.profile)
-        with progress("reading parameters", len(entries), enabled=not as_json) as advance:
+        with (
+            boosted(ctx, [d], "the backup"),
+            progress("reading parameters", len(entries), enabled=not as_json) as advance,
+        ):
             b = backup.take(d, progress=advance)
         suffix = "csv" if kind == "csv" else "yaml"
         path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
@@ -220,16 +223,18 @@ def restore_cmd(
     """
     from servotool.ops import backup, restore
     from servotool.ops.eeprom import compared_memory
-    from servotool.ops.params import select
+    from servotool.ops.params import read_settings, select
 
     profile = resolved(ctx).profile
     b = backup.load(file, profile, force=force)  # every file problem is refused before connecting
     for w in b.warnings:
         warn(w)
-    with drive(ctx) as d:
+    speed = profile.boost.code if profile.boost.available else None
+    names_speed = speed is not None and any(profile.entry(c).code == speed for c in include or [])
+    with drive(ctx) as d, boosted(ctx, [d], "the restore", allow=not names_speed):
         entries = select(d.profile)
         with progress("reading the drive", len(entries), enabled=not as_json) as advance:
-            current = {r.entry.code: r.raw for r in d.read_entries(entries, partial=True, progress=advance)}
+            current = read_settings(d, progress=advance)
         plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [], ram_only=ram_only)
         compared = compared_memory(d.profile)
         if not as_json:

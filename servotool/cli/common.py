@@ -17,6 +17,7 @@ from servotool.errors import UsageError
 from servotool.session import Bus, open_drives, resolve_or_find
 
 if TYPE_CHECKING:
+    from servotool.ops.boost import BoostFacts
     from servotool.ops.scan import Found
 
 
@@ -140,6 +141,22 @@ def drives_for(ctx: typer.Context, res: Resolved, units: list[int]) -> Iterator[
         return
     with open_drives(res, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)) as found:
         yield found
+
+
+@contextmanager
+def boosted(
+    ctx: typer.Context, found: list[Drive], what: str, *, allow: bool = True, res: Resolved | None = None
+) -> Iterator[BoostFacts]:
+    """The line raised for a long exchange (identification, trace, backup, restore) as --boost/--no-boost and the
+    profile allow (ops.boost); allow=False keeps the factory line (a restore that writes the baud entry). res: the
+    options a command resolved itself (a plan's)."""
+    from servotool.ops.boost import line_boost
+
+    res = res or resolved(ctx)
+    with line_boost(
+        found, res.boost if allow else False, sole=res.simulated, notice=notice_for(ctx), what=what
+    ) as facts:
+        yield facts
 
 
 def confirm(question: str, yes: bool) -> bool:

@@ -126,6 +126,13 @@ def main(
         "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.",
         show_default=False,
     ),
+    boost: bool = typer.Option(
+        None,
+        "--boost/--no-boost",
+        help="Raise the line for identification, trace, backup and restore where the profile allows (SD25 to "
+        "57600 baud; default: unless another device answers on the bus); --boost even then. Env: SERVOTOOL_BOOST.",
+        show_default=False,
+    ),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only results and errors."),
     explain: bool = typer.Option(
@@ -158,6 +165,7 @@ def main(
             heartbeat=heartbeat,
             heartbeat_timeout_ms=heartbeat_timeout_ms,
             no_identity_check=no_identity_check or None,
+            boost=boost,
         ),
     )
     Verbosity.level = -1 if quiet else verbose

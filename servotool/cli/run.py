@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from servotool.cli.common import drives_for, resolved_from, state
+from servotool.cli.common import boosted, drives_for, resolved_from, state
 from servotool.cli.messages import error_text
 from servotool.cli.render import Verbosity, emit_json, info, notice, out, warn
 from servotool.commission.plan import Plan, load_plan
@@ -56,7 +56,8 @@ def run(
     def ask(unit: int, question: str) -> bool:
         return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
 
-    with drives_for(ctx, resolved, units) as drives:
+    long = any(st.name in LONG_STEPS for st in plan.steps)  # the automatic backup before the plan is one too
+    with drives_for(ctx, resolved, units) as drives, boosted(ctx, drives, "the plan", allow=long, res=resolved):
         runner = Runner(
             plan,
             drives,
@@ -101,6 +102,9 @@ def run(
             for r in failures:
                 notice(f"FAIL unit {r.unit} {r.step.where()}: {r.detail}")
         raise typer.Exit(int(failures[0].data.get("exit_code", 1)) if failures else 1)
+
+
+LONG_STEPS = ("tune inertia", "backup", "restore")  # steps whose exchanges a raised line shortens (ops.boost)
 
 
 def _units(plan: Plan, given: int | None, default: int) -> list[int]:

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
 import typer
 
-from servotool.cli.common import confirm, drive, resolved
+from servotool.cli.common import boosted, confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
 from servotool.cli.values import json_mark, spoken, unit_text
@@ -62,15 +63,10 @@ def _gains_json(changes: Any, profile: Profile | None = None) -> list[dict[str, 
 
 
 def _step_json(response: step.StepResponse | None) -> dict[str, Any] | None:
-    if response is None:
-        return None
-    return {
-        "target": quantity(response.target_rpm, "rpm"),
-        "overshoot": quantity(_rounded(response.overshoot_pct, 2), "%"),
-        "settling": quantity(_rounded(response.settling_ms, 2), "ms"),
-        "samples": response.samples,
-        "ripple": quantity(_rounded(response.ripple_pct, 2), "%"),
-    }
+    return response.summary() if response is not None else None
+
+
+STEP_FIGURES = ("overshoot", "settling", "ripple", "interval", "overshoot_bound")
 
 
 def _check_options(
@@ -188,8 +184,8 @@ def inertia(
     check: bool = typer.Option(
         None,
         "--check/--no-check",
-        help="Step check after writing gains; on failure the "
-        "previous gains go back (default: on with the simulated drive).",
+        help="Step check after writing gains; on failure the previous gains go back (default: on with the "
+        "simulated drive; a real drive asks, and without a terminal needs one of the two).",
     ),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
@@ -202,10 +198,10 @@ def inertia(
         from servotool.report.tune_report import check_folder
 
         check_folder(report)
-    verify = check if check is not None else resolved(ctx).simulated
+    writes_gains = (rigidity is not None or bandwidth is not None) and not dry_run
     request = tune.TuneRequest(
         force=force,
-        verify=verify and (rigidity is not None or bandwidth is not None),
+        verify=_step_check_choice(ctx, check, writes_gains, yes),
         method=method,
         max_speed=max_speed,
         accel_time_ms=accel_time,
@@ -220,10 +216,9 @@ def inertia(
         step_check=step_check,
         trace_path=save_trace,
     )
-    if step_check:
-        step.step_duration_s(travel)  # refused before the drive is opened
+    tune.check_request(resolved(ctx).profile, request)  # refused before the drive is opened (or its line raised)
 
-    with drive(ctx) as d:
+    with drive(ctx) as d, boosted(ctx, [d], "the identification"):
         d.dead_man_waived = no_dead_man
         ask = _Dialog(ctx, d, yes=yes, method=method, step_check=step_check, travel=travel, as_json=as_json)
         try:
@@ -246,6 +241,23 @@ def inertia(
     _render(res, profile, as_json, ask.dead_man)
 
 
+CHECK_WHAT = "a 200 rpm step forward and back once they are written; the previous gains go back if it fails"
+
+
+def _step_check_choice(ctx: typer.Context, check: bool | None, writes_gains: bool, yes: bool) -> bool:
+    """Whether the gains are step-checked once written: as --check/--no-check say; on the simulated drive, yes; on
+    a real one the choice is the user's: asked in a terminal, else a usage error (before anything moves)."""
+    if not writes_gains:
+        return False
+    if check is not None:
+        return check
+    if resolved(ctx).simulated:
+        return True
+    if yes or not sys.stdin.isatty():
+        raise UsageError(f"writing gains on a real drive needs --check ({CHECK_WHAT}) or --no-check")
+    return typer.confirm(f"Step-check the gains ({CHECK_WHAT})?", default=True, err=True)
+
+
 def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: bool) -> None:
     """What a failed identification leaves: the report of a refused one, and the JSON of any (the reason, the
     estimate so far, the travel a refusal suggests)."""
@@ -255,15 +267,20 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
         _report(report, refused, profile, None, str(exc))
     if as_json:
         cure = refusal.remedy if refusal is not None else None
+        rolled = exc.facts if isinstance(exc, tune.GainsRolledBack) else {}
         emit_json(
             _clean(
                 {
                     "ok": False,
                     "reason": str(exc),
                     **(_estimate_json(refused) if refused else {}),
-                    "ratio": refused.new_ratio if refused else None,
-                    "written": False,
+                    # refused: no ratio stands (what was measured is in the report); rolled back: it does
+                    "ratio": round(exc.ratio, 4) if isinstance(exc, tune.GainsRolledBack) and exc.ratio else None,
+                    "written": bool(rolled.get("kept")),  # a rollback keeps the ratio written before the gains
                     "suggested_travel": quantity(cure.suggested_rev if cure is not None else None, "rev"),
+                    "rolled_back": bool(rolled),
+                    "rollback_reason": rolled.get("reason"),
+                    "step_check": _step_json(exc.response) if isinstance(exc, tune.GainsRolledBack) else None,
                 }
             )
         )
@@ -416,6 +433,8 @@ def _render(
     if res.step_after is not None:
         label = "step check after writing the gains:" if res.verified is not None else "step after: "
         out.print(f"{label} {res.step_after.describe()}", markup=False)
+    if (sampled := res.step_after or res.step_before) is not None:
+        out.print(f"step {sampled.sampling()}", markup=False)
 
 
 def _show(proposal: tune.Proposal) -> None:
@@ -432,6 +451,8 @@ def _show(proposal: tune.Proposal) -> None:
     )
     if est:
         travel = f"{result.travel_used_rev:.2f} rev, " if result.travel_used_rev is not None else ""
+        peaks = [m.peak_rpm for m in est.moves if math.isfinite(m.peak_rpm)]
+        travel += f"moves reached {min(peaks):.0f}-{max(peaks):.0f} rpm, " if peaks else ""
         out.print(
             f"friction {est.coulomb_nm:.4f} ± {est.coulomb_std_nm:.4f} N·m, viscous "
             f"{est.viscous_nm_per_rad_s:.2e} N·m·s/rad, load torque {est.load_torque_nm:.4f} ± "
@@ -473,7 +494,8 @@ def gains(
     load_ratio: float = typer.Option(
         None,
         "--load-ratio",
-        help="J_load/J_motor to tune for (default: the drive's inertia-ratio parameter, as tune inertia wrote it).",
+        help="J_load/J_motor to tune for (default: the drive's inertia-ratio parameter, as tune inertia wrote it; "
+        "given, the margins are those of this load under the drive's own ratio, which is not written).",
     ),
     start: int = typer.Option(None, "--from", help="First rigidity level to try (default: the drive's current)."),
     top: int = typer.Option(None, "--to", help="Highest level to try (default: the highest the margins allow)."),
@@ -508,7 +530,7 @@ def gains(
                 + (f": FAILED ({trial.failure})" if trial.failure else "")
             )
 
-    with drive(ctx) as d:
+    with drive(ctx) as d, boosted(ctx, [d], "the step checks"):
         d.dead_man_waived = no_dead_man
         confirm_motion(ctx, d, yes, "tune gains")
         if not confirm("Move the axis now (a speed step forward and back at each level)?", yes):
@@ -531,11 +553,9 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
         {
             "level": t.level,
             "speed_gain": quantity(round(t.speed_gain_hz, 2), "Hz"),
-            "phase_margin": quantity(round(t.margins.phase_deg, 1), "°"),
+            "phase_margin": quantity(_rounded(t.margins.phase_deg, 1), "°"),
             "gain_margin": quantity(_rounded(t.margins.gain_db, 1), "dB"),
-            "overshoot": quantity(_rounded(t.response.overshoot_pct, 2), "%") if t.response else None,
-            "settling": quantity(_rounded(t.response.settling_ms, 2), "ms") if t.response else None,
-            "ripple": quantity(round(t.response.ripple_pct, 2), "%") if t.response else None,
+            **{k: (t.response.summary()[k] if t.response else None) for k in STEP_FIGURES},
             "failure": t.failure,
         }
         for t in res.trials
@@ -546,6 +566,7 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
                 {
                     "ok": ok,
                     "load_ratio": _rounded(res.load_ratio, 4),
+                    "drive_ratio": _rounded(res.own_ratio, 4) if res.own_ratio is not None else None,
                     "levels": rows,
                     "chosen": res.chosen,
                     "reason": res.reason,
@@ -564,7 +585,12 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
         "Settling",
         "Result",
         drop=("Settling",),
-        title=f"rigidity levels tried (load ratio {res.load_ratio:.2f})",
+        title=f"rigidity levels tried (load ratio {res.load_ratio:.2f}"
+        + (
+            ")"
+            if res.own_ratio is None or abs(res.own_ratio - res.load_ratio) < 0.005
+            else f"; the drive's own {res.own_ratio:.2f}, by which it scales its speed gain, left as it is)"
+        ),
     )
     for r in rows:
         settle = f"{r['settling']['value']:.0f} ms" if r["settling"] is not None else "-"
@@ -579,6 +605,9 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
             r["failure"] or "ok",
         )
     out.print(t)
+    sampled = next((t.response for t in res.trials if t.response is not None), None)
+    if sampled is not None:
+        out.print(f"step checks {sampled.sampling()}", markup=False)
     if res.chosen is not None:
         out.print(
             f"{res.reason}; kept level {res.chosen}: "

@@ -77,10 +77,11 @@ def _report_option(arg: Any) -> str | None:
 
 
 class TuneInertiaStep(StepType):
-    """`tune inertia: {rigidity, bandwidth, travel, max_speed, accel_time, direction, repeats, gains, report}`: what
-    `servotool tune inertia --yes` does (host method): the gains are set only with rigidity or bandwidth (or
-    `gains: true`: at the drive's own current level), as the command leaves them alone without; `report: DIR`
-    writes the charts and report.md there (as `--report DIR`)."""
+    """`tune inertia: {rigidity, bandwidth, travel, max_speed, accel_time, direction, repeats, gains, check,
+    report}`: what `servotool tune inertia --yes --check` does (host method): the gains are set only with rigidity
+    or bandwidth (or `gains: true`: at the drive's own current level), as the command leaves them alone without,
+    and are step-checked once written (a failed check writes the previous gains back and fails the step; `check:
+    false` leaves the check out); `report: DIR` writes the charts and report.md there (as `--report DIR`)."""
 
     name = "tune inertia"
 
@@ -99,6 +100,9 @@ class TuneInertiaStep(StepType):
         gains = opts.get("gains", rigidity is not None or bandwidth is not None)
         if not isinstance(gains, bool):
             raise UsageError("tune inertia gains must be true or false")
+        check = opts.get("check", True)  # gains written in a plan are step-checked unless the plan says not
+        if not isinstance(check, bool):
+            raise UsageError("tune inertia check must be true or false")
         if rigidity is not None and (isinstance(rigidity, bool) or not isinstance(rigidity, int)):
             raise UsageError(f"tune inertia rigidity must be a whole number, got {rigidity!r}")
         request = TuneRequest(
@@ -112,6 +116,7 @@ class TuneInertiaStep(StepType):
             direction=direction,
             repeats=None if repeats is None else int(repeats),
             gains=gains,
+            verify=gains and check,
             rigidity=rigidity,
             bandwidth_hz=None if bandwidth is None else number_in(bandwidth, "tune inertia bandwidth", 0, 10_000),
         )
@@ -127,9 +132,11 @@ class TuneInertiaStep(StepType):
             if profile.role("inertia_ratio") is not None
             else f"; the ratio is reported, not written ({profile.id} maps no inertia-ratio parameter)"
         )
+        check = self.request(step.arg, profile).verify
         return (
             f"tune inertia: {motion.describe()}"
             + ("" if gains else "; gains left as they are")
+            + ("; the gains step-checked once written" if check else "; gains NOT step-checked" if gains else "")
             + reported
             + (f"; report to {report}" if report else "")
         )
@@ -158,14 +165,19 @@ class TuneInertiaStep(StepType):
         data: dict[str, Any] = {"ratio": round(res.ratio, 4)}
         if entry is not None:
             data[entry.code] = quantity(value, entry.unit)
+        checked = ""
         if request.gains:
             data["gains"] = {c.entry.code: quantity(c.new, c.entry.unit) for c in proposal.gain_changes}
+        if res.verified is not None:
+            data["step_check"] = res.verified.summary()
+            checked = f"; gains step-checked: overshoot {res.verified.overshoot_pct:.0f} %"
         data["persisted"] = res.persisted
         if folder is not None:
             data["report"] = str(folder / "report.md")
         if entry is None:
             return Outcome(
-                f"load ratio {res.ratio:.2f} (nothing to write: {drive.profile.id} maps no inertia-ratio parameter)",
+                f"load ratio {res.ratio:.2f} (nothing to write: {drive.profile.id} maps no inertia-ratio parameter)"
+                + checked,
                 data,
             )
-        return Outcome(f"load ratio {res.ratio:.2f} -> {entry.code}={value:g}", data)
+        return Outcome(f"load ratio {res.ratio:.2f} -> {entry.code}={value:g}{checked}", data)

@@ -38,6 +38,7 @@ TUNE_KEYS = {
     "direction",
     "repeats",
     "gains",
+    "check",
     "report",
     "no_dead_man",
 }

@@ -114,7 +114,9 @@ class Runner:
                     outcome = kind.run(step, drive, self.context)
                     detail, data, ok = outcome.detail, outcome.data, True
                 except ServoError as exc:
-                    detail, data, ok = self.word(exc), {"error": type(exc).__name__, "exit_code": exc.exit_code}, False
+                    detail, ok = self.word(exc), False
+                    # the error's own facts where it has them (a rollback: why, and the step check that failed)
+                    data = {"error": type(exc).__name__, "exit_code": exc.exit_code, **getattr(exc, "facts", {})}
                 result = StepResult(step, drive.unit, ok, detail, self.clock.now() - t0, data)
                 self.results.append(result)
                 self.after_step()

@@ -22,6 +22,7 @@ from servotool.model.profile import (
     Identity,
     IdentityCheck,
     Limits,
+    LineBoost,
     LineSettings,
     Motor,
     Persistence,
@@ -38,6 +39,7 @@ SECTIONS: dict[str, Any] = {
     "alarm_causes": AlarmCauses | None,
     "alarm_log": AlarmLog | None,
     "unverified_values": dict[str, str],
+    "boost": LineBoost,
 }
 TEXTS = ("id", "model", "vendor", "version", "description", "source", "address_rule", "word_order", "unverified_note")
 

@@ -124,6 +124,27 @@ class LineSettings:
 
 
 @dataclass(frozen=True)
+class LineBoost:
+    """Whether and how the drive's own line can be raised for a long exchange (profile `serial.boost`): the baud
+    entry, its codes (raw -> baud) and the speed to raise it to; `none` says why a drive has no boost."""
+
+    code: str = ""
+    rates: dict[int, int] = field(default_factory=dict)
+    to_baud: int = 0
+    source: str = ""
+    unverified: str = ""
+    none: str = ""
+
+    @property
+    def available(self) -> bool:
+        return bool(self.code) and self.to_baud > 0
+
+    def code_of(self, baud: int) -> int | None:
+        """The entry's raw value for a baud rate (None: the drive has no code for it)."""
+        return next((raw for raw, b in self.rates.items() if b == baud), None)
+
+
+@dataclass(frozen=True)
 class Limits:
     max_read: int = 125
     max_write: int = 123
@@ -275,6 +296,7 @@ class Profile:
     alarm_causes: AlarmCauses | None = None  # the manual's causes and remedies (model.alarm_notes)
     alarm_log: AlarmLog | None = None  # what the drive records with its past alarms (model.alarm_notes)
     unverified_values: dict[str, str] = field(default_factory=dict)  # CODE -> why its scale/meaning is open
+    boost: LineBoost = field(default_factory=LineBoost)
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
 

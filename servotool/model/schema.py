@@ -19,6 +19,7 @@ from servotool.model.profile import (
     Entry,
     ForcedInputs,
     Limits,
+    LineBoost,
     LineSettings,
     Motor,
     Persistence,
@@ -65,7 +66,7 @@ FORCED_KEYS = {"switch", "levels", "monitor", "monitor_shows", "source", "unveri
 
 SETUP_KEYS = {"code", "value", "reason", "source", "unverified"}
 ALARM_KEYS = {"code", "name", "clearable", "display", "source", "kind"}
-SERIAL_KEYS = {"baud", "parity", "stopbits", "bytesize", "unit"}
+SERIAL_KEYS = {"baud", "parity", "stopbits", "bytesize", "unit", "boost"}
 LIMITS_KEYS = {"max_read", "max_write", "write_multiple"}
 PERSISTENCE_KEYS = {"mode", "switch", "write_limit", "note"}
 SWITCH_KEYS = {"code", "eeprom", "ram", "digit"}
@@ -120,6 +121,10 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     listed = data.get("alarms", [])
     alarm_codes = {a.code for a in alarms} if isinstance(listed, list) and len(alarms) == len(listed) else None
     extras = _parse_extras(chk, data, by_code, broken, alarm_codes)
+    serial = data.get("serial") if isinstance(data.get("serial"), dict) else {}
+    # a broken or missing persistence section is no ground to refuse a boost on: its own problem says what to fix
+    stored = persistence if isinstance(data.get("persistence"), dict) and _clean_section(chk, "persistence") else None
+    boost = _parse_boost(chk, serial["boost"], by_code, broken, line, stored) if "boost" in serial else LineBoost()
     if chk.problems or pid is None or any(v is None for v in texts.values()):
         return None, chk.problems
     profile = Profile(
@@ -147,6 +152,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         forced_inputs=forced,
         identity=identity,
         **extras,
+        boost=boost,
     )
     return profile, []
 
@@ -157,6 +163,11 @@ def _profile_id(chk: Checker, data: dict[str, Any]) -> str | None:
         chk.bad("id", f"{shown(pid)} is not a lower-case id (letters, digits, '-' and '_')")
         return None
     return pid
+
+
+def _clean_section(chk: Checker, key: str) -> bool:
+    """Whether no problem was found so far in a top-level section (what another check may rely on)."""
+    return not any(p.startswith(f"{chk.where}: {key}") for p in chk.problems)
 
 
 def _section(
@@ -389,6 +400,9 @@ def _mappings(chk: Checker, data: dict[str, Any], name: str, shape: str = "") ->
     return items
 
 
+BOOST_KEYS = {"code", "rates", "to", "source", "unverified", "none"}
+
+
 def _parse_alarms(chk: Checker, data: dict[str, Any]) -> list[Alarm]:
     out: list[Alarm] = []
     seen: dict[int, str] = {}
@@ -430,6 +444,58 @@ def _parse_serial(chk: Checker, raw: dict[str, Any] | None) -> tuple[LineSetting
         chk.bad("serial.unit", "0 is the broadcast address, which no drive answers: a drive's address is 1..247")
         return line, 1
     return line, chk.whole(raw, "unit", "serial", 1, 247, 1, required=True)
+
+
+def _parse_boost(
+    chk: Checker,
+    raw: Any,
+    entries: dict[str, Entry],
+    broken: set[str],
+    line: LineSettings,
+    persistence: Persistence | None,
+) -> LineBoost:
+    """serial.boost: {code, rates: {raw: baud}, to, source, unverified} where the drive documents a baud entry
+    that takes effect at once, or {none: why} where it does not. The factory line must be one of the codes, the
+    entry immediate and writable, and the drive able to keep the change out of EEPROM (a power cycle must bring
+    back the factory line)."""
+    loc = "serial.boost"
+    if not isinstance(raw, dict):
+        chk.bad(loc, f"expected a mapping, got {shown(raw)}")
+        return LineBoost()
+    chk.known_keys(raw, BOOST_KEYS, loc)
+    texts = {k: chk.opt(raw, k, loc, str, "") for k in ("unverified", "none")}
+    texts["source"] = chk.need(raw, "source", loc, str) or ""
+    if texts["none"]:
+        if set(raw) - {"none", "source", "unverified"}:
+            chk.bad(loc, "'none' (no boost, and why) goes without code, rates and to")
+        return LineBoost(**texts)
+    code, to = chk.need(raw, "code", loc, str), chk.need(raw, "to", loc, int)
+    rates: dict[int, int] = {}
+    given = chk.need(raw, "rates", loc, dict) or {}
+    for key, baud in given.items():
+        if isinstance(key, bool) or not isinstance(key, int) or isinstance(baud, bool) or not isinstance(baud, int):
+            chk.bad(f"{loc}.rates", f"expected raw code: baud (integers), got {key!r}: {baud!r}")
+        elif baud <= 0:
+            chk.bad(f"{loc}.rates", f"baud {baud} must be positive")
+        else:
+            rates[key] = baud
+    entry = entries.get(str(code).upper()) if code else None
+    if code and entry is None and str(code).upper() not in broken:
+        chk.bad(f"{loc}.code", f"names unknown entry {code!r}")
+    if entry is not None:
+        if entry.effect != "immediate" or not entry.writable:
+            chk.bad(f"{loc}.code", f"{entry.code} must be a writable entry that takes effect immediately")
+        if any(not entry.min <= r <= entry.max for r in rates):
+            chk.bad(f"{loc}.rates", f"a code outside {entry.code}'s range {entry.min}..{entry.max}")
+    if rates and line.baud not in rates.values():
+        chk.bad(f"{loc}.rates", f"no code for the factory line's {line.baud} baud")
+    elif to is not None and rates and to not in rates.values():  # (rates already blamed: not `to` as well)
+        chk.bad(f"{loc}.to", f"{to} baud has no code in rates")
+    if persistence is not None and persistence.mode == "immediate":
+        chk.bad(loc, "a drive that stores every write would keep the raised line after a power cycle")
+    if code is None or to is None:
+        return LineBoost()
+    return LineBoost(str(code), rates, to, texts["source"], texts["unverified"])
 
 
 def _parse_limits(chk: Checker, raw: dict[str, Any] | None) -> Limits:

@@ -110,6 +110,29 @@ def port_lock(drive: Drive, notice: Notice | None = None, clock: Clock | None = 
             held.lock.release()
 
 
+@contextmanager
+def lock_if_free(drive: Drive) -> Iterator[bool]:
+    """Hold the drive's port for the block if nobody does (yields True), without the recovery port_lock runs
+    (ops.boost puts the line back first: until then the drive may not answer at this speed); False when a live
+    holder has it (it will put back what it changed itself)."""
+    if not drive.port:
+        yield True
+        return
+    held = _lock_of(drive.port)
+    if held.depth:
+        yield True
+        return
+    if not held.lock.try_acquire():
+        yield False
+        return
+    held.depth += 1
+    try:
+        yield True
+    finally:
+        held.depth -= 1
+        held.lock.release()
+
+
 # ----- records ---------------------------------------------------------------------------------------------------
 
 
@@ -246,6 +269,8 @@ def _recover_record(drive: Drive, record: dict[str, Any], keep: dict[str, Any]) 
     forcing = record.get("forcing")
     if isinstance(forcing, dict):  # first, moving or not: it is what stops a forced JOG
         lines.append(_release_forcing(drive, forcing, pid))
+    if isinstance(record.get("boost"), dict):  # the line's speed: put back by ops.boost before the drive is read
+        keep["boost"] = record["boost"]
     if record.get("settings") or record.get("servo"):  # before the switch: written back in RAM, as changed
         line, left = _end_motion(drive, record, pid)
         lines.append(line)
@@ -552,6 +577,24 @@ def note_switch(drive: Drive, code: str, original: int) -> None:
 def clear_switch(drive: Drive) -> None:
     """The switch is confirmed back: the record goes."""
     _update(drive, switch=None)
+
+
+def note_boost(drive: Drive, boost: dict[str, Any]) -> None:
+    """Record a raised line (the baud entry's original and raised raw values, both speeds) before it is raised:
+    the next command finds the drive at either speed and puts it back (ops.boost.recover_boost)."""
+    _update(drive, boost={**boost, "since": RealClock().wall()})
+
+
+def clear_boost(drive: Drive) -> None:
+    """The line is confirmed back at its factory speed: the record goes."""
+    _update(drive, boost=None)
+
+
+def boost_record(drive: Drive) -> dict[str, Any] | None:
+    """The raised line this drive's record holds (None: none), with the pid of the process that raised it."""
+    record = read_record(drive) if drive.port else None
+    boost = record.get("boost") if record else None
+    return {**boost, "pid": record.get("pid")} if isinstance(boost, dict) and record else None
 
 
 def note_settings(drive: Drive, originals: dict[str, int]) -> None:

@@ -28,8 +28,13 @@ def select(profile: Profile, *, group: str | None = None, classes: tuple[str, ..
 
 def read_settings(drive: Drive, progress: Callable[[int], None] | None = None) -> dict[str, int]:
     """Every readable parameter as the drive holds it (code -> raw, coalesced); entries it lacks are left out (and
-    listed in drive.missing)."""
-    return {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)}
+    listed in drive.missing). An entry a raised line holds for the command (ops.boost) reads as its original,
+    which is what the drive keeps and gets back when the command ends."""
+    from servotool.ops.boost import held_originals
+
+    values = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)}
+    values.update({code: raw for code, raw in held_originals(drive).items() if code in values})
+    return values
 
 
 @dataclass(frozen=True)

@@ -150,13 +150,25 @@ class TuneResult:
 
 
 class GainsRolledBack(ServoError):
-    """The step check after writing the gains failed; the previous gains were written back."""
+    """The step check after writing the gains failed; the previous gains were written back. `reason` is why the
+    check failed, `facts` the rollback as a report carries it."""
 
     exit_code = 1
 
-    def __init__(self, message: str, response: StepResponse | None) -> None:
+    def __init__(self, message: str, response: StepResponse | None, reason: str = "") -> None:
         super().__init__(message)
-        self.response = response
+        self.response, self.reason = response, reason
+        self.kept: list[str] = []  # codes written before the gains that stay (the inertia ratio)
+        self.ratio: float | None = None  # the identified ratio those gains were for
+
+    @property
+    def facts(self) -> dict[str, object]:
+        return {
+            "rolled_back": True,
+            "reason": self.reason or str(self),
+            "kept": self.kept,
+            "step_check": self.response.summary() if self.response is not None else None,
+        }
 
 
 def tune_inertia(
@@ -212,11 +224,17 @@ def tune_inertia(
     written, persisted = _write(drive, proposal, approved, request.save)
     # The host method stores the ratio by writing it; the drive method's drive stored its own (kept unless dry run).
     stored = (proposal.writes_ratio and written != []) if request.method == "host" else not request.dry_run
-    verified = (
-        verify_gains(drive, proposal.gain_changes, request, clock)
-        if request.verify and approved and proposal.gain_changes
-        else None
-    )
+    try:
+        verified = (
+            verify_gains(drive, proposal.gain_changes, request, clock)
+            if request.verify and approved and proposal.gain_changes
+            else None
+        )
+    except GainsRolledBack as exc:
+        gains = {c.entry.code for c in proposal.gain_changes}
+        exc.kept = [entry.code for entry, _raw in written if entry.code not in gains]
+        exc.ratio = proposal.ratio
+        raise
     changed = stored or bool(written)  # SDC stores no ratio: its gains changed all the same
     after = verified or (_step(drive, step_s, clock) if before is not None and changed else None)
     return TuneResult(
@@ -248,7 +266,7 @@ def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, 
         for c in changes:
             write_one(drive, c.entry, c.old_raw)
     raise GainsRolledBack(
-        f"step check after writing the gains failed ({fault}): the previous gains were written back", response
+        f"step check after writing the gains failed ({fault}): the previous gains were written back", response, fault
     )
 
 
