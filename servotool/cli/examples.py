@@ -50,6 +50,13 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
         "servotool --port sim tune inertia --yes --rigidity 16 --report tune-report",
         "Identify, write the ratio and gains; charts in the folder tune-report.",
     ),
+    ("tune score", "servotool --port sim tune score --yes --save before.json", "Score the response: 3 runs."),
+    (
+        "tune score",
+        "servotool --port sim tune score --yes --before before.json",
+        "Score again and compare: a verdict only beyond the spread.",
+    ),
+    ("tune compare", "servotool tune compare before.json before.json", "Two saved scores, figure by figure."),
     ("param reset", "servotool --port sim param reset --yes", "Factory defaults, after an automatic backup."),
     ("sim reset", "servotool sim reset -P sd25 --power-cycle", "Power-cycle the simulated SD25."),
     ("run", "servotool run examples/commission.yaml --dry-run", "Check a plan against the profile; touch nothing."),

@@ -31,7 +31,11 @@ COMMANDS = {
     "profiles": lazy("servotool.cli.profiles:app", help="List, show and check drive profiles."),
     "sim": lazy("servotool.cli.sim:app", help="The simulated drive: serve it, configure its machine, reset it."),
     "alarm": lazy("servotool.cli.alarm:app", help="Show, clear and list the drive's alarms."),
-    "tune": lazy("servotool.cli.tune:app", help="Identify load inertia and set gains."),
+    "tune": lazy(
+        "servotool.cli.tune:app",
+        "servotool.cli.tune_score:app",
+        help="Identify load inertia, set gains, score and compare the response.",
+    ),
     "monitor": lazy("servotool.cli.monitor:monitor", help="Watch live values with units, min/max and a trend."),
     "jog": lazy("servotool.cli.jog:jog", help="JOG the motor, timed or by keys; first says what stops it."),
     "run": lazy("servotool.cli.run:run", help="Validate a commissioning plan, then run it on one or more axes."),

@@ -11,7 +11,7 @@ import numpy as np
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
-from servotool.model.codec import raw_to_eng
+from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.quantity import quantity
 from servotool.motion.jogger import Jogger
 from servotool.motion.keepalive import keepalive_interval_s
@@ -140,6 +140,18 @@ def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> flo
     return duration
 
 
+@dataclass(frozen=True)
+class Leg:
+    """One leg of a step motion: samples from the moment its command went out (the first: at rest just before)."""
+
+    direction: int
+    ramp_ms: float  # the JOG ramp of this leg (time from 0 to rated speed)
+    t: tuple[float, ...]
+    speed_rpm: tuple[float, ...]
+    torque_pct: tuple[float, ...]  # empty where the leg read no torque
+    command_ms: float  # how long its command took to send
+
+
 def step_response(
     drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None, load_unknown: bool = False
 ) -> StepResponse:
@@ -150,57 +162,86 @@ def step_response(
     holds position between the steps, the position gain is lowered meanwhile so that the hold cannot swing up on
     a load far above the configured ratio (tuning.stable_hold); the speed loop being checked is left as it is.
     """
+    legs, loop_hz = step_legs(drive, speed_rpm, duration_s, timing, load_unknown=load_unknown)
+    return _response(legs[0], speed_rpm, duration_s, loop_hz)
+
+
+def step_legs(
+    drive: Drive,
+    speed_rpm: float,
+    duration_s: float,
+    timing: Clock | None = None,
+    *,
+    load_unknown: bool = False,
+    back_ramp_ms: float | None = None,
+    torque: bool = False,
+) -> tuple[list[Leg], float | None]:
+    """The step motion: forward at the shortest ramp for duration_s, stop, then back for as long (at back_ramp_ms,
+    a trapezoid, where given: the same distance, since a JOG stops at the ramp it starts with), stop. Speed (and
+    torque where asked, in the fewest requests) at the line's full rate; returns the legs and the speed loop's gain.
+    The JOG settings go back afterwards, kept out of EEPROM where the drive has a switch."""
     with ram_writes(drive):
-        return _step_response(drive, speed_rpm, duration_s, timing, load_unknown)
+        return _step_legs(drive, speed_rpm, duration_s, timing, load_unknown, back_ramp_ms, torque)
 
 
-def _step_response(
-    drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None, load_unknown: bool
-) -> StepResponse:
+def _step_legs(
+    drive: Drive,
+    speed_rpm: float,
+    duration_s: float,
+    timing: Clock | None,
+    load_unknown: bool,
+    back_ramp_ms: float | None,
+    with_torque: bool,
+) -> tuple[list[Leg], float | None]:
     p, timing = drive.profile, timing or RealClock()
     jogger = Jogger(drive, keepalive_interval_s(drive), FEATURE, timing)
     # The drive's own protections for the step and back (it stays within the travel step_duration_s allowed it).
     jogger.protect_for(speed_rpm, 1.3 * speed_rpm / 60.0 * duration_s / 0.9)
     jog_accel = p.need_role("jog_accel", FEATURE)
     speed_e = p.need_role("speed_feedback", FEATURE)
+    read = [speed_e, p.need_role("torque_feedback", FEATURE)] if with_torque else [speed_e]
     saved = jogger.settings_to_restore()
     loop_hz = drive_loop(drive).speed_hz
-    t: list[float] = []
-    v: list[float] = []
-    command_s = 0.0
+    legs: list[Leg] = []
 
-    def speed() -> float:
-        value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
+    def sample() -> tuple[float, float | None]:
+        readings = drive.read_entries(read)
         jogger.keepalive.beat_if_due()
         jogger.watch_inputs()
-        return value
+        values = [float(raw_to_eng(r.entry, r.raw)) for r in readings]
+        return values[0], (values[1] if with_torque else None)
 
     def stop() -> None:
         jogger.command(0)
         end = timing.now() + 2.0
-        while timing.now() < end and abs(speed()) > 3:
+        while timing.now() < end and abs(sample()[0]) > 3:
             timing.sleep(0.02)
 
     try:
         if load_unknown:
             StableHold(drive, jogger.route.kind, saved).soften_position()
         jogger.set_speed(speed_rpm)
-        jogger.set_ramp(jog_accel.min)
         for direction in (1, -1):
-            rest = speed()  # the same zero for every step: at rest, just before the command
+            ramp_raw = jog_accel.min
+            if direction < 0 and back_ramp_ms is not None:
+                ramp_raw = max(jog_accel.min, min(jog_accel.max, eng_to_raw(jog_accel, back_ramp_ms)))
+            jogger.set_ramp(ramp_raw)
+            t: list[float] = [0.0]
+            rest, rest_torque = sample()  # the same zero for every step: at rest, just before the command
+            v, q = [rest], [rest_torque]
             t0 = timing.now()
             jogger.command(direction)
-            if direction > 0:
-                command_s = timing.now() - t0
-                t.append(0.0)
-                v.append(rest)
-            # nothing but the speed in this loop (the keep-alive only when due): the line's full rate
+            command_s = timing.now() - t0
+            # nothing but the samples in this loop (the keep-alive only when due): the line's full rate
             while (now := timing.now() - t0) < duration_s:
-                value = speed()
-                if direction > 0:
-                    t.append(now)
-                    v.append(value)
+                value, moment = sample()
+                t.append(now)
+                v.append(value)
+                q.append(moment)
             stop()
+            torque = tuple(float(x) for x in q if x is not None) if with_torque else ()
+            ramp_ms = float(raw_to_eng(jog_accel, ramp_raw))
+            legs.append(Leg(direction, ramp_ms, tuple(t), tuple(v), torque, command_s * 1000.0))
         active = active_alarm(drive)
         if active:
             raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
@@ -209,6 +250,12 @@ def _step_response(
         raise
     finally:
         jogger.leave_and_restore(saved)
+    return legs, loop_hz
+
+
+def _response(leg: Leg, speed_rpm: float, duration_s: float, loop_hz: float | None) -> StepResponse:
+    """The forward leg's overshoot, settling and ripple."""
+    t, v = list(leg.t), list(leg.speed_rpm)
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = (
@@ -227,6 +274,6 @@ def _step_response(
         tuple(v),
         interval_ms=float(np.median(gaps)) if gaps.size else duration_s * 1000.0,
         longest_gap_ms=float(np.max(gaps)) if gaps.size else duration_s * 1000.0,
-        command_ms=command_s * 1000.0,
+        command_ms=leg.command_ms,
         loop_hz=loop_hz,
     )
