@@ -78,6 +78,26 @@ def sim_extensions(profile: Profile) -> list[SimExtension]:
                 f"are forced; the manual's words read as the forced levels ({profile.forced_inputs.source})",
             )
         )
+    notch = profile.role("notch1_freq")
+    if notch is not None:
+        width, depth = profile.role("notch1_width"), profile.role("notch1_depth")
+        found.append(
+            SimExtension(
+                "notch width and depth levels",
+                "NOT IN THE MANUAL: it names a frequency, a width level and a depth level per notch "
+                f"({notch.code}, {width.code if width else '-'}, {depth.code if depth else '-'}: {notch.source}) but "
+                "not the filter they make; the simulator's notch passes depth % at its centre over a -3 dB band of "
+                "width x 10 % of the centre frequency",
+            )
+        )
+    if any(profile.role(r) is not None for r in ("friction_comp_fwd", "friction_comp_rev", "torque_offset")):
+        found.append(
+            SimExtension(
+                "friction compensation by direction",
+                "NOT IN THE MANUAL: the simulator adds the forward or reverse compensation by the sign of the "
+                "speed reference (none within 1 rpm of zero); the manual names the torques, not when they switch",
+            )
+        )
     if profile.motor is None:
         found.append(
             SimExtension("motor", "no motor data in the profile: the simulator assumes a 400 W, 3000 rpm motor")

@@ -34,6 +34,7 @@ from servotool.sim.alarms import AlarmLog
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.handover import Handover, MachineState
 from servotool.sim.identification import Identification, Progress
+from servotool.sim.loop_functions import FrictionFeedForward, NotchSetting
 from servotool.sim.mechanics import MechanicsSettings
 from servotool.sim.plant import (
     BRAKE_HOLD_X_RATED,
@@ -50,6 +51,7 @@ DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 # motion, ramped and without an alarm, when no motion-role write arrives for this long.
 FAKE_WATCHDOG_MS = 500.0
 COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
+NOTCHES = 4  # notch roles notch1_* .. notch4_*
 STOP_STEP_S = 0.01  # a quiet ramp-down after host loss is checked for standstill at this resolution
 
 
@@ -169,6 +171,39 @@ class Firmware:
             max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
             jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
             following_limit_rev=self._following_limit_rev(),
+            notches=self._notches(),
+            friction_ff=self._friction_ff(),
+        )
+
+    def _notches(self) -> tuple[NotchSetting, ...]:
+        """The torque-command notches the profile maps (roles notchN_freq, notchN_width, notchN_depth)."""
+        found = []
+        for n in range(1, NOTCHES + 1):
+            if self.profile.role(f"notch{n}_freq") is None:
+                continue
+            found.append(
+                NotchSetting(
+                    self._eng(f"notch{n}_freq", 0.0),
+                    self._eng(f"notch{n}_width", 0.0),
+                    self._eng(f"notch{n}_depth", 100.0),
+                )
+            )
+        return tuple(found)
+
+    def _friction_ff(self) -> FrictionFeedForward:
+        """The friction compensation the profile maps (roles torque_offset, friction_comp_fwd/_rev,
+        viscous_comp_fwd/_rev), each in % of rated torque (an entry in another unit is not simulated)."""
+
+        def pct(role: str) -> float:
+            entry = self.profile.role(role)
+            return self._eng(role, 0.0) if entry is not None and entry.unit == "%" else 0.0
+
+        return FrictionFeedForward(
+            pct("torque_offset"),
+            pct("friction_comp_fwd"),
+            pct("friction_comp_rev"),
+            pct("viscous_comp_fwd"),
+            pct("viscous_comp_rev"),
         )
 
     def _following_limit_rev(self) -> float:

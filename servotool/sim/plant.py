@@ -25,6 +25,7 @@ import random
 from dataclasses import asdict, dataclass, field
 
 from servotool.model.profile import Motor as MotorData
+from servotool.sim.loop_functions import FrictionFeedForward, Notch, NotchSetting
 from servotool.sim.mechanics import Friction, Mechanics, MechanicsSettings, MotorState, friction_step
 
 TS = 125e-6  # control period, s
@@ -98,6 +99,8 @@ class DriveGains:
     max_speed_rpm: float = 6000.0
     jog_accel_ms: float = 200.0  # time from 0 to rated speed
     following_limit_rev: float = FOLLOWING_LIMIT_REV
+    notches: tuple[NotchSetting, ...] = ()  # torque-command notches (sim.loop_functions)
+    friction_ff: FrictionFeedForward = field(default_factory=FrictionFeedForward)  # friction compensation
 
 
 @dataclass(frozen=True)
@@ -158,7 +161,10 @@ class Plant:
         self._rng = random.Random(settings.seed)
 
     def set_gains(self, gains: DriveGains) -> None:
+        old = getattr(self, "gains", None)
         self.gains = gains
+        if old is None or old.notches != gains.notches:  # a filter keeps its state while its setting stays
+            self._notches = [Notch(n, TS) for n in gains.notches if n.active(TS)]
         j_conf = self.motor.jm * (1.0 + gains.inertia_ratio_configured)
         self._kp = 2 * math.pi * gains.speed_gain_hz * j_conf
         self._ti = max(gains.speed_integral_ms, 0.1) / 1000.0
@@ -337,13 +343,21 @@ class Plant:
         else:
             self._loop_ref = self._ref
         err = self._loop_ref - self._w_meas
-        unclamped = self._kp * (err + self._integral / self._ti)
+        unclamped = self._kp * (err + self._integral / self._ti) + self._feed_forward_nm()
         if abs(unclamped) < self._t_lim:  # anti-windup: integrate only while not saturated
             self._integral += err * TS
             self._saturated_s = 0.0
         else:
             self._saturated_s += TS
         return max(-self._t_lim, min(self._t_lim, unclamped))
+
+    def _feed_forward_nm(self) -> float:
+        """The friction compensation's torque for the speed reference now (0 where the drive sets none)."""
+        ff = self.gains.friction_ff
+        if not ff.any:
+            return 0.0
+        pct = ff.torque_pct(self._loop_ref / RAD_S_PER_RPM, self.motor.rated_speed_rpm)
+        return pct / 100.0 * self.motor.rated_torque_nm
 
     def _fence_stop(self) -> None:
         """Beyond an overtravel fence that stops: the speed in the direction of travel is forced to zero at once."""
@@ -359,6 +373,8 @@ class Plant:
     def _step(self) -> None:
         # the torque applied now was commanded one period ago (computation delay), then filtered
         t_cmd = self._controller()
+        for notch in self._notches:
+            t_cmd = notch.step(t_cmd)
         applied_target = self._t_delayed
         self._t_delayed = t_cmd
         if self._tf > 0:
