@@ -57,6 +57,17 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
         "Score again and compare: a verdict only beyond the spread.",
     ),
     ("tune compare", "servotool tune compare before.json before.json", "Two saved scores, figure by figure."),
+    ("tune resonance", "servotool --port sim tune resonance --yes", "Peaks after a step; the line's limit."),
+    (
+        "tune friction",
+        "servotool --port sim tune friction --yes",
+        "Friction compensation, kept only where the score improves.",
+    ),
+    (
+        "tune notch",
+        "servotool --port sim -P is620p tune notch --yes",
+        "A notch at a resolved resonance, judged likewise (IS620P).",
+    ),
     ("param reset", "servotool --port sim param reset --yes", "Factory defaults, after an automatic backup."),
     ("sim reset", "servotool sim reset -P sd25 --power-cycle", "Power-cycle the simulated SD25."),
     ("run", "servotool run examples/commission.yaml --dry-run", "Check a plan against the profile; touch nothing."),

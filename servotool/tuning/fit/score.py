@@ -167,9 +167,10 @@ class Difference:
     verdict: str  # better | worse | unchanged | not comparable
 
 
-def compare(before: Score, after: Score) -> tuple[list[Difference], str]:
-    """Each figure's difference with its verdict, and the overall verdict from the judged figures: better where
-    one improved beyond its margin and none got worse, worse where any got worse, else unchanged."""
+def compare(before: Score, after: Score, judged: tuple[str, ...] | None = None) -> tuple[list[Difference], str]:
+    """Each figure's difference with its verdict, and the overall verdict from the judged figures (default: those
+    FIGURES marks; a function names the ones it is for): better where one improved beyond its margin and none got
+    worse, worse where any got worse, else unchanged."""
     diffs: list[Difference] = []
     for name, (_unit, _judged) in FIGURES.items():
         a, b = before.figures.get(name), after.figures.get(name)
@@ -181,10 +182,11 @@ def compare(before: Score, after: Score) -> tuple[list[Difference], str]:
             PRINTED_SHARE * max(abs(a.value or 0.0), abs(b.value or 0.0)),
         )
         diffs.append(Difference(name, a, b, margin, _verdict(name, a, b, margin)))
-    judged = [d for d in diffs if FIGURES[d.name][1]]
-    if any(d.verdict == "worse" for d in judged):
+    names = judged if judged is not None else tuple(n for n, (_u, j) in FIGURES.items() if j)
+    counted = [d for d in diffs if d.name in names]
+    if any(d.verdict == "worse" for d in counted):
         overall = "worse"
-    elif any(d.verdict == "better" for d in judged):
+    elif any(d.verdict == "better" for d in counted):
         overall = "better"
     else:
         overall = "unchanged"
