@@ -35,7 +35,7 @@ COMMANDS = {
         "servotool.cli.tune:app",
         "servotool.cli.tune_score:app",
         "servotool.cli.tune_functions:app",
-        help="Identify inertia, set gains, score the response, run the drive's tuning functions.",
+        help="Inertia, gains, response scores and the drive's tuning functions.",
     ),
     "monitor": lazy("servotool.cli.monitor:monitor", help="Watch live values with units, min/max and a trend."),
     "jog": lazy("servotool.cli.jog:jog", help="JOG the motor, timed or by keys; first says what stops it."),

@@ -39,6 +39,8 @@ JUDGED = {
     "friction": ("following_error_rms", "following_error_peak", "iae"),
     "notch": ("overshoot", "settling", "ripple", "iae", "following_error_rms"),
 }
+MIN_COMP_PCT = 0.5  # a friction term below this share of rated torque (or two torque-reading steps) is left at 0:
+#                    nothing to compensate that the score could show
 NOTCH_WIDTH_LEVEL = 2  # the notch set at a resonance: IS620P's default width level
 NOTCH_DEPTH_LEVEL = 0  # cut out at its centre
 NOTCHES = 4
@@ -200,12 +202,17 @@ def friction_trial(
     progress(f"at {SLOW_RPM:g} rpm: torque {slow_fwd:+.1f} % forward, {slow_rev:+.1f} % reverse")
     trial = FunctionTrial("friction", before=before)
     trial.found = {"coulomb_fwd": slow_fwd, "coulomb_rev": -slow_rev, "torque_noise": noise}
-    wanted = {"friction_comp_fwd": max(0.0, slow_fwd), "friction_comp_rev": max(0.0, -slow_rev)}
+    floor = max(MIN_COMP_PCT, 2 * drive.profile.need_role("torque_feedback", FEATURE).scale)
+
+    def term(x: float) -> float:
+        return x if x >= floor else 0.0
+
+    wanted = {"friction_comp_fwd": term(slow_fwd), "friction_comp_rev": term(-slow_rev)}
     if "viscous_comp_fwd" in entries or "viscous_comp_rev" in entries:
         fast_fwd, fast_rev, _ = constant_speed_torque(drive, motion.speed_rpm, motion.duration_s, clock)
         scale = rated / (motion.speed_rpm - SLOW_RPM)
-        wanted["viscous_comp_fwd"] = max(0.0, (fast_fwd - slow_fwd) * scale)
-        wanted["viscous_comp_rev"] = max(0.0, (slow_rev - fast_rev) * scale)
+        wanted["viscous_comp_fwd"] = term((fast_fwd - slow_fwd) * scale)
+        wanted["viscous_comp_rev"] = term((slow_rev - fast_rev) * scale)
         trial.found["viscous_fwd_at_rated"] = wanted["viscous_comp_fwd"]
         trial.found["viscous_rev_at_rated"] = wanted["viscous_comp_rev"]
     what = {
