@@ -11,6 +11,7 @@ from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, warn
 from servotool.cli.tune_score import _render_comparison, _render_score
 from servotool.drive import Drive
+from servotool.errors import UsageError
 from servotool.model.quantity import quantity
 from servotool.ops import eeprom
 from servotool.tuning import drive_functions as functions
@@ -70,6 +71,12 @@ def friction(
 @app.command("notch")
 def notch(
     ctx: typer.Context,
+    method: str = typer.Option(
+        None,
+        "--method",
+        help="drive: the drive's own adaptive notch, read back (default where the profile maps one); host: at a "
+        "peak of the score's spectrum.",
+    ),
     repeats: int = typer.Option(scoring.DEFAULT_REPEATS, "--repeats", help=REPEATS_HELP),
     travel: float = typer.Option(2.0, "--travel", help=TRAVEL_HELP),
     keep: bool = typer.Option(False, "--keep", help=KEEP_HELP),
@@ -78,19 +85,28 @@ def notch(
     no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
-    """A torque-command notch at the resonance the score's step shows, kept only where the score improves.
+    """A torque-command notch at the machine's resonance, kept only where the score improves.
 
-    Only a peak the line's sampling resolves (below 80 % of the Nyquist limit) and inside the drive's notch range
-    is notched; the first notch that is off takes it. Put back where the score does not improve beyond its spread.
+    --method drive runs the drive's adaptive notch while the test motion excites the machine and reads back what
+    it set; --method host notches only a peak the line's sampling resolves (below 80 % of the Nyquist limit) inside
+    the drive's notch range. Put back where the score does not improve beyond its spread.
     """
+    if method not in (None, "drive", "host"):
+        raise UsageError("--method must be drive or host")
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
     with drive(ctx) as d, boosted(ctx, [d], "tune notch"):
         eeprom.check_save_request(d.profile, save)
         functions.notch_entries(d)
+        chosen = method or ("drive" if d.profile.role("adaptive_notch") is not None else "host")
+        if chosen == "drive" and d.profile.role("adaptive_notch") is None:
+            raise UsageError(f"tune notch --method drive: {d.profile.model} maps no adaptive notch")
         _start(ctx, d, yes, no_dead_man, "notch", motion)
         before = scoring.measure(d, motion, repeats)
-        trial = functions.notch_trial(d, before)
+        if chosen == "drive":
+            trial = functions.adaptive_notch_trial(d, motion, before, progress=_progress(as_json))
+        else:
+            trial = functions.notch_trial(d, before)
         trial = functions.judged_trial(d, trial, motion, repeats, keep=keep, save=save, progress=_progress(as_json))
         profile = d.profile
     _render(trial, as_json, profile.id)

@@ -90,6 +90,16 @@ def sim_extensions(profile: Profile) -> list[SimExtension]:
                 "width x 10 % of the centre frequency",
             )
         )
+    adaptive = profile.role("adaptive_notch")
+    if adaptive is not None:
+        found.append(
+            SimExtension(
+                f"adaptive notch ({adaptive.code})",
+                "NOT IN THE MANUAL: it names the modes, not how the drive finds a resonance; the simulator's sets "
+                "notch 3 at the machine's own resonance (width level 2, depth 0) once the torque command vibrates "
+                "(above 20 Hz, 1 % of rated torque RMS) with the servo on",
+            )
+        )
     if any(profile.role(r) is not None for r in ("friction_comp_fwd", "friction_comp_rev", "torque_offset")):
         found.append(
             SimExtension(

@@ -52,6 +52,9 @@ DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 FAKE_WATCHDOG_MS = 500.0
 COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
 NOTCHES = 4  # notch roles notch1_* .. notch4_*
+ADAPT_VIBRATION_PCT = 1.0  # the simulator's adaptive notch acts once the torque command vibrates this much
+ADAPTIVE_NOTCH = 3  # the notch an adaptive notch takes (IS620P: notch 3 for one, 3 and 4 for two; unverified)
+ADAPTED_WIDTH, ADAPTED_DEPTH = 2, 0  # and how it sets it
 STOP_STEP_S = 0.01  # a quiet ramp-down after host loss is checked for standstill at this resolution
 
 
@@ -190,6 +193,38 @@ class Firmware:
             )
         return tuple(found)
 
+    def _adapt_notch(self) -> None:
+        """The drive's adaptive notch (role adaptive_notch: IS620P H09-02), a simulator extension: its manual names
+        the modes, not how the drive finds a resonance. Modes 1 and 2 set notch ADAPTIVE_NOTCH at the machine's own
+        resonance once the torque command vibrates (ADAPT_VIBRATION_PCT) with the servo on; mode 3 only reports it
+        (role resonance_result); a machine without a resonance in the notch's range gets nothing."""
+        entry = self.profile.role("adaptive_notch")
+        if entry is None:
+            return
+        mode = self.drive.bank.effective_value(entry.code)
+        hz = self.plant.settings.mechanics.resonance_hz
+        freq = self.profile.role(f"notch{ADAPTIVE_NOTCH}_freq")
+        if mode not in (1, 2, 3) or hz <= 0 or freq is None or not self.plant.servo_on:
+            return
+        if self.plant.vibration_pct < ADAPT_VIBRATION_PCT:
+            return
+        raw = eng_to_raw(freq, hz, clamp=False)
+        if not freq.min <= raw <= freq.max:
+            return
+        wanted = {"freq": raw, "width": ADAPTED_WIDTH, "depth": ADAPTED_DEPTH}
+        found = self.profile.role("resonance_result")
+        changed = False
+        if mode == 3:
+            targets = [(found, raw)] if found is not None else []
+        else:
+            targets = [(self.profile.role(f"notch{ADAPTIVE_NOTCH}_{k}"), v) for k, v in wanted.items()]
+        for target, value in targets:
+            if target is not None and self.drive.bank.effective_value(target.code) != value:
+                self.drive.bank.apply_parameter(target, value)
+                changed = True
+        if changed:
+            self.plant.set_gains(self._gains())
+
     def _friction_ff(self) -> FrictionFeedForward:
         """The friction compensation the profile maps (roles torque_offset, friction_comp_fwd/_rev,
         viscous_comp_fwd/_rev), each in % of rated torque (an entry in another unit is not simulated)."""
@@ -252,6 +287,7 @@ class Firmware:
                 self.segment = None
                 self.mode = "servo"  # the move ended: the drive holds there, servo on
         self.plant.advance_to(now)
+        self._adapt_notch()
         if self.plant.alarm is not None:
             if self.mode != "off":
                 self.mode = "off"

@@ -42,6 +42,8 @@ ESTOP_MAX_S = 0.5  # an alarm stop at the torque limit lasts at most this long, 
 OVERSPEED_X_MAX = 1.2  # the overspeed alarm: this many times the motor's top speed (IS620P H0A-08 = 0: automatic)
 LOCKED_SPEED_SHARE = 0.1  # a locked rotor: under this share of the commanded speed ...
 LOCKED_TORQUE_SHARE = 0.9  # ... with the torque at this share of its limit or more
+VIBRATION_LOWPASS_S = 1.0 / (2 * math.pi * 20.0)  # the torque command's vibration: what lies above 20 Hz ...
+VIBRATION_AVERAGE_S = 0.05  # ... as an RMS over about this long (the simulator's adaptive notch watches it)
 # The plant's dynamic state, as persisted between processes serving one simulated drive (the drive stays powered).
 STATE_FIELDS = (
     "time",
@@ -147,6 +149,8 @@ class Plant:
         self._defl_rate = 0.0  # and its rate, rad/s
         self._locked_s = 0.0  # how long the rotor has been locked under a speed command
         self._saturated_s = 0.0  # how long the speed regulator's output has sat at the torque limit
+        self._t_slow = 0.0  # the torque command low-passed (VIBRATION_LOWPASS_S) ...
+        self._vibration = 0.0  # ... and the mean square of what lies above it, N*m^2
         self.protections = Protections()
         self.set_settings(settings)
         self.set_gains(gains)
@@ -270,6 +274,11 @@ class Plant:
         return round((self._pos_ref - self.theta) / (2 * math.pi) * self.motor.counts_per_rev)
 
     @property
+    def vibration_pct(self) -> float:
+        """The torque command's content above 20 Hz, RMS over about 50 ms, in % of rated torque."""
+        return math.sqrt(max(self._vibration, 0.0)) / self.motor.rated_torque_nm * 100.0
+
+    @property
     def load_rate_pct(self) -> float:
         return self._load
 
@@ -375,6 +384,8 @@ class Plant:
         t_cmd = self._controller()
         for notch in self._notches:
             t_cmd = notch.step(t_cmd)
+        self._t_slow += (t_cmd - self._t_slow) * (TS / (VIBRATION_LOWPASS_S + TS))
+        self._vibration += ((t_cmd - self._t_slow) ** 2 - self._vibration) * (TS / VIBRATION_AVERAGE_S)
         applied_target = self._t_delayed
         self._t_delayed = t_cmd
         if self._tf > 0:

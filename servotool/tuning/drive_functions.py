@@ -294,6 +294,53 @@ def notch_proposal(drive: Drive, peaks: list[Peak], nyquist_hz: float) -> dict[s
     return {"frequency": quantity(round(target.hz, 1), "Hz") if target else None, "reason": reason}
 
 
+def adaptive_notch_trial(
+    drive: Drive,
+    motion: scoring.ScoreMotion,
+    before: scoring.MeasuredScore,
+    clock: Clock | None = None,
+    progress: Progress = _quiet,
+) -> FunctionTrial:
+    """The drive's own adaptive notch (role adaptive_notch: IS620P H09-02): one notch adapting (mode 1) while the
+    test motion excites the machine, then frozen (mode 0: not updated) and the notch read back: what the drive
+    chose becomes the trial's change (judged_trial keeps or puts back). The mode goes back to what it was, also on
+    failure; the notch as found is the journal's 'before'."""
+    mode_e = drive.profile.role("adaptive_notch")
+    if mode_e is None:
+        raise UsageError(f"tune notch --method drive: {drive.profile.model} maps no adaptive notch")
+    groups = notch_entries(drive)
+    flat = [e for g in groups for e in g]
+    found = {r.entry.code: r.raw for r in drive.read_entries([mode_e, *flat])}
+    mode = found[mode_e.code]
+    trial = FunctionTrial("notch", before=before)
+    with journal.operation(drive, "tune notch", None, {mode_e.code: 1}, dict(found)):
+        try:
+            with eeprom.persistence(drive, False):
+                write_one(drive, mode_e, 1, mode)
+            progress(f"{mode_e.code} = 1: the drive adapts one notch while the axis moves")
+            scoring.measure(drive, motion, 1, clock)
+        finally:
+            with eeprom.persistence(drive, False):
+                write_one(drive, mode_e, mode)
+    chosen = {r.entry.code: r.raw for r in drive.read_entries(flat)}
+    for entry in flat:
+        if chosen[entry.code] != found[entry.code]:
+            # what the drive set: written back as found first, then set again by judged_trial (journaled)
+            why = "set by the drive's adaptive notch"
+            trial.changes.append(Change(entry, found[entry.code], chosen[entry.code], why))
+    if trial.changes:
+        with eeprom.persistence(drive, False):
+            for c in trial.changes:
+                write_one(drive, c.entry, c.old)
+        freq = next((c for c in trial.changes if c.entry in [g[0] for g in groups]), None)
+        if freq is not None:
+            trial.found = {"resonance": freq.new_value}
+        progress("the drive chose " + ", ".join(f"{c.entry.code} = {c.new_value:g}" for c in trial.changes))
+    else:
+        trial.reason = f"the drive's adaptive notch set nothing ({mode_e.code} = 1 during the test motion)"
+    return trial
+
+
 def notch_trial(drive: Drive, before: scoring.MeasuredScore) -> FunctionTrial:
     """A notch at notch_target's peak, on the first notch that is off (depth at its maximum or width 0: it passes
     everything) or else the first; no change where there is no target."""

@@ -9,7 +9,7 @@ import pytest
 
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
-from servotool.model.codec import words_to_raw
+from servotool.model.codec import eng_to_raw, words_to_raw
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
@@ -103,3 +103,39 @@ def test_the_resonance_finder_states_the_lines_limit(cli):
     assert data["notch"]["frequency"] is None and "maps no torque-command notch" in data["notch"]["reason"]
     r = cli("--port", "sim", "tune", "notch", "--yes")
     assert r.code == 2 and "maps no torque-command notch" in r.err
+
+
+def _ringing_is620p(resonance_hz: float, gain_hz: float):
+    """IS620P at its factory 57600 baud on a two-mass load (ratio 5) whose speed loop at gain_hz overshoots and
+    rings on its resonance."""
+    sim, d, clock = _virtual("is620p", 57600, load_ratio=5.0, resonance_hz=resonance_hz, resonance_damping=0.02)
+    for role, value in (("inertia_ratio", d.profile.param_from_load_ratio(5.0)), ("speed_loop_gain", gain_hz)):
+        entry = d.profile.role(role)
+        d.write_raw(entry, eng_to_raw(entry, value))
+    return sim, d, clock
+
+
+def test_the_drives_adaptive_notch_removes_a_two_mass_loads_ringing_and_is_kept(sim_dir):
+    sim, d, clock = _ringing_is620p(55.0, 50.0)
+    motion = scoring.motion_for(2.0)
+    before = scoring.measure(d, motion, 3, clock)
+    trial = functions.adaptive_notch_trial(d, motion, before, clock)
+    assert trial.found == {"resonance": 55.0}  # what the drive set (H09-18), read back
+    trial = functions.judged_trial(d, trial, motion, 3, clock=clock)
+    assert trial.verdict == "better" and trial.kept, [(x.name, x.verdict) for x in trial.differences]
+    figures = {x.name: x for x in trial.differences}
+    assert (
+        figures["overshoot"].verdict == "better"
+        and figures["overshoot"].after.value < 0.75 * figures["overshoot"].before.value
+    )
+    assert _held(sim, "H09-18") == 55 and _held(sim, "H09-02") == 0  # kept, and the drive no longer adapting
+
+
+def test_an_adaptive_notch_that_makes_the_response_worse_is_put_back(sim_dir):
+    """At 75 Hz under a 40 Hz loop the notch's phase lag costs more overshoot than the resonance did."""
+    sim, d, clock = _ringing_is620p(75.0, 40.0)
+    motion = scoring.motion_for(2.0)
+    trial = functions.adaptive_notch_trial(d, motion, scoring.measure(d, motion, 3, clock), clock)
+    trial = functions.judged_trial(d, trial, motion, 3, clock=clock)
+    assert trial.verdict == "worse" and not trial.kept and "written back" in trial.reason
+    assert _held(sim, "H09-18") == 4000 and _held(sim, "H09-02") == 0 and trial.held == {"H09-18": 4000.0}
