@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import typer
@@ -24,6 +25,7 @@ REPEATS_HELP = "Runs of the test motion before and after (2 or more give the spr
 TRAVEL_HELP = "Travel limit of the test motion in revolutions."
 KEEP_HELP = "Keep the change even where the score did not improve beyond its spread."
 SAVE_HELP = "Store a kept change in EEPROM (or keep it out of it) as the drive allows; default: the drive's setting."
+REPORT_HELP = "Write the before/after chart and the score table to DIR (needs servotool[plot])."
 DEAD_MAN_HELP = "Move a drive that has no dead-man route (nothing stops the motor if this program dies)."
 
 
@@ -47,6 +49,7 @@ def friction(
     save: bool = typer.Option(None, "--save/--no-save", help=SAVE_HELP),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
     no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
+    report: Path = typer.Option(None, "--report", metavar="DIR", help=REPORT_HELP),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
     """Friction compensation from the torques at constant speed, kept only where the score improves.
@@ -57,6 +60,7 @@ def friction(
     """
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
+    _check_report(report)
     with drive(ctx) as d, boosted(ctx, [d], "tune friction"):
         eeprom.check_save_request(d.profile, save)
         functions.friction_entries(d)
@@ -65,6 +69,7 @@ def friction(
         trial = functions.friction_trial(d, motion, before, progress=_progress(as_json))
         trial = functions.judged_trial(d, trial, motion, repeats, keep=keep, save=save, progress=_progress(as_json))
         profile = d.profile
+    _report(report, trial)
     _render(trial, as_json, profile.id)
 
 
@@ -83,6 +88,7 @@ def notch(
     save: bool = typer.Option(None, "--save/--no-save", help=SAVE_HELP),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
     no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
+    report: Path = typer.Option(None, "--report", metavar="DIR", help=REPORT_HELP),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
     """A torque-command notch at the machine's resonance, kept only where the score improves.
@@ -95,6 +101,7 @@ def notch(
         raise UsageError("--method must be drive or host")
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
+    _check_report(report)
     with drive(ctx) as d, boosted(ctx, [d], "tune notch"):
         eeprom.check_save_request(d.profile, save)
         functions.notch_entries(d)
@@ -109,6 +116,7 @@ def notch(
             trial = functions.notch_trial(d, before)
         trial = functions.judged_trial(d, trial, motion, repeats, keep=keep, save=save, progress=_progress(as_json))
         profile = d.profile
+    _report(report, trial)
     _render(trial, as_json, profile.id)
 
 
@@ -147,6 +155,21 @@ def resonance(
     if not peaks:
         out.print("no peak stands out of the spectrum", markup=False)
     out.print(proposal["reason"], markup=False)
+
+
+def _check_report(folder: Path | None) -> None:
+    if folder is not None:
+        from servotool.report.tune_report import check_folder
+
+        check_folder(folder)
+
+
+def _report(folder: Path | None, trial: functions.FunctionTrial) -> None:
+    if folder is not None:
+        from servotool.report.function_report import write
+
+        for path in write(folder, trial):
+            info(f"wrote {path}")
 
 
 def _peak_json(p: Peak) -> dict[str, Any]:

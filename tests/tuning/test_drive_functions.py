@@ -139,3 +139,14 @@ def test_an_adaptive_notch_that_makes_the_response_worse_is_put_back(sim_dir):
     trial = functions.judged_trial(d, trial, motion, 3, clock=clock)
     assert trial.verdict == "worse" and not trial.kept and "written back" in trial.reason
     assert _held(sim, "H09-18") == 4000 and _held(sim, "H09-02") == 0 and trial.held == {"H09-18": 4000.0}
+
+
+def test_the_report_shows_before_and_after_and_the_score_table(cli, tmp_path):
+    pytest.importorskip("matplotlib")
+    cli("sim", "config", "--load-ratio", "2", "--friction", "0.1")
+    folder = tmp_path / "rep"
+    r = cli("--port", "sim", "tune", "friction", "--yes", "--repeats", "2", "--report", str(folder))
+    assert r.code == 0, r.err
+    assert (folder / "response.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    text = (folder / "report.md").read_text()
+    assert "| Pn121 |" in text and "| iae |" in text and "Read back: Pn121 = " in text
