@@ -10,7 +10,7 @@ import typer
 from servotool.cli.common import boosted, confirm, drive
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, warn
-from servotool.cli.tune_score import _render_comparison, _render_score
+from servotool.cli.tune_score import render_comparison, render_score
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.quantity import quantity
@@ -204,9 +204,9 @@ def _render(trial: functions.FunctionTrial, as_json: bool, profile_id: str) -> N
         emit_json(data)
         return
     if trial.after is None and trial.before is not None:
-        _render_score(trial.before.score, trial.before.motion.describe())
+        render_score(trial.before.score, trial.before.motion.describe())
     if trial.after is not None:
-        _render_comparison(trial.differences, trial.verdict)
+        render_comparison(trial.differences, trial.verdict)
         out.print(f"judged on: {', '.join(data['judged_on'])}", markup=False)
     out.print(f"{'KEPT' if trial.kept else 'NOT KEPT'}: {trial.reason}", markup=False)
     if trial.held:

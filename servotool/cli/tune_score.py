@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import typer
 
@@ -87,11 +86,11 @@ def score(
     if as_json:
         emit_json(data)
         return
-    _render_score(measured.score, motion.describe())
+    render_score(measured.score, motion.describe())
     if save is not None:
         out.print(f"saved to {save}", markup=False)
     if old is not None:
-        _render_comparison(*scoring.compare(old[0], measured.score))
+        render_comparison(*scoring.compare(old[0], measured.score))
 
 
 @app.command("compare")
@@ -109,7 +108,7 @@ def compare(
     if as_json:
         emit_json(scoring.comparison_json(diffs, overall))
         return
-    _render_comparison(diffs, overall)
+    render_comparison(diffs, overall)
 
 
 def _text(name: str, f: Figure, spread: bool = True) -> str:
@@ -123,7 +122,7 @@ def _text(name: str, f: Figure, spread: bool = True) -> str:
     return text
 
 
-def _render_score(s: Score, motion: str) -> None:
+def render_score(s: Score, motion: str) -> None:
     t = table("Figure", "Value (± spread)", "Sampling resolution", title=f"score of {s.runs} run(s): {motion}")
     for name, f in s.figures.items():
         unit = FIGURES[name][0]
@@ -135,7 +134,7 @@ def _render_score(s: Score, motion: str) -> None:
     )
 
 
-def _render_comparison(diffs: list[Difference], overall: str) -> None:
+def render_comparison(diffs: list[Difference], overall: str) -> None:
     t = table("Figure", "Before", "After", "Must differ by", "Verdict")
     for d in diffs:
         unit = FIGURES[d.name][0]
@@ -148,7 +147,3 @@ def _render_comparison(diffs: list[Difference], overall: str) -> None:
         )
     out.print(t)
     out.print(f"verdict: {overall.upper()} (beyond the spread of the repeats and the sampling)", markup=False)
-
-
-def verdict_json(diffs: list[Difference], overall: str) -> dict[str, Any]:
-    return scoring.comparison_json(diffs, overall)
