@@ -80,14 +80,15 @@ def sim_extensions(profile: Profile) -> list[SimExtension]:
         )
     notch = profile.role("notch1_freq")
     if notch is not None:
-        width, depth = profile.role("notch1_width"), profile.role("notch1_depth")
+        width = profile.role("notch1_width")
+        depth = profile.role("notch1_depth") or profile.role("notch1_attenuation")
         found.append(
             SimExtension(
                 "notch width and depth levels",
                 "NOT IN THE MANUAL: it names a frequency, a width level and a depth level per notch "
                 f"({notch.code}, {width.code if width else '-'}, {depth.code if depth else '-'}: {notch.source}) but "
-                "not the filter they make; the simulator's notch passes depth % at its centre over a -3 dB band of "
-                "width x 10 % of the centre frequency",
+                "not the filter they make; the simulator's notch passes depth % at its centre (SD25: cuts depth %, "
+                "its sense not stated) over a -3 dB band of width x 10 % of the centre frequency",
             )
         )
     adaptive = profile.role("adaptive_notch")

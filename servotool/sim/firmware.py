@@ -179,18 +179,18 @@ class Firmware:
         )
 
     def _notches(self) -> tuple[NotchSetting, ...]:
-        """The torque-command notches the profile maps (roles notchN_freq, notchN_width, notchN_depth)."""
+        """The torque-command notches the profile maps: roles notchN_freq, notchN_width and notchN_depth (% passed
+        at the centre, IS620P's depth level) or notchN_attenuation (% cut there: how the simulator reads SD25's
+        depth, whose sense its manual leaves open, so that its factory notches pass everything)."""
         found = []
         for n in range(1, NOTCHES + 1):
             if self.profile.role(f"notch{n}_freq") is None:
                 continue
-            found.append(
-                NotchSetting(
-                    self._eng(f"notch{n}_freq", 0.0),
-                    self._eng(f"notch{n}_width", 0.0),
-                    self._eng(f"notch{n}_depth", 100.0),
-                )
-            )
+            if self.profile.role(f"notch{n}_depth") is not None:
+                depth = self._eng(f"notch{n}_depth", 100.0)
+            else:
+                depth = 100.0 - self._eng(f"notch{n}_attenuation", 0.0)
+            found.append(NotchSetting(self._eng(f"notch{n}_freq", 0.0), self._eng(f"notch{n}_width", 0.0), depth))
         return tuple(found)
 
     def _adapt_notch(self) -> None:
@@ -204,6 +204,7 @@ class Firmware:
         mode = self.drive.bank.effective_value(entry.code)
         hz = self.plant.settings.mechanics.resonance_hz
         freq = self.profile.role(f"notch{ADAPTIVE_NOTCH}_freq")
+        self.plant.watch_vibration = mode in (1, 2, 3)
         if mode not in (1, 2, 3) or hz <= 0 or freq is None or not self.plant.servo_on:
             return
         if self.plant.vibration_pct < ADAPT_VIBRATION_PCT:

@@ -151,6 +151,7 @@ class Plant:
         self._saturated_s = 0.0  # how long the speed regulator's output has sat at the torque limit
         self._t_slow = 0.0  # the torque command low-passed (VIBRATION_LOWPASS_S) ...
         self._vibration = 0.0  # ... and the mean square of what lies above it, N*m^2
+        self.watch_vibration = False  # measured only while something watches it (an adaptive notch that adapts)
         self.protections = Protections()
         self.set_settings(settings)
         self.set_gains(gains)
@@ -169,6 +170,7 @@ class Plant:
         self.gains = gains
         if old is None or old.notches != gains.notches:  # a filter keeps its state while its setting stays
             self._notches = [Notch(n, TS) for n in gains.notches if n.active(TS)]
+        self._ff = gains.friction_ff if gains.friction_ff.any else None
         j_conf = self.motor.jm * (1.0 + gains.inertia_ratio_configured)
         self._kp = 2 * math.pi * gains.speed_gain_hz * j_conf
         self._ti = max(gains.speed_integral_ms, 0.1) / 1000.0
@@ -352,7 +354,9 @@ class Plant:
         else:
             self._loop_ref = self._ref
         err = self._loop_ref - self._w_meas
-        unclamped = self._kp * (err + self._integral / self._ti) + self._feed_forward_nm()
+        unclamped = self._kp * (err + self._integral / self._ti)
+        if self._ff is not None:
+            unclamped += self._feed_forward_nm(self._ff)
         if abs(unclamped) < self._t_lim:  # anti-windup: integrate only while not saturated
             self._integral += err * TS
             self._saturated_s = 0.0
@@ -360,11 +364,8 @@ class Plant:
             self._saturated_s += TS
         return max(-self._t_lim, min(self._t_lim, unclamped))
 
-    def _feed_forward_nm(self) -> float:
-        """The friction compensation's torque for the speed reference now (0 where the drive sets none)."""
-        ff = self.gains.friction_ff
-        if not ff.any:
-            return 0.0
+    def _feed_forward_nm(self, ff: FrictionFeedForward) -> float:
+        """The friction compensation's torque for the speed reference now."""
         pct = ff.torque_pct(self._loop_ref / RAD_S_PER_RPM, self.motor.rated_speed_rpm)
         return pct / 100.0 * self.motor.rated_torque_nm
 
@@ -382,10 +383,12 @@ class Plant:
     def _step(self) -> None:
         # the torque applied now was commanded one period ago (computation delay), then filtered
         t_cmd = self._controller()
-        for notch in self._notches:
-            t_cmd = notch.step(t_cmd)
-        self._t_slow += (t_cmd - self._t_slow) * (TS / (VIBRATION_LOWPASS_S + TS))
-        self._vibration += ((t_cmd - self._t_slow) ** 2 - self._vibration) * (TS / VIBRATION_AVERAGE_S)
+        if self._notches:
+            for notch in self._notches:
+                t_cmd = notch.step(t_cmd)
+        if self.watch_vibration:
+            self._t_slow += (t_cmd - self._t_slow) * (TS / (VIBRATION_LOWPASS_S + TS))
+            self._vibration += ((t_cmd - self._t_slow) ** 2 - self._vibration) * (TS / VIBRATION_AVERAGE_S)
         applied_target = self._t_delayed
         self._t_delayed = t_cmd
         if self._tf > 0:

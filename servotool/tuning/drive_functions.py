@@ -234,16 +234,22 @@ def friction_trial(
 
 
 def notch_entries(drive: Drive) -> list[tuple[Entry, Entry, Entry]]:
-    """(frequency, width level, depth level) of each notch the profile maps (a usage error where none)."""
+    """(frequency, width level, depth or attenuation) of each notch the profile maps (a usage error where none)."""
     p = drive.profile
     found = []
     for n in range(1, NOTCHES + 1):
-        parts = [p.role(f"notch{n}_{what}") for what in ("freq", "width", "depth")]
+        parts = [p.role(f"notch{n}_{what}") for what in ("freq", "width")]
+        parts.append(p.role(f"notch{n}_depth") or p.role(f"notch{n}_attenuation"))
         if all(e is not None for e in parts):
             found.append((parts[0], parts[1], parts[2]))  # type: ignore[arg-type]
     if not found:
         raise UsageError(f"tune notch: {p.model} maps no torque-command notch (roles notchN_freq/_width/_depth)")
     return found
+
+
+def _attenuates(drive: Drive, entry: Entry) -> bool:
+    """Whether a notch's third entry is an attenuation (role notchN_attenuation) rather than a depth passed."""
+    return any(drive.profile.role(f"notch{n}_attenuation") is entry for n in range(1, NOTCHES + 1))
 
 
 def resonance_peaks(measured: scoring.MeasuredScore) -> tuple[list[Peak], float]:
@@ -353,11 +359,24 @@ def notch_trial(drive: Drive, before: scoring.MeasuredScore) -> FunctionTrial:
     trial.found = {"resonance": target.hz}
     flat = [e for g in groups for e in g]
     raws = {r.entry.code: r.raw for r in drive.read_entries(flat)}
-    free = next((g for g in groups if raws[g[2].code] >= g[2].max or raws[g[1].code] == 0), groups[0])
+
+    def passes(g: tuple[Entry, Entry, Entry]) -> bool:  # off: passes everything
+        cut = raws[g[2].code] == 0 if _attenuates(drive, g[2]) else raws[g[2].code] >= g[2].max
+        return cut or raws[g[1].code] == 0
+
+    free = next((g for g in groups if passes(g)), groups[0])
+    full = (
+        (float(raw_to_eng(free[2], free[2].max)), "attenuation (cut out at its centre)")
+        if _attenuates(drive, free[2])
+        else (
+            NOTCH_DEPTH_LEVEL,
+            "depth level (0: cut out at its centre)",
+        )
+    )
     for entry, value, why in (
         (free[0], target.hz, f"notch at the {target.hz:.0f} Hz peak"),
         (free[1], NOTCH_WIDTH_LEVEL, "width level"),
-        (free[2], NOTCH_DEPTH_LEVEL, "depth level (0: cut out at its centre)"),
+        (free[2], full[0], full[1]),
     ):
         trial.changes.append(Change(entry, raws[entry.code], eng_to_raw(entry, value), why))
     return trial

@@ -50,3 +50,11 @@ def test_the_drive_parameters_set_the_loops_functions():
     dsx.bank.apply_parameter(entry, 55)
     dsx.firmware._param_changed(dsx, entry, 55)
     assert dsx.firmware.plant.gains.friction_ff.coulomb_fwd_pct == pytest.approx(5.5)
+
+
+def test_sd25s_factory_notches_pass_everything():
+    """SD25's manual leaves the sense of a notch's depth open (Po219, default 0): read as the cut, the factory
+    notches (2000 Hz, width 5, depth 0) leave the loop as it was."""
+    sim = build_drive(load_profile("sd25"), 1, VirtualClock(10.0), persist=False)
+    assert sim.firmware.plant.gains.notches and all(n.depth_level == 100.0 for n in sim.firmware.plant.gains.notches)
+    assert not any(n.active(TS) for n in sim.firmware.plant.gains.notches)
