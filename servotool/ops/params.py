@@ -97,8 +97,14 @@ def set_assignments(
 
 
 def write_one(drive: Drive, entry: Entry, raw: int, old: int | None = None) -> WriteResult:
-    """The one path every parameter write takes (set, restore, plans): write, then verify by read-back."""
-    return drive.write_verified(entry, raw, old)
+    """The one path every parameter write takes (set, restore, plans): write, then verify by read-back. A change
+    made inside a batch of lasting writes goes into the drive's change log (ops.changelog)."""
+    from servotool.ops import changelog
+
+    [old] = changelog.before_write(drive, [(entry, old)])
+    result = drive.write_verified(entry, raw, old)
+    changelog.after_write(drive, [result])
+    return result
 
 
 def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list[tuple[Entry, int, int]]]:
@@ -133,10 +139,15 @@ def write_changes(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[W
 def write_run(drive: Drive, run: list[tuple[Entry, int, int]]) -> list[WriteResult]:
     """One run of write_runs (entry, old, new): a lone entry by write_one, adjacent ones in one verified FC16
     request."""
+    from servotool.ops import changelog
+
     if len(run) == 1:
         entry, old, new = run[0]
         return [write_one(drive, entry, new, old)]
-    return drive.write_block_verified([(e, new, old) for e, old, new in run])
+    olds = changelog.before_write(drive, [(e, old) for e, old, _new in run])
+    results = drive.write_block_verified([(e, new, old) for (e, _, new), old in zip(run, olds, strict=True)])
+    changelog.after_write(drive, results)
+    return results
 
 
 def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:

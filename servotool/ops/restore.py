@@ -372,13 +372,17 @@ def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
 
 
 def factory_reset(drive: Drive, notice: Notice | None = None, progress: Callable[[int], None] | None = None) -> Path:
-    """Automatic backup (progress: entries read), then the profile's factory-reset function."""
+    """Automatic backup (progress: entries read), then the profile's factory-reset function (a line in the change
+    log naming the backup: the values it replaced are there)."""
     drive.profile.need_role("factory_reset", "param reset")
     check_servo_off(drive, [e for e in drive.profile.of_class("Pn") if e.effect == "servo_off"], "a factory reset")
     auto = auto_backup(drive, "before-reset", progress)
     if notice:
         notice(f"automatic backup of the drive's current state: {auto}")
     drive.trigger("factory_reset", "param reset")
+    from servotool.ops.changelog import event
+
+    event(drive, "factory_reset", auto_backup=str(auto))
     return auto
 
 
