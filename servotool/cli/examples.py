@@ -20,7 +20,11 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
     ("param list", "servotool --port sim param list --changed", "Only what differs from the factory default."),
     ("param backup", "servotool --port sim param backup -o axis1.yaml", "Every parameter to a checksummed file."),
     ("param diff", "servotool --port sim param diff axis1.yaml", "The drive against a backup."),
-    ("param diff", "servotool --port sim param diff --factory", "The drive against its factory defaults."),
+    (
+        "param diff",
+        "servotool --port sim param diff --factory",
+        "The drive against its factory defaults; they differ (exit 1).",
+    ),
     ("param restore", "servotool --port sim param restore axis1.yaml --dry-run", "What a restore would write."),
     ("param restore", "servotool --port sim param restore axis1.yaml --yes", "Write the differences, verified."),
     ("raw read", "servotool --port sim raw read 0x2100 2", "Two registers by address, FC03."),
