@@ -26,6 +26,7 @@ COMMANDS = {
     "param": lazy(
         "servotool.cli.param:app",
         "servotool.cli.backup:app",
+        "servotool.cli.apply:app",
         help="Read, set, list, back up and restore drive parameters.",
     ),
     "profiles": lazy("servotool.cli.profiles:app", help="List, show and check drive profiles."),
