@@ -107,3 +107,20 @@ def test_a_log_that_cannot_be_written_refuses_before_the_drive_is_changed(serve,
     r = cli("--port", port, "-P", "sd25", "param", "set", "Po101=40")
     assert r.code == 2 and "cannot write the change log" in r.err and "nothing was written" in r.err, r.err
     assert read_registers(port, 101) == [600]
+
+
+def test_servotool_log_reads_per_unit_and_machine_and_names_a_torn_line(cli, sim_dir):
+    env = {"SERVOTOOL_MACHINE": "press-07"}
+    assert cli("--port", "sim", "param", "set", "Pn101=30", env=env).code == 0
+    assert cli("--port", "sim", "-u", "2", "param", "set", "Pn101=31", "Pn100=40", env=env).code == 0
+    r = cli("log", "--unit", "2", "--json")
+    assert r.code == 0 and [x["code"] for x in r.json()] == ["Pn101", "Pn100"], r.err
+    r = cli("log", "--machine", "press-07")
+    assert r.code == 0 and "3 changes" in r.out and "Pn100" in r.out and "32.0 1/s" in r.out, r.out
+    assert cli("log", "--machine", "elsewhere").out.startswith("no changes logged of machine elsewhere")
+    assert [x["code"] for x in cli("log", "--last", "1", "--json").json()] == ["Pn100"]
+    (path,) = [p for p in (sim_dir.parent / "auto-backups" / "changes").rglob("*.jsonl") if "unit1" in p.name]
+    with path.open("a") as fh:
+        fh.write('{"time": "2026-')  # a line cut short by a power loss
+    r = cli("log", "--unit", "1", "--json")
+    assert r.code == 0 and len(r.json()) == 1 and "line 2 is not JSON" in r.err, r.err
