@@ -1,7 +1,7 @@
 """Many buses at once: `servotool fleet backup` over 4 simulated buses of 6 drives each, against the slowest bus alone.
 
 Run: python bench/fleet.py [--buses 4] [--units 6] [--profile sd25] [--line-baud 19200] [--action backup|drift]
-     [--runs 1]
+     [--runs 1] [--port-base N]
 Starts one `sim serve` per bus (its own drives, its line emulated at --line-baud: each answer after its wire time),
 runs the CLI on an inventory of each bus alone, then on all of them, and prints each wall time, the slowest single
 bus, the time of all at once and their ratio (target <= 1.2), with the load before and after. Times are the CLI's
@@ -26,8 +26,8 @@ import yaml
 TARGET = 1.2
 
 
-def serve(folder: Path, profile: str, units: int, line_baud: str) -> tuple[subprocess.Popen[str], str]:
-    args = [sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0", "-P", profile]
+def serve(folder: Path, profile: str, units: int, line_baud: str, port: int) -> tuple[subprocess.Popen[str], str]:
+    args = [sys.executable, "-m", "servotool", "sim", "serve", "--port", f"tcp://127.0.0.1:{port}", "-P", profile]
     args += ["--line-baud", line_baud]
     for u in range(1, units + 1):
         args += ["--unit", str(u)]
@@ -71,6 +71,7 @@ def main() -> None:
     ap.add_argument("--line-baud", default="19200", help="the simulated line's speed (factory: the profile's)")
     ap.add_argument("--action", choices=("backup", "drift"), default="backup")
     ap.add_argument("--runs", type=int, default=1, help="repeat the all-at-once run (the best and worst shown)")
+    ap.add_argument("--port-base", type=int, default=0, help="serve bus i on TCP port BASE+i (default: any free)")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="servotool-bench-fleet-"))
     env = {**os.environ, "SERVOTOOL_BACKUP_DIR": str(work / "backups"), "SERVOTOOL_CONFIG": str(work / "none.yaml")}
@@ -82,7 +83,9 @@ def main() -> None:
     try:
         buses = []
         for i in range(args.buses):
-            proc, port = serve(work / f"sim{i}", args.profile, args.units, args.line_baud)
+            proc, port = serve(
+                work / f"sim{i}", args.profile, args.units, args.line_baud, args.port_base + i if args.port_base else 0
+            )
             procs.append(proc)
             bus = {"machine": f"machine-{i + 1}", "port": port, "profile": args.profile}
             bus["units"] = list(range(1, args.units + 1))
