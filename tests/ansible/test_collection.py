@@ -64,25 +64,34 @@ def playbook(tmp_path: Path, fleet: dict[str, machines.Machine]) -> subprocess.C
         }
     }
     (tmp_path / "inventory.yml").write_text(yaml.safe_dump(inventory))
+    command = [sys.executable, "-m", "ansible", "playbook", "-i", str(tmp_path / "inventory.yml")]
+    return subprocess.run(
+        [*command, str(HERE / "playbook.yml")],
+        capture_output=True,
+        text=True,
+        env=ansible_env(tmp_path, forks=len(fleet)),
+        cwd=tmp_path,
+        timeout=300,
+    )
+
+
+def ansible_env(tmp_path: Path, forks: int = 5) -> dict[str, str]:
+    """ansible-core's settings for a test: its own home and temp folders, the collection from this checkout."""
     home = tmp_path / "ansible-home"
-    env = {
+    return {
         **os.environ,
         "ANSIBLE_CONFIG": str(tmp_path / "no-ansible.cfg"),  # no ansible.cfg of the cwd or the user's
         "ANSIBLE_HOME": str(home),
         "ANSIBLE_LOCAL_TEMP": str(home / "tmp"),
         "ANSIBLE_REMOTE_TEMP": str(home / "remote"),
         "ANSIBLE_COLLECTIONS_PATH": str(ROOT / "ansible" / "collections"),
-        "ANSIBLE_FORKS": str(len(fleet)),
+        "ANSIBLE_FORKS": str(forks),
         "ANSIBLE_NOCOLOR": "1",
         "ANSIBLE_RETRY_FILES_ENABLED": "0",
         "ANSIBLE_DEPRECATION_WARNINGS": "0",
         "LC_ALL": "C.UTF-8",  # ansible-core refuses a non-UTF-8 locale
         "LANG": "C.UTF-8",
     }
-    command = [sys.executable, "-m", "ansible", "playbook", "-i", str(tmp_path / "inventory.yml")]
-    return subprocess.run(
-        [*command, str(HERE / "playbook.yml")], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300
-    )
 
 
 def test_a_playbook_applies_idempotently_checks_without_writing_and_a_refusing_machine_fails_alone(
@@ -132,3 +141,43 @@ def test_a_playbook_applies_idempotently_checks_without_writing_and_a_refusing_m
     logged = cli("log", "--machine", "m1", "--json").json()  # the drive's change log names the playbook's task
     assert sorted(x["code"] for x in logged) == sorted(GOLDEN)
     assert {(x["who"], x["source"]) for x in logged} == {("test-runner", "ansible servotool.drives.settings")}
+
+
+def test_the_documented_example_and_every_module_s_documentation_parse(tmp_path):
+    """What a user reads first: ansible-doc shows each module (its DOCUMENTATION, EXAMPLES and RETURN are YAML),
+    the example playbook and inventory pass ansible's syntax check, and its golden gains are entries of the profile
+    its inventory names."""
+    from servotool.model.loader import load_profile
+    from servotool.ops import desired
+
+    env = ansible_env(tmp_path)
+    modules = [f"servotool.drives.{name}" for name in ("settings", "facts", "backup", "drift")]
+    shown = subprocess.run(
+        [sys.executable, "-m", "ansible", "doc", "--json", *modules], capture_output=True, text=True, env=env
+    )
+    assert shown.returncode == 0, shown.stderr
+    docs = json.loads(shown.stdout)
+    assert sorted(docs) == sorted(modules) and all(d["doc"] and d["examples"] and d["return"] for d in docs.values())
+    assert "port" in docs["servotool.drives.settings"]["doc"]["options"]
+
+    docs_dir = ROOT / "ansible" / "collections" / "ansible_collections" / "servotool" / "drives" / "docs"
+    checked = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "ansible",
+            "playbook",
+            "--syntax-check",
+            "-i",
+            str(docs_dir / "inventory.yml"),
+            str(docs_dir / "golden-gains.yml"),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+    assert checked.returncode == 0, checked.stdout + checked.stderr
+    group = yaml.safe_load((docs_dir / "inventory.yml").read_text())["all"]["children"]["press_x"]["vars"]
+    golden = yaml.safe_load((docs_dir / "group_vars" / "press_x.yml").read_text())["golden_gains"]
+    wanted = desired.from_mapping({"parameters": golden, "save": True}, "press_x golden_gains")
+    desired.check(wanted, load_profile(group["servo_profile"]))  # UsageError on a code the profile lacks

@@ -10,7 +10,7 @@ module: backup
 short_description: Back up a servo drive's parameters to the control node
 description:
   - Reads every parameter of the drive on the managed host and returns a servotool snapshot (deterministic, no time
-    stamp inside: fit for version control, and usable as a golden file and by C(servotool param restore)).
+    stamp inside, so fit for version control, and usable as a golden file and by C(servotool param restore)).
   - The action plugin of the same name writes it on the control node, under I(dest)/MACHINE/ as
     C(PROFILE-unitN-IDENTITY-TIME.yaml) (machine, drive identity and the time it was read, UTC); a snapshot equal
     to the drive's latest one there is not written again and the task reports C(changed=false).

@@ -49,7 +49,7 @@ options:
     description: Accepted for module_defaults; a comparison changes nothing.
     type: str
   parameters:
-    description: The golden parameters, C(CODE: VALUE) in engineering units.
+    description: The golden parameters, C(CODE=VALUE) pairs in engineering units.
     type: dict
   file:
     description: A settings file or snapshot on the managed host.

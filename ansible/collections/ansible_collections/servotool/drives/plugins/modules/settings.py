@@ -52,8 +52,8 @@ options:
     type: str
   parameters:
     description:
-      - The desired parameters, C(CODE: VALUE) in engineering units as C(servotool param set) takes them
-        (C(Po101: 40.0), C(Po001: d 1 21), C(Po001.Y: 1)).
+      - The desired parameters, C(CODE=VALUE) pairs in engineering units as C(servotool param set) takes
+        them (Po101 40.0, Po001 "d 1 21", Po001.Y 1).
     type: dict
   file:
     description: A settings file or a servotool backup/snapshot on the managed host, instead of I(parameters).
@@ -68,7 +68,7 @@ options:
     type: bool
 notes:
   - Supports check mode (nothing is written; C(changed) says whether something would be) and diff mode (before and
-    after, one C(CODE: value unit) line per changing parameter).
+    after, one line per changing parameter with its code, value and unit).
   - Values are compared with what a read shows, the drive's RAM; where EEPROM cannot be read over Modbus (SD25,
     IS620P) a value RAM holds already is left as it is.
 author: servotool
