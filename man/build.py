@@ -163,6 +163,8 @@ Success.
 .TP
 .B 1
 Device or I/O error: port, timeout, CRC, Modbus exception, a motion or identification that failed.
+Also a difference found: \fBparam diff\fR, \fBparam apply \-\-check\fR, \fBfleet drift\fR and
+\fBfleet apply \-\-check\fR when a drive differs.
 .TP
 .B 2
 Usage or validation error: unknown code, value out of range, bad file or plan, missing confirmation, a drive
@@ -171,6 +173,9 @@ Nothing is written to a drive before all values of a command are validated.
 .TP
 .B 3
 Verification mismatch: a value read back differs, or an expectation or alarm clear failed.
+.TP
+.B 4
+Some drives of a \fBfleet\fR command failed; the others were done (the table and \fB\-\-json\fR say which).
 .TP
 .B 130
 Interrupted (Ctrl\-C); any motion was stopped first.

@@ -26,6 +26,7 @@ COMMANDS = {
     "param": lazy(
         "servotool.cli.param:app",
         "servotool.cli.backup:app",
+        "servotool.cli.apply:app",
         help="Read, set, list, back up and restore drive parameters.",
     ),
     "profiles": lazy("servotool.cli.profiles:app", help="List, show and check drive profiles."),
@@ -41,6 +42,8 @@ COMMANDS = {
     "trace": lazy("servotool.cli.trace:trace", help="Capture entries around a trigger, as fast as the line allows."),
     "plot": lazy("servotool.cli.plot:plot", help="Draw any servotool CSV in the terminal or as a PNG."),
     "shell": lazy("servotool.cli.shell:shell", help="One open port, the same commands at a prompt, live status."),
+    "fleet": lazy("servotool.cli.fleet:app", help="Many machines at once: backup, drift and apply per inventory."),
+    "log": lazy("servotool.cli.log:log", help="The change log: every value servotool changed, per drive or machine."),
 }
 
 app = typer.Typer(
