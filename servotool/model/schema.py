@@ -49,7 +49,16 @@ TOP_KEYS = {
     "identity",
 }
 DEAD_MAN_ROUTES = ("drive_timeout", "segment", "none")
-DEAD_MAN_KEYS = {"route", "reason", "source", "unverified", "if_host_dies", "start_value"}
+DEAD_MAN_KEYS = {
+    "route",
+    "reason",
+    "source",
+    "unverified",
+    "if_host_dies",
+    "start_value",
+    "ramp_reference_rpm",
+    "ramp_source",
+}
 
 
 SETUP_KEYS = {"code", "value", "reason", "source", "unverified"}
@@ -172,11 +181,25 @@ def _parse_dead_man(chk: Checker, raw: Any) -> DeadManRoute | None:
         return None
     chk.known_keys(raw, DEAD_MAN_KEYS, "dead_man")
     route = chk.choice(raw, "route", "dead_man", DEAD_MAN_ROUTES, "none")
-    texts = {k: chk.opt(raw, k, "dead_man", str, "") for k in ("reason", "source", "unverified", "if_host_dies")}
+    keys = ("reason", "source", "unverified", "if_host_dies", "ramp_source")
+    texts = {k: chk.opt(raw, k, "dead_man", str, "") for k in keys}
     if not texts["reason"] or not texts["source"]:
         chk.bad("dead_man", "needs a reason and a source (the manual lines it relies on)")
     start_value = chk.opt(raw, "start_value", "dead_man", int, 1)
-    return DeadManRoute(route=route, start_value=start_value, **texts)
+    reference = raw.get("ramp_reference_rpm")
+    if reference == "rated":
+        reference = 0.0
+    elif reference is not None and not (isinstance(reference, int | float) and reference > 0):
+        chk.bad("dead_man.ramp_reference_rpm", "expected a speed in rpm > 0, or 'rated'")
+        reference = None
+    if reference is not None and not texts["ramp_source"]:
+        chk.bad("dead_man", "ramp_reference_rpm needs a ramp_source (the manual lines, or why it is inferred)")
+    return DeadManRoute(
+        route=route,
+        start_value=start_value,
+        ramp_reference_rpm=float(reference) if reference is not None else None,
+        **texts,
+    )
 
 
 def _parse_motion_setup(chk: Checker, raw: Any, entries: dict[str, Entry], broken: set[str]) -> list[SetupItem]:

@@ -20,9 +20,6 @@ EXCHANGES_PER_BEAT = 4
 # Bytes on the wire of one exchange (request + reply of a short read or write) and the turnaround allowance.
 EXCHANGE_BYTES = 17
 TURNAROUND_S = 0.005
-# Ramp times of these drives are specified up to 1000 rpm on some (IS620P) and up to the rated speed on others:
-# the bound takes the slower reading.
-RAMP_REFERENCE_RPM = 1000.0
 NO_ROUTE = DeadManRoute(route="none", reason="the profile describes no dead-man route", source="")
 
 
@@ -74,24 +71,25 @@ def link_cycle_s(drive: Drive) -> float:
     return EXCHANGES_PER_BEAT * (EXCHANGE_BYTES * 11.0 / baud + TURNAROUND_S)
 
 
-def stop_time_s(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
-    """Time to ramp down from speed_rpm with a ramp time ramp_ms per reference_rpm (by default the slower of the
-    two readings); without a known ramp, one second per 1000 rpm."""
-    ramp_s = (ramp_ms if ramp_ms is not None else 1000.0) / 1000.0
-    return ramp_s * abs(speed_rpm) / reference_rpm
+def stop_time_s(speed_rpm: float, ramp_ms: float | None, reference_rpm: float) -> float:
+    """Time to ramp down from speed_rpm with a ramp time ramp_ms per reference_rpm (Profile.ramp_rpm); without a
+    known ramp, one second per 1000 rpm."""
+    if ramp_ms is None:
+        return abs(speed_rpm) / 1000.0
+    return ramp_ms / 1000.0 * abs(speed_rpm) / reference_rpm
 
 
 SEGMENT_BEATS = 3.0  # a segment covers this many beat periods at speed, so a late beat never stutters the motion
 
 
-def braking_rev(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
+def braking_rev(speed_rpm: float, ramp_ms: float | None, reference_rpm: float) -> float:
     """Distance to ramp down from speed_rpm (see stop_time_s; reference_rpm: the speed the ramp time is for)."""
     return abs(speed_rpm) / 60.0 * stop_time_s(speed_rpm, ramp_ms, reference_rpm) / 2.0
 
 
-def segment_rev(speed_rpm: float, beat_s: float, ramp_ms: float | None) -> float:
+def segment_rev(speed_rpm: float, beat_s: float, ramp_ms: float | None, reference_rpm: float) -> float:
     """The length of each re-armed segment: SEGMENT_BEATS beats at speed, then room to stop."""
-    return abs(speed_rpm) / 60.0 * SEGMENT_BEATS * beat_s + braking_rev(speed_rpm, ramp_ms)
+    return abs(speed_rpm) / 60.0 * SEGMENT_BEATS * beat_s + braking_rev(speed_rpm, ramp_ms, reference_rpm)
 
 
 def drive_timeout_s(drive: Drive) -> float | None:
@@ -118,7 +116,8 @@ def bound(
     already read); see check() for when it cannot be kept."""
     route = route_of(drive.profile)
     cycle = link_cycle_s(drive)
-    stop_s = stop_time_s(speed_rpm, ramp_ms)
+    reference = drive.profile.ramp_rpm()
+    stop_s = stop_time_s(speed_rpm, ramp_ms, reference)
     rev = s = None
     kind = route.route
     if kind == "drive_timeout":
@@ -129,7 +128,7 @@ def bound(
             s = timeout + stop_s
             rev = abs(speed_rpm) / 60.0 * (timeout + stop_s / 2.0)
     elif kind == "segment":
-        rev = segment_rev(speed_rpm, beat_s, ramp_ms)
+        rev = segment_rev(speed_rpm, beat_s, ramp_ms, reference)
         s = SEGMENT_BEATS * beat_s + stop_s
     return DeadManBound(
         kind,
@@ -151,9 +150,7 @@ def motion_bound(drive: Drive, speed_rpm: float, ramp_s: float) -> DeadManBound:
     drive's beat rate, as its Jogger arms it."""
     from servotool.motion.keepalive import keepalive_interval_s
 
-    motor = drive.profile.motor
-    rated = motor.rated_speed_rpm if motor is not None else 3000.0
-    ramp_ms = ramp_s * 1000.0 * rated / abs(speed_rpm)  # the ramp parameter's reading: time to rated speed
+    ramp_ms = ramp_s * 1000.0 * drive.profile.ramp_rpm() / abs(speed_rpm)  # the parameter's reading
     b = bound(drive, speed_rpm, min(0.1, keepalive_interval_s(drive)), ramp_ms, drive.dead_man_waived)
     check(b, drive.dead_man_waived)
     return b

@@ -118,9 +118,7 @@ class Jogger:
         self.guard = TravelGuard(self.drive, travel)
         self.keepalive.interval_s = min(self.keepalive_s, keepalive_interval_s(self.drive))
         accel_ms = self._ramp_ms()
-        self._stop_wait_s = 1.0 + 2.0 * (float(accel_ms) / 1000.0 if accel_ms is not None else 1.0) * abs(speed_rpm) / (
-            self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0
-        )
+        self._stop_wait_s = 1.0 + 2.0 * deadman.stop_time_s(speed_rpm, accel_ms, self.profile.ramp_rpm())
         bound = self.arm_dead_man(abs(speed_rpm), accel_ms)
         return JogPlan(
             abs(speed_rpm),
@@ -363,7 +361,8 @@ class Jogger:
                     self.check_tripped()
                     guard.check(
                         self.direction,
-                        deadman.braking_rev(self.speed_rpm, plan.accel_ms) + self.speed_rpm / 60.0 * self.keepalive_s,
+                        deadman.braking_rev(self.speed_rpm, plan.accel_ms, self.profile.ramp_rpm())
+                        + self.speed_rpm / 60.0 * self.keepalive_s,
                     )
                     if on_sample is not None:
                         on_sample(elapsed, self.speed())

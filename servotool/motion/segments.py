@@ -19,8 +19,7 @@ class SegmentMoves:
         self.feature = feature
         dead_man = drive.profile.dead_man
         self.start_bits = dead_man.start_value if dead_man is not None else 1
-        motor = drive.profile.motor
-        self.rated_rpm = motor.rated_speed_rpm if motor is not None else 3000.0
+        self.ramp_rpm = drive.profile.ramp_rpm()  # the speed the ramp time runs up to
         self.moving = 0  # the direction of the running move (0: none or braking)
         self._raw: int | None = None  # the displacement last written
         self._per_rev: float | None = None
@@ -30,7 +29,7 @@ class SegmentMoves:
 
     def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
         """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own where
-        own_s is set, see length_rev); direction 0 brakes a running move at the ramp (read as time to rated speed).
+        own_s is set, see length_rev); direction 0 brakes a running move at the ramp (Profile.ramp_rpm).
         False when there was nothing to do."""
         own_s, self.own_s = self.own_s, None
         if direction:
@@ -38,7 +37,7 @@ class SegmentMoves:
             rev *= direction
         elif self.moving:
             self.ends_itself = False
-            rev = self.moving * deadman.braking_rev(speed_rpm, ramp_ms, self.rated_rpm)
+            rev = self.moving * deadman.braking_rev(speed_rpm, ramp_ms, self.ramp_rpm)
         else:
             return False
         self.moving = direction
@@ -51,10 +50,10 @@ class SegmentMoves:
         """The length of a fresh move, and whether it is the move's own. A move that accelerates for own_s and then
         stops (identification) is one segment of its own where that is no longer than the dead-man's: the drive
         brakes it at its end by itself, with no re-arm and no stop command (three writes a move on IS620P)."""
-        bounded = deadman.segment_rev(speed_rpm, beat_s, ramp_ms)
+        bounded = deadman.segment_rev(speed_rpm, beat_s, ramp_ms, self.ramp_rpm)
         if own_s is None or not ramp_ms or ramp_ms <= 0:
             return bounded, False
-        to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.rated_rpm
+        to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.ramp_rpm
         own = abs(speed_rpm) / 60.0 * own_s * min(1.0, own_s / to_speed_s)  # up for own_s, down as long
         return (own, True) if own <= bounded else (bounded, False)
 

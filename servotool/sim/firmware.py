@@ -158,7 +158,7 @@ class Firmware:
             torque_filter_ms=self._gain("torque_filter", 0.5),
             torque_limit_pct=min(self._eng("torque_limit_fwd", 300.0), self._eng("torque_limit_rev", 300.0)),
             max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
-            jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
+            jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)) * self.motor.rated_speed_rpm / self.profile.ramp_rpm(),
             following_limit_rev=self._following_limit_rev(),
         )
 

@@ -183,8 +183,7 @@ class _HostRun:
         beat_s = ident.keepalive_s if ident.keepalive_s is not None else keepalive_interval_s(d)
         self.jogger = Mover(d, beat_s, FEATURE, self.timing)
         self.jog_accel = p.need_role("jog_accel", FEATURE)
-        assert p.motor is not None
-        self.rated_rpm = p.motor.rated_speed_rpm
+        self.ramp_rpm = p.ramp_rpm()  # the speed the drive's ramp time runs up to
         limit_e = p.role("torque_limit_fwd")
         self.torque_limit = ident._eng(limit_e) if limit_e is not None else None
         self.old_ratio = ident.current_ratio()
@@ -239,7 +238,7 @@ class _HostRun:
         jogger.start(
             direction,
             speed,
-            eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
+            eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.ramp_rpm / speed),
             self.ramp if guard.band is not None else None,
         )
         start = self.timing.now()

@@ -105,11 +105,12 @@ def test_the_axis_position_is_tracked_across_the_counter_wrap(sim_dir):
 
 def test_the_bound_is_facts_from_route_speed_beat_and_ramp(sim_dir):
     _sim, d, _clock = _virtual()
-    b = deadman.bound(d, 600, 0.1, 200.0)  # DSX7E: its watchdog Pn620 = 500 ms
-    assert b.route == "drive_timeout" and b.stop_rev == pytest.approx(10 * (0.5 + 0.12 / 2))
-    assert b.stop_s == pytest.approx(0.62) and deadman.sentence(b).endswith("within 5.60 rev (0.62 s)")
+    # DSX7E: its watchdog Pn620 = 500 ms, then Pn513's 200 ms ramp read as time to the rated 3000 rpm: 0.04 s
+    b = deadman.bound(d, 600, 0.1, 200.0)
+    assert b.route == "drive_timeout" and b.stop_rev == pytest.approx(10 * (0.5 + 0.04 / 2))
+    assert b.stop_s == pytest.approx(0.54) and deadman.sentence(b).endswith("within 5.20 rev (0.54 s)")
     _sim, d, _clock = _virtual("is620p")
-    b = deadman.bound(d, 600, 0.1, 100.0)  # a segment: 3 beats at speed plus the stop
+    b = deadman.bound(d, 600, 0.1, 100.0)  # a segment: 3 beats at speed plus the stop (H11-15 per 1000 rpm)
     assert b.route == "segment" and b.stop_rev == pytest.approx(10 * 0.3 + 10 * 0.06 / 2)
     _sim, d, _clock = _virtual("sdc")
     b = deadman.bound(d, 600, 0.1, 100.0)

@@ -35,8 +35,8 @@ def _jogger(sim_dir):
 
 
 def _ramp_raw(jogger: Mover, up_s: float, speed: float) -> int:
-    """The ramp parameter (time to rated speed) that reaches `speed` in up_s."""
-    return eng_to_raw(jogger.profile.entry("H11-15"), up_s * 1000.0 * 3000.0 / speed)
+    """The ramp parameter (time to the profile's ramp reference speed) that reaches `speed` in up_s."""
+    return eng_to_raw(jogger.profile.entry("H11-15"), up_s * 1000.0 * jogger.profile.ramp_rpm() / speed)
 
 
 def test_a_move_that_stops_after_its_ramp_is_one_segment_and_needs_no_stop_write(sim_dir):
@@ -45,7 +45,8 @@ def test_a_move_that_stops_after_its_ramp_is_one_segment_and_needs_no_stop_write
     jogger.start(1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=0.1)
     block = [v for a, v in writes if a == distance.address]
     assert len(block) == 1 and len(block[0]) == 4  # displacement, speed and ramp in one request
-    assert block[0][0] == pytest.approx(600.0 / 60.0 * 0.1 * 10000, abs=2)  # up 0.1 s, down as long
+    # up 0.1 s, down as long (the ramp in whole ms per 1000 rpm: 167 ms, 0.2 % off)
+    assert block[0][0] == pytest.approx(600.0 / 60.0 * 0.1 * 10000, rel=0.003)
     writes.clear()
     clock.advance(0.35)  # longer than two beats: never re-armed
     jogger.keep_alive()
@@ -68,7 +69,8 @@ def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_d
     # A move longer than the dead-man's segment is not one of its own: beat-sized, re-armed before it would end.
     ramp = _ramp_raw(jogger, 0.1, 600.0)
     jogger.start(-1, 600.0, ramp, stop_after_s=2.0)
-    bound = deadman.segment_rev(600.0, BEAT_S, 100.0 * 3000.0 / 600.0) * 10000
+    ref = jogger.profile.ramp_rpm()
+    bound = deadman.segment_rev(600.0, BEAT_S, float(ramp), ref) * 10000
     assert abs(jogger.segments.written_distance()) == pytest.approx(bound, abs=2)
     writes.clear()
     clock.advance(1.5 * BEAT_S)

@@ -62,7 +62,7 @@ def test_is620p_identification_writes_no_segment_re_arm_or_setting_it_does_not_n
         if len(v) == 4:
             v_rpm, ramp_ms = v[2], v[3]
         rev = abs(((v[1] << 16) | v[0]) - (1 << 32 if v[1] & 0x8000 else 0)) / units
-        assert rev <= deadman.segment_rev(v_rpm, 0.1, ramp_ms) + 1e-4
+        assert rev <= deadman.segment_rev(v_rpm, 0.1, ramp_ms, sim.profile.ramp_rpm()) + 1e-4
     assert sim.firmware.plant.alarm is None
 
 
