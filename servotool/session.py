@@ -29,8 +29,10 @@ def open_drives(
     units: list[int] | None = None,
     trace: Trace | None = None,
     notice: Callable[[str], None] | None = None,
+    bare: bool = False,
 ) -> Iterator[list[Drive]]:
-    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit."""
+    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit. bare: no
+    identity check and no journal recovery first (`servotool stop`: nothing may fail before its first write)."""
     from servotool.files import sim_state_dir
     from servotool.ops.journal import recover_at_start
 
@@ -59,12 +61,12 @@ def open_drives(
         drives = [Drive(link, resolved.profile, u, port=port) for u in units]
         # Before anything is written: the drive answering must be the one the profile describes. The embedded
         # simulator is built from the profile itself.
-        if resolved.identity_check and not resolved.simulated:
+        if resolved.identity_check and not resolved.simulated and not bare:
             from servotool.ops.identity import confirm, warning_text
 
             if text := warning_text(confirm(drives)):
                 (notice or _stderr)(f"servotool: warning: {text}")
-        for d in drives:  # what a killed servotool process left on these drives is put right first
+        for d in [] if bare else drives:  # what a killed servotool process left on these drives is put right first
             recover_at_start(d, notice or _stderr, (sim_state_dir(),) if sim else ())
         yield drives
     finally:

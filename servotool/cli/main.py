@@ -7,7 +7,7 @@ import os
 import signal
 import sys
 import threading
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import typer
 
@@ -18,7 +18,7 @@ from servotool.cli.common import State, state
 from servotool.cli.lazy import lazy, lazy_group
 from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.connection import ConnectOptions
-from servotool.errors import ServoError
+from servotool.errors import ServoError, StopUnconfirmed
 
 fastparse.install()
 
@@ -35,6 +35,7 @@ COMMANDS = {
     "tune": lazy("servotool.cli.tune:app"),
     "monitor": lazy("servotool.cli.monitor:monitor"),
     "jog": lazy("servotool.cli.jog:jog"),
+    "stop": lazy("servotool.cli.stop:stop"),
     "run": lazy("servotool.cli.run:run"),
     "raw": lazy("servotool.cli.raw:app"),
     "scan": lazy("servotool.cli.scan:scan"),
@@ -162,9 +163,10 @@ def _run() -> int:
     except ServoError as exc:
         from servotool.cli.messages import error_code, error_text  # words for a failure, loaded on one
 
-        return _fail(error_code(exc), error_text(exc, given.options, Verbosity.level > 0), exc.exit_code, as_json)
-    except (KeyboardInterrupt, typer.Abort):
-        return _fail("interrupted", "interrupted", 130, as_json)
+        text = error_text(exc, given.options, Verbosity.level > 0)
+        return _fail(error_code(exc), text, exc.exit_code, as_json, exc)
+    except (KeyboardInterrupt, typer.Abort) as exc:
+        return _fail("interrupted", "interrupted", 130, as_json, exc)
     except BrokenPipeError:  # `| head` closed the pipe: nothing more to say, to anyone
         _broken_pipe()
     except Exception as exc:
@@ -177,10 +179,17 @@ def _run() -> int:
             f"internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the traceback)",
             1,
             as_json,
+            exc,
         )
     if result == 130:  # typer turns Ctrl-C into a silent exit 130: say it as for any failure
         return _fail("interrupted", "interrupted", 130, as_json)
-    return result if isinstance(result, int) else 0
+    status = result if isinstance(result, int) else 0
+    report = _stop_report(None)
+    if report is not None:  # a command that moved ends with what the drive was read to be
+        err.print(f"servotool: {report.describe()}", markup=False)
+        if not report.confirmed:
+            return STOP_UNCONFIRMED
+    return status
 
 
 def _broken_pipe() -> NoReturn:
@@ -224,12 +233,35 @@ def _interrupt_on_termination() -> None:
             signal.signal(getattr(signal, name), _terminated)
 
 
-def _fail(code: str, message: str, status: int, as_json: bool) -> int:
-    """Say why on stderr (and as a JSON object on stdout for --json, unless the command printed its own)."""
+STOP_UNCONFIRMED = 4  # the exit status of a command whose motion's stop could not be proven (errors.StopUnconfirmed)
+
+
+def _stop_report(exc: BaseException | None) -> Any:
+    """The stop report the last line gives: the one a failure carries, else the first unproven or the last stop
+    this process made (motion/stop.py, looked at only where a motion ran)."""
+    attached = getattr(exc, "stop_report", None)
+    if attached is not None:
+        return attached
+    stops = sys.modules.get("servotool.motion.stop")
+    return stops.final() if stops is not None else None
+
+
+def _fail(code: str, message: str, status: int, as_json: bool, exc: BaseException | None = None) -> int:
+    """Say why on stderr (and as a JSON object on stdout for --json, unless the command printed its own); what the
+    failure left (its notes) follows, and where a motion ran the last line says what its stop read back."""
     sys.stdout.flush()
     err.print(f"servotool: {'error: ' if code not in ('interrupted', 'internal') else ''}{message}", markup=False)
+    for note in getattr(exc, "__notes__", ()):
+        err.print(f"servotool: {note}", markup=False)
+    report = _stop_report(exc)
+    if report is not None:
+        if not isinstance(exc, StopUnconfirmed):  # its own message is the line
+            err.print(f"servotool: {report.describe()}", markup=False)
+        if not report.confirmed:
+            status, code = STOP_UNCONFIRMED, "stop_unconfirmed"
     if as_json and not json_emitted():
-        emit_json({"error": {"code": code, "message": message, "exit_status": status}})
+        error = {"code": code, "message": message, "exit_status": status}
+        emit_json({"error": error, **({"stop": report.as_json()} if report is not None else {})})
     return status
 
 

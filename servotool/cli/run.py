@@ -10,7 +10,7 @@ import typer
 
 from servotool.cli.common import notice_for, state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, emit_json, info, notice, out, trace_frame, warn
+from servotool.cli.render import Verbosity, emit_json, info, notice, out, safety, trace_frame, warn
 from servotool.commission.plan import Plan, load_plan
 from servotool.commission.runner import Report, Runner
 from servotool.commission.steps import validate
@@ -60,6 +60,7 @@ def run(
             ask=ask,
             log=info,
             word=lambda exc: error_text(exc, cli_opts),
+            safety=safety,
         )
         rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)
         if rep.previous is not None:

@@ -10,13 +10,13 @@ from typing import Any
 import typer
 
 from servotool.cli.common import confirm, drive, resolved
-from servotool.cli.jog import confirm_motion
-from servotool.cli.render import emit_json, info, out, table, warn
+from servotool.cli.jog import confirm_motion, safety_lines
+from servotool.cli.render import emit_json, info, out, safety, table, warn
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import as_held, raw_to_eng
 from servotool.model.profile import Profile
-from servotool.motion import deadman
+from servotool.motion import deadman, stop
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
 from servotool.tuning.friction import friction_report
@@ -235,7 +235,7 @@ def inertia(
         profile = d.profile
     if report is not None:
         _report(report, res.identified, profile, res)
-    _render(res, profile, as_json, ask.dead_man)
+    _render(res, profile, as_json, ask.dead_man, ask.safety + ask.cautions)
 
 
 def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: bool) -> None:
@@ -272,29 +272,33 @@ class _Dialog:
         self.step_check, self.travel, self.as_json = step_check, travel, as_json
         self.moving = False  # identifying: a failure now reports what was measured
         self.dead_man: deadman.DeadManBound | None = None
+        self.cautions: list[str] = []
+        self.safety: list[str] = []  # the safety lines printed (for --json)
 
     def approve_motion(self, motion: planning.MotionPlan | None) -> bool:
         if self.method == "host" or self.step_check:
-            confirm_motion(self.ctx, self.d, self.yes, preflight.FEATURE)
+            self.cautions = confirm_motion(self.ctx, self.d, self.yes, preflight.FEATURE)
         info(
             f"motion: {motion.describe()}"
             if motion is not None
             else "motion: the drive's own identification (its parameters set torque and travel), then host "
             "moves that check its result"
         )
-        if self.step_check:
-            info(
-                f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(self.travel):.2f} s forward "
-                "and back, before and after"
-            )
         if self.method == "host" and motion is not None:
-            self.dead_man = deadman.motion_bound(self.d, motion.speed_rpm, motion.ramp_s)
-        elif self.step_check:
-            self.dead_man = deadman.motion_bound(self.d, step.STEP_SPEED_RPM, 0.0)
-        if self.dead_man is not None:
-            info(deadman.sentence(self.dead_man))
+            self.dead_man = planning.identification_bound(self.d, motion)
+            deadman.check(self.dead_man, self.d.dead_man_waived)
+            self._safety(deadman.sentence(self.dead_man))
+        if self.step_check:
+            check = step.plan_step(self.d, self.travel)
+            info(f"step check: {check.describe()}, before and after")
+            self._safety(f"step check: {deadman.sentence(check.bound)}")
+            self.dead_man = self.dead_man or check.bound
         self.moving = confirm("Move the axis now?", self.yes)
         return self.moving
+
+    def _safety(self, line: str) -> None:
+        safety(line)
+        self.safety.append(line)
 
     def show(self, proposal: tune.Proposal) -> None:
         self.moving = False
@@ -336,10 +340,20 @@ def _report(
     info(f"report: {len(written.files)} files in {folder} (open {folder / 'report.md'})")
 
 
+def _stop_json() -> dict[str, Any] | None:
+    """What the last motion's stop read back (motion/stop.py), for --json."""
+    report = stop.final()
+    return report.as_json() if report is not None else None
+
+
 def _render(
-    res: tune.TuneResult, profile: Profile, as_json: bool, dead_man: deadman.DeadManBound | None = None
+    res: tune.TuneResult,
+    profile: Profile,
+    as_json: bool,
+    dead_man: deadman.DeadManBound | None = None,
+    cautions: list[str] | None = None,
 ) -> None:
-    """The outcome, after the writes."""
+    """The outcome, after the writes (cautions: the safety lines and cautions given before moving)."""
     proposal, sugg = res.proposal, res.proposal.suggestion
     entry, changes = proposal.parameter, proposal.gain_changes
     if as_json:
@@ -365,6 +379,8 @@ def _render(
                     "step_before": _step_json(res.step_before),
                     "step_after": _step_json(res.step_after),
                     "dead_man": dead_man.as_json() if dead_man is not None else None,
+                    "safety": cautions or [],
+                    "stop": _stop_json(),
                 }
             )
         )
@@ -486,7 +502,9 @@ def gains(
 
     with drive(ctx) as d:
         d.dead_man_waived = no_dead_man
-        confirm_motion(ctx, d, yes, "tune gains")
+        cautions = confirm_motion(ctx, d, yes, "tune gains")
+        bound = deadman.motion_bound(d, step.STEP_SPEED_RPM, 0.0)
+        safety(deadman.sentence(bound))
         if not confirm("Move the axis now (a speed step forward and back at each level)?", yes):
             raise typer.Exit(1)
         try:
@@ -494,15 +512,21 @@ def gains(
                 d, load_ratio=load_ratio, start=start, top=top, travel_rev=travel, save=save, progress=show
             )
         except gain_search.GainSearchFailed as exc:
-            _render_search(exc.search, as_json, ok=False)
+            _render_search(exc.search, as_json, ok=False, safety_json=safety_lines(bound, cautions), bound=bound)
             raise
         profile = d.profile
     if res.persisted is False:
         warn(eeprom.ram_only_warning(profile))
-    _render_search(res, as_json, ok=True)
+    _render_search(res, as_json, ok=True, safety_json=safety_lines(bound, cautions), bound=bound)
 
 
-def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None:
+def _render_search(
+    res: gain_search.GainSearch,
+    as_json: bool,
+    ok: bool,
+    safety_json: list[str] | None = None,
+    bound: deadman.DeadManBound | None = None,
+) -> None:
     rows = [
         {
             "level": t.level,
@@ -527,6 +551,9 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
                     "reason": res.reason,
                     "gains": _gains_json(res.changes),
                     "persisted": res.persisted,
+                    "dead_man": bound.as_json() if bound is not None else None,
+                    "safety": safety_json or [],
+                    "stop": _stop_json(),
                 }
             )
         )

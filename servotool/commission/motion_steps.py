@@ -16,6 +16,7 @@ from servotool.motion.jogger import Jogger
 from servotool.report.charts import need_matplotlib
 from servotool.report.tune_report import write_tune_report
 from servotool.tuning.identify import IdentificationRefused
+from servotool.tuning.planning import MotionPlan, identification_bound
 from servotool.tuning.stable_hold import guard_hold
 from servotool.tuning.tune import TuneRequest, check_request, tune_inertia
 
@@ -48,6 +49,8 @@ class JogStep(StepType):
         drive.dead_man_waived = _waived(step.arg)
         jogger = guard_hold(Jogger(drive))
         plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
+        if plan.dead_man is not None:
+            ctx.safety(f"unit {drive.unit}: {sentence(plan.dead_man)}")
         jogger.run(plan)
         bound = plan.dead_man
         return Outcome(
@@ -138,8 +141,14 @@ class TuneInertiaStep(StepType):
         drive.dead_man_waived = _waived(step.arg)
         report = _report_option(step.arg)
         folder = ctx.path(report, drive.unit) if report else None
+
+        def announce(motion: MotionPlan | None) -> bool:
+            if motion is not None:
+                ctx.safety(f"unit {drive.unit}: {sentence(identification_bound(drive, motion))}")
+            return True
+
         try:
-            res = tune_inertia(drive, request)
+            res = tune_inertia(drive, request, approve_motion=announce)
         except IdentificationRefused as exc:
             if folder is not None:
                 write_tune_report(folder, exc.result, drive.profile, None, str(exc))

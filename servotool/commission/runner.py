@@ -58,12 +58,16 @@ class Runner:
         log: Callable[[str], None],
         word: Callable[[ServoError], str] = str,
         clock: Clock | None = None,
+        safety: Callable[[str], None] | None = None,
     ) -> None:
-        """word turns a failed step's error into its report line (the CLI adds fix commands)."""
+        """word turns a failed step's error into its report line (the CLI adds fix commands); safety shows a
+        motion step's dead-man bound before it moves (never quiet)."""
         self.plan, self.drives = plan, drives
         self.clock = clock or RealClock()
         self.continue_on_error, self.log, self.word = continue_on_error, log, word
         self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives}, self.clock)
+        if safety is not None:
+            self.context.safety = safety
         self.results: list[StepResult] = []
         self.current: Step | None = None  # the step running (or the last one run)
         self.auto_backups: dict[int, str] = {}

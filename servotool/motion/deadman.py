@@ -7,6 +7,7 @@ X rev (Y s)"). A route that stops nothing (route none) needs the user's explicit
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from servotool.drive import Drive
@@ -49,7 +50,7 @@ class DeadManBound:
             "bounded": self.bounded,
             "stop_within_rev": None if self.stop_rev is None else round(self.stop_rev, 3),
             "stop_within_s": None if self.stop_s is None else round(self.stop_s, 3),
-            "speed_rpm": self.speed_rpm,
+            "speed_rpm": round(self.speed_rpm, 1),
             "beat_s": round(self.beat_s, 4),
             "link_cycle_s": round(self.link_cycle_s, 4),
             "waived": self.waived,
@@ -79,6 +80,8 @@ def stop_time_s(speed_rpm: float, ramp_ms: float | None, reference_rpm: float) -
     return ramp_ms / 1000.0 * abs(speed_rpm) / reference_rpm
 
 
+SEGMENT_BRAKE_LAG_S = 0.02  # a braked segment stops this much later than its ramp alone (the speed loop's lag)
+SEGMENT_SETTLE_S = 0.2  # a queued segment starts once the braked one has settled: within this (time bound only)
 SEGMENT_BEATS = 3.0  # a segment covers this many beat periods at speed, so a late beat never stutters the motion
 
 
@@ -128,8 +131,11 @@ def bound(
             s = timeout + stop_s
             rev = abs(speed_rpm) / 60.0 * (timeout + stop_s / 2.0)
     elif kind == "segment":
-        rev = segment_rev(speed_rpm, beat_s, ramp_ms, reference)
-        s = SEGMENT_BEATS * beat_s + stop_s
+        # The running segment, re-armed just before the host died: restarted from where the axis was, or (the
+        # stricter reading of the firmware) braked and followed by the queued one once settled.
+        braked = braking_rev(speed_rpm, ramp_ms, reference) + abs(speed_rpm) / 60.0 * SEGMENT_BRAKE_LAG_S
+        rev = segment_rev(speed_rpm, beat_s, ramp_ms, reference) + braked
+        s = SEGMENT_BEATS * beat_s + 2.0 * stop_s + SEGMENT_SETTLE_S
     return DeadManBound(
         kind,
         abs(speed_rpm),
@@ -156,6 +162,29 @@ def motion_bound(drive: Drive, speed_rpm: float, ramp_s: float) -> DeadManBound:
     return b
 
 
+def largest_fitting_speed(speed_rpm: float, fits: Callable[[float], bool], floor_rpm: float) -> float | None:
+    """The highest speed up to speed_rpm (to 1 %) at which `fits` holds (it holds at lower speeds if at higher);
+    None where not even floor_rpm fits."""
+    if fits(speed_rpm):
+        return speed_rpm
+    if floor_rpm >= speed_rpm or not fits(floor_rpm):
+        return None
+    lo, hi = floor_rpm, speed_rpm
+    while hi - lo > 0.01 * hi:
+        mid = (lo + hi) / 2.0
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return max(floor_rpm, float(int(lo)))  # whole rpm, as printed
+
+
+def timeout_remedy(drive: Drive, b: DeadManBound) -> str:
+    """What else shortens a bound than a lower speed, as words after a list of remedies: the drive's own watchdog
+    where it is the route ("" elsewhere)."""
+    entry = drive.profile.role("comm_timeout")
+    if b.route != "drive_timeout" or entry is None:
+        return ""
+    return f", or a shorter watchdog {entry.code} (param set {entry.code}=...; it stops the motor after that long)"
+
+
 def check(b: DeadManBound, waived: bool) -> None:
     """Refuse a motion whose dead-man cannot be kept: no route and no acknowledgement, or a link too slow for the
     beat the bound needs (with the alternatives)."""
@@ -180,6 +209,6 @@ def sentence(b: DeadManBound) -> str:
     if b.stop_rev is None:
         return (
             "NO DEAD-MAN (--no-dead-man): if this program stops, the motor keeps running at "
-            f"{b.speed_rpm:g} rpm until stopped at the drive"
+            f"{b.speed_rpm:.0f} rpm until stopped at the drive"
         )
     return f"if this program stops, the motor stops within {b.stop_rev:.2f} rev ({b.stop_s:.2f} s)"

@@ -8,6 +8,7 @@ from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.roles import MotionRoute
 from servotool.motion import deadman
+from servotool.motion.stop import StoppedElsewhere
 
 
 class SegmentMoves:
@@ -29,15 +30,20 @@ class SegmentMoves:
 
     def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
         """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own where
-        own_s is set, see length_rev); direction 0 brakes a running move at the ramp (Profile.ramp_rpm).
+        own_s is set, see length_rev); direction 0 stops a running move at the drive's ramp.
         False when there was nothing to do."""
         own_s, self.own_s = self.own_s, None
         if direction:
             rev, self.ends_itself = self.length_rev(speed_rpm, beat_s, ramp_ms, own_s)
             rev *= direction
         elif self.moving:
+            # A stop: the start edges with the shortest displacement the drive takes. On one reading of the firmware
+            # the new segment replaces the running one and brakes at the ramp; on the other (the simulator's
+            # default) the falling edge brakes the running one and the queued segment adds one displacement unit,
+            # where a braking-length segment added the whole braking distance again (identification at 1080 rpm
+            # on 2 rev then ran into its travel limit).
             self.ends_itself = False
-            rev = self.moving * deadman.braking_rev(speed_rpm, ramp_ms, self.ramp_rpm)
+            rev = self.moving * 0.5 / self.units_per_rev()
         else:
             return False
         self.moving = direction
@@ -83,6 +89,12 @@ class SegmentMoves:
             self._raw = raw
         start = self.route.entries["segment_start"]
         if self.start_high:
+            # A re-arm, the servo on since the first move: where it reads off, something switched it off
+            # ('servotool stop'), and the S-ON this write carries would switch it back on.
+            if not self.drive.read_entries([start])[0].raw & 1:
+                raise StoppedElsewhere(
+                    f"{start.code} reads the servo off: the drive was stopped from elsewhere ('servotool stop'?)"
+                )
             self.drive.write_raw(start, 1)  # servo on, start bits off ...
         self.drive.write_raw(start, 1 | self.start_bits)  # ... then on: the edge starts the move
         self.start_high = True

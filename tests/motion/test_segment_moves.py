@@ -11,6 +11,7 @@ from servotool.model.codec import eng_to_raw
 from servotool.model.loader import load_profile
 from servotool.motion import deadman
 from servotool.motion.moves import Mover
+from servotool.motion.stop import stop_sequence
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
 
@@ -24,7 +25,7 @@ def _jogger(sim_dir):
     make_motion_setup(sim)
     d = Drive(VirtualLink([sim], clock, 57600), profile, 1)
     jogger = Mover(d, BEAT_S, "test", clock)
-    saved = jogger.settings_to_restore()
+    saved = jogger.snapshot(need_ramp=True)
     writes: list[tuple[int, list[int]]] = []
     write = d.link.write
     d.link.write = lambda unit, address, values, **kw: (
@@ -54,7 +55,7 @@ def test_a_move_that_stops_after_its_ramp_is_one_segment_and_needs_no_stop_write
     assert writes == []
     clock.advance(0.5)
     assert abs(sim.firmware.plant.true_speed_rpm) < 5.0
-    jogger.leave_and_restore(saved)
+    assert stop_sequence(jogger.drive, jogger, saved, wait_s=1.0, clock=clock).confirmed
 
 
 def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_dir):
@@ -80,4 +81,4 @@ def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_d
     jogger.keep_alive()
     assert len(writes) == 2  # two beats: re-armed (the start edge)
     jogger.command(0)
-    jogger.leave_and_restore(saved)
+    assert stop_sequence(jogger.drive, jogger, saved, wait_s=1.0, clock=clock).confirmed
