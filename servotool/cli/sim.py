@@ -176,6 +176,13 @@ def config(
         "motion after 500 ms of host silence on a drive whose manual documents no "
         "communication timeout. The real drive keeps running.",
     ),
+    segment_restart: str = typer.Option(
+        None,
+        "--segment-restart",
+        help="on|off (default off), segment route (IS620P): on, a start edge during a running segment restarts it "
+        "at once from where the axis is; off, it waits until the segment has settled, and a falling edge brakes "
+        "the segment (the stricter reading; the manual documents neither).",
+    ),
     missing: str = typer.Option(
         None,
         "--missing",
@@ -187,6 +194,7 @@ def config(
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
     fake_on = None if fake_watchdog is None else _on_off(fake_watchdog, "--fake-watchdog")
+    restart_on = None if segment_restart is None else _on_off(segment_restart, "--segment-restart")
     p, u = _target(ctx, profile, unit)
     if missing is not None:
         sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
@@ -202,6 +210,7 @@ def config(
         line_baud=line_baud,
         brake=brake_on,
         fake_watchdog=fake_on,
+        segment_restart=restart_on,
         resonance_hz=resonance_hz,
         resonance_damping=resonance_damping,
         backlash_rad=backlash_rad,
@@ -268,7 +277,7 @@ def _print_settings(status: sim_state.SimStatus) -> None:
         title=f"simulated {status.profile.model} unit {status.unit} ({status.state_file})",
     )
     for name, value in status.settings.items():
-        shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
+        shown = ("on" if value else "off") if name in ("brake", "fake_watchdog", "segment_restart") else f"{value:g}"
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
     if status.missing:
