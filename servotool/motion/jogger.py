@@ -65,9 +65,10 @@ class Jogger:
         self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
         self.guard = TravelGuard(drive, None)  # the soft travel limit of the planned JOG (none until plan())
         self._timeout_s: float | None = deadman.UNREAD  # the drive's communication timeout, read once
-        # Called by run() before the JOG moves with its settings to put back (code -> raw): a caller may write
-        # temporary settings there, each original recorded in it, and the JOG puts them back with its own
-        # (tuning.stable_hold.guard_hold: a position hold that cannot swing up on an unknown load).
+        # Called by every motion's stop scope (stopping(), motion/stop.py) before it moves, with the settings to put
+        # back (code -> raw): a caller may write temporary settings there, each original recorded in it first, and
+        # the stop puts them back with the motion's own (tuning.stable_hold.guard_hold: a position hold that cannot
+        # swing up on an unknown load; drive-side protections).
         self.prepare: Callable[[dict[str, int]], object] | None = None
 
     @property
@@ -348,9 +349,7 @@ class Jogger:
         and proves it (motion/stop.py). The JOG's own writes stay out of EEPROM where the drive has a switch, and
         every parameter it writes is put back as it was found, so a JOG leaves no trace in the drive's settings.
         """
-        with self.stopping() as saved:
-            if self.prepare is not None:
-                self.prepare(saved)
+        with self.stopping():  # runs self.prepare first
             self._run(plan, on_sample, command)
         self.check_tripped()
 

@@ -431,7 +431,9 @@ class Motion(Protocol):
 
 
 class MotionStop:
-    """`with MotionStop(jogger) as saved:` — the motion runs inside; however it leaves, the stop sequence runs
+    """`with MotionStop(jogger) as saved:` — the motion's `prepare` hook (if any: temporary settings such as a
+    softer hold or drive-side protections, each original recorded in saved before it is written) runs first; then
+    the motion runs inside; however it leaves, the stop sequence runs
     with interrupts held, inside the drive's RAM-only writes (ops.eeprom.ram_writes), and its report is recorded
     (and attached to the exception that ended it, as `stop_report`). A normal end whose stop is not proven raises
     StopUnconfirmed; an interrupt held during the stop is raised after it."""
@@ -454,6 +456,13 @@ class MotionStop:
             finally:
                 GUARD.leave()
             raise
+        prepare = getattr(self.motion, "prepare", None)
+        if prepare is not None:  # temporary settings for the motion's duration, each original added to saved first
+            try:
+                prepare(self.saved)
+            except BaseException as exc:
+                self._finish(exc)
+                raise
         return self.saved
 
     def __exit__(self, _kind: object, exc: BaseException | None, _tb: object) -> bool:
