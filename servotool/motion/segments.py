@@ -27,6 +27,7 @@ class SegmentMoves:
         self.start_high = True  # the start bits may be on: a move needs them off first
         self.ends_itself = False  # the running move's own segment stops it (see length_rev)
         self.own_s: float | None = None  # the next fresh move accelerates this long, then stops (once)
+        self.single = False  # own moves of any length (the caller's bound is the move: the step check's)
 
     def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
         """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own where
@@ -57,11 +58,12 @@ class SegmentMoves:
         stops (identification) is one segment of its own where that is no longer than the dead-man's: the drive
         brakes it at its end by itself, with no re-arm and no stop command (three writes a move on IS620P)."""
         bounded = deadman.segment_rev(speed_rpm, beat_s, ramp_ms, self.ramp_rpm)
-        if own_s is None or not ramp_ms or ramp_ms <= 0:
+        if own_s is None or ramp_ms is None or ramp_ms < 0:
             return bounded, False
         to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.ramp_rpm
-        own = abs(speed_rpm) / 60.0 * own_s * min(1.0, own_s / to_speed_s)  # up for own_s, down as long
-        return (own, True) if own <= bounded else (bounded, False)
+        # up for own_s, down as long (a ramp of 0: at speed for own_s)
+        own = abs(speed_rpm) / 60.0 * own_s * (min(1.0, own_s / to_speed_s) if to_speed_s > 0 else 1.0)
+        return (own, True) if own <= bounded or self.single else (bounded, False)
 
     def distance_raw(
         self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None, own_s: float | None = None

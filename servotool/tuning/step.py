@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -12,8 +12,8 @@ from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
-from servotool.motion.jogger import Jogger
 from servotool.motion.keepalive import keepalive_interval_s
+from servotool.motion.moves import Mover
 from servotool.tuning.identify import IdentificationFailed
 from servotool.tuning.preflight import FEATURE, active_alarm
 from servotool.tuning.stable_hold import StableHold
@@ -103,10 +103,16 @@ def plan_step(drive: Drive, travel_rev: float) -> StepPlan:
     timeout = deadman.drive_timeout_s(drive) if drive.profile.role("comm_timeout") is not None else None
     room = 0.9 * travel_rev
 
-    def bound(speed: float) -> DeadManBound:
-        return deadman.bound(drive, speed, beat, ramp_ms, drive.dead_man_waived, timeout)
+    def bound(speed: float, duration_s: float = MIN_STEP_S) -> DeadManBound:
+        b = deadman.bound(drive, speed, beat, ramp_ms, drive.dead_man_waived, timeout)
+        if b.route != "segment":
+            return b
+        # On the segment route each step is one segment of its own, ending where the step ends: that is its bound.
+        return replace(b, stop_rev=speed / 60.0 * duration_s, stop_s=duration_s + (b.stop_s or 0.0) / 2.0)
 
     def run_on(speed: float) -> float:
+        if bound(speed).route == "segment":
+            return 0.0  # the step's own segment ends inside its travel
         return bound(speed).stop_rev or 0.0  # nothing bounds it (--no-dead-man): nothing to fit
 
     def fits(speed: float) -> bool:
@@ -121,7 +127,7 @@ def plan_step(drive: Drive, travel_rev: float) -> StepPlan:
             + deadman.timeout_remedy(drive, b)
         )
     duration = min(0.6, (room - run_on(speed)) / (1.3 * speed / 60.0))
-    b = bound(speed)
+    b = bound(speed, duration)
     deadman.check(b, drive.dead_man_waived)
     return StepPlan(speed, duration, b)
 
@@ -138,7 +144,7 @@ def step_response(
     a load far above the configured ratio (tuning.stable_hold); the speed loop being checked is left as it is.
     """
     p, timing = drive.profile, timing or RealClock()
-    jogger = Jogger(drive, keepalive_interval_s(drive), FEATURE, timing)
+    jogger = Mover(drive, keepalive_interval_s(drive), FEATURE, timing)
     jog_accel = p.need_role("jog_accel", FEATURE)
     speed_e = p.need_role("speed_feedback", FEATURE)
     t: list[float] = []
@@ -146,7 +152,7 @@ def step_response(
 
     def speed() -> float:
         value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
-        jogger.keepalive.beat_if_due()
+        jogger.keep_alive()
         return value
 
     def stop() -> None:
@@ -158,11 +164,11 @@ def step_response(
     with jogger.stopping(need_ramp=True) as saved:  # however the check ends: the one stop sequence
         if load_unknown:
             StableHold(drive, jogger.route.kind, saved).soften_position()
-        jogger.set_speed(speed_rpm)
-        jogger.set_ramp(jog_accel.min)
+        if jogger.segments is not None:
+            jogger.segments.single = True  # each step one segment of its own: its bound is the step (plan_step)
         for direction in (1, -1):
             t0 = timing.now()
-            jogger.command(direction)
+            jogger.start(direction, speed_rpm, jog_accel.min, stop_after_s=duration_s)
             while timing.now() - t0 < duration_s:
                 now = timing.now() - t0
                 value = speed()
