@@ -13,7 +13,7 @@ Pass, per run:
 - every identification: its planned travel plus the printed bound fit inside its --travel.
 
 Run: python bench/ctrl_c_storm.py [--moments 20] [--kills 3] [--seed 1] [--profiles dsx7e,is620p,sd25,sdc]
-         [--kinds jog,ident,step,gains] [--port-base 15150]
+         [--kinds jog,ident,step,gains] [--port-base 15150] [--older-trigger]
 Prints one row per profile and kind: runs, passed, the slowest exit after the signal, the largest speed read
 after exit, and for kills the largest travel against its bound.
 """
@@ -142,7 +142,15 @@ class Served:
             timeout=timeout,
         )
 
-    def set_up(self) -> None:
+    def set_up(self, older_trigger: bool = False) -> None:
+        if older_trigger and self.profile == "is620p":  # sim config --segment-restart on: the reading for comparison
+            subprocess.run(
+                [sys.executable, "-m", "servotool", "sim", "config", "-P", self.profile, "--segment-restart", "on"],
+                cwd=ROOT,
+                env=self.env,
+                capture_output=True,
+                check=True,
+            )
         for args in SETUP[self.profile]:
             if args is None:
                 self.restart()
@@ -336,13 +344,14 @@ def storm(
     root: Path,
     port_number: int = 0,
     progress: Callable[[Outcome], None] | None = None,
+    older_trigger: bool = False,
 ) -> list[Outcome]:
     """Every run for one profile, on a freshly served and set-up drive."""
     served = Served(profile, root)
     served.start(port_number)
     outcomes: list[Outcome] = []
     try:
-        served.set_up()
+        served.set_up(older_trigger)
         for kind in kinds:
             for _ in range(moments):
                 outcomes.append(interrupt(served, kind, rng.uniform(0.05, WINDOW_S[kind])))
@@ -366,6 +375,9 @@ def main() -> None:
     ap.add_argument("--profiles", default=",".join(PROFILES))
     ap.add_argument("--kinds", default=",".join(COMMANDS))
     ap.add_argument("--port-base", type=int, default=0, help="first TCP port (one per profile); 0: any free one")
+    ap.add_argument(
+        "--older-trigger", action="store_true", help="IS620P: the older segment trigger reading (--segment-restart on)"
+    )
     args = ap.parse_args()
     rng = random.Random(args.seed)
     kinds = [k for k in args.kinds.split(",") if k]
@@ -375,7 +387,16 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for n, profile in enumerate(p for p in args.profiles.split(",") if p):
             port = args.port_base + n if args.port_base else 0
-            outcomes = storm(profile, kinds, args.moments, args.kills, rng, Path(tmp) / profile, port)
+            outcomes = storm(
+                profile,
+                kinds,
+                args.moments,
+                args.kills,
+                rng,
+                Path(tmp) / profile,
+                port,
+                older_trigger=args.older_trigger,
+            )
             for kind in dict.fromkeys(o.kind for o in outcomes):
                 rows = [o for o in outcomes if o.kind == kind]
                 worst = max(rows, key=lambda o: (o.moved_rev or 0.0) / (o.bound_rev or 1.0))
