@@ -73,7 +73,7 @@ def test_dsx7e_beats_come_at_the_last_safe_moment_and_the_watchdog_never_starves
     sim, d, clock = set_up("dsx7e", 19200, load_ratio=5.0, friction=0.05, noise=0.002, seed=3)
     d.dead_man_waived = False
     log = _record(d)
-    tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    tune_inertia(d, TuneRequest(dry_run=True, travel_rev=12.0), clock=clock)  # room for the watchdog's run-on
     p = d.profile
     beat, jog = p.entry("Fn032").address, p.entry("Fn001").address
     timeout_s = sim.bank.effective_value("Pn620") / 1000.0
