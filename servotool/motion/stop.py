@@ -7,19 +7,14 @@ DRIVE BACK. It returns facts (StopReport: the speed read, the servo state read, 
 words them in its last line, and where they could not be proven it says so in capitals and exits 4
 (StopUnconfirmed). `servotool stop` runs the same sequence on a drive it knows nothing about (DriveHalt).
 
-Interrupts: while a motion runs, the first Ctrl-C / SIGTERM / SIGHUP (Ctrl-Break on Windows) raises
-KeyboardInterrupt as before; every later one is held until the stop sequence has run (timeout(1) signals the
-process and then its group: the second SIGINT used to land inside the stop and leave the servo on).
+Interrupts are held while it runs (motion/interrupts.py).
 """
 
 from __future__ import annotations
 
-import signal
-import threading
-from collections.abc import Callable, Iterator
-from contextlib import ExitStack, contextmanager
+from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass, field
-from types import FrameType
 from typing import Protocol
 
 from servotool.clock import Clock, RealClock
@@ -27,6 +22,7 @@ from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError, StopUnconfirmed
 from servotool.model.codec import format_value, get_field, raw_to_eng
 from servotool.model.profile import Entry
+from servotool.motion.interrupts import GUARD
 from servotool.motion.rest import SETTLE_S, STOPPED_RPM, RestWatch
 from servotool.ops import alarms
 from servotool.ops.status import servo_is_on
@@ -34,74 +30,6 @@ from servotool.ops.status import servo_is_on
 PROOF_BAND_RPM = 10.0  # proven at rest: |speed| under this on two readings SETTLE_S apart (above the drives' noise)
 DEFAULT_WAIT_S = 3.0  # the stop's wait for rest where the motion's own cannot be worked out
 RUNAWAY_SHARE = 1.2  # waiting for rest, a speed this much above the first one read means the drive is not stopping it
-INTERRUPT_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP", "SIGBREAK")
-
-
-# ----- interrupts held while the motor is being stopped --------------------------------------------------------
-
-
-class InterruptGuard:
-    """Signal handlers for the duration of a motion (main thread only; elsewhere nothing is installed).
-
-    Armed, the first interrupt raises KeyboardInterrupt; then, and whenever disarmed, interrupts are held (counted)
-    and the handler returns. `protected` code objects never see one raised: the stop's own entry points, where a
-    signal can land before their first statement disarms."""
-
-    def __init__(self) -> None:
-        self.armed = False
-        self.held = 0
-        self._outer: list[bool] = []  # the armed state of each enclosing section
-        self._previous: dict[int, object] = {}
-        self.protected: set[object] = set()
-
-    def enter(self, armed: bool = True) -> None:
-        """A section starts (a motion: armed; a rollback: held): the outermost installs the handlers."""
-        if not self._outer:
-            self.held = 0
-            if threading.current_thread() is threading.main_thread():
-                for name in INTERRUPT_SIGNALS:
-                    number = getattr(signal, name, None)
-                    if number is None:
-                        continue
-                    try:
-                        self._previous[number] = signal.signal(number, self._handler)
-                    except (OSError, ValueError):  # not settable here
-                        pass
-        self._outer.append(self.armed)
-        self.armed = armed
-
-    def leave(self) -> int:
-        """A section ends: the outermost puts the previous handlers back. Returns the interrupts held so far."""
-        held = self.held
-        self.armed = self._outer.pop()
-        if not self._outer:
-            for number, previous in self._previous.items():
-                signal.signal(number, previous)  # type: ignore[arg-type]
-            self._previous.clear()
-            self.held = 0
-        return held
-
-    def _handler(self, _signum: int, frame: FrameType | None) -> None:
-        if self.armed and (frame is None or frame.f_code not in self.protected):
-            self.armed = False
-            raise KeyboardInterrupt
-        self.held += 1
-
-
-GUARD = InterruptGuard()
-
-
-@contextmanager
-def held_interrupts(raise_held: bool = True) -> Iterator[None]:
-    """Run a short critical section (a rollback of gains) with every interrupt held; one that came is raised as
-    KeyboardInterrupt after it (raise_held; not where an interrupt or failure is already on its way out)."""
-    GUARD.enter(armed=False)
-    try:
-        yield
-    finally:
-        held = GUARD.leave()
-    if held and raise_held:
-        raise KeyboardInterrupt
 
 
 # ----- the facts ----------------------------------------------------------------------------------------------
@@ -179,11 +107,6 @@ def final(found: list[StopReport] | None = None) -> StopReport | None:
     """The report the command's last line gives: the first unconfirmed one, else the last."""
     found = reports() if found is None else found
     return next((r for r in found if not r.confirmed), found[-1] if found else None)
-
-
-def report_of(exc: BaseException) -> StopReport | None:
-    """The stop report a failure carries (attached by the motion's stop)."""
-    return getattr(exc, "stop_report", None)
 
 
 # ----- what a motion offers its stop ----------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, raw_to_eng
-from servotool.motion.stop import held_interrupts
+from servotool.motion.interrupts import held_interrupts
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, step

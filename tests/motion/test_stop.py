@@ -14,6 +14,7 @@ from servotool.drive import Drive
 from servotool.errors import DeviceError, StopUnconfirmed
 from servotool.model.loader import load_profile
 from servotool.motion import stop
+from servotool.motion.interrupts import GUARD
 from servotool.motion.jogger import Jogger
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
@@ -72,7 +73,7 @@ def test_a_second_interrupt_during_the_stop_is_held_until_it_is_done(sim_dir):
             os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C ...
 
     def second(_drive) -> None:  # ... and another on the stop sequence's own reads
-        if count["samples"] >= 6 and stop.GUARD.armed is False and count["reads_in_stop"] < 3:
+        if count["samples"] >= 6 and GUARD.armed is False and count["reads_in_stop"] < 3:
             count["reads_in_stop"] += 1
             os.kill(os.getpid(), signal.SIGINT)
 
