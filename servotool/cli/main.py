@@ -166,7 +166,8 @@ def _run() -> int:
         text = error_text(exc, given.options, Verbosity.level > 0)
         return _fail(error_code(exc), text, exc.exit_code, as_json, exc)
     except (KeyboardInterrupt, typer.Abort) as exc:
-        return _fail("interrupted", "interrupted", 130, as_json, exc)
+        # click turns Ctrl-C into Abort: what the interrupt carries (notes, the stop's report) is on its cause
+        return _fail("interrupted", "interrupted", 130, as_json, exc.__cause__ or exc)
     except BrokenPipeError:  # `| head` closed the pipe: nothing more to say, to anyone
         _broken_pipe()
     except Exception as exc:

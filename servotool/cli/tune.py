@@ -11,7 +11,7 @@ import typer
 
 from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.jog import confirm_motion, safety_lines
-from servotool.cli.render import emit_json, info, out, safety, table, warn
+from servotool.cli.render import emit_json, err, info, out, safety, table, warn
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import as_held, raw_to_eng
@@ -229,6 +229,9 @@ def inertia(
             )
         except tune.TuneDeclined:
             raise typer.Exit(1) from None
+        except KeyboardInterrupt as exc:
+            _notes(exc)
+            raise
         except ServoError as exc:  # refused, tripped, travel exceeded, link lost
             _failed(exc, report, d.profile, as_json and ask.moving)
             raise
@@ -236,6 +239,13 @@ def inertia(
     if report is not None:
         _report(report, res.identified, profile, res)
     _render(res, profile, as_json, ask.dead_man, ask.safety + ask.cautions)
+
+
+def _notes(interrupt: KeyboardInterrupt) -> None:
+    """What an interrupt left said before it leaves (typer turns it into a bare exit 130): the gains written back,
+    or the new ones that stay."""
+    for note in getattr(interrupt, "__notes__", ()):
+        err.print(f"servotool: {note}", markup=False)
 
 
 def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: bool) -> None:
@@ -511,6 +521,9 @@ def gains(
             res = gain_search.search_gains(
                 d, load_ratio=load_ratio, start=start, top=top, travel_rev=travel, save=save, progress=show
             )
+        except KeyboardInterrupt as exc:
+            _notes(exc)
+            raise
         except gain_search.GainSearchFailed as exc:
             _render_search(exc.search, as_json, ok=False, safety_json=safety_lines(bound, cautions), bound=bound)
             raise

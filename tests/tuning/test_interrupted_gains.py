@@ -63,3 +63,27 @@ def test_an_interrupted_gain_search_puts_the_gains_before_it_back(sim_dir, monke
     assert calls["n"] == 2
     assert _gains(sim) == before
     assert any("gains before it were written back" in note for note in raised.value.__notes__)
+
+
+def test_the_cli_says_the_previous_gains_are_back_and_ends_with_the_stop(sim_dir, tmp_path):
+    """Through the CLI's own exit path (typer turns Ctrl-C into exit 130): the note, then 'interrupted', then the
+    stop's line."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "interrupted.py"
+    script.write_text(
+        "import sys\n"
+        "import servotool.tuning.step as step\n"
+        "def interrupted(*a, **k):\n"
+        "    raise KeyboardInterrupt\n"
+        "step.step_response = interrupted\n"
+        "sys.argv = ['servotool', '--port', 'sim', 'tune', 'inertia', '--yes', '--rigidity', '14', '--travel', '12']\n"
+        "from servotool.cli.main import run\n"
+        "run()\n"
+    )
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 130, r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.startswith("servotool:")]
+    assert "the previous gains were written back (Pn101 18.0" in lines[-3]
+    assert lines[-2] == "servotool: interrupted" and lines[-1].startswith("servotool: stopped, servo off")
