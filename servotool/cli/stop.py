@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import typer
 
-from servotool.cli.common import JSON_OPT, notice_for, resolved
-from servotool.cli.render import Verbosity, emit_json, notice, trace_frame
+from servotool.cli.common import JSON_OPT, drives, resolved
+from servotool.cli.render import emit_json, notice
 from servotool.errors import DeviceError
 from servotool.motion.stop import stop_drive
 from servotool.ops.scan import parse_units
-from servotool.session import open_drives
 
 STOP_UNCONFIRMED = 4
 
@@ -30,12 +29,10 @@ def stop(
     """
     if not (0 <= wait <= 60):
         raise typer.BadParameter("must be 0..60 s", param_hint="--wait")
-    where = resolved(ctx)
-    ids = parse_units(units) if units else [where.unit]
-    trace = trace_frame if Verbosity.level > 0 else None
+    ids = parse_units(units) if units else [resolved(ctx).unit]
     results = []
-    with open_drives(where, ids, trace=trace, notice=notice_for(ctx), bare=True) as drives:
-        for d in drives:
+    with drives(ctx, ids, bare=True) as found:  # in the shell, on the port it keeps open
+        for d in found:
             try:
                 report = stop_drive(d, wait)
             except DeviceError as exc:  # not even the first write went out

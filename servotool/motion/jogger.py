@@ -15,9 +15,10 @@ from servotool.errors import DeviceError, UsageError
 from servotool.model.codec import eng_to_raw, parse_value, raw_to_eng
 from servotool.model.profile import Entry
 from servotool.model.roles import FEATURE, jog_codes, motion_route
-from servotool.motion import deadman
+from servotool.motion import deadman, protect
 from servotool.motion.deadman import DeadManBound
-from servotool.motion.jog_plan import JogPlan, checked_travel, travel_estimate
+from servotool.motion.forced_inputs import ForcedInputs
+from servotool.motion.jog_plan import JogPlan, checked_travel, ramp_words, travel_estimate
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.rest import STOPPED_RPM
 from servotool.motion.segments import SegmentMoves
@@ -65,11 +66,20 @@ class Jogger:
         self.segments = SegmentMoves(drive, self.route, feature) if self.route.kind == "segment" else None
         self.guard = TravelGuard(drive, None)  # the soft travel limit of the planned JOG (none until plan())
         self._timeout_s: float | None = deadman.UNREAD  # the drive's communication timeout, read once
-        # Called by every motion's stop scope (stopping(), motion/stop.py) before it moves, with the settings to put
-        # back (code -> raw): a caller may write temporary settings there, each original recorded in it first, and
-        # the stop puts them back with the motion's own (tuning.stable_hold.guard_hold: a position hold that cannot
-        # swing up on an unknown load; drive-side protections).
+        # Called by every motion's stop scope (stopping(), motion/stop.py) before it moves, after the drive's own
+        # protections are set (start_protection), with the settings to put back (code -> raw): a caller may write
+        # temporary settings there, each original recorded in it first, and the stop puts them back with the
+        # motion's own (tuning.stable_hold.guarded_jogger: a position hold that cannot swing up on an unknown load).
         self.prepare: Callable[[dict[str, int]], object] | None = None
+        # The drive's own protections for the motion (motion/protect: planned by plan() or protect_for(), set with
+        # the motion's settings and put back with them), and a forced-input trigger's forcing (SD25).
+        self.protections: protect.Protections | None = None
+        self._forcing_released = False  # command_zero released the forced inputs (release() proves it)
+        self.inputs = (
+            ForcedInputs(drive, self.clock, keepalive_s)
+            if self.profile.forced_inputs is not None and self.route.kind == "trigger"
+            else None
+        )
 
     @property
     def keepalive_s(self) -> float:
@@ -124,6 +134,8 @@ class Jogger:
         bound = self.arm_dead_man(abs(speed_rpm), accel_ms)
         if travel is not None:
             self._check_run_on(bound, abs(speed_rpm), seconds, accel_ms, travel)
+        self.protect_for(abs(speed_rpm), self._fence_rev(speed_rpm, seconds, travel, accel_ms))
+        bound = self.dead_man = self._protected(bound)
         return JogPlan(
             abs(speed_rpm),
             1 if speed_rpm > 0 else -1,
@@ -133,6 +145,7 @@ class Jogger:
             abs(speed_rpm) / 60.0 * seconds if seconds is not None else None,
             bound,
             travel,
+            ramp_words(self.profile, float(accel_ms) if accel_ms is not None else None),
         )
 
     def _check_run_on(
@@ -161,6 +174,39 @@ class Jogger:
             + f", more --travel{deadman.timeout_remedy(self.drive, bound)}"
         )
 
+    def _fence_rev(
+        self, speed_rpm: float, seconds: float | None, travel: TravelLimit | None, accel_ms: float | None
+    ) -> float | None:
+        """How far either way a JOG may go: its travel limit, else a timed JOG's travel, its stop and a beat."""
+        if travel is not None:
+            return travel.rev
+        if seconds is None:
+            return None  # an interactive JOG without a travel limit: no extent to fence
+        speed = abs(speed_rpm)
+        return (
+            travel_estimate(speed, seconds)
+            + deadman.braking_rev(speed, accel_ms, self.profile.ramp_rpm())
+            + speed / 60.0 * self.keepalive.interval_s
+        )
+
+    def protect_for(self, peak_rpm: float, fence_rev: float | None) -> protect.Protections | None:
+        """Plan the drive's protections for motion up to peak_rpm within fence_rev either way of where it starts
+        (None: no fence); they are set when the motion starts (its stop scope: start_protection) and put back with
+        its settings by the stop sequence. Not on an in-process link (no port: the benches' and seeded tests'
+        virtual time), where their requests would only change which measurement noise the motion draws, and no
+        journal exists to put them back."""
+        if not self.drive.port:
+            self.protections = None
+            return None
+        self.protections = protect.plan(self.drive, peak_rpm, fence_rev)
+        if self.dead_man is not None:
+            self.dead_man = self._protected(self.dead_man)
+        return self.protections
+
+    def _protected(self, bound: DeadManBound) -> DeadManBound:
+        """The bound with what else bounds the motion: the protections planned, a forced-input warning."""
+        return protect.limited(bound, self.protections, self.profile)
+
     def _ramp_ms(self) -> float | None:
         accel = self.profile.role("jog_accel")
         if accel is None:
@@ -183,6 +229,8 @@ class Jogger:
             self._timeout_s,
         )
         deadman.check(bound, self.drive.dead_man_waived)
+        if self.protections is not None or self.inputs is not None:
+            bound = self._protected(bound)
         if self.dead_man is None or bound.speed_rpm >= self.dead_man.speed_rpm:
             self.dead_man = bound
         return bound
@@ -227,7 +275,9 @@ class Jogger:
             self._segment_command()
             return
         if self.jog is not None:
-            self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
+            if self._forced_trigger_gone():
+                return
+            self.drive.write_raw(self.jog, self._trigger_raw())
             self.keepalive.sent()
             return
         assert self.servo is not None
@@ -240,6 +290,24 @@ class Jogger:
         if self._enabled:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
             self.keepalive.sent()
+
+    def _trigger_raw(self) -> int:
+        """The JOG trigger's raw value for the present direction (a forced-input trigger with the other inputs as
+        held)."""
+        assert self.jog is not None
+        code = jog_codes(self.jog)[self.direction]
+        return self.inputs.levels(code) if self.inputs is not None and self.inputs.engaged else code
+
+    def _forced_trigger_gone(self) -> bool:
+        """A forced-input trigger whose forcing is off (released by the stop): its forced value (put back as found)
+        drives nothing, and is not written again."""
+        return self.inputs is not None and not self.inputs.engaged and self._forcing_released
+
+    def watch_inputs(self) -> None:
+        """At most once a beat, where the drive's forced inputs can be watched: stop the motion on a wired input's
+        change (motion.forced_inputs.InputsChanged)."""
+        if self.inputs is not None:
+            self.inputs.watch()
 
     def _segment_command(self) -> None:
         """The segment route: servo on for the first move, then a fresh move (or a braking one) now."""
@@ -281,19 +349,36 @@ class Jogger:
                 self._segment_command()
             return
         if self.jog is not None:
-            self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
+            if not self._forced_trigger_gone():
+                self.drive.write_raw(self.jog, self._trigger_raw())
         elif self._enabled:
             # The reference again, never the servo-on: a servo switched off from elsewhere ('servotool stop') stays off.
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
 
     # ----- what the stop sequence (motion/stop.py) asks of a motion --------------------------------------------
+    def start_protection(self, saved: dict[str, int]) -> None:
+        """Inside the stop scope, before the motion moves (and before `prepare`): the heartbeat's lead (a watchdog
+        relay closes, a main contactor's drive charges, before the first motion command), the planned protections
+        set (their originals into `saved` and the journal first), the inputs forced (journaled first). What fails
+        here still gets the stop, which puts back whatever was written."""
+        self.keepalive.heartbeat_lead(self.idle)
+        if self.protections is not None:
+            protect.apply(self.drive, self.protections, saved)
+        if self.inputs is not None:
+            self.inputs.engage()
+
     def command_zero(self) -> float | None:
-        """Zero speed, ramped by the drive (its wait: stop_wait_s)."""
+        """Zero speed, ramped by the drive (its wait: stop_wait_s). A forced-input trigger (SD25) drops its JOG
+        bits and releases forcing at once, before the wait for rest: every input, the JOG's and a wired E-stop's,
+        follows its terminal again while the motor ramps down (issue 29 item 6)."""
         self.command(0)
+        if self.inputs is not None and self.inputs.engaged:
+            self._forcing_released = True
+            self.inputs.release()
         return None
 
     def keep_alive(self) -> None:
-        """The drive's watchdog fed while it ramps down."""
+        """The drive's watchdog (and the heartbeat's relay) fed while it ramps down."""
         self.beat()
 
     def leave(self) -> None:
@@ -303,6 +388,19 @@ class Jogger:
         self._enabled = False
         if self.segments is not None:
             self.segments.moving = 0
+
+    def release(self) -> bool:
+        """The motion has ended: the heartbeat (--heartbeat) stops (it fed a watchdog relay through the ramp-down),
+        and forced inputs are released if command_zero could not, whatever the heartbeat did. True when this motion
+        released forcing (the stop then proves it reads released)."""
+        try:
+            self.keepalive.stop_heartbeat()
+        finally:
+            forced = self._forcing_released or (self.inputs is not None and self.inputs.engaged)
+            self._forcing_released = False
+            if self.inputs is not None:
+                self.inputs.release()  # where command_zero could not (a no-op once released)
+        return forced
 
     def stop_wait_s(self) -> float:
         """How long the stop waits for rest: twice the drive's ramp down from the fastest speed armed, and a second
@@ -393,6 +491,7 @@ class Jogger:
                     self.command(new)
             if command is None or self.keepalive.due():  # interactive: keys are polled between beats
                 self.beat()
+                self.watch_inputs()
                 self.check_tripped()
                 # The room kept ahead: the stop's braking and a beat, and what a dead host lets it run on.
                 braking = deadman.braking_rev(self.speed_rpm, plan.accel_ms, self.profile.ramp_rpm())

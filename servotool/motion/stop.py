@@ -1,11 +1,13 @@
 """The one stop sequence of every motion servotool commands, and what it proves.
 
 However a motion ends (it finished, Ctrl-C, SIGTERM, SIGHUP, a lost line, any exception, a failed check), the
-same sequence runs, with every further interrupt held until it is done: command zero speed, wait for rest, put the
-servo back as found, put forced inputs back as found, write back every parameter the motion wrote, then READ THE
-DRIVE BACK. It returns facts (StopReport: the speed read, the servo state read, the settings verified); the CLI
-words them in its last line, and where they could not be proven it says so in capitals and exits 4
-(StopUnconfirmed). `servotool stop` runs the same sequence on a drive it knows nothing about (DriveHalt).
+same sequence runs, with every further interrupt held until it is done: command zero speed (a drive whose inputs
+the motion forced, SD25, has forcing released with it: its wired E-stop acts again while the motor ramps down),
+wait for rest, put the servo back as found, stop the heartbeat (--heartbeat: it fed a watchdog relay through the
+ramp), write back every parameter the motion wrote (its speed and ramp, a softer hold, the drive-side protections of
+motion/protect), then READ THE DRIVE BACK. It returns facts (StopReport: the speed read, the servo state read, the
+settings verified); the CLI words them in its last line, and where they could not be proven it says so in capitals
+and exits 4 (StopUnconfirmed). `servotool stop` runs the same sequence on a drive it knows nothing about (DriveHalt).
 
 Interrupts are held while it runs (motion/interrupts.py).
 """
@@ -20,8 +22,10 @@ from typing import Protocol
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import DeviceError, ServoError, StopUnconfirmed
-from servotool.model.codec import format_value, get_field, raw_to_eng
+from servotool.model.codec import format_value, raw_to_eng
+from servotool.model.forcing import is_forcing, switch_value
 from servotool.model.profile import Entry
+from servotool.model.quantity import quantity
 from servotool.motion.interrupts import GUARD
 from servotool.motion.rest import SETTLE_S, STOPPED_RPM, RestWatch
 from servotool.ops import alarms
@@ -82,7 +86,7 @@ class StopReport:
     def as_json(self) -> dict[str, object]:
         return {
             "confirmed": self.confirmed,
-            "speed_rpm": self.speed_rpm,
+            "speed": quantity(None if self.speed_rpm is None else round(self.speed_rpm, 1), "rpm"),
             "at_rest": self.at_rest,
             "servo_on": self.servo_on,
             "servo_as_found": self.servo_on is None or self.servo_on == self.servo_found_on,
@@ -116,14 +120,20 @@ class Halt(Protocol):
     """The motion-specific steps of the stop sequence (Jogger; DriveHalt for `servotool stop`)."""
 
     def command_zero(self) -> float | None:
-        """Command zero speed (ramped by the drive). Returns how long the drive may take to come to rest from it
-        (0: nothing was commanded, the servo-off stops the motor), None: the sequence's wait_s."""
+        """Command zero speed (ramped by the drive), and release forced inputs (profile forced_inputs) with it.
+        Returns how long the drive may take to come to rest from it (0: nothing was commanded, the servo-off stops
+        the motor), None: the sequence's wait_s."""
 
     def keep_alive(self) -> None:
         """Keep the drive's watchdog fed while it ramps down."""
 
     def leave(self) -> None:
-        """Servo back as found (off), and forced inputs back as found."""
+        """Servo back as found (off)."""
+
+    def release(self) -> bool:
+        """The motion's end for what else holds the drive: the heartbeat (--heartbeat) stopped, forced inputs
+        released where command_zero could not. True when the motion released forcing, which the stop then proves
+        reads released."""
 
 
 def servo_state(drive: Drive) -> tuple[bool | None, str]:
@@ -142,33 +152,31 @@ def servo_state(drive: Drive) -> tuple[bool | None, str]:
     return bool(raw & ~start), servo.code
 
 
-def forcing_entry(drive: Drive) -> Entry | None:
-    """The drive's forced-input mode (role input_forcing: SD25 So-58), where it forces inputs for motion."""
-    return drive.profile.role("input_forcing")
+def forcing_switch(drive: Drive) -> Entry | None:
+    """The drive's forcing switch (profile forced_inputs: SD25 So-58), where host motion forces its inputs."""
+    spec = drive.profile.forced_inputs
+    return drive.profile.entry(spec.switch_code) if spec is not None else None
 
 
-def put_forcing(drive: Drive, raw: int) -> None:
-    """Forced inputs to `raw` (0 releases them: the drive's wired inputs, E-stop and limits, act again): the step of
-    the stop sequence that `servotool stop` asks for. A motion that switches forcing on records the original with its
-    other settings (the `saved` of its stop), which puts it back as found."""
-    entry = forcing_entry(drive)
+def release_forcing(drive: Drive) -> None:
+    """Forcing off (model.forcing.switch_value: the switch's other digits kept), so that the drive's wired inputs,
+    E-stop and limits, act again: what `servotool stop` asks of a drive it knows nothing about (a motion releases
+    its own forcing, motion.forced_inputs.ForcedInputs.release, and the journal a dead process's)."""
+    entry = forcing_switch(drive)
     if entry is None:
         return
-    if drive.read_entries([entry])[0].raw != raw:
-        drive.write_raw(entry, raw)
-    back = drive.read_entries([entry])[0].raw
-    if back != raw:
-        raise DeviceError(f"{entry.code} reads back {format_value(entry, back)}, not {format_value(entry, raw)}")
-
-
-def forcing_state(drive: Drive) -> str:
-    """The forced-input mode as read now, in words ("" where the drive forces no inputs)."""
-    entry = forcing_entry(drive)
-    if entry is None:
-        return ""
     raw = drive.read_entries([entry])[0].raw
-    on = (get_field(entry, raw, entry.fields[0]) if entry.fields else raw) != 0
-    return f"{entry.code} forcing on: wired inputs ignored" if on else f"{entry.code} released"
+    if is_forcing(drive.profile, raw):
+        drive.write_raw(entry, switch_value(drive.profile, raw, False))
+
+
+def forcing_state(drive: Drive) -> tuple[bool | None, str]:
+    """(forcing on, in words) as read now; (None, "") where the drive forces no inputs."""
+    entry = forcing_switch(drive)
+    if entry is None:
+        return None, ""
+    on = is_forcing(drive.profile, drive.read_entries([entry])[0].raw)
+    return on, (f"{entry.code} forcing on: wired inputs ignored" if on else f"{entry.code} released")
 
 
 # ----- the sequence --------------------------------------------------------------------------------------------
@@ -245,17 +253,17 @@ def stop_sequence(
     wait_s: float,
     band_rpm: float = STOPPED_RPM,
     servo_found_on: bool = False,
-    forcing: int | None = None,
     clock: Clock | None = None,
     idle: Callable[[float], None] | None = None,
     poll_s: float = 0.02,
 ) -> StopReport:
-    """Zero speed, rest, servo and forced inputs as found, the motion's settings back, then the drive read back.
+    """Zero speed, rest, servo as found, heartbeat stopped and forced inputs released, the motion's settings back,
+    then the drive read back.
 
     saved: code -> raw of every parameter the motion wrote (written back where it differs, then all read back);
     wait_s: how long the drive may take to come to rest (its ramp from the motion's speed, with margin);
     band_rpm: the speed band of rest the servo-off waits for (the motion's: a ringing loop swings through zero);
-    the proof takes PROOF_BAND_RPM at least; forcing: the forced-input mode as found (None: leave it). Each step
+    the proof takes PROOF_BAND_RPM at least. Each step
     runs even when one before it failed (a servo-off stops a motor whose zero command was lost); once the line stops
     answering, each is tried once."""
     GUARD.armed = False
@@ -274,8 +282,12 @@ def stop_sequence(
     steps.run("switching the servo off", halt.leave)
     if at_rest is False:  # the servo-off stops it (the drive's own servo-off stop), or it coasts
         at_rest, speed = _wait_for_rest(drive, halt, steps, wait_s, band_rpm, clock, idle, poll_s)
-    if forcing is not None:
-        steps.run("releasing the forced inputs", lambda: put_forcing(drive, forcing))
+    released = [False]
+
+    def release() -> None:
+        released[0] = halt.release()
+
+    steps.run("stopping the heartbeat and releasing the forced inputs", release)
     entries = [drive.profile.entry(code) for code in saved]
     back = False
 
@@ -298,11 +310,12 @@ def stop_sequence(
     servo_on, servo_code = None, ""
 
     alarm = forced = ""
+    forcing_on: bool | None = None
 
     def read_back() -> None:
-        nonlocal speed, servo_on, servo_code, at_rest, alarm, forced
+        nonlocal speed, servo_on, servo_code, at_rest, alarm, forced, forcing_on
         servo_on, servo_code = servo_state(drive)
-        forced = forcing_state(drive)
+        forcing_on, forced = forcing_state(drive)
         state = alarms.confirmed(drive)
         alarm = f"{state.display} {state.name}" if state is not None else ""
         first = _speed(drive)
@@ -318,6 +331,8 @@ def stop_sequence(
         steps.problems.append(f"the speed reads {speed:g} rpm (not under {band:g} rpm {wait_s:.1f} s after the stop)")
     if servo_on is not None and servo_on != servo_found_on:
         steps.problems.append(f"{servo_code} reads the servo {'on' if servo_on else 'off'}")
+    if released[0] and forcing_on:
+        steps.problems.append(f"{forced} (the release did not take)")
     if entries and not back and not any("setting" in p for p in steps.problems):
         steps.problems.append("the motion's settings could not be put back")
     report = StopReport(
@@ -348,15 +363,18 @@ class Motion(Protocol):
     def command_zero(self) -> None: ...
     def keep_alive(self) -> None: ...
     def leave(self) -> None: ...
+    def release(self) -> bool: ...
+    def start_protection(self, saved: dict[str, int]) -> None: ...
     def snapshot(self, need_ramp: bool) -> dict[str, int]: ...
     def stop_wait_s(self) -> float: ...
     def stopped(self, report: StopReport) -> None: ...
 
 
 class MotionStop:
-    """`with MotionStop(jogger) as saved:` — the motion's `prepare` hook (if any: temporary settings such as a
-    softer hold or drive-side protections, each original recorded in saved before it is written) runs first; then
-    the motion runs inside; however it leaves, the stop sequence runs
+    """`with MotionStop(jogger) as saved:` — the motion's own protections (start_protection: the heartbeat's lead,
+    the drive-side protections planned, forced inputs engaged) and its `prepare` hook (if any: temporary settings
+    such as a softer hold), each original recorded in saved before it is written, run first; then the motion runs
+    inside; however it leaves, the stop sequence runs
     with interrupts held, inside the drive's RAM-only writes (ops.eeprom.ram_writes), and its report is recorded
     (and attached to the exception that ended it, as `stop_report`). A normal end whose stop is not proven raises
     StopUnconfirmed; an interrupt held during the stop is raised after it."""
@@ -380,12 +398,13 @@ class MotionStop:
                 GUARD.leave()
             raise
         prepare = getattr(self.motion, "prepare", None)
-        if prepare is not None:  # temporary settings for the motion's duration, each original added to saved first
-            try:
+        try:  # temporary settings for the motion's duration, each original added to saved (and journaled) first
+            self.motion.start_protection(self.saved)
+            if prepare is not None:
                 prepare(self.saved)
-            except BaseException as exc:
-                self._finish(exc)
-                raise
+        except BaseException as exc:
+            self._finish(exc)
+            raise
         return self.saved
 
     def __exit__(self, _kind: object, exc: BaseException | None, _tb: object) -> bool:
@@ -448,8 +467,9 @@ class StoppedElsewhere(DeviceError):
 
 class DriveHalt:
     """The stop of a drive servotool knows nothing about (`servotool stop`): every motion role the profile maps is
-    commanded to zero (a JOG trigger, a communication speed reference, the drive's own identification), then the
-    servo goes off and forced inputs are released; nothing is read first that could fail before the first write."""
+    commanded to zero (a JOG trigger, a communication speed reference, the drive's own identification) and forced
+    inputs are released (profile forced_inputs), then the servo goes off; nothing is read first that could fail
+    before the first write."""
 
     def __init__(self, drive: Drive) -> None:
         self.drive = drive
@@ -472,6 +492,8 @@ class DriveHalt:
                 written += 1
             except DeviceError as exc:
                 failures.append(exc)
+        if self.drive.profile.forced_inputs is not None:
+            release_forcing(self.drive)  # a forced JOG's inputs, and a wired E-stop's, follow their terminals again
         if failures:
             raise failures[0]
         return None if written else 0.0  # a segment route or a parameter-held reference: the servo-off stops it
@@ -485,9 +507,12 @@ class DriveHalt:
         if self.servo is not None:
             self.drive.write_raw(self.servo, 0)
 
+    def release(self) -> bool:
+        release_forcing(self.drive)
+        return self.drive.profile.forced_inputs is not None
+
 
 def stop_drive(drive: Drive, wait_s: float = 3.0, clock: Clock | None = None) -> StopReport:
     """`servotool stop` on one drive: zero speed, rest (bounded by wait_s), servo off, forced inputs released, read
     back. No identity check, journal or lock comes first (a running servotool process holds the lock)."""
-    forcing = 0 if forcing_entry(drive) is not None else None
-    return stop_sequence(drive, DriveHalt(drive), {}, wait_s=wait_s, forcing=forcing, clock=clock)
+    return stop_sequence(drive, DriveHalt(drive), {}, wait_s=wait_s, clock=clock)

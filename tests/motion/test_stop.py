@@ -148,6 +148,8 @@ def test_servotool_stop_zeroes_switches_off_and_releases_forcing_on_every_profil
     for profile_id in PROFILES:
         sim, jogger, clock = _jogger(profile_id)
         jogger.set_speed(400)
+        if jogger.inputs is not None:  # SD25: its DIs forced as a motion forces them (So-58 on, JOGU in So-57)
+            jogger.inputs.engage()
         jogger.command(1)
         clock.advance(0.15)  # inside IS620P's first segment (3 beats)
         sim.firmware.update()
