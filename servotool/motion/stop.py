@@ -227,9 +227,17 @@ def _wait_for_rest(
         try:
             speed = _speed(drive)
         except DeviceError as exc:
-            steps.problems.append(f"reading the speed failed ({exc})")
-            steps.line_dead = True
-            break
+            if exc.fault != "unsettled":
+                steps.problems.append(f"reading the speed failed ({exc})")
+                steps.line_dead = True
+                break
+            # After an interrupted request the link confirms reads by a second that agrees, which a turning
+            # motor's speed never does: the line answers, so wait on (the read-back proves rest or says why not).
+            if clock.now() >= end:
+                return False, speed
+            steps.run("feeding the drive's watchdog", halt.keep_alive)
+            idle(poll_s)
+            continue
         if speed is None or watch.at_rest(clock.now(), speed):
             return (None if speed is None else True), speed
         first = abs(speed) if first is None else first

@@ -130,6 +130,53 @@ def test_a_line_lost_mid_motion_is_said_in_capitals_not_stopped(sim_dir):
     assert abs(sim.firmware.plant.true_speed_rpm) < 10
 
 
+class _Unsettled(VirtualLink):
+    """A line whose speed reads do not agree twice in a row while the motor turns (the link's confirmation after an
+    interrupted request, link/exchange.py): they fail as 'unsettled' once `unsettled` is set, above 10 rpm."""
+
+    unsettled = False
+    speed_address = -1
+    failed = 0
+
+    def read(self, unit: int, address: int, count: int) -> list[int]:
+        words = super().read(unit, address, count)
+        sim = self.drives[unit]
+        if self.unsettled and address == self.speed_address and abs(sim.firmware.plant.true_speed_rpm) > 10:
+            self.failed += 1
+            error = DeviceError("no two reads in a row agreed")
+            error.fault = "unsettled"
+            raise error
+        return words
+
+
+def test_speed_reads_that_never_agree_while_it_turns_are_waited_out_not_taken_for_a_dead_line(sim_dir):
+    """bench/ctrl_c_storm.py after the merge with main: SDC at 9600 baud, Ctrl-C in the step check: the reply of the
+    interrupted request made the link confirm every read, the ramping speed never agreed, and the stop said COULD
+    NOT CONFIRM though the line answered; it waits on, and the read-back at rest proves the stop."""
+    profile = load_profile("dsx7e")
+    clock = VirtualClock(10.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    make_motion_setup(sim)
+    link = _Unsettled([sim], clock, profile.line.baud)
+    link.speed_address = profile.need_role("speed_feedback", "test").address
+    d = Drive(link, profile, 1)
+    d.dead_man_waived = True
+    jogger = Jogger(d, 0.1, "test", clock)
+    plan = jogger.plan(500, 5.0)
+
+    def interrupt(t: float, speed: float | None) -> None:
+        if t > 0.5:
+            link.unsettled = True
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as raised:
+        jogger.run(plan, interrupt)
+    report = raised.value.stop_report
+    assert link.failed > 0  # the speed did not settle while it ramped down
+    assert report.confirmed, report.describe()
+    assert abs(sim.firmware.plant.true_speed_rpm) < 10 and not sim.firmware.plant.servo_on
+
+
 def test_a_normal_end_whose_stop_cannot_be_proven_fails_with_exit_4(sim_dir):
     _sim, jogger, _clock = _jogger("dsx7e")
     plan = jogger.plan(300, 0.5)
