@@ -34,6 +34,8 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
     ("jog", "servotool --port sim jog --speed 300 --time 2", "JOG forward at 300 rpm for 2 s."),
     ("param set", "servotool --port sim -P sdc param set PN4=3", "SDC in JOG mode, as its jog needs."),
     ("jog", "servotool --port sim -P sdc jog -s 100 -t 1 --no-dead-man", "SDC has no dead-man: acknowledge it."),
+    ("stop", "servotool --port sim stop", "Zero speed and servo off, read back (exit 4 if unproven)."),
+    ("stop", "servotool --port sim -P sd25 stop --json", "SD25: its forced inputs released too (So-58)."),
     ("trace", "servotool --port sim trace Un000 Un002 --duration 0.5 -o start.csv", "Half a second, at once."),
     (
         "trace",

@@ -52,7 +52,7 @@ def drift_cmd(
     jobs: int = JOBS,
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Compare every drive with its golden file; writes nothing. Exit 0 all equal, 1 some differ, 4 some failed."""
+    """Compare every drive with its golden file; writes nothing. Exit 0 all equal, 1 some differ, 5 some failed."""
     from servotool.fleet.actions import DIFFERS, Drift
 
     if against is not None and not against.is_dir():

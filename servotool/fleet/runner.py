@@ -22,7 +22,7 @@ from servotool.errors import ServoError
 from servotool.fleet.inventory import BusSpec, Inventory, Target
 
 FAILED = "failed"
-EXIT_FAILED = 4  # some drive failed; the others were done (README: Exit codes)
+EXIT_FAILED = 5  # some drive failed; the others were done (README: Exit codes)
 
 
 @dataclass

@@ -159,7 +159,8 @@ def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
     if entries and servo_is_on(drive):
         codes = ", ".join(e.code for e in entries[:6]) + (" ..." if len(entries) > 6 else "")
         raise UsageError(
-            f"{what} changes {codes}, which the drive accepts only with the servo off: switch the servo off first"
+            f"{what} changes {codes}, which the drive accepts only with the servo off: switch the servo off first "
+            "('servotool stop')"
         )
 
 

@@ -116,7 +116,7 @@ def test_progress_shows_a_bar_with_time_left_on_a_terminal_only(monkeypatch):
 
 
 def test_the_gains_table_names_entries_not_roles_and_fits_80_columns(cli):
-    r = cli("--port", "sim", "tune", "inertia", "--yes", "--rigidity", "14", env=NARROW)
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--rigidity", "14", "--travel", "12", env=NARROW)
     assert r.code == 0, r.err
     assert "Speed loop gain" in r.out and "speed_loop_gain" not in r.out
     assert _widest(r.out) <= 80 and (_name_width(r.out) or 0) >= render.NAME_MIN

@@ -67,7 +67,7 @@ def test_backup_drift_and_apply_run_every_bus_and_a_failure_leaves_the_others_do
 
     fleet[2].inject_fault("sd25", 2, "Po110")  # m3 unit 2 refuses its last write: rolled back
     r = cli("fleet", "apply", str(with_dead), "--json")
-    assert r.code == 4, r.err  # some failed, the others were done
+    assert r.code == 5, r.err  # some failed, the others were done
     rows = {(d["machine"], d["unit"]): d for d in r.json()["drives"]}
     assert r.json()["summary"] == {"changed": 5, "failed": 2}
     assert rows[("m3", 2)]["status"] == "failed" and rows[("m3", 2)]["as_before"] is True
@@ -82,7 +82,7 @@ def test_backup_drift_and_apply_run_every_bus_and_a_failure_leaves_the_others_do
     r = cli("fleet", "drift", str(inv), "--against", str(tmp_path / "snaps"), "--json")
     assert r.code == 1 and r.json()["summary"] == {"differs": 5, "equal": 1}  # the snapshots hold the old values
     r = cli("fleet", "apply", str(inv))
-    assert r.code == 4 and "FAILED" in r.out and "5 unchanged" in r.out, r.out
+    assert r.code == 5 and "FAILED" in r.out and "5 unchanged" in r.out, r.out
     r = cli("log", "--machine", "m1", "--json")
     assert sorted({(x["unit"], x["code"]) for x in r.json()}) == [(u, c) for u in (1, 2) for c in ADDRESSES]
 
