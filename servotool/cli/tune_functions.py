@@ -29,11 +29,16 @@ REPORT_HELP = "Write the before/after chart and the score table to DIR (needs se
 DEAD_MAN_HELP = "Move a drive that has no dead-man route (nothing stops the motor if this program dies)."
 
 
-def _start(ctx: typer.Context, d: Drive, yes: bool, no_dead_man: bool, what: str, motion: scoring.ScoreMotion) -> None:
+def _start(
+    ctx: typer.Context, d: Drive, yes: bool, no_dead_man: bool, what: str, motion: scoring.ScoreMotion
+) -> scoring.ScoreMotion:
+    """Ask before moving (the motion as planned for this drive and travel) and return that motion."""
     d.dead_man_waived = no_dead_man
+    motion = scoring.planned(d, motion)
     confirm_motion(ctx, d, yes, f"tune {what}")
     if not confirm(f"Move the axis now ({motion.describe()}, several times)?", yes):
         raise typer.Exit(1)
+    return motion
 
 
 def _progress(as_json: bool) -> functions.Progress:
@@ -64,7 +69,7 @@ def friction(
     with drive(ctx) as d, boosted(ctx, [d], "tune friction"):
         eeprom.check_save_request(d.profile, save)
         functions.friction_entries(d)
-        _start(ctx, d, yes, no_dead_man, "friction", motion)
+        motion = _start(ctx, d, yes, no_dead_man, "friction", motion)
         before = scoring.measure(d, motion, repeats)
         trial = functions.friction_trial(d, motion, before, progress=_progress(as_json))
         trial = functions.judged_trial(d, trial, motion, repeats, keep=keep, save=save, progress=_progress(as_json))
@@ -108,7 +113,7 @@ def notch(
         chosen = method or ("drive" if d.profile.role("adaptive_notch") is not None else "host")
         if chosen == "drive" and d.profile.role("adaptive_notch") is None:
             raise UsageError(f"tune notch --method drive: {d.profile.model} maps no adaptive notch")
-        _start(ctx, d, yes, no_dead_man, "notch", motion)
+        motion = _start(ctx, d, yes, no_dead_man, "notch", motion)
         before = scoring.measure(d, motion, repeats)
         if chosen == "drive":
             trial = functions.adaptive_notch_trial(d, motion, before, progress=_progress(as_json))
@@ -135,7 +140,7 @@ def resonance(
     """
     motion = scoring.motion_for(travel)
     with drive(ctx) as d, boosted(ctx, [d], "tune resonance"):
-        _start(ctx, d, yes, no_dead_man, "resonance", motion)
+        motion = _start(ctx, d, yes, no_dead_man, "resonance", motion)
         measured = scoring.measure(d, motion, 1)
         peaks, nyquist = functions.resonance_peaks(measured)
         proposal = functions.notch_proposal(d, peaks, nyquist)

@@ -60,10 +60,11 @@ def score(
     scoring.check_repeats(repeats)
     _writable(save)
     old = scoring.load(before) if before is not None else None
-    if old is not None and (why := scoring.comparable(old[1], motion)):
-        raise UsageError(f"{before}: {why}")
     with drive(ctx) as d, boosted(ctx, [d], "the test motion"):
         d.dead_man_waived = no_dead_man
+        motion = scoring.planned(d, motion)
+        if old is not None and (why := scoring.comparable(old[1], motion)):
+            raise UsageError(f"{before}: {why}")
         confirm_motion(ctx, d, yes, "tune score")
         if not confirm(f"Move the axis now ({motion.describe()}, {repeats} times)?", yes):
             raise typer.Exit(1)

@@ -60,6 +60,17 @@ def motion_for(travel_rev: float, speed_rpm: float = step.STEP_SPEED_RPM) -> Sco
     return ScoreMotion(speed_rpm, step.step_duration_s(travel_rev, speed_rpm), travel_rev)
 
 
+def planned(drive: Drive, motion: ScoreMotion) -> ScoreMotion:
+    """The motion as the step check's plan lets it run (step.plan_step): each leg and what a dead host lets the
+    motor run on from its end fit the travel, at a lower speed or in shorter legs where they must."""
+    plan = step.plan_step(drive, motion.travel_rev)
+    if plan.speed_rpm >= motion.speed_rpm and plan.duration_s >= motion.duration_s:
+        return motion
+    return ScoreMotion(
+        min(motion.speed_rpm, plan.speed_rpm), min(motion.duration_s, plan.duration_s), motion.travel_rev
+    )
+
+
 def check_repeats(repeats: int) -> int:
     if not 1 <= repeats <= MAX_REPEATS:
         raise UsageError(f"--repeats must be 1..{MAX_REPEATS} (2 or more to know the spread)")
@@ -73,9 +84,12 @@ def measure(
     clock: Clock | None = None,
     progress: Callable[[int, Score], None] | None = None,
 ) -> MeasuredScore:
-    """Run the test motion `repeats` times and score it (drive at rest, servo as found afterwards)."""
+    """Run the test motion `repeats` times and score it (drive at rest, servo as found afterwards). Where the step
+    check's plan (step.plan_step) lowers the speed or shortens the legs to fit a dead host's run-on into the travel,
+    the score's motion says so (and a score of another motion is not compared with it)."""
     check_repeats(repeats)
     preflight(drive, "host")
+    motion = planned(drive, motion)
     p = drive.profile
     rated = p.motor.rated_speed_rpm if p.motor is not None else 3000.0
     jog_accel = p.need_role("jog_accel", FEATURE)
