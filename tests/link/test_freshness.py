@@ -8,8 +8,8 @@ from collections import deque
 import pytest
 
 from servotool.errors import DeviceError
+from servotool.link.crc import with_crc
 from servotool.link.exchange import Exchange
-from servotool.link.rtu import with_crc
 
 TIMEOUT = 0.1
 REPLY_S = 0.001

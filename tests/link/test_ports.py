@@ -14,10 +14,10 @@ import pytest
 
 from servotool.connection import ConnectOptions, resolve
 from servotool.errors import DeviceError, UsageError
+from servotool.link.crc import with_crc
 from servotool.link.exchange import Exchange
 from servotool.link.master import RtuMaster
 from servotool.link.ports import LinkSettings, latency_advice, open_serial, usb_latency_ms
-from servotool.link.rtu import with_crc
 from servotool.model.loader import load_profile
 from servotool.model.profile import LineSettings
 from servotool.sim.faults import LineFaults
