@@ -102,6 +102,18 @@ class NotOnDrive(ModbusException):
         self.code, self.entries = ILLEGAL_ADDRESS, entries
 
 
+_READABLE: dict[int, tuple[list[Entry], frozenset[int]]] = {}
+
+
+def readable_addresses(profile: Profile) -> frozenset[int]:
+    """Every address of the profile's readable entries (kept per profile: a backup coalesces 80 times)."""
+    cached = _READABLE.get(id(profile))
+    if cached is None or cached[0] is not profile.entries:
+        cached = (profile.entries, frozenset(a for e in profile.entries if e.readable for a in e.addresses))
+        _READABLE[id(profile)] = cached
+    return cached[1]
+
+
 def coalesce_reads(
     profile: Profile, entries: Iterable[Entry], holes: frozenset[int] = frozenset()
 ) -> list[tuple[int, int, list[Entry]]]:
@@ -110,7 +122,7 @@ def coalesce_reads(
     A request may span a gap only when every address in the gap belongs to a readable entry, since a real
     drive answers exception 02 for unmapped addresses, and none is a hole (an address the drive turned out to lack).
     """
-    readable = {a for e in profile.entries if e.readable for a in e.addresses} - holes
+    readable = readable_addresses(profile)
     wanted = sorted({e.code: e for e in entries}.values(), key=lambda e: e.address)
     plans: list[tuple[int, int, list[Entry]]] = []
     limit = profile.limits.max_read
@@ -118,7 +130,7 @@ def coalesce_reads(
         if plans:
             start, count, group = plans[-1]
             end = start + count
-            gap_ok = all(a in readable for a in range(end, e.address))
+            gap_ok = all(a in readable and a not in holes for a in range(end, e.address))
             new_count = e.address + e.words - start
             if e.address >= end and gap_ok and new_count <= limit:
                 plans[-1] = (start, new_count, [*group, e])
@@ -147,6 +159,9 @@ class Drive:
         self.unit = unit
         self.port = port
         self.missing: dict[str, Entry] = {}  # entries the drive answered exception 02 for, this run, by code
+        readable = [e for e in profile.entries if e.readable]
+        self._starting = {e.address: e for e in readable}  # readable entries by first and by past-last address
+        self._ending = {e.address + e.words: e for e in readable}
 
     # ----- reading -------------------------------------------------------------------------------------------
     def read_entries(
@@ -180,7 +195,7 @@ class Drive:
         """Read one coalesced block into values; on exception 02, split it in two and read each half, down to the
         single entry the drive lacks."""
         try:
-            words = self.link.read(self.unit, start, count)
+            words = self.link.read(self.unit, start, count, spare=self._spare(start, count))
         except ModbusException as exc:
             if exc.code != ILLEGAL_ADDRESS:
                 raise _prefixed(exc, f"reading {_names(group)}") from None
@@ -197,6 +212,18 @@ class Drive:
         for e in group:
             off = e.address - start
             values[e.code] = words_to_raw(e, words[off : off + e.words])
+
+    def _spare(self, start: int, count: int) -> tuple[int, int]:
+        """Registers of the readable entries just before and just after a block (none the drive lacks), within the
+        profile's read limit: the link may read them too, so that this read's reply differs in length from the
+        replies around it (link/exchange.py)."""
+        room = self.profile.limits.max_read - count
+        spare = []
+        for e in (self._starting.get(start + count), self._ending.get(start)):
+            words = e.words if e is not None and e.code not in self.missing and e.words <= room else 0
+            spare.append(words)
+            room -= words
+        return spare[1], spare[0]
 
     def read(self, *codes: str) -> list[Reading]:
         return self.read_entries(self.profile.entry(c) for c in codes)

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 from servotool.link.exchange import Exchange, Wire
 from servotool.link.ports import LinkSettings, Trace, open_serial, open_tcp, parse_tcp
+from servotool.model.profile import LineSettings
 
 if TYPE_CHECKING:  # pyserial's platform module (serialposix imports fcntl) loads only with a real port
     import serial
@@ -40,6 +41,8 @@ class RtuMaster:
             settle=silence,
             turnaround=settings.turnaround,
             echo=settings.echo,
+            char_s=_char_time(settings.line),
+            baud=settings.line.baud,
             trace=trace,
         )
 
@@ -53,8 +56,8 @@ class RtuMaster:
         """Whether the adapter echoes what it sends: as set, or as found out (None: not yet known)."""
         return self._exchange.echo
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
-        return self._exchange.read(unit, address, count)
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+        return self._exchange.read(unit, address, count, spare=spare)
 
     def write(
         self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
@@ -69,6 +72,11 @@ class RtuMaster:
 
     def close(self) -> None:
         self._port.close()
+
+
+def _char_time(line: LineSettings) -> float:
+    """Seconds one character takes on the line: start bit, data bits, parity bit, stop bits."""
+    return (1 + line.bytesize + (line.parity != "N") + line.stopbits) / line.baud
 
 
 def _frame_gap(baud: int) -> float:

@@ -38,7 +38,11 @@ class LinkSettings:
 class Link(Protocol):
     """What drive operations need from a Modbus master."""
 
-    def read(self, unit: int, address: int, count: int) -> list[int]: ...
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+        """`count` registers at `address`. spare = registers before and after that may be read as well (whole
+        readable entries): a master without transaction ids reads them to tell its replies apart."""
+        ...
+
     def write(
         self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
     ) -> None:

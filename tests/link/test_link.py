@@ -20,7 +20,7 @@ class CountingLink:
     def __init__(self, sim) -> None:
         self.sim, self.reads = sim, []
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
         self.reads.append((address, count))
         return self.sim.read(address, count)
 
