@@ -276,13 +276,22 @@ class Drive:
         """Write, read back, and raise VerifyError when the drive holds something else."""
         self.write_raw(entry, raw)
         if entry.readable:
-            back = self.read_entries([entry])[0].raw
-            if back != raw:
-                raise VerifyError(
-                    f"{entry.code}: wrote {format_value(entry, raw)} but the drive reads back "
-                    f"{format_value(entry, back)}"
-                )
+            self._verify({entry.code: (entry, raw)})
         return WriteResult(entry, old, raw)
+
+    def _verify(self, written: dict[str, tuple[Entry, int]]) -> None:
+        """Read back what was written; VerifyError for the first entry the drive holds otherwise. A read-back that
+        disagrees is read once more before it is believed: a stray reply that slipped through must not make a
+        stored value look lost."""
+        entries = [e for e, _ in written.values()]
+        back = {r.entry.code: r.raw for r in self.read_entries(entries)}
+        if differ := [e for e in entries if back[e.code] != written[e.code][1]]:
+            back.update((r.entry.code, r.raw) for r in self.read_entries(differ))
+        for e, raw in written.values():
+            if back[e.code] != raw:
+                raise VerifyError(
+                    f"{e.code}: wrote {format_value(e, raw)} but the drive reads back {format_value(e, back[e.code])}"
+                )
 
     def write_block_verified(self, items: list[tuple[Entry, int, int | None]]) -> list[WriteResult]:
         """Write entries at adjacent addresses in one FC16 request, then verify each by one coalesced read-back.
@@ -299,13 +308,8 @@ class Drive:
             self.link.write(self.unit, first.address, words, multiple=True)
         except DeviceError as exc:
             raise _prefixed(exc, f"writing {', '.join(e.code for e, _, _ in items)}") from None
-        readable = [e for e, _, _ in items if e.readable]
-        back = {r.entry.code: r.raw for r in self.read_entries(readable)} if readable else {}
-        for e, raw, _ in items:
-            if e.code in back and back[e.code] != raw:
-                raise VerifyError(
-                    f"{e.code}: wrote {format_value(e, raw)} but the drive reads back {format_value(e, back[e.code])}"
-                )
+        if readable := {e.code: (e, raw) for e, raw, _ in items if e.readable}:
+            self._verify(readable)
         return [WriteResult(e, old, raw) for e, raw, old in items]
 
     def trigger(self, role: str, feature: str, value: int | None = None) -> None:
