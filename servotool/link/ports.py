@@ -71,8 +71,9 @@ PARITY_NAMES = {"N": "none", "E": "even", "O": "odd"}
 SYSFS_USB_SERIAL = Path("/sys/bus/usb-serial/devices")
 
 
-def open_serial(port: str, line: LineSettings, timeout: float) -> serial.Serial:
-    """Open and configure a serial port for exclusive use; DeviceError naming the real cause when it will not."""
+def open_serial(port: str, line: LineSettings, timeout: float, doing: str = "open port") -> serial.Serial:
+    """Open and configure a serial port for exclusive use; DeviceError naming the real cause when it will not
+    ('cannot {doing} {port}: ...')."""
     import serial
 
     try:
@@ -86,7 +87,7 @@ def open_serial(port: str, line: LineSettings, timeout: float) -> serial.Serial:
             exclusive=True,
         )
     except Exception as exc:  # SerialException, OSError, termios.error (not an OSError), ValueError
-        raise DeviceError(f"cannot open port {port}: {port_problem(port, exc, line)}") from None
+        raise DeviceError(f"cannot {doing} {port}: {port_problem(port, exc, line)}") from None
 
 
 def open_tcp(port: str, timeout: float) -> socket.socket:

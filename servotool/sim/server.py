@@ -1,4 +1,5 @@
-"""Serve simulated drives as Modbus RTU slaves with pymodbus' server (serial line or RTU-over-TCP).
+"""Serve simulated drives as Modbus RTU slaves: RTU over TCP with pymodbus' server, a serial line with
+sim/serial.py's framing.
 
 The only module of the simulator that touches pymodbus.
 """
@@ -16,11 +17,11 @@ from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import NoSuchIdException
 from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
-from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from servotool.errors import DeviceError
-from servotool.link.ports import open_serial, parse_tcp, port_problem
+from servotool.link.ports import parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.firmware import build_drive
@@ -109,10 +110,10 @@ class _SpecDecoder(DecodePDU):
 async def _start(
     port: str,
     drives: list[SimulatedDrive],
-    line: LineSettings,
     lock: threading.Lock,
     trace: Callable[[bool, bytes], None] | None,
 ):
+    """pymodbus' RTU-over-TCP server for the drives on a tcp://HOST:PORT spec, started."""
     # The server wants a datastore to start with; the line takes its place below.
     devices = [SimDevice(id=d.unit, simdata=[SimData(address=0, datatype=DataType.UINT16)]) for d in drives]
 
@@ -122,43 +123,26 @@ async def _start(
         return data
 
     tcp = parse_tcp(port)
-    server: ModbusTcpServer | ModbusSerialServer
-    if tcp:
-        try:  # pymodbus says only 'Could not start listen': bind once here, where the cause gets named
-            socket.create_server(tcp).close()
-        except OSError as exc:
-            raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
-        # A real RS485 slave stays silent for other unit ids, so missing devices get no answer.
-        server = ModbusTcpServer(
-            devices,
-            framer=FramerType.RTU,
-            address=tcp,
-            trace_packet=hook if trace else None,
-            ignore_missing_devices=True,
-            broadcast_enable=True,
-        )
-    else:
-        # pymodbus would fail with a bare '(22, Invalid argument)' for, say, parity on a pty: open it once here,
-        # where the cause gets named.
-        open_serial(port, line, 0.1).close()
-        server = ModbusSerialServer(
-            devices,
-            framer=FramerType.RTU,
-            port=port,
-            baudrate=line.baud,
-            parity=line.parity,
-            stopbits=line.stopbits,
-            bytesize=line.bytesize,
-            trace_packet=hook if trace else None,
-            ignore_missing_devices=True,
-            broadcast_enable=True,  # unit 0: applied by every drive, unanswered
-        )
+    assert tcp is not None, "a serial line is framed by sim/serial.py"
+    try:  # pymodbus says only 'Could not start listen': bind once here, where the cause gets named
+        socket.create_server(tcp).close()
+    except OSError as exc:
+        raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
+    # A real RS485 slave stays silent for other unit ids, so missing devices get no answer.
+    server = ModbusTcpServer(
+        devices,
+        framer=FramerType.RTU,
+        address=tcp,
+        trace_packet=hook if trace else None,
+        ignore_missing_devices=True,
+        broadcast_enable=True,  # unit 0: applied by every drive, unanswered
+    )
     server.context = _Datastore(Line(drives, lock))  # type: ignore[assignment]
     server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
-    except Exception as exc:  # OSError, termios.error, pyserial's errors, RuntimeError
-        raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc, line)}") from None
+    except Exception as exc:  # OSError, RuntimeError
+        raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
     return server
 
 
@@ -175,15 +159,22 @@ def serve_forever(
     ready: Callable[[str], None] | None = None,
     faults: LineFaults | None = None,
 ) -> None:
-    """Serve in the foreground until interrupted; with faults, behind a bad line on the tcp:// port."""
+    """Serve in the foreground until interrupted; with faults, behind a bad line on the tcp:// port. A serial port is
+    framed by sim/serial.py (the 3.5-character rule pymodbus' framer cannot keep), RTU over TCP by pymodbus."""
     lock = threading.Lock()
     tcp = parse_tcp(port)
     if faults is not None and not tcp:
         raise DeviceError(f"cannot serve on {port}: line faults need a tcp://HOST:PORT port")
+    if not tcp:
+        from servotool.sim.serial import SerialSlave
+
+        slave = SerialSlave(port, drives, line or LineSettings(), lock, trace)
+        slave.serve(ready=(lambda: ready(port)) if ready else None)
+        return
 
     async def main() -> None:
         proxy = None
-        server = await _start("tcp://127.0.0.1:0" if faults else port, drives, line or LineSettings(), lock, trace)
+        server = await _start("tcp://127.0.0.1:0" if faults else port, drives, lock, trace)
         bound = bound_port(server) if tcp else 0
         if faults is not None and tcp:
             from servotool.sim.faults import FaultProxy
@@ -240,7 +231,7 @@ class EmbeddedSim:
         # the start would cost a scheduling round trip each on a busy machine.
         try:
             self._server: ModbusTcpServer | None = self._loop.run_until_complete(
-                _start("tcp://127.0.0.1:0", drives, LineSettings(), self.lock, None)
+                _start("tcp://127.0.0.1:0", drives, self.lock, None)
             )
             port = bound_port(self._server)
             if faults is not None:
