@@ -18,6 +18,7 @@ import select
 import threading
 from collections.abc import Callable
 
+from servotool.errors import DeviceError
 from servotool.link.crc import crc_ok, with_crc
 from servotool.link.ports import open_serial
 from servotool.model.profile import LineSettings
@@ -59,7 +60,7 @@ class SerialSlave:
         trace: Callable[[bool, bytes], None] | None = None,
     ) -> None:
         self.line = Line(drives, lock)
-        self.trace = trace
+        self.name, self.trace = port, trace
         self.silence = silence_s(line)
         # Linux refuses parity on a pty on some opens only (a second open meets it when the first did not): open
         # twice, so that a setting the port cannot do is named now rather than never.
@@ -75,7 +76,11 @@ class SerialSlave:
             ready()
         try:
             while not self.stop.is_set():
-                if chunk := self._read(self.silence if buf else IDLE_S):
+                try:
+                    chunk = self._read(self.silence if buf else IDLE_S)
+                except OSError as exc:  # the adapter was unplugged, the pty's other end closed
+                    raise DeviceError(f"serving on {self.name}: the port went away ({exc})") from None
+                if chunk:
                     buf = self._complete(buf + chunk)
                     if len(buf) > MAX_FRAME:
                         buf = b""  # no frame is this long: noise
@@ -92,7 +97,9 @@ class SerialSlave:
         if self._fd is not None:  # POSIX: one select and one read, not pyserial's loop (a pty answers in 0.1 ms)
             if not select.select([self._fd], [], [], timeout)[0]:
                 return b""
-            return os.read(self._fd, MAX_FRAME)
+            if not (data := os.read(self._fd, MAX_FRAME)):
+                raise ConnectionError("end of file")  # readable yet empty: the other end is gone
+            return data
         if port.timeout != timeout:
             port.timeout = timeout
         data = port.read(1)
