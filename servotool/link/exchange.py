@@ -3,8 +3,9 @@
 The contract. A frame is taken as the answer to a request when its head and CRC fit the request (unit, function,
 byte count; a write's echoed address and value) and nothing on the line says it may be another's:
 
-1. Consecutive reads of a unit differ in reply length wherever the profile lets a read widen by an adjacent entry
-   (`spare`): a copy or the late reply of the read before, the stray most often met, cannot fit.
+1. A read that follows one repeating a read made within the copy window (a monitor's, a trace's) differs from it in
+   reply length wherever the profile lets a read widen by an adjacent entry (`spare`): a copy of that read's reply,
+   or its own reply that such a copy stood in for (point 4), cannot fit.
 2. A frame that repeats, byte for byte, one heard within the copy window (link/ledger.py) for another request (or
    for the same read before a write to its registers) may be that frame's copy: the read is confirmed.
 3. A try that failed owes its reply, which may come later than any timeout: a reply of that shape for another
@@ -30,7 +31,7 @@ from typing import Protocol
 from servotool.clock import Clock, RealClock
 from servotool.errors import DeviceError, ModbusException
 from servotool.link.crc import crc_ok, with_crc
-from servotool.link.ledger import OWED_MIN_S, OWED_TIMEOUTS, Ledger, Rid, shape_of
+from servotool.link.ledger import COPY_WINDOW, OWED_MIN_S, OWED_TIMEOUTS, Ledger, Rid, shape_of
 from servotool.link.ports import Trace
 from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, NotAnswer, Request
 
@@ -80,6 +81,7 @@ class _Op:
         self.what, self.retries, self.timeout, self.outcome, self.wire = what, retries, timeout, outcome, wire
         self.tries = 0
         self.faults = 0
+        self.repeating = False  # a read of registers read within the copy window (a monitor's, a trace's)
 
     def begin(self) -> None:
         if self.tries >= 2 * (self.retries + 2):
@@ -149,7 +151,9 @@ class Exchange:
         self.trace, self.clock = trace, clock or RealClock()
         self.requests = 0
         self.ledger = Ledger(owed_s=max(OWED_MIN_S, OWED_TIMEOUTS * timeout))
-        self._previous_length: dict[int, int] = {}  # by unit: the byte count of the last read's reply
+        self._previous: dict[int, tuple[int, bool]] = {}  # by unit: the last read's reply byte count, and whether
+        # it repeated a read made within the copy window
+        self._asked: dict[tuple[int, int, int], float] = {}  # (unit, address, count) -> when it was last read
         self._written: dict[tuple[int, int], int] = {}  # (unit, address) -> the number of the last write to it
         self._writes = 0
         self._narrow: set[tuple[int, int, int]] = set()  # reads whose widening met an exception
@@ -165,6 +169,9 @@ class Exchange:
         return self._read(unit, address, count, spare, op)
 
     def _read(self, unit: int, address: int, count: int, spare: tuple[int, int], op: _Op) -> list[int]:
+        now, key = self.clock.now(), (unit, address, count)
+        op.repeating = now - self._asked.get(key, -float("inf")) <= COPY_WINDOW
+        self._asked[key] = now
         held: Held | None = None
         while True:
             req = self._shape(unit, address, count, spare, held[1] if held else None)
@@ -271,12 +278,13 @@ class Exchange:
     # ----- which request, and who may answer it -------------------------------------------------------------
     def _shape(self, unit: int, address: int, count: int, spare: tuple[int, int], avoid: Request | None) -> Request:
         """The read to send for `count` registers at `address`: of the widths `spare` allows, the narrowest whose reply
-        length no owed reply has and that differs from an answer being confirmed and from the last read's."""
+        length no owed reply has and that differs from an answer being confirmed and from the last read's when that
+        one repeated (contract point 1)."""
         before, after = (0, 0) if (unit, address, count) in self._narrow else spare
         if not before and not after:
             return Request(unit, READ, address, count)
         now = self.clock.now()
-        previous = self._previous_length.get(unit)
+        previous = self._previous.get(unit)
         best: tuple[tuple[bool, ...], Request] | None = None
         for lead, tail in dict.fromkeys(((0, 0), (0, after), (before, 0), (before, after))):
             req = Request(unit, READ, address - lead, count + lead + tail)
@@ -284,7 +292,7 @@ class Exchange:
             score = (
                 self.ledger.owed_by_other(shape, rid, now),
                 avoid is not None and req.count == avoid.count,
-                req.count * 2 == previous,
+                previous is not None and previous[1] and req.count * 2 == previous[0],
             )
             if best is None or score < best[0]:
                 best = (score, req)
@@ -354,7 +362,7 @@ class Exchange:
         rid = self._rid(req)
         self.requests += 1
         if req.fc == READ:
-            self._previous_length[req.unit] = 2 * req.count
+            self._previous[req.unit] = (2 * req.count, op.repeating)
         else:
             self._writes += 1
             for a in range(req.address, req.address + req.count):

@@ -119,14 +119,23 @@ def test_a_late_reply_is_not_taken_for_the_answer_to_the_next_read():
     assert ex.read(1, 10, 1) == [111]
 
 
-def test_a_copy_of_the_last_reply_after_a_gap_cannot_answer_the_next_read():
-    # The copy arrives after the next request went out, before its reply: the next read is widened by the entry
-    # after it, so its reply has another length and the copy is set aside.
-    line = ScriptedLine({10: 111, 20: 222, 21: 7}, ["copy:0.0005"])
+def test_a_monitors_repeated_read_takes_another_length_so_its_copies_cannot_answer_the_next():
+    # A monitor reads 10 and 20 over and over. A copy of 10's reply stands in for its next read (the same registers,
+    # read a moment ago), and the reply it displaced follows: the read of 20 after it is widened by the entry after
+    # 20, so that reply has another length and is set aside.
+    line = ScriptedLine({10: 111, 20: 222, 21: 7}, ["ok", "ok", "copy:0.0005"])
     ex = exchange(line)
-    assert ex.read(1, 10, 1) == [111]
-    assert ex.read(1, 20, 1, spare=(0, 1)) == [222]
-    assert [f[4:6] for f in line.sent] == [b"\x00\x01", b"\x00\x02"] and ex.requests == 2
+    for _ in range(3):
+        assert ex.read(1, 10, 1) == [111]
+        assert ex.read(1, 20, 1, spare=(0, 1)) == [222]
+    assert [f[4:6] for f in line.sent[:4]] == [b"\x00\x01", b"\x00\x01", b"\x00\x01", b"\x00\x02"]
+
+
+def test_a_read_that_repeats_none_is_not_widened():
+    line = ScriptedLine({10: 111, 20: 222, 21: 7}, [])
+    ex = exchange(line)
+    assert ex.read(1, 10, 1) == [111] and ex.read(1, 20, 1, spare=(0, 1)) == [222]  # a backup's reads
+    assert [f[4:6] for f in line.sent] == [b"\x00\x01", b"\x00\x01"]
 
 
 def test_a_copy_of_another_reads_reply_is_confirmed_not_used():
@@ -160,10 +169,11 @@ def test_two_confirmations_that_disagree_are_a_fault():
 def test_a_widened_read_that_meets_an_exception_asks_for_its_registers_alone():
     line = ScriptedLine({10: 111, 20: 222}, [], refuse=frozenset({21}))
     ex = exchange(line)
-    assert ex.read(1, 10, 1) == [111]
+    assert [ex.read(1, 20, 1, spare=(0, 1)) for _ in range(2)] == [[222], [222]]  # a monitor's
     assert ex.read(1, 20, 1, spare=(0, 1)) == [222]  # widened to 20..21 first: 21 is refused
     assert ex.read(1, 20, 1, spare=(0, 1)) == [222]  # and not widened again
-    assert [f[4:6] for f in line.sent] == [b"\x00\x01", b"\x00\x02", b"\x00\x01", b"\x00\x01"]
+    counts = [b"\x00\x01", b"\x00\x01", b"\x00\x02", b"\x00\x01", b"\x00\x01"]
+    assert [f[4:6] for f in line.sent] == counts
 
 
 def test_the_deadline_allows_for_the_frames_time_on_the_wire():
