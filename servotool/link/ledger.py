@@ -1,8 +1,9 @@
 """What an RTU line may still deliver: the frames heard lately (whose copies may follow) and the replies owed by tries
 that failed (which may come later than any timeout). link/exchange.py asks it whether a reply could be a stray one.
 
-Requests are told apart by their identity (`Rid`): unit, function, address, register count or values, and for a read
-the write epoch of its registers, so that a reply read before a write never stands for one read after it.
+Requests are told apart by their identity (`Rid`): a read's unit, address, register count and the write epoch of its
+registers (so that a reply read before a write never stands for one read after it); a write's by what its
+acknowledgement shows.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ COPY_WINDOW = 0.1
 # timeout and the late-reply window a silent try already waits, and later than a gateway's queue releases one.
 OWED_TIMEOUTS, OWED_MIN_S = 10, 2.0
 
-Rid = tuple[int, ...]  # a request's identity (unit, fc, address, count or values..., epoch)
+Rid = tuple[int, ...]  # a request's identity: (unit, fc, address, count, epoch) or (unit, fc, address, value|count)
 Shape = tuple[int, ...]  # what a reply's head shows: (unit, fc, byte count) for a read, the whole frame for a write
 
 
