@@ -11,7 +11,7 @@ byte count; a write's echoed address and value) and nothing on the line says it 
 3. A try that failed owes its reply, which may come later than any timeout: a reply of that shape for another
    request is confirmed, and reads pick a width that no owed reply has.
 4. Bytes before a request or after a reply are a fault of the operation, and faults leave the line to go quiet and
-   be flushed; a copy of the same request's reply, taken on a line that has shown faults, leaves its own reply owed.
+   be flushed; on a line that has shown faults, a read whose reply repeats its own last one is confirmed too.
 5. A confirmation is another read, at another width where one is allowed. An unambiguous confirmation stands; two
    ambiguous ones must agree; a disagreement is a fault.
 
@@ -205,8 +205,7 @@ class Exchange:
         an unambiguous one stands, and the fault is only counted."""
         first, first_req, _ = held
         fault = LineFault("disagree", len(reply.frame), f"{_said(first)}, then {_said(answer)}")
-        self._trouble_until = self.clock.now() + self.ledger.owed_s
-        self._owe(first_req)
+        self._owe(first_req)  # no mark of a troubled line: a live value may simply have moved between the reads
         if not reply.ambiguous:
             op.faults += 1
             return
@@ -314,7 +313,7 @@ class Exchange:
         return (req.unit, READ, req.address, req.count, epoch)
 
     def _ambiguous(self, req: Request, rid: Rid, frame: bytes, now: float) -> bool:
-        """Whether the frame that fits `req` may be another request's reply (contract points 2 and 3)."""
+        """Whether the frame that fits `req` may be another request's reply or an old one (contract points 2-4)."""
         copied = self.ledger.copy_of(frame, now)
         if copied is not None and copied != rid:
             return True
@@ -324,9 +323,9 @@ class Exchange:
                 return True
         elif self.ledger.owed_by_other(shape, rid, now):
             return True
-        if copied is not None and now < self._trouble_until:
-            self.ledger.owe(shape, rid, now)  # a copy of this request's reply: its own may still come (point 4)
-        return False
+        # A copy of this read's own earlier reply, on a line that has shown faults: the same registers, but maybe a
+        # moment old, and its own reply may follow (point 4).
+        return copied is not None and req.fc == READ and now < self._trouble_until
 
     def _owe(self, req: Request) -> None:
         """The request's reply may still come (a failed try, or a reply that may have been another's)."""
