@@ -31,11 +31,10 @@ from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.errors import ServoError
 from servotool.model.loader import load_profile
-from servotool.motion.jogger import Jogger
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
-from servotool.tuning.identify import TravelExceeded
-from servotool.tuning.stable_hold import guard_hold
+from servotool.tuning.errors import TravelExceeded
+from servotool.tuning.stable_hold import guarded_jogger
 from servotool.tuning.tune import TuneRequest, tune_inertia
 
 FACTORY_BAUD = {"sd25": 9600, "sdc": 9600, "is620p": 57600, "dsx7e": 115200}
@@ -108,11 +107,11 @@ def run_once(profile_id: str, ratio: float, friction: float, noise: float, seed:
 def run_jog(
     profile_id: str, ratio: float, friction: float, noise: float, seed: int, speed_rpm: float, baud: int | None = None
 ) -> Run:
-    """A 1 s JOG at speed_rpm as `servotool jog` runs it (guard_hold), watching the true speed."""
+    """A 1 s JOG at speed_rpm as `servotool jog` runs it (guarded_jogger), watching the true speed."""
     drive, clock, seen = machine(profile_id, ratio, friction, noise, seed, baud)
     run = Run()
     try:
-        jogger = guard_hold(Jogger(drive, clock=clock))
+        jogger = guarded_jogger(drive, clock)
         jogger.run(jogger.plan(speed_rpm, 1.0))
     except ServoError as exc:
         run.outcome = "alarm" if "alarm" in str(exc) else "refused"

@@ -23,7 +23,8 @@ from servotool.errors import ServoError
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import HostStalls, VirtualLink, make_motion_setup
-from servotool.tuning.identify import IdentificationRefused, TravelExceeded
+from servotool.tuning.errors import TravelExceeded
+from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, tune_inertia
 
 ROWS = [("dsx7e", 115200), ("dsx7e", 19200), ("is620p", 57600), ("sdc", 19200), ("sd25", 19200)]

@@ -12,6 +12,7 @@ from pathlib import Path
 import typer
 
 from servotool import __version__
+from servotool.cli.examples import EXAMPLES
 from servotool.cli.main import app
 
 PAGE = Path(__file__).with_name("servotool.1")
@@ -47,9 +48,14 @@ l l l.
 Drive	If the host dies	Bound
 DSX7E	its host watchdog Pn620 (kept alive by Fn032) stops the motor with E25	speed x (Pn620 + ramp/2)
 IS620P	the running multi\-segment position move (H11 segment 1) ends and stops	one segment: 3 beats at speed + stop
-SD25	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR
-SDC	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR
+SD25	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
+SDC	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
 .TE
+With \fB\-\-heartbeat dtr|rts\fR a control line of the USB\-RS485 adapter toggles at every beat of a motion for a
+retriggerable watchdog relay on the drive's main contactor; the bound is then the relay's time
+(\fB\-\-heartbeat\-timeout\-ms\fR). For a motion's duration servotool also sets the drive's own protections
+where the profile maps them (speed limit, SD25's overtravel fence and locked\-rotor trip, SDC's saturation trip) and
+puts them back; SD25's DIs are forced while it moves, so its wired inputs are ignored (main power still stops it).
 The IS620P route is unverified (the start of a segment is the general IS620P manual's); see
 \fBservotool profiles show \fIID\fB \-\-unverified\fR for each profile's route, its manual lines and the simulator's
 extensions. The simulator stops nothing the manual does not: \fBsim config \-\-fake\-watchdog on\fR (NOT REAL, off
@@ -69,8 +75,9 @@ cannot tell warns once.
 TAIL = r""".SH PLAN FILES
 A plan for \fBservotool run\fR is YAML (loaded safely: values are data, nothing but these steps can run).
 Optional top keys \fBport\fR, \fBprofile\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR,
-\fBretries\fR (the command line wins) and \fBunits\fR (a list of unit ids: several axes on one line; each step
-runs on every axis in turn, \fB\-\-unit\fR picks one of them); then \fBsteps\fR, a list run in order:
+\fBretries\fR (the command line wins), \fBunits\fR (a list of unit ids: several axes on one line; each step
+runs on every axis in turn, \fB\-\-unit\fR picks one of them), \fBallow_outside\fR and \fBoverwrite\fR (see
+below); then \fBsteps\fR, a list run in order:
 .TP
 .B "set: {CODE: VALUE, ...}"
 Write parameters in engineering units, verified by read\-back; unchanged values are not rewritten.
@@ -79,18 +86,20 @@ Write parameters in engineering units, verified by read\-back; unchanged values 
 Read parameters or monitors and fail (exit 3) unless each is within the bounds (a bare VALUE allows half a
 resolution step).
 .TP
-.BR "backup: FILE" ", " "restore: FILE"
-Back up to or restore from FILE, relative to the plan; \fB{unit}\fR in the name is replaced by the unit id, and
-with several units a name without it gets \fB\-unit\fIN\fR before its suffix.
+.BR "backup: FILE | {file: FILE, overwrite: BOOL}" ", " "restore: FILE"
+Back up to or restore from FILE; \fB{unit}\fR in the name is replaced by the unit id, and with several units a
+name without it gets \fB\-unit\fIN\fR before its suffix.
 .TP
 .B "jog: {speed: RPM, time: S, max_travel: REV, no_dead_man: BOOL}"
 A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBservotool jog\fR;
 \fBno_dead_man: true\fR acknowledges a drive without one (SD25, SDC), as \fB\-\-no\-dead\-man\fR does.
 .TP
 .B "tune inertia: {rigidity: N | bandwidth: HZ, travel: REV, max_speed: RPM, \
-accel_time: MS, direction: D, repeats: N, gains: BOOL, report: DIR, no_dead_man: BOOL}"
+accel_time: MS, direction: D, repeats: N, gains: BOOL, check: BOOL, report: DIR, no_dead_man: BOOL}"
 Identify the load inertia and write it, then the matching gains only with \fBrigidity\fR or \fBbandwidth\fR
-(or \fBgains: true\fR: at the drive's current level); without them the gains are left as they are. \fBreport\fR
+(or \fBgains: true\fR: at the drive's current level); without them the gains are left as they are. Gains written
+are step-checked: a failed check writes the previous ones back and fails the step, with the reason in the report;
+\fBcheck: false\fR leaves the check out. \fBreport\fR
 writes the same folder of charts as \fBtune inertia \-\-report\fR (beside the plan, one per axis).
 .TP
 .BR "wait: S" ", " "alarm clear:" ", " "prompt: QUESTION"
@@ -101,9 +110,18 @@ Make the plan's writes survive a power cycle the way the drive does it: its save
 with its EEPROM switch set (nothing to do on drives that store every write).
 .PP
 Any step may carry \fBunit: N\fR or a list to run on some axes only.
-The whole plan is checked against the profile before the first step runs; an error names the plan's line.
+A file a plan names is relative to the plan's folder (\fB~\fR is the home folder) and must stay inside that
+folder, symbolic links followed, unless the plan says \fBallow_outside: true\fR; a file (or report folder) that
+exists is replaced only where the step or the plan says \fBoverwrite: true\fR, or \fB\-\-force\fR does.
+The whole plan is checked before the first step runs, the same way by \fB\-\-dry\-run\fR, which also lists
+every file the run would write: each step against the profile, each file (outside the folder, existing without
+overwrite, written twice, a restore whose file neither exists nor is written by an earlier step); every
+problem is reported at once and names the plan's line.
+Once the port is open, before anything is written, the run also reads the settings each motion step needs
+(the profile's motion setup, with what earlier \fBset\fR steps write) and refuses a step the drive is not set up for.
 A run writes a JSON report (steps, values written, results, timing) next to the plan as
-\fIPLAN\fB.report.json\fR or to \fB\-\-report\fR, also when it fails or is interrupted.
+\fIPLAN\fB.report.json\fR (replaced by each run) or to \fB\-\-report\fR (an existing file that is not a plan
+report only with \fB\-\-force\fR), also when it fails or is interrupted.
 .SH SHELL COMPLETION
 \fBservotool \-\-install\-completion\fR installs completion for the current shell;
 \fBservotool \-\-show\-completion\fR prints the script instead.
@@ -126,6 +144,11 @@ the environment.
 .B SERVOTOOL_SIM_DIR
 Where simulated drives keep their parameters and machine settings (default \fIsim\fR in the user state folder:
 \fI~/.local/state/servotool/sim\fR on Linux, following \fB$XDG_STATE_HOME\fR).
+.TP
+.B SERVOTOOL_SIM_LINE_BAUD
+\fBfast\fR, \fBfactory\fR or a baud rate: the line whose wire time delays each answer of a simulated drive whose
+\fBsim config \-\-line\-baud\fR is left at \fBfactory\fR (the default: the connection's line, the profile's
+factory settings unless given).
 .TP
 .B SERVOTOOL_BACKUP_DIR
 Where automatic backups are written before a restore or a factory reset (default \fIbackups\fR in the user data
@@ -151,31 +174,9 @@ Verification mismatch: a value read back differs, or an expectation or alarm cle
 .TP
 .B 130
 Interrupted (Ctrl\-C); any motion was stopped first.
-.SH EXAMPLES
-.nf
-servotool \-\-port sim param list \-\-group gain
-servotool \-\-port /dev/ttyUSB0 \-\-profile sd25 param get Po109
-servotool \-\-port sim param set Pn100=40.0 Pn101=25.0
-servotool \-\-port sim param backup \-o axis1.yaml
-servotool \-\-port sim param restore axis1.yaml \-\-dry\-run
-servotool \-\-port sim monitor \-\-rate 20 \-\-csv log.csv
-servotool \-\-port sim monitor Un000 Un002 \-\-plot
-servotool \-\-port tcp://127.0.0.1:5020 trace Un000 Un002 \-\-trigger 'Un000>100' \-\-pre 25 \-o start.csv
-servotool \-\-port sim trace 5E00h Un000 \-\-trigger 5E00h.moving=0 \-\-duration 0.5 \-\-repeat 3 \-\-plot
-servotool plot start.csv \-o start.png
-servotool \-\-port sim jog \-\-speed 300 \-\-time 2
-servotool \-\-port sim \-P sdc param set PN4=3 && servotool \-\-port sim \-P sdc jog \-s 100 \-t 1
-servotool sim config \-\-load\-ratio 5 \-\-friction 0.03
-servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 16
-servotool \-\-port sim tune inertia \-\-yes \-\-rigidity 16 \-\-step\-check \-\-report tune\-report
-servotool sim config \-\-load\-ratio 5 \-\-resonance\-hz 20 \-\-arm\-gravity 0.2 \-\-gear 10
-servotool \-\-port sim tune inertia \-\-yes \-\-dry\-run
-servotool run examples/commission.yaml \-\-yes
-servotool sim serve \-\-port tcp://127.0.0.1:5020 \-\-unit 1 \-\-unit 2
-servotool scan \-\-port /dev/ttyUSB0 \-\-units 1\-10 \-\-baud 9600 \-\-format 8N1
-servotool \-\-profile sd25 doctor \-\-port /dev/ttyUSB0 \-u 1 \-\-count 200
-.fi
-.SH SEE ALSO
+"""
+
+SEE_ALSO = r""".SH SEE ALSO
 .BR mbpoll (1),
 .BR socat (1)
 """
@@ -192,9 +193,7 @@ def placeholder(p) -> str:
     """What an option's value is called on the page: its metavar, FILE for paths, else the option's own name."""
     if p.metavar:
         return p.metavar
-    # typer 0.29 keeps the annotation in type_descriptor, older releases a click type in .type
-    annotation = getattr(getattr(p, "type_descriptor", None), "annotation", None)
-    if annotation is Path or type(getattr(p, "type", None)).__name__ == "Path":
+    if getattr(p.type, "name", None) == "path":  # click's Path type (typer's for a pathlib.Path annotation)
         return "FILE"
     longest = max(p.opts, key=len).lstrip("-")
     return longest.upper().replace("-", "_")
@@ -229,11 +228,24 @@ def command_sections(group, prefix: str) -> list[str]:
     return out
 
 
+def example_lines() -> list[str]:
+    """The EXAMPLES section: every command's examples (cli/examples.py), in the order they run."""
+    lines = [
+        ".SH EXAMPLES",
+        "In this order they run on a fresh simulated drive (a test runs each), as on a real one; the SD25, IS620P and "
+        "SDC motion examples need the drive set up for Modbus motion first (an error names the \\fBparam set\\fR "
+        "that does it).",
+    ]
+    for _, line, what in EXAMPLES:
+        lines += [".TP", f"\\fB{esc(line)}\\fR", esc(what)]
+    return lines
+
+
 def render() -> str:
     root = typer.main.get_command(app)
     body = [".SH GLOBAL OPTIONS", *option_lines(root), ".SH COMMANDS", *command_sections(root, "servotool")]
     head = HEAD.replace("{date}", date.today().strftime("%Y-%m")).replace("{version}", __version__)
-    return head + "\n".join(body) + "\n" + TAIL
+    return head + "\n".join(body) + "\n" + TAIL + "\n".join(example_lines()) + "\n" + SEE_ALSO
 
 
 if __name__ == "__main__":

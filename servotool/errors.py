@@ -144,3 +144,17 @@ class IdentityMismatch(UsageError):
             f"unit {unit} is not the drive profile {profile} ({model}) describes: "
             f"{'; '.join(answers)}; {fit}; nothing was written (--no-identity-check skips this check)"
         )
+
+
+class ProfileNotFound(UsageError):
+    """A drive found without --profile fits no candidate profile, or several; `candidates` are (profile id, what
+    its checks met) for each."""
+
+    def __init__(self, unit: int, port: str, fits: bool, candidates: Sequence[tuple[str, str]]) -> None:
+        self.unit, self.port, self.fits, self.candidates = unit, port, fits, tuple(candidates)
+        listed = "; ".join(f"{pid}: {why}" for pid, why in self.candidates)
+        if fits:
+            text = f"unit {unit} on {port} fits several profiles ({listed}): choose one with --profile"
+        else:
+            text = f"unit {unit} on {port} answers but fits no profile ({listed}): name its profile with --profile"
+        super().__init__(text)

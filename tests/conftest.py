@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -26,22 +27,34 @@ class Result:
 
 @pytest.fixture
 def sim_dir(tmp_path, monkeypatch) -> Path:
-    """Each test gets its own simulated drives (state files), automatic-backup folder and no user config."""
+    """Each test gets its own simulated drives (state files), automatic-backup folder and no user config; its
+    simulated drives answer without the wire time of their line (SERVOTOOL_SIM_LINE_BAUD=fast) unless their
+    `sim config --line-baud` names one; the `factory_line` fixture gives them the default, their factory line."""
     d = tmp_path / "sim"
     monkeypatch.setenv("SERVOTOOL_SIM_DIR", str(d))
     monkeypatch.setenv("SERVOTOOL_BACKUP_DIR", str(tmp_path / "auto-backups"))
     monkeypatch.setenv("SERVOTOOL_CONFIG", str(tmp_path / "no-config.yaml"))
+    monkeypatch.setenv("SERVOTOOL_SIM_LINE_BAUD", "fast")
     for var in ("SERVOTOOL_PORT", "SERVOTOOL_PROFILE", "SERVOTOOL_UNIT", "SERVOTOOL_BAUD"):
         monkeypatch.delenv(var, raising=False)
     return d
 
 
 @pytest.fixture
+def factory_line(sim_dir, monkeypatch) -> Path:
+    """sim_dir with the simulator as a user gets it: each drive's line emulated unless its sim config says
+    otherwise."""
+    monkeypatch.delenv("SERVOTOOL_SIM_LINE_BAUD", raising=False)
+    return sim_dir
+
+
+@pytest.fixture
 def cli(sim_dir):
-    """Run `python -m servotool ARGS` as a user would; returns exit code, stdout, stderr."""
+    """Run `python -m servotool ARGS` as a user would, on a screen wide enough that nothing wraps (stdout and
+    stderr are wrapped to COLUMNS; tests of the width give their own); returns exit code, stdout, stderr."""
 
     def run(*args: str, input: str | None = None, env: dict[str, str] | None = None, timeout: float = 120) -> Result:
-        full_env = {**os.environ, "COLUMNS": "200", **(env or {})}
+        full_env = {**os.environ, "COLUMNS": "1000", **(env or {})}
         proc = subprocess.run(
             [sys.executable, "-m", "servotool", *args],
             capture_output=True,
@@ -54,3 +67,32 @@ def cli(sim_dir):
         return Result(proc.returncode, proc.stdout, proc.stderr)
 
     return run
+
+
+@pytest.fixture
+def sim_serve(sim_dir):
+    """Start `servotool sim serve --port tcp://127.0.0.1:0 ARGS` in its own process; returns its tcp:// port. Each
+    one is stopped (Ctrl-C) at the end of the test."""
+    procs: list[subprocess.Popen] = []
+
+    def start(*args: str) -> str:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "servotool", "sim", "serve", "--port", "tcp://127.0.0.1:0", *args],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=ROOT,
+        )
+        procs.append(proc)
+        banner = proc.stderr.readline()
+        assert "serving on tcp://" in banner, banner
+        return banner.split("serving on ")[1].split()[0]
+
+    yield start
+    for proc in procs:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()

@@ -49,6 +49,10 @@ CLIENT_SIDE = (
     "servotool.cli",
     "pymodbus.client",
 )
+# tuning's pure rooms: the fit (a log in, an estimate out) and the control (gains and margins) import numpy, the
+# standard library, the model and their own room only, so they run on any log without a drive.
+PURE_ROOMS = ("servotool.tuning.fit", "servotool.tuning.control")
+PURE_MAY_IMPORT = ("__future__", "numpy", "servotool.model")
 
 
 def modules() -> dict[str, Path]:
@@ -75,6 +79,31 @@ def imported(name: str, path: Path, known: dict[str, Path]) -> set[str]:
             # `from pkg import mod` imports pkg.mod; `from mod import name` imports mod
             found.update(f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names)
     return {m for m in found if m in known and m != name}
+
+
+def imported_anything(name: str, path: Path) -> set[str]:
+    """Every module one module imports, anywhere in its source, by absolute dotted name (the package's or not)."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([node.module] if node.module else []))
+            found.add(base)
+    return found
+
+
+def impure_imports(name: str, path: Path, room: str) -> list[str]:
+    """What a module of a pure room imports beyond numpy, the standard library, the model and its own room."""
+    return sorted(
+        m
+        for m in imported_anything(name, path)
+        if m.split(".")[0] not in sys.stdlib_module_names and not any(within(m, p) for p in (*PURE_MAY_IMPORT, room))
+    )
 
 
 def import_graph() -> dict[str, set[str]]:
@@ -156,6 +185,24 @@ def test_imports_go_only_down_the_layers():
             ):
                 upward.append(f"{module} imports {target}")
     assert not upward, upward
+
+
+def test_the_purity_check_sees_a_procedure_or_a_library_imported_in_a_function(tmp_path):
+    module = tmp_path / "m.py"
+    module.write_text(
+        "import math\nimport numpy as np\nfrom servotool.model.profile import Profile\nfrom . import signals\n\n"
+        "def later():\n    import yaml\n    from servotool.drive import Drive\n"
+    )
+    found = impure_imports("servotool.tuning.fit.m", module, "servotool.tuning.fit")
+    assert found == ["servotool.drive", "yaml"]
+
+
+@pytest.mark.parametrize("room", PURE_ROOMS)
+def test_tunings_pure_rooms_import_only_numpy_the_standard_library_and_the_model(room):
+    rooms = [(name, path) for name, path in modules().items() if within(name, room)]
+    assert rooms, f"{room} has no modules"
+    wrong = {name: found for name, path in rooms if (found := impure_imports(name, path, room))}
+    assert not wrong, wrong
 
 
 def test_the_simulator_imports_only_what_it_may_and_only_session_and_cli_import_it():

@@ -3,12 +3,14 @@
 
 The global options are the root command's own (whatever main() declares, so an option added there is covered);
 those found after the sub-command are moved in front of it, unless the sub-command has an option of the same name
-(`sim serve --port` keeps its own).
+(`sim serve --port` keeps its own). An option's value that looks like an option (`--csv --json`) is refused.
 """
 
 from __future__ import annotations
 
 from typing import Any
+
+from servotool.errors import UsageError
 
 
 def _options(command: Any) -> dict[str, bool]:
@@ -52,9 +54,10 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
         leaf, start = _leaf(root, args, glob)
     except Exception:  # a broken sub-command is reported when it runs, with the arguments as given
         return args
+    own = _options(leaf)
+    _refuse_missing_values(args, start, glob, {**glob, **own})
     if leaf is root:
         return args
-    own = _options(leaf)
     moved: list[str] = []
     # A flag of the sub-command given to its group (`alarm --json show`) or before it (`servotool --json param get
     # Pn004`) goes to the sub-command.
@@ -82,6 +85,17 @@ def hoist_globals(root: Any, args: list[str]) -> list[str]:
                 i += 1
         i += 1
     return moved + rest
+
+
+def _refuse_missing_values(args: list[str], start: int, before: dict[str, bool], after: dict[str, bool]) -> None:
+    """`monitor --csv --json` would log to a file named '--json': an option's value that looks like an option was
+    left out, and is refused before anything runs."""
+    for k, token in enumerate(args[:-1]):
+        if token == "--":
+            return
+        known = before if k < start else after
+        if known.get(token) and args[k + 1].startswith("--"):
+            raise UsageError(f"{args[k + 1]!r} looks like an option, not a value for {token}: give the value after it")
 
 
 def _value_positions(args: list[str], glob: dict[str, bool]) -> set[int]:

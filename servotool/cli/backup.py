@@ -7,15 +7,14 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from servotool.cli.common import JSON_OPT, confirm, drive, state
+from servotool.cli.common import JSON_OPT, boosted, confirm, drive, resolved, state
 from servotool.cli.render import emit_json, err, info, out, progress, table, warn
-from servotool.connection import resolve
+from servotool.cli.values import footnote, json_mark, texts, unit_text
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
-from servotool.ops.params import read_settings, select
-from servotool.words import count
+from servotool.words import agree, count
 
 if TYPE_CHECKING:  # imported by the commands that use them: `param get` and `set` share this group
     from servotool.drive import Drive
@@ -48,6 +47,7 @@ def backup_cmd(
 ) -> None:
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
     from servotool.ops import backup
+    from servotool.ops.params import select
 
     kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
     if kind not in ("yaml", "yml", "csv"):
@@ -55,7 +55,10 @@ def backup_cmd(
     backup.check_output(output or Path(f"new.{kind}"), force=force)  # before reading the drive (24 s at 1200 Bd)
     with drive(ctx) as d:
         entries = select(d.profile)
-        with progress("reading parameters", len(entries), enabled=not as_json) as advance:
+        with (
+            boosted(ctx, [d], "the backup"),
+            progress("reading parameters", len(entries), enabled=not as_json) as advance,
+        ):
             b = backup.take(d, progress=advance)
         suffix = "csv" if kind == "csv" else "yaml"
         path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
@@ -95,6 +98,7 @@ def diff_cmd(
     A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning.
     """
     from servotool.ops import backup
+    from servotool.ops.eeprom import compared_memory
 
     opts = state(ctx).options
     if file2 is not None and from_default:
@@ -107,7 +111,12 @@ def diff_cmd(
             current = _read_all(d, as_json)
             missing = list(d.missing)
         _show_diff(
-            backup.diff(profile, current, backup.defaults(profile)), ("drive", "factory default"), missing, as_json
+            profile,
+            backup.diff(profile, current, backup.defaults(profile)),
+            ("drive", "factory default"),
+            missing,
+            as_json,
+            compared_memory(profile),
         )
         return
 
@@ -118,6 +127,7 @@ def diff_cmd(
         return b
 
     missing: list[str] = []  # entries the drive lacks (a drive diff only)
+    compared: str | None = None  # the drive's memory a drive diff compared
     if file2 is not None or from_default:
         name = opts.profile or backup.profile_of(file)
         if name is None:
@@ -135,19 +145,41 @@ def diff_cmd(
             missing = list(d.missing)
         labels = ("drive", str(file))
         diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
-    _show_diff(diffs, labels, missing, as_json)
+        compared = compared_memory(profile)
+    _show_diff(profile, diffs, labels, missing, as_json, compared)
 
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
     """Every readable parameter of the drive (code -> raw), with a progress bar on a terminal."""
+    from servotool.ops.params import read_settings, select
+
     with progress("reading the drive", len(select(d.profile)), enabled=not as_json) as advance:
         return read_settings(d, advance)
 
 
-def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing: list[str], as_json: bool) -> None:
+def _show_diff(
+    profile: Profile,
+    diffs: list[backup.Difference],
+    labels: tuple[str, str],
+    missing: list[str],
+    as_json: bool,
+    compared: str | None = None,
+) -> None:
+    """The differences; compared names the drive's memory a drive diff read (RAM, which may not be EEPROM)."""
     if as_json:
-        emit_json({"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs], "missing": missing})
+        differences = [{**x.as_json(), "value_unverified": json_mark(profile, x.entry)} for x in diffs]
+        data = {"a": labels[0], "b": labels[1], "differences": differences, "missing": missing}
+        emit_json({**data, **({"compared": compared} if compared else {})})
         return
+    if compared == "RAM":
+        info(
+            "compared with the drive's RAM: what EEPROM holds (what a power cycle brings back) cannot be read over "
+            "Modbus and may differ ('param restore' writes every value under the EEPROM setting)"
+        )
+    elif compared:
+        info(f"compared with the drive's {compared}")
+    drive = f"drive {compared.split()[0]}" if compared else ""
+    labels = (drive or labels[0], labels[1])
     if not diffs:
         out.print(f"no differences between {labels[0]} and {labels[1]}", markup=False)
         return
@@ -159,10 +191,12 @@ def _show_diff(diffs: list[backup.Difference], labels: tuple[str, str], missing:
             e.name,
             "" if x.a is None else format_value(e, x.a),
             "" if x.b is None else format_value(e, x.b),
-            e.unit,
+            unit_text(profile, e),
             MARK.get(e.effect, ""),
         )
     out.print(t)
+    if (note := footnote(profile, [x.entry for x in diffs])) is not None:
+        out.print(note, markup=False)
 
 
 @app.command("restore")
@@ -174,43 +208,60 @@ def restore_cmd(
     force: bool = typer.Option(False, "--force", help="Accept a file of another model or with a bad checksum."),
     only: str = typer.Option(None, "--only", help="Restore only this group (a portable subset)."),
     include: list[str] = typer.Option(None, "--include", help="Also restore this axis-specific entry (repeatable)."),
+    ram_only: bool = typer.Option(
+        False,
+        "--ram-only",
+        help="Compare with the drive's RAM only and write what differs there; by default a drive whose EEPROM "
+        "cannot be read gets every value written again under the EEPROM setting.",
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Write only the differing entries, verified, after an automatic backup; roll back on failure."""
-    from servotool.ops import backup, restore
+    """Write the differing entries, verified, after an automatic backup; roll back on failure.
 
-    profile = resolve(state(ctx).options).profile
+    Reads show the drive's RAM: where EEPROM may hold something else (SD25, IS620P), every other backup value is
+    written again under the EEPROM setting, as 'param set --save' does, unless --ram-only.
+    """
+    from servotool.ops import backup, restore
+    from servotool.ops.eeprom import compared_memory
+    from servotool.ops.params import read_settings, select
+
+    profile = resolved(ctx).profile
     b = backup.load(file, profile, force=force)  # every file problem is refused before connecting
     for w in b.warnings:
         warn(w)
-    with drive(ctx) as d:
+    speed = profile.boost.code if profile.boost.available else None
+    names_speed = speed is not None and any(profile.entry(c).code == speed for c in include or [])
+    with drive(ctx) as d, boosted(ctx, [d], "the restore", allow=not names_speed):
         entries = select(d.profile)
         with progress("reading the drive", len(entries), enabled=not as_json) as advance:
-            current = {r.entry.code: r.raw for r in d.read_entries(entries, partial=True, progress=advance)}
-        plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [])
+            current = read_settings(d, progress=advance)
+        plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [], ram_only=ram_only)
+        compared = compared_memory(d.profile)
         if not as_json:
-            _show_plan(plan)
-        if dry_run or not plan.changes:
+            _show_plan(d.profile, plan, compared)
+        if dry_run or plan.empty:
             if as_json:
                 emit_json(
                     {
                         "dry_run": dry_run,
-                        "changes": _changes_json(plan),
+                        "compared": compared,
+                        "changes": _changes_json(d.profile, plan),
+                        "store_again": [e.code for e, _ in plan.again],
                         "written": [],
+                        "stored_again": [],
                         "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
                         "missing": [e.code for e in plan.missing],
                         "refused": [],
                     }
                 )
-            elif not plan.changes:
-                out.print("nothing to restore: the drive already matches", markup=False)
+            elif plan.empty:
+                out.print(_nothing_to_restore(plan, compared), markup=False)
             return
-        if not confirm(f"Write {count(len(plan.changes), 'parameter')}?", yes):
+        total = len(plan.changes) + len(plan.again)
+        if not confirm(f"Write {count(total, 'parameter')}?", yes):
             raise ServoError("restore cancelled: nothing was written")
         # The automatic backup reads every entry before the first write: at a slow baud rate that is most of it.
-        with progress(
-            "automatic backup, then writing", len(entries) + len(plan.changes), enabled=not as_json
-        ) as advance:
+        with progress("automatic backup, then writing", len(entries) + total, enabled=not as_json) as advance:
             report = restore.restore(
                 d, b, plan, progress=lambda _entry: advance(1), notice=_where, backup_progress=advance
             )
@@ -218,8 +269,11 @@ def restore_cmd(
         emit_json(
             {
                 "dry_run": False,
-                "changes": _changes_json(plan),
+                "compared": compared,
+                "changes": _changes_json(d.profile, plan),
+                "store_again": [e.code for e, _ in plan.again],
                 "written": [e.code for e in report.written],
+                "stored_again": [e.code for e in report.stored_again],
                 "auto_backup": str(report.auto_backup),
                 "persisted": report.persisted,
                 "skipped": [{"code": e.code, "why": why} for e, why in plan.skipped],
@@ -230,7 +284,16 @@ def restore_cmd(
         return
     for e, why in report.refused:
         warn(f"{e.code} ({e.name}) not restored: the drive refuses writes there ({why})")
-    out.print(f"{count(len(report.written), 'parameter')} restored and verified by read-back", markup=False)
+    if report.written or not report.stored_again:
+        out.print(f"{count(len(report.written), 'parameter')} restored and verified by read-back", markup=False)
+    if report.stored_again:
+        out.print(
+            f"{count(len(report.stored_again), 'value')} RAM already held written again under the EEPROM setting "
+            f"and verified by read-back, to store {agree(len(report.stored_again), 'it', 'them')}",
+            markup=False,
+        )
+    if plan.ram_only and report.persisted:
+        warn("--ram-only: values that differ only in EEPROM were not compared, and stay as they are")
     if not report.persisted:
         # restore asks for EEPROM, so this is a drive that cannot store over Modbus
         warn(f"the drive keeps these values in RAM only, lost at power-off: {d.profile.persistence.note}")
@@ -238,23 +301,60 @@ def restore_cmd(
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 
 
-def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
+def _changes_json(profile: Profile, plan: restore.RestoreChanges) -> list[dict[str, object]]:
     return [
-        {"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit, "effect": e.effect}
+        {
+            "code": e.code,
+            "old": json_value(e, old),
+            "new": json_value(e, new),
+            **texts(e, old=old, new=new),
+            "unit": e.unit,
+            "effect": e.effect,
+            "value_unverified": json_mark(profile, e),
+        }
         for e, old, new in plan.changes
     ]
 
 
-def _show_plan(plan: restore.RestoreChanges) -> None:
+def _show_plan(profile: Profile, plan: restore.RestoreChanges, compared: str) -> None:
     if plan.changes:
         t = table(
-            "Code", "Name", "Drive", "Backup", "Unit", "Needs", title=f"{count(len(plan.changes), 'change')}, in order"
+            "Code",
+            "Name",
+            f"Drive {compared.split()[0]}",
+            "Backup",
+            "Unit",
+            "Needs",
+            title=f"{count(len(plan.changes), 'change')}, in order",
         )
         for e, old, new in plan.changes:
-            t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
+            t.add_row(
+                e.code,
+                e.name,
+                format_value(e, old),
+                format_value(e, new),
+                unit_text(profile, e),
+                MARK.get(e.effect, ""),
+            )
         out.print(t)
+        if (note := footnote(profile, [e for e, _, _ in plan.changes])) is not None:
+            out.print(note, markup=False)
+    if plan.again:
+        info(
+            f"and {count(len(plan.again), 'value')} the drive's RAM already holds, written again under the EEPROM "
+            "setting: what EEPROM holds cannot be read over Modbus (--ram-only writes only what differs in RAM)"
+        )
+    if plan.store:
+        info("the drive's store function runs at the end: what its EEPROM holds cannot be read over Modbus")
     for e, why in plan.skipped:
         info(f"skipped {e.code}: {why}")
+
+
+def _nothing_to_restore(plan: restore.RestoreChanges, compared: str) -> str:
+    if compared != "RAM":
+        return "nothing to restore: the drive already matches"
+    why = " (--ram-only: what EEPROM holds was not compared)" if plan.ram_only else ""
+    return f"nothing to restore: the drive's RAM already matches{why}"
 
 
 @app.command("reset")
@@ -265,6 +365,7 @@ def reset_cmd(
 ) -> None:
     """Factory defaults through the drive's own function, after an automatic backup."""
     from servotool.ops import backup, restore
+    from servotool.ops.params import select
 
     with drive(ctx) as d:
         d.profile.need_role("factory_reset", "param reset")

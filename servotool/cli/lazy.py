@@ -1,32 +1,38 @@
 """Command groups whose sub-commands are imported when called: `servotool param get` does not load numpy for
 `tune`, nor any other command's module.
 
-A sub-command is registered by name as "module:attribute" (a typer app, or a command function); several targets
-under one name are merged into one group (`param` is the values app and the files app). Help and completion, which
-list every sub-command, import them all; commands registered the usual typer way still work beside these.
+A sub-command is registered by name as "module:attribute" (a typer app, or a command function) with its one-line
+help, which `servotool --help` lists without importing anything; several targets under one name are merged into one
+group (`param` is the values app and the files app). Completion, which asks each sub-command for its help, imports
+them all; commands registered the usual typer way still work beside these.
+
+Every command built here prints its help as plain text (typer's rich_markup_mode=None: rich's help panels load
+markdown and pygments, ~3x a bare start) and ends it with its examples (cli/examples.py).
 """
 
 from __future__ import annotations
 
 import copy
 import importlib
-from dataclasses import dataclass
 from difflib import get_close_matches
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import typer
 from typer.core import TyperGroup
 
+from servotool.cli import examples
 
-@dataclass(frozen=True)
-class Lazy:
-    """One sub-command: where it lives, and the help of a merged group."""
+
+class Lazy(NamedTuple):
+    """One sub-command: where it lives, and its one line of help (also the whole help of a merged group)."""
 
     targets: tuple[str, ...]
-    help: str | None = None
+    help: str | None
 
 
 def lazy(*targets: str, help: str | None = None) -> Lazy:
+    """A sub-command by "module:attribute"; `help` is what `servotool --help` lists (the help of a group made of
+    several targets). Without it, --help imports the command to ask (tests/cli/test_examples.py wants it given)."""
     return Lazy(targets, help)
 
 
@@ -40,22 +46,25 @@ def build(name: str, spec: Lazy) -> Any:
     called)."""
     objects = [_load(t) for t in spec.targets]
     if len(objects) == 1 and not isinstance(objects[0], typer.Typer):
-        single = typer.Typer(add_completion=False)  # completion is the root's: not on each command's help
-        single.command(name)(objects[0])
+        # completion is the root's: not on each command's help
+        single = typer.Typer(add_completion=False, rich_markup_mode=None)
+        single.command(name, epilog=examples.epilog(name))(objects[0])
         command = typer.main.get_command(single)
     else:
-        command = _app_group(objects)
+        command = _app_group(objects, name)
     command.name = name
     if spec.help is not None:
-        command.help = spec.help
+        command.short_help = spec.help  # as `servotool --help` lists it before anything is imported
+        if len(spec.targets) > 1:  # a merged group has no help of its own
+            command.help = spec.help
     if hasattr(command, "commands") and not command.invoke_without_command:
         command.no_args_is_help = True  # a bare group name shows its help, once
     return command
 
 
-def _app_group(apps: list[typer.Typer]) -> Any:
+def _app_group(apps: list[typer.Typer], name: str) -> Any:
     """One group of the typer apps' commands, each built (typer reads its signature) only when asked for; an app
-    with sub-groups of its own is built whole, the usual typer way."""
+    with sub-groups of its own is built whole, the usual typer way (its help then as the app declares it)."""
     if any(a.registered_groups for a in apps):
         group = typer.main.get_group(apps[0])
         for extra in apps[1:]:
@@ -70,10 +79,12 @@ def _app_group(apps: list[typer.Typer]) -> Any:
     }
     shell = copy.copy(apps[0])
     shell.registered_commands = []
+    shell.rich_markup_mode = None
     shell.info = copy.copy(apps[0].info)
     shell.info.cls = _OnDemand
     group = typer.main.get_group(shell)
     group.infos = infos
+    group.path = name
     return group
 
 
@@ -93,6 +104,7 @@ class _OnDemand(_Suggesting):
     """A typer group whose commands are made from their CommandInfo on first use."""
 
     infos: dict[str, tuple[Any, typer.Typer]]
+    path = ""  # the group's name on the command line ('param')
 
     def list_commands(self, ctx: Any) -> list[str]:
         return [*super().list_commands(ctx), *(n for n in getattr(self, "infos", {}) if n not in self.commands)]
@@ -101,8 +113,11 @@ class _OnDemand(_Suggesting):
         found = getattr(self, "infos", {}).get(cmd_name)
         if cmd_name not in self.commands and found is not None:
             info, app = found
+            if (more := examples.epilog(f"{self.path} {cmd_name}")) is not None:
+                info = copy.copy(info)
+                info.epilog = f"{info.epilog}\n\n{more}" if info.epilog else more
             self.commands[cmd_name] = typer.main.get_command_from_info(
-                info, pretty_exceptions_short=app.pretty_exceptions_short, rich_markup_mode=app.rich_markup_mode
+                info, pretty_exceptions_short=app.pretty_exceptions_short, rich_markup_mode=None
             )
         return super().get_command(ctx, cmd_name)
 
@@ -120,5 +135,17 @@ def lazy_group(commands: dict[str, Lazy]) -> type[TyperGroup]:
             if cmd_name not in self.commands and cmd_name in self.registry:
                 self.commands[cmd_name] = build(cmd_name, self.registry[cmd_name])
             return super().get_command(ctx, cmd_name)
+
+        def format_commands(self, ctx: Any, formatter: Any) -> None:
+            """The commands and their one-line help, from the registry for those not loaded."""
+            rows = []
+            for name in self.list_commands(ctx):
+                if name not in self.commands and (known := self.registry[name].help) is not None:
+                    rows.append((name, known))
+                elif not (command := self.get_command(ctx, name)).hidden:
+                    rows.append((name, command.get_short_help_str(formatter.width)))
+            if rows:
+                with formatter.section("Commands"):
+                    formatter.write_dl(rows)
 
     return LazyGroup

@@ -12,35 +12,35 @@ from typing import NoReturn
 import typer
 
 from servotool import __version__
-from servotool.cli import classcache, complete, fastparse
+from servotool.cli import complete
 from servotool.cli.argv import hoist_globals
-from servotool.cli.common import State, state
+from servotool.cli.common import State, take_options
 from servotool.cli.lazy import lazy, lazy_group
 from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.connection import ConnectOptions
 from servotool.errors import ServoError
 
-fastparse.install()
-
-# Each command's module is imported when that command runs (a typer app or a command function, "module:name").
+# Each command's module is imported when that command runs (a typer app or a command function, "module:name"); the
+# help is the one line `servotool --help` lists.
 COMMANDS = {
     "param": lazy(
         "servotool.cli.param:app",
         "servotool.cli.backup:app",
         help="Read, set, list, back up and restore drive parameters.",
     ),
-    "profiles": lazy("servotool.cli.profiles:app"),
-    "sim": lazy("servotool.cli.sim:app"),
-    "alarm": lazy("servotool.cli.alarm:app"),
-    "tune": lazy("servotool.cli.tune:app"),
-    "monitor": lazy("servotool.cli.monitor:monitor"),
-    "jog": lazy("servotool.cli.jog:jog"),
-    "run": lazy("servotool.cli.run:run"),
-    "raw": lazy("servotool.cli.raw:app"),
-    "scan": lazy("servotool.cli.scan:scan"),
-    "doctor": lazy("servotool.cli.doctor:doctor"),
-    "trace": lazy("servotool.cli.trace:trace"),
-    "plot": lazy("servotool.cli.plot:plot"),
+    "profiles": lazy("servotool.cli.profiles:app", help="List, show and check drive profiles."),
+    "sim": lazy("servotool.cli.sim:app", help="The simulated drive: serve it, configure its machine, reset it."),
+    "alarm": lazy("servotool.cli.alarm:app", help="Show, clear and list the drive's alarms."),
+    "tune": lazy("servotool.cli.tune:app", help="Identify load inertia and set gains."),
+    "monitor": lazy("servotool.cli.monitor:monitor", help="Watch live values with units, min/max and a trend."),
+    "jog": lazy("servotool.cli.jog:jog", help="JOG the motor, timed or by keys; first says what stops it."),
+    "run": lazy("servotool.cli.run:run", help="Validate a commissioning plan, then run it on one or more axes."),
+    "raw": lazy("servotool.cli.raw:app", help="Read and write registers by address (outside the profile)."),
+    "scan": lazy("servotool.cli.scan:scan", help="Find drives on a bus and the profile each matches."),
+    "doctor": lazy("servotool.cli.doctor:doctor", help="Link health: round trips, echo, errors, adapter latency."),
+    "trace": lazy("servotool.cli.trace:trace", help="Capture entries around a trigger, as fast as the line allows."),
+    "plot": lazy("servotool.cli.plot:plot", help="Draw any servotool CSV in the terminal or as a PNG."),
+    "shell": lazy("servotool.cli.shell:shell", help="One open port, the same commands at a prompt, live status."),
 }
 
 app = typer.Typer(
@@ -48,6 +48,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help: rich's panels load markdown and pygments (cli/lazy.py)
     help="Commission and tune AC servo drives over Modbus RTU (real or simulated).",
     context_settings={"help_option_names": ["-h", "--help"]},
     cls=lazy_group(COMMANDS),
@@ -99,12 +100,28 @@ def main(
         "--silence-ms",
         help="Silence that ends a frame (default: 3.5 characters at the baud rate). Env: SERVOTOOL_SILENCE_MS.",
     ),
+    heartbeat: str = typer.Option(
+        None,
+        "--heartbeat",
+        help="dtr|rts: a hardware dead-man. Toggle this control line of the USB-RS485 adapter at each keep-alive "
+        "beat of a motion, for a retriggerable watchdog relay wired to the drive's enable input or main contactor "
+        "(README: the hardware dead-man); it stops toggling when the motion ends, on a late beat and on every exit. "
+        "RTS only where the adapter does not use RTS to switch its RS485 driver's direction. Serial ports only. "
+        "Env: SERVOTOOL_HEARTBEAT.",
+    ),
+    heartbeat_timeout_ms: float = typer.Option(
+        None,
+        "--heartbeat-timeout-ms",
+        help="The watchdog relay's time: it drops the drive this long after the last toggle (default 1000). "
+        "Env: SERVOTOOL_HEARTBEAT_TIMEOUT_MS.",
+    ),
     profile: str = typer.Option(
         None,
         "--profile",
         "-P",
         autocompletion=complete.profiles,
-        help="Drive profile id or YAML file (default for sim: dsx7e). Env: SERVOTOOL_PROFILE.",
+        help="Drive profile id or YAML file (default: found from the drive's answers; for sim: dsx7e). "
+        "Env: SERVOTOOL_PROFILE.",
     ),
     no_identity_check: bool = typer.Option(
         None,
@@ -112,6 +129,13 @@ def main(
         help="Skip the check, made before "
         "any write, that the drive answering is the one the profile describes. "
         "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.",
+        show_default=False,
+    ),
+    boost: bool = typer.Option(
+        None,
+        "--boost/--no-boost",
+        help="Raise the line for identification, trace, backup and restore where the profile allows (SD25 to "
+        "57600 baud; default: unless another device answers on the bus); --boost even then. Env: SERVOTOOL_BOOST.",
         show_default=False,
     ),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
@@ -129,19 +153,25 @@ def main(
     Options also come from SERVOTOOL_* environment variables and the config file (~/.config/servotool/config.yaml
     on Linux; override with SERVOTOOL_CONFIG); the command line wins.
     """
-    state(ctx).options = ConnectOptions(
-        port=port,
-        baud=baud,
-        parity=parity,
-        stopbits=stopbits,
-        unit=unit,
-        timeout=timeout,
-        retries=retries,
-        profile=profile,
-        echo=echo,
-        turnaround_ms=turnaround_ms,
-        silence_ms=silence_ms,
-        no_identity_check=no_identity_check or None,
+    take_options(
+        ctx,
+        ConnectOptions(
+            port=port,
+            baud=baud,
+            parity=parity,
+            stopbits=stopbits,
+            unit=unit,
+            timeout=timeout,
+            retries=retries,
+            profile=profile,
+            echo=echo,
+            turnaround_ms=turnaround_ms,
+            silence_ms=silence_ms,
+            heartbeat=heartbeat,
+            heartbeat_timeout_ms=heartbeat_timeout_ms,
+            no_identity_check=no_identity_check or None,
+            boost=boost,
+        ),
     )
     Verbosity.level = -1 if quiet else verbose
     Verbosity.explain = explain
@@ -154,15 +184,20 @@ def run() -> None:
 
 
 def _run() -> int:
-    classcache.save_at_exit()
-    given = State()  # the options given on the command line, filled in by main(); fix commands repeat them
     _interrupt_on_termination()
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)  # streamed lines reach a pipe as they are made
+    return dispatch(sys.argv[1:], State())  # the options given, filled in by main(); fix commands repeat them
+
+
+def dispatch(argv: list[str], given: State) -> int:
+    """Run one command line through the app (the process's, or one typed in `servotool shell`, whose `given`
+    holds the port it keeps open): its exit status, every failure said in one line."""
     root = typer.main.get_command(app)
-    args = hoist_globals(root, sys.argv[1:])
+    args = list(argv)
     as_json = "--json" in args[: args.index("--")] if "--" in args else "--json" in args
     try:
+        args = hoist_globals(root, args)
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
         from servotool.cli.messages import error_code, error_text  # words for a failure, loaded on one

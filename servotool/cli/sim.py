@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import typer
 
 from servotool.cli.common import state
@@ -12,9 +10,11 @@ from servotool.connection import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
+from servotool.model.quantity import quantity
 from servotool.model.roles import sim_extensions
 from servotool.sim import state as sim_state
-from servotool.sim.device import SIM_SETTINGS
+from servotool.sim.device import SIM_SETTINGS, line_choice
+from servotool.sim.line import LINE_ENV, Line, env_choice
 
 app = typer.Typer(no_args_is_help=True, help="The simulated drive: serve it, configure its machine, reset it.")
 
@@ -47,10 +47,11 @@ def serve(
     baud: int = typer.Option(None, "--baud", "-b", help="Serial baud rate (default: the profile's)."),
     parity: str = typer.Option(None, "--parity", help="N, E or O (default: the profile's)."),
     stopbits: int = typer.Option(None, "--stopbits", help="1 or 2 (default: the profile's)."),
-    line_baud: int = typer.Option(
+    line_baud: str = typer.Option(
         None,
         "--line-baud",
-        help="Delay each answer by its wire time at this baud (overrides 'sim config --line-baud'; 0 = off).",
+        help="factory|fast|BAUD: delay each answer by its wire time on this line (default: as 'sim config "
+        "--line-baud' says, then SERVOTOOL_SIM_LINE_BAUD, then factory; on a serial port its own timing).",
     ),
     faults: str = typer.Option(
         None,
@@ -80,14 +81,13 @@ def serve(
     ids = [check_unit(u) for u in units or [p.default_unit]]
     if len(set(ids)) != len(ids):
         raise UsageError("each --unit may be given once")
-    if line_baud is not None and line_baud < 0:
-        raise UsageError("--line-baud must be >= 0")
+    choice = _line_choice(line_baud)
     line = line_format(ConnectOptions(baud=baud, parity=parity, stopbits=stopbits), p)
 
-    def ready(where: str, took: dict[int, list[str]]) -> None:
+    def ready(where: str, served: Line, took: dict[int, list[str]]) -> None:
         info(
             f"servotool: SIMULATED {p.model} drive(s) unit {','.join(map(str, ids))} serving on {where} "
-            f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); Ctrl-C stops"
+            f"({line.baud} {line.bytesize}{line.parity}{line.stopbits}); {served.describe()}; Ctrl-C stops"
         )
         for u, codes in took.items():
             if codes:
@@ -110,7 +110,7 @@ def serve(
             p,
             ids,
             line,
-            line_baud=line_baud,
+            line_baud=choice,
             trace=trace_frame if Verbosity.level > 0 else None,
             ready=ready,
             faults=bad_line,
@@ -165,7 +165,7 @@ def config(
     load_torque: float = typer.Option(None, "--load-torque", help=SIM_SETTINGS["load_torque"][4]),
     noise: float = typer.Option(None, "--noise", help=SIM_SETTINGS["noise"][4]),
     seed: int = typer.Option(None, "--seed", help=SIM_SETTINGS["seed"][4]),
-    line_baud: int = typer.Option(None, "--line-baud", help=SIM_SETTINGS["line_baud"][4]),
+    line_baud: str = typer.Option(None, "--line-baud", help=f"factory|fast|BAUD: {SIM_SETTINGS['line_baud'][4]}."),
     resonance_hz: float = typer.Option(None, "--resonance-hz", help=SIM_SETTINGS["resonance_hz"][4]),
     resonance_damping: float = typer.Option(None, "--resonance-damping", help=SIM_SETTINGS["resonance_damping"][4]),
     backlash_rad: float = typer.Option(None, "--backlash-rad", help=SIM_SETTINGS["backlash_rad"][4]),
@@ -187,6 +187,13 @@ def config(
         "motion after 500 ms of host silence on a drive whose manual documents no "
         "communication timeout. The real drive keeps running.",
     ),
+    inputs: int = typer.Option(None, "--inputs", help=SIM_SETTINGS["inputs"][4] + ".", min=0, max=255),
+    di_monitor: str = typer.Option(
+        None,
+        "--di-monitor",
+        help="forced|terminals, NOT IN THE MANUAL as terminals (default forced): what the input monitor shows while "
+        "the inputs are forced; the manual's words read as the forced levels.",
+    ),
     missing: str = typer.Option(
         None,
         "--missing",
@@ -198,6 +205,7 @@ def config(
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
     fake_on = None if fake_watchdog is None else _on_off(fake_watchdog, "--fake-watchdog")
+    monitor = None if di_monitor is None else _choice(di_monitor, "--di-monitor", DI_MONITOR)
     p, u = _target(ctx, profile, unit)
     if missing is not None:
         sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
@@ -210,9 +218,11 @@ def config(
         load_torque=load_torque,
         noise=noise,
         seed=seed,
-        line_baud=line_baud,
+        line_baud=_line_choice(line_baud),
         brake=brake_on,
         fake_watchdog=fake_on,
+        inputs=inputs,
+        di_monitor=monitor,
         resonance_hz=resonance_hz,
         resonance_damping=resonance_damping,
         backlash_rad=backlash_rad,
@@ -247,7 +257,13 @@ def show(
                 "settings": status.settings,
                 "pending_power_cycle": status.pending_power_cycle,
                 "eeprom_writes": status.eeprom_writes,
-                "running": dataclasses.asdict(run) if run else None,
+                "running": {
+                    "servo_on": run.servo_on,
+                    "alarm": run.alarm,
+                    "position": quantity(run.position_rev, "rev"),
+                }
+                if run
+                else None,
                 "missing": list(status.missing),
                 "extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(status.profile)],
             }
@@ -264,11 +280,29 @@ def show(
         )
 
 
+def _line_choice(value: str | None) -> str | int | None:
+    if value is None:
+        return None
+    try:
+        return line_choice(value)
+    except ValueError as exc:
+        raise UsageError(f"--line-baud: {exc}") from None
+
+
+DI_MONITOR = ("forced", "terminals")
+
+
 def _on_off(value: str, option: str) -> int:
-    choices = {"on": 1, "off": 0}
-    if value.lower() not in choices:
-        raise UsageError(f"{option} must be on or off, not {value!r}")
-    return choices[value.lower()]
+    return _choice(value, option, ("off", "on"))
+
+
+def _choice(value: str, option: str, names: tuple[str, ...]) -> int:
+    """The index of a named choice (off/on, forced/terminals); UsageError naming the choices."""
+    if value.lower() not in names:
+        raise UsageError(
+            f"{option} must be {' or '.join(names[::-1] if names == ('off', 'on') else names)}, not {value!r}"
+        )
+    return names.index(value.lower())
 
 
 def _print_settings(status: sim_state.SimStatus) -> None:
@@ -279,7 +313,12 @@ def _print_settings(status: sim_state.SimStatus) -> None:
         title=f"simulated {status.profile.model} unit {status.unit} ({status.state_file})",
     )
     for name, value in status.settings.items():
-        shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
+        if name == "line_baud":
+            over = env_choice() if value == "factory" else None
+            shown = str(value) if over is None else f"{over} ({LINE_ENV})"
+        else:
+            shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
+        shown = DI_MONITOR[int(value)] if name == "di_monitor" else shown
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
     if status.missing:

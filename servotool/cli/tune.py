@@ -4,22 +4,26 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
 import typer
 
-from servotool.cli.common import confirm, drive, resolved
+from servotool.cli.common import boosted, confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table, warn
+from servotool.cli.values import json_mark, spoken, unit_text
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import as_held, raw_to_eng
 from servotool.model.profile import Profile
-from servotool.motion import deadman
+from servotool.model.quantity import quantity
+from servotool.motion import deadman, protect
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
-from servotool.tuning.friction import friction_report
+from servotool.tuning.control.friction import friction_report
+from servotool.tuning.errors import TuneDeclined
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
 
@@ -44,7 +48,7 @@ def _rounded(value: float | None, decimals: int) -> float | None:
     return None if value is None or not math.isfinite(value) else round(value, decimals)
 
 
-def _gains_json(changes: Any) -> list[dict[str, Any]]:
+def _gains_json(changes: Any, profile: Profile | None = None) -> list[dict[str, Any]]:
     return [
         {
             "role": c.role,
@@ -52,16 +56,17 @@ def _gains_json(changes: Any) -> list[dict[str, Any]]:
             "old": as_held(c.entry, c.old),
             "new": as_held(c.entry, c.new),
             "unit": c.entry.unit,
+            "value_unverified": json_mark(profile, c.entry) if profile is not None else None,
         }
         for c in changes
     ]
 
 
 def _step_json(response: step.StepResponse | None) -> dict[str, Any] | None:
-    if response is None:
-        return None
-    summary = response.summary()
-    return {**summary, **{k: _rounded(summary[k], 2) for k in ("overshoot_pct", "settling_ms", "ripple_pct")}}
+    return response.summary() if response is not None else None
+
+
+STEP_FIGURES = ("overshoot", "settling", "ripple", "interval", "overshoot_bound")
 
 
 def _check_options(
@@ -91,17 +96,15 @@ def _estimate_json(result: identify.Result) -> dict[str, Any]:
         "method": result.method,
         "old_ratio": round(result.old_ratio, 4) if result.old_ratio is not None else None,
         "ratio_std": _sig(est.ratio_std) if est else None,
-        "coulomb_nm": _sig(est.coulomb_nm) if est else None,
-        "coulomb_std_nm": _sig(est.coulomb_std_nm) if est else None,
-        "viscous_nm_per_rad_s": _sig(est.viscous_nm_per_rad_s) if est else None,
-        "load_torque_nm": _sig(est.load_torque_nm) if est else None,
-        "load_torque_std_nm": _sig(est.load_torque_std_nm) if est else None,
+        "coulomb": quantity(_sig(est.coulomb_nm), "N·m", std=_sig(est.coulomb_std_nm)) if est else None,
+        "viscous": quantity(_sig(est.viscous_nm_per_rad_s), "N·m·s/rad") if est else None,
+        "load_torque": quantity(_sig(est.load_torque_nm), "N·m", std=_sig(est.load_torque_std_nm)) if est else None,
         "residual_rel": _rounded(est.residual_rel, 4) if est else None,
         "notes": list(est.notes) if est else [],
         "samples": len(result.trace.t),
-        "samples_per_s": round(result.samples_per_s, 1),
-        "travel_rev": round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None,
-        "time_s": round(result.time_used_s, 2),
+        "sample_rate": quantity(round(result.samples_per_s, 1), "Hz"),
+        "travel": quantity(round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None, "rev"),
+        "time": quantity(round(result.time_used_s, 2), "s"),
         "cycles": result.cycles,
     }
 
@@ -155,6 +158,7 @@ def inertia(
     report: Path = typer.Option(
         None,
         "--report",
+        metavar="DIR",
         help="Write a report folder: PNG charts of the motion, the fit, "
         "each move, the step response and the gains, with report.md (needs servotool[plot]).",
     ),
@@ -180,8 +184,8 @@ def inertia(
     check: bool = typer.Option(
         None,
         "--check/--no-check",
-        help="Step check after writing gains; on failure the "
-        "previous gains go back (default: on with the simulated drive).",
+        help="Step check after writing gains; on failure the previous gains go back (default: on with the "
+        "simulated drive; a real drive asks, and without a terminal needs one of the two).",
     ),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
@@ -194,10 +198,10 @@ def inertia(
         from servotool.report.tune_report import check_folder
 
         check_folder(report)
-    verify = check if check is not None else resolved(ctx).simulated
+    writes_gains = (rigidity is not None or bandwidth is not None) and not dry_run
     request = tune.TuneRequest(
         force=force,
-        verify=verify and (rigidity is not None or bandwidth is not None),
+        verify=_step_check_choice(ctx, check, writes_gains, yes),
         method=method,
         max_speed=max_speed,
         accel_time_ms=accel_time,
@@ -212,10 +216,9 @@ def inertia(
         step_check=step_check,
         trace_path=save_trace,
     )
-    if step_check:
-        step.step_duration_s(travel)  # refused before the drive is opened
+    tune.check_request(resolved(ctx).profile, request)  # refused before the drive is opened (or its line raised)
 
-    with drive(ctx) as d:
+    with drive(ctx) as d, boosted(ctx, [d], "the identification"):
         d.dead_man_waived = no_dead_man
         ask = _Dialog(ctx, d, yes=yes, method=method, step_check=step_check, travel=travel, as_json=as_json)
         try:
@@ -227,7 +230,7 @@ def inertia(
                 on_proposal=ask.show,
                 approve_write=ask.approve_write,
             )
-        except tune.TuneDeclined:
+        except TuneDeclined:
             raise typer.Exit(1) from None
         except ServoError as exc:  # refused, tripped, travel exceeded, link lost
             _failed(exc, report, d.profile, as_json and ask.moving)
@@ -236,6 +239,23 @@ def inertia(
     if report is not None:
         _report(report, res.identified, profile, res)
     _render(res, profile, as_json, ask.dead_man)
+
+
+CHECK_WHAT = "a 200 rpm step forward and back once they are written; the previous gains go back if it fails"
+
+
+def _step_check_choice(ctx: typer.Context, check: bool | None, writes_gains: bool, yes: bool) -> bool:
+    """Whether the gains are step-checked once written: as --check/--no-check say; on the simulated drive, yes; on
+    a real one the choice is the user's: asked in a terminal, else a usage error (before anything moves)."""
+    if not writes_gains:
+        return False
+    if check is not None:
+        return check
+    if resolved(ctx).simulated:
+        return True
+    if yes or not sys.stdin.isatty():
+        raise UsageError(f"writing gains on a real drive needs --check ({CHECK_WHAT}) or --no-check")
+    return typer.confirm(f"Step-check the gains ({CHECK_WHAT})?", default=True, err=True)
 
 
 def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: bool) -> None:
@@ -247,15 +267,20 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
         _report(report, refused, profile, None, str(exc))
     if as_json:
         cure = refusal.remedy if refusal is not None else None
+        rolled = exc.facts if isinstance(exc, tune.GainsRolledBack) else {}
         emit_json(
             _clean(
                 {
                     "ok": False,
                     "reason": str(exc),
                     **(_estimate_json(refused) if refused else {}),
-                    "ratio": refused.new_ratio if refused else None,
-                    "written": False,
-                    "suggested_travel_rev": cure.suggested_rev if cure is not None else None,
+                    # refused: no ratio stands (what was measured is in the report); rolled back: it does
+                    "ratio": round(exc.ratio, 4) if isinstance(exc, tune.GainsRolledBack) and exc.ratio else None,
+                    "written": bool(rolled.get("kept")),  # a rollback keeps the ratio written before the gains
+                    "suggested_travel": quantity(cure.suggested_rev if cure is not None else None, "rev"),
+                    "rolled_back": bool(rolled),
+                    "rollback_reason": rolled.get("reason"),
+                    "step_check": _step_json(exc.response) if isinstance(exc, tune.GainsRolledBack) else None,
                 }
             )
         )
@@ -288,11 +313,14 @@ class _Dialog:
                 "and back, before and after"
             )
         if self.method == "host" and motion is not None:
-            self.dead_man = deadman.motion_bound(self.d, motion.speed_rpm, motion.ramp_s)
+            bound = deadman.motion_bound(self.d, motion.speed_rpm, motion.ramp_s)
+            self.dead_man = protect.planned_bound(self.d, bound, motion.speed_rpm, motion.travel_limit_rev)
         elif self.step_check:
-            self.dead_man = deadman.motion_bound(self.d, step.STEP_SPEED_RPM, 0.0)
+            bound = deadman.motion_bound(self.d, step.STEP_SPEED_RPM, 0.0)
+            self.dead_man = protect.planned_bound(self.d, bound, step.STEP_SPEED_RPM, self.travel)
         if self.dead_man is not None:
-            info(deadman.sentence(self.dead_man))
+            for line in deadman.lines(self.dead_man):
+                info(line)
         self.moving = confirm("Move the axis now?", self.yes)
         return self.moving
 
@@ -319,11 +347,17 @@ def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:
     report = friction_report(profile, est) if est is not None else None
     if report is None:
         return None
+    rated = "% of rated torque"
     return {
-        "coulomb_pct": _rounded(report.coulomb_pct, 2),
-        "viscous_pct_at_rated_speed": _rounded(report.viscous_pct_at_rated, 2),
-        "load_pct": _rounded(report.load_pct, 2),
-        "compensation": {s.entry.code: as_held(s.entry, s.value) for s in report.settings},
+        "coulomb": quantity(_rounded(report.coulomb_pct, 2), rated),
+        "viscous_at_rated_speed": quantity(_rounded(report.viscous_pct_at_rated, 2), rated),
+        "load": quantity(_rounded(report.load_pct, 2), rated),
+        "compensation": {
+            s.entry.code: quantity(
+                as_held(s.entry, s.value), s.entry.unit, value_unverified=json_mark(profile, s.entry)
+            )
+            for s in report.settings
+        },
     }
 
 
@@ -351,17 +385,23 @@ def _render(
                     "ratio": round(res.ratio, 4),
                     "friction": _friction_json(profile, res.identified.estimate),
                     "parameter": entry.code if entry else None,
-                    "parameter_value": raw_to_eng(entry, proposal.parameter_raw)
+                    "parameter_value": quantity(
+                        raw_to_eng(entry, proposal.parameter_raw),
+                        entry.unit,
+                        value_unverified=json_mark(profile, entry),
+                    )
                     if entry and proposal.parameter_raw is not None
                     else None,
                     "written": res.ratio_stored,
                     "persisted": res.persisted,
-                    "gains": _gains_json(changes),
+                    "gains": _gains_json(changes, profile),
                     "gains_written": res.gains_written,
-                    "bandwidth_hz": _rounded(sugg.bandwidth_hz, 2) if sugg else None,
+                    "bandwidth": quantity(_rounded(sugg.bandwidth_hz, 2), "Hz") if sugg else None,
                     "rigidity": sugg.rigidity if sugg else None,
-                    "phase_margin_deg": _rounded(proposal.margins.phase_deg, 1) if proposal.margins else None,
-                    "gain_margin_db": _rounded(proposal.margins.gain_db, 1) if proposal.margins else None,
+                    "phase_margin": quantity(_rounded(proposal.margins.phase_deg, 1), "°")
+                    if proposal.margins
+                    else None,
+                    "gain_margin": quantity(_rounded(proposal.margins.gain_db, 1), "dB") if proposal.margins else None,
                     "step_before": _step_json(res.step_before),
                     "step_after": _step_json(res.step_after),
                     "dead_man": dead_man.as_json() if dead_man is not None else None,
@@ -393,6 +433,8 @@ def _render(
     if res.step_after is not None:
         label = "step check after writing the gains:" if res.verified is not None else "step after: "
         out.print(f"{label} {res.step_after.describe()}", markup=False)
+    if (sampled := res.step_after or res.step_before) is not None:
+        out.print(f"step {sampled.sampling()}", markup=False)
 
 
 def _show(proposal: tune.Proposal) -> None:
@@ -400,7 +442,7 @@ def _show(proposal: tune.Proposal) -> None:
     result, entry, sugg, changes = proposal.identified, proposal.parameter, proposal.suggestion, proposal.gain_changes
     est = result.estimate
     old = f"{result.old_ratio:.2f}" if result.old_ratio is not None else "(not a drive parameter)"
-    param = f"  ({entry.code} = {proposal.parameter_value:g} {entry.unit})" if entry is not None else ""
+    param = f"  ({entry.code} = {spoken(proposal.profile, entry, f'{proposal.parameter_value:g}')})" if entry else ""
     out.print(
         f"load inertia ratio (J_load/J_motor): {old} -> {result.new_ratio:.2f}"
         + (f" ± {est.ratio_std:.2f}" if est else "")
@@ -409,6 +451,8 @@ def _show(proposal: tune.Proposal) -> None:
     )
     if est:
         travel = f"{result.travel_used_rev:.2f} rev, " if result.travel_used_rev is not None else ""
+        peaks = [m.peak_rpm for m in est.moves if math.isfinite(m.peak_rpm)]
+        travel += f"moves reached {min(peaks):.0f}-{max(peaks):.0f} rpm, " if peaks else ""
         out.print(
             f"friction {est.coulomb_nm:.4f} ± {est.coulomb_std_nm:.4f} N·m, viscous "
             f"{est.viscous_nm_per_rad_s:.2e} N·m·s/rad, load torque {est.load_torque_nm:.4f} ± "
@@ -422,8 +466,8 @@ def _show(proposal: tune.Proposal) -> None:
             out.print(f"in drive units: {report.describe()}", markup=False)
             for s in report.settings:
                 out.print(
-                    f"  friction compensation (suggested, not written): {s.entry.code} = {s.value:g} "
-                    f"{s.entry.unit} ({s.what})",
+                    f"  friction compensation (suggested, not written): {s.entry.code} = "
+                    f"{spoken(proposal.profile, s.entry, f'{s.value:g}')} ({s.what})",
                     markup=False,
                 )
     if changes and sugg is not None:
@@ -437,7 +481,8 @@ def _show(proposal: tune.Proposal) -> None:
             + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else ""),
         )
         for c in changes:
-            t.add_row(c.entry.code, c.entry.name, f"{c.old:g}", f"{c.new:g}", c.entry.unit)  # the role: in JSON
+            unit = unit_text(proposal.profile, c.entry)
+            t.add_row(c.entry.code, c.entry.name, f"{c.old:g}", f"{c.new:g}", unit)  # the role: in JSON
         out.print(t)
         if proposal.margins is not None:
             out.print(f"margins on the identified inertia: {proposal.margins.describe()}", markup=False)
@@ -449,7 +494,8 @@ def gains(
     load_ratio: float = typer.Option(
         None,
         "--load-ratio",
-        help="J_load/J_motor to tune for (default: the drive's inertia-ratio parameter, as tune inertia wrote it).",
+        help="J_load/J_motor to tune for (default: the drive's inertia-ratio parameter, as tune inertia wrote it; "
+        "given, the margins are those of this load under the drive's own ratio, which is not written).",
     ),
     start: int = typer.Option(None, "--from", help="First rigidity level to try (default: the drive's current)."),
     top: int = typer.Option(None, "--to", help="Highest level to try (default: the highest the margins allow)."),
@@ -484,7 +530,7 @@ def gains(
                 + (f": FAILED ({trial.failure})" if trial.failure else "")
             )
 
-    with drive(ctx) as d:
+    with drive(ctx) as d, boosted(ctx, [d], "the step checks"):
         d.dead_man_waived = no_dead_man
         confirm_motion(ctx, d, yes, "tune gains")
         if not confirm("Move the axis now (a speed step forward and back at each level)?", yes):
@@ -506,12 +552,10 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
     rows = [
         {
             "level": t.level,
-            "speed_gain_hz": round(t.speed_gain_hz, 2),
-            "phase_margin_deg": round(t.margins.phase_deg, 1),
-            "gain_margin_db": _clean(round(t.margins.gain_db, 1)),
-            "overshoot_pct": _rounded(t.response.overshoot_pct, 2) if t.response else None,
-            "settling_ms": _rounded(t.response.settling_ms, 2) if t.response else None,
-            "ripple_pct": round(t.response.ripple_pct, 2) if t.response else None,
+            "speed_gain": quantity(round(t.speed_gain_hz, 2), "Hz"),
+            "phase_margin": quantity(_rounded(t.margins.phase_deg, 1), "°"),
+            "gain_margin": quantity(_rounded(t.margins.gain_db, 1), "dB"),
+            **{k: (t.response.summary()[k] if t.response else None) for k in STEP_FIGURES},
             "failure": t.failure,
         }
         for t in res.trials
@@ -522,6 +566,7 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
                 {
                     "ok": ok,
                     "load_ratio": _rounded(res.load_ratio, 4),
+                    "drive_ratio": _rounded(res.own_ratio, 4) if res.own_ratio is not None else None,
                     "levels": rows,
                     "chosen": res.chosen,
                     "reason": res.reason,
@@ -540,21 +585,29 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
         "Settling",
         "Result",
         drop=("Settling",),
-        title=f"rigidity levels tried (load ratio {res.load_ratio:.2f})",
+        title=f"rigidity levels tried (load ratio {res.load_ratio:.2f}"
+        + (
+            ")"
+            if res.own_ratio is None or abs(res.own_ratio - res.load_ratio) < 0.005
+            else f"; the drive's own {res.own_ratio:.2f}, by which it scales its speed gain, left as it is)"
+        ),
     )
     for r in rows:
-        settle = f"{r['settling_ms']:.0f} ms" if r["settling_ms"] is not None else "-"
-        over = f"{r['overshoot_pct']:.0f} %" if r["overshoot_pct"] is not None else "-"
-        gm = f"{r['gain_margin_db']:.1f} dB" if r["gain_margin_db"] is not None else "inf"
+        settle = f"{r['settling']['value']:.0f} ms" if r["settling"] is not None else "-"
+        over = f"{r['overshoot']['value']:.0f} %" if r["overshoot"] is not None else "-"
+        gm = f"{r['gain_margin']['value']:.1f} dB" if r["gain_margin"] is not None else "inf"
         t.add_row(
             str(r["level"]),
-            f"{r['speed_gain_hz']:.1f} Hz",
-            f"{r['phase_margin_deg']:.0f}°, {gm}",
+            f"{r['speed_gain']['value']:.1f} Hz",
+            f"{r['phase_margin']['value']:.0f}°, {gm}",
             over,
             settle,
             r["failure"] or "ok",
         )
     out.print(t)
+    sampled = next((t.response for t in res.trials if t.response is not None), None)
+    if sampled is not None:
+        out.print(f"step checks {sampled.sampling()}", markup=False)
     if res.chosen is not None:
         out.print(
             f"{res.reason}; kept level {res.chosen}: "

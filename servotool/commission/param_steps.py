@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servotool.commission.plan import Step
+from servotool.commission.plan_files import FileUse
 from servotool.commission.step_type import Outcome, RunContext, StepType, no_argument
 from servotool.drive import Drive
 from servotool.errors import UsageError, VerifyError
@@ -12,6 +13,7 @@ from servotool.model.codec import format_value, json_value, parse_value, raw_to_
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup, params, restore
 from servotool.ops.eeprom import check_power_cycle, persistence
+from servotool.ops.journal import port_lock
 from servotool.words import count
 
 
@@ -36,12 +38,14 @@ class SetStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         texts = [f"{e.code}={raw}" for e, raw in self.assignments(step, drive.profile)]
-        plan = params.prepare_set(drive, texts, raw=True)
-        if not any(st.name == "save" and st.index > step.index for st in ctx.plan.steps):
-            # no later 'save:' stores it: a power-cycle parameter kept in RAM would be lost by that power cycle
-            check_power_cycle(drive, [e for e, _, _ in plan.changes], None)
-        with persistence(drive, None):  # under the port's lock: no other process flips the switch meanwhile
-            done = params.apply_set(drive, plan)
+        # Read and written under the port's lock: no other process writes these or flips the switch meanwhile.
+        with port_lock(drive):
+            plan = params.prepare_set(drive, texts, raw=True)
+            if not any(st.name == "save" and st.index > step.index for st in ctx.plan.steps):
+                # no later 'save:' stores it: a power-cycle parameter kept in RAM would be lost by that power cycle
+                check_power_cycle(drive, [e for e, _, _ in plan.changes], None)
+            with persistence(drive, None):
+                done = params.apply_set(drive, plan)
         for r in done:
             ctx.wrote(drive, r.entry, r.new)
         for entry, raw in plan.unchanged:  # already in RAM, maybe not in EEPROM: 'save:' stores them too
@@ -119,15 +123,16 @@ class ExpectStep(StepType):
         ]
         if bad:
             raise VerifyError("expectation failed: " + "; ".join(bad))
-        meanings = {r.entry.code: r.entry.enum[r.raw] for r in readings if r.raw in r.entry.enum}
-        return Outcome(
-            "as expected",
-            {
-                "values": values,
-                "units": {x.entry.code: x.entry.unit for x in exps},
-                **({"meanings": meanings} if meanings else {}),
-            },
-        )
+        # Each value with its unit (the one way JSON gives units), and its meaning where the entry names it.
+        found = {
+            r.entry.code: {
+                "value": values[r.entry.code],
+                "unit": r.entry.unit,
+                **({"meaning": r.entry.enum[r.raw]} if r.raw in r.entry.enum else {}),
+            }
+            for r in readings
+        }
+        return Outcome("as expected", {"values": found})
 
 
 class _FileStep(StepType):
@@ -164,11 +169,15 @@ class BackupStep(StepType):
         name, overwrite = self.target(step)
         return f"backup {name}" + (" (replacing an existing file)" if overwrite else "")
 
-    def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
         name, overwrite = self.target(step)
-        path = ctx.path(name, drive.unit)
-        if path.exists() and not overwrite:  # before reading the drive: a refusal costs nothing
-            raise UsageError(f"{path} exists; the step must say 'overwrite: true' to replace it")
+        return [FileUse(name, "backup", overwrite)]
+
+    def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+        name, step_says = self.target(step)
+        path, overwrite = ctx.path(name, drive.unit), ctx.may_replace(step_says)
+        if path.exists() and not overwrite:  # checked before the run; a file made meanwhile is still kept
+            raise UsageError(f"{path} exists; say 'overwrite: true' (in the step or the plan) or pass --force")
         written = backup.write_backup(drive, path, force=overwrite)
         return Outcome(f"saved to {written}", {"file": str(written)})
 
@@ -177,6 +186,10 @@ class RestoreStep(_FileStep):
     """`restore: FILE`: a backup file put back completely."""
 
     name = "restore"
+
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
+        self.describe(step, profile)
+        return [FileUse(step.arg, "restore")]
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         path = ctx.path(step.arg, drive.unit)

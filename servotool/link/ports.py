@@ -33,6 +33,7 @@ class LinkSettings:
     echo: bool | None = False  # the adapter echoes what it sends (None: find out from the first replies)
     turnaround: float = 0.0  # s of quiet after a reply before the next request (slow drives' transceivers)
     silence: float | None = None  # s of quiet that ends a frame; None: RTU's 3.5 characters at the baud rate
+    heartbeat: str | None = None  # dtr or rts: a control line kept low at open and toggled by the heartbeat
 
 
 class Link(Protocol):
@@ -66,19 +67,65 @@ def parse_tcp(port: str) -> tuple[str, int] | None:
     return m["host"].strip("[]"), int(m["port"])
 
 
+SERIAL_BY_ID = Path("/dev/serial/by-id")
+
+
+def bus_identity(port: str, by_id: Path = SERIAL_BY_ID) -> str:
+    """The one name of the bus a port spec reaches, whatever its spelling, for the host's journal and write lock:
+    a serial device by its /dev/serial/by-id link where one points to it (stable across a replug), else by its
+    real path (macOS's /dev/tty.X as /dev/cu.X, the same device); a COM port by its upper-case name (Windows has
+    no realpath for it); tcp://HOST:PORT by the address HOST resolves to, every loopback address as localhost."""
+    tcp = parse_tcp(port)
+    if tcp is not None:
+        return f"tcp://{_host_identity(tcp[0])}:{tcp[1]}"
+    com = re.fullmatch(r"(?:\\\\[.?]\\)?(COM\d+)", port, re.IGNORECASE)
+    if com or sys.platform.startswith("win"):
+        return com[1].upper() if com else port
+    real = os.path.realpath(port)
+    try:
+        links = sorted(by_id.iterdir())
+    except OSError:
+        links = []
+    for link in links:
+        if os.path.realpath(link) == real:
+            return str(link)
+    return re.sub(r"^/dev/tty\.", "/dev/cu.", real)
+
+
+def _host_identity(host: str) -> str:
+    """The address a host name resolves to (the first IPv4 one, else the first); 'localhost' for any loopback
+    address; the name itself, in lower case, when it does not resolve."""
+    import ipaddress
+
+    try:
+        infos = socket.getaddrinfo(host.encode() if host.isascii() else host, None, type=socket.SOCK_STREAM)
+        found = [ipaddress.ip_address(str(info[4][0]).split("%")[0]) for info in infos]
+    except (OSError, UnicodeError, ValueError):
+        return host.lower()
+    mapped = [a.ipv4_mapped or a if isinstance(a, ipaddress.IPv6Address) else a for a in found]
+    if not mapped:
+        return host.lower()
+    if any(a.is_loopback for a in mapped):
+        return "localhost"
+    return str(next((a for a in mapped if a.version == 4), mapped[0]))
+
+
 # ----- opening a port, and why it would not open --------------------------------------------------------------
 PARITY_NAMES = {"N": "none", "E": "even", "O": "odd"}
 SYSFS_USB_SERIAL = Path("/sys/bus/usb-serial/devices")
 
 
-def open_serial(port: str, line: LineSettings, timeout: float, doing: str = "open port") -> serial.Serial:
+def open_serial(
+    port: str, line: LineSettings, timeout: float, low: str | None = None, doing: str = "open port"
+) -> serial.Serial:
     """Open and configure a serial port for exclusive use; DeviceError naming the real cause when it will not
-    ('cannot {doing} {port}: ...')."""
+    ('cannot {doing} {port}: ...'). low: a control line (dtr, rts) held low from the moment the port opens (a
+    heartbeat's resting level)."""
     import serial
 
     try:
-        return serial.Serial(
-            port,
+        s = serial.Serial(
+            None,
             baudrate=line.baud,
             bytesize=line.bytesize,
             parity=line.parity,
@@ -86,8 +133,25 @@ def open_serial(port: str, line: LineSettings, timeout: float, doing: str = "ope
             timeout=timeout,
             exclusive=True,
         )
+        if low is not None:
+            setattr(s, low, False)  # pyserial applies it as the port opens: no pulse before the first beat
+        s.port = port
+        s.open()
+        return s
     except Exception as exc:  # SerialException, OSError, termios.error (not an OSError), ValueError
         raise DeviceError(f"cannot {doing} {port}: {port_problem(port, exc, line)}") from None
+
+
+class ControlLine:
+    """One modem control line (DTR or RTS) of an open serial port, set high or low: what a heartbeat toggles."""
+
+    def __init__(self, port: serial.SerialBase, name: str) -> None:
+        self.port, self.name = port, name
+        self.level = False
+
+    def set(self, level: bool) -> None:
+        setattr(self.port, self.name, level)
+        self.level = level
 
 
 def open_tcp(port: str, timeout: float) -> socket.socket:

@@ -7,12 +7,13 @@ X rev (Y s)"). A route that stops nothing (route none) needs the user's explicit
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import DeadManRoute, Profile
+from servotool.model.quantity import quantity
 
 # Exchanges one beat cycle of host motion makes (the beat, at most two writes re-arming a segment, the alarm check and
 # the speed read).
@@ -30,7 +31,7 @@ NO_ROUTE = DeadManRoute(route="none", reason="the profile describes no dead-man 
 class DeadManBound:
     """The dead-man facts of one motion: the route, and how far/long the motor runs on if the host dies now."""
 
-    route: str  # drive_timeout | segment | none
+    route: str  # drive_timeout | segment | heartbeat | none
     speed_rpm: float
     beat_s: float
     link_cycle_s: float  # the host's estimated time for one beat cycle on this link
@@ -41,6 +42,12 @@ class DeadManBound:
     unverified: str
     if_host_dies: str
     waived: bool = False  # route none, acknowledged with --no-dead-man
+    # What else bounds the motion (motion/protect, motion/forced_inputs): the drive's overtravel fence either way
+    # of the start and its speed limit, set for the motion's duration, and those facts and warnings in words.
+    fence_rev: float | None = None
+    speed_limit_rpm: float | None = None
+    limits: tuple[str, ...] = ()
+    relay_s: float | None = None  # route heartbeat: the watchdog relay's time
 
     @property
     def bounded(self) -> bool:
@@ -50,15 +57,18 @@ class DeadManBound:
         return {
             "route": self.route,
             "bounded": self.bounded,
-            "stop_within_rev": None if self.stop_rev is None else round(self.stop_rev, 3),
-            "stop_within_s": None if self.stop_s is None else round(self.stop_s, 3),
-            "speed_rpm": self.speed_rpm,
-            "beat_s": round(self.beat_s, 4),
-            "link_cycle_s": round(self.link_cycle_s, 4),
+            "stop_within": quantity(None if self.stop_rev is None else round(self.stop_rev, 3), "rev"),
+            "stop_within_time": quantity(None if self.stop_s is None else round(self.stop_s, 3), "s"),
+            "speed": quantity(self.speed_rpm, "rpm"),
+            "beat": quantity(round(self.beat_s, 4), "s"),
+            "link_cycle": quantity(round(self.link_cycle_s, 4), "s"),
             "waived": self.waived,
             "reason": self.reason,
             "source": self.source,
             "unverified": self.unverified,
+            "fence_rev": None if self.fence_rev is None else round(self.fence_rev, 3),
+            "speed_limit_rpm": self.speed_limit_rpm,
+            "limits": list(self.limits),
         }
 
 
@@ -131,6 +141,8 @@ def bound(
     elif kind == "segment":
         rev = segment_rev(speed_rpm, beat_s, ramp_ms)
         s = SEGMENT_BEATS * beat_s + stop_s
+    if kind == "none" and drive.heartbeat_timeout_s is not None and drive.heartbeat_line is not None:
+        return heartbeat_bound(drive, speed_rpm, beat_s, stop_s, cycle)
     return DeadManBound(
         kind,
         abs(speed_rpm),
@@ -143,6 +155,29 @@ def bound(
         route.unverified,
         route.if_host_dies,
         waived and kind == "none",
+    )
+
+
+def heartbeat_bound(drive: Drive, speed_rpm: float, beat_s: float, stop_s: float, cycle: float) -> DeadManBound:
+    """A drive without a dead-man of its own, with a watchdog relay on the adapter's control line (--heartbeat):
+    the relay drops the drive's enable (or main contactor) its time after the toggles stop."""
+    relay_s = drive.heartbeat_timeout_s or 0.0
+    line = drive.heartbeat_line.name if drive.heartbeat_line is not None else "?"
+    return DeadManBound(
+        "heartbeat",
+        abs(speed_rpm),
+        beat_s,
+        cycle,
+        abs(speed_rpm) / 60.0 * (relay_s + stop_s / 2.0),
+        relay_s + stop_s,
+        f"--heartbeat {line}: a watchdog relay drops the drive's enable input or main contactor "
+        f"{relay_s * 1000:g} ms after the adapter's {line.upper()} line stops toggling",
+        "servotool --heartbeat (README: the hardware dead-man)",
+        "the relay's wiring and time are the user's (--heartbeat-timeout-ms); how the drive stops when its enable or "
+        "main power is cut (coast, dynamic brake, ramp) is its own setting, taken as its ramp here; a host that hangs "
+        "with the line high holds a relay that times from the line's fall",
+        "the relay drops the drive's enable within the printed time",
+        relay_s=relay_s,
     )
 
 
@@ -170,6 +205,14 @@ def check(b: DeadManBound, waived: bool) -> None:
                 f"{what}. Pass --no-dead-man to move anyway, with an E-stop at hand"
             )
         return
+    if b.relay_s is not None:  # a toggle needs no exchange: the loop's exchanges must fit well inside the relay's time
+        if b.link_cycle_s * 4 > b.relay_s:
+            raise UsageError(
+                f"this link cannot keep the heartbeat: one beat cycle takes about {b.link_cycle_s * 1000:.0f} ms, "
+                f"the watchdog relay's {b.relay_s * 1000:g} ms needs a toggle every {b.relay_s * 250:.0f} ms; use a "
+                "faster baud rate or a longer --heartbeat-timeout-ms"
+            )
+        return
     if b.link_cycle_s * 2 > b.beat_s:
         raise UsageError(
             f"this link cannot keep the dead-man beat: one beat cycle takes about "
@@ -178,11 +221,25 @@ def check(b: DeadManBound, waived: bool) -> None:
         )
 
 
+def with_limits(
+    b: DeadManBound, fence_rev: float | None, speed_limit_rpm: float | None, limits: tuple[str, ...]
+) -> DeadManBound:
+    """The bound with what else bounds the motion (see DeadManBound.fence_rev)."""
+    return replace(b, fence_rev=fence_rev, speed_limit_rpm=speed_limit_rpm, limits=limits)
+
+
 def sentence(b: DeadManBound) -> str:
     """The bound in words, as printed before moving."""
+    fence = f" until the drive's overtravel fence at ±{b.fence_rev:.2f} rev stops it" if b.fence_rev else ""
     if b.stop_rev is None:
         return (
             "NO DEAD-MAN (--no-dead-man): if this program stops, the motor keeps running at "
-            f"{b.speed_rpm:g} rpm until stopped at the drive"
+            f"{b.speed_rpm:g} rpm " + (fence[1:] if fence else "until stopped at the drive")
         )
-    return f"if this program stops, the motor stops within {b.stop_rev:.2f} rev ({b.stop_s:.2f} s)"
+    text = f"if this program stops, the motor stops within {b.stop_rev:.2f} rev ({b.stop_s:.2f} s)"
+    return text + (f"; at worst it runs at ≤ {b.speed_rpm:g} rpm{fence}" if fence else "")
+
+
+def lines(b: DeadManBound) -> list[str]:
+    """The bound and what else bounds the motion, one line each, as printed before moving."""
+    return [sentence(b), *(f"  {line}" for line in b.limits)]

@@ -15,9 +15,10 @@ from servotool.errors import DeviceError, ServoError, UsageError
 from servotool.model.codec import eng_to_raw, parse_value, raw_to_eng
 from servotool.model.profile import Entry
 from servotool.model.roles import FEATURE, jog_codes, motion_route
-from servotool.motion import deadman
+from servotool.motion import deadman, protect
 from servotool.motion.deadman import DeadManBound
-from servotool.motion.jog_plan import JogPlan, checked_travel
+from servotool.motion.forced_inputs import ForcedInputs
+from servotool.motion.jog_plan import JogPlan, checked_travel, ramp_words, travel_estimate
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.rest import STOPPED_RPM, RestWatch
 from servotool.motion.segments import SegmentMoves
@@ -68,8 +69,16 @@ class Jogger:
         self._timeout_s: float | None = deadman.UNREAD  # the drive's communication timeout, read once
         # Called by run() before the JOG moves with its settings to put back (code -> raw): a caller may write
         # temporary settings there, each original recorded in it, and the JOG puts them back with its own
-        # (tuning.stable_hold.guard_hold: a position hold that cannot swing up on an unknown load).
+        # (tuning.stable_hold.guarded_jogger: a position hold that cannot swing up on an unknown load).
         self.prepare: Callable[[dict[str, int]], object] | None = None
+        # The drive's own protections for the motion (motion/protect: planned by plan() or protect_for(), set with
+        # the motion's settings and put back with them), and a forced-input trigger's forcing (SD25).
+        self.protections: protect.Protections | None = None
+        self.inputs = (
+            ForcedInputs(drive, self.clock, keepalive_s)
+            if self.profile.forced_inputs is not None and self.route.kind == "trigger"
+            else None
+        )
 
     @property
     def keepalive_s(self) -> float:
@@ -122,6 +131,8 @@ class Jogger:
             self.profile.motor.rated_speed_rpm if self.profile.motor else 3000.0
         )
         bound = self.arm_dead_man(abs(speed_rpm), accel_ms)
+        self.protect_for(abs(speed_rpm), self._fence_rev(speed_rpm, seconds, travel, accel_ms))
+        bound = self.dead_man = self._protected(bound)
         return JogPlan(
             abs(speed_rpm),
             1 if speed_rpm > 0 else -1,
@@ -131,7 +142,41 @@ class Jogger:
             abs(speed_rpm) / 60.0 * seconds if seconds is not None else None,
             bound,
             travel,
+            ramp_words(self.profile, float(accel_ms) if accel_ms is not None else None),
         )
+
+    def _fence_rev(
+        self, speed_rpm: float, seconds: float | None, travel: TravelLimit | None, accel_ms: float | None
+    ) -> float | None:
+        """How far either way a JOG may go: its travel limit, else a timed JOG's travel, its stop and a beat."""
+        if travel is not None:
+            return travel.rev
+        if seconds is None:
+            return None  # an interactive JOG without a travel limit: no extent to fence
+        speed = abs(speed_rpm)
+        return (
+            travel_estimate(speed, seconds)
+            + deadman.braking_rev(speed, accel_ms)
+            + speed / 60.0 * self.keepalive.interval_s
+        )
+
+    def protect_for(self, peak_rpm: float, fence_rev: float | None) -> protect.Protections | None:
+        """Plan the drive's protections for motion up to peak_rpm within fence_rev either way of where it starts
+        (None: no fence); they are set when the motion starts (run, settings_to_restore) and put back with its
+        settings. Not on an in-process link (no port: the benches' and seeded tests' virtual time), where their
+        requests would only change which measurement noise the motion draws, and no journal exists to put them
+        back."""
+        if not self.drive.port:
+            self.protections = None
+            return None
+        self.protections = protect.plan(self.drive, peak_rpm, fence_rev)
+        if self.dead_man is not None:
+            self.dead_man = self._protected(self.dead_man)
+        return self.protections
+
+    def _protected(self, bound: DeadManBound) -> DeadManBound:
+        """The bound with what else bounds the motion: the protections planned, a forced-input warning."""
+        return protect.limited(bound, self.protections, self.profile)
 
     def _ramp_ms(self) -> float | None:
         accel = self.profile.role("jog_accel")
@@ -152,6 +197,8 @@ class Jogger:
             self._timeout_s,
         )
         deadman.check(bound, self.drive.dead_man_waived)
+        if self.protections is not None or self.inputs is not None:
+            bound = self._protected(bound)
         if self.dead_man is None or bound.speed_rpm >= self.dead_man.speed_rpm:
             self.dead_man = bound
         return bound
@@ -196,7 +243,7 @@ class Jogger:
             self._segment_command()
             return
         if self.jog is not None:
-            self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
+            self.drive.write_raw(self.jog, self._trigger_raw())
             self.keepalive.sent()
             return
         assert self.servo is not None
@@ -214,6 +261,19 @@ class Jogger:
         if self._enabled:
             self.drive.write_raw(self.speed_entry, self._speed_raw(self.direction * self.speed_rpm))
             self.keepalive.sent()
+
+    def _trigger_raw(self) -> int:
+        """The JOG trigger's raw value for the present direction (a forced-input trigger with the other inputs as
+        held)."""
+        assert self.jog is not None
+        code = jog_codes(self.jog)[self.direction]
+        return self.inputs.levels(code) if self.inputs is not None and self.inputs.engaged else code
+
+    def watch_inputs(self) -> None:
+        """At most once a beat, where the drive's forced inputs can be watched: stop the motion on a wired input's
+        change (motion.forced_inputs.InputsChanged)."""
+        if self.inputs is not None:
+            self.inputs.watch()
 
     def _segment_command(self) -> None:
         """The segment route: servo on for the first move, then a fresh move (or a braking one) now."""
@@ -246,7 +306,7 @@ class Jogger:
                 self._segment_command()
             return
         if self.jog is not None:
-            self.drive.write_raw(self.jog, jog_codes(self.jog)[self.direction])
+            self.drive.write_raw(self.jog, self._trigger_raw())
         elif self._enabled and self.servo is not None:
             self.drive.write_raw(self.servo, 1)  # servo-on again (no EEPROM write of the reference)
 
@@ -298,6 +358,7 @@ class Jogger:
             failing = True
             try:
                 self._journal(saved)
+                self._start_protection(saved)
                 if self.prepare is not None:
                     self.prepare(saved)
                 self._run(plan, on_sample, command)
@@ -321,8 +382,26 @@ class Jogger:
         found = {e.code: r.raw for e, r in zip(entries, self.drive.read_entries(entries), strict=True)}
         return {**found, **journal.pending_settings(self.drive)}  # a dead process's originals win
 
+    def _start_protection(self, saved: dict[str, int]) -> None:
+        """Before the motion moves: the planned protections set (their originals into `saved`), the inputs
+        forced, and the heartbeat's lead (a watchdog relay closes, a main contactor's drive charges, before the
+        first motion command)."""
+        self.keepalive.heartbeat_lead(self.idle)
+        if self.protections is not None:
+            protect.apply(self.drive, self.protections, saved)
+        if self.inputs is not None:
+            self.inputs.engage()
+
     def _put_back(self, saved: dict[str, int], failing: bool) -> None:
-        """Write back what differs from `saved`; while failing, the first error stays the one reported."""
+        """Write back what differs from `saved`; while failing, the first error stays the one reported. The
+        heartbeat (--heartbeat) stops and forced inputs are released first, whatever else fails."""
+        self.keepalive.stop_heartbeat()
+        try:
+            if self.inputs is not None:
+                self.inputs.release()
+        except ServoError:
+            if not failing:
+                raise
         try:
             entries = [self.profile.entry(code) for code in saved]
             for entry, reading in zip(entries, self.drive.read_entries(entries), strict=True):
@@ -360,6 +439,7 @@ class Jogger:
                         self.command(new)
                 if command is None or self.keepalive.due():  # interactive: keys are polled between beats
                     self.beat()
+                    self.watch_inputs()
                     self.check_tripped()
                     guard.check(
                         self.direction,
@@ -397,6 +477,11 @@ class Jogger:
         self._ramp_raw = saved[ramp.code]
         self._journal(saved)
         self._speed_param_raw = saved.get(self.speed_entry.code)
+        try:
+            self._start_protection(saved)
+        except BaseException:
+            self._put_back(saved, failing=True)
+            raise
         return saved
 
     def _journal(self, saved: dict[str, int]) -> None:

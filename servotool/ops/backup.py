@@ -15,7 +15,8 @@ from servotool.clock import utc_now
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.files import backup_dir, load_yaml, write_atomic
-from servotool.model.codec import format_value, json_value
+from servotool.model.codec import format_value, json_text, json_value
+from servotool.model.identity import identity_entries
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup_csv
 from servotool.ops.params import read_settings, select
@@ -103,15 +104,6 @@ def take(drive: Drive, progress: Callable[[int], None] | None = None) -> Backup:
         values,
         missing=[e.code for e in select(p) if e.code in drive.missing],
     )
-
-
-def identity_entries(profile: Profile) -> list[Entry]:
-    """The entries a backup records as the drive's identity: those the profile's identity section checks (its
-    firmware and model entries among them), in the section's order."""
-    if profile.identity is None:
-        return []
-    codes = [c.code for c in profile.identity.checks if c.code]
-    return [e for e in (profile.find(c) for c in codes) if e is not None and e.readable]
 
 
 def check_output(path: Path, *, force: bool = False) -> None:
@@ -263,6 +255,9 @@ class Difference:
             "a": None if self.a is None else json_value(e, self.a),
             "b": None if self.b is None else json_value(e, self.b),
         }
+        for key, raw in (("a", self.a), ("b", self.b)):  # an encoded value's manual form beside its number
+            if raw is not None and (text := json_text(e, raw)) is not None:
+                out[f"{key}_text"] = text
         for key, raw in (("a", self.a), ("b", self.b)):
             if raw is not None and raw in e.enum:
                 out[f"{key}_meaning"] = e.enum[raw]

@@ -6,7 +6,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from servotool.drive import Drive
-from servotool.errors import ServoError, UsageError
+from servotool.errors import ServoError, UsageError, VerifyError
+from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile, can_save
 from servotool.words import agree
 
@@ -26,11 +27,14 @@ def switch_state(drive: Drive) -> tuple[Entry, int, int, int]:
 
 @contextmanager
 def _switched(
-    drive: Drive, entry: Entry, current: int, wanted: int, state: dict[str, bool] | None = None
+    drive: Drive, entry: Entry, current: int, wanted: int, state: dict[str, bool] | None = None, purpose: str = ""
 ) -> Iterator[None]:
     """Run the block with the switch at `wanted`, journaled on the host, and put it back (verified) on every exit
     path; the journal record goes only once the switch is confirmed back, else the next command finishes it.
-    state['switch_back'] says whether it was put back."""
+    The switch is read back once written, before the block runs, and again when the block ends, before it is put
+    back: a drive that acknowledges the switch but ignores it (or drops it midway) ends the batch with
+    SwitchNotTaken, so no write is ever reported as stored (or kept out of EEPROM) on the switch's word alone.
+    state['switch_back'] says whether it was put back; `purpose` words what the switch was set for."""
     from servotool.ops import journal
 
     if wanted == current:
@@ -41,10 +45,33 @@ def _switched(
         # Inside the try: a Ctrl-C that lands while the switch is being written still puts it back.
         journal.note_switch(drive, entry.code, current)
         drive.write_raw(entry, wanted)
+        _confirm_switch(drive, entry, wanted, purpose, "before any value was written: nothing was written")
         yield
+        _confirm_switch(
+            drive,
+            entry,
+            wanted,
+            purpose,
+            "when the writes ended: the values written may NOT be where the command meant them to go",
+        )
         failing = False
     finally:
         _put_back(drive, entry, current, failing, state)
+
+
+class SwitchNotTaken(VerifyError):
+    """The drive acknowledged the EEPROM switch but does not hold it: where the writes go is not what was asked."""
+
+
+def _confirm_switch(drive: Drive, entry: Entry, wanted: int, purpose: str, when: str) -> None:
+    """Read the switch back; SwitchNotTaken naming the drive's value and what that leaves when it is not `wanted`."""
+    now = drive.read_entries([entry])[0].raw
+    if now != wanted:
+        raise SwitchNotTaken(
+            f"{entry.code} (the EEPROM switch) was set to {format_value(entry, wanted)}"
+            f"{f' to {purpose}' if purpose else ''} and the drive acknowledged it, but it reads back "
+            f"{format_value(entry, now)} {when}"
+        )
 
 
 def _put_back(drive: Drive, entry: Entry, raw: int, failing: bool, state: dict[str, bool] | None) -> None:
@@ -90,8 +117,20 @@ def ram_writes(drive: Drive) -> Iterator[None]:
             yield
             return
         entry, current, _eeprom, ram = switch_state(drive)
-        with _switched(drive, entry, current, ram):
+        with _switched(drive, entry, current, ram, purpose="keep the motion's settings out of EEPROM"):
             yield
+
+
+def reads_are_stored(profile: Profile) -> bool:
+    """Whether a value read from the drive is also the one it stores: only on a drive that stores every write.
+    Elsewhere a read shows RAM, which a RAM-only write (or one stored and then changed in RAM) sets apart from
+    EEPROM, and EEPROM cannot be read over Modbus."""
+    return profile.persistence.mode == "immediate"
+
+
+def compared_memory(profile: Profile) -> str:
+    """What a comparison with the drive's values compares, for the user: 'RAM' or 'RAM (= EEPROM ...)'."""
+    return "RAM (= EEPROM: the drive stores every write)" if reads_are_stored(profile) else "RAM"
 
 
 def ram_only_warning(profile: Profile) -> str:
@@ -156,7 +195,8 @@ def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
             entry, current, eeprom, ram = switch_state(drive)
             wanted = current if save is None else (eeprom if save else ram)
             state["persisted"] = wanted == eeprom
-            with _switched(drive, entry, current, wanted, state):
+            purpose = "store the writes in EEPROM" if wanted == eeprom else "keep the writes out of EEPROM"
+            with _switched(drive, entry, current, wanted, state, purpose):
                 yield state
             return
         yield state

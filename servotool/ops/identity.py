@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servotool.drive import Drive
-from servotool.errors import DeviceError, IdentityMismatch, ModbusException
+from servotool.errors import DeviceError, IdentityMismatch, ModbusException, ProfileNotFound
 from servotool.link.ports import Link
 from servotool.model.codec import words_to_raw
 from servotool.model.identity import read_plan
@@ -171,6 +171,20 @@ def best_fit(link: Link, unit: int, profiles: list[Profile]) -> Verdict | None:
     """The profile whose checks the unit matches best, or None when none matches."""
     ranked = identify(link, unit, profiles)
     return ranked[0] if ranked and ranked[0].outcome == MATCH else None
+
+
+def choose(ranked: list[Verdict], port: str) -> Verdict:
+    """The one profile a unit's answers match (identify's verdicts); ProfileNotFound listing the candidates, with
+    what their checks met, when none or several match."""
+    matches = [v for v in ranked if v.outcome == MATCH]
+    if len(matches) == 1:
+        return matches[0]
+    unit = ranked[0].unit if ranked else 0
+    if matches:
+        listed = [(v.profile.id, ", ".join(v.reasons(FITS)[:2])) for v in matches]
+        raise ProfileNotFound(unit, port, True, listed)
+    listed = [(v.profile.id, (v.reasons(CONTRADICTS) or v.reasons(UNKNOWN) or ["no checks"])[0]) for v in ranked]
+    raise ProfileNotFound(unit, port, False, listed)
 
 
 def consistent(profile: Profile, answers: tuple[Answer, ...]) -> bool:

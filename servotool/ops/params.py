@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 from servotool.drive import Drive, WriteResult
@@ -27,8 +28,13 @@ def select(profile: Profile, *, group: str | None = None, classes: tuple[str, ..
 
 def read_settings(drive: Drive, progress: Callable[[int], None] | None = None) -> dict[str, int]:
     """Every readable parameter as the drive holds it (code -> raw, coalesced); entries it lacks are left out (and
-    listed in drive.missing)."""
-    return {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)}
+    listed in drive.missing). An entry a raised line holds for the command (ops.boost) reads as its original,
+    which is what the drive keeps and gets back when the command ends."""
+    from servotool.ops.boost import held_originals
+
+    values = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)}
+    values.update({code: raw for code, raw in held_originals(drive).items() if code in values})
+    return values
 
 
 @dataclass(frozen=True)
@@ -77,6 +83,19 @@ def prepare_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> P
     return PreparedSet(changes, unchanged)
 
 
+def set_assignments(
+    drive: Drive, assignments: list[str], *, raw: bool = False, save: bool | None = None
+) -> tuple[PreparedSet, SetOutcome]:
+    """`param set`: parse, read the current values and write them under the drive's EEPROM rule, all under the
+    port's lock. A field (Po018.A=1) is written as the whole register read before it, so no other process may
+    write that register between this read and this write: two field writes in two processes both land."""
+    from servotool.ops.journal import port_lock
+
+    with port_lock(drive):
+        plan = prepare_set(drive, assignments, raw=raw)
+        return plan, set_values(drive, plan, save)
+
+
 def write_one(drive: Drive, entry: Entry, raw: int, old: int | None = None) -> WriteResult:
     """The one path every parameter write takes (set, restore, plans): write, then verify by read-back."""
     return drive.write_verified(entry, raw, old)
@@ -107,12 +126,13 @@ def write_changes(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[W
     (write_runs), each run verified by one read-back; the others by write_one."""
     results: list[WriteResult] = []
     for run in write_runs(drive, sorted(changes, key=lambda c: c[0].address)):
-        results.extend(_write_run(drive, run))
+        results.extend(write_run(drive, run))
     return results
 
 
-def _write_run(drive: Drive, run: list[tuple[Entry, int, int]]) -> list[WriteResult]:
-    """One run of write_runs: a lone entry by write_one, adjacent ones in one verified FC16 request."""
+def write_run(drive: Drive, run: list[tuple[Entry, int, int]]) -> list[WriteResult]:
+    """One run of write_runs (entry, old, new): a lone entry by write_one, adjacent ones in one verified FC16
+    request."""
     if len(run) == 1:
         entry, old, new = run[0]
         return [write_one(drive, entry, new, old)]
@@ -125,7 +145,7 @@ def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:
     results: list[WriteResult] = []
     for run in write_runs(drive, plan.changes):
         try:
-            results.extend(_write_run(drive, run))
+            results.extend(write_run(drive, run))
         except ServoError as exc:
             raise _naming_written(exc, results, [e for e, _, _ in run]) from None
     return results
@@ -156,6 +176,7 @@ def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome
     """Write a prepared set under the drive's EEPROM rule. save=True stores every requested value, also one RAM
     already holds (RAM and EEPROM may differ, and only a write under the EEPROM setting or the drive's store
     command puts it in EEPROM). A power-cycle parameter that would stay in RAM only is refused before writing."""
+    from servotool.ops import journal
     from servotool.ops.eeprom import check_power_cycle, persistence
 
     check_power_cycle(drive, [e for e, _, _ in plan.changes], save)
@@ -164,13 +185,20 @@ def set_values(drive: Drive, plan: PreparedSet, save: bool | None) -> SetOutcome
         return SetOutcome(
             [], [e for e, _ in plan.unchanged] if save else [], drive.profile.persistence.mode == "immediate"
         )
-    with persistence(drive, save) as kept:
-        results = apply_set(drive, plan)
-        for entry, raw in again:  # the same value again, now with the switch on EEPROM
-            try:
+    results: list[WriteResult] = []
+    targets = {e.code: new for e, _old, new in plan.changes}
+    before = {e.code: old for e, old, _new in plan.changes}
+    # Journaled before the first write: a kill midway is named by the next command, value by value.
+    record = journal.operation(drive, "param set", None, targets, before) if targets else nullcontext()
+    try:
+        with record, persistence(drive, save) as kept:
+            results = apply_set(drive, plan)
+            for entry, raw in again:  # the same value again, now with the switch on EEPROM
                 write_one(drive, entry, raw, raw)
-            except ServoError as exc:
-                raise _naming_written(exc, results, []) from None
+    except ServoError as exc:
+        # apply_set names its own writes; the switch read back when the writes ended, or a value written again
+        # for EEPROM, fails after them
+        raise exc if hasattr(exc, "written") or not results else _naming_written(exc, results, []) from None
     stored = (
         ([r.entry for r in results] + ([e for e, _ in plan.unchanged] if save else [])) if kept["persisted"] else []
     )

@@ -8,10 +8,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from servotool.clock import Clock, RealClock
-from servotool.connection import PARITIES, SIM_PORT, ConnectOptions, effective
+from servotool.connection import (
+    PARITIES,
+    REAL_RETRIES,
+    REAL_TIMEOUT,
+    SIM_PORT,
+    ConnectOptions,
+    effective,
+    line_settings,
+)
 from servotool.errors import DeviceError, ModbusException, UsageError
 from servotool.link.master import RtuMaster
-from servotool.link.ports import Link, LinkSettings, parse_tcp
+from servotool.link.ports import Link, LinkSettings, Trace, parse_tcp
 from servotool.model.loader import load_profile
 from servotool.model.profile import LineSettings, Profile
 from servotool.ops.identity import MATCH, Verdict, identify, shipped_profiles
@@ -177,8 +185,8 @@ def scan(
     return result
 
 
-def _open(settings: LinkSettings) -> Link:
-    link = RtuMaster(settings)
+def _open(settings: LinkSettings, trace: Trace | None = None) -> Link:
+    link = RtuMaster(settings, trace=trace)
     link.hurry()
     return link
 
@@ -246,4 +254,50 @@ def plan(
         [] if tcp else settings_to_try(profiles, bauds, formats),
         profiles,
         timeout,
+    )
+
+
+def find(
+    options: ConnectOptions,
+    unit: int,
+    profiles: list[Profile],
+    *,
+    probe_timeout: float = SCAN_TIMEOUT,
+    open_link: Callable[[LinkSettings], Link] | None = None,
+    trace: Trace | None = None,
+) -> Found:
+    """The unit on the options' port, read as a scan reads it, before its profile is known: over tcp:// one probe;
+    on a serial port one at each candidate profile's factory line (the options' --baud/--parity/--stopbits
+    replacing its parts), up to the first that answers. Then one reading of every candidate's identity checks,
+    at the options' timeout and retries (ops.identity.choose picks from `ranked`). DeviceError when the unit
+    answers at none."""
+    opts = effective(options)
+    port = opts.port or ""
+    tcp = parse_tcp(port) is not None
+    lines: list[LineSettings | None] = [None] if tcp else []
+    for p in profiles if not tcp else ():
+        if (line := line_settings(opts, p.line)) not in lines:
+            lines.append(line)
+    result = ScanResult(port)
+    for line in lines:
+        settings = LinkSettings(port, line or LineSettings(), timeout=probe_timeout, retries=0)
+        link = open_link(settings) if open_link else _open(settings, trace)
+        try:
+            answered = _probe(link, unit, result, line)
+        finally:
+            link.close()
+        if not answered:
+            continue
+        timeout = opts.timeout if opts.timeout is not None else REAL_TIMEOUT
+        retries = opts.retries if opts.retries is not None else REAL_RETRIES
+        settings = LinkSettings(port, line or LineSettings(), timeout=timeout, retries=retries)
+        link = open_link(settings) if open_link else RtuMaster(settings, trace=trace)
+        try:
+            return Found(port, line, unit, tuple(identify(link, unit, profiles)))
+        finally:
+            link.close()
+    tried = "" if tcp else " at " + ", ".join(line_format_text(x, baud=True) for x in lines if x)
+    raise DeviceError(
+        f"no answer from unit {unit} on {port}{tried} (wrong unit id, baud/parity, wiring, or the drive is off); "
+        f"without --profile the drive must answer to be identified"
     )

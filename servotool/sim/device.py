@@ -12,7 +12,7 @@ from servotool.sim.registers import ILLEGAL_ADDRESS, ILLEGAL_VALUE, RegisterBank
 FnHandler = Callable[["SimulatedDrive", Entry, int], None]
 
 # The simulated machine's true properties (never readable over Modbus), persisted with the drive's state.
-SIM_SETTINGS: dict[str, tuple[type, float | int, float, float, str]] = {
+SIM_SETTINGS: dict[str, tuple[type, float | int | str, float, float, str]] = {
     # name: (type, default, min, max, help)
     "load_ratio": (float, 2.0, 0.0, 200.0, "true load inertia / motor inertia"),
     "friction": (float, 0.02, 0.0, 1.0, "Coulomb friction, fraction of rated torque"),
@@ -21,7 +21,15 @@ SIM_SETTINGS: dict[str, tuple[type, float | int, float, float, str]] = {
     "noise": (float, 0.002, 0.0, 0.2, "relative measurement noise on speed and torque readings"),
     "seed": (int, 1, 0, 2**31 - 1, "random seed of the measurement noise"),
     "brake": (int, 1, 0, 1, "holding brake (on/off): closed while the servo is off; holds any load_torque"),
-    "line_baud": (int, 0, 0, 10_000_000, "emulate an RS485 line at this baud (delay answers by wire time); 0 = off"),
+    "line_baud": (
+        str,
+        "factory",
+        0,
+        0,
+        "the line each answer is delayed by (its wire time): factory (the connection's line, the profile's factory "
+        "settings unless --baud/--parity/--stopbits say otherwise; SERVOTOOL_SIM_LINE_BAUD may replace it), a baud "
+        "rate in that format, or fast (none)",
+    ),
     # mechanics outside the rigid model (sim.mechanics); all off by default
     "resonance_hz": (
         float,
@@ -51,6 +59,22 @@ SIM_SETTINGS: dict[str, tuple[type, float | int, float, float, str]] = {
     "gear": (float, 10.0, 1.0, 1000.0, "gear ratio between motor and arm (motor turns per arm turn)"),
     "cogging": (float, 0.0, 0.0, 0.2, "cogging torque ripple amplitude, fraction of rated torque"),
     "cogging_periods": (int, 6, 1, 200, "cogging ripple periods per motor revolution"),
+    "inputs": (
+        int,
+        0,
+        0,
+        255,
+        "wired digital input levels, bit n = DI n+1 (e.g. 4 = DI3 closed); the drive acts on them unless its "
+        "inputs are forced",
+    ),
+    "di_monitor": (
+        int,
+        0,
+        0,
+        1,
+        "NOT IN THE MANUAL (forced/terminals): what the input monitor shows while the inputs are forced; the manual's "
+        "words read as the forced levels (forced, the default)",
+    ),
     "fake_watchdog": (
         int,
         0,
@@ -98,13 +122,22 @@ class SimulatedDrive:
             yield
 
     @property
-    def line_baud(self) -> int:
-        return int(self.settings["line_baud"])
+    def line_baud(self) -> str | int:
+        """The line this drive's answers are timed by: "factory", "fast" or a baud rate (sim config)."""
+        return self.settings["line_baud"]
 
-    def configure(self, **changes: float | int) -> None:
+    def configure(self, **changes: float | int | str) -> None:
         """Change and persist simulated-machine settings (validated)."""
+        changes = {k: v for k, v in changes.items() if v is not None}
+        if "line_baud" in changes:  # as given now: 0 is fast, as it always meant when given
+            from servotool.errors import UsageError
+
+            try:
+                changes["line_baud"] = line_choice(changes["line_baud"])
+            except ValueError as exc:
+                raise UsageError(f"sim setting {exc}") from None
         with self.session():
-            merged = {**self.settings, **{k: v for k, v in changes.items() if v is not None}}
+            merged = {**self.settings, **changes}
             self.settings = sim_settings(merged, strict=True)
             self.bank.extra["settings"] = self.settings
             self.bank.save()
@@ -214,22 +247,48 @@ def _eeprom_save(drive: SimulatedDrive, entry: Entry, raw: int) -> None:
         drive.bank.save_eeprom()
 
 
-def sim_settings(raw: object, *, strict: bool = False) -> dict[str, float | int]:
+LINE_FACTORY, LINE_FAST = "factory", "fast"
+LINE_BAUDS = (300, 10_000_000)
+
+
+def line_choice(value: object) -> str | int:
+    """A line to emulate as given (sim config --line-baud, sim serve --line-baud, SERVOTOOL_SIM_LINE_BAUD):
+    "factory", "fast" (also "off" and 0, the old word for it) or a baud rate; ValueError otherwise."""
+    text = str(value).strip().lower()
+    if text in (LINE_FACTORY, LINE_FAST):
+        return text
+    if text in ("off", "0"):
+        return LINE_FAST
+    if not text.isascii() or not text.isdigit() or not LINE_BAUDS[0] <= int(text) <= LINE_BAUDS[1]:
+        raise ValueError(f"line baud must be factory, fast or {LINE_BAUDS[0]}..{LINE_BAUDS[1]}, not {value!r}")
+    return int(text)
+
+
+def _stored_line(value: object) -> str | int:
+    """The stored line setting; a stored 0 is the old default, which every sim config saved: factory now."""
+    return LINE_FACTORY if value == 0 else line_choice(value)
+
+
+def sim_settings(raw: object, *, strict: bool = False) -> dict[str, float | int | str]:
     """Settings with defaults filled in; strict=True raises UsageError for bad values instead of ignoring them."""
     from servotool.errors import UsageError
 
     given = raw if isinstance(raw, dict) else {}
-    out: dict[str, float | int] = {}
+    out: dict[str, float | int | str] = {}
     for name, (kind, default, lo, hi, _help) in SIM_SETTINGS.items():
         value = given.get(name, default)
         try:
-            value = kind(value)
-            ok = lo <= value <= hi
+            if name == "line_baud":
+                value, ok = _stored_line(value), True
+            else:
+                value = kind(value)
+                ok = lo <= value <= hi
         except (TypeError, ValueError):
             ok = False
         if not ok:
             if strict:
-                raise UsageError(f"sim setting {name}={given.get(name)!r} is outside {lo}..{hi}")
+                within = f"{lo}..{hi}" if name != "line_baud" else f"factory, fast or {LINE_BAUDS[0]}..{LINE_BAUDS[1]}"
+                raise UsageError(f"sim setting {name}={given.get(name)!r} is outside {within}")
             value = default
         out[name] = value
     if strict and (out["resonance_hz"] or out["backlash_rad"]) and not out["load_ratio"]:

@@ -24,10 +24,12 @@ from __future__ import annotations
 
 from servotool.clock import Clock, RealClock
 from servotool.model.codec import eng_to_raw, raw_to_eng
+from servotool.model.forcing import trigger_bits
 from servotool.model.gain_units import to_canonical
 from servotool.model.profile import Entry, Motor, Profile
+from servotool.model.roles import jog_direction
 from servotool.model.setup import requirements
-from servotool.sim import functions, monitors
+from servotool.sim import functions, monitors, protections
 from servotool.sim.alarms import AlarmLog
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.handover import Handover, MachineState
@@ -69,6 +71,7 @@ class Firmware:
         drive.on_reload.append(self._reloaded)
         drive.bank.before_write.append(self._store_machine_state)
         functions.install(drive, self)
+        self.plant.set_protections(self._protections())
         self.update()
 
     def _power_on(self) -> None:
@@ -120,6 +123,8 @@ class Firmware:
         self._take_machine_state()
         self.plant.set_settings(self._plant_settings())
         self.plant.set_gains(self._gains())
+        self.plant.set_protections(self._protections())
+        self.inputs_changed()  # the wired inputs may have changed (sim config), or forcing ended (power cycle)
 
     # ----- settings ------------------------------------------------------------------------------------------
     def _plant_settings(self) -> PlantSettings:
@@ -156,7 +161,11 @@ class Firmware:
             speed_integral_ms=self._eng("speed_loop_integral", 20.0) if integral else 20.0,
             position_gain_per_s=self._gain("position_loop_gain", 40.0),
             torque_filter_ms=self._gain("torque_filter", 0.5),
-            torque_limit_pct=min(self._eng("torque_limit_fwd", 300.0), self._eng("torque_limit_rev", 300.0)),
+            torque_limit_pct=min(
+                self._eng("torque_limit_fwd", 300.0),
+                self._eng("torque_limit_rev", 300.0),
+                self._eng("overload_multiple", 300.0),
+            ),
             max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
             jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
             following_limit_rev=self._following_limit_rev(),
@@ -175,10 +184,15 @@ class Firmware:
     def _param_changed(self, _drive: SimulatedDrive, _entry: Entry, _raw: int) -> None:
         self.update()
         self.plant.set_gains(self._gains())
+        self.plant.set_protections(self._protections())
+
+    def _protections(self) -> protections.Protections:
+        return protections.protections(self.profile, self.drive.bank, self.motor, self.plant.position_rev)
 
     def reconfigure(self) -> None:
-        """Apply changed simulated-machine settings (sim config)."""
+        """Apply changed simulated-machine settings (sim config): the machine, the wired inputs."""
         self.plant.set_settings(self._plant_settings())
+        self.inputs_changed()
 
     @property
     def alarm_history(self) -> list[int]:
@@ -208,7 +222,7 @@ class Firmware:
                 self.mode = "off"
                 self.ident = None
                 self.segment = None
-            self.alarms.record(self.plant.alarm)  # also alarms raised with the servo off
+            self.alarms.record(self.plant.alarm, self._alarm_context())  # also alarms raised with the servo off
         self._refresh_monitors()
 
     def _watched(self) -> bool:
@@ -252,7 +266,7 @@ class Firmware:
         self.plant.raise_alarm(kind)
         self.mode = "off"
         self.ident = None
-        self.alarms.record(self.plant.alarm)
+        self.alarms.record(self.plant.alarm, self._alarm_context())
 
     # ----- actions (what the drive's functions trigger; see servotool.sim.functions) -------------------------
     def _host_alive(self) -> None:
@@ -288,6 +302,15 @@ class Firmware:
         self.mode = "jog"
         self.jog_dir = direction
         self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))
+
+    def inputs_changed(self) -> None:
+        """The digital input levels changed (forced value, forcing switch, wired terminals): a JOG trigger among them
+        (role jog's bits, the JOGU/JOGD functions of a forced-input drive) starts or stops the JOG."""
+        jog = self.profile.role("jog")
+        if self.profile.forced_inputs is None or jog is None:
+            return
+        levels = protections.input_levels(self.profile, self.drive.bank, int(self.drive.settings["inputs"]))
+        self.jog(jog_direction(jog, levels & trigger_bits(self.profile)))
 
     def _ramp_rev_s2(self) -> float:
         """The drive's ramp (role jog_accel: time from 0 to rated speed) in rev/s^2, as the plant runs it."""
@@ -384,6 +407,11 @@ class Firmware:
         self.plant.set_gains(self._gains())
         self.drive.bank.save()
 
+    def _alarm_context(self) -> dict[str, float]:
+        """What the drive records beside an alarm now; its run time counts from the simulated drive's first start."""
+        started = self.drive.bank.extra.setdefault("first_start", self.clock.now())
+        return monitors.alarm_context(self.profile, self.drive.bank, self.plant, self.clock.now() - started)
+
     def _refresh_monitors(self) -> None:
         monitors.refresh(
             self.profile,
@@ -392,6 +420,17 @@ class Firmware:
             self.alarms,
             jogging=self.mode == "jog",
             identifying=self.mode == "ident",
+        )
+        monitors.refresh_inputs(
+            self.profile,
+            self.drive.bank,
+            protections.input_monitor(
+                self.profile,
+                self.drive.bank,
+                int(self.drive.settings["inputs"]),
+                bool(self.drive.settings["di_monitor"]),
+            ),
+            protections.encoder_position(self.motor, self.plant.position_rev),
         )
 
 

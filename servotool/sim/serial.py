@@ -22,7 +22,6 @@ from servotool.errors import DeviceError
 from servotool.link.crc import crc_ok, with_crc
 from servotool.link.ports import open_serial
 from servotool.model.profile import LineSettings
-from servotool.sim.device import SimulatedDrive
 from servotool.sim.line import WRITE_CODES, Line, refusal
 from servotool.sim.virtual import READ_CODES
 
@@ -54,18 +53,17 @@ class SerialSlave:
     def __init__(
         self,
         port: str,
-        drives: list[SimulatedDrive],
+        served: Line,
         line: LineSettings,
-        lock: threading.Lock,
         trace: Callable[[bool, bytes], None] | None = None,
     ) -> None:
-        self.line = Line(drives, lock)
+        self.line = served
         self.name, self.trace = port, trace
         self.silence = silence_s(line)
         # Linux refuses parity on a pty on some opens only (a second open meets it when the first did not): open
         # twice, so that a setting the port cannot do is named now rather than never.
-        open_serial(port, line, IDLE_S, "serve on").close()
-        self.port = open_serial(port, line, IDLE_S, "serve on")
+        open_serial(port, line, IDLE_S, doing="serve on").close()
+        self.port = open_serial(port, line, IDLE_S, doing="serve on")
         self._fd: int | None = self.port.fileno() if hasattr(self.port, "fileno") else None
         self.stop = threading.Event()
 
@@ -147,6 +145,8 @@ class SerialSlave:
                     self.line.serve(drive, fc, address, count, values)
             return None
         result, delay = self.line.serve(drives[0], fc, address, count, values)
+        if result is None:  # the drive listens at another speed (its baud entry): it hears only garbage
+            return None
         if isinstance(result, int):
             return with_crc(bytes([unit, fc | 0x80, result]))
         if delay:

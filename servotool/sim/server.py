@@ -25,7 +25,7 @@ from servotool.link.ports import parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.firmware import build_drive
-from servotool.sim.line import WRITE_CODES, Line, refusal
+from servotool.sim.line import WRITE_CODES, Line, env_choice, refusal
 
 if TYPE_CHECKING:  # the bad-line proxy loads only when faults are asked for (not for a plain --port sim)
     from servotool.sim.faults import FaultProxy, LineFaults
@@ -71,6 +71,8 @@ class _Datastore:
         self, drive: SimulatedDrive, fc: int, address: int, count: int, values: list[int] | None
     ) -> list[int] | ExcCodes:
         result, delay = self.line.serve(drive, fc, address, count, values)
+        if result is None:  # the drive hears garbage at this speed: no answer, as from a unit nobody serves
+            raise NoSuchIdException(f"unit {drive.unit} listens at another speed")
         if isinstance(result, int):
             return ExcCodes(result)
         if delay:
@@ -107,15 +109,10 @@ class _SpecDecoder(DecodePDU):
         return super().decode(frame)
 
 
-async def _start(
-    port: str,
-    drives: list[SimulatedDrive],
-    lock: threading.Lock,
-    trace: Callable[[bool, bytes], None] | None,
-):
-    """pymodbus' RTU-over-TCP server for the drives on a tcp://HOST:PORT spec, started."""
+async def _start(port: str, served: Line, trace: Callable[[bool, bytes], None] | None):
+    """pymodbus' RTU-over-TCP server for the drives on a tcp://HOST:PORT spec, started, answering as `served` has it."""
     # The server wants a datastore to start with; the line takes its place below.
-    devices = [SimDevice(id=d.unit, simdata=[SimData(address=0, datatype=DataType.UINT16)]) for d in drives]
+    devices = [SimDevice(id=unit, simdata=[SimData(address=0, datatype=DataType.UINT16)]) for unit in served.drives]
 
     def hook(sending: bool, data: bytes) -> bytes:
         if trace:
@@ -137,7 +134,7 @@ async def _start(
         ignore_missing_devices=True,
         broadcast_enable=True,  # unit 0: applied by every drive, unanswered
     )
-    server.context = _Datastore(Line(drives, lock))  # type: ignore[assignment]
+    server.context = _Datastore(served)  # type: ignore[assignment]
     server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
@@ -156,25 +153,29 @@ def serve_forever(
     drives: list[SimulatedDrive],
     line: LineSettings | None = None,
     trace: Callable[[bool, bytes], None] | None = None,
-    ready: Callable[[str], None] | None = None,
+    ready: Callable[[str, Line], None] | None = None,
     faults: LineFaults | None = None,
+    choice: str | int | None = None,
 ) -> None:
-    """Serve in the foreground until interrupted; with faults, behind a bad line on the tcp:// port. A serial port is
-    framed by sim/serial.py (the 3.5-character rule pymodbus' framer cannot keep), RTU over TCP by pymodbus."""
-    lock = threading.Lock()
+    """Serve in the foreground until interrupted; with faults, behind a bad line on the tcp:// port. The answers
+    are timed as on the line the drives are set to (`line`, else their profile's) unless `choice`, their own
+    setting or SERVOTOOL_SIM_LINE_BAUD says otherwise (line.emulated); on a serial port, by the port itself. A
+    serial port is framed by sim/serial.py (the 3.5-character rule pymodbus' framer cannot keep), RTU over TCP by
+    pymodbus."""
     tcp = parse_tcp(port)
     if faults is not None and not tcp:
         raise DeviceError(f"cannot serve on {port}: line faults need a tcp://HOST:PORT port")
+    served = Line(drives, threading.Lock(), line, choice, wired=not tcp, default=env_choice())
     if not tcp:
         from servotool.sim.serial import SerialSlave
 
-        slave = SerialSlave(port, drives, line or LineSettings(), lock, trace)
-        slave.serve(ready=(lambda: ready(port)) if ready else None)
+        slave = SerialSlave(port, served, line or LineSettings(), trace)
+        slave.serve(ready=(lambda: ready(port, served)) if ready else None)
         return
 
     async def main() -> None:
         proxy = None
-        server = await _start("tcp://127.0.0.1:0" if faults else port, drives, lock, trace)
+        server = await _start("tcp://127.0.0.1:0" if faults else port, served, trace)
         bound = bound_port(server) if tcp else 0
         if faults is not None and tcp:
             from servotool.sim.faults import FaultProxy
@@ -185,7 +186,7 @@ def serve_forever(
             except OSError as exc:
                 raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
         if ready:
-            ready(f"{port[:-2]}:{bound}" if tcp and port.endswith(":0") else port)
+            ready(f"{port[:-2]}:{bound}" if tcp and port.endswith(":0") else port, served)
         try:
             await server.serving
         finally:
@@ -202,36 +203,49 @@ def serve_units(
     units: list[int],
     line: LineSettings,
     *,
-    line_baud: int | None = None,
+    line_baud: str | int | None = None,
     trace: Callable[[bool, bytes], None] | None = None,
-    ready: Callable[[str, dict[int, list[str]]], None] | None = None,
+    ready: Callable[[str, Line, dict[int, list[str]]], None] | None = None,
     faults: LineFaults | None = None,
 ) -> None:
     """Serve simulated drives of one profile in the foreground until interrupted. Starting them switches them on:
-    ready(where, took) gets, by unit, the codes whose pending power-cycle change took effect. line_baud overrides
-    the drives' own line emulation for this run; faults put them behind a bad line."""
+    ready(where, line, took) gets, by unit, the codes whose pending power-cycle change took effect. line_baud
+    overrides the drives' own line emulation for this run; faults put them behind a bad line."""
     drives = [build_drive(profile, u) for u in units]
     took = {d.unit: d.power_cycle() for d in drives}
-    if line_baud is not None:
-        for d in drives:
-            d.settings["line_baud"] = line_baud
-    serve_forever(port, drives, line, trace, ready=(lambda where: ready(where, took)) if ready else None, faults=faults)
+    serve_forever(
+        port,
+        drives,
+        line,
+        trace,
+        ready=(lambda where, served: ready(where, served, took)) if ready else None,
+        faults=faults,
+        choice=line_baud,
+    )
 
 
 class EmbeddedSim:
     """Simulated drives served on a loopback TCP port from a background thread (`--port sim`); with faults, the
-    port is a bad line in front of them (`self.proxy` changes what it does)."""
+    port is a bad line in front of them (`self.proxy` changes what it does).
 
-    def __init__(self, drives: list[SimulatedDrive], faults: LineFaults | None = None) -> None:
+    Each answer comes after its wire time on the line the drives are reached at (`line`, else each one's
+    profile's factory settings), as a real RS485 line has it, unless the drive's own `sim config --line-baud` or
+    SERVOTOOL_SIM_LINE_BAUD says otherwise (`self.line.describe()` says which)."""
+
+    def __init__(
+        self, drives: list[SimulatedDrive], faults: LineFaults | None = None, line: LineSettings | None = None
+    ) -> None:
         self.drives = drives
         self.lock = threading.Lock()
+        self.line = Line(drives, self.lock, line, default=env_choice())
+        self.line.host = line
         self._loop = asyncio.new_event_loop()
         self.proxy: FaultProxy | None = None
         # Started on this thread, before the loop's own thread runs it: a wait for that thread at each step of
         # the start would cost a scheduling round trip each on a busy machine.
         try:
             self._server: ModbusTcpServer | None = self._loop.run_until_complete(
-                _start("tcp://127.0.0.1:0", drives, self.lock, None)
+                _start("tcp://127.0.0.1:0", self.line, None)
             )
             port = bound_port(self._server)
             if faults is not None:
@@ -245,6 +259,11 @@ class EmbeddedSim:
         self.port = f"tcp://127.0.0.1:{port}"
         self._thread = threading.Thread(target=self._loop.run_forever, name="servotool-sim", daemon=True)
         self._thread.start()
+
+    def host_speaks(self, line: LineSettings) -> None:
+        """The master now speaks at these settings (its own set_line): a drive whose baud entry set another speed
+        stays silent."""
+        self.line.host = line
 
     async def _stop(self) -> None:
         try:

@@ -20,20 +20,21 @@ READ_CODES = (3, 4)
 TURNAROUND_S = 0.0005  # the drive's reply delay and the host's turnaround, per request
 
 
-def wire_time(fc: int, count: int, baud: int) -> float:
-    """Seconds a request and its response occupy an RS485 line (11 bits/char, 3.5-char gaps)."""
+def wire_time(fc: int, count: int, baud: int, bits: int = 11) -> float:
+    """Seconds a request and its response occupy an RS485 line (`bits` a character: 11 for 8E1, 8O1 or 8N2, 10
+    for 8N1; 3.5-character gaps)."""
     if fc in READ_CODES:
         chars = 8 + 5 + 2 * count
     elif fc == 16:
         chars = 9 + 2 * count + 8
     else:
         chars = 16
-    return (chars + 7) * 11.0 / baud
+    return (chars + 7) * bits / baud
 
 
 def make_motion_setup(sim: SimulatedDrive) -> None:
     """The profile's motion setup made on a simulated drive, stored and power-cycled (SD25's DI functions act only
-    after a power cycle), then made again for what a power-up clears (SD25's So-58): as a user sets up the drive."""
+    after a power cycle), then made again for anything a power-up clears: as a user sets up the drive."""
     for power_up in range(2):
         for req in requirements(sim.profile):
             now = sim.bank.effective_value(req.entry.code)

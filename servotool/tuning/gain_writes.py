@@ -1,8 +1,8 @@
 """Turning an identified inertia into the drive's inertia-ratio, gain and rigidity parameter values, with margins.
 
 Before anything is written the margins of the suggested gains are computed on the identified inertia
-(tuning.margins); gains with less than 45 degrees of phase or 6 dB of gain margin are refused, naming the highest
-level that keeps them, unless forced.
+(tuning.control.margins); gains with less than 45 degrees of phase or 6 dB of gain margin are refused, naming the
+highest level that keeps them, unless forced.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from servotool.errors import UsageError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import from_canonical, to_canonical
 from servotool.model.profile import Entry, Profile
-from servotool.tuning.gains import GainSuggestion, LoopGains, RigidityScale, rigidity_scale, suggest_gains
-from servotool.tuning.identify import IdentificationFailed
-from servotool.tuning.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
+from servotool.tuning.control.gains import GainSuggestion, LoopGains, RigidityScale, rigidity_scale, suggest_gains
+from servotool.tuning.control.margins import MIN_GAIN_DB, MIN_PHASE_DEG, Margins, margins
+from servotool.tuning.errors import IdentificationFailed, MarginRefused
 from servotool.tuning.preflight import FEATURE
 
 GAIN_ROLES = {
@@ -25,10 +25,6 @@ GAIN_ROLES = {
     "position_loop_gain": "position_loop_gain_per_s",
     "torque_filter": "torque_filter_ms",
 }
-
-
-class MarginRefused(UsageError):
-    """The suggested gains would leave too little phase or gain margin."""
 
 
 @dataclass(frozen=True)
@@ -41,24 +37,40 @@ class GainChange:
     old_raw: int = 0
 
 
-def configured_inertia(profile: Profile, j_total_kgm2: float) -> float:
-    """The inertia the drive's speed gain is computed with once the ratio is written: the identified one, or the
-    rotor's alone where the drive has no ratio parameter (SDC: its speed gain is absolute, F3's levels are for
-    "large-inertia loads" below the factory level)."""
+def configured_inertia(profile: Profile, j_total_kgm2: float, configured_kgm2: float | None = None) -> float:
+    """The inertia the drive's speed gain is computed with: the one its ratio parameter holds (configured_kgm2,
+    where that is not the load's: `tune gains --load-ratio` writes no ratio), else the load's once the ratio is
+    written, or the rotor's alone where the drive has no ratio parameter (SDC: its speed gain is absolute, F3's
+    levels are for "large-inertia loads" below the factory level)."""
     motor = profile.motor
     assert motor is not None
-    return j_total_kgm2 if profile.role("inertia_ratio") is not None else motor.rotor_inertia_kgcm2 * 1e-4
+    if profile.role("inertia_ratio") is None:
+        return motor.rotor_inertia_kgcm2 * 1e-4
+    return configured_kgm2 if configured_kgm2 is not None else j_total_kgm2
 
 
-def loop_margins(profile: Profile, loop: LoopGains, j_total_kgm2: float, viscous: float = 0.0) -> Margins:
-    return margins(loop, j_total_kgm2, configured_inertia(profile, j_total_kgm2), viscous)
+def loop_margins(
+    profile: Profile,
+    loop: LoopGains,
+    j_total_kgm2: float,
+    viscous: float = 0.0,
+    configured_kgm2: float | None = None,
+) -> Margins:
+    return margins(loop, j_total_kgm2, configured_inertia(profile, j_total_kgm2, configured_kgm2), viscous)
 
 
-def safe_level(profile: Profile, scale: RigidityScale, j_total_kgm2: float, upto: int | None = None) -> int | None:
+def safe_level(
+    profile: Profile,
+    scale: RigidityScale,
+    j_total_kgm2: float,
+    upto: int | None = None,
+    configured_kgm2: float | None = None,
+) -> int | None:
     """The highest level (up to `upto`) whose gains keep the minimum margins; None when none does."""
     top = scale.highest if upto is None else upto
     for level in range(top, scale.lowest - 1, -1):
-        if loop_margins(profile, scale.factory.scaled(scale.factor(level)), j_total_kgm2).ok():
+        loop = scale.factory.scaled(scale.factor(level))
+        if loop_margins(profile, loop, j_total_kgm2, configured_kgm2=configured_kgm2).ok():
             return level
     return None
 
@@ -72,10 +84,17 @@ def current_level(drive: Drive, scale: RigidityScale) -> int:
 
 
 def gain_changes(
-    drive: Drive, load_ratio: float, *, rigidity: int | None, bandwidth_hz: float | None, force: bool = False
+    drive: Drive,
+    load_ratio: float,
+    *,
+    rigidity: int | None,
+    bandwidth_hz: float | None,
+    force: bool = False,
+    configured_kgm2: float | None = None,
 ) -> tuple[GainSuggestion, list[GainChange], Margins]:
     """Gains for the identified inertia at the drive's own level (its current one when neither is given), mapped
-    onto the profile's gain roles (and its rigidity parameter), with their margins; MarginRefused unless forced."""
+    onto the profile's gain roles (and its rigidity parameter), with their margins (configured_kgm2: the inertia
+    the drive's ratio parameter holds, where it is not the load's); MarginRefused unless forced."""
     p = drive.profile
     motor = p.motor
     assert motor is not None
@@ -92,10 +111,10 @@ def gain_changes(
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    found = loop_margins(p, sugg.loop, sugg.j_total_kgm2)
+    found = loop_margins(p, sugg.loop, sugg.j_total_kgm2, configured_kgm2=configured_kgm2)
     if not found.ok() and not force:
         what = f"rigidity {rigidity}" if rigidity is not None else f"{bandwidth_hz:g} Hz"
-        safe = safe_level(p, scale, sugg.j_total_kgm2, rigidity)
+        safe = safe_level(p, scale, sugg.j_total_kgm2, rigidity, configured_kgm2)
         hint = (
             f"the highest level that keeps them is {safe} (--rigidity {safe})" if safe is not None else "no level does"
         )
@@ -139,8 +158,8 @@ def drive_loop(drive: Drive) -> LoopGains:
 
 NEAREST_SHARE = 0.02
 """A ratio just outside the parameter's range is written as the nearest end when that is within this share of
-J_total or the estimate's 3 sigma: SD25's Po013 starts at 0.01, so a bare motor (0.00 or a little below) was
-refused (issue 16's sweep at 115200 baud: half the runs at load 0)."""
+J_total or the estimate's 3 sigma: SD25's Po013 starts at 0.01, and a bare motor (0.00 or a little below) must not
+be refused for it."""
 
 
 def ratio_raw(drive: Drive, load_ratio: float, std: float = 0.0) -> tuple[Entry, int]:

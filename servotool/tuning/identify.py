@@ -9,7 +9,7 @@ from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import ServoError
 from servotool.model.codec import eng_to_raw, raw_to_eng
-from servotool.model.profile import Entry
+from servotool.model.profile import Entry, Profile
 from servotool.model.roles import status_bit
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.moves import Mover
@@ -17,7 +17,8 @@ from servotool.motion.rest import RestWatch
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.tuning.band_guard import BandGuard
-from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.errors import IdentificationFailed, TravelExceeded
+from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
     MIN_RAMP_S,
@@ -30,20 +31,10 @@ from servotool.tuning.planning import (
     remedy,
 )
 from servotool.tuning.preflight import FEATURE, RestCheck, active_alarm
-from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached, quantization_floor
+from servotool.tuning.sampling import Sampler, Trace, TravelLimitReached
 from servotool.tuning.stable_hold import StableHold, pilot_settings
 
-__all__ = ["IdentificationFailed", "IdentificationRefused", "Identifier", "Result", "Trace", "TravelExceeded"]
-
-
-class IdentificationFailed(ServoError):
-    """The motion ran but the result is not trustworthy (or the drive reported failure)."""
-
-    exit_code = 1
-
-
-class TravelExceeded(IdentificationFailed):
-    """The axis moved further than the travel limit; the motion was stopped."""
+__all__ = ["IdentificationRefused", "Identifier", "Result", "Trace"]
 
 
 @dataclass
@@ -79,13 +70,10 @@ class Identifier:
         self.keepalive_s = keepalive_s
         self.trace = Trace()  # filled while the motion runs; kept when it fails
 
-    def _eng(self, entry: Entry) -> float:
-        return float(raw_to_eng(entry, self.drive.read_entries([entry])[0].raw))
-
     def current_ratio(self) -> float | None:
         """The drive's configured load ratio; None where the profile maps no inertia-ratio parameter."""
         entry = self.p.role("inertia_ratio")
-        return self.p.load_ratio_from_param(self._eng(entry)) if entry is not None else None
+        return self.p.load_ratio_from_param(_eng(self.drive, entry)) if entry is not None else None
 
     # ----- host method ---------------------------------------------------------------------------------------
     def run_host(
@@ -98,31 +86,17 @@ class Identifier:
             return self._run_host(plan, progress, rest)
 
     def _run_host(self, plan: MotionPlan, progress: Callable[[str], None] | None, rest: RestCheck | None) -> Result:
-        run = _HostRun(self, plan, progress, rest)
+        p, d = self.p, self.drive
+        mover = Mover(
+            d, self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d), FEATURE, self.timing
+        )
+        limit_e = p.role("torque_limit_fwd")
+        torque_limit = _eng(d, limit_e) if limit_e is not None else None
+        old_ratio = self.current_ratio()
+        estimate = trace_estimate(p, torque_limit)
+        run = _HostRun(mover, self.timing, plan, estimate, torque_limit, old_ratio, progress, rest)
         self.trace = run.sampler.trace
         return run.run()
-
-    def _estimate(self, settings: EstimatorSettings, torque_limit: float | None, rate: float) -> InertiaEstimate:
-        motor = self.p.motor
-        assert motor is not None
-        # Fast links give many samples per ramp: allow windows long enough to span ~1/5 s.
-        cfg = replace(settings, max_window_intervals=max(6, int(rate / 5)))
-        est = estimate_inertia(
-            self.trace.t,
-            self.trace.aligned_speed(),
-            self.trace.torque,
-            rated_torque_nm=motor.rated_torque_nm,
-            rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
-            torque_limit_pct=torque_limit,
-            settings=cfg,
-        )
-        return quantization_floor(
-            est,
-            self.trace,
-            self.p.need_role("torque_feedback", FEATURE).scale,
-            motor.rated_torque_nm,
-            cfg.max_rel_uncertainty,
-        )
 
     # ----- drive method --------------------------------------------------------------------------------------
     def run_drive(self, timeout_s: float = 30.0, keep: bool = True) -> Result:
@@ -167,6 +141,37 @@ class Identifier:
         return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)
 
 
+Estimate = Callable[[Trace, EstimatorSettings], InertiaEstimate]
+"""A trace fitted as its drive's identification fits it, with the settings asked for (the pilot's or the final)."""
+
+
+def trace_estimate(profile: Profile, torque_limit_pct: float | None) -> Estimate:
+    """How this drive's traces are fitted: windows up to about a fifth of a second at the trace's sampling rate (a
+    fast link gives many samples a ramp), the torque reading's step as its register states it, saturation at the
+    drive's torque limit."""
+    motor = profile.motor
+    assert motor is not None
+    step_pct = profile.need_role("torque_feedback", FEATURE).scale
+
+    def estimate(trace: Trace, settings: EstimatorSettings) -> InertiaEstimate:
+        cfg = replace(settings, max_window_intervals=max(6, int(trace.rate() / 5)), torque_step_pct=step_pct)
+        return estimate_inertia(
+            trace.t,
+            trace.aligned_speed(),
+            trace.torque,
+            rated_torque_nm=motor.rated_torque_nm,
+            rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
+            torque_limit_pct=torque_limit_pct,
+            settings=cfg,
+        )
+
+    return estimate
+
+
+def _eng(drive: Drive, entry: Entry) -> float:
+    return float(raw_to_eng(entry, drive.read_entries([entry])[0].raw))
+
+
 FIT_LEAD_S = 1.0  # the dead-man is fed before an estimate between moves as if it took up to this long
 REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) between moves
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
@@ -176,18 +181,24 @@ class _HostRun:
     """One host identification: the pilot, the planned cycles and the fit, on one Jogger and one Sampler."""
 
     def __init__(
-        self, ident: Identifier, plan: MotionPlan, progress: Callable[[str], None] | None, rest: RestCheck | None
+        self,
+        jogger: Mover,
+        timing: Clock,
+        plan: MotionPlan,
+        estimate: Estimate,
+        torque_limit: float | None,
+        old_ratio: float | None,
+        progress: Callable[[str], None] | None,
+        rest: RestCheck | None,
     ) -> None:
-        p, d = ident.p, ident.drive
-        self.ident, self.plan, self.progress, self.timing = ident, plan, progress, ident.timing
-        beat_s = ident.keepalive_s if ident.keepalive_s is not None else keepalive_interval_s(d)
-        self.jogger = Mover(d, beat_s, FEATURE, self.timing)
+        d = jogger.drive
+        p = d.profile
+        self.drive, self.jogger, self.timing, self.plan, self.progress = d, jogger, timing, plan, progress
+        self.estimate, self.torque_limit, self.old_ratio = estimate, torque_limit, old_ratio
+        jogger.protect_for(plan.speed_rpm, plan.travel_limit_rev)  # the drive's own, set with the settings
         self.jog_accel = p.need_role("jog_accel", FEATURE)
         assert p.motor is not None
         self.rated_rpm = p.motor.rated_speed_rpm
-        limit_e = p.role("torque_limit_fwd")
-        self.torque_limit = ident._eng(limit_e) if limit_e is not None else None
-        self.old_ratio = ident.current_ratio()
         self.stop_band = max(3.0, 4.0 * (rest.speed_noise_rpm if rest is not None else 0.0))
         self.sampler = Sampler(d, self.timing, plan.travel_limit_rev, self._beat)
         # A torque read in whole percent: its step error would repeat in every move of the same acceleration.
@@ -198,6 +209,7 @@ class _HostRun:
         self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")  # the test speed, its cap and bound
 
     def _beat(self, lead_s: float = 0.0) -> None:
+        self.jogger.watch_inputs()
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
         # take samples' time on a slow line.
         bound = self.jogger.dead_man
@@ -211,7 +223,7 @@ class _HostRun:
         500 ms watchdog)."""
         self._beat(lead_s=max(FIT_LEAD_S, 2.0 * self.fit_s))
         start = self.timing.now()
-        est = self.ident._estimate(settings, self.torque_limit, self.sampler.rate())
+        est = self.estimate(self.sampler.trace, settings)
         self.fit_s = max(self.fit_s, self.timing.now() - start)
         return est
 
@@ -258,8 +270,8 @@ class _HostRun:
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
                 break
         # At rest for two samples and, where the next move's settings go in fewer requests (Mover.folds), half a
-        # ramp: the loop settles, as those requests used to let it (without it DSX7E at 19200 was accepted less
-        # often; the speed route, unchanged, keeps its rest: more changed SDC's result on a borderline machine).
+        # ramp: the loop gets the time to settle that those requests' own time gave it (the speed route keeps its
+        # rest).
         rest = self.timing.now() + (REST_RAMPS * self.ramp if self.jogger.folds else 0.0)
         self.sample()
         self.sample()
@@ -268,7 +280,7 @@ class _HostRun:
         guard.ended()
         if v_stop > self.stop_band:
             guard.coasted(abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0, v_stop)
-        active = active_alarm(self.ident.drive)
+        active = active_alarm(self.drive)
         if active:
             raise IdentificationFailed(f"the drive stopped the identification with alarm {active}")
         peak = max((abs(q) for q in trace.torque[first:]), default=0.0)
@@ -320,14 +332,13 @@ class _HostRun:
 
     def _dithered(self, cycle: int, speed: float) -> tuple[float, float]:
         """Ramp and speed of a cycle: a torque read in coarse steps gets a different acceleration in every cycle
-        (planning.dithered). A finer reading only where the planned ramp sits at its floor (a fast line: DSX7E at
-        115200), by the same shorter ramps at the same speed: stronger accelerations for light loads, where the
-        floor, not the samples a ramp needs, kept them weak (bench: 55 -> 59 of 60 accepted); on slower lines
-        (DSX7E 19200: 53 -> 50, one travel trip) the planned ramps stay."""
+        (planning.dithered). A finer reading only where the planned ramp sits at its floor (a fast line), by the same
+        shorter ramps at the same speed: stronger accelerations for light loads, where the floor, not the samples a
+        ramp needs, kept them weak; on slower lines the planned ramps stay."""
         if not self.coarse and self.plan.ramp_s > MIN_RAMP_S:
             return self.ramp, speed
         # No shorter than twice the longest gap yet: a host stall must not take a whole ramp before the stop guard
-        # sees the axis again (bench/host_stalls.py).
+        # sees the axis again.
         ramp, slower = dithered(self.ramp, speed, cycle, self.sampler.rate(), STALL_RAMPS * self.guard.gap_s)
         return ramp, slower if self.coarse else speed
 
@@ -375,7 +386,7 @@ class _HostRun:
         settings = EstimatorSettings(fit_load_torque=len(self.plan.directions) > 1)
         jogger = self.jogger
         saved = jogger.settings_to_restore()
-        hold = StableHold(self.ident.drive, jogger.route.kind, saved)
+        hold = StableHold(self.drive, jogger.route.kind, saved)
         try:
             cycles = self.cycles(self.pilot(hold, settings), settings)
             self.settle()
@@ -386,7 +397,7 @@ class _HostRun:
             jogger.leave_and_restore(saved)
         s = self.sampler
         rate = s.rate()
-        est = self.ident._estimate(settings, self.torque_limit, rate)
+        est = self.estimate(s.trace, settings)
         result = Result(
             "host", self.old_ratio, est.load_ratio, est, s.trace, self.plan, s.travel_rev, s.elapsed(), rate, cycles
         )

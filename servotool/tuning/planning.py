@@ -15,7 +15,7 @@ from servotool.tuning.preflight import DEFAULT_SAMPLES_PER_S, RestCheck, check_a
 # position reads and keep-alives share the link). Fewer leave too few windows between torque steps and let the axis
 # run further between two samples than the travel guard can foresee; more lower the acceleration (it falls with the
 # square of the ramp time at a fixed travel), and a low-inertia axis with a noisy torque reading then cannot reach
-# the precision within the time budget (10 intervals: 2.0-2.7 % at 19200 baud with 0.4 % rated torque noise).
+# the precision within the time budget.
 SAMPLES_PER_RAMP = 7.0
 MIN_RAMP_S = 0.1  # ... and at least this long (a loop with factory gains on an unknown load follows them)
 
@@ -37,14 +37,14 @@ PILOT_SHARE = 0.25
 # (a shorter ramp at the same speed, or a lower speed where the ramp would get too few samples). The reading then
 # misreads the acceleration torque by a different fraction of its step in every cycle instead of by the same
 # amount: the step error averages out over the cycles and the move jackknife sees it, where with one acceleration
-# it repeats identically and only a fixed floor (sampling.quantization_floor) can cover it.
+# it repeats identically and only a fixed floor (fit.quantization) can cover it.
 DITHER_MIN = 0.4
 COARSE_TORQUE_STEP_PCT = 0.5  # readings in steps this coarse (% of rated) are dithered
 MIN_SAMPLES_PER_RAMP = 5.0  # a dithered ramp keeps this many sampling intervals (else the speed is lowered)
-# ... and at least this long. Below the planned ramps' 0.1 s floor: on a fast line (IS620P at 57600, 150 samples/s)
-# that floor, not the samples, bounded the ramp, so every dithered cycle lowered the speed instead, weakening the
-# accelerations of light loads whose acceleration torque is already near the reading's step (refused 12 of 60 on
-# the bench, 3 with it); the planned ramps, which the pilot and the travel guard are learned with, keep the 0.1 s.
+# ... and at least this long: below the planned ramps' floor, since on a fast line that floor, not the samples,
+# bounds the ramp, and lowering the speed instead would weaken the accelerations of light loads whose acceleration
+# torque is already near the reading's step; the planned ramps, which the pilot and the travel guard are learned
+# with, keep their floor.
 DITHER_MIN_RAMP_S = 0.05
 
 
@@ -193,8 +193,8 @@ def plan_host_motion(
 
 # A suggested travel aims this far past the shortfall, and is at least MIN_REMEDY_GAIN times the old one: the
 # uncertainty falls with the acceleration but less than in proportion (a faster move loses more samples to the
-# loop's kinks), and a few moves' jackknife misjudges it by a third (bench/inertia_accuracy.py --remedies, SD25 and
-# SDC at 9600, 30 machines each: 1.25x and at least 1.5x got 28 of 42 refusals accepted when followed; these, 32).
+# loop's kinks), and a few moves' jackknife misjudges it by a third (bench/inertia_accuracy.py --remedies counts how
+# many refusals the suggestion cures).
 REMEDY_MARGIN = 1.6
 MIN_REMEDY_GAIN = 2.0
 
@@ -202,9 +202,8 @@ MIN_REMEDY_GAIN = 2.0
 @dataclass(frozen=True)
 class Remedy:
     """A longer travel for a host identification refused for too little excitation where the travel bounded its
-    moves: at the same ramps the speed, the acceleration and its torque grow in proportion to the travel. What a
-    refusal used to suggest, more repeats, helps far less on a slow line (SD25 at 9600: 20 cycles, 46 s, left all 5
-    refusals of 6 machines refused)."""
+    moves: at the same ramps the speed, the acceleration and its torque grow in proportion to the travel, where more
+    repeats help far less on a slow line."""
 
     travel_rev: float  # the travel limit the motion had
     suggested_rev: float  # the one to ask for

@@ -4,9 +4,8 @@ due, and the travel band the axis has covered."""
 from __future__ import annotations
 
 import csv
-import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -15,13 +14,12 @@ from servotool.clock import Clock
 from servotool.drive import Drive, coalesce_reads
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
-from servotool.tuning.estimator import InertiaEstimate
 from servotool.tuning.preflight import FEATURE
 
 # Position costs a request of its own on every profile (no profile maps it next to speed and torque with readable
 # registers between): it is read at most this share of the link's time, and at least every POSITION_MAX_GAP_S.
-# Between reads the travel is predicted from the speed. At 9600 baud a position read every 50 ms (the old pace)
-# took 60 % of the line: the samples the estimator needs came at half the rate the line carries.
+# Between reads the travel is predicted from the speed: on a slow line a fixed fast pace of position reads would
+# take the samples the estimator needs.
 POSITION_SHARE = 0.06
 POSITION_MIN_GAP_S = 0.05
 POSITION_MAX_GAP_S = 0.5
@@ -29,6 +27,8 @@ POSITION_MAX_GAP_S = 0.5
 
 @dataclass
 class Trace:
+    """What an identification sampled: times (s from its start), speed (rpm), torque (% of rated), position (rev)."""
+
     t: list[float] = field(default_factory=list)
     speed: list[float] = field(default_factory=list)
     torque: list[float] = field(default_factory=list)
@@ -41,8 +41,8 @@ class Trace:
         """Speed at the torque's sample times; the speed itself if read together.
 
         Cubic (Hermite, slopes from the neighbours) between speed reads, held after the last: a straight line
-        between reads half an interval away misplaces a curving speed (a sluggish loop rings through its ramps), and
-        SD25 at 19200 gave J 2-3 % high, outside its 3 sigma, with it (the cubic: within 1 %)."""
+        between reads half an interval away misplaces a curving speed (a sluggish loop rings through its ramps) and
+        biases J."""
         if len(self.speed_t) != len(self.t) or len(self.t) < 2:
             return list(self.speed)
         ts, v, t = np.asarray(self.speed_t), np.asarray(self.speed), np.asarray(self.t)
@@ -57,6 +57,11 @@ class Trace:
             + (x**3 - x**2) * h * slope[i + 1]
         )
         return [float(s) for s in out]
+
+    def rate(self) -> float:
+        """Samples per second, first to last."""
+        t = self.t
+        return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else 0.0
 
     def save(self, path: Path) -> None:
         try:
@@ -105,8 +110,7 @@ class Sampler:
 
     def rate(self) -> float:
         """Samples per second so far, first to last (the motion's own set-up and put-back writes left out)."""
-        t = self.trace.t
-        return (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else 0.0
+        return self.trace.rate()
 
     def interval(self) -> float:
         """The last sampling interval (0 before the second sample)."""
@@ -163,75 +167,3 @@ class Sampler:
         self.pos, self.pos_t, self.pred = x, now, x
         first = len(self.trace.t) == 1
         self.lo, self.hi = (x, x) if first else (min(self.lo, x), max(self.hi, x))
-
-
-def quantization_floor(
-    est: InertiaEstimate, trace: Trace, step_pct: float, rated_nm: float, max_rel: float
-) -> InertiaEstimate:
-    """The estimate with the torque reading's resolution in its uncertainty (refused where that is too much).
-
-    A torque read in whole percent (SD25, SDC, IS620P) that stays on one value while the axis accelerates misreads
-    the torque by the same amount in every such sample: an error that repeats move after move, which neither the
-    least-squares spread nor the jackknife sees (SD25 at 9600 accepted J 18 % off with a stated 0.7 %, IS620P
-    8.6 % off with 0.9 %, both with noise-free readings). Readings that move between steps (noise, a torque that
-    varies) average it out. J follows the difference between accelerating and braking torque, over two directions
-    (the fit's friction and load terms take up what is common): the floor is (q / sqrt 12) / 2 x the share of
-    moving samples that read as their neighbour, over the RMS acceleration torque.
-
-    The part that differs between moves (dithered accelerations) is the jackknife's in principle, but the
-    adaptive repeats stop as soon as the uncertainty looks small enough: with 8-12 moves that is often when the
-    jackknife happens to fall short. So that part counts as well, as a move's misreading (q / sqrt 12 / sqrt 2 over
-    the acceleration torque) averaged over the moves (IS620P at 19200: 2 of 36 accepted results outside their
-    3 sigma without it, one -2.0 % against a stated 0.45 %; 1 of 36 with it, and none more refused).
-    """
-    if not est.ok or step_pct <= 0 or len(trace.t) < 4:
-        return est
-    t, rpm, pct = np.asarray(trace.t), np.asarray(trace.aligned_speed()), np.asarray(trace.torque)
-    moving = np.abs(rpm) > 0.05 * float(np.max(np.abs(rpm)))
-    pair = moving[1:] & moving[:-1]
-    if np.count_nonzero(pair) < 4:
-        return est
-    accel = np.diff(rpm)[pair] / np.diff(t)[pair] * np.pi / 30.0  # rad/s^2
-    signal_pct = est.j_total_kgm2 * float(np.sqrt(np.mean(accel**2))) / rated_nm * 100.0
-    stuck = float(np.mean(np.diff(pct)[pair] == 0.0))
-    share, moves = _repeated_share(moving, pair, accel, est.j_total_kgm2 / rated_nm * 100.0, step_pct)
-    misread = step_pct / 12**0.5 * stuck / max(signal_pct, 1e-9)  # one reading's, relative to the signal
-    rel_q = math.hypot(misread / 2.0 * share, misread / 2**0.5 / max(moves, 1) ** 0.5)
-    rel = math.hypot(est.j_std_kgm2 / est.j_total_kgm2, rel_q)
-    if rel_q <= 0:
-        return est
-    j_std = rel * est.j_total_kgm2
-    out = replace(est, j_std_kgm2=j_std, ratio_std=j_std / est.j_total_kgm2 * (1.0 + est.load_ratio))
-    if rel > max_rel:
-        return replace(
-            out,
-            ok=False,
-            reason=f"inertia too uncertain ({100 * rel:.1f} % of J_total > "
-            f"{100 * max_rel:g} %: the torque reads in {step_pct:g} % steps against an acceleration "
-            f"torque of {signal_pct:.1f} %)",
-            advice="use stronger accelerations or a faster line",
-            shortfall=rel / max_rel,
-        )
-    return out
-
-
-def _repeated_share(
-    moving: np.ndarray, pair: np.ndarray, accel: np.ndarray, pct_per_accel: float, step_pct: float
-) -> tuple[float, int]:
-    """The share of the step error that every move repeats, and the number of moves it counts. Moves whose
-    acceleration torques spread evenly over a range s (in reading steps) misread it by the sawtooth's values over
-    that range: their common part has, over the unknown offset, an RMS of (1 - s) of one move's for s <= 1 and at
-    most 0.17 of it beyond (none at whole steps); the part that differs between moves is the jackknife's (and
-    quantization_floor's). Without dithered ramps s is ~0: one."""
-    run = np.cumsum(np.concatenate(([0], (moving[1:] & ~moving[:-1]).astype(int))))[1:][pair]
-    levels = [
-        float(np.sqrt(np.mean(accel[run == k] ** 2))) * pct_per_accel
-        for k in np.unique(run)
-        if np.count_nonzero(run == k) >= 2
-    ]
-    # The pilot's weak moves carry little weight in the fit (and would stretch the range): left out.
-    strong = [v for v in levels if v >= 0.5 * max(levels, default=0.0)]
-    if len(strong) < 4:
-        return 1.0, len(strong)
-    spread = (max(strong) - min(strong)) / step_pct
-    return max(1.0 - spread, 0.3 / max(spread, 1.0)), len(strong)

@@ -1,16 +1,12 @@
-"""A position hold that stays stable while the load is still unknown: identification on a position-mode route.
+"""A position hold that stays stable while the load is still unknown, for motion on a route that holds position.
 
-IS620P's segment route (issue 15) ends every move in the drive's position hold. The drive computes its speed-loop
-gain from the *configured* inertia ratio (H08-00 is a bandwidth in Hz, which it only is for the inertia H08-15
-describes), while the position gain H08-02 and the speed integral H08-01 are absolute. With a load far above the
-configured ratio the speed loop is slow, the position loop and the integral are not, and the hold swings with
-growing amplitude: at the factory gains (25.0 Hz, 31.83 ms, 40.0) and ratio 1.00 the closed loop's poles
-(tuning.margins.least_damping) grow for any load above about 16; issue 16 saw 37 and 49 run into the travel guard.
-The CANopen manual prints the gains and H08-15 (0.00~120.00, default 1.00, "load moment-of-inertia ratio";
-L3260-3272) but no formula for how the ratio enters the speed loop (the usual Kp = 2 pi f J_motor (1 + ratio) is
-assumed, as in the simulator); its commissioning runs velocity mode at low speed before the gains are adjusted
-(section 4.4 steps 8-9, L1447-1448), and the drive's own offline identification (H09-05..H09-09) runs a speed
-profile, not a position hold.
+A segment route (IS620P's) ends every move in the drive's position hold. The drive computes its speed-loop gain
+from the *configured* inertia ratio (H08-00 is a bandwidth in Hz only for the inertia H08-15 describes), while the
+position gain H08-02 and the speed integral H08-01 are absolute: with a load far above the configured ratio the speed
+loop is slow, the position loop and the integral are not, and the hold swings up (at the factory gains and ratio the
+closed loop's poles, control.margins.least_damping, grow for any load above about 16). unverified: the CANopen manual
+prints the gains and H08-15 (0.00~120.00, default 1.00; L3260-3272) but no formula for how the ratio enters the
+speed loop; the usual Kp = 2 pi f J_motor (1 + ratio) is assumed, as in the simulator.
 
 So, on a route that holds position, the identification
   - before the pilot: sets the ratio as high as an unloaded motor stays well damped (PILOT_LIGHT_DAMPING: a
@@ -21,7 +17,7 @@ So, on a route that holds position, the identification
     how far the loop lags its ramps, which a slower loop would exceed) and takes the position gain and integral
     back to the drive's own as far as a load within PILOT_SPREAD of that estimate allows.
 A motion that must show or keep the drive's own speed loop while the load is unknown (the step check before
-identification, a JOG: guard_hold) lowers only the position gain (soften_position).
+identification, a JOG: guarded_jogger) lowers only the position gain (soften_position).
 Each change is a parameter written through ops.params.write_one (RAM only where the drive has a switch: the
 identification runs inside ops.eeprom.ram_writes), its original value recorded in the motion's settings to put
 back (motion.jogger.Jogger.leave_and_restore), so the drive ends as it was found.
@@ -32,6 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from servotool.clock import Clock
 from servotool.drive import Drive
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.gain_units import from_canonical, to_canonical
@@ -39,9 +36,9 @@ from servotool.model.profile import Entry
 from servotool.motion.jogger import Jogger
 from servotool.ops import journal
 from servotool.ops.params import write_one
-from servotool.tuning.estimator import EstimatorSettings, InertiaEstimate
-from servotool.tuning.gains import LoopGains, rigidity_scale
-from servotool.tuning.margins import least_damping
+from servotool.tuning.control.gains import LoopGains, rigidity_scale
+from servotool.tuning.control.margins import least_damping
+from servotool.tuning.fit import EstimatorSettings, InertiaEstimate
 
 # The least damping ratio the loops' poles may have: a swing shrinks to 40 % or less each cycle (exp(-2 pi z)).
 HOLD_MIN_DAMPING = 0.15
@@ -50,9 +47,9 @@ PILOT_RATIO_STEP = 1.25
 HEAVIEST_WITHOUT_PARAMETER = 100.0  # the heaviest load assumed where the profile maps no inertia-ratio parameter
 PILOT_SPREAD = 2.0  # after the pilot: stable for a true J_total within [J/2, 2 J] of its estimate
 PILOT_MAX_REL_STD = 0.25  # a pilot estimate with a larger relative uncertainty of J_total is not used
-# The pilot's fit may use fewer windows than the final one (two short moves), but not smaller speed changes: at
-# 1.5x the speed noise (tried) a bare motor with 30 % friction and 1 % noise was fitted at a ratio of 811 with a
-# 'usable' uncertainty, and that ratio on the drive ended in the overload alarm.
+# The pilot's fit may use fewer windows than the final one (two short moves), but not smaller speed changes: a fit on
+# speed changes near the noise can give a far too high ratio with a 'usable' uncertainty, and that ratio written to
+# the drive trips its overload alarm.
 PILOT_MIN_WINDOWS = 4
 INTEGRAL_STEP = 1.5
 POSITION_STEP = 1.5
@@ -162,7 +159,7 @@ class StableHold:
     def _pilot_ratio(self) -> float:
         """The highest ratio that keeps an unloaded motor's loops damped by PILOT_LIGHT_DAMPING: raised from the
         configured one (a stiffer speed loop breaks a heavy load away against friction in the pilot), or lowered
-        where the configured one is far above a light load (H08-15 = 30 on a bare motor ended in the overload
+        where the configured one is far above a light load (a loop that stiff drives a bare motor into the overload
         alarm)."""
         assert self.original is not None
         e = self.entries.get("inertia_ratio")
@@ -276,11 +273,12 @@ class StableHold:
         self.setting = setting
 
 
-def guard_hold(jogger: Jogger) -> Jogger:
-    """The jogger, its JOGs made with the position gain lowered as the step check's (StableHold.soften_position)
-    where its route holds position: IS620P at the factory ratio with a load of 37 swung from a 100 rpm JOG up to
-    1250 rpm after the stop. The gain is put back with the JOG's other settings."""
-    jogger.prepare = lambda saved: StableHold(jogger.drive, jogger.route.kind, saved).soften_position()
+def guarded_jogger(drive: Drive, clock: Clock | None = None) -> Jogger:
+    """The Jogger every JOG of an unknown load runs on (`servotool jog`, a plan's jog step): where its route holds
+    position, each JOG lowers the position gain as the step check does (StableHold.soften_position), since a hold
+    tuned for a lighter load swings up after the stop; the gain goes back with the JOG's other settings."""
+    jogger = Jogger(drive, clock=clock)
+    jogger.prepare = lambda saved: StableHold(drive, jogger.route.kind, saved).soften_position()
     return jogger
 
 

@@ -18,9 +18,10 @@ from servotool.model.profile import Entry, Profile
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, identify, planning, preflight, step
+from servotool.tuning.control.gains import GainSuggestion, rigidity_scale, suggest_gains
+from servotool.tuning.control.margins import Margins
+from servotool.tuning.errors import IdentificationFailed, TuneDeclined
 from servotool.tuning.gain_writes import GainChange
-from servotool.tuning.gains import GainSuggestion, rigidity_scale, suggest_gains
-from servotool.tuning.margins import Margins
 from servotool.tuning.planning import MotionPlan
 from servotool.tuning.preflight import RestCheck
 from servotool.tuning.step import StepResponse
@@ -148,18 +149,26 @@ class TuneResult:
         return self.proposal.ratio
 
 
-class TuneDeclined(ServoError):
-    """The operator said no before anything moved."""
-
-
 class GainsRolledBack(ServoError):
-    """The step check after writing the gains failed; the previous gains were written back."""
+    """The step check after writing the gains failed; the previous gains were written back. `reason` is why the
+    check failed, `facts` the rollback as a report carries it."""
 
     exit_code = 1
 
-    def __init__(self, message: str, response: StepResponse | None) -> None:
+    def __init__(self, message: str, response: StepResponse | None, reason: str = "") -> None:
         super().__init__(message)
-        self.response = response
+        self.response, self.reason = response, reason
+        self.kept: list[str] = []  # codes written before the gains that stay (the inertia ratio)
+        self.ratio: float | None = None  # the identified ratio those gains were for
+
+    @property
+    def facts(self) -> dict[str, object]:
+        return {
+            "rolled_back": True,
+            "reason": self.reason or str(self),
+            "kept": self.kept,
+            "step_check": self.response.summary() if self.response is not None else None,
+        }
 
 
 def tune_inertia(
@@ -215,11 +224,17 @@ def tune_inertia(
     written, persisted = _write(drive, proposal, approved, request.save)
     # The host method stores the ratio by writing it; the drive method's drive stored its own (kept unless dry run).
     stored = (proposal.writes_ratio and written != []) if request.method == "host" else not request.dry_run
-    verified = (
-        verify_gains(drive, proposal.gain_changes, request, clock)
-        if request.verify and approved and proposal.gain_changes
-        else None
-    )
+    try:
+        verified = (
+            verify_gains(drive, proposal.gain_changes, request, clock)
+            if request.verify and approved and proposal.gain_changes
+            else None
+        )
+    except GainsRolledBack as exc:
+        gains = {c.entry.code for c in proposal.gain_changes}
+        exc.kept = [entry.code for entry, _raw in written if entry.code not in gains]
+        exc.ratio = proposal.ratio
+        raise
     changed = stored or bool(written)  # SDC stores no ratio: its gains changed all the same
     after = verified or (_step(drive, step_s, clock) if before is not None and changed else None)
     return TuneResult(
@@ -251,14 +266,14 @@ def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, 
         for c in changes:
             write_one(drive, c.entry, c.old_raw)
     raise GainsRolledBack(
-        f"step check after writing the gains failed ({fault}): the previous gains were written back", response
+        f"step check after writing the gains failed ({fault}): the previous gains were written back", response, fault
     )
 
 
 def check_drive_result(drive: Drive, result: identify.Result, request: TuneRequest, clock: Clock) -> None:
-    """A drive-side result is checked before it is kept: the host method measures the same load (it also fits the
-    friction the drive's method may mistake for inertia, +71 % at 30 % friction on the simulated DSX7E); a result
-    outside the host's 3 sigma (plus 5 % of J_total) is put back to the previous value and refused."""
+    """A drive-side result is checked before it is kept: the host method measures the same load, and also fits the
+    friction the drive's own method may mistake for inertia; a result outside the host's 3 sigma (plus 5 % of
+    J_total) is put back to the previous value and refused."""
     motion, rest = request.host_motion(drive, clock)
     host = identify.Identifier(drive, clock).run_host(motion, rest=rest)
     est = host.estimate
@@ -270,7 +285,7 @@ def check_drive_result(drive: Drive, result: identify.Result, request: TuneReque
         entry, raw = gain_writes.ratio_raw(drive, result.old_ratio)
         with eeprom.persistence(drive, request.save):
             write_one(drive, entry, raw)
-    raise identify.IdentificationFailed(
+    raise IdentificationFailed(
         f"the drive's identification gave load ratio {result.new_ratio:.2f}, implausible against the host "
         f"measurement {host.new_ratio:.2f} ± {est.ratio_std:.2f} (friction {est.coulomb_nm:.3g} N·m): the previous "
         f"ratio {result.old_ratio:.2f} was put back; use --method host"

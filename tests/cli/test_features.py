@@ -30,7 +30,15 @@ def test_diff_factory_compares_the_drive_with_its_defaults(cli):
     r = cli("--port", "sim", "param", "diff", "--factory", "--json")
     assert r.code == 0
     assert r.json()["differences"] == [
-        {"code": "Pn101", "name": "Speed loop gain", "unit": "Hz", "effect": "unknown", "a": 25.0, "b": 18.0}
+        {
+            "code": "Pn101",
+            "name": "Speed loop gain",
+            "unit": "Hz",
+            "effect": "unknown",
+            "a": 25.0,
+            "b": 18.0,
+            "value_unverified": "unit/scale not printed (unit column empty); inferred",
+        }
     ]
     assert cli("--port", "sim", "param", "diff").code == 2  # neither a file nor --factory
 

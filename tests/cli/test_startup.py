@@ -1,5 +1,6 @@
 """Fast start: a one-shot command loads only what it uses (no numpy, pydantic or other commands' modules;
-piped, no rich)."""
+piped, no rich); --help lists the commands without loading one. pydantic comes with typer 0.29, which builds a
+pydantic adapter for every option (pyproject holds typer below it)."""
 
 from __future__ import annotations
 
@@ -100,3 +101,9 @@ def test_a_one_shot_ends_after_its_exit_handlers_without_tearing_the_interpreter
 def test_the_exit_still_waits_for_a_thread_that_is_not_a_daemon(sim_dir):
     r = ended("--thread", "--version")
     assert r.returncode == 0 and "THREAD DONE" in r.stderr and "ATEXIT" in r.stderr
+
+
+def test_help_lists_the_commands_without_loading_them_rich_or_markdown(sim_dir):
+    names = ("servotool.cli.param", "servotool.cli.sim", "servotool.cli.trace", "pygments", "markdown_it")
+    probe = PROBE.replace('"numpy", ', f'*{names!r}, "numpy", ')
+    assert loaded({}, "--help", probe=probe) == []

@@ -48,7 +48,14 @@ def test_unknown_code_suggests_and_the_fix_command_keeps_the_connection_options(
 def test_other_spellings_units_and_enum_names_end_to_end(cli):
     r = cli("--port", "sim", "-P", "is620p", "param", "set", "H08.00=30Hz", "--json")
     assert r.code == 0, r.err
-    assert r.json()["changed"][0] == {"code": "H08-00", "old": 25.0, "new": 30.0, "unit": "Hz", "effect": "unknown"}
+    assert r.json()["changed"][0] == {
+        "code": "H08-00",
+        "old": 25.0,
+        "new": 30.0,
+        "unit": "Hz",
+        "effect": "unknown",
+        "value_unverified": "raw scale inferred from the decimals printed in the range",
+    }
     r = cli("--port", "sim", "param", "set", "Pn027=3000Hz")
     assert r.code == 2 and "is in rpm" in r.err
     r = cli("--port", "sim", "-P", "sdc", "param", "set", "PN4=jog")
@@ -132,14 +139,19 @@ def test_a_fields_meaning_is_accepted_by_name(cli):
 
 def test_what_a_killed_restore_left_is_told_with_quiet_and_the_users_options(cli, sim_dir, tmp_path):
     from servotool.files import backup_dir
-    from servotool.ops.journal import journal_dir, port_key
+    from servotool.model.loader import load_profile
+    from servotool.ops.journal import journal_dir, record_path
+    from servotool.session import sim_bus
+
+    class Drive:  # what names a drive's record: its bus, profile and unit
+        port, unit, profile = sim_bus("dsx7e"), 1, load_profile("dsx7e")
 
     auto = tmp_path / "auto.yaml"
     assert cli("--port", "sim", "param", "backup", "-o", str(auto)).code == 0
     assert cli("--port", "sim", "param", "set", "Pn101=25").code == 0  # the dead restore's one write
     assert journal_dir() == backup_dir() / "journal"
     journal_dir().mkdir(parents=True, exist_ok=True)
-    record = journal_dir() / f"{port_key(f'sim:{sim_dir.resolve()}')}-unit1.json"
+    record = record_path(Drive())  # type: ignore[arg-type]
     record.write_text(
         json.dumps({"op": {"name": "restore", "auto_backup": str(auto), "targets": {"Pn101": 250}}, "pid": 1})
     )

@@ -11,7 +11,7 @@ IS620P_SETUP = ("H02-00=1", "H05-00=2", "H05-02=10000", "H11-00=0", "H0C-09=1", 
 def get(cli, profile, *codes):
     r = cli("--port", "sim", "--profile", profile, "param", "get", *codes, "--json")
     assert r.code == 0, r.err
-    return {d["code"]: d["value"] for d in r.json()}
+    return {d["code"]: d.get("text", d["value"]) for d in r.json()}  # an encoded value in the manual's form
 
 
 def test_sd25_writes_are_ram_only_by_default_and_saved_with_save(cli):
@@ -119,24 +119,16 @@ def test_tune_says_when_its_result_is_in_ram_only_and_save_stores_it(cli):
 
 def test_a_switch_left_changed_by_a_dead_process_is_put_back_by_the_next_command(cli, sim_dir):
     """The host's journal says Po505 was d 1 1 (RAM only) before a process that died changed it to EEPROM."""
-    from servotool.files import sim_state_dir
-    from servotool.model.loader import load_profile
+    from servotool.connection import ConnectOptions, resolve
     from servotool.ops import journal
-    from servotool.sim.device import SimulatedDrive
+    from servotool.session import open_drives
 
-    drive = SimulatedDrive(load_profile("sd25"), 1)
-    with drive.session():
-        drive.bank.ram["Po505"] = drive.bank.eeprom["Po505"] = 0x0100  # left on EEPROM
-        drive.bank.save()
-
-    class Port:  # what the journal needs of a drive: its port name and unit
-        port, unit = f"sim:{sim_state_dir().resolve()}", 1
-        profile = load_profile("sd25")
-
-    journal.note_switch(Port(), "Po505", 0x0101)  # type: ignore[arg-type]
+    with open_drives(resolve(ConnectOptions(port="sim", profile="sd25")), notice=lambda _m: None) as (d,):
+        d.write_raw(d.profile.entry("Po505"), 0x0100)  # left on EEPROM
+        journal.note_switch(d, "Po505", 0x0101)
     (journal.journal_dir() / ".x.json.999999999.abc.tmp").write_text("left by a kill")
     r = cli("--port", "sim", "-P", "sd25", "param", "get", "Po505", "--json")
-    assert r.code == 0 and r.json()[0]["value"] == "d 1 1", r.err
+    assert r.code == 0 and r.json()[0]["text"] == "d 1 1", r.err
     assert "put Po505 back to d 1 1 (was d 1 0): a servotool process (pid" in r.err
     assert not list(journal.journal_dir().glob("*.json")) and not list(journal.journal_dir().glob("*.tmp"))
     r = cli("--port", "sim", "-P", "sd25", "param", "set", "Po110=30")
@@ -150,12 +142,12 @@ def test_writes_of_one_drive_wait_for_another_process_that_has_its_port(cli, sim
     import sys
     import time
 
-    from servotool.files import sim_state_dir
     from servotool.model.loader import load_profile
     from servotool.ops import journal
+    from servotool.session import sim_bus
 
-    class Port:
-        port, unit, profile = f"sim:{sim_state_dir().resolve()}", 1, load_profile("sd25")
+    class Port:  # what the lock needs of a drive: its bus, profile and unit
+        port, unit, profile = sim_bus("sd25"), 1, load_profile("sd25")
 
     with journal.port_lock(Port()):  # type: ignore[arg-type]
         proc = subprocess.Popen(
@@ -209,3 +201,118 @@ def test_ctrl_c_puts_the_switch_back_and_leaves_no_journal_record(sim_dir, fail_
             raise KeyboardInterrupt(when)  # the batch itself is interrupted too (a no-op if already)
     assert d.read_entries([entry])[0].raw == 1, when
     assert journal.read_record(d) is None, when
+
+
+class IgnoresWrites:
+    """A Link that acknowledges writes to one address and drops them (a drive that ignores its EEPROM switch over
+    Modbus); `after` writes of other addresses pass first (a drive that drops the switch midway: `revert` then
+    puts the switch back behind the host's back)."""
+
+    def __init__(self, link, address: int, *, after: int = 0, revert=None) -> None:
+        self.link, self.address, self.after, self.revert = link, address, after, revert
+        self.others = 0
+
+    def read(self, unit, address, count):
+        return self.link.read(unit, address, count)
+
+    def write(self, unit, address, values, **kw):
+        if address == self.address and self.revert is None:
+            return  # acknowledged, never applied
+        self.link.write(unit, address, values, **kw)
+        if address != self.address:
+            self.others += 1
+            if self.revert is not None and self.others == self.after:
+                self.revert()
+
+    def close(self):
+        self.link.close()
+
+
+def _ignoring(profile_id: str, **kw):
+    """(drive over a link that ignores the profile's EEPROM switch, the simulated drive behind it)."""
+    from servotool.clock import VirtualClock
+    from servotool.drive import Drive
+    from servotool.model.loader import load_profile
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.virtual import VirtualLink
+
+    profile = load_profile(profile_id)
+    clock = VirtualClock()
+    sim = build_drive(profile, 1, clock, persist=False)
+    link = IgnoresWrites(VirtualLink([sim], clock), profile.entry(profile.persistence.switch_code).address, **kw)
+    return Drive(link, profile, 1, port="virtual-line"), sim
+
+
+@pytest.mark.parametrize(
+    ("profile", "code", "value", "save", "switch_now"),
+    [("sd25", "Po003", "20", True, "d 1 1"), ("is620p", "H08-00", "30.0", False, "1 (store)")],
+)
+def test_a_drive_that_ignores_the_switch_ends_the_set_with_nothing_written(
+    sim_dir, profile, code, value, save, switch_now
+):
+    """Issue 30 item 4: SD25 --save printed "1 value stored in EEPROM" with EEPROM unchanged, IS620P --no-save said
+    "not saved" while it was. The switch is read back before any value is written."""
+    from servotool.ops import eeprom, journal, params
+
+    d, sim = _ignoring(profile)
+    before = (sim.bank.ram[code], sim.bank.eeprom[code])
+    plan = params.prepare_set(d, [f"{code}={value}"])
+    with pytest.raises(eeprom.SwitchNotTaken) as caught:
+        params.set_values(d, plan, save)
+    text = str(caught.value)
+    assert f"reads back {switch_now} before any value was written: nothing was written" in text, text
+    assert caught.value.exit_code == 3
+    assert (sim.bank.ram[code], sim.bank.eeprom[code]) == before  # read from the drive's own memory
+    assert journal.read_record(d) is None
+
+
+def test_restore_on_a_drive_that_ignores_the_switch_writes_nothing_and_says_why(sim_dir, tmp_path):
+    from servotool.ops import backup, params, restore
+
+    d, sim = _ignoring("sd25")
+    target = backup.take(d)
+    target.values["Po003"] = 20
+    plan = restore.restore_changes(d.profile, target, params.read_settings(d))
+    with pytest.raises(restore.RestoreFailed) as caught:
+        restore.restore(d, target, plan)
+    assert "Po505 (the EEPROM switch)" in str(caught.value) and "nothing was written" in str(caught.value)
+    assert caught.value.written == [] and caught.value.equals_backup is True
+    assert sim.bank.ram["Po003"] == sim.bank.eeprom["Po003"] == 16
+
+
+def test_a_plan_save_step_on_a_drive_that_ignores_the_switch_fails(sim_dir, tmp_path):
+    from servotool.commission.param_steps import SaveStep
+    from servotool.commission.plan import Plan, Step
+    from servotool.commission.step_type import RunContext
+    from servotool.ops import eeprom, params
+
+    d, sim = _ignoring("sd25")
+    params.set_values(d, params.prepare_set(d, ["Po003=20"]), None)  # RAM only, as the plan's set step leaves it
+    ctx = RunContext(Plan(tmp_path / "plan.yaml", {}, [1], []), False, True, lambda _i, _q: True)
+    ctx.wrote(d, d.profile.entry("Po003"), 20)
+    with pytest.raises(eeprom.SwitchNotTaken):
+        SaveStep().run(Step(0, 1, "save", None, None), d, ctx)
+    assert (sim.bank.ram["Po003"], sim.bank.eeprom["Po003"]) == (20, 16)
+
+
+def test_a_switch_the_drive_drops_midway_is_reported_with_what_was_written(sim_dir):
+    """The switch read again when the writes end: a drive that put it back on its own (here after the first value
+    write) leaves the later values in RAM only, and the command must not call them stored."""
+    from servotool.ops import eeprom, journal, params
+
+    holder: list = []
+
+    def revert() -> None:  # the drive sets Po505 back to RAM-only by itself
+        sim = holder[0]
+        sim.bank.ram["Po505"] = sim.bank.eeprom["Po505"] = 0x0101
+
+    d, sim = _ignoring("sd25", after=1, revert=revert)
+    holder.append(sim)
+    plan = params.prepare_set(d, ["Po003=20", "Po101=30"])
+    with pytest.raises(eeprom.SwitchNotTaken) as caught:
+        params.set_values(d, plan, True)
+    text = str(caught.value)
+    assert "when the writes ended: the values written may NOT be" in text, text
+    assert "written and verified before it stopped: Po003=20, Po101=30.0" in text, text
+    assert sim.bank.eeprom["Po101"] != 300  # stored it was not
+    assert journal.read_record(d) is None

@@ -1,4 +1,4 @@
-"""Dithered accelerations against a torque read in whole percent (planning.dither, sampling.quantization_floor)."""
+"""Dithered accelerations against a torque read in whole percent (planning.dither, fit.quantization)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from servotool.tuning.estimator import InertiaEstimate
+from servotool.tuning.fit.quantization import floor
 from servotool.tuning.planning import DITHER_MIN, DITHER_MIN_RAMP_S, dither, dithered
-from servotool.tuning.sampling import Trace, quantization_floor
+from servotool.tuning.sampling import Trace
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 from inertia_accuracy import identify_once
@@ -50,39 +50,19 @@ def _trace(accels: list[float]) -> Trace:
     return tr
 
 
-def _estimate() -> InertiaEstimate:
-    nan = math.nan
-    return InertiaEstimate(
-        True,
-        "",
-        J,
-        0.001 * J,
-        J / 2.6e-5 - 1,
-        0.0,
-        nan,
-        nan,
-        nan,
-        nan,
-        nan,
-        nan,
-        nan,
-        nan,
-        10.0,
-        0.5,
-        20,
-        100,
-        0,
-        3,
-        0,
-        10.0,
-    )
+def _std(trace: Trace) -> float:
+    """J's uncertainty (kg*m^2) with the floor of a whole-percent reading on a fit's own 0.1 %."""
+    t, rpm, pct = (np.asarray(a, dtype=float) for a in (trace.t, trace.speed, trace.torque))
+    found = floor(t, rpm, pct, J, 1.0, RATED_NM)
+    assert found is not None
+    return math.hypot(0.001, found.rel) * J
 
 
 def test_dithered_accelerations_leave_less_step_error_repeated() -> None:
-    same = quantization_floor(_estimate(), _trace([60.0] * 8), 1.0, RATED_NM, 0.02)
-    spread = quantization_floor(_estimate(), _trace([60.0 * dither(n) ** -1 for n in range(8)]), 1.0, RATED_NM, 0.02)
-    assert spread.j_std_kgm2 < 0.6 * same.j_std_kgm2
-    assert same.j_std_kgm2 > 0.001 * J * 1.5  # the repeated step error is in the uncertainty
+    same = _std(_trace([60.0] * 8))
+    spread = _std(_trace([60.0 * dither(n) ** -1 for n in range(8)]))
+    assert spread < 0.6 * same
+    assert same > 0.001 * J * 1.5  # the repeated step error is in the uncertainty
 
 
 def test_a_fast_line_dithers_by_shorter_ramps_below_the_planned_floor() -> None:
@@ -117,10 +97,10 @@ def test_a_fine_reading_on_a_fast_line_gets_the_shorter_ramps_too(sim_dir) -> No
 def test_few_dithered_moves_keep_each_moves_step_error_in_the_uncertainty() -> None:
     """The part of the step error that differs between moves counts too: the adaptive repeats stop on the first
     small uncertainty, with few moves, when the jackknife may have missed it."""
-    few = quantization_floor(_estimate(), _trace([60.0 * dither(n) ** -1 for n in range(4)]), 1.0, RATED_NM, 0.02)
-    many = quantization_floor(_estimate(), _trace([60.0 * dither(n) ** -1 for n in range(16)]), 1.0, RATED_NM, 0.02)
+    few = _std(_trace([60.0 * dither(n) ** -1 for n in range(4)]))
+    many = _std(_trace([60.0 * dither(n) ** -1 for n in range(16)]))
     # Averaged over 4 times as many moves, that part halves (the part every move repeats stays).
-    assert few.j_std_kgm2 > 1.5 * many.j_std_kgm2
+    assert few > 1.5 * many
 
 
 def test_a_noise_free_torque_in_whole_percent_is_within_3_sigma_at_19200(sim_dir) -> None:

@@ -9,8 +9,8 @@ from servotool.drive import Drive
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink
+from servotool.tuning.errors import IdentificationFailed
 from servotool.tuning.gain_writes import ratio_raw
-from servotool.tuning.identify import IdentificationFailed
 
 
 def test_a_bare_motor_is_written_as_the_lowest_ratio_the_parameter_holds(sim_dir):

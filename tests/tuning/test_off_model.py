@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from servotool.tuning.fit.signals import torque_step
 from servotool.tuning.identify import IdentificationRefused
-from servotool.tuning.subsets import torque_step
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
 

@@ -10,13 +10,12 @@ from pathlib import Path
 import pytest
 
 from servotool.drive import Drive
-from servotool.motion.jogger import Jogger
 from servotool.ops.params import write_one
-from servotool.tuning.estimator import estimate_inertia
-from servotool.tuning.gains import LoopGains
+from servotool.tuning.control.gains import LoopGains
+from servotool.tuning.control.margins import least_damping
+from servotool.tuning.fit import estimate_inertia
 from servotool.tuning.identify import IdentificationRefused
-from servotool.tuning.margins import least_damping
-from servotool.tuning.stable_hold import HOLD_MIN_DAMPING, StableHold, guard_hold
+from servotool.tuning.stable_hold import HOLD_MIN_DAMPING, StableHold, guarded_jogger
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
 
@@ -140,7 +139,7 @@ def test_a_jog_on_a_heavy_load_stops_without_swinging_up_and_leaves_the_gains(si
     gains = _raws(d, HOLD_CODES)
     peak = [0.0]
     sim.on_read.append(lambda _d: peak.__setitem__(0, max(peak[0], abs(sim.firmware.plant.true_speed_rpm))))
-    jogger = guard_hold(Jogger(d, 0.1, "jog", d.link.clock))
+    jogger = guarded_jogger(d, d.link.clock)
     jogger.run(jogger.plan(100.0, 1.0))
     assert peak[0] < 200.0 and sim.firmware.plant.alarm is None
     assert _raws(d, HOLD_CODES) == gains

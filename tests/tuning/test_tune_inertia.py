@@ -14,7 +14,8 @@ from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink
 from servotool.tuning import identify, planning
-from servotool.tuning.tune import TuneDeclined, TuneRequest, tune_inertia
+from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TuneDeclined
+from servotool.tuning.tune import TuneRequest, tune_inertia
 
 
 def _virtual(ratio: float = 3.0, profile_id: str = "dsx7e"):
@@ -54,7 +55,7 @@ def test_alarm_in_the_middle_of_the_motion_stops_it_and_refuses(sim_dir):
     jog_params = d.read_entries([p.role("jog_speed"), p.role("jog_accel")])
     tripped = _after_motion_reads(sim_drive, 150, lambda plant: plant.raise_alarm("overload"))
     ident = identify.Identifier(d, timing)
-    with pytest.raises(identify.IdentificationFailed, match="alarm E09"):
+    with pytest.raises(IdentificationFailed, match="alarm E09"):
         _run_host(ident, timing)
     assert "t" in tripped  # the alarm came during the motion
     trace_t0 = timing.now() - ident.trace.t[-1]
@@ -77,7 +78,7 @@ def test_travel_check_stops_an_axis_that_runs_away(sim_dir):
         plant.set_settings(replace(plant.settings, load_torque_nm=3.5 * rated))
 
     _after_motion_reads(sim_drive, 150, overload)
-    with pytest.raises(identify.TravelExceeded, match="travel limit 2 rev"):
+    with pytest.raises(TravelExceeded, match="travel limit 2 rev"):
         _run_host(identify.Identifier(d, timing), timing)
     plant = sim_drive.firmware.plant
     assert sim_drive.firmware.mode == "off" and not plant.servo_on

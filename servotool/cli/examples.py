@@ -1,0 +1,85 @@
+"""Examples of every sub-command, in the order a first session would run them: each command's help shows its own,
+the man page's EXAMPLES section shows them all (man/build.py), and a test runs each one against the simulator.
+
+One entry: (sub-command, command line as typed in a POSIX shell, what it does). The SD25, SDC and IS620P motion
+examples assume the drive set up for Modbus motion as the README shows (`param set` of the profile's motion_setup);
+an example that ends otherwise than with exit 0 says so at the end of what it does ("(exit 130).").
+"""
+
+from __future__ import annotations
+
+EXAMPLES: tuple[tuple[str, str, str], ...] = (
+    ("profiles list", "servotool profiles list", "The built-in drive profiles."),
+    ("profiles show", "servotool profiles show sd25 --unverified", "What the SD25 manual leaves open, and why."),
+    ("profiles check", "servotool profiles check", "Validate every built-in profile (exit 2 on a problem)."),
+    ("param find", "servotool -P sd25 param find jog speed", "Search a profile's entries; no drive needed."),
+    ("param get", "servotool --port sim param get Pn004 Un000", "The inertia ratio and the motor speed."),
+    ("param get", "servotool --port /dev/ttyUSB0 -P sd25 param get Po109", "A real drive on a USB-RS485 adapter."),
+    ("param list", "servotool --port sim param list --group gain", "The gains, with defaults and changed marks."),
+    ("param set", "servotool --port sim param set Pn100=40.0 Pn101=25.0", "Write, then verify by read-back."),
+    ("param list", "servotool --port sim param list --changed", "Only what differs from the factory default."),
+    ("param backup", "servotool --port sim param backup -o axis1.yaml", "Every parameter to a checksummed file."),
+    ("param diff", "servotool --port sim param diff axis1.yaml", "The drive against a backup."),
+    ("param diff", "servotool --port sim param diff --factory", "The drive against its factory defaults."),
+    ("param restore", "servotool --port sim param restore axis1.yaml --dry-run", "What a restore would write."),
+    ("param restore", "servotool --port sim param restore axis1.yaml --yes", "Write the differences, verified."),
+    ("raw read", "servotool --port sim raw read 0x2100 2", "Two registers by address, FC03."),
+    ("raw write", "servotool --port sim raw write 0x2100=400", "One register (FC06), read back."),
+    ("monitor", "servotool --port sim monitor Un000 Un002 --once", "One sample of speed and torque."),
+    ("monitor", "servotool --port sim monitor --rate 20 --duration 2 --csv log.csv", "Two seconds, logged to CSV."),
+    ("jog", "servotool --port sim jog --speed 300 --time 2", "JOG forward at 300 rpm for 2 s."),
+    ("param set", "servotool --port sim -P sdc param set PN4=3", "SDC in JOG mode, as its jog needs."),
+    ("jog", "servotool --port sim -P sdc jog -s 100 -t 1 --no-dead-man", "SDC has no dead-man: acknowledge it."),
+    ("trace", "servotool --port sim trace Un000 Un002 --duration 0.5 -o start.csv", "Half a second, at once."),
+    (
+        "trace",
+        "servotool --port sim trace Un000 --trigger 'Un000<100' -o stop.csv & "
+        "servotool --port sim jog --speed 300 --time 3 && wait $!",
+        "Catch the stop at the end of a JOG that a second command makes.",
+    ),
+    ("plot", "servotool plot start.csv", "Draw a CSV in the terminal."),
+    ("plot", "servotool plot start.csv -o start.png", "The same as a PNG (needs matplotlib: the plot extra)."),
+    ("alarm show", "servotool --port sim alarm show", "The current alarm, if any."),
+    ("alarm history", "servotool --port sim alarm history", "The drive's alarm history, latest first."),
+    ("alarm clear", "servotool --port sim alarm clear", "Reset the alarm (exit 3 if it stays active)."),
+    ("sim config", "servotool sim config --load-ratio 5", "A simulated load of 5 times the rotor's inertia."),
+    ("sim show", "servotool sim show", "The simulated drive's machine and running state."),
+    ("tune gains", "servotool --port sim tune gains --yes --to 14", "Raise the rigidity level, step-checked."),
+    (
+        "tune inertia",
+        "servotool --port sim tune inertia --yes --rigidity 16 --report tune-report",
+        "Identify, write the ratio and gains; charts in the folder tune-report.",
+    ),
+    ("param reset", "servotool --port sim param reset --yes", "Factory defaults, after an automatic backup."),
+    ("sim reset", "servotool sim reset -P sd25 --power-cycle", "Power-cycle the simulated SD25."),
+    ("run", "servotool run examples/commission.yaml --dry-run", "Check a plan against the profile; touch nothing."),
+    (
+        "shell",
+        "printf 'param get Pn004\\nalarm show\\n' | servotool --port sim shell",
+        "One port opened once; piped lines run in turn.",
+    ),
+    (
+        "sim serve",
+        "servotool sim serve --port tcp://127.0.0.1:5020 --unit 1 --unit 2",
+        "Two simulated drives for any Modbus RTU master, until Ctrl-C (exit 130).",
+    ),
+    ("scan", "servotool scan --port /dev/ttyUSB0 --units 1-10 --baud 9600 --format 8N1", "Find drives on a bus."),
+    ("doctor", "servotool -P sd25 doctor --port /dev/ttyUSB0 --count 50", "Round trips, errors, adapter latency."),
+)
+
+
+def for_command(path: str) -> list[tuple[str, str]]:
+    """The examples of one sub-command ('param get'): (command line, what it does)."""
+    return [(line, what) for name, line, what in EXAMPLES if name == path]
+
+
+def epilog(path: str) -> str | None:
+    """The examples as the end of a command's help, kept line by line (click's \\b marker)."""
+    found = for_command(path)
+    if not found:
+        return None
+    lines = ["\b", "Examples:"]
+    for line, what in found:
+        lines += [f"  {part}" for part in line.replace(" & ", " &\n").split("\n")]  # a command on each line
+        lines.append(f"      {what}")
+    return "\n".join(lines)

@@ -1,0 +1,190 @@
+"""Second stage of the fit: the log in SI units with what the windows and the regression need.
+
+Speed noise, the zero-speed band, the kinks (torque steps and host stalls, which no interpolant places between slow
+samples) and the integrals of the piecewise-cubic interpolant over the uneven sample times: the trapezoid rule
+would miss the curvature between slow samples (a ringing loop) and bias J.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from servotool.tuning.fit.estimate import EstimatorSettings, Partial
+
+RPM_TO_RAD_S = math.pi / 30.0
+GAP_INTERVALS = 6.0  # no window spans more median intervals (a stall: a cubic misses a ringing loop's swing)
+
+
+@dataclass(frozen=True)
+class Signals:
+    """The log in SI units, with what the windows and integrals need."""
+
+    t: np.ndarray
+    rpm: np.ndarray
+    w: np.ndarray
+    pct: np.ndarray  # the torque reading, % of rated
+    torque: np.ndarray  # N*m
+    torque_step_pct: float  # the torque reading's resolution, % of rated (0: finer than the log shows, or unknown)
+    noise_w: float
+    band: float
+    kink: np.ndarray
+    cum_t: np.ndarray
+    cum_w: np.ndarray
+    moves: np.ndarray
+
+
+def signals(
+    t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: float, cfg: EstimatorSettings, r: Partial
+) -> Signals:
+    """Noise, zero-speed band, the torque reading's step, kinks (torque steps) and the Hermite integrals of torque
+    and speed."""
+    noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm)
+    r.speed_noise_rpm = noise_rpm
+    peak = float(np.max(np.abs(rpm)))
+    band = cfg.zero_band_rpm if cfg.zero_band_rpm is not None else max(0.02 * peak, 3.0 * noise_rpm)
+    w = rpm * RPM_TO_RAD_S
+    torque = pct / 100.0 * rated_torque_nm
+    kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct, GAP_INTERVALS)
+    r.n_kinks = int(np.count_nonzero(kink))
+    return Signals(
+        t=t,
+        rpm=rpm,
+        w=w,
+        pct=pct,
+        torque=torque,
+        torque_step_pct=cfg.torque_step_pct if cfg.torque_step_pct is not None else torque_step(pct),
+        noise_w=noise_rpm * RPM_TO_RAD_S,
+        band=band,
+        kink=kink,
+        cum_t=cumulative_hermite(t, torque, kink),
+        cum_w=cumulative_hermite(t, w, kink),
+        moves=move_ids(rpm, band),
+    )
+
+
+def line_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How far each interior sample sits off the line through its two neighbours, and that deviation's standard
+    deviation per unit of white measurement noise (sqrt(1 + a^2 + b^2), a + b = 1)."""
+    if v.size < 3:
+        return np.zeros(0), np.ones(0)
+    t0, t1, t2 = t[:-2], t[1:-1], t[2:]
+    a = (t2 - t1) / (t2 - t0)
+    b = 1.0 - a
+    return v[1:-1] - (a * v[:-2] + b * v[2:]), np.sqrt(1.0 + a**2 + b**2)
+
+
+def speed_noise_rpm(t: np.ndarray, rpm: np.ndarray) -> float:
+    """Robust speed-noise estimate (floored at 0.1 rpm): the smaller of the median deviations from the line through
+    each sample's two neighbours and from the cubic through its four.
+
+    Motion adds to both deviations, so each overestimates the noise: the line where the speed curves between
+    samples (a ringing loop), the cubic where its wider stencil spans a corner of a short ramp. The median ignores
+    the few samples that disagree with both.
+    """
+    estimates = [
+        float(1.4826 * np.median(np.abs(dev) / ref))
+        for dev, ref in (line_deviation(t, rpm), cubic_deviation(t, rpm))
+        if dev.size
+    ]
+    return max(min(estimates, default=0.1), 0.1)
+
+
+def cubic_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Like line_deviation, against the cubic through the two samples on each side (Lagrange weights)."""
+    if v.size < 5:
+        return np.zeros(0), np.ones(0)
+    c = np.arange(2, v.size - 2)
+    offsets = (-2, -1, 1, 2)
+    x = [t[c + j] - t[c] for j in offsets]
+    weights = []
+    for a, xa in enumerate(x):
+        w = np.ones(c.size)
+        for b, xb in enumerate(x):
+            if a != b:
+                w *= -xb / (xa - xb)
+        weights.append(w)
+    pred = sum(w * v[c + j] for w, j in zip(weights, offsets, strict=True))
+    return v[c] - pred, np.sqrt(1.0 + sum(w**2 for w in weights))
+
+
+def kink_mask(
+    t: np.ndarray,
+    rpm: np.ndarray,
+    pct: np.ndarray,
+    noise_rpm: float,
+    kink_sigma: float,
+    torque_noise_floor_pct: float,
+    gap_intervals: float,
+) -> np.ndarray:
+    """Samples at a torque step (torque or speed further than kink_sigma noise sigmas off the line through its
+    neighbours; the torque noise estimated robustly, floored) or ending a gap of more than gap_intervals median
+    sampling intervals (a host stall)."""
+    dev, ref = line_deviation(t, pct)
+    torque_noise = max(float(1.4826 * np.median(np.abs(dev) / ref)), torque_noise_floor_pct) if dev.size else 0.0
+    dev_w, ref_w = line_deviation(t, rpm)
+    kink = np.zeros(pct.size, dtype=bool)
+    kink[1:-1] = (np.abs(dev) > kink_sigma * torque_noise * ref) | (np.abs(dev_w) > kink_sigma * noise_rpm * ref_w)
+    gaps = np.diff(t)
+    kink[1:] |= gaps > gap_intervals * float(np.median(gaps))
+    return kink
+
+
+def move_ids(rpm: np.ndarray, band: float) -> np.ndarray:
+    """Number of each sample's move: a new move starts wherever the speed enters, leaves or crosses the zero band."""
+    sign = np.where(rpm >= band, 1, np.where(rpm <= -band, -1, 0))
+    ids = np.zeros(rpm.size, dtype=int)
+    ids[1:] = np.cumsum(sign[1:] != sign[:-1])
+    return ids
+
+
+def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.ndarray:
+    """Cumulative integral of the piecewise-cubic Hermite interpolant (the trapezoid rule plus its end corrections
+    h^2/12 * (v'_i - v'_i+1)), with v' from three-point differences that never reach across a kink.
+
+    The trapezoid rule alone is biased wherever the signal curves between samples: the plain trapezoid shrinks the
+    integral of an oscillation by (x cot x) with x half its phase advance per sample, and the loop's response to
+    a ramp corner (ringing of a loop tuned for the wrong inertia) is such an oscillation, which biases J low at slow
+    sampling. Intervals touching a kink sample come out wrong but are never inside a window.
+    """
+    n = v.size
+    out = np.zeros_like(v)
+    if n < 2:
+        return out
+    h = np.diff(t)
+    d = np.zeros_like(v)
+    have = np.zeros(n, dtype=bool)
+    if n >= 3:
+        smooth3 = ~(kink[:-2] | kink[1:-1] | kink[2:])  # stencil samples s, s+1, s+2 all smooth
+        h0, h1 = h[:-1], h[1:]
+        v0, v1, v2 = v[:-2], v[1:-1], v[2:]
+        central = (h0**2 * (v2 - v1) + h1**2 * (v1 - v0)) / (h0 * h1 * (h0 + h1))
+        forward = -(2 * h0 + h1) / (h0 * (h0 + h1)) * v0 + (h0 + h1) / (h0 * h1) * v1 - h0 / (h1 * (h0 + h1)) * v2
+        backward = h1 / (h0 * (h0 + h1)) * v0 - (h0 + h1) / (h0 * h1) * v1 + (2 * h1 + h0) / (h1 * (h0 + h1)) * v2
+        # later assignments win: central where its stencil is smooth, else one-sided into smooth data
+        for idx, vals in ((np.arange(2, n), backward), (np.arange(0, n - 2), forward), (np.arange(1, n - 1), central)):
+            d[idx[smooth3]] = vals[smooth3]
+            have[idx[smooth3]] = True
+    secant = np.diff(v) / h
+    # fall back to the secant of an interval with no kink at its other end (first order, at few samples only)
+    for idx, other, vals in (
+        (np.arange(0, n - 1), np.arange(1, n), secant),
+        (np.arange(1, n), np.arange(0, n - 1), secant),
+    ):
+        fill = ~have[idx] & ~kink[other]
+        d[idx[fill]] = vals[fill]
+        have[idx[fill]] = True
+    out[1:] = np.cumsum(0.5 * h * (v[1:] + v[:-1]) + h * h / 12.0 * (d[:-1] - d[1:]))
+    return out
+
+
+def torque_step(torque: np.ndarray) -> float:
+    """The step of a reading where every value lies on one grid (a torque read in whole percent), else 0."""
+    values = np.unique(torque)
+    if values.size < 3:
+        return 0.0
+    step = float(np.min(np.diff(values)))
+    grid = (values - values[0]) / step
+    return step if float(np.max(np.abs(grid - np.round(grid)))) < 0.01 else 0.0

@@ -1,0 +1,111 @@
+"""The rigid-model checks (tuning.fit.checks) on the benches' own rows: no false resonance on a rigid load at a
+slow line, and the off-model rows that were accepted outside their 3 sigma now covered or refused (issue 16)."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+from servotool.tuning.identify import IdentificationRefused
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
+from inertia_accuracy import identify_once
+from off_model import identify
+
+
+@pytest.mark.parametrize(
+    "profile_id,baud,ratio,friction,viscous,gravity,noise,seed",
+    [
+        ("sd25", 19200, 10.0, 0.1, 0.001, -0.4, 0.0, 10),  # bench --profiles --quick, SD25 19200 row, machine 9
+        ("sdc", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 12),  # SDC 19200 row, machine 11
+    ],
+)
+def test_a_rigid_load_on_a_slow_line_is_not_refused_for_a_resonance(
+    sim_dir, profile_id, baud, ratio, friction, viscous, gravity, noise, seed
+):
+    """These were refused 'inertia too uncertain (2.1-2.5 %): perhaps a resonance near 41-43 Hz' although the
+    plant is rigid: the spring term's hint fired at half a sigma, and its column is the shape of the integration's
+    own curvature correction. Now accepted, with the truth inside the stated 3 sigma and no off-model note, or (the
+    SD25 machine since the stop guard foresees host stalls: its moves are a little shorter) refused as too uncertain
+    without blaming a resonance."""
+    try:
+        run = identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
+    except IdentificationRefused as exc:
+        assert "too uncertain" in str(exc) and "resonance" not in str(exc), str(exc)
+        return
+    est = run.identified.estimate
+    assert est is not None and est.ok
+    assert abs(run.ratio - ratio) <= 3 * est.ratio_std
+    assert not any(n.startswith("off-model:") for n in est.notes), est.notes
+
+
+@pytest.mark.parametrize(
+    "machine,baud,seed",
+    [
+        ({"backlash_rad": 0.05}, 19200, 8),  # was flagged +4.24 % vs 3 sigma 2.43 %
+        ({"resonance_hz": 100.0, "resonance_damping": 0.05}, 19200, 22),  # was accepted +1.36 % vs 3 sigma 1.02 %
+        (
+            {"resonance_hz": 100.0, "resonance_damping": 0.05},
+            115200,
+            54,
+        ),  # without the unresolved spring: +1.08 vs 0.95
+    ],
+)
+def test_the_off_model_rows_once_outside_their_3_sigma_are_covered_or_refused(sim_dir, machine, baud, seed):
+    """bench/off_model.py's violations (ratio 10, the bench's seeds): backlash looked like a load varying over the
+    travel and that model moved J the wrong way; a stiff coupling's term was too weak to see. At 115200 the two-mass
+    scan covers this coupling's own resonance (100 Hz motor-side at ratio 10: 30 Hz, below its 60 Hz) and finds
+    nothing: only the unresolved spring share keeps the truth inside 3 sigma (with it 1.08 % vs 1.58 %)."""
+    outcome, est, why = identify(10.0, machine, baud, seed=seed)
+    assert outcome in ("accepted", "flagged", "refused"), why
+    if outcome != "refused":
+        assert est is not None
+        assert abs(est.load_ratio - 10.0) <= 3 * est.ratio_std, (outcome, est.load_ratio, est.ratio_std, why)
+
+
+@pytest.mark.parametrize(
+    "profile_id,baud,ratio,friction,viscous,gravity,noise,seed",
+    [
+        ("sd25", 19200, 10.0, 0.05, 0.0, 0.2, 0.005, 11),  # SD25 19200 row, machine 10
+        ("is620p", 19200, 10.0, 0.01, 0.0, 0.0, 0.01, 14),  # IS620P 19200 row, machine 11 with another noise seed
+        # (its own seed, 12, is accepted within 3 sigma since a move's own segment ends it: longer moves)
+    ],
+)
+def test_a_rigid_load_too_uncertain_anyway_is_not_blamed_on_a_resonance(
+    sim_dir, profile_id, baud, ratio, friction, viscous, gravity, noise, seed
+):
+    """Refused 'perhaps a resonance near N Hz (a compliant coupling)' on a rigid plant whose fit was too uncertain
+    before the spring hint (or with the hint below 2 sigma): the refusal now gives the usual remedy instead."""
+    with pytest.raises(IdentificationRefused) as caught:
+        identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
+    reason = str(caught.value)
+    assert "too uncertain" in reason and "resonance" not in reason, reason
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_a_damped_two_mass_at_a_fast_line_is_refused_for_its_resonance(sim_dir, seed):
+    """A 20 Hz coupling with damping 0.2 at ratio 2 and 115200 baud was accepted +7.2..7.5 % off with a stated
+    3 sigma of 4.5-5.1 %: the rigid fit took the load's lag behind the motor for inertia, and the quasi-static spring
+    term put the resonance at 45-66 Hz at 2 sigmas. The two-mass model finds it near 20 Hz; what it changes is too
+    uncertain to accept, so the refusal names the resonance (or the truth lies within the stated 3 sigma)."""
+    outcome, est, why = identify(2.0, {"resonance_hz": 20.0, "resonance_damping": 0.2}, 115200, seed=seed)
+    assert est is not None, why
+    if outcome == "refused":
+        hz = re.search(r"resonance near (\d+) Hz", why)
+        assert hz is not None and 15 <= int(hz.group(1)) <= 25, why
+    else:
+        assert abs(est.load_ratio - 2.0) <= 3 * est.ratio_std, (outcome, est.load_ratio, est.ratio_std, why)
+
+
+def test_a_rigid_load_whose_travel_differs_by_1_percent_at_a_fast_line_is_not_called_off_model(sim_dir):
+    """At 921600 baud (the simulated drive's own rate) thousands of windows make a 1 % difference in J over the
+    travel stand 1.5 sigmas out; the result said "off-model: the load varies over the travel". A difference within
+    3 % of J now widens the uncertainty without blaming the mechanics."""
+    run = identify_once(5.0, 0.05, 0.0, 0.002, 921600, seed=6, profile_id="dsx7e", viscous=0.0)
+    est = run.identified.estimate
+    assert not any(n.startswith("off-model:") for n in est.notes), est.notes
+    assert any("too little to point to the mechanics" in n for n in est.notes), est.notes
+    assert abs(run.ratio - 5.0) <= 3 * est.ratio_std
