@@ -248,6 +248,7 @@ class EmbeddedSim:
                 _start("tcp://127.0.0.1:0", self.line, None)
             )
             port = bound_port(self._server)
+            self.direct_port = f"tcp://127.0.0.1:{port}"  # the drives themselves, behind any bad line
             if faults is not None:
                 from servotool.sim.faults import FaultProxy
 

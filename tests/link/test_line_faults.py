@@ -17,6 +17,7 @@ from servotool.model.loader import load_profile
 from servotool.sim.faults import KINDS, LineFaults, parse_rates
 from servotool.sim.firmware import build_drive
 from servotool.sim.server import EmbeddedSim
+from tests.frames import plain_read
 
 # Every profile meets several kinds; the repeated and held replies meet the two with single-register parameters
 # scattered over the map (the reads a stray reply of the same length stood in for, issue 30).
@@ -41,8 +42,9 @@ def line(sim_dir):
 
 
 def truth(sim: EmbeddedSim, drive, entry) -> int:
-    with sim.lock:
-        return words_to_raw(entry, drive.read(entry.address, entry.words))
+    """What the drive holds, read by a plain pymodbus client on the drives' own port (behind the bad line), not
+    through servotool's link or its recovery."""
+    return words_to_raw(entry, plain_read(sim.direct_port, entry.address, entry.words, unit=drive.unit))
 
 
 def settable(profile) -> list:
