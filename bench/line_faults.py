@@ -4,7 +4,7 @@ fault-injecting line (servotool.sim.faults), at 1, 5 and 20 % of replies for eac
 writes to 1, 5 and 20 % of the settable entries acknowledged but ignored, on every profile. Every value is checked
 against the simulator's true state; a restore that fails must not claim a state the drive is not in.
 
-Run: python bench/line_faults.py [--quick] [--tries N] [--seed S] [--clean N]
+Run: python bench/line_faults.py [--quick] [--tries N] [--seed S] [--profile P ...] [--clean N]
 Prints one row per fault kind, rate and operation (profiles summed): tries, ok, clean error, silent wrong,
 traceback, hang. The target is silent wrong = 0 everywhere. --clean N instead times each operation N times on a
 clean line per profile (ms per operation, the median), to compare the link's cost before and after a change.
@@ -221,6 +221,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="a short sample: 20 %% only, one profile per fault kind")
     ap.add_argument("--tries", type=int, default=1, help="tries per profile, fault kind, rate and operation")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--profile", action="append", choices=PROFILES, help="only these profiles (repeatable)")
     ap.add_argument("-v", "--verbose", action="store_true", help="print each clean error")
     ap.add_argument("--clean", type=int, metavar="N", help="time each operation N times on a clean line instead")
     args = ap.parse_args()
@@ -235,6 +236,8 @@ def main() -> None:
     counts: dict[tuple[str, float, str], Counter[str]] = {}
     t0 = time.monotonic()
     for p_index, profile_id in enumerate(PROFILES):
+        if args.profile and profile_id not in args.profile:
+            continue
         bench = Bench(load_profile(profile_id), args.seed)
         try:
             for k_index, kind in enumerate(FAULTS):
