@@ -3,17 +3,20 @@ socat pty pair, and a libmodbus RTU slave on the same kind of pty pair (the yard
 least 0.8x its rate, issue 30). Then what users run on a clean line: a monitor's samples/s and a backup's duration,
 on the embedded simulator and with its line emulated at each profile's baud rate.
 
-Run: python bench/rtu_throughput.py [--requests N] [--rounds R] [--no-users]
+Run: python bench/rtu_throughput.py [--requests N] [--rounds R] [--no-users] [--no-slaves] [--against DIR]
 Prints the embedded simulator's requests/s; on the ptys, for three masters (servotool as shipped, which listens
 3.5 characters after each reply; servotool --silence-ms 0; libmodbus), each slave's requests/s and the sim serve /
-libmodbus ratio; then one line per profile with monitor samples/s and backup ms. The libmodbus slave is built from
-bench/modbus_rtu_slave.c with gcc and Debian's libmodbus-dev (apt-get install libmodbus-dev); without them its line
-is skipped.
+libmodbus ratio; then one line per profile with monitor samples/s and backup ms. --against DIR (main's code:
+`git archive main | tar -x -C DIR`) prints this checkout's monitor and backup figures beside DIR's, through the
+library and through the CLI on --port sim, in interleaved rounds: issue 30 holds them within 10 % of main's on a
+clean line. The libmodbus slave is built from bench/modbus_rtu_slave.c with gcc and Debian's libmodbus-dev
+(apt-get install libmodbus-dev); without them its line is skipped.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import statistics
@@ -172,8 +175,10 @@ def slaves(tmp: Path, n: int, rounds: int) -> None:
                 print(f"  {master:<42} sim serve / libmodbus slave: {best:.2f} best, {ratio:.2f} median of the rounds")
 
 
-def users(samples: int) -> None:
-    """A monitor's samples/s and a backup's duration per profile: on loopback, and at the profile's baud rate."""
+def users(samples: int, show: bool = True) -> dict[str, list[float]]:
+    """A monitor's samples/s and a backup's duration per profile, through the library (no CLI start-up): on
+    loopback with no line emulated, and with the line emulated at the profile's factory speed. By "profile line":
+    [monitor samples/s, requests per sample, backup ms, backup requests]."""
     from servotool.drive import Drive
     from servotool.link.master import RtuMaster
     from servotool.link.ports import LinkSettings
@@ -182,13 +187,17 @@ def users(samples: int) -> None:
     from servotool.sim.firmware import build_drive
     from servotool.sim.server import EmbeddedSim
 
-    print(f"{'profile':<8} {'line':>14} {'monitor/s':>10} {'requests/sample':>16} {'backup ms':>10} {'requests':>9}")
+    if show:
+        print(
+            f"{'profile':<8} {'line':>14} {'monitor/s':>10} {'requests/sample':>16} {'backup ms':>10} {'requests':>9}"
+        )
+    figures: dict[str, list[float]] = {}
     for profile_id in ("sd25", "is620p", "sdc", "dsx7e"):
         profile = load_profile(profile_id)
         for baud in (0, profile.line.baud):
             sim_drive = build_drive(profile, profile.default_unit, persist=False)
-            sim_drive.settings["line_baud"] = baud
-            sim = EmbeddedSim([sim_drive])
+            sim_drive.settings["line_baud"] = "factory" if baud else "fast"
+            sim = EmbeddedSim([sim_drive], line=profile.line)
             link = RtuMaster(LinkSettings(sim.port, profile.line, timeout=1.0, retries=2))
             try:
                 drive = Drive(link, profile, profile.default_unit)
@@ -206,7 +215,71 @@ def users(samples: int) -> None:
                 link.close()
                 sim.close()
             where = f"{baud} baud" if baud else "loopback"
-            print(f"{profile_id:<8} {where:>14} {rate:>10.1f} {per:>16.2f} {took:>10.0f} {asked:>9}")
+            figures[f"{profile_id} {where}"] = [rate, per, took, asked]
+            if show:
+                print(f"{profile_id:<8} {where:>14} {rate:>10.1f} {per:>16.2f} {took:>10.0f} {asked:>9}")
+    return figures
+
+
+def cli_users(duration: float) -> dict[str, list[float]]:
+    """What users run, through the CLI on `--port sim` (its line emulated at the profile's factory speed, as by
+    default; SD25's line raised for the backup, as by default): by profile, [monitor samples/s over `duration` s,
+    backup s, start-up included]."""
+    import re
+
+    figures: dict[str, list[float]] = {}
+    tmp = Path(tempfile.mkdtemp())
+    env = {**os.environ, "SERVOTOOL_SIM_DIR": str(tmp / "sim"), "SERVOTOOL_BACKUP_DIR": str(tmp / "bk")}
+    for profile_id in ("sd25", "is620p", "sdc", "dsx7e"):
+        base = [sys.executable, "-m", "servotool", "--port", "sim", "--profile", profile_id]
+        mon = subprocess.run(
+            [*base, "monitor", "--rate", "1000", "--duration", str(duration), "--json"],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+        )
+        found = re.search(r"(\d+) samples in ([\d.]+) s", mon.stderr + mon.stdout)
+        rate = int(found.group(1)) / float(found.group(2)) if found else float("nan")
+        t0 = time.perf_counter()
+        subprocess.run(
+            [*base, "param", "backup", "-o", str(tmp / f"{profile_id}.yaml"), "--force"],
+            capture_output=True,
+            env=env,
+            check=True,
+        )
+        figures[profile_id] = [rate, time.perf_counter() - t0]
+    return figures
+
+
+def against(tree: str, rounds: int, samples: int, duration: float) -> None:
+    """This checkout's monitor and backup figures beside another tree's (`git archive main | tar -x -C DIR`), in
+    interleaved rounds (the machine's load moves between them), the median of each, and this/that."""
+    here = str(HERE.parent)
+
+    def run(root: str, mode: str) -> dict[str, list[float]]:
+        env = {**os.environ, "PYTHONPATH": root}
+        args = [sys.executable, str(HERE / "rtu_throughput.py"), mode, "--samples", str(samples)]
+        out = subprocess.run([*args, "--duration", str(duration)], capture_output=True, text=True, env=env, check=True)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    for mode, heads in (
+        ("--lib-json", ("monitor/s", "req/sample", "backup ms", "requests")),
+        ("--cli-json", ("monitor/s", "backup s")),
+    ):
+        got: dict[str, list[dict[str, list[float]]]] = {here: [], tree: []}
+        for _ in range(rounds):
+            for root in (here, tree):
+                got[root].append(run(root, mode))
+        what = "library, no CLI start-up" if mode == "--lib-json" else "CLI on --port sim, start-up included"
+        print(f"{what}: median of {rounds} interleaved rounds, this checkout | {tree} | this/that")
+        for key in got[here][0]:
+            cells = []
+            for i, head in enumerate(heads):
+                a = statistics.median(r[key][i] for r in got[here])
+                b = statistics.median(r[key][i] for r in got[tree])
+                cells.append(f"{head} {a:8.1f} | {b:8.1f} | {a / b if b else float('nan'):5.2f}")
+            print(f"  {key:<16} " + "   ".join(cells))
 
 
 def main() -> None:
@@ -214,12 +287,25 @@ def main() -> None:
     ap.add_argument("--requests", type=int, default=1000)
     ap.add_argument("--rounds", type=int, default=5, help="interleaved rounds of each master and slave on the ptys")
     ap.add_argument("--no-users", action="store_true", help="only the request rates")
+    ap.add_argument("--no-slaves", action="store_true", help="only the monitor and backup figures")
+    ap.add_argument("--against", metavar="DIR", help="compare monitor and backup with another tree's code (main's)")
+    ap.add_argument("--samples", type=int, default=200, help="monitor samples on loopback (fewer at line speed)")
+    ap.add_argument("--duration", type=float, default=3.0, help="seconds of each CLI monitor run (--against)")
+    ap.add_argument("--lib-json", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--cli-json", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     os.environ.setdefault("SERVOTOOL_SIM_DIR", str(tmp / "sim"))
-    slaves(tmp, args.requests, args.rounds)
-    if not args.no_users:
-        users(200)
+    if args.lib_json or args.cli_json:
+        print(json.dumps(users(args.samples, show=False) if args.lib_json else cli_users(args.duration)))
+        return
+    print(f"load average: {os.getloadavg()[0]:.2f} ({os.cpu_count()} cores)")
+    if not args.no_slaves:
+        slaves(tmp, args.requests, args.rounds)
+    if args.against:
+        against(args.against, args.rounds, args.samples, args.duration)
+    elif not args.no_users:
+        users(args.samples)
     print(f"load average: {os.getloadavg()[0]:.2f} ({os.cpu_count()} cores)")
 
 
