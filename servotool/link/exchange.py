@@ -157,7 +157,8 @@ class Exchange:
         self._written: dict[tuple[int, int], int] = {}  # (unit, address) -> the number of the last write to it
         self._writes = 0
         self._narrow: set[tuple[int, int, int]] = set()  # reads whose widening met an exception
-        self._trouble_until = -float("inf")  # a fault or a stray frame was met lately: copies leave replies owed
+        self._trouble_until = -float("inf")  # bytes nobody asked for or a garbled reply were met lately: copies of a
+        # read's own reply are confirmed, and so are exception replies
         self._sent: deque[bytes] = deque(maxlen=16)  # the latest requests, whose echoes may come back
 
     # ----- operations ----------------------------------------------------------------------------------------
@@ -392,7 +393,11 @@ class Exchange:
             return _Reply(words, code, frame, ambiguous)
         except LineFault as exc:
             fault = exc
-        self._trouble_until = self.clock.now() + self.ledger.owed_s
+        if fault.kind != "silent" or fault.data:
+            # Silence alone shows nothing on the line that repeats or comes late: the reply it owes is in the ledger,
+            # and one that comes within the late window is a stray frame that marks the line (a probe of ids that
+            # are silent by design, before a line speed's trial, does not make every repeated read confirmed).
+            self._trouble_until = self.clock.now() + self.ledger.owed_s
         self._owe(req)
         self._quiet(fault, deadline)
         op.spend(fault)

@@ -131,6 +131,18 @@ def test_a_monitors_repeated_read_takes_another_length_so_its_copies_cannot_answ
     assert [f[4:6] for f in line.sent[:4]] == [b"\x00\x01", b"\x00\x01", b"\x00\x01", b"\x00\x02"]
 
 
+def test_silence_alone_does_not_make_a_monitors_repeated_reads_confirmed():
+    # A try nobody answers (a probe of an id that is silent by design, before a line speed's trial) leaves its reply
+    # owed but shows nothing that repeats: the repeated reads after it alternate their widths and are used as they
+    # come, one request each.
+    line = ScriptedLine({10: 111, 20: 222, 21: 7}, ["lost"])
+    ex = exchange(line, retries=0)
+    with pytest.raises(DeviceError, match="no response"):
+        ex.read(1, 10, 1)
+    assert [ex.read(1, 20, 1, spare=(0, 1)) for _ in range(6)] == [[222]] * 6
+    assert len(line.sent) == 1 + 6
+
+
 def test_a_read_that_repeats_none_is_not_widened():
     line = ScriptedLine({10: 111, 20: 222, 21: 7}, [])
     ex = exchange(line)
