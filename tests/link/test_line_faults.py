@@ -14,6 +14,7 @@ from servotool.link.master import RtuMaster
 from servotool.link.ports import LinkSettings
 from servotool.model.codec import words_to_raw
 from servotool.model.loader import load_profile
+from servotool.ops import backup
 from servotool.sim.faults import KINDS, LineFaults, parse_rates
 from servotool.sim.firmware import build_drive
 from servotool.sim.server import EmbeddedSim
@@ -102,6 +103,31 @@ def test_no_fault_kind_makes_the_link_return_a_wrong_value(sim_dir, kind):
     assert proxy.applied.get(kind, 0) >= 2  # the line really was bad
     assert wrong == []
     assert done >= 1  # and it was not all errors
+
+
+@pytest.mark.parametrize("profile_id", ["is620p", "sd25"])
+def test_a_backup_on_a_bad_line_holds_only_what_the_drive_holds(sim_dir, profile_id):
+    # The two profiles with single-register parameters scattered over the map: many reads of one length, whose
+    # repeated, held or foreign replies could stand in for each other. At this seed every kind of fault meets the
+    # backup, which then finishes; the timeout is well above a loaded host's stalls and late replies come after it.
+    # A backup that could not finish would say so (a clean error); one that finishes holds the drive's values.
+    profile, sim_drive, sim = served(profile_id)
+    proxy = sim.proxy
+    proxy.set_faults(LineFaults(parse_rates("mixed:8%"), seed=4, late_s=0.45, gap_s=0.005))
+    link = RtuMaster(LinkSettings(sim.port, timeout=0.3, retries=3))
+    try:
+        try:
+            taken = backup.take(Drive(link, profile, profile.default_unit)).values
+        except DeviceError:
+            taken = {}
+    finally:
+        link.close()
+    try:
+        wrong = [f"{c}={v}" for c, v in taken.items() if truth(sim, sim_drive, profile.entry(c)) != v]
+    finally:
+        sim.close()
+    assert {"duplicate", "stale", "unit", "late", "burst"} <= set(proxy.applied)  # the line really was bad
+    assert wrong == []
 
 
 def test_a_write_the_drive_acknowledges_but_ignores_is_found_by_its_read_back(line):
