@@ -173,6 +173,10 @@ def slaves(tmp: Path, n: int, rounds: int) -> None:
                     a / b for a, b in zip(rates["sim serve"], rates["libmodbus slave"], strict=True)
                 )
                 print(f"  {master:<42} sim serve / libmodbus slave: {best:.2f} best, {ratio:.2f} median of the rounds")
+        # A pty carries bytes at memory speed; a real line at BAUD carries a one-register read's 8 + 7 bytes and
+        # the two 3.5-character silences in 22 characters of 10 bits.
+        ceiling = BAUD / (22 * 10)
+        print(f"  a real {BAUD}-baud line carries at most {ceiling:.0f} such requests/s (22 characters each)")
 
 
 def users(samples: int, show: bool = True) -> dict[str, list[float]]:
