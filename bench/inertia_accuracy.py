@@ -52,6 +52,14 @@ from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, TuneResult, tune_inertia
 
 TRAVEL_REV = 2.0
+# The simulated DSX7E's 500 ms host watchdog lets a dead host's motor run on 9 rev at 1080 rpm: 2 rev of travel leave
+# it 184 rpm (tuning.planning.fit_run_on), too little to identify; its rows get the travel its run-on needs.
+DSX7E_TRAVEL_REV = 12.0
+
+
+def bench_travel(profile_id: str) -> float:
+    """The travel limit a bench row identifies within: 2 rev, or what the drive's dead-man run-on needs."""
+    return DSX7E_TRAVEL_REV if profile_id == "dsx7e" else TRAVEL_REV
 
 
 def fit_brake(plant: Plant) -> None:
@@ -90,7 +98,7 @@ def identify_once(
     brake: bool = True,
     profile_id: str = "dsx7e",
     viscous: float = 0.0005,
-    travel_rev: float = TRAVEL_REV,
+    travel_rev: float | None = None,
 ) -> TuneResult:
     """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine; a drive
     without a dead-man route is moved as the CLI moves it with --no-dead-man."""
@@ -110,7 +118,8 @@ def identify_once(
     make_motion_setup(sim)
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
     drive.dead_man_waived = True
-    return tune_inertia(drive, TuneRequest(travel_rev=travel_rev, dry_run=True), clock=clock)
+    travel = travel_rev if travel_rev is not None else bench_travel(profile_id)
+    return tune_inertia(drive, TuneRequest(travel_rev=travel, dry_run=True), clock=clock)
 
 
 def line_rate(profile_id: str, baud: int) -> float:
@@ -150,7 +159,9 @@ class Cell:
         err = abs(run.ratio - ratio) / (1.0 + ratio) * 100
         self.errors.append(err)
         self.within += abs(run.ratio - ratio) <= 3 * est.ratio_std + 1e-9
-        self.over += (run.identified.travel_used_rev or 0.0) > TRAVEL_REV or run.seconds > 10.0
+        plan = run.identified.plan
+        limit = plan.travel_limit_rev if plan is not None else TRAVEL_REV
+        self.over += (run.identified.travel_used_rev or 0.0) > limit or run.seconds > 10.0
         self.rates.append(run.identified.samples_per_s)
 
     def targets(self) -> dict[str, bool]:

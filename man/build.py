@@ -41,15 +41,25 @@ port; the client still speaks real RTU frames with CRC).
 Output that comes from a simulated drive says so once on standard error.
 .PP
 Anything that moves the motor first prints what stops the motor if this program stops (kill, crash, pulled
-cable) and the bound: "if this program stops, the motor stops within X rev (Y s)" (\fBdead_man\fR in \fB\-\-json\fR).
-Ctrl\-C stops at once; speed and travel limits (\fB\-\-travel\fR) are checked before and during motion.
+cable) and the bound: "if this program stops, the motor stops within X rev (Y s)" (\fBdead_man\fR and
+\fBsafety\fR in \fB\-\-json\fR; never hidden by \fB\-q\fR). With a travel limit, the planned travel and that bound
+must fit inside it: an identification or step check lowers its speed until they do, a JOG is refused naming the
+speed that fits.
+However a motion ends (its end, Ctrl\-C, SIGTERM, SIGHUP, a lost line, an error, a failed check) one stop sequence
+runs, which a second Ctrl\-C cannot interrupt: zero speed, rest, the servo back as found, the heartbeat stopped
+and forced inputs released, every parameter the motion wrote (its protections too) put back, then the drive read
+back. The last line says what it read ("stopped, servo off" and the
+values read back) or, where that could not be proven, "COULD NOT CONFIRM THE MOTOR STOPPED" and why, with exit
+status 4.
+.B servotool stop
+stops a drive whatever moved it.
 .TS
 l l l.
 Drive	If the host dies	Bound
-DSX7E	its host watchdog Pn620 (kept alive by Fn032) stops the motor with E25	speed x (Pn620 + ramp/2)
-IS620P	the running multi\-segment position move (H11 segment 1) ends and stops	one segment: 3 beats at speed + stop
-SD25	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
-SDC	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
+DSX7E	watchdog Pn620 (fed by Fn032) stops it, E25; simulator only, not in the manual	speed x (Pn620 + ramp/2)
+IS620P	the running multi\-segment position move (H11 segment 1) ends and stops	one segment and one braking
+SD25	nothing: no Modbus timeout; forced DIs ignore wired inputs	none: \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
+SDC	nothing: no Modbus timeout, no bounded route	none: \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
 .TE
 With \fB\-\-heartbeat dtr|rts\fR a control line of the USB\-RS485 adapter toggles at every beat of a motion for a
 retriggerable watchdog relay on the drive's main contactor; the bound is then the relay's time
@@ -163,6 +173,8 @@ Success.
 .TP
 .B 1
 Device or I/O error: port, timeout, CRC, Modbus exception, a motion or identification that failed.
+Also a difference found: \fBparam diff\fR, \fBparam apply \-\-check\fR, \fBfleet drift\fR and
+\fBfleet apply \-\-check\fR when a drive differs.
 .TP
 .B 2
 Usage or validation error: unknown code, value out of range, bad file or plan, missing confirmation, a drive
@@ -172,8 +184,16 @@ Nothing is written to a drive before all values of a command are validated.
 .B 3
 Verification mismatch: a value read back differs, or an expectation or alarm clear failed.
 .TP
+.B 4
+A motion's stop could not be proven: reading the drive back did not show the motor at rest, the servo as found and
+the motion's settings as they were (or the drive did not answer); the last line says so in capitals. It wins over
+every other status.
+.TP
+.B 5
+Some drives of a \fBfleet\fR command failed; the others were done (the table and \fB\-\-json\fR say which).
+.TP
 .B 130
-Interrupted (Ctrl\-C); any motion was stopped first.
+Interrupted (Ctrl\-C, SIGTERM, SIGHUP); any motion was stopped first, and the last line says what the drive read.
 """
 
 SEE_ALSO = r""".SH SEE ALSO

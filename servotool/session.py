@@ -95,9 +95,11 @@ class Bus:
             self.link.line_listeners.append(self.sim.host_speaks)
         self.checked: set[int] = set(resolved.confirmed)
 
-    def drives(self, units: list[int] | None = None) -> list[Drive]:
+    def drives(self, units: list[int] | None = None, bare: bool = False) -> list[Drive]:
         """A Drive for each unit (the bus's own by default), on this link; UsageError for a unit the embedded
-        simulator does not serve."""
+        simulator does not serve. bare: nothing read or written first, neither a raised line nor the identity put
+        right nor a journal (`servotool stop`: nothing may fail before its first write); the next command does
+        them."""
         from servotool.files import sim_state_dir
         from servotool.ops.journal import boost_record, recover_at_start
 
@@ -109,6 +111,8 @@ class Bus:
         line = self.link.control_line()
         for d in drives:  # one line for the bus: a relay per adapter, wired to every drive's enable or contactor
             d.heartbeat_line, d.heartbeat_timeout_s = line, self.resolved.heartbeat_timeout_s
+        if bare:
+            return drives
         unchecked = [d for d in drives if d.unit not in self.checked]
         raised = self.resolved.profile.boost.available and any(boost_record(d) for d in unchecked)
         if raised:  # a line a killed process left raised comes first (ops.boost loads only then)
@@ -145,11 +149,13 @@ def open_drives(
     units: list[int] | None = None,
     trace: Trace | None = None,
     notice: Callable[[str], None] | None = None,
+    bare: bool = False,
 ) -> Iterator[list[Drive]]:
-    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit."""
+    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit. bare: no
+    identity check and no journal recovery first (`servotool stop`: nothing may fail before its first write)."""
     bus = Bus(resolved, units, trace, notice)
     try:
-        yield bus.drives()
+        yield bus.drives(bare=bare)
     finally:
         bus.close()
 

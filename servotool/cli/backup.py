@@ -43,15 +43,31 @@ def backup_cmd(
         help="yaml (checksummed; the default) or csv (for a spreadsheet; "
         "restore reads it too). Default: from the file name's suffix.",
     ),
+    snapshot: bool = typer.Option(
+        False,
+        "--snapshot",
+        help="A snapshot for version control: no time stamp or checksum, one line per value with its reading as a "
+        "comment, so a diff of two shows only what changed (default name PROFILE-unitN.yaml).",
+    ),
+    machine: str = typer.Option(
+        None, "--machine", help="The machine a snapshot names in its header. Env: SERVOTOOL_MACHINE."
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
+    import os
+
     from servotool.ops import backup
     from servotool.ops.params import select
 
     kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
     if kind not in ("yaml", "yml", "csv"):
         raise UsageError(f"--format must be yaml or csv, not '{fmt or kind}'")
+    if snapshot and kind == "csv":
+        raise UsageError("a snapshot is YAML: give --snapshot or --format csv, not both")
+    machine = machine or os.environ.get("SERVOTOOL_MACHINE") or ""
+    if machine and not snapshot:
+        raise UsageError("--machine names the machine in a snapshot's header: give --snapshot too")
     backup.check_output(output or Path(f"new.{kind}"), force=force)  # before reading the drive (24 s at 1200 Bd)
     with drive(ctx) as d:
         entries = select(d.profile)
@@ -61,13 +77,18 @@ def backup_cmd(
         ):
             b = backup.take(d, progress=advance)
         suffix = "csv" if kind == "csv" else "yaml"
-        path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
-        backup.save(b, d.profile, path, force=force, fmt=suffix)
+        if snapshot:
+            b.machine = machine
+            path = output or Path(f"{d.profile.id}-unit{d.unit}.yaml")
+            backup.check_output(path, force=force)
+        else:
+            path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
+        backup.save(b, d.profile, path, force=force, fmt="snapshot" if snapshot else suffix)
     if as_json:
         emit_json(
             {
                 "file": str(path),
-                "format": "csv" if kind == "csv" else "yaml",
+                "format": "snapshot" if snapshot else "csv" if kind == "csv" else "yaml",
                 "entries": len(b.values),
                 "checksum": b.checksum(),
                 "identity": b.identity,
@@ -95,7 +116,8 @@ def diff_cmd(
 ) -> None:
     """Differences between the drive and a file, two files, a file or the drive and the factory defaults.
 
-    A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning.
+    A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning. Exit
+    status 0 when they are equal, 1 when they differ (for scripts and CI).
     """
     from servotool.ops import backup
     from servotool.ops.eeprom import compared_memory
@@ -110,13 +132,15 @@ def diff_cmd(
             profile = d.profile
             current = _read_all(d, as_json)
             missing = list(d.missing)
-        _show_diff(
-            profile,
-            backup.diff(profile, current, backup.defaults(profile)),
-            ("drive", "factory default"),
-            missing,
-            as_json,
-            compared_memory(profile),
+        _differ(
+            _show_diff(
+                profile,
+                backup.diff(profile, current, backup.defaults(profile)),
+                ("drive", "factory default"),
+                missing,
+                as_json,
+                compared_memory(profile),
+            )
         )
         return
 
@@ -146,7 +170,13 @@ def diff_cmd(
         labels = ("drive", str(file))
         diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
         compared = compared_memory(profile)
-    _show_diff(profile, diffs, labels, missing, as_json, compared)
+    _differ(_show_diff(profile, diffs, labels, missing, as_json, compared))
+
+
+def _differ(differences: int) -> None:
+    """Exit 1 when a comparison found differences (0 when equal), as diff(1) does."""
+    if differences:
+        raise typer.Exit(1)
 
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
@@ -164,13 +194,14 @@ def _show_diff(
     missing: list[str],
     as_json: bool,
     compared: str | None = None,
-) -> None:
-    """The differences; compared names the drive's memory a drive diff read (RAM, which may not be EEPROM)."""
+) -> int:
+    """The differences (returns how many); compared names the drive's memory a drive diff read (RAM, which may not
+    be EEPROM)."""
     if as_json:
         differences = [{**x.as_json(), "value_unverified": json_mark(profile, x.entry)} for x in diffs]
         data = {"a": labels[0], "b": labels[1], "differences": differences, "missing": missing}
         emit_json({**data, **({"compared": compared} if compared else {})})
-        return
+        return len(diffs)
     if compared == "RAM":
         info(
             "compared with the drive's RAM: what EEPROM holds (what a power cycle brings back) cannot be read over "
@@ -182,7 +213,7 @@ def _show_diff(
     labels = (drive or labels[0], labels[1])
     if not diffs:
         out.print(f"no differences between {labels[0]} and {labels[1]}", markup=False)
-        return
+        return 0
     t = table("Code", "Name", labels[0], labels[1], "Unit", "Needs")
     for x in diffs:
         e = x.entry
@@ -197,6 +228,7 @@ def _show_diff(
     out.print(t)
     if (note := footnote(profile, [x.entry for x in diffs])) is not None:
         out.print(note, markup=False)
+    return len(diffs)
 
 
 @app.command("restore")

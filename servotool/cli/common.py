@@ -111,18 +111,20 @@ def drive(ctx: typer.Context) -> Iterator[Drive]:
 
 
 @contextmanager
-def _drives(ctx: typer.Context, units: list[int] | None) -> Iterator[list[Drive]]:
+def _drives(ctx: typer.Context, units: list[int] | None, bare: bool = False) -> Iterator[list[Drive]]:
     res = resolved(ctx)
     if (bus := state(ctx).bus) is not None:
-        yield bus.drives(units or [res.unit])
+        yield bus.drives(units or [res.unit], bare=bare)
         return
-    with open_drives(res, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)) as found:
+    trace = trace_frame if Verbosity.level > 0 else None
+    with open_drives(res, units, trace=trace, notice=notice_for(ctx), bare=bare) as found:
         yield found
 
 
 @contextmanager
-def drives(ctx: typer.Context, units: list[int]) -> Iterator[list[Drive]]:
-    with _drives(ctx, units) as found:
+def drives(ctx: typer.Context, units: list[int], bare: bool = False) -> Iterator[list[Drive]]:
+    """Drives for these units (in the shell, on its open port); bare: see session.Bus.drives."""
+    with _drives(ctx, units, bare) as found:
         yield found
 
 

@@ -13,16 +13,17 @@ import typer
 
 from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.keys import raw_keys
-from servotool.cli.render import Verbosity, caution, emit_json, err, info, notice
+from servotool.cli.render import Verbosity, caution, emit_json, err, info, notice, safety
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.quantity import quantity
 from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
-from servotool.motion.deadman import lines
+from servotool.motion.deadman import DeadManBound, lines
 from servotool.motion.hold import HoldToRun
 from servotool.motion.jog_plan import JogPlan
 from servotool.motion.setup import check_setup
+from servotool.motion.stop import StopReport
 from servotool.motion.travel import TravelLimit
 from servotool.ops.trace import Sampler, motion_entries
 from servotool.ops.trace_file import check_writable, write_trace
@@ -40,20 +41,22 @@ def travel_limit(ctx: typer.Context, travel: float | None) -> TravelLimit | None
     return TravelLimit(configured, "config file / SERVOTOOL_TRAVEL") if configured is not None else None
 
 
-def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
+def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> list[str]:
     """Refuse while the drive lacks its motion setup; on a real port name the unverified motion entries (ask
-    before moving) and a missing drive-side watchdog."""
+    before moving) and a missing drive-side watchdog. Returns the cautions given (for --json)."""
     simulated = resolved(ctx).simulated
     # A real drive reads back a power-cycle value before it acts on it; the simulator says what is in effect.
     check_setup(d, feature, partial(effective_values, d.profile, d.unit) if simulated else None)
     if simulated:
-        return
+        return []
     caveats = motion_caveats(d.profile, feature)
-    caution(caveats.lines())
+    lines = caveats.lines()
+    caution(lines)
     if caveats.unverified:
         codes = ", ".join(e.code for _, e, _ in caveats.unverified)
         if not confirm(f"Move the motor through unverified entries ({codes})?", yes):
             raise ServoError("cancelled: nothing moved")
+    return lines
 
 
 @contextmanager
@@ -135,13 +138,13 @@ def jog(
             jogger.idle = sampler.sample_for
             show.sampler = sampler
         plan = jogger.plan(speed, seconds, max_travel, travel_limit(ctx, travel))
-        confirm_motion(ctx, d, yes)
+        cautions = confirm_motion(ctx, d, yes)
         info(
             plan.describe() + ("" if not interactive else f"  [{'toggle' if toggle else 'hold a key to move'}: {KEYS}]")
         )
         if plan.dead_man is not None:
             for line in lines(plan.dead_man):
-                info(line)
+                safety(line)
         try:
             if interactive:
                 hold = None if toggle else HoldToRun(jogger.clock, jogger.keepalive_s)
@@ -160,15 +163,23 @@ def jog(
             else:
                 jogger.run(plan, show)
         except KeyboardInterrupt:
-            err.print("\nservotool: JOG stopped by Ctrl-C", markup=False)
-            raise typer.Exit(130) from None
+            if err.is_terminal:
+                err.print("")  # after the speed line; the last line says what the stop read back
+            raise
         if err.is_terminal:
             err.print("")
-        final = jogger.speed()
-    _result(plan, seconds, show, final, as_json)
+    _result(plan, seconds, show, jogger.last_stop, as_json, cautions)
 
 
-def _result(plan: JogPlan, seconds: float | None, show: _Speeds, final: float | None, as_json: bool) -> None:
+def _result(
+    plan: JogPlan,
+    seconds: float | None,
+    show: _Speeds,
+    stopped: StopReport | None,
+    as_json: bool,
+    cautions: list[str],
+) -> None:
+    final = stopped.speed_rpm if stopped is not None else None
     sign = plan.direction if seconds is not None else 1  # a timed reverse JOG peaks at a negative speed
     peak, rate = show.measured_peak()
     if as_json:
@@ -182,6 +193,8 @@ def _result(plan: JogPlan, seconds: float | None, show: _Speeds, final: float | 
                 "median_speed": quantity(round(statistics.median(show.late), 1) * sign if show.late else None, "rpm"),
                 "final_speed": quantity(final, "rpm"),
                 "dead_man": plan.dead_man.as_json() if plan.dead_man is not None else None,
+                "safety": safety_lines(plan.dead_man, cautions),
+                "stop": stopped.as_json() if stopped is not None else None,
             }
         )
     else:
@@ -194,6 +207,12 @@ def _coarse(rate: float | None) -> str:
     if rate is None:
         return ""
     return f" (speed read {rate:.0f} times a second)"
+
+
+def safety_lines(bound: DeadManBound | None, cautions: list[str]) -> list[str]:
+    """The safety lines printed before moving, for --json: the dead-man bound (or NO DEAD-MAN), what else bounds
+    the motion (protections, forced inputs), and the cautions."""
+    return (lines(bound) if bound is not None else []) + cautions
 
 
 def _check_options(seconds: float | None, interactive: bool, toggle: bool, trace_file: Path | None) -> None:

@@ -263,6 +263,12 @@ def notice(text: str) -> None:
     err.print(text, markup=False)
 
 
+def safety(text: str) -> None:
+    """A safety line on stderr: what stops the motor if this program stops and how far it can run on, a missing
+    dead-man, wired inputs that do not act. Never hidden by --quiet (and given in --json by the command too)."""
+    err.print(text, markup=False)
+
+
 _UNVERIFIED = re.compile(r"(\S+) \((\w+)\): ")
 _RELIES = re.compile(r"(.+?) relies on .*; unverified\b")  # "the dead-man (segment) relies on L..; unverified: ..."
 

@@ -9,7 +9,7 @@ import typer
 
 from servotool.cli.common import boosted, drives_for, resolved_from, state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, emit_json, info, notice, out, warn
+from servotool.cli.render import Verbosity, emit_json, info, notice, out, safety, warn
 from servotool.commission.plan import Plan, load_plan
 from servotool.commission.plan_files import report_problem
 from servotool.commission.prerequisites import motion_setup
@@ -66,6 +66,7 @@ def run(
             ask=ask,
             log=info,
             word=lambda exc: error_text(exc, cli_opts),
+            safety=safety,
             force=force,
         )
         rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)

@@ -187,6 +187,13 @@ def config(
         "motion after 500 ms of host silence on a drive whose manual documents no "
         "communication timeout. The real drive keeps running.",
     ),
+    segment_restart: str = typer.Option(
+        None,
+        "--segment-restart",
+        help="on|off (default off), segment route (IS620P): on, a start edge during a running segment restarts it "
+        "at once from where the axis is; off, it waits until the segment has settled, and a falling edge brakes "
+        "the segment (the stricter reading; the manual documents neither).",
+    ),
     inputs: int = typer.Option(None, "--inputs", help=SIM_SETTINGS["inputs"][4] + ".", min=0, max=255),
     di_monitor: str = typer.Option(
         None,
@@ -205,6 +212,7 @@ def config(
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
     fake_on = None if fake_watchdog is None else _on_off(fake_watchdog, "--fake-watchdog")
+    restart_on = None if segment_restart is None else _on_off(segment_restart, "--segment-restart")
     monitor = None if di_monitor is None else _choice(di_monitor, "--di-monitor", DI_MONITOR)
     p, u = _target(ctx, profile, unit)
     if missing is not None:
@@ -221,6 +229,7 @@ def config(
         line_baud=_line_choice(line_baud),
         brake=brake_on,
         fake_watchdog=fake_on,
+        segment_restart=restart_on,
         inputs=inputs,
         di_monitor=monitor,
         resonance_hz=resonance_hz,
@@ -317,7 +326,9 @@ def _print_settings(status: sim_state.SimStatus) -> None:
             over = env_choice() if value == "factory" else None
             shown = str(value) if over is None else f"{over} ({LINE_ENV})"
         else:
-            shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
+            shown = (
+                ("on" if value else "off") if name in ("brake", "fake_watchdog", "segment_restart") else f"{value:g}"
+            )
         shown = DI_MONITOR[int(value)] if name == "di_monitor" else shown
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)

@@ -11,15 +11,15 @@ from typing import Any
 import typer
 
 from servotool.cli.common import boosted, confirm, drive, resolved
-from servotool.cli.jog import confirm_motion
-from servotool.cli.render import emit_json, info, out, table, warn
+from servotool.cli.jog import confirm_motion, safety_lines
+from servotool.cli.render import emit_json, err, info, out, safety, table, warn
 from servotool.cli.values import json_mark, spoken, unit_text
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import as_held, raw_to_eng
 from servotool.model.profile import Profile
 from servotool.model.quantity import quantity
-from servotool.motion import deadman, protect
+from servotool.motion import deadman, protect, stop
 from servotool.ops import eeprom
 from servotool.tuning import gain_search, identify, planning, preflight, step, tune
 from servotool.tuning.control.friction import friction_report
@@ -232,13 +232,23 @@ def inertia(
             )
         except TuneDeclined:
             raise typer.Exit(1) from None
+        except KeyboardInterrupt as exc:
+            _notes(exc)
+            raise
         except ServoError as exc:  # refused, tripped, travel exceeded, link lost
             _failed(exc, report, d.profile, as_json and ask.moving)
             raise
         profile = d.profile
     if report is not None:
         _report(report, res.identified, profile, res)
-    _render(res, profile, as_json, ask.dead_man)
+    _render(res, profile, as_json, ask.dead_man, ask.safety + ask.cautions)
+
+
+def _notes(interrupt: KeyboardInterrupt) -> None:
+    """What an interrupt left said before it leaves (typer turns it into a bare exit 130): the gains written back,
+    or the new ones that stay."""
+    for note in getattr(interrupt, "__notes__", ()):
+        err.print(f"servotool: {note}", markup=False)
 
 
 CHECK_WHAT = "a 200 rpm step forward and back once they are written; the previous gains go back if it fails"
@@ -297,32 +307,40 @@ class _Dialog:
         self.step_check, self.travel, self.as_json = step_check, travel, as_json
         self.moving = False  # identifying: a failure now reports what was measured
         self.dead_man: deadman.DeadManBound | None = None
+        self.cautions: list[str] = []
+        self.safety: list[str] = []  # the safety lines printed (for --json)
 
     def approve_motion(self, motion: planning.MotionPlan | None) -> bool:
         if self.method == "host" or self.step_check:
-            confirm_motion(self.ctx, self.d, self.yes, preflight.FEATURE)
+            self.cautions = confirm_motion(self.ctx, self.d, self.yes, preflight.FEATURE)
         info(
             f"motion: {motion.describe()}"
             if motion is not None
             else "motion: the drive's own identification (its parameters set torque and travel), then host "
             "moves that check its result"
         )
-        if self.step_check:
-            info(
-                f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(self.travel):.2f} s forward "
-                "and back, before and after"
-            )
         if self.method == "host" and motion is not None:
-            bound = deadman.motion_bound(self.d, motion.speed_rpm, motion.ramp_s)
+            bound = planning.identification_bound(self.d, motion)
+            deadman.check(bound, self.d.dead_man_waived)
             self.dead_man = protect.planned_bound(self.d, bound, motion.speed_rpm, motion.travel_limit_rev)
-        elif self.step_check:
-            bound = deadman.motion_bound(self.d, step.STEP_SPEED_RPM, 0.0)
-            self.dead_man = protect.planned_bound(self.d, bound, step.STEP_SPEED_RPM, self.travel)
-        if self.dead_man is not None:
             for line in deadman.lines(self.dead_man):
-                info(line)
+                self._safety(line)
+        if self.step_check:
+            check = step.plan_step(self.d, self.travel)
+            info(f"step check: {check.describe()}, before and after")
+            if self.dead_man is None:  # the step check's bound, with the protections it sets
+                self.dead_man = protect.planned_bound(self.d, check.bound, check.speed_rpm, self.travel)
+                first, *more = deadman.lines(self.dead_man)
+                for line in (f"step check: {first}", *more):
+                    self._safety(line)
+            else:
+                self._safety(f"step check: {deadman.sentence(check.bound)}")
         self.moving = confirm("Move the axis now?", self.yes)
         return self.moving
+
+    def _safety(self, line: str) -> None:
+        safety(line)
+        self.safety.append(line)
 
     def show(self, proposal: tune.Proposal) -> None:
         self.moving = False
@@ -370,10 +388,20 @@ def _report(
     info(f"report: {len(written.files)} files in {folder} (open {folder / 'report.md'})")
 
 
+def _stop_json() -> dict[str, Any] | None:
+    """What the last motion's stop read back (motion/stop.py), for --json."""
+    report = stop.final()
+    return report.as_json() if report is not None else None
+
+
 def _render(
-    res: tune.TuneResult, profile: Profile, as_json: bool, dead_man: deadman.DeadManBound | None = None
+    res: tune.TuneResult,
+    profile: Profile,
+    as_json: bool,
+    dead_man: deadman.DeadManBound | None = None,
+    cautions: list[str] | None = None,
 ) -> None:
-    """The outcome, after the writes."""
+    """The outcome, after the writes (cautions: the safety lines and cautions given before moving)."""
     proposal, sugg = res.proposal, res.proposal.suggestion
     entry, changes = proposal.parameter, proposal.gain_changes
     if as_json:
@@ -405,6 +433,8 @@ def _render(
                     "step_before": _step_json(res.step_before),
                     "step_after": _step_json(res.step_after),
                     "dead_man": dead_man.as_json() if dead_man is not None else None,
+                    "safety": cautions or [],
+                    "stop": _stop_json(),
                 }
             )
         )
@@ -532,23 +562,37 @@ def gains(
 
     with drive(ctx) as d, boosted(ctx, [d], "the step checks"):
         d.dead_man_waived = no_dead_man
-        confirm_motion(ctx, d, yes, "tune gains")
+        cautions = confirm_motion(ctx, d, yes, "tune gains")
+        check = step.plan_step(d, travel)  # the bound of each level's step check, with the protections it sets
+        bound = protect.planned_bound(d, check.bound, check.speed_rpm, travel)
+        info(f"step check: {check.describe()}, at each level")
+        for line in deadman.lines(bound):
+            safety(line)
         if not confirm("Move the axis now (a speed step forward and back at each level)?", yes):
             raise typer.Exit(1)
         try:
             res = gain_search.search_gains(
                 d, load_ratio=load_ratio, start=start, top=top, travel_rev=travel, save=save, progress=show
             )
+        except KeyboardInterrupt as exc:
+            _notes(exc)
+            raise
         except gain_search.GainSearchFailed as exc:
-            _render_search(exc.search, as_json, ok=False)
+            _render_search(exc.search, as_json, ok=False, safety_json=safety_lines(bound, cautions), bound=bound)
             raise
         profile = d.profile
     if res.persisted is False:
         warn(eeprom.ram_only_warning(profile))
-    _render_search(res, as_json, ok=True)
+    _render_search(res, as_json, ok=True, safety_json=safety_lines(bound, cautions), bound=bound)
 
 
-def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None:
+def _render_search(
+    res: gain_search.GainSearch,
+    as_json: bool,
+    ok: bool,
+    safety_json: list[str] | None = None,
+    bound: deadman.DeadManBound | None = None,
+) -> None:
     rows = [
         {
             "level": t.level,
@@ -572,6 +616,9 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
                     "reason": res.reason,
                     "gains": _gains_json(res.changes),
                     "persisted": res.persisted,
+                    "dead_man": bound.as_json() if bound is not None else None,
+                    "safety": safety_json or [],
+                    "stop": _stop_json(),
                 }
             )
         )

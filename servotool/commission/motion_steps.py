@@ -13,10 +13,11 @@ from servotool.model.codec import parse_value
 from servotool.model.profile import Profile
 from servotool.model.quantity import quantity
 from servotool.model.roles import motion_route
-from servotool.motion.deadman import sentence
+from servotool.motion.deadman import lines, sentence
 from servotool.report.charts import need_matplotlib
 from servotool.report.tune_report import write_tune_report
 from servotool.tuning.identify import IdentificationRefused
+from servotool.tuning.planning import MotionPlan, identification_bound
 from servotool.tuning.stable_hold import guarded_jogger
 from servotool.tuning.tune import TuneRequest, check_request, tune_inertia
 
@@ -49,6 +50,11 @@ class JogStep(StepType):
         drive.dead_man_waived = _waived(step.arg)
         jogger = guarded_jogger(drive)
         plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
+        if plan.dead_man is not None:  # the bound, then what else bounds the motion (protections, forced inputs)
+            first, *more = lines(plan.dead_man)
+            ctx.safety(f"unit {drive.unit}: {first}")
+            for line in more:
+                ctx.safety(line)
         jogger.run(plan)
         bound = plan.dead_man
         return Outcome(
@@ -150,8 +156,14 @@ class TuneInertiaStep(StepType):
         drive.dead_man_waived = _waived(step.arg)
         report = _report_option(step.arg)
         folder = ctx.path(report, drive.unit) if report else None
+
+        def announce(motion: MotionPlan | None) -> bool:
+            if motion is not None:
+                ctx.safety(f"unit {drive.unit}: {sentence(identification_bound(drive, motion))}")
+            return True
+
         try:
-            res = tune_inertia(drive, request)
+            res = tune_inertia(drive, request, approve_motion=announce)
         except IdentificationRefused as exc:
             if folder is not None:
                 write_tune_report(folder, exc.result, drive.profile, None, str(exc))

@@ -11,7 +11,7 @@ from servotool.drive import Drive
 from servotool.errors import UsageError, VerifyError
 from servotool.model.codec import format_value, json_value, parse_value, raw_to_eng
 from servotool.model.profile import Entry, Profile
-from servotool.ops import backup, params, restore
+from servotool.ops import backup, changelog, params, restore
 from servotool.ops.eeprom import check_power_cycle, persistence
 from servotool.ops.journal import port_lock
 from servotool.words import count
@@ -219,6 +219,7 @@ class SaveStep(StepType):
         written = list(ctx.written.get(drive.unit, {}).values())
         if mode == "ram":
             drive.trigger("eeprom_save", "save")
+            changelog.event(drive, "store", memory=changelog.EEPROM, note="the drive's store function: RAM to EEPROM")
             return Outcome("parameters stored in EEPROM", {"stored": [e.code for e, _ in written]})
         if mode == "immediate":
             return Outcome("nothing to do: the drive stores every write", {"stored": [e.code for e, _ in written]})

@@ -58,14 +58,18 @@ class Runner:
         log: Callable[[str], None],
         word: Callable[[ServoError], str] = str,
         clock: Clock | None = None,
+        safety: Callable[[str], None] | None = None,
         force: bool = False,
     ) -> None:
-        """word turns a failed step's error into its report line (the CLI adds fix commands); force: files the
-        plan writes may replace existing ones (`run --force`)."""
+        """word turns a failed step's error into its report line (the CLI adds fix commands); safety shows a
+        motion step's dead-man bound before it moves (never quiet); force: files the plan writes may replace
+        existing ones (`run --force`)."""
         self.plan, self.drives = plan, drives
         self.clock = clock or RealClock()
         self.continue_on_error, self.log, self.word = continue_on_error, log, word
         self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives}, self.clock, force)
+        if safety is not None:
+            self.context.safety = safety
         self.results: list[StepResult] = []
         self.current: Step | None = None  # the step running (or the last one run)
         self.auto_backups: dict[int, str] = {}

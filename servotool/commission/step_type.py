@@ -26,6 +26,8 @@ class RunContext:
     written: dict[int, dict[str, tuple[Entry, int]]] = field(default_factory=dict)
     clock: Clock = field(default_factory=RealClock)
     force: bool = False  # `run --force`: files may be replaced
+    # A safety line before a step moves (the dead-man bound, NO DEAD-MAN): shown even where step lines are quiet.
+    safety: Callable[[str], None] = field(default=lambda _line: None)
 
     def wrote(self, drive: Drive, entry: Entry, raw: int) -> None:
         self.written.setdefault(drive.unit, {})[entry.code] = (entry, raw)

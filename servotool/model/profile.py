@@ -53,6 +53,10 @@ ALARM_KINDS = (
 CONVENTIONS = {"inertia_ratio": ("load_over_motor", "total_over_motor")}
 
 
+# A ramp time whose reference speed a profile does not describe is read as the time to this speed (or the rated one).
+UNDESCRIBED_RAMP_RPM = 1000.0
+
+
 @dataclass(frozen=True)
 class Entry:
     """One register-mapped item of a drive."""
@@ -215,6 +219,10 @@ class DeadManRoute:
     unverified: str = ""
     if_host_dies: str = ""
     start_value: int = 1  # segment: the value OR-ed into role segment_start's servo-on value to start a move
+    # The speed role jog_accel's ramp time runs up to (rpm); 0: the motor's rated speed, None: not described (the
+    # slower of 1000 rpm and the rated speed is assumed). ramp_source: the manual lines, or why it is inferred.
+    ramp_reference_rpm: float | None = None
+    ramp_source: str = ""
 
 
 FORCED_MONITOR = ("forced", "terminals")
@@ -356,6 +364,16 @@ class Profile:
 
     def alarm_of_kind(self, kind: str) -> Alarm | None:
         return next((a for a in self.alarms if a.kind == kind), None)
+
+    def ramp_rpm(self) -> float:
+        """The speed the drive's ramp time (role jog_accel) runs up to, as the profile reads its manual
+        (dead_man.ramp_reference_rpm: SDC's PN29 per 1000 rpm, the simulated DSX7E's Pn513 to the rated speed); where
+        the profile does not say, the slower reading: 1000 rpm or the rated speed, whichever is lower."""
+        rated = self.motor.rated_speed_rpm if self.motor is not None else 3000.0
+        reference = self.dead_man.ramp_reference_rpm if self.dead_man is not None else None
+        if reference is None:
+            return min(UNDESCRIBED_RAMP_RPM, rated)
+        return reference or rated
 
     def value_unverified(self, entry: Entry) -> str:
         """Why this entry's value (its scale, unit or meaning) is not confirmed by the manual; "" when it is."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from typing import Any
 
@@ -60,7 +61,16 @@ ID_PATTERN = re.compile(r"[a-z0-9][a-z0-9_-]*")
 ROLE_PATTERN = re.compile(r"[a-z][a-z0-9_]*")
 GROUP_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 DEAD_MAN_ROUTES = ("drive_timeout", "segment", "none")
-DEAD_MAN_KEYS = {"route", "reason", "source", "unverified", "if_host_dies", "start_value"}
+DEAD_MAN_KEYS = {
+    "route",
+    "reason",
+    "source",
+    "unverified",
+    "if_host_dies",
+    "start_value",
+    "ramp_reference_rpm",
+    "ramp_source",
+}
 FORCED_KEYS = {"switch", "levels", "monitor", "monitor_shows", "source", "unverified"}
 
 
@@ -293,9 +303,29 @@ def _parse_dead_man(chk: Checker, raw: dict[str, Any] | None) -> DeadManRoute | 
     chk.known_keys(raw, DEAD_MAN_KEYS, "dead_man")
     route = chk.choice(raw, "route", "dead_man", DEAD_MAN_ROUTES, "none", required=True)
     texts = {k: chk.need(raw, k, "dead_man", str) or "" for k in ("reason", "source")}
-    texts |= {k: chk.opt(raw, k, "dead_man", str, "") for k in ("unverified", "if_host_dies")}
+    texts |= {k: chk.opt(raw, k, "dead_man", str, "") for k in ("unverified", "if_host_dies", "ramp_source")}
     start_value = chk.whole(raw, "start_value", "dead_man", 1, 0xFFFF, 1)
-    return DeadManRoute(route=route, start_value=start_value, **texts)
+    reference = _ramp_reference(chk, raw)
+    if reference is not None and "ramp_source" not in raw:
+        chk.bad(
+            "dead_man", "missing key 'ramp_source': ramp_reference_rpm needs the manual lines, or why it is inferred"
+        )
+    return DeadManRoute(route=route, start_value=start_value, ramp_reference_rpm=reference, **texts)
+
+
+def _ramp_reference(chk: Checker, raw: dict[str, Any]) -> float | None:
+    """dead_man.ramp_reference_rpm: a speed in rpm > 0, or 'rated' (the motor's rated speed, read as 0.0); None when
+    absent or broken (after reporting it)."""
+    if "ramp_reference_rpm" not in raw:
+        return None
+    loc = "dead_man.ramp_reference_rpm"
+    value = raw["ramp_reference_rpm"]
+    if value == "rated":
+        return 0.0
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+        chk.bad(loc, f"expected a speed in rpm > 0 or 'rated', got {shown(value)}")
+        return None
+    return float(value)
 
 
 def _parse_forced_inputs(

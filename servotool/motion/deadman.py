@@ -7,6 +7,7 @@ X rev (Y s)"). A route that stops nothing (route none) needs the user's explicit
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from servotool.drive import Drive
@@ -21,9 +22,6 @@ EXCHANGES_PER_BEAT = 4
 # Bytes on the wire of one exchange (request + reply of a short read or write) and the turnaround allowance.
 EXCHANGE_BYTES = 17
 TURNAROUND_S = 0.005
-# Ramp times of these drives are specified up to 1000 rpm on some (IS620P) and up to the rated speed on others:
-# the bound takes the slower reading.
-RAMP_REFERENCE_RPM = 1000.0
 NO_ROUTE = DeadManRoute(route="none", reason="the profile describes no dead-man route", source="")
 
 
@@ -59,7 +57,7 @@ class DeadManBound:
             "bounded": self.bounded,
             "stop_within": quantity(None if self.stop_rev is None else round(self.stop_rev, 3), "rev"),
             "stop_within_time": quantity(None if self.stop_s is None else round(self.stop_s, 3), "s"),
-            "speed": quantity(self.speed_rpm, "rpm"),
+            "speed": quantity(round(self.speed_rpm, 1), "rpm"),
             "beat": quantity(round(self.beat_s, 4), "s"),
             "link_cycle": quantity(round(self.link_cycle_s, 4), "s"),
             "waived": self.waived,
@@ -84,24 +82,27 @@ def link_cycle_s(drive: Drive) -> float:
     return EXCHANGES_PER_BEAT * (EXCHANGE_BYTES * 11.0 / baud + TURNAROUND_S)
 
 
-def stop_time_s(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
-    """Time to ramp down from speed_rpm with a ramp time ramp_ms per reference_rpm (by default the slower of the
-    two readings); without a known ramp, one second per 1000 rpm."""
-    ramp_s = (ramp_ms if ramp_ms is not None else 1000.0) / 1000.0
-    return ramp_s * abs(speed_rpm) / reference_rpm
+def stop_time_s(speed_rpm: float, ramp_ms: float | None, reference_rpm: float) -> float:
+    """Time to ramp down from speed_rpm with a ramp time ramp_ms per reference_rpm (Profile.ramp_rpm); without a
+    known ramp, one second per 1000 rpm."""
+    if ramp_ms is None:
+        return abs(speed_rpm) / 1000.0
+    return ramp_ms / 1000.0 * abs(speed_rpm) / reference_rpm
 
 
+SEGMENT_BRAKE_LAG_S = 0.02  # a braked segment stops this much later than its ramp alone (the speed loop's lag)
+SEGMENT_SETTLE_S = 0.2  # a queued segment starts once the braked one has settled: within this (time bound only)
 SEGMENT_BEATS = 3.0  # a segment covers this many beat periods at speed, so a late beat never stutters the motion
 
 
-def braking_rev(speed_rpm: float, ramp_ms: float | None, reference_rpm: float = RAMP_REFERENCE_RPM) -> float:
+def braking_rev(speed_rpm: float, ramp_ms: float | None, reference_rpm: float) -> float:
     """Distance to ramp down from speed_rpm (see stop_time_s; reference_rpm: the speed the ramp time is for)."""
     return abs(speed_rpm) / 60.0 * stop_time_s(speed_rpm, ramp_ms, reference_rpm) / 2.0
 
 
-def segment_rev(speed_rpm: float, beat_s: float, ramp_ms: float | None) -> float:
+def segment_rev(speed_rpm: float, beat_s: float, ramp_ms: float | None, reference_rpm: float) -> float:
     """The length of each re-armed segment: SEGMENT_BEATS beats at speed, then room to stop."""
-    return abs(speed_rpm) / 60.0 * SEGMENT_BEATS * beat_s + braking_rev(speed_rpm, ramp_ms)
+    return abs(speed_rpm) / 60.0 * SEGMENT_BEATS * beat_s + braking_rev(speed_rpm, ramp_ms, reference_rpm)
 
 
 def drive_timeout_s(drive: Drive) -> float | None:
@@ -128,7 +129,8 @@ def bound(
     already read); see check() for when it cannot be kept."""
     route = route_of(drive.profile)
     cycle = link_cycle_s(drive)
-    stop_s = stop_time_s(speed_rpm, ramp_ms)
+    reference = drive.profile.ramp_rpm()
+    stop_s = stop_time_s(speed_rpm, ramp_ms, reference)
     rev = s = None
     kind = route.route
     if kind == "drive_timeout":
@@ -139,8 +141,11 @@ def bound(
             s = timeout + stop_s
             rev = abs(speed_rpm) / 60.0 * (timeout + stop_s / 2.0)
     elif kind == "segment":
-        rev = segment_rev(speed_rpm, beat_s, ramp_ms)
-        s = SEGMENT_BEATS * beat_s + stop_s
+        # The running segment, re-armed just before the host died: restarted from where the axis was, or (the
+        # stricter reading of the firmware) braked and followed by the queued one once settled.
+        braked = braking_rev(speed_rpm, ramp_ms, reference) + abs(speed_rpm) / 60.0 * SEGMENT_BRAKE_LAG_S
+        rev = segment_rev(speed_rpm, beat_s, ramp_ms, reference) + braked
+        s = SEGMENT_BEATS * beat_s + 2.0 * stop_s + SEGMENT_SETTLE_S
     if kind == "none" and drive.heartbeat_timeout_s is not None and drive.heartbeat_line is not None:
         return heartbeat_bound(drive, speed_rpm, beat_s, stop_s, cycle)
     return DeadManBound(
@@ -186,12 +191,33 @@ def motion_bound(drive: Drive, speed_rpm: float, ramp_s: float) -> DeadManBound:
     drive's beat rate, as its Jogger arms it."""
     from servotool.motion.keepalive import keepalive_interval_s
 
-    motor = drive.profile.motor
-    rated = motor.rated_speed_rpm if motor is not None else 3000.0
-    ramp_ms = ramp_s * 1000.0 * rated / abs(speed_rpm)  # the ramp parameter's reading: time to rated speed
+    ramp_ms = ramp_s * 1000.0 * drive.profile.ramp_rpm() / abs(speed_rpm)  # the parameter's reading
     b = bound(drive, speed_rpm, min(0.1, keepalive_interval_s(drive)), ramp_ms, drive.dead_man_waived)
     check(b, drive.dead_man_waived)
     return b
+
+
+def largest_fitting_speed(speed_rpm: float, fits: Callable[[float], bool], floor_rpm: float) -> float | None:
+    """The highest speed up to speed_rpm (to 1 %) at which `fits` holds (it holds at lower speeds if at higher);
+    None where not even floor_rpm fits."""
+    if fits(speed_rpm):
+        return speed_rpm
+    if floor_rpm >= speed_rpm or not fits(floor_rpm):
+        return None
+    lo, hi = floor_rpm, speed_rpm
+    while hi - lo > 0.01 * hi:
+        mid = (lo + hi) / 2.0
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return max(floor_rpm, float(int(lo)))  # whole rpm, as printed
+
+
+def timeout_remedy(drive: Drive, b: DeadManBound) -> str:
+    """What else shortens a bound than a lower speed, as words after a list of remedies: the drive's own watchdog
+    where it is the route ("" elsewhere)."""
+    entry = drive.profile.role("comm_timeout")
+    if b.route != "drive_timeout" or entry is None:
+        return ""
+    return f", or a shorter watchdog {entry.code} (param set {entry.code}=...; it stops the motor after that long)"
 
 
 def check(b: DeadManBound, waived: bool) -> None:
@@ -234,7 +260,7 @@ def sentence(b: DeadManBound) -> str:
     if b.stop_rev is None:
         return (
             "NO DEAD-MAN (--no-dead-man): if this program stops, the motor keeps running at "
-            f"{b.speed_rpm:g} rpm " + (fence[1:] if fence else "until stopped at the drive")
+            f"{b.speed_rpm:.0f} rpm " + (fence[1:] if fence else "until stopped at the drive")
         )
     text = f"if this program stops, the motor stops within {b.stop_rev:.2f} rev ({b.stop_s:.2f} s)"
     return text + (f"; at worst it runs at ≤ {b.speed_rpm:g} rpm{fence}" if fence else "")

@@ -83,6 +83,15 @@ SIM_SETTINGS: dict[str, tuple[type, float | int | str, float, float, str]] = {
         "NOT REAL (on/off): stop host motion after 500 ms of host silence on a drive "
         "whose manual documents no communication timeout; off by default, as on the real drive",
     ),
+    "segment_restart": (
+        int,
+        0,
+        0,
+        1,
+        "for comparison (on/off, default off): a start edge during a running segment restarts segment 1 at once "
+        "from where the axis is; off: it is queued until the running segment ends and settles, and a falling "
+        "edge brakes the running segment (the stricter reading; neither is in the manual)",
+    ),
 }
 
 

@@ -83,6 +83,7 @@ class Firmware:
         self.ident: Identification | None = None
         self.segment: Segment | None = None
         self._start_level = False
+        self._queued = False  # a start edge came during a running segment: it starts once that one has settled
         self.alarms.recorded = False
 
     # ----- the running state, shared with other processes through the state file -----------------------------
@@ -167,7 +168,7 @@ class Firmware:
                 self._eng("overload_multiple", 300.0),
             ),
             max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
-            jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
+            jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)) * self.motor.rated_speed_rpm / self.profile.ramp_rpm(),
             following_limit_rev=self._following_limit_rev(),
         )
 
@@ -212,10 +213,14 @@ class Firmware:
             self._advance_identification(self.ident, now)
         if self.mode == "stopping":
             self._advance_stop(now)
-        if self.mode == "segment" and self.segment is not None:
-            if self.segment.advance(self.plant, now, self._ramp_rev_s2()):
-                self.segment = None
-                self.mode = "servo"  # the move ended: the drive holds there, servo on
+        while self.mode == "segment" and self.segment is not None:
+            if not self.segment.advance(self.plant, now, self._ramp_rev_s2()):
+                break
+            self.segment = None
+            self.mode = "servo"  # the move ended: the drive holds there, servo on
+            if self._queued:  # the start edge that came meanwhile (strict trigger semantics): it runs now
+                self._queued = False
+                self._start_segment()
         self.plant.advance_to(now)
         if self.plant.alarm is not None:
             if self.mode != "off":
@@ -317,12 +322,29 @@ class Firmware:
         return self.motor.rated_speed_rpm / 60.0 / max(self.plant.gains.jog_accel_ms / 1000.0, 1e-3)
 
     def segment_start(self, level: bool) -> None:
-        """The segment start input: a rising edge with the servo on starts segment 1 afresh from here."""
+        """The segment start input (IS620P PosInSen on a VDI): a rising edge with the servo on starts segment 1
+        from here. During a running segment (unverified, not in the manual; issue 29 cites a third-party account of
+        Inovance firmware): a rising edge is queued until the segment ends and settles, a falling edge brakes it.
+        `sim config --segment-restart on` takes the older reading for comparison: a rising edge restarts segment 1
+        at once from the present position, a falling edge does nothing."""
         self.keep_alive()
-        rising = level and not self._start_level
+        rising, falling = level and not self._start_level, self._start_level and not level
         self._start_level = level
-        if not rising or self.mode not in ("servo", "segment") or self.plant.alarm is not None:
+        if self.mode not in ("servo", "segment") or self.plant.alarm is not None:
             return
+        running = self.mode == "segment" and self.segment is not None
+        if running and not self.drive.settings["segment_restart"]:
+            if falling and self.segment is not None:
+                self.segment.brake(self.plant)
+                self._queued = False  # the level went away before the queued start could act
+            elif rising:
+                self._queued = True
+            return
+        if rising:
+            self._start_segment()
+
+    def _start_segment(self) -> None:
+        """Segment 1 from here, with the parameters now in effect."""
         per_rev = self._eng("segment_units_per_rev", 0.0) or float(self.motor.counts_per_rev)
         distance = self._eng("segment_distance", 0.0) / per_rev
         self.segment = Segment.start(self.plant, distance, self._eng("segment_speed", 0.0))
@@ -345,6 +367,7 @@ class Firmware:
             self.plant.set_mode("off")
             self.mode = "off"
             self.segment = None
+            self._queued = False
 
     def reset_alarm(self) -> None:
         """Clear the latched alarm if its cause is gone; one that stays latched is not entered again."""

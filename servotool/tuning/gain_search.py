@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.model.codec import raw_to_eng
+from servotool.model.codec import format_value, raw_to_eng
+from servotool.motion.interrupts import held_interrupts
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, step
@@ -95,7 +96,7 @@ def search_gains(
     clock = clock or RealClock()
     p = drive.profile
     eeprom.check_save_request(p, save)
-    duration = step.step_duration_s(travel_rev)
+    step.step_duration_s(travel_rev)
     scale = rigidity_scale(p)
     ratio = drive_load_ratio(drive, load_ratio)
     own = own_load_ratio(drive) if load_ratio is not None else ratio
@@ -118,6 +119,7 @@ def search_gains(
         )
         raise UsageError(f"no level from {first} up keeps 45° and 6 dB of margin on load ratio {ratio:.2f}{under}")
     preflight(drive, "host")
+    check = step.plan_step(drive, travel_rev)
     search = GainSearch(ratio, first, own_ratio=own)
     original: list[GainChange] = []
     for level in range(first, highest + 1):
@@ -125,12 +127,16 @@ def search_gains(
             drive, ratio, rigidity=level, bandwidth_hz=None, configured_kgm2=configured
         )
         original = original or changes
-        _write(drive, changes, False)
         try:
-            response: StepResponse | None = step.step_response(drive, step.STEP_SPEED_RPM, duration, clock)
-            failure = response.failure() if response is not None else None
-        except ServoError as exc:
-            response, failure = None, str(exc)
+            _write(drive, changes, False)
+            try:
+                response: StepResponse | None = step.step_response(drive, check.speed_rpm, check.duration_s, clock)
+                failure = response.failure() if response is not None else None
+            except ServoError as exc:
+                response, failure = None, str(exc)
+        except BaseException as exc:  # Ctrl-C, SIGTERM, a lost line: no level was chosen, the gains go back
+            _roll_back(drive, original, save, exc)
+            raise
         trial = LevelTrial(level, sugg.speed_loop_gain_hz, found, response, failure)
         search.trials.append(trial)
         if progress is not None:
@@ -172,7 +178,24 @@ def _write(drive: Drive, changes: list[GainChange], save: bool | None) -> bool:
     return outcome["persisted"]
 
 
-def _restore(drive: Drive, original: list[GainChange], save: bool | None) -> None:
-    with eeprom.persistence(drive, save):
+def _restore(drive: Drive, original: list[GainChange], save: bool | None, raise_held: bool = True) -> None:
+    with held_interrupts(raise_held), eeprom.persistence(drive, save):
         for c in original:
             write_one(drive, c.entry, c.old_raw)
+
+
+def _roll_back(drive: Drive, original: list[GainChange], save: bool | None, exc: BaseException) -> None:
+    """The gains before the search back after an interrupt; a note on it says so, or that a level's gains stay."""
+    try:
+        _restore(drive, original, save, raise_held=False)
+    except ServoError as failure:
+        exc.add_note(
+            f"the search was interrupted and writing the previous gains back failed ({failure}): the gains of the "
+            "level being checked stay"
+        )
+        return
+    exc.add_note(
+        "the search was interrupted during a step check: the gains before it were written back ("
+        + ", ".join(f"{c.entry.code} {format_value(c.entry, c.old_raw)}" for c in original)
+        + ")"
+    )

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -13,9 +13,10 @@ from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.quantity import quantity
-from servotool.motion.jogger import Jogger
+from servotool.motion import deadman
+from servotool.motion.deadman import DeadManBound
 from servotool.motion.keepalive import keepalive_interval_s
-from servotool.ops.eeprom import ram_writes
+from servotool.motion.moves import Mover
 from servotool.tuning.errors import IdentificationFailed
 from servotool.tuning.gain_writes import drive_loop
 from servotool.tuning.preflight import FEATURE, active_alarm
@@ -140,30 +141,80 @@ def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> flo
     return duration
 
 
+@dataclass(frozen=True)
+class StepPlan:
+    """A step check that fits its travel limit: its speed, how long each step runs, and what a dead host lets the
+    motor run on (printed before moving)."""
+
+    speed_rpm: float
+    duration_s: float
+    bound: DeadManBound
+
+    def describe(self) -> str:
+        lowered = "" if self.speed_rpm >= STEP_SPEED_RPM else " (lowered so that a dead host's run-on fits the travel)"
+        return f"{self.speed_rpm:.0f} rpm{lowered} for {self.duration_s:.2f} s forward and back"
+
+
+MIN_STEP_S = 0.2  # a step shorter than this shows no settling
+
+
+def plan_step(drive: Drive, travel_rev: float) -> StepPlan:
+    """The step check's speed and time: each step and what a dead host lets the motor run on from its end fit
+    inside the travel limit (STEP_SPEED_RPM where they do, else lower; refused where not even 20 rpm fits)."""
+    step_duration_s(travel_rev)  # the travel's own check, as before the drive is opened
+    ramp = drive.profile.need_role("jog_accel", FEATURE)  # the check runs at its shortest ramp
+    ramp_ms = float(raw_to_eng(ramp, ramp.min))
+    beat = min(0.1, keepalive_interval_s(drive))
+    timeout = deadman.drive_timeout_s(drive) if drive.profile.role("comm_timeout") is not None else None
+    room = 0.9 * travel_rev
+
+    def bound(speed: float, duration_s: float = MIN_STEP_S) -> DeadManBound:
+        b = deadman.bound(drive, speed, beat, ramp_ms, drive.dead_man_waived, timeout)
+        if b.route != "segment":
+            return b
+        # On the segment route each step is one segment of its own, ending where the step ends: that is its bound.
+        return replace(b, stop_rev=speed / 60.0 * duration_s, stop_s=duration_s + (b.stop_s or 0.0) / 2.0)
+
+    def run_on(speed: float) -> float:
+        if bound(speed).route == "segment":
+            return 0.0  # the step's own segment ends inside its travel
+        return bound(speed).stop_rev or 0.0  # nothing bounds it (--no-dead-man): nothing to fit
+
+    def fits(speed: float) -> bool:
+        return 1.3 * speed / 60.0 * MIN_STEP_S + run_on(speed) <= room
+
+    speed = deadman.largest_fitting_speed(STEP_SPEED_RPM, fits, 20.0)
+    if speed is None:
+        b = bound(STEP_SPEED_RPM)
+        raise UsageError(
+            f"--travel {travel_rev:g} leaves no room for a step check and what a dead host lets the motor run on "
+            f"({run_on(STEP_SPEED_RPM):.2f} rev at {STEP_SPEED_RPM:g} rpm, {b.route}): give more --travel"
+            + deadman.timeout_remedy(drive, b)
+        )
+    duration = min(0.6, (room - run_on(speed)) / (1.3 * speed / 60.0))
+    b = bound(speed, duration)
+    deadman.check(b, drive.dead_man_waived)
+    return StepPlan(speed, duration, b)
+
+
 def step_response(
     drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None, load_unknown: bool = False
 ) -> StepResponse:
     """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
 
-    JOG parameters are put back afterwards (their writes kept out of EEPROM where the drive has a switch); the
-    keep-alive beats at the drive's watchdog rate. load_unknown (the check before identification): on a route that
+    However it ends, the motion's stop sequence stops the motor, puts the JOG parameters back (their writes kept out
+    of EEPROM where the drive has a switch) and reads the drive back (motion/stop.py); the keep-alive beats at the
+    drive's watchdog rate. load_unknown (the check before identification): on a route that
     holds position between the steps, the position gain is lowered meanwhile so that the hold cannot swing up on
     a load far above the configured ratio (tuning.stable_hold); the speed loop being checked is left as it is.
     """
-    with ram_writes(drive):
-        return _step_response(drive, speed_rpm, duration_s, timing, load_unknown)
-
-
-def _step_response(
-    drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None, load_unknown: bool
-) -> StepResponse:
     p, timing = drive.profile, timing or RealClock()
-    jogger = Jogger(drive, keepalive_interval_s(drive), FEATURE, timing)
-    # The drive's own protections for the step and back (it stays within the travel step_duration_s allowed it).
+    jogger = Mover(drive, keepalive_interval_s(drive), FEATURE, timing)
+    # The drive's own protections for the step and back (it stays within the travel step_duration_s allowed it),
+    # set inside the stop scope below before the first step.
     jogger.protect_for(speed_rpm, 1.3 * speed_rpm / 60.0 * duration_s / 0.9)
     jog_accel = p.need_role("jog_accel", FEATURE)
     speed_e = p.need_role("speed_feedback", FEATURE)
-    saved = jogger.settings_to_restore()
     loop_hz = drive_loop(drive).speed_hz
     t: list[float] = []
     v: list[float] = []
@@ -171,7 +222,7 @@ def _step_response(
 
     def speed() -> float:
         value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
-        jogger.keepalive.beat_if_due()
+        jogger.keep_alive()
         jogger.watch_inputs()
         return value
 
@@ -181,15 +232,17 @@ def _step_response(
         while timing.now() < end and abs(speed()) > 3:
             timing.sleep(0.02)
 
-    try:
+    with jogger.stopping(need_ramp=True) as saved:  # however the check ends: the one stop sequence
         if load_unknown:
             StableHold(drive, jogger.route.kind, saved).soften_position()
-        jogger.set_speed(speed_rpm)
+        if jogger.segments is not None:
+            jogger.segments.single = True  # each step one segment of its own: its bound is the step (plan_step)
+        jogger.set_speed(speed_rpm)  # the settings before the first step, so that its time counts from the command
         jogger.set_ramp(jog_accel.min)
         for direction in (1, -1):
             rest = speed()  # the same zero for every step: at rest, just before the command
             t0 = timing.now()
-            jogger.command(direction)
+            jogger.start(direction, speed_rpm, jog_accel.min, stop_after_s=duration_s)
             if direction > 0:
                 command_s = timing.now() - t0
                 t.append(0.0)
@@ -204,11 +257,6 @@ def _step_response(
         active = active_alarm(drive)
         if active:
             raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
-    except BaseException:
-        jogger.stop_quietly()
-        raise
-    finally:
-        jogger.leave_and_restore(saved)
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = (

@@ -14,7 +14,9 @@ from pathlib import Path
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
+from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile
+from servotool.motion.interrupts import held_interrupts
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, identify, planning, preflight, step
@@ -190,15 +192,15 @@ def tune_inertia(
     clock = clock or RealClock()
     t0 = clock.now()
     check_request(drive.profile, request)
-    step_s = step.step_duration_s(request.travel_rev) if request.step_check else None
     preflight.preflight(drive, request.method)
+    step_plan = step.plan_step(drive, request.travel_rev) if request.step_check else None
     ident = identify.Identifier(drive, clock)
     motion, rest = None, None
     if request.method == "host":
         motion, rest = request.host_motion(drive, clock)
     if approve_motion is not None and not approve_motion(motion):
         raise TuneDeclined("nothing moved")
-    before = _step(drive, step_s, clock, load_unknown=True)
+    before = _step(drive, step_plan, clock, load_unknown=True)
     try:
         result = (
             ident.run_host(motion, progress=progress, rest=rest)
@@ -236,7 +238,12 @@ def tune_inertia(
         exc.ratio = proposal.ratio
         raise
     changed = stored or bool(written)  # SDC stores no ratio: its gains changed all the same
-    after = verified or (_step(drive, step_s, clock) if before is not None and changed else None)
+    try:
+        after = verified or (_step(drive, step_plan, clock) if before is not None and changed else None)
+    except BaseException as exc:  # the check only measures: what was written stays, and the user is told
+        if written:
+            exc.add_note(f"the values written before the step check stay: {_written_words(written)}")
+        raise
     return TuneResult(
         proposal,
         stored,
@@ -255,19 +262,50 @@ def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, 
     previous gains go back (by the same EEPROM rule) and GainsRolledBack is raised."""
     response: StepResponse | None = None
     try:
-        response = step.step_response(drive, step.STEP_SPEED_RPM, step.step_duration_s(request.travel_rev), clock)
+        check = step.plan_step(drive, request.travel_rev)
+        response = step.step_response(drive, check.speed_rpm, check.duration_s, clock)
         fault = response.failure()
     except ServoError as exc:
         fault = str(exc)
+    except BaseException as exc:  # Ctrl-C, SIGTERM: the check did not pass, so the gains it checks do not stay
+        _roll_back(drive, changes, request.save, exc, "the step check after writing the gains was interrupted")
+        raise
     if fault is None:
         assert response is not None
         return response
-    with eeprom.persistence(drive, request.save):
-        for c in changes:
-            write_one(drive, c.entry, c.old_raw)
+    _roll_back(drive, changes, request.save)
     raise GainsRolledBack(
         f"step check after writing the gains failed ({fault}): the previous gains were written back", response, fault
     )
+
+
+def _roll_back(
+    drive: Drive, changes: list[GainChange], save: bool | None, exc: BaseException | None = None, why: str = ""
+) -> None:
+    """The previous gains written back (by the same EEPROM rule) with interrupts held; with `exc` (the interrupt or
+    failure that ended the check), a note on it says what was done, or that the new gains stay."""
+    try:
+        with held_interrupts(raise_held=exc is None), eeprom.persistence(drive, save):
+            for c in changes:
+                write_one(drive, c.entry, c.old_raw)
+    except ServoError as failure:
+        if exc is None:
+            raise
+        exc.add_note(
+            f"{why}: writing the previous gains back failed ({failure}); the new gains stay: "
+            + _written_words([(c.entry, c.raw) for c in changes])
+        )
+        return
+    if exc is not None:
+        exc.add_note(
+            f"{why}: the previous gains were written back ("
+            + ", ".join(f"{c.entry.code} {format_value(c.entry, c.old_raw)}" for c in changes)
+            + ")"
+        )
+
+
+def _written_words(written: list[tuple[Entry, int]]) -> str:
+    return ", ".join(f"{e.code} = {format_value(e, raw)}" for e, raw in written)
 
 
 def check_drive_result(drive: Drive, result: identify.Result, request: TuneRequest, clock: Clock) -> None:
@@ -321,5 +359,7 @@ def _write(
     return writes, outcome["persisted"]
 
 
-def _step(drive: Drive, seconds: float | None, clock: Clock, load_unknown: bool = False) -> StepResponse | None:
-    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock, load_unknown) if seconds is not None else None
+def _step(drive: Drive, plan: step.StepPlan | None, clock: Clock, load_unknown: bool = False) -> StepResponse | None:
+    if plan is None:
+        return None
+    return step.step_response(drive, plan.speed_rpm, plan.duration_s, clock, load_unknown)

@@ -168,7 +168,9 @@ def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_ru
 def test_quiet_keeps_results_and_errors(cli, tmp_path):
     r = cli("-q", "--port", "sim", "jog", "--speed", "100", "--time", "0.2")
     assert r.code == 0 and "JOG done: peak" in r.err and "SIMULATED" not in r.err  # the banner goes
-    assert "if this program stops" not in r.err  # progress words go
+    assert "JOG forward at" not in r.err  # progress words go
+    assert "if this program stops, the motor stops within" in r.err  # the safety line stays (issue 29)
+    assert r.err.strip().splitlines()[-1].startswith("servotool: stopped, servo off")  # so does the stop's proof
     plan = tmp_path / "plan.yaml"
     plan.write_text("port: sim\nprofile: dsx7e\nsteps:\n  - expect: {Pn101: 99.0}\n")
     r = cli("-q", "run", str(plan), "--yes")

@@ -25,10 +25,11 @@ def test_find_searches_codes_names_and_descriptions_without_a_drive(cli):
 
 
 def test_diff_factory_compares_the_drive_with_its_defaults(cli):
-    assert cli("--port", "sim", "param", "diff", "--factory").out.startswith("no differences")
+    r = cli("--port", "sim", "param", "diff", "--factory")
+    assert r.code == 0 and r.out.startswith("no differences")
     cli("--port", "sim", "param", "set", "Pn101=25")
     r = cli("--port", "sim", "param", "diff", "--factory", "--json")
-    assert r.code == 0
+    assert r.code == 1  # they differ: exit 1, for scripts (issue 35)
     assert r.json()["differences"] == [
         {
             "code": "Pn101",

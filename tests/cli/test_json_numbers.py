@@ -24,7 +24,7 @@ def _floats(value):
 
 
 def test_tune_json_gives_entry_values_and_rounded_figures(cli):
-    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--rigidity", "13")
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--rigidity", "13", "--travel", "12")
     assert r.code == 0, r.err
     data = r.json()
     assert isinstance(data["parameter_value"]["value"], int)  # Pn004 in %, not 300.0

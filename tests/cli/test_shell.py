@@ -75,7 +75,7 @@ def test_a_session_in_a_terminal(sim_dir, sim_serve, tmp_path):
             seen = _speed_rpm(port)
         assert 250 <= seen <= 400  # it runs (forward; a speed loop may overshoot its 300 rpm on the way)
         term.keys("C-c")
-        term.wait_for("JOG stopped by Ctrl-C")
+        term.wait_for("servotool: stopped, servo off")  # the stop sequence's last line: what it read back
         term.wait_for("servotool>", count=4)  # the prompt again: still in the shell
         deadline = time.monotonic() + 5
         while abs(_speed_rpm(port)) > 10 and time.monotonic() < deadline:

@@ -23,7 +23,7 @@ steps:
   - expect: {Pn101: 25.0, Un100: 0}
   - set: {Pn102: 30.0}
     unit: 2
-  - tune inertia: {rigidity: 12}
+  - tune inertia: {rigidity: 12, travel: 12}
   - expect: {Un000: {value: 0, tol: 10}}
   - backup: axis-{unit}.yaml
   - prompt: Is the machine clear?

@@ -114,3 +114,24 @@ def test_forcing_found_on_is_released_first_so_that_the_wired_levels_are_read(si
     jogger.run(jogger.plan(200, 0.4), lambda _t, _v: seen.append(reads(d, "So-57")[0]))
     assert seen[-1] == 0b10001
     assert not is_forcing(d.profile, reads(d, "So-58")[0])
+
+
+def test_the_stop_releases_forcing_with_its_zero_command_before_the_motor_is_at_rest(sim_dir):
+    """Issue 29 item 6: the wired inputs (an E-stop) act again while the motor ramps down, not only once it rests."""
+    _sim, d, clock = sd25()
+    jogger = Jogger(d, clock=clock)
+    plan = jogger.plan(1000, 0.8)
+    seen: list[tuple[bool, float]] = []
+
+    def idle(s: float) -> None:
+        seen.append((is_forcing(d.profile, reads(d, "So-58")[0]), abs(jogger.speed() or 0.0)))
+        clock.sleep(s)
+
+    jogger.idle = idle
+    jogger.run(plan)
+    released = [i for i, (forcing, _speed) in enumerate(seen) if not forcing]
+    assert released and seen[0][0]  # forced while it ran, released at the end
+    first = released[0]
+    assert all(not forcing for forcing, _ in seen[first:])  # never forced again
+    assert seen[first][1] > 100  # released while the motor still turned (it was ramping down from 1000 rpm)
+    assert jogger.last_stop is not None and jogger.last_stop.confirmed and "So-58 released" in jogger.last_stop.forcing

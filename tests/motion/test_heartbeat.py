@@ -65,7 +65,9 @@ def test_with_a_heartbeat_a_drive_without_dead_man_moves_bounded_by_the_relay(si
     jogger = Jogger(d, clock=clock)
     plan = jogger.plan(300, 1.0)  # no --no-dead-man: the relay is the dead-man
     assert plan.dead_man.route == "heartbeat" and plan.dead_man.bounded
-    assert plan.dead_man.stop_s == pytest.approx(0.5 + deadman.stop_time_s(300, plan.accel_ms), abs=1e-6)
+    assert plan.dead_man.stop_s == pytest.approx(
+        0.5 + deadman.stop_time_s(300, plan.accel_ms, d.profile.ramp_rpm()), abs=1e-6
+    )
     assert "within" in deadman.sentence(plan.dead_man)
     jogger.run(plan)
     ended = clock.now()

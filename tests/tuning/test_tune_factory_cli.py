@@ -61,11 +61,13 @@ def test_identification_through_the_cli_at_the_factory_line_speed(cli, profile):
         )
         assert cli(*cmd).code == 0
     ack = ["--no-dead-man"] if route_of(p).route == "none" else []
-    r = cli("--port", "sim", "--profile", profile, "tune", "inertia", "--yes", "--json", "--dry-run", *ack)
+    # DSX7E's 500 ms watchdog lets a dead host's motor run on 1.7 rev at 200 rpm: 2 rev leave no useful speed
+    room = ["--travel", "12"] if route_of(p).route == "drive_timeout" else []
+    r = cli("--port", "sim", "--profile", profile, "tune", "inertia", "--yes", "--json", "--dry-run", *ack, *room)
     assert r.code == 0, r.err
     res = r.json()
     assert res["ratio"] == pytest.approx(20.0, abs=max(3 * res["ratio_std"], 0.03 * 21))
-    assert res["travel"]["value"] <= 2.0
+    assert res["travel"]["value"] <= (12.0 if room else 2.0)
 
 
 # At 9600 the travel bounds the moves: a load of 37 with gravity is always too uncertain within 2 rev on SD25
