@@ -85,7 +85,12 @@ def main(
     unit: int = typer.Option(
         None, "--unit", "-u", help="Modbus unit id 1..247 (default: the profile's). Env: SERVOTOOL_UNIT."
     ),
-    timeout: float = typer.Option(None, "--timeout", help="Response timeout in seconds. Env: SERVOTOOL_TIMEOUT."),
+    timeout: float = typer.Option(
+        None,
+        "--timeout",
+        help="Response timeout in seconds, beyond the request's and reply's time on the wire at the baud rate "
+        "(a long reply at 2400 baud is waited for). Env: SERVOTOOL_TIMEOUT.",
+    ),
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
     echo: str = typer.Option(
         None,
