@@ -32,7 +32,12 @@ COMMANDS = {
     "profiles": lazy("servotool.cli.profiles:app", help="List, show and check drive profiles."),
     "sim": lazy("servotool.cli.sim:app", help="The simulated drive: serve it, configure its machine, reset it."),
     "alarm": lazy("servotool.cli.alarm:app", help="Show, clear and list the drive's alarms."),
-    "tune": lazy("servotool.cli.tune:app", help="Identify load inertia and set gains."),
+    "tune": lazy(
+        "servotool.cli.tune:app",
+        "servotool.cli.tune_score:app",
+        "servotool.cli.tune_functions:app",
+        help="Inertia, gains, response scores and the drive's tuning functions.",
+    ),
     "monitor": lazy("servotool.cli.monitor:monitor", help="Watch live values with units, min/max and a trend."),
     "jog": lazy("servotool.cli.jog:jog", help="JOG the motor, timed or by keys; first says what stops it."),
     "stop": lazy("servotool.cli.stop:stop", help="Stop the motor, whatever moved it; then read it back at rest."),
