@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import typer
 
@@ -17,7 +16,6 @@ from servotool.model.quantity import quantity
 from servotool.ops import eeprom
 from servotool.tuning import drive_functions as functions
 from servotool.tuning import score as scoring
-from servotool.tuning.fit.spectrum import Peak
 
 app = typer.Typer(no_args_is_help=True, help="Run the drive's own tuning functions, judged by a measured score.")
 
@@ -63,19 +61,7 @@ def friction(
     gives the Coulomb terms, the torque at the test speed less them the damping terms (where mapped). Scored
     before and after on following error and integrated error; put back otherwise.
     """
-    motion = scoring.motion_for(travel)
-    scoring.check_repeats(repeats)
-    _check_report(report)
-    with drive(ctx) as d, boosted(ctx, [d], "tune friction"):
-        eeprom.check_save_request(d.profile, save)
-        functions.friction_entries(d)
-        motion = _start(ctx, d, yes, no_dead_man, "friction", motion)
-        before = scoring.measure(d, motion, repeats)
-        trial = functions.friction_trial(d, motion, before, progress=_progress(as_json))
-        trial = functions.judged_trial(d, trial, motion, repeats, keep=keep, save=save, progress=_progress(as_json))
-        profile = d.profile
-    _report(report, trial)
-    _render(trial, as_json, profile.id)
+    _run(ctx, "friction", None, repeats, travel, keep, save, yes, no_dead_man, report, as_json)
 
 
 @app.command("notch")
@@ -102,24 +88,39 @@ def notch(
     it set; --method host notches only a peak the line's sampling resolves (below 80 % of the Nyquist limit) inside
     the drive's notch range. Put back where the score does not improve beyond its spread.
     """
-    if method not in (None, "drive", "host"):
+    _run(ctx, "notch", method, repeats, travel, keep, save, yes, no_dead_man, report, as_json)
+
+
+def _run(
+    ctx: typer.Context,
+    function: str,
+    method: str | None,
+    repeats: int,
+    travel: float,
+    keep: bool,
+    save: bool | None,
+    yes: bool,
+    no_dead_man: bool,
+    report: Path | None,
+    as_json: bool,
+) -> None:
+    """The one use case (drive_functions.run_function), asked for and rendered."""
+    if method not in (None, *functions.METHODS):
         raise UsageError("--method must be drive or host")
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
     _check_report(report)
-    with drive(ctx) as d, boosted(ctx, [d], "tune notch"):
+    with drive(ctx) as d, boosted(ctx, [d], f"tune {function}"):
+        functions.check_function(d.profile, function, method)
         eeprom.check_save_request(d.profile, save)
-        functions.notch_entries(d)
-        chosen = method or ("drive" if d.profile.role("adaptive_notch") is not None else "host")
-        if chosen == "drive" and d.profile.role("adaptive_notch") is None:
-            raise UsageError(f"tune notch --method drive: {d.profile.model} maps no adaptive notch")
-        motion = _start(ctx, d, yes, no_dead_man, "notch", motion)
-        before = scoring.measure(d, motion, repeats)
-        if chosen == "drive":
-            trial = functions.adaptive_notch_trial(d, motion, before, progress=_progress(as_json))
+        if function == "friction":
+            functions.friction_entries(d)
         else:
-            trial = functions.notch_trial(d, before)
-        trial = functions.judged_trial(d, trial, motion, repeats, keep=keep, save=save, progress=_progress(as_json))
+            functions.notch_entries(d)
+        motion = _start(ctx, d, yes, no_dead_man, function, motion)
+        trial = functions.run_function(
+            d, function, motion, repeats, method=method, keep=keep, save=save, progress=_progress(as_json)
+        )
         profile = d.profile
     _report(report, trial)
     _render(trial, as_json, profile.id)
@@ -147,7 +148,7 @@ def resonance(
     data = {
         "sample_rate": quantity(round(2 * nyquist, 1), "Hz"),
         "nyquist": quantity(round(nyquist, 1), "Hz"),
-        "peaks": [_peak_json(p) for p in peaks],
+        "peaks": [functions.peak_json(p) for p in peaks],
         "notch": proposal,
     }
     if as_json:
@@ -177,34 +178,8 @@ def _report(folder: Path | None, trial: functions.FunctionTrial) -> None:
             info(f"wrote {path}")
 
 
-def _peak_json(p: Peak) -> dict[str, Any]:
-    return {"frequency": quantity(round(p.hz, 1), "Hz"), "amplitude": round(p.amplitude, 3), "resolved": p.resolvable}
-
-
 def _render(trial: functions.FunctionTrial, as_json: bool, profile_id: str) -> None:
-    data: dict[str, Any] = {
-        "function": trial.function,
-        "changes": [
-            {
-                "code": c.entry.code,
-                "old": quantity(c.old_value, c.entry.unit),
-                "new": quantity(c.new_value, c.entry.unit),
-                "what": c.why,
-            }
-            for c in trial.changes
-        ],
-        "found": {k: round(v, 3) for k, v in trial.found.items()},
-        "peaks": [_peak_json(p) for p in trial.peaks],
-        "verdict": trial.verdict,
-        "judged_on": list(functions.JUDGED.get(trial.function, ())),
-        "kept": trial.kept,
-        "reason": trial.reason,
-        "held": {c.entry.code: quantity(trial.held.get(c.entry.code), c.entry.unit) for c in trial.changes},
-        "persisted": trial.persisted,
-        "before": scoring.score_json(trial.before, profile_id) if trial.before else None,
-        "after": scoring.score_json(trial.after, profile_id) if trial.after else None,
-        "comparison": scoring.comparison_json(trial.differences, trial.verdict) if trial.after else None,
-    }
+    data = functions.trial_json(trial, profile_id)
     if as_json:
         emit_json(data)
         return
@@ -212,7 +187,7 @@ def _render(trial: functions.FunctionTrial, as_json: bool, profile_id: str) -> N
         render_score(trial.before.score, trial.before.motion.describe())
     if trial.after is not None:
         render_comparison(trial.differences, trial.verdict)
-        out.print(f"judged on: {', '.join(data['judged_on'])}", markup=False)
+        out.print(f"judged on: {', '.join(functions.JUDGED.get(trial.function, ()))}", markup=False)
     out.print(f"{'KEPT' if trial.kept else 'NOT KEPT'}: {trial.reason}", markup=False)
     if trial.held:
         held = ", ".join(f"{code} = {value:g}" for code, value in trial.held.items())

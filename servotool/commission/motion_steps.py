@@ -47,7 +47,7 @@ class JogStep(StepType):
         return f"jog {speed:g} rpm for {secs:g} s"
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
-        drive.dead_man_waived = _waived(step.arg)
+        drive.dead_man_waived = waived(step.arg)
         jogger = guarded_jogger(drive)
         plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
         if plan.dead_man is not None:  # the bound, then what else bounds the motion (protections, forced inputs)
@@ -63,7 +63,7 @@ class JogStep(StepType):
         )
 
 
-def _waived(arg: Any) -> bool:
+def waived(arg: Any) -> bool:
     """`no_dead_man: true` in a motion step: the plan's author acknowledges a drive without a dead-man."""
     value = (arg or {}).get("no_dead_man", False) if isinstance(arg, dict) else False
     if not isinstance(value, bool):
@@ -153,7 +153,7 @@ class TuneInertiaStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         request = self.request(step.arg, drive.profile)
-        drive.dead_man_waived = _waived(step.arg)
+        drive.dead_man_waived = waived(step.arg)
         report = _report_option(step.arg)
         folder = ctx.path(report, drive.unit) if report else None
 
