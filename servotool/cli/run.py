@@ -106,7 +106,7 @@ def run(
 
 
 # steps whose exchanges a raised line shortens (ops.boost)
-LONG_STEPS = ("tune inertia", "tune score", "tune friction", "tune notch", "backup", "restore")
+LONG_STEPS = ("tune inertia", "tune score", "tune friction", "tune notch", "tune gain-switching", "backup", "restore")
 
 
 def _units(plan: Plan, given: int | None, default: int) -> list[int]:

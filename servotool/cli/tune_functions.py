@@ -15,6 +15,8 @@ from servotool.errors import UsageError
 from servotool.model.quantity import quantity
 from servotool.ops import eeprom
 from servotool.tuning import drive_functions as functions
+from servotool.tuning import function_run as use
+from servotool.tuning import gain_switching as gs
 from servotool.tuning import score as scoring
 
 app = typer.Typer(no_args_is_help=True, help="Run the drive's own tuning functions, judged by a measured score.")
@@ -103,27 +105,59 @@ def _run(
     no_dead_man: bool,
     report: Path | None,
     as_json: bool,
+    factor: float | None = None,
 ) -> None:
-    """The one use case (drive_functions.run_function), asked for and rendered."""
-    if method not in (None, *functions.METHODS):
+    """The one use case (tuning.function_run.run_function), asked for and rendered."""
+    if method not in (None, *use.METHODS):
         raise UsageError("--method must be drive or host")
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
     _check_report(report)
     with drive(ctx) as d, boosted(ctx, [d], f"tune {function}"):
-        functions.check_function(d.profile, function, method)
+        use.check_function(d.profile, function, method)
+        use.check_entries(d, function)
         eeprom.check_save_request(d.profile, save)
-        if function == "friction":
-            functions.friction_entries(d)
-        else:
-            functions.notch_entries(d)
         motion = _start(ctx, d, yes, no_dead_man, function, motion)
-        trial = functions.run_function(
-            d, function, motion, repeats, method=method, keep=keep, save=save, progress=_progress(as_json)
+        trial = use.run_function(
+            d,
+            function,
+            motion,
+            repeats,
+            method=method,
+            keep=keep,
+            save=save,
+            factor=factor,
+            progress=_progress(as_json),
         )
         profile = d.profile
     _report(report, trial)
     _render(trial, as_json, profile.id)
+
+
+@app.command("gain-switching")
+def gain_switching(
+    ctx: typer.Context,
+    factor: float = typer.Option(
+        1.5, "--factor", help="Gain 2's speed-loop gain and integral time against gain 1's, above 1, at most 4."
+    ),
+    repeats: int = typer.Option(scoring.DEFAULT_REPEATS, "--repeats", help=REPEATS_HELP),
+    travel: float = typer.Option(2.0, "--travel", help=TRAVEL_HELP),
+    keep: bool = typer.Option(False, "--keep", help=KEEP_HELP),
+    save: bool = typer.Option(None, "--save/--no-save", help=SAVE_HELP),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
+    no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
+    report: Path = typer.Option(None, "--report", metavar="DIR", help=REPORT_HELP),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
+) -> None:
+    """A stiffer second gain set while the motor turns, the first at rest, kept only where the score improves.
+
+    On the speed condition the manual documents (SD25 Po130 = 2: above Po131 gain 2 at once, below it gain 1
+    after Po135): gain 2 is gain 1's speed gain and integral time times --factor. Judged on following error,
+    integrated error, overshoot and settling; put back otherwise. Refused where the manual does not describe the
+    conditions (IS620P H08-09).
+    """
+    gs.check_factor(factor)
+    _run(ctx, "gain-switching", None, repeats, travel, keep, save, yes, no_dead_man, report, as_json, factor)
 
 
 @app.command("resonance")
@@ -148,7 +182,7 @@ def resonance(
     data = {
         "sample_rate": quantity(round(2 * nyquist, 1), "Hz"),
         "nyquist": quantity(round(nyquist, 1), "Hz"),
-        "peaks": [functions.peak_json(p) for p in peaks],
+        "peaks": [use.peak_json(p) for p in peaks],
         "notch": proposal,
     }
     if as_json:
@@ -179,7 +213,7 @@ def _report(folder: Path | None, trial: functions.FunctionTrial) -> None:
 
 
 def _render(trial: functions.FunctionTrial, as_json: bool, profile_id: str) -> None:
-    data = functions.trial_json(trial, profile_id)
+    data = use.trial_json(trial, profile_id)
     if as_json:
         emit_json(data)
         return

@@ -1,5 +1,6 @@
-"""Plan steps for the measured score and the drive's own functions: `tune score`, `tune friction`, `tune notch` (the
-same library calls as the commands: tuning.score.measure and tuning.drive_functions.run_function)."""
+"""Plan steps for the measured score and the drive's own functions: `tune score`, `tune friction`, `tune notch`,
+`tune gain-switching` (the same library calls as the commands: tuning.score.measure and
+tuning.function_run.run_function)."""
 
 from __future__ import annotations
 
@@ -12,12 +13,14 @@ from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.profile import Profile
 from servotool.motion.deadman import sentence
-from servotool.tuning import drive_functions as functions
+from servotool.tuning import function_run as use
+from servotool.tuning import gain_switching
 from servotool.tuning import score as scoring
 from servotool.tuning import step as step_check
 
 SCORE_KEYS = {"repeats", "travel", "speed", "no_dead_man"}
-FUNCTION_KEYS = {"repeats", "travel", "keep", "save", "method", "no_dead_man"}
+FUNCTION_KEYS = {"repeats", "travel", "keep", "save", "no_dead_man"}
+OWN_KEYS = {"notch": {"method"}, "gain-switching": {"factor"}}  # a function's own options
 
 
 def _options(step: Step, keys: set[str]) -> dict[str, Any]:
@@ -77,33 +80,40 @@ class TuneScoreStep(StepType):
 
 
 class TuneFunctionStep(StepType):
-    """`tune friction|notch: {repeats, travel, keep, save, method}`: what the command of the same name does (score
-    before, set up, score after, keep or put back, read back); kept values count as the plan's writes, so a later
-    `save:` stores them."""
+    """`tune friction|notch|gain-switching: {repeats, travel, keep, save}` (notch: method; gain-switching: factor):
+    what the command of the same name does (score before, set up, score after, keep or put back, read back); kept
+    values count as the plan's writes, so a later `save:` stores them."""
 
     def __init__(self, function: str) -> None:
         self.function = function
         self.name = f"tune {function}"  # type: ignore[misc]
 
     def _request(self, step: Step, profile: Profile) -> tuple[scoring.ScoreMotion, int, dict[str, Any], str]:
-        opts = _options(step, FUNCTION_KEYS - ({"method"} if self.function == "friction" else set()))
+        opts = _options(step, FUNCTION_KEYS | OWN_KEYS.get(self.function, set()))
         for key in ("keep", "save", "no_dead_man"):
             _flag(opts, key, step.name)
         if "speed" in opts:
             raise UsageError(f"{step.name} takes no speed")
         motion, repeats = _motion(step, opts)
-        method = functions.check_function(profile, self.function, opts.get("method"))
+        method = use.check_function(profile, self.function, opts.get("method"))
         if self.function == "friction":
-            roles = functions.FRICTION_ROLES
             if profile.role("friction_comp_fwd") is None:
-                raise UsageError(f"{step.name}: {profile.model} maps no friction compensation (roles {roles[0]}..)")
-        elif profile.role("notch1_freq") is None:
+                raise UsageError(f"{step.name}: {profile.model} maps no friction compensation (role friction_comp_fwd)")
+        elif self.function == "notch" and profile.role("notch1_freq") is None:
             raise UsageError(f"{step.name}: {profile.model} maps no torque-command notch (roles notchN_freq/..)")
+        elif self.function == "gain-switching":
+            gain_switching.switching_entries(profile)
+            if "factor" in opts:
+                gain_switching.check_factor(number_in(opts["factor"], f"{step.name} factor", 1, 4))
         return motion, repeats, opts, method
 
     def describe(self, step: Step, profile: Profile) -> str:
         motion, repeats, opts, method = self._request(step, profile)
-        how = {"friction": "compensation from constant-speed torques", "notch": f"notch by the {method}"}
+        how = {
+            "friction": "compensation from constant-speed torques",
+            "notch": f"notch by the {method}",
+            "gain-switching": f"gain 2 = {opts.get('factor', gain_switching.DEFAULT_FACTOR):g} x gain 1 while moving",
+        }
         keep = "kept even if not better" if opts.get("keep") else "kept only where the score improves"
         return f"{step.name} ({how[self.function]}): {motion.describe()}, {repeats} times before and after, {keep}"
 
@@ -111,7 +121,7 @@ class TuneFunctionStep(StepType):
         motion, repeats, opts, _method = self._request(step, drive.profile)
         drive.dead_man_waived = waived(step.arg)
         motion = _announce(drive, motion, ctx)
-        trial = functions.run_function(
+        trial = use.run_function(
             drive,
             self.function,
             motion,
@@ -119,6 +129,7 @@ class TuneFunctionStep(StepType):
             method=opts.get("method"),
             keep=bool(opts.get("keep", False)),
             save=opts.get("save"),
+            factor=opts.get("factor"),
             clock=ctx.clock,
         )
         if trial.kept:
@@ -126,4 +137,4 @@ class TuneFunctionStep(StepType):
                 ctx.wrote(drive, c.entry, c.new)
         held = ", ".join(f"{code} = {value:g}" for code, value in trial.held.items())
         detail = f"{'KEPT' if trial.kept else 'NOT KEPT'}: {trial.reason}" + (f"; holds {held}" if held else "")
-        return Outcome(detail, {"result": functions.trial_json(trial, drive.profile.id)})
+        return Outcome(detail, {"result": use.trial_json(trial, drive.profile.id)})

@@ -22,6 +22,7 @@ STEP_NAMES = (
     "tune score",
     "tune friction",
     "tune notch",
+    "tune gain-switching",
     "wait",
     "alarm clear",
     "save",

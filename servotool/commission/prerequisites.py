@@ -21,6 +21,7 @@ MOTION_STEPS = {
     "tune score": "tune score",
     "tune friction": "tune friction",
     "tune notch": "tune notch",
+    "tune gain-switching": "tune gain-switching",
 }
 
 

@@ -79,6 +79,7 @@ STEP_TYPES: dict[str, StepType] = {
         TuneScoreStep(),
         TuneFunctionStep("friction"),
         TuneFunctionStep("notch"),
+        TuneFunctionStep("gain-switching"),
         WaitStep(),
         AlarmClearStep(),
         SaveStep(),

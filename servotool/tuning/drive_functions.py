@@ -20,7 +20,7 @@ from servotool.clock import Clock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import eng_to_raw, raw_to_eng
-from servotool.model.profile import Entry, Profile
+from servotool.model.profile import Entry
 from servotool.model.quantity import quantity
 from servotool.ops import eeprom, journal
 from servotool.ops.params import write_one
@@ -38,6 +38,8 @@ LATE_SHARE = 0.4  # after the reversal first)
 JUDGED = {
     "friction": ("following_error_rms", "following_error_peak", "iae"),
     "notch": ("overshoot", "settling", "ripple", "iae", "following_error_rms"),
+    # a stiffer gain while moving is for tracking, and must not cost overshoot or settling
+    "gain-switching": ("following_error_rms", "following_error_peak", "iae", "overshoot", "settling"),
 }
 MIN_COMP_PCT = 0.5  # a friction term below this share of rated torque (or two torque-reading steps) is left at 0:
 #                    nothing to compensate that the score could show
@@ -382,98 +384,10 @@ def notch_trial(drive: Drive, before: scoring.MeasuredScore) -> FunctionTrial:
     return trial
 
 
-# ----- the one use case: a function run and judged (the CLI's `tune friction|notch` and a plan's steps) -----------
-
-FUNCTIONS = ("friction", "notch")
-METHODS = ("drive", "host")
-
-
-def check_function(profile: Profile, function: str, method: str | None) -> str:
-    """The function's method on this profile (notch: the drive's adaptive one where mapped, else host; friction:
-    host); a usage error for an unknown function or a method the profile lacks. Reads nothing from the drive."""
-    if function not in FUNCTIONS:
-        raise UsageError(f"unknown function {function!r} (functions: {', '.join(FUNCTIONS)})")
-    if method is not None and method not in METHODS:
-        raise UsageError("--method must be drive or host")
-    if function == "friction":
-        if method == "drive":
-            raise UsageError("tune friction has no drive method: the compensation comes from the host's run")
-        return "host"
-    adaptive = profile.role("adaptive_notch") is not None
-    if method == "drive" and not adaptive:
-        raise UsageError(f"tune notch --method drive: {profile.model} maps no adaptive notch")
-    return method or ("drive" if adaptive else "host")
-
-
-def run_function(
-    drive: Drive,
-    function: str,
-    motion: scoring.ScoreMotion,
-    repeats: int,
-    *,
-    method: str | None = None,
-    keep: bool = False,
-    save: bool | None = None,
-    clock: Clock | None = None,
-    progress: Progress = _quiet,
-) -> FunctionTrial:
-    """Score before, set the function up, score after, keep or put back, read back (judged_trial): what `tune
-    friction` and `tune notch` do, and a plan's steps of the same names. motion is the planned one
-    (scoring.planned); the entries the function needs are checked before anything moves."""
-    chosen = check_function(drive.profile, function, method)
-    eeprom.check_save_request(drive.profile, save)
-    if function == "friction":
-        friction_entries(drive)
-    else:
-        notch_entries(drive)
-    before = scoring.measure(drive, motion, repeats, clock)
-    if function == "friction":
-        trial = friction_trial(drive, motion, before, clock, progress)
-    elif chosen == "drive":
-        trial = adaptive_notch_trial(drive, motion, before, clock, progress)
-    else:
-        trial = notch_trial(drive, before)
-    return judged_trial(drive, trial, motion, repeats, keep=keep, save=save, clock=clock, progress=progress)
-
-
-def peak_json(p: Peak) -> dict[str, object]:
-    return {"frequency": quantity(round(p.hz, 1), "Hz"), "amplitude": round(p.amplitude, 3), "resolved": p.resolvable}
-
-
-def trial_json(trial: FunctionTrial, profile_id: str) -> dict[str, object]:
-    """A trial's facts, every figure with its unit: the changes, the scores before and after, the verdict, what the
-    drive holds (read back)."""
-    return {
-        "function": trial.function,
-        "changes": [
-            {
-                "code": c.entry.code,
-                "old": quantity(c.old_value, c.entry.unit),
-                "new": quantity(c.new_value, c.entry.unit),
-                "what": c.why,
-            }
-            for c in trial.changes
-        ],
-        "found": {k: round(v, 3) for k, v in trial.found.items()},
-        "peaks": [peak_json(p) for p in trial.peaks],
-        "verdict": trial.verdict,
-        "judged_on": list(JUDGED.get(trial.function, ())),
-        "kept": trial.kept,
-        "reason": trial.reason,
-        "held": {c.entry.code: quantity(trial.held.get(c.entry.code), c.entry.unit) for c in trial.changes},
-        "persisted": trial.persisted,
-        "before": scoring.score_json(trial.before, profile_id) if trial.before else None,
-        "after": scoring.score_json(trial.after, profile_id) if trial.after else None,
-        "comparison": scoring.comparison_json(trial.differences, trial.verdict) if trial.after else None,
-    }
-
-
 __all__ = [
     "FEATURE",
     "FunctionTrial",
     "friction_trial",
     "judged_trial",
     "notch_trial",
-    "run_function",
-    "trial_json",
 ]

@@ -83,3 +83,16 @@ def test_dry_run_lists_the_steps_and_refuses_what_the_profile_lacks(cli, tmp_pat
     r = cli("run", str(plan), "--dry-run")
     assert r.code == 2 and "maps no torque-command notch" in r.err and "repeats must be" in r.err
     assert "Traceback" not in r.err
+
+
+def test_gain_switching_step_runs_on_sd25_and_is_refused_on_is620p_before_anything_runs(sim_dir, tmp_path, cli):
+    steps = "  - set: {Po013: 3.0, Po101: 6}\n  - tune gain-switching: {factor: 2, repeats: 3, no_dead_man: true}\n"
+    runner, sim, _ = _runner(tmp_path, "sd25", steps, load_ratio=3.0)
+    assert runner.run(), [r.detail for r in runner.results]
+    result = runner.results[1].data["result"]
+    assert result["kept"] and result["comparison"]["figures"]["iae"]["verdict"] == "better", result["comparison"]
+    assert sim.bank.effective_value("Po130") == 2 and runner.context.written[1]["Po130"][1] == 2
+    plan = tmp_path / "is620p.yaml"
+    plan.write_text("port: sim\nprofile: is620p\nsteps:\n  - tune gain-switching: {}\n")
+    r = cli("run", str(plan), "--dry-run")
+    assert r.code == 2 and "UNVERIFIED on IS620P" in r.err and "not described" in r.err and "Traceback" not in r.err
