@@ -2,9 +2,9 @@
 
 Every reply is matched to its request (unit, function, byte count; a write's echoed address and value), and bytes
 after it make it suspect. After a fault the line is left to go quiet (a late reply's window) and flushed. A read
-that follows a fault is confirmed by a second read that must agree, when a stale reply of the same shape could
-stand in for it; a failed write is read back before it is sent again, and a write that is not safe to repeat (an Fn
-trigger) never is. Every operation has a bounded number of tries.
+that follows a fault (or a request Ctrl-C interrupted) is confirmed by a second read that must agree, when a stale
+reply of the same shape could stand in for it; a failed write is read back before it is sent again, and a write
+that is not safe to repeat (an Fn trigger) never is. Every operation has a bounded number of tries.
 
 The promise holds for replies that come within the late window (one timeout) after their timeout; a later reply
 is caught only when it stands in for a read that confirmation checks, so a drive slower than that needs a longer
@@ -228,8 +228,8 @@ class Exchange:
         sent_at = self.clock.now()
         if self.trace:
             self.trace(True, req.frame)
-        self.wire.send(req.frame)
         try:
+            self.wire.send(req.frame)
             frame, extra = self._receive(req, sent_at + self.timeout)
             try:
                 words = req.answer(frame, op.what)
@@ -240,6 +240,11 @@ class Exchange:
             return words
         except LineFault as exc:
             fault = exc
+        except KeyboardInterrupt:
+            # Interrupted (Ctrl-C, a terminate signal) with the reply perhaps on its way: it may come after the next
+            # request goes out and pass for its answer, so the next operation's reads are confirmed.
+            op.troubled = True
+            raise
         self._quiet(fault, sent_at)
         op.spend(fault)
         raise fault
