@@ -502,6 +502,9 @@ class MotionStop:
             exc.stop_report = report  # type: ignore[attr-defined]
             if closing is not None:
                 exc.add_note(f"after the stop: {closing}")
+            if held and not isinstance(exc, KeyboardInterrupt):
+                # Ctrl-C came while a failure's stop ran: the command ends as interrupted, not on with the failure
+                raise _interrupt_after(exc, report) from exc
             return
         if closing is not None:
             closing.stop_report = report  # type: ignore[attr-defined]
@@ -532,14 +535,27 @@ def proven_on_interrupt(drive: Drive, clock: Clock | None = None) -> Iterator[No
     except BaseException as exc:
         # A prompt turns the interrupt into its own exception (click's Abort), whose context is the interrupt.
         interrupted = isinstance(exc, KeyboardInterrupt) or isinstance(exc.__context__, KeyboardInterrupt)
-        if interrupted and getattr(exc, "stop_report", None) is None:
+        held = GUARD.held > 0  # one held on the failure's way out (a stop, a rollback): the command is interrupted
+        if (interrupted or held) and getattr(exc, "stop_report", None) is None:
             GUARD.armed = False
             report = read_back(drive, moved=len(_REPORTS) > since, clock=clock)
             _REPORTS.append(report)
             exc.stop_report = report  # type: ignore[attr-defined]
+        if held and not interrupted:
+            raise _interrupt_after(exc, exc.stop_report) from exc  # type: ignore[attr-defined]
         raise
     finally:
         GUARD.leave()
+
+
+def _interrupt_after(failure: BaseException, report: StopReport) -> KeyboardInterrupt:
+    """The interrupt held while a failure was on its way out, which it replaces (the failure said in a note)."""
+    interrupt = GUARD.interrupt()
+    interrupt.stop_report = report  # type: ignore[attr-defined]
+    interrupt.add_note(f"it came as the command failed: {failure}")
+    for note in getattr(failure, "__notes__", ()):
+        interrupt.add_note(note)
+    return interrupt
 
 
 GUARD.protected.add(proven_on_interrupt.__wrapped__.__code__)
