@@ -13,6 +13,7 @@ from servotool.cli.tune_score import render_comparison, render_score
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.quantity import quantity
+from servotool.motion.stop import proven_on_interrupt
 from servotool.ops import eeprom
 from servotool.tuning import drive_functions as functions
 from servotool.tuning import function_run as use
@@ -113,7 +114,7 @@ def _run(
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
     _check_report(report)
-    with drive(ctx) as d, boosted(ctx, [d], f"tune {function}"):
+    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], f"tune {function}"):
         use.check_function(d.profile, function, method)
         use.check_entries(d, function)
         eeprom.check_save_request(d.profile, save)
@@ -174,7 +175,7 @@ def resonance(
     inside the drive's notch range. Writes nothing.
     """
     motion = scoring.motion_for(travel)
-    with drive(ctx) as d, boosted(ctx, [d], "tune resonance"):
+    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], "tune resonance"):
         motion = _start(ctx, d, yes, no_dead_man, "resonance", motion)
         measured = scoring.measure(d, motion, 1)
         peaks, nyquist = functions.resonance_peaks(measured)

@@ -13,6 +13,7 @@ from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.profile import Profile
 from servotool.motion.deadman import sentence
+from servotool.motion.stop import proven_on_interrupt
 from servotool.tuning import function_run as use
 from servotool.tuning import gain_switching
 from servotool.tuning import score as scoring
@@ -69,8 +70,9 @@ class TuneScoreStep(StepType):
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         motion, repeats = _motion(step, _options(step, SCORE_KEYS))
         drive.dead_man_waived = waived(step.arg)
-        motion = _announce(drive, motion, ctx)
-        measured = scoring.measure(drive, motion, repeats, ctx.clock)
+        with proven_on_interrupt(drive):  # an interrupt before a motion, or between two, ends with a read-back
+            motion = _announce(drive, motion, ctx)
+            measured = scoring.measure(drive, motion, repeats, ctx.clock)
         data = scoring.score_json(measured, drive.profile.id)
         iae = measured.score.figures["iae"]
         detail = f"scored {repeats} run(s) of {motion.describe()}"
@@ -120,18 +122,19 @@ class TuneFunctionStep(StepType):
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         motion, repeats, opts, _method = self._request(step, drive.profile)
         drive.dead_man_waived = waived(step.arg)
-        motion = _announce(drive, motion, ctx)
-        trial = use.run_function(
-            drive,
-            self.function,
-            motion,
-            repeats,
-            method=opts.get("method"),
-            keep=bool(opts.get("keep", False)),
-            save=opts.get("save"),
-            factor=opts.get("factor"),
-            clock=ctx.clock,
-        )
+        with proven_on_interrupt(drive):  # an interrupt before a motion, or between two, ends with a read-back
+            motion = _announce(drive, motion, ctx)
+            trial = use.run_function(
+                drive,
+                self.function,
+                motion,
+                repeats,
+                method=opts.get("method"),
+                keep=bool(opts.get("keep", False)),
+                save=opts.get("save"),
+                factor=opts.get("factor"),
+                clock=ctx.clock,
+            )
         if trial.kept:
             for c in trial.changes:
                 ctx.wrote(drive, c.entry, c.new)
