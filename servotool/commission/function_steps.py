@@ -94,8 +94,6 @@ class TuneFunctionStep(StepType):
         opts = _options(step, FUNCTION_KEYS | OWN_KEYS.get(self.function, set()))
         for key in ("keep", "save", "no_dead_man"):
             _flag(opts, key, step.name)
-        if "speed" in opts:
-            raise UsageError(f"{step.name} takes no speed")
         motion, repeats = _motion(step, opts)
         method = use.check_function(profile, self.function, opts.get("method"))
         if self.function == "friction":

@@ -40,7 +40,7 @@ def check_function(profile: Profile, function: str, method: str | None) -> str:
     if function not in FUNCTIONS:
         raise UsageError(f"unknown function {function!r} (functions: {', '.join(FUNCTIONS)})")
     if method is not None and method not in METHODS:
-        raise UsageError("--method must be drive or host")
+        raise UsageError(f"method must be drive or host, got {method!r}")
     if function != "notch":
         if method == "drive":
             raise UsageError(f"tune {function} has no drive method")
