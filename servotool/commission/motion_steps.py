@@ -166,7 +166,7 @@ class TuneInertiaStep(StepType):
 
         try:
             with proven_on_interrupt(drive):  # an interrupt before a motion, or between two, ends with a read-back
-                res = tune_inertia(drive, request, approve_motion=announce)
+                res = tune_inertia(drive, request, clock=ctx.clock, approve_motion=announce)
         except IdentificationRefused as exc:
             if folder is not None:
                 write_tune_report(folder, exc.result, drive.profile, None, str(exc))
