@@ -256,7 +256,12 @@ def test_motion_stays_inside_a_small_travel_limit(cli):
     cli("sim", "config", "--load-ratio", "30")  # far from the configured 1.5: the loop overshoots
     r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--travel", "1", "--no-gains")
     assert r.code in (0, 1), r.err  # identified, or refused for the little a 1 rev travel lets it accelerate
-    assert r.json()["travel"]["value"] <= 1.0
+    data = r.json()
+    if "travel" in data:  # whatever the outcome, the axis moved inside the limit
+        assert data["travel"]["value"] <= 1.0, data
+    else:  # stopped before a travel was measured (a busy host's stall tripped the drive's watchdog): said, stopped
+        assert r.code == 1 and "servotool: error:" in r.err, r.err
+        assert r.err.splitlines()[-1].startswith("servotool: stopped"), r.err
 
 
 def test_identification_works_wherever_the_axis_stands(cli):
