@@ -73,8 +73,11 @@ def _path_with_servotool(tmp: Path) -> str:
 
 
 def masked(text: str) -> str:
-    """Numbers as #, runs of table padding as one space: what may differ from run to run."""
-    text = re.sub(r"\d+(\.\d+)?(e[-+]?\d+)?", "#", text)
+    """Numbers as #, runs of table padding as one space, a frame's bytes as #, an identification's move lines left
+    out (it stops once its estimate is tight: a move more or less): what may differ from run to run."""
+    text = re.sub(r"(?m)^move \d+/\d+ (forward|reverse) at .*\n", "", text)
+    text = re.sub(r"(?m)^(<<|>>)( [0-9a-f]{2})+", r"\1 #", text)
+    text = re.sub(r"[-−+]?\d+(\.\d+)?(e[-+]?\d+)?", "#", text)  # a sign too: a speed reads -1 or 0 rpm at rest
     return re.sub(r"[ ─━]+", " ", text)
 
 
