@@ -337,3 +337,10 @@ def test_an_fc16_whose_byte_count_disagrees_with_its_data_gets_exception_03(pty_
     assert short[:3] == bytes([1, 0x90, 3]), short.hex(" ")
     assert inconsistent[:3] == bytes([1, 0x90, 3]), inconsistent.hex(" ")
     assert read(master, 0x2004) == [250]  # nothing written, and the next request answered
+
+
+def test_raw_read_agrees_with_mbpoll(pty_line, cli):
+    _, master = pty_line
+    r = cli("--port", str(master), "--baud", "19200", "--profile", "dsx7e", "raw", "read", "0x2100", "3", "--json")
+    assert r.code == 0, r.err
+    assert [x["value"] for x in r.json()] == read(master, 0x2100, 3)
