@@ -22,6 +22,7 @@ def read(
     ctx: typer.Context,
     address: str = typer.Argument(..., help="First register address: decimal or hex (0x2004)."),
     count: int = typer.Argument(1, help="Number of values (registers for 16-bit types, register pairs for 32-bit)."),
+    fc: int = typer.Option(3, "--fc", help="3: holding registers, 4: input registers."),
     kind: str = typer.Option("uint16", "--type", help="int16, uint16, int32, uint32 or float32."),
     word_order: str = typer.Option("big", "--word-order", help="32-bit values: big (high word first) or little."),
     interval: float | None = typer.Option(None, "--interval", help="Poll every S seconds, one row per poll."),
@@ -29,8 +30,8 @@ def read(
     as_csv: bool = typer.Option(False, "--csv", help="CSV on stdout: one row per value, or per poll."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Read holding registers (FC03) and show them in decimal, signed and hex, with the entry each belongs to;
-    with --type as 16- or 32-bit integers or floats; with --interval, polled."""
+    """Read holding registers (FC03; input registers with --fc 4) and show them in decimal, signed and hex, with
+    the entry each belongs to; with --type as 16- or 32-bit integers or floats; with --interval, polled."""
     start = raw.parse_address(address)
     if as_csv and as_json:
         raise UsageError("give --csv or --json, not both")
@@ -39,16 +40,18 @@ def read(
     if interval is not None:
         raw.check_poll(interval, polls)
     raw.decode(start, [], kind, word_order)  # refuses a bad --type or --word-order before the port opens
+    if fc not in raw.READ_FUNCTIONS:
+        raise UsageError(f"--fc {fc}: registers are read with --fc 3 (holding) or 4 (input)")
     typed = kind != "uint16" or word_order != "big"
     interrupted = False
     with drive(ctx) as d:
         if interval is None:
-            values = raw.read_values(d, start, count, kind, word_order)
+            values = raw.read_values(d, start, count, kind, word_order, fc)
             owners = [raw.owner(d, v.address) for v in values]
         else:
             try:
                 _show_polls(
-                    raw.poll(d, start, count, kind, word_order, interval=interval, polls=polls), as_csv, as_json
+                    raw.poll(d, start, count, kind, word_order, interval=interval, polls=polls, fc=fc), as_csv, as_json
                 )
             except KeyboardInterrupt:
                 interrupted = True

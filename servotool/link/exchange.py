@@ -33,7 +33,7 @@ from servotool.errors import DeviceError, ModbusException
 from servotool.link.crc import crc_ok, with_crc
 from servotool.link.ledger import COPY_WINDOW, OWED_MIN_S, OWED_TIMEOUTS, Ledger, Rid, shape_of
 from servotool.link.ports import Trace
-from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, NotAnswer, Request
+from servotool.link.rtu import READ, READ_INPUT, WRITE_MANY, WRITE_ONE, NotAnswer, Request
 
 # Silence that ends a frame. RTU's 3.5 characters, but USB-serial adapters and TCP gateways deliver bytes in
 # bursts (an FTDI's latency timer holds them up to 16 ms), so a frame is only taken as over after this long.
@@ -164,20 +164,24 @@ class Exchange:
         self._sent: deque[bytes] = deque(maxlen=16)  # the latest requests, whose echoes may come back
 
     # ----- operations ----------------------------------------------------------------------------------------
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
-        """`count` registers at `address`; `spare` = registers before and after that may be read too (a whole
-        adjacent entry each), to give this read's reply another length than the replies around it."""
-        what = f"read {count} register(s) at {address} (0x{address:04X}) from unit {unit}"
-        op = self._op(what, Request(unit, READ, address, count))
-        return self._read(unit, address, count, spare, op)
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = READ
+    ) -> list[int]:
+        """`count` registers at `address` (fc 3 holding, 4 input registers); `spare` = registers before and after
+        that may be read too (a whole adjacent entry each), to give this read's reply another length than the
+        replies around it."""
+        kind = "input register(s)" if fc == READ_INPUT else "register(s)"
+        what = f"read {count} {kind} at {address} (0x{address:04X}) from unit {unit}"
+        op = self._op(what, Request(unit, fc, address, count))
+        return self._read(unit, address, count, spare, op, fc)
 
-    def _read(self, unit: int, address: int, count: int, spare: tuple[int, int], op: _Op) -> list[int]:
+    def _read(self, unit: int, address: int, count: int, spare: tuple[int, int], op: _Op, fc: int = READ) -> list[int]:
         now, key = self.clock.now(), (unit, address, count)
         op.repeating = now - self._asked.get(key, -float("inf")) <= COPY_WINDOW
         self._asked[key] = now
         held: Held | None = None
         while True:
-            req = self._shape(unit, address, count, spare, held[1] if held else None)
+            req = self._shape(unit, address, count, spare, held[1] if held else None, fc)
             try:
                 reply = self._attempt(req, op)
             except LineFault:
@@ -278,19 +282,21 @@ class Exchange:
             return False  # not readable here: cannot tell, and the write is safe to repeat
 
     # ----- which request, and who may answer it -------------------------------------------------------------
-    def _shape(self, unit: int, address: int, count: int, spare: tuple[int, int], avoid: Request | None) -> Request:
+    def _shape(
+        self, unit: int, address: int, count: int, spare: tuple[int, int], avoid: Request | None, fc: int = READ
+    ) -> Request:
         """The read to send for `count` registers at `address`: of the widths `spare` allows, the narrowest whose reply
         length no owed reply has and that differs from an answer being confirmed and from the last read's when that
         one repeated (contract point 1)."""
         before, after = (0, 0) if (unit, address, count) in self._narrow else spare
         if not before and not after:
-            return Request(unit, READ, address, count)
+            return Request(unit, fc, address, count)
         now = self.clock.now()
         previous = self._previous.get(unit)
         best: tuple[tuple[bool, ...], Request] | None = None
         for lead, tail in dict.fromkeys(((0, 0), (0, after), (before, 0), (before, after))):
-            req = Request(unit, READ, address - lead, count + lead + tail)
-            rid, shape = self._rid(req), (unit, READ, 2 * req.count)
+            req = Request(unit, fc, address - lead, count + lead + tail)
+            rid, shape = self._rid(req), (unit, fc, 2 * req.count)
             score = (
                 self.ledger.owed_by_other(shape, rid, now),
                 avoid is not None and req.count == avoid.count,
@@ -307,13 +313,13 @@ class Exchange:
         """A request's identity: a read's includes the number of the last write to its registers; a write's is what
         its acknowledgement shows (an FC16 one echoes no values, so a copy of one for the same registers fits: what
         a write stored is proven by reading it back, drive.Drive.write_verified)."""
-        if req.fc != READ:
+        if not req.reads:
             return (req.unit, req.fc, req.address, req.values[0] if req.fc == WRITE_ONE else req.count)
         epoch = 0
         if self._written:
             get = self._written.get
             epoch = max(get((req.unit, a), 0) for a in range(req.address, req.address + req.count))
-        return (req.unit, READ, req.address, req.count, epoch)
+        return (req.unit, req.fc, req.address, req.count, epoch)
 
     def _ambiguous(self, req: Request, rid: Rid, frame: bytes, now: float) -> bool:
         """Whether the frame that fits `req` may be another request's reply or an old one (contract points 2-4)."""
@@ -328,12 +334,12 @@ class Exchange:
             return True
         # A copy of this read's own earlier reply, on a line that has shown faults: the same registers, but maybe a
         # moment old, and its own reply may follow (point 4).
-        return copied is not None and req.fc == READ and now < self._trouble_until
+        return copied is not None and req.reads and now < self._trouble_until
 
     def _owe(self, req: Request) -> None:
         """The request's reply may still come (a failed try, or a reply that may have been another's)."""
-        if req.fc == READ:
-            shape: tuple[int, ...] = (req.unit, READ, 2 * req.count)
+        if req.reads:
+            shape: tuple[int, ...] = (req.unit, req.fc, 2 * req.count)
         else:
             shape = shape_of(req.frame if req.fc == WRITE_ONE else with_crc(req.frame[:6]))
         self.ledger.owe(shape, self._rid(req), self.clock.now())
@@ -363,7 +369,7 @@ class Exchange:
             self.clock.sleep(wait)
         rid = self._rid(req)
         self.requests += 1
-        if req.fc == READ:
+        if req.reads:
             self._previous[req.unit] = (2 * req.count, op.repeating)
         else:
             self._writes += 1
@@ -414,7 +420,7 @@ class Exchange:
         """Seconds the request and its longest reply take on the line, at the baud rate when it is known."""
         if not self.char_s:
             return 0.0
-        reply = 5 + 2 * req.count if req.fc == READ else 8
+        reply = 5 + 2 * req.count if req.reads else 8
         return (len(req.frame) + reply + GAP_CHARS) * self.char_s
 
     def _receive(self, req: Request, deadline: float) -> tuple[bytes, bytes]:

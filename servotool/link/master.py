@@ -60,8 +60,8 @@ class RtuMaster:
         """Whether the adapter echoes what it sends: as set, or as found out (None: not yet known)."""
         return self._exchange.echo
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
-        return self._exchange.read(unit, address, count, spare=spare)
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
+        return self._exchange.read(unit, address, count, spare=spare, fc=fc)
 
     def write(
         self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True

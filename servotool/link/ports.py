@@ -39,9 +39,10 @@ class LinkSettings:
 class Link(Protocol):
     """What drive operations need from a Modbus master."""
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
-        """`count` registers at `address`. spare = registers before and after that may be read as well (whole
-        readable entries): a master without transaction ids reads them to tell its replies apart."""
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
+        """`count` registers at `address` (fc 3 holding, 4 input registers). spare = registers before and after that
+        may be read as well (whole readable entries): a master without transaction ids reads them to tell its
+        replies apart."""
         ...
 
     def write(

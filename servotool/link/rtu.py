@@ -11,7 +11,8 @@ from dataclasses import dataclass
 from servotool.errors import ModbusException
 from servotool.link.crc import crc_ok, with_crc
 
-READ, WRITE_ONE, WRITE_MANY = 3, 6, 16
+READ, READ_INPUT, WRITE_ONE, WRITE_MANY = 3, 4, 6, 16
+REGISTER_READS = (READ, READ_INPUT)  # holding and input registers: the same request and reply shapes
 EXCEPTION_LENGTH = 5
 
 
@@ -25,7 +26,7 @@ class NotAnswer(Exception):
 
 @dataclass(frozen=True)
 class Request:
-    """One request: FC03 read of `count` registers, FC06 write of one, or FC16 write of `values`."""
+    """One request: FC03 (or FC04) read of `count` registers, FC06 write of one, or FC16 write of `values`."""
 
     unit: int
     fc: int
@@ -34,9 +35,14 @@ class Request:
     values: tuple[int, ...] = ()
 
     @property
+    def reads(self) -> bool:
+        """Whether it reads registers (FC03 holding, FC04 input)."""
+        return self.fc in REGISTER_READS
+
+    @property
     def frame(self) -> bytes:
         head = bytes([self.unit, self.fc]) + self.address.to_bytes(2, "big")
-        if self.fc == READ:
+        if self.reads:
             return with_crc(head + self.count.to_bytes(2, "big"))
         if self.fc == WRITE_ONE:
             return with_crc(head + self.values[0].to_bytes(2, "big"))
@@ -54,7 +60,7 @@ class Request:
             return EXCEPTION_LENGTH
         if head[1] != self.fc:
             raise NotAnswer(False, f"a reply to function {head[1] & 0x7F}")
-        if self.fc != READ:
+        if not self.reads:
             return 8
         if len(head) < 3:
             return None
@@ -69,7 +75,7 @@ class Request:
             raise NotAnswer(True, "bad CRC")
         if frame[1] & 0x80:
             raise ModbusException(frame[2], what)
-        if self.fc == READ:
+        if self.reads:
             data = frame[3:-2]
             return [int.from_bytes(data[i : i + 2], "big") for i in range(0, len(data), 2)]
         echoed = int.from_bytes(frame[2:4], "big"), int.from_bytes(frame[4:6], "big")

@@ -49,6 +49,7 @@ VALUE_TYPES: dict[str, tuple[int, str]] = {
     "float32": (2, ">f"),
 }
 WORD_ORDERS = ("big", "little")
+READ_FUNCTIONS = (3, 4)  # holding and input registers
 
 
 @dataclass(frozen=True)
@@ -82,9 +83,11 @@ def decode(address: int, words: list[int], kind: str, word_order: str = "big") -
     return values
 
 
-def read_values(drive: Drive, address: int, count: int, kind: str = "uint16", word_order: str = "big") -> list[Value]:
-    """`count` values of `kind` from `address` on, in one FC03 read."""
-    return decode(address, read_registers(drive, address, count * width(kind)), kind, word_order)
+def read_values(
+    drive: Drive, address: int, count: int, kind: str = "uint16", word_order: str = "big", fc: int = 3
+) -> list[Value]:
+    """`count` values of `kind` from `address` on, in one FC03 (holding) or FC04 (input registers) read."""
+    return decode(address, read_registers(drive, address, count * width(kind), fc), kind, word_order)
 
 
 def poll(
@@ -97,12 +100,13 @@ def poll(
     interval: float,
     polls: int | None = None,
     clock: Clock | None = None,
+    fc: int = 3,
 ) -> Iterator[tuple[float, list[Value]]]:
     """(seconds since the first poll, its values) every `interval` s, `polls` times (None: until the caller stops);
     a poll that overruns its slot starts the next one at once rather than bunching up."""
     check_poll(interval, polls)
     decode(address, [], kind, word_order)  # a bad type or word order is refused before the first read
-    return _polls(drive, address, count, kind, word_order, interval, polls, clock or RealClock())
+    return _polls(drive, address, count, kind, word_order, interval, polls, clock or RealClock(), fc)
 
 
 def check_poll(interval: float, polls: int | None) -> None:
@@ -122,23 +126,28 @@ def _polls(
     interval: float,
     polls: int | None,
     clock: Clock,
+    fc: int,
 ) -> Iterator[tuple[float, list[Value]]]:
     start = clock.now()
     done = 0
     while polls is None or done < polls:
         if done:
             clock.sleep(start + done * interval - clock.now())
-        yield clock.now() - start, read_values(drive, address, count, kind, word_order)
+        yield clock.now() - start, read_values(drive, address, count, kind, word_order, fc)
         done += 1
 
 
-def read_registers(drive: Drive, address: int, count: int) -> list[int]:
+def read_registers(drive: Drive, address: int, count: int, fc: int = 3) -> list[int]:
+    """`count` registers from `address` on: FC03 holding, FC04 input registers. ModbusException (01) from a drive
+    that lacks the function."""
+    if fc not in READ_FUNCTIONS:
+        raise UsageError(f"--fc {fc}: registers are read with FC03 (holding) or FC04 (input)")
     limit = drive.profile.limits.max_read
     if not 1 <= count <= limit:
         raise UsageError(f"count {count}: the drive reads 1..{limit} registers at a time")
     if address + count > 0x10000:
         raise UsageError(f"registers {address}..{address + count - 1} go past 65535")
-    return drive.link.read(drive.unit, address, count)
+    return drive.link.read(drive.unit, address, count, fc=fc)
 
 
 def write_registers(drive: Drive, address: int, values: list[int]) -> list[int]:

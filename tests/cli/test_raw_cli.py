@@ -45,3 +45,12 @@ def test_bad_read_options_fail_in_one_line(cli):
     ]:
         r = cli(*SIM, "raw", "read", "0x2100", *args)
         assert r.code == 2 and word in r.err and len(r.err.strip().splitlines()) == 1, (args, r.err)
+
+
+def test_a_function_the_drive_lacks_is_said_in_one_line(cli):
+    for profile in ("dsx7e", "sd25"):
+        r = cli(*SIM, "-P", profile, "raw", "read", "0x0065", "--fc", "4")
+        assert r.code == 1 and "exception 01 (illegal function)" in r.err, r.err
+        assert "input register" in r.err and len([x for x in r.err.splitlines() if "error" in x]) == 1
+    r = cli(*SIM, "raw", "read", "0x2100", "--fc", "1")
+    assert r.code == 2 and "--fc 3" in r.err

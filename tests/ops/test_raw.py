@@ -63,3 +63,15 @@ def test_fc16_write_is_read_back_by_a_plain_client(serve, cli):
     refused = cli("--port", port, "-P", "dsx7e", "raw", "write", "0x2100=400,70000", "--yes")
     assert refused.code == 2 and "16 bits" in refused.err
     assert read_registers(port, 0x2100, 3) == [400, 401, 402]  # nothing of a refused list was written
+
+
+def test_fc04_reaches_the_drive_through_the_one_master_and_is_refused(serve):
+    from servotool.errors import ModbusException
+
+    port = serve("sd25")
+    with open_drives(resolve(ConnectOptions(port=port, profile="sd25")), notice=lambda _m: None) as (d,):
+        assert raw.read_values(d, 101, 1) != []  # FC03 answers
+        with pytest.raises(ModbusException) as refused:
+            raw.read_values(d, 101, 1, fc=4)
+        assert refused.value.code == 1
+        assert raw.read_values(d, 101, 1)[0].value == raw.read_values(d, 101, 1)[0].value  # the line stays in step
