@@ -22,7 +22,7 @@ def read(
     ctx: typer.Context,
     address: str = typer.Argument(..., help="First register address: decimal or hex (0x2004)."),
     count: int = typer.Argument(1, help="Number of values (registers for 16-bit types, register pairs for 32-bit)."),
-    fc: int = typer.Option(3, "--fc", help="3: holding registers, 4: input registers."),
+    fc: int = typer.Option(3, "--fc", help="1 coils, 2 discrete inputs, 3 holding registers, 4 input registers."),
     kind: str = typer.Option("uint16", "--type", help="int16, uint16, int32, uint32 or float32."),
     word_order: str = typer.Option("big", "--word-order", help="32-bit values: big (high word first) or little."),
     interval: float | None = typer.Option(None, "--interval", help="Poll every S seconds, one row per poll."),
@@ -30,8 +30,9 @@ def read(
     as_csv: bool = typer.Option(False, "--csv", help="CSV on stdout: one row per value, or per poll."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Read holding registers (FC03; input registers with --fc 4) and show them in decimal, signed and hex, with
-    the entry each belongs to; with --type as 16- or 32-bit integers or floats; with --interval, polled."""
+    """Read holding registers (FC03; --fc 4 input registers, 1 coils, 2 discrete inputs) and show them in decimal,
+    signed and hex, with the entry each belongs to; with --type as 16- or 32-bit integers or floats; with
+    --interval, polled."""
     start = raw.parse_address(address)
     if as_csv and as_json:
         raise UsageError("give --csv or --json, not both")
@@ -41,7 +42,9 @@ def read(
         raw.check_poll(interval, polls)
     raw.decode(start, [], kind, word_order)  # refuses a bad --type or --word-order before the port opens
     if fc not in raw.READ_FUNCTIONS:
-        raise UsageError(f"--fc {fc}: registers are read with --fc 3 (holding) or 4 (input)")
+        raise UsageError(f"--fc {fc}: reads are --fc 1 (coils), 2 (discrete inputs), 3 (holding) or 4 (input)")
+    if fc in raw.BIT_FUNCTIONS and (kind != "uint16" or word_order != "big"):
+        raise UsageError(f"--fc {fc} reads bits: --type and --word-order are for registers")
     typed = kind != "uint16" or word_order != "big"
     interrupted = False
     with drive(ctx) as d:

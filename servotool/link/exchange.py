@@ -167,10 +167,10 @@ class Exchange:
     def read(
         self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = READ
     ) -> list[int]:
-        """`count` registers at `address` (fc 3 holding, 4 input registers); `spare` = registers before and after
-        that may be read too (a whole adjacent entry each), to give this read's reply another length than the
-        replies around it."""
-        kind = "input register(s)" if fc == READ_INPUT else "register(s)"
+        """`count` registers at `address` (fc 3 holding, 4 input registers; fc 1 coils, 2 discrete inputs, as bits
+        0/1); `spare` = registers before and after that may be read too (a whole adjacent entry each), to give this
+        read's reply another length than the replies around it."""
+        kind = {1: "coil(s)", 2: "discrete input(s)", READ_INPUT: "input register(s)"}.get(fc, "register(s)")
         what = f"read {count} {kind} at {address} (0x{address:04X}) from unit {unit}"
         op = self._op(what, Request(unit, fc, address, count))
         return self._read(unit, address, count, spare, op, fc)
@@ -296,11 +296,11 @@ class Exchange:
         best: tuple[tuple[bool, ...], Request] | None = None
         for lead, tail in dict.fromkeys(((0, 0), (0, after), (before, 0), (before, after))):
             req = Request(unit, fc, address - lead, count + lead + tail)
-            rid, shape = self._rid(req), (unit, fc, 2 * req.count)
+            rid, shape = self._rid(req), (unit, fc, req.data_bytes)
             score = (
                 self.ledger.owed_by_other(shape, rid, now),
                 avoid is not None and req.count == avoid.count,
-                previous is not None and previous[1] and req.count * 2 == previous[0],
+                previous is not None and previous[1] and req.data_bytes == previous[0],
             )
             if best is None or score < best[0]:
                 best = (score, req)
@@ -339,7 +339,7 @@ class Exchange:
     def _owe(self, req: Request) -> None:
         """The request's reply may still come (a failed try, or a reply that may have been another's)."""
         if req.reads:
-            shape: tuple[int, ...] = (req.unit, req.fc, 2 * req.count)
+            shape: tuple[int, ...] = (req.unit, req.fc, req.data_bytes)
         else:
             shape = shape_of(req.frame if req.fc == WRITE_ONE else with_crc(req.frame[:6]))
         self.ledger.owe(shape, self._rid(req), self.clock.now())
@@ -370,7 +370,7 @@ class Exchange:
         rid = self._rid(req)
         self.requests += 1
         if req.reads:
-            self._previous[req.unit] = (2 * req.count, op.repeating)
+            self._previous[req.unit] = (req.data_bytes, op.repeating)
         else:
             self._writes += 1
             for a in range(req.address, req.address + req.count):
@@ -420,7 +420,7 @@ class Exchange:
         """Seconds the request and its longest reply take on the line, at the baud rate when it is known."""
         if not self.char_s:
             return 0.0
-        reply = 5 + 2 * req.count if req.reads else 8
+        reply = 5 + req.data_bytes if req.reads else 8
         return (len(req.frame) + reply + GAP_CHARS) * self.char_s
 
     def _receive(self, req: Request, deadline: float) -> tuple[bytes, bytes]:
@@ -528,7 +528,7 @@ def _frame_length(head: bytes) -> int | None:
     fc = head[1]
     if fc & 0x80:
         return 5
-    if fc in (3, 4):
+    if fc in (1, 2, 3, 4):
         return 5 + head[2]
     return 8 if fc in (WRITE_ONE, WRITE_MANY) else None
 

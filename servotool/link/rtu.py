@@ -11,8 +11,9 @@ from dataclasses import dataclass
 from servotool.errors import ModbusException
 from servotool.link.crc import crc_ok, with_crc
 
-READ, READ_INPUT, WRITE_ONE, WRITE_MANY = 3, 4, 6, 16
+READ_COILS, READ_DISCRETE, READ, READ_INPUT, WRITE_ONE, WRITE_MANY = 1, 2, 3, 4, 6, 16
 REGISTER_READS = (READ, READ_INPUT)  # holding and input registers: the same request and reply shapes
+BIT_READS = (READ_COILS, READ_DISCRETE)  # coils and discrete inputs: the same request, bits packed in the reply
 EXCEPTION_LENGTH = 5
 
 
@@ -26,7 +27,8 @@ class NotAnswer(Exception):
 
 @dataclass(frozen=True)
 class Request:
-    """One request: FC03 (or FC04) read of `count` registers, FC06 write of one, or FC16 write of `values`."""
+    """One request: FC03/FC04 read of `count` registers (FC01/FC02: bits), FC06 write of one, or FC16 write of
+    `values`."""
 
     unit: int
     fc: int
@@ -36,8 +38,13 @@ class Request:
 
     @property
     def reads(self) -> bool:
-        """Whether it reads registers (FC03 holding, FC04 input)."""
-        return self.fc in REGISTER_READS
+        """Whether it reads (FC03 holding, FC04 input registers; FC01 coils, FC02 discrete inputs)."""
+        return self.fc in REGISTER_READS or self.fc in BIT_READS
+
+    @property
+    def data_bytes(self) -> int:
+        """The data bytes a read's reply carries: two a register, or the bits packed eight to a byte."""
+        return (self.count + 7) // 8 if self.fc in BIT_READS else 2 * self.count
 
     @property
     def frame(self) -> bytes:
@@ -64,7 +71,7 @@ class Request:
             return 8
         if len(head) < 3:
             return None
-        if head[2] != 2 * self.count:
+        if head[2] != self.data_bytes:
             raise NotAnswer(False, f"a reply with {head[2]} data bytes")
         return 5 + head[2]
 
@@ -75,6 +82,9 @@ class Request:
             raise NotAnswer(True, "bad CRC")
         if frame[1] & 0x80:
             raise ModbusException(frame[2], what)
+        if self.fc in BIT_READS:
+            data = frame[3:-2]
+            return [data[i // 8] >> (i % 8) & 1 for i in range(self.count)]
         if self.reads:
             data = frame[3:-2]
             return [int.from_bytes(data[i : i + 2], "big") for i in range(0, len(data), 2)]

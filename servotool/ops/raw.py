@@ -49,7 +49,9 @@ VALUE_TYPES: dict[str, tuple[int, str]] = {
     "float32": (2, ">f"),
 }
 WORD_ORDERS = ("big", "little")
-READ_FUNCTIONS = (3, 4)  # holding and input registers
+READ_FUNCTIONS = (1, 2, 3, 4)  # coils, discrete inputs, holding and input registers
+BIT_FUNCTIONS = (1, 2)
+MAX_BITS = 2000  # the specification's limit for an FC01/FC02 read
 
 
 @dataclass(frozen=True)
@@ -86,7 +88,12 @@ def decode(address: int, words: list[int], kind: str, word_order: str = "big") -
 def read_values(
     drive: Drive, address: int, count: int, kind: str = "uint16", word_order: str = "big", fc: int = 3
 ) -> list[Value]:
-    """`count` values of `kind` from `address` on, in one FC03 (holding) or FC04 (input registers) read."""
+    """`count` values of `kind` from `address` on, in one FC03 (holding) or FC04 (input registers) read; FC01
+    (coils) and FC02 (discrete inputs) read `count` bits, each a value 0 or 1."""
+    if fc in BIT_FUNCTIONS:
+        if kind != "uint16" or word_order != "big":
+            raise UsageError(f"--fc {fc} reads bits: --type and --word-order are for registers")
+        return [Value(address + i, (b,), b) for i, b in enumerate(read_registers(drive, address, count, fc))]
     return decode(address, read_registers(drive, address, count * width(kind), fc), kind, word_order)
 
 
@@ -138,13 +145,15 @@ def _polls(
 
 
 def read_registers(drive: Drive, address: int, count: int, fc: int = 3) -> list[int]:
-    """`count` registers from `address` on: FC03 holding, FC04 input registers. ModbusException (01) from a drive
-    that lacks the function."""
+    """`count` registers from `address` on: FC03 holding, FC04 input registers (FC01/FC02: bits 0/1).
+    ModbusException (01) from a drive that lacks the function."""
     if fc not in READ_FUNCTIONS:
-        raise UsageError(f"--fc {fc}: registers are read with FC03 (holding) or FC04 (input)")
-    limit = drive.profile.limits.max_read
+        raise UsageError(f"--fc {fc}: reads are FC01 (coils), FC02 (discrete inputs), FC03 (holding), FC04 (input)")
+    limit = MAX_BITS if fc in BIT_FUNCTIONS else drive.profile.limits.max_read
     if not 1 <= count <= limit:
-        raise UsageError(f"count {count}: the drive reads 1..{limit} registers at a time")
+        raise UsageError(
+            f"count {count}: the drive reads 1..{limit} {'bits' if limit == MAX_BITS else 'registers'} at a time"
+        )
     if address + count > 0x10000:
         raise UsageError(f"registers {address}..{address + count - 1} go past 65535")
     return drive.link.read(drive.unit, address, count, fc=fc)

@@ -52,5 +52,13 @@ def test_a_function_the_drive_lacks_is_said_in_one_line(cli):
         r = cli(*SIM, "-P", profile, "raw", "read", "0x0065", "--fc", "4")
         assert r.code == 1 and "exception 01 (illegal function)" in r.err, r.err
         assert "input register" in r.err and len([x for x in r.err.splitlines() if "error" in x]) == 1
-    r = cli(*SIM, "raw", "read", "0x2100", "--fc", "1")
-    assert r.code == 2 and "--fc 3" in r.err
+    r = cli(*SIM, "raw", "read", "0x2100", "--fc", "5")
+    assert r.code == 2 and "--fc 5: reads are" in r.err
+
+
+def test_coils_and_discrete_inputs_are_refused_by_every_profiled_drive(cli):
+    for fc in ("1", "2"):
+        r = cli(*SIM, "-P", "is620p", "raw", "read", "0", "8", "--fc", fc)
+        assert r.code == 1 and "exception 01 (illegal function)" in r.err, r.err
+    r = cli(*SIM, "raw", "read", "0", "--fc", "1", "--type", "int32")
+    assert r.code == 2 and "bits" in r.err

@@ -26,3 +26,52 @@ def test_an_fc03_reply_does_not_answer_fc04_and_exception_01_is_raised():
     with pytest.raises(ModbusException) as exc:
         req.answer(refused, "read")
     assert exc.value.code == 1
+
+
+class _Device:
+    """A wire to a device (a PLC, say) that has coils and input registers: FC01 bits from `coils`, FC04 words
+    from `inputs`, each answered at once."""
+
+    def __init__(self, coils: list[int], inputs: dict[int, int]) -> None:
+        self.coils, self.inputs, self.reply = coils, inputs, b""
+
+    def send(self, frame: bytes) -> None:
+        fc, address, count = frame[1], int.from_bytes(frame[2:4], "big"), int.from_bytes(frame[4:6], "big")
+        if fc == 1:
+            packed = bytearray((count + 7) // 8)
+            for i, bit in enumerate(self.coils[address : address + count]):
+                packed[i // 8] |= bit << (i % 8)
+            self.reply = with_crc(bytes([1, 1, len(packed)]) + packed)
+        elif fc == 4:
+            data = b"".join(self.inputs[a].to_bytes(2, "big") for a in range(address, address + count))
+            self.reply = with_crc(bytes([1, 4, len(data)]) + data)
+        else:
+            self.reply = with_crc(bytes([1, fc | 0x80, 1]))
+
+    def recv(self, timeout: float) -> bytes:
+        data, self.reply = self.reply, b""
+        return data
+
+
+def test_the_exchange_reads_bits_and_input_registers_by_their_function():
+    from servotool.link.exchange import Exchange
+
+    coils = [1, 0, 1, 1, 0, 0, 0, 1, 1, 0, 1]
+    ex = Exchange(_Device(coils, {7: 0xBEEF, 8: 12}), timeout=0.2, retries=0)
+    assert ex.read(1, 0, 11, fc=1) == coils  # two bytes, the second one partly used
+    assert ex.read(1, 2, 3, fc=1) == coils[2:5]
+    assert ex.read(1, 7, 2, fc=4) == [0xBEEF, 12]
+    with pytest.raises(ModbusException) as exc:
+        ex.read(1, 7, 1)  # this device has no holding registers: 01
+    assert exc.value.code == 1
+
+
+def test_fc01_request_frame_and_bit_unpacking():
+    req = Request(1, 1, 0x0013, 10)
+    assert req.frame == with_crc(bytes([1, 1, 0, 0x13, 0, 10]))
+    assert req.data_bytes == 2
+    reply = with_crc(bytes([1, 1, 2, 0b1100_1101, 0b0000_0001]))
+    assert req.reply_length(reply[:3]) == len(reply)
+    assert req.answer(reply, "read") == [1, 0, 1, 1, 0, 0, 1, 1, 1, 0]
+    with pytest.raises(NotAnswer, match="data bytes"):
+        req.reply_length(with_crc(bytes([1, 1, 4, 0, 0, 0, 0]))[:3])  # a width that is not this read's
