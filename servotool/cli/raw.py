@@ -145,32 +145,52 @@ def write(
     assignment: str = typer.Argument(
         ..., help="ADDR=VALUE[,VALUE...]: decimal or hex, e.g. 0x2004=300, or 0x2100=400,401 for FC16."
     ),
+    fc: int | None = typer.Option(
+        None, "--fc", help="5 one coil, 15 coils (values 0/1); 6 one register, 16 several (the default by count)."
+    ),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask (real drives only; the simulator never asks)."),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """Write one register (FC06), or several from ADDR on (FC16), and read them back. No profile check: the drive
-    is the only judge."""
+    """Write one register (FC06), or several from ADDR on (FC16), or coils (--fc 5, 15), and read them back. No
+    profile check: the drive is the only judge."""
     if "=" not in assignment:
         raise UsageError(f"'{assignment}' is not ADDR=VALUE")
     left, _, right = assignment.partition("=")
     address, values = raw.parse_address(left), [raw.parse_word(v) for v in right.split(",")]
+    coils = _check_write_fc(fc, values)
     simulated = resolved(ctx).simulated
     last = address + len(values) - 1
     with drive(ctx) as d:
         entry = raw.owner(d, address)
         span = f"{address}" if len(values) == 1 else f"{address}..{last}"
         what = (
-            f"register{'s' if len(values) > 1 else ''} {span} (0x{address:04X}"
+            f"{'coil' if coils else 'register'}{'s' if len(values) > 1 else ''} {span} (0x{address:04X}"
             + (f", {entry.code} {entry.name}" if entry else "")
             + ")"
         )
         shown = ",".join(str(v) for v in values)
         if not simulated and not confirm(f"Write {shown} to {what} of unit {d.unit}?", yes):
             raise ServoError("cancelled: nothing was written")
-        back = raw.write_registers(d, address, values)
+        if coils:
+            back = raw.write_coils(d, address, values, many=fc == 15)
+        else:
+            back = raw.write_registers(d, address, values)
     if as_json:
         value: object = back[0] if len(back) == 1 else back
         emit_json({"address": address, "value": value, "entry": _code(entry), "verified": True})
     else:
-        said = ", ".join(f"{b} (0x{b:04X})" for b in back)
+        said = ", ".join(str(b) if coils else f"{b} (0x{b:04X})" for b in back)
         out.print(f"{what}: {said}, verified by read-back", markup=False)
+
+
+def _check_write_fc(fc: int | None, values: list[int]) -> bool:
+    """Whether the write is of coils; UsageError for a function that cannot carry these values."""
+    if fc not in (None, 5, 6, 15, 16):
+        raise UsageError(f"--fc {fc}: writes are --fc 5 (one coil), 6 (one register), 15 (coils), 16 (registers)")
+    if fc in (5, 6) and len(values) != 1:
+        raise UsageError(f"--fc {fc} writes one value, not {len(values)}: give --fc {15 if fc == 5 else 16}")
+    if fc == 16 and len(values) == 1:
+        raise UsageError("--fc 16 with one register: give two or more values, or --fc 6")
+    if fc in (5, 15) and (bad := [v for v in values if v not in (0, 1)]):
+        raise UsageError(f"a coil is 0 or 1, not {bad[0]}")
+    return fc in (5, 15)

@@ -33,7 +33,17 @@ from servotool.errors import DeviceError, ModbusException
 from servotool.link.crc import crc_ok, with_crc
 from servotool.link.ledger import COPY_WINDOW, OWED_MIN_S, OWED_TIMEOUTS, Ledger, Rid, shape_of
 from servotool.link.ports import Trace
-from servotool.link.rtu import READ, READ_INPUT, WRITE_MANY, WRITE_ONE, NotAnswer, Request
+from servotool.link.rtu import (
+    READ,
+    READ_COILS,
+    READ_INPUT,
+    WRITE_COIL,
+    WRITE_COILS,
+    WRITE_MANY,
+    WRITE_ONE,
+    NotAnswer,
+    Request,
+)
 
 # Silence that ends a frame. RTU's 3.5 characters, but USB-serial adapters and TCP gateways deliver bytes in
 # bursts (an FTDI's latency timer holds them up to 16 ms), so a frame is only taken as over after this long.
@@ -221,17 +231,31 @@ class Exchange:
         op.spend(fault)
 
     def write(
-        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+        self,
+        unit: int,
+        address: int,
+        values: list[int],
+        *,
+        multiple: bool = True,
+        idempotent: bool = True,
+        coils: bool = False,
     ) -> None:
-        fc = WRITE_ONE if len(values) == 1 and not multiple else WRITE_MANY
+        """Write registers (FC06 for one unless `multiple`, else FC16), or with `coils` bits 0/1 (FC05, FC15)."""
+        single = len(values) == 1 and not multiple
+        fc = (WRITE_COIL if single else WRITE_COILS) if coils else WRITE_ONE if single else WRITE_MANY
         req = Request(unit, fc, address, len(values), tuple(values))
         outcome = (
             "the drive may or may not hold the new value"
             if idempotent
             else "it may or may not have run; not sent again, since running it twice is not safe"
         )
-        op = self._op(f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}", req, outcome)
-        if self.echo is None and fc == WRITE_ONE:
+        what = "coil(s)" if coils else "register(s)"
+        op = self._op(
+            f"write {len(values)} {what} at {address} (0x{address:04X}) to unit {unit}",
+            req,
+            outcome,
+        )
+        if self.echo is None and req.repeated:
             self._probe_echo(unit, address)
         refused: int | None = None
         while True:
@@ -277,7 +301,8 @@ class Exchange:
     def _holds(self, req: Request, op: _Op) -> bool:
         """Whether the drive already holds what a failed write sent (then sending it again is not needed)."""
         try:
-            return self._read(req.unit, req.address, req.count, (0, 0), op) == list(req.values)
+            fc = READ_COILS if req.fc in (WRITE_COIL, WRITE_COILS) else READ
+            return self._read(req.unit, req.address, req.count, (0, 0), op, fc) == list(req.values)
         except ModbusException:
             return False  # not readable here: cannot tell, and the write is safe to repeat
 
@@ -314,7 +339,7 @@ class Exchange:
         its acknowledgement shows (an FC16 one echoes no values, so a copy of one for the same registers fits: what
         a write stored is proven by reading it back, drive.Drive.write_verified)."""
         if not req.reads:
-            return (req.unit, req.fc, req.address, req.values[0] if req.fc == WRITE_ONE else req.count)
+            return (req.unit, req.fc, req.address, req.values[0] if req.repeated else req.count)
         epoch = 0
         if self._written:
             get = self._written.get
@@ -341,7 +366,7 @@ class Exchange:
         if req.reads:
             shape: tuple[int, ...] = (req.unit, req.fc, req.data_bytes)
         else:
-            shape = shape_of(req.frame if req.fc == WRITE_ONE else with_crc(req.frame[:6]))
+            shape = shape_of(req.frame if req.repeated else with_crc(req.frame[:6]))
         self.ledger.owe(shape, self._rid(req), self.clock.now())
 
     def _stray(self, data: bytes) -> None:
@@ -478,11 +503,11 @@ class Exchange:
                 return buf
             buf += self._recv(left)
         if not buf.startswith(sent):
-            if self.echo is None and req.fc != WRITE_ONE:
+            if self.echo is None and not req.repeated:
                 self.echo = False
             return buf
-        if self.echo is None and req.fc == WRITE_ONE:
-            # An FC06 reply repeats the request: one copy alone is the echo or the reply, which cannot be told.
+        if self.echo is None and req.repeated:
+            # An FC05/FC06 reply repeats the request: one copy alone is the echo or the reply, which cannot be told.
             buf += self._take_pending(max(0.0, deadline - self.clock.now()), until=len(sent) * 2 - len(buf))
             if len(buf) < 2 * len(sent):
                 raise LineFault("stray", len(buf), "one copy of a write that may be an echo")
@@ -530,7 +555,7 @@ def _frame_length(head: bytes) -> int | None:
         return 5
     if fc in (1, 2, 3, 4):
         return 5 + head[2]
-    return 8 if fc in (WRITE_ONE, WRITE_MANY) else None
+    return 8 if fc in (WRITE_COIL, WRITE_ONE, WRITE_COILS, WRITE_MANY) else None
 
 
 def _frames(data: bytes) -> list[bytes]:

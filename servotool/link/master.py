@@ -64,9 +64,16 @@ class RtuMaster:
         return self._exchange.read(unit, address, count, spare=spare, fc=fc)
 
     def write(
-        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+        self,
+        unit: int,
+        address: int,
+        values: list[int],
+        *,
+        multiple: bool = True,
+        idempotent: bool = True,
+        coils: bool = False,
     ) -> None:
-        self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent)
+        self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent, coils=coils)
 
     def control_line(self) -> ControlLine | None:
         """The control line the settings name for a heartbeat (held low since the port opened), None without."""

@@ -46,10 +46,17 @@ class Link(Protocol):
         ...
 
     def write(
-        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+        self,
+        unit: int,
+        address: int,
+        values: list[int],
+        *,
+        multiple: bool = True,
+        idempotent: bool = True,
+        coils: bool = False,
     ) -> None:
-        """Write registers. idempotent=False (an Fn trigger) means a write whose fate is unknown is never sent
-        again; an idempotent one may be."""
+        """Write registers (with `coils`, bits 0/1: FC05/FC15). idempotent=False (an Fn trigger) means a write
+        whose fate is unknown is never sent again; an idempotent one may be."""
         ...
 
     def close(self) -> None: ...

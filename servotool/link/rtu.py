@@ -14,6 +14,8 @@ from servotool.link.crc import crc_ok, with_crc
 READ_COILS, READ_DISCRETE, READ, READ_INPUT, WRITE_ONE, WRITE_MANY = 1, 2, 3, 4, 6, 16
 REGISTER_READS = (READ, READ_INPUT)  # holding and input registers: the same request and reply shapes
 BIT_READS = (READ_COILS, READ_DISCRETE)  # coils and discrete inputs: the same request, bits packed in the reply
+WRITE_COIL, WRITE_COILS = 5, 15  # values 0/1; FC05 sends a coil as 0xFF00 or 0x0000
+REPEATED_WRITES = (WRITE_COIL, WRITE_ONE)  # single writes, whose reply repeats the request
 EXCEPTION_LENGTH = 5
 
 
@@ -42,6 +44,11 @@ class Request:
         return self.fc in REGISTER_READS or self.fc in BIT_READS
 
     @property
+    def repeated(self) -> bool:
+        """Whether its reply repeats the request byte for byte (FC05, FC06)."""
+        return self.fc in REPEATED_WRITES
+
+    @property
     def data_bytes(self) -> int:
         """The data bytes a read's reply carries: two a register, or the bits packed eight to a byte."""
         return (self.count + 7) // 8 if self.fc in BIT_READS else 2 * self.count
@@ -53,6 +60,13 @@ class Request:
             return with_crc(head + self.count.to_bytes(2, "big"))
         if self.fc == WRITE_ONE:
             return with_crc(head + self.values[0].to_bytes(2, "big"))
+        if self.fc == WRITE_COIL:
+            return with_crc(head + (b"\xff\x00" if self.values[0] else b"\x00\x00"))
+        if self.fc == WRITE_COILS:
+            packed = bytearray((len(self.values) + 7) // 8)
+            for i, bit in enumerate(self.values):
+                packed[i // 8] |= (1 if bit else 0) << (i % 8)
+            return with_crc(head + len(self.values).to_bytes(2, "big") + bytes([len(packed)]) + packed)
         data = b"".join(v.to_bytes(2, "big") for v in self.values)
         return with_crc(head + len(self.values).to_bytes(2, "big") + bytes([len(data)]) + data)
 
@@ -89,7 +103,7 @@ class Request:
             data = frame[3:-2]
             return [int.from_bytes(data[i : i + 2], "big") for i in range(0, len(data), 2)]
         echoed = int.from_bytes(frame[2:4], "big"), int.from_bytes(frame[4:6], "big")
-        expected = (self.address, self.values[0] if self.fc == WRITE_ONE else self.count)
+        expected = (self.address, int.from_bytes(self.frame[4:6], "big") if self.repeated else self.count)
         if echoed != expected:
             raise NotAnswer(False, f"an acknowledgement of {echoed[1]} at {echoed[0]}")
         return []

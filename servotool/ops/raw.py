@@ -178,6 +178,20 @@ def write_registers(drive: Drive, address: int, values: list[int]) -> list[int]:
     return back
 
 
+def write_coils(drive: Drive, address: int, bits: list[int], *, many: bool = False) -> list[int]:
+    """Write coils from `address` on (FC05 for one, FC15 for several or with `many`) and read them back (FC01);
+    the bits read. VerifyError when they differ; ModbusException (01) from a drive that has no coils."""
+    if any(b not in (0, 1) for b in bits):
+        raise UsageError(f"a coil is 0 or 1, not {next(b for b in bits if b not in (0, 1))}")
+    if address + len(bits) > 0x10000 or len(bits) > MAX_BITS:
+        raise UsageError(f"{len(bits)} coils from {address}: at most {MAX_BITS}, up to address 65535")
+    drive.link.write(drive.unit, address, bits, multiple=many or len(bits) > 1, coils=True)
+    back = drive.link.read(drive.unit, address, len(bits), fc=1)
+    if back != bits:
+        raise VerifyError(f"coils {address}.. (0x{address:04X}): wrote {bits}, read back {back}")
+    return back
+
+
 def write_register(drive: Drive, address: int, value: int) -> int:
     """Write one register (FC06) and read it back; the value read. VerifyError when it differs."""
     target = Entry(

@@ -92,9 +92,18 @@ class VirtualLink:
             raise ModbusException(exc.code, what) from None
 
     def write(
-        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+        self,
+        unit: int,
+        address: int,
+        values: list[int],
+        *,
+        multiple: bool = True,
+        idempotent: bool = True,
+        coils: bool = False,
     ) -> None:
         what = f"write {len(values)} register(s) at {address} to unit {unit}"
+        if coils:  # no profiled drive has coils (sim.line.refusal)
+            raise ModbusException(1, what)
         self.requests += 1
         self._stall()
         fc = 16 if multiple or len(values) > 1 else 6

@@ -62,3 +62,17 @@ def test_coils_and_discrete_inputs_are_refused_by_every_profiled_drive(cli):
         assert r.code == 1 and "exception 01 (illegal function)" in r.err, r.err
     r = cli(*SIM, "raw", "read", "0", "--fc", "1", "--type", "int32")
     assert r.code == 2 and "bits" in r.err
+
+
+def test_coil_writes_are_refused_by_the_drive_and_bad_ones_before_the_port(cli):
+    for args in (("0x10=1", "--fc", "5"), ("0x10=1,0,1", "--fc", "15")):
+        r = cli(*SIM, "raw", "write", *args)
+        assert r.code == 1 and "coil(s)" in r.err and "exception 01 (illegal function)" in r.err, r.err
+    for args, word in [
+        (("0x10=1,0", "--fc", "5"), "--fc 15"),
+        (("0x10=2", "--fc", "5"), "0 or 1"),
+        (("0x2100=5", "--fc", "16"), "--fc 6"),
+        (("0x2100=5", "--fc", "3"), "writes are"),
+    ]:
+        r = cli(*SIM, "raw", "write", *args)
+        assert r.code == 2 and word in r.err and "SIMULATED" not in r.err, (args, r.err)

@@ -42,6 +42,13 @@ class _Device:
             for i, bit in enumerate(self.coils[address : address + count]):
                 packed[i // 8] |= bit << (i % 8)
             self.reply = with_crc(bytes([1, 1, len(packed)]) + packed)
+        elif fc == 5:
+            self.coils[address] = 1 if frame[4] == 0xFF else 0
+            self.reply = frame
+        elif fc == 15:
+            for i in range(count):
+                self.coils[address + i] = frame[7 + i // 8] >> (i % 8) & 1
+            self.reply = with_crc(frame[:6])
         elif fc == 4:
             data = b"".join(self.inputs[a].to_bytes(2, "big") for a in range(address, address + count))
             self.reply = with_crc(bytes([1, 4, len(data)]) + data)
@@ -75,3 +82,22 @@ def test_fc01_request_frame_and_bit_unpacking():
     assert req.answer(reply, "read") == [1, 0, 1, 1, 0, 0, 1, 1, 1, 0]
     with pytest.raises(NotAnswer, match="data bytes"):
         req.reply_length(with_crc(bytes([1, 1, 4, 0, 0, 0, 0]))[:3])  # a width that is not this read's
+
+
+def test_the_exchange_writes_coils_with_fc05_and_fc15_and_they_read_back():
+    from servotool.link.exchange import Exchange
+
+    device = _Device([0] * 12, {})
+    ex = Exchange(device, timeout=0.2, retries=0)
+    ex.write(1, 3, [1], multiple=False, coils=True)
+    assert device.coils[3] == 1 and ex.read(1, 3, 1, fc=1) == [1]
+    ex.write(1, 0, [1, 0, 1, 1, 0, 0, 0, 1, 1, 0], coils=True)
+    assert ex.read(1, 0, 10, fc=1) == [1, 0, 1, 1, 0, 0, 0, 1, 1, 0]
+
+
+def test_coil_write_frames():
+    assert Request(1, 5, 0x00AC, 1, (1,)).frame == with_crc(bytes([1, 5, 0, 0xAC, 0xFF, 0]))
+    assert Request(1, 5, 0x00AC, 1, (0,)).frame == with_crc(bytes([1, 5, 0, 0xAC, 0, 0]))
+    many = Request(1, 15, 0x0013, 10, (1, 0, 1, 1, 0, 0, 1, 1, 1, 0))
+    assert many.frame == with_crc(bytes([1, 15, 0, 0x13, 0, 10, 2, 0xCD, 0x01]))  # the specification's example
+    assert many.answer(with_crc(bytes([1, 15, 0, 0x13, 0, 10])), "write") == []
