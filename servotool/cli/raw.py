@@ -50,7 +50,7 @@ def read(
     with drive(ctx) as d:
         if interval is None:
             values = raw.read_values(d, start, count, kind, word_order, fc)
-            owners = [raw.owner(d, v.address) for v in values]
+            owners = [raw.owner(d, v.address) if fc == 3 else None for v in values]  # the profile maps FC03 only
         else:
             try:
                 _show_polls(
