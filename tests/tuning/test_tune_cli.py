@@ -120,10 +120,11 @@ def test_bad_options_are_refused_before_anything_moves(cli, args, message):
 
 def test_one_direction_identifies_with_friction_and_load_torque_combined(cli):
     cli("sim", "config", "--load-ratio", "6", "--friction", "0.03")
-    # 8 rev: six moves one way and what DSX7E's 500 ms watchdog lets a dead host's motor run on fit at 400 rpm
-    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--direction", "forward", "--travel", "8")
+    # 16 rev: six moves one way with room to accelerate, and a dead host's run-on inside the travel (at 8 rev the
+    # moves were held to 407 rpm and a busy host left them 3.4 % uncertain: refused 1 in 2 with two CPU burners)
+    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json", "--direction", "forward", "--travel", "16")
     assert r.code == 0, r.err
-    assert r.json()["ratio"] == pytest.approx(6.0, rel=0.05) and r.json()["travel"]["value"] <= 8.0
+    assert r.json()["ratio"] == pytest.approx(6.0, rel=0.05) and r.json()["travel"]["value"] <= 16.0
     assert any("one direction" in n for n in r.json()["notes"])
 
 
