@@ -173,9 +173,12 @@ def serve_forever(
         slave.serve(ready=(lambda: ready(port, served)) if ready else None)
         return
 
+    stopped_by: list[int] = []
+
     async def main() -> None:
         proxy = None
         server = await _start("tcp://127.0.0.1:0" if faults else port, served, trace)
+        _stop_on_termination(server, stopped_by)
         bound = bound_port(server) if tcp else 0
         if faults is not None and tcp:
             from servotool.sim.faults import FaultProxy
@@ -195,6 +198,33 @@ def serve_forever(
             await server.shutdown()
 
     asyncio.run(main())
+    if stopped_by:  # a terminate signal ends it as Ctrl-C does (exit 130, "simulator stopped")
+        raise KeyboardInterrupt
+
+
+def _stop_on_termination(server: ModbusTcpServer, stopped_by: list[int]) -> None:
+    """SIGTERM and SIGHUP end the serving through the event loop's own signal handling (POSIX), as asyncio.run
+    already ends it at Ctrl-C: the CLI's handler would raise KeyboardInterrupt wherever the loop happened to be, inside
+    a transport's or a request's callback, and the loop's shutdown could then wait on what that callback never
+    finished (a test's terminate once went unanswered for 10 s). Windows has no loop signal handlers: the CLI's
+    handler stays there."""
+    import signal
+
+    loop = asyncio.get_running_loop()
+
+    def stop(number: int) -> None:
+        stopped_by.append(number)
+        if not server.serving.done():
+            server.serving.set_result(True)
+
+    for name in ("SIGTERM", "SIGHUP"):
+        number = getattr(signal, name, None)
+        if number is None:
+            continue
+        try:
+            loop.add_signal_handler(number, stop, number)
+        except (NotImplementedError, RuntimeError, ValueError):  # Windows; not the main thread
+            return
 
 
 def serve_units(
