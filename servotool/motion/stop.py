@@ -33,6 +33,9 @@ from servotool.ops.status import servo_is_on
 
 PROOF_BAND_RPM = 10.0  # proven at rest: |speed| under this on two readings SETTLE_S apart (above the drives' noise)
 DEFAULT_WAIT_S = 3.0  # the stop's wait for rest where the motion's own cannot be worked out
+# A read's failure that shows the line answering (replies that did not agree with their confirming read: a live
+# value, or stray replies), as opposed to a silent or lost line: a stop waits on through it.
+LINE_ANSWERS = ("unsettled", "disagree")
 RUNAWAY_SHARE = 1.2  # waiting for rest, a speed this much above the first one read means the drive is not stopping it
 
 
@@ -195,8 +198,9 @@ class _Steps:
 
     def run(self, what: str, step: Callable[[], object], tries: int = 1) -> bool:
         """Run one step (up to `tries` times on a line fault, once the line stops answering); a failure is noted
-        and the sequence goes on."""
-        failure: ServoError | None = None
+        and the sequence goes on, whatever it was: a fault in one step (a bug included) must not keep the next,
+        the servo-off, from being sent."""
+        failure: Exception | None = None
         for _ in range(1 if self.line_dead else tries):
             try:
                 step()
@@ -206,6 +210,9 @@ class _Steps:
             except ServoError as exc:
                 failure = exc
                 break
+            except Exception as exc:  # an internal error, said as one: the stop goes on
+                self.problems.append(f"{what} failed (internal error: {type(exc).__name__}: {exc})")
+                return False
         self.problems.append(f"{what} failed ({failure})")
         if isinstance(failure, DeviceError) and (failure.fault == "silent" or "link lost" in str(failure)):
             self.line_dead = True
@@ -231,24 +238,29 @@ def _wait_for_rest(
         try:
             speed = _speed(drive)
         except DeviceError as exc:
-            if exc.fault != "unsettled":
+            if exc.fault not in LINE_ANSWERS:
                 steps.problems.append(f"reading the speed failed ({exc})")
                 steps.line_dead = True
                 break
             # After an interrupted request the link confirms reads by a second that agrees, which a turning
-            # motor's speed never does: the line answers, so wait on (the read-back proves rest or says why not).
+            # motor's speed (or its noise at rest) need not: the line answers, so wait on (the read-back proves
+            # rest or says why not).
             if clock.now() >= end:
                 return False, speed
             steps.run("feeding the drive's watchdog", halt.keep_alive)
-            idle(poll_s)
+            steps.run("waiting", lambda: idle(poll_s))
             continue
+        except Exception as exc:  # the wait ends; the servo-off comes next all the same
+            steps.problems.append(f"reading the speed failed ({type(exc).__name__}: {exc})")
+            break
         if speed is None or watch.at_rest(clock.now(), speed):
             return (None if speed is None else True), speed
         first = abs(speed) if first is None else first
         if clock.now() >= end or abs(speed) > RUNAWAY_SHARE * first + PROOF_BAND_RPM:
             return False, speed
         steps.run("feeding the drive's watchdog", halt.keep_alive)
-        idle(poll_s)
+        if not steps.run("waiting", lambda: idle(poll_s)):  # a JOG's trace samples while it waits
+            break
     return False, speed
 
 
