@@ -49,6 +49,14 @@ class Notch:
         self.a2 = (k * k - 2 * zeta * w0 * k + w0 * w0) / a0
         self.z1 = self.z2 = 0.0
 
+    @property
+    def memory(self) -> list[float]:
+        """The filter's state (what it remembers of past samples), to hand the running loop over."""
+        return [self.z1, self.z2]
+
+    def recall(self, memory: list[float]) -> None:
+        self.z1, self.z2 = memory
+
     def step(self, x: float) -> float:
         """One sample (transposed direct form II)."""
         y = self.b[0] * x + self.z1
@@ -108,6 +116,15 @@ class GainSelector:
         self.switch = switch
         self.active = 2 if switch.condition == "gain2" else 1
         self._below_s = 0.0
+
+    @property
+    def memory(self) -> list[float]:
+        """Which set acts and how long the speed has been below the switching speed, to hand the loop over."""
+        return [float(self.active), self._below_s]
+
+    def recall(self, memory: list[float]) -> None:
+        active, self._below_s = memory
+        self.active = 2 if active == 2 else 1
 
     def step(self, speed_rpm: float, ts: float) -> int:
         s = self.switch

@@ -71,7 +71,11 @@ STATE_FIELDS = (
     "_defl_rate",
     "_locked_s",
     "_saturated_s",
+    "_t_slow",
+    "_vibration",
 )
+# With them, state() carries the loop functions' memories (sim.loop_functions) under the same names: "_notches" (one
+# per active notch) and "_gain_select"; a process whose parameters give other notches starts its own afresh.
 
 
 @dataclass(frozen=True)
@@ -499,6 +503,8 @@ class Plant:
         for name in STATE_FIELDS:
             value = getattr(self, name)
             out[name] = None if isinstance(value, float) and math.isinf(value) else value
+        out["_notches"] = [n.memory for n in self._notches]
+        out["_gain_select"] = self._gain_select.memory if self._gain_select is not None else None
         return out
 
     def restore(self, state: dict[str, object], shift: float = 0.0) -> None:
@@ -517,3 +523,23 @@ class Plant:
                 setattr(self, name, int(value) if name == "_theta_prev_counts" else float(value))
                 if name == "time":
                     self.time += shift
+        self._recall_loop_memory(state)
+
+    def _recall_loop_memory(self, state: dict[str, object]) -> None:
+        """The notch filters' and the gain selector's memories, where they fit this process's loop functions."""
+        notches = state.get("_notches")
+        if isinstance(notches, list) and len(notches) == len(self._notches) and all(map(_memory, notches)):
+            for notch, memory in zip(self._notches, notches, strict=True):
+                notch.recall([float(x) for x in memory])
+        selector = state.get("_gain_select")
+        if self._gain_select is not None and _memory(selector):
+            self._gain_select.recall([float(x) for x in selector])  # type: ignore[union-attr]
+
+
+def _memory(value: object) -> bool:
+    """A loop function's memory as persisted: two finite numbers."""
+    return (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value)
+    )
