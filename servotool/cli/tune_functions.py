@@ -58,11 +58,13 @@ def friction(
     report: Path = typer.Option(None, "--report", metavar="DIR", help=REPORT_HELP),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
-    """Friction compensation from the torques at constant speed, kept only where the score improves.
+    """Friction compensation, kept only where the score improves.
 
-    The SDC manual's procedure for every drive that maps compensation entries: a run each way below 10 r/min
-    gives the Coulomb terms, the torque at the test speed less them the damping terms (where mapped). Scored
-    before and after on following error and integrated error; put back otherwise.
+    Compensation torques (DSX7E, SDC): the SDC manual's procedure, a run each way below 10 r/min gives the
+    Coulomb terms, the torque at the test speed less them the damping terms (where mapped). The drive's own
+    compensation (SD25 Po183-187): its manual's procedure, gains at their factory values and the coefficient
+    raised to 50 % then 95 % while each step improves. Scored before and after on following error and
+    integrated error; put back otherwise.
     """
     _run(ctx, "friction", None, repeats, travel, keep, save, yes, no_dead_man, report, as_json)
 
