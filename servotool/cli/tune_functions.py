@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from servotool.cli.common import boosted, confirm, drive
+from servotool.cli.common import boosted, confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, warn
 from servotool.cli.tune_score import render_comparison, render_score
@@ -161,6 +161,17 @@ def gain_switching(
     """
     gs.check_factor(factor)
     _run(ctx, "gain-switching", None, repeats, travel, keep, save, yes, no_dead_man, report, as_json, factor)
+
+
+@app.command("vibration")
+def vibration(ctx: typer.Context) -> None:
+    """Vibration suppression: refused, with the reason, where servotool cannot run it honestly.
+
+    SD25 suppresses a load end's sway only in its position modes (Po240/Po242) or inside its own auto-tune
+    started at the panel (Po174.C): servotool moves it by JOG, where neither acts, so no score could judge a
+    change. Exits 2 and writes nothing.
+    """
+    raise UsageError(use.vibration_refusal(resolved(ctx).profile))
 
 
 @app.command("resonance")

@@ -106,6 +106,24 @@ def run_function(
     return judged_trial(drive, trial, motion, repeats, keep=keep, save=save, clock=clock, progress=progress)
 
 
+VIBRATION_REFUSED = (
+    "tune vibration: NOT RUN: {model}'s vibration suppression ({codes}) acts only in its position modes "
+    "or inside its own auto-tune, neither of which servotool can command over Modbus, so no score could judge it: "
+    "set it at the drive"
+)
+
+
+def vibration_refusal(profile: Profile) -> str:
+    """Why `tune vibration` cannot run on this drive, in one line: SD25 maps its low-frequency vibration suppression
+    (roles vibration_suppression_freq/_strength: Po240/Po242, PP/CSP only, L7937) and its automatic one lives inside
+    the auto-tune started at the panel (Po174.C, L7480, L7656-7672); servotool's motions there are JOG (a speed
+    mode), where neither acts. Reads nothing from the drive."""
+    found = [e for r in ("vibration_suppression_freq", "vibration_suppression_strength") if (e := profile.role(r))]
+    if not found:
+        return f"tune vibration: {profile.model} maps no vibration suppression (roles vibration_suppression_*)"
+    return VIBRATION_REFUSED.format(model=profile.model, codes=", ".join(e.code for e in found))
+
+
 def _observer_steps(
     drive: Drive,
     motion: scoring.ScoreMotion,

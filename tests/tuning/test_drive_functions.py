@@ -197,3 +197,13 @@ def test_the_report_shows_before_and_after_and_the_score_table(cli, tmp_path):
     assert (folder / "response.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     text = (folder / "report.md").read_text()
     assert "| Pn121 |" in text and "| iae |" in text and "Read back: Pn121 = " in text
+
+
+def test_tune_vibration_says_in_one_line_why_it_cannot_run(cli):
+    """SD25's vibration suppression acts only in its position modes or inside its panel-started auto-tune, and
+    servotool moves it by JOG: refused with the reason and exit 2, nothing written; a drive without one says so."""
+    r = cli("--port", "sim", "-P", "sd25", "tune", "vibration")
+    assert r.code == 2 and r.out == ""
+    assert r.err.count("\n") == 1 and "NOT RUN" in r.err and "Po240, Po242" in r.err and "position modes" in r.err
+    r = cli("--port", "sim", "-P", "is620p", "tune", "vibration")
+    assert r.code == 2 and "maps no vibration suppression" in r.err
