@@ -40,6 +40,7 @@ from servotool.drive import Drive
 from servotool.errors import ServoError
 from servotool.model.codec import eng_to_raw
 from servotool.model.loader import load_profile
+from servotool.model.profile import Entry, Profile
 from servotool.model.setup import requirements
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
@@ -76,6 +77,14 @@ def machine(
     }
 
 
+def commissioned(p: Profile, load_ratio: float, gain_hz: float | None) -> list[tuple[Entry, float]]:
+    """The loop of a commissioned machine: its true inertia ratio where the profile maps one (SD25 section 9.6,
+    L8020: friction compensation wants Po013 'set as correctly as possible'), and the notch machines' speed-loop
+    gain (gain_hz)."""
+    found = [(e, p.param_from_load_ratio(load_ratio)) for e in [p.role("inertia_ratio")] if e is not None]
+    return found + ([(p.need_role("speed_loop_gain", "bench"), gain_hz)] if gain_hz is not None else [])
+
+
 def run_one(function: str, profile_id: str, settings: dict[str, float]) -> str:
     p = load_profile(profile_id)
     clock = VirtualClock(100.0)
@@ -86,13 +95,8 @@ def run_one(function: str, profile_id: str, settings: dict[str, float]) -> str:
     sim.firmware.reconfigure()
     d = Drive(VirtualLink([sim], clock, FACTORY_BAUD[profile_id]), p, 1)
     d.dead_man_waived = True
-    if gain_hz is not None:  # the loop the machine is tuned to, at its true inertia ratio
-        for role, value in (
-            ("inertia_ratio", p.param_from_load_ratio(settings["load_ratio"])),
-            ("speed_loop_gain", gain_hz),
-        ):
-            entry = p.need_role(role, "bench")
-            d.write_raw(entry, eng_to_raw(entry, value))
+    for entry, value in commissioned(p, settings["load_ratio"], gain_hz):
+        d.write_raw(entry, eng_to_raw(entry, value))
     try:  # the one use case tune and plans run (tuning.function_run): its method chosen by the profile
         trial = function_run.run_function(d, function, scoring.planned(d, scoring.motion_for(2.0)), 3, clock=clock)
     except ServoError:
@@ -117,9 +121,7 @@ def run_real_time(function: str, profile_id: str, settings: dict[str, float], po
     machine_args = [a for k in MACHINE_OPTIONS if k in settings for a in (f"--{k.replace('_', '-')}", str(settings[k]))]
     p = load_profile(profile_id)
     setup = [a for r in requirements(p) for a in r.assignments()]
-    if gain_hz is not None:
-        setup += [f"{p.need_role('inertia_ratio', 'bench').code}={p.param_from_load_ratio(settings['load_ratio'])}"]
-        setup += [f"{p.need_role('speed_loop_gain', 'bench').code}={gain_hz}"]
+    setup += [f"{entry.code}={value:g}" for entry, value in commissioned(p, settings["load_ratio"], gain_hz)]
     steps = [("-P", profile_id, "sim", "config", *machine_args)]
     if setup:
         steps += [("--port", "sim", "-P", profile_id, "param", "set", "--save", *setup)]
