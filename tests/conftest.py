@@ -96,3 +96,53 @@ def sim_serve(sim_dir):
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.communicate()
+
+
+@dataclass
+class VirtualPlan:
+    """A plan's runner in-process on virtual time, over one simulated drive (unit 1) with its machine behind it;
+    `safety` collects the runner's safety lines."""
+
+    runner: object  # servotool.commission.runner.Runner
+    sim: object  # servotool.sim.device.SimulatedDrive
+    clock: object  # servotool.clock.VirtualClock
+    safety: list[str]
+
+
+@pytest.fixture
+def virtual_plan(tmp_path, sim_dir):
+    """build(steps, profile_id="dsx7e", **machine): the plan `profile: ID` with these step lines, run by the plan
+    runner in-process on virtual time, the profile's motion setup made on the drive and its machine set (sim
+    config's names), its line at 115200 baud; nothing asks and nothing is logged."""
+    from servotool.clock import VirtualClock
+    from servotool.commission.plan import load_plan
+    from servotool.commission.runner import Runner
+    from servotool.drive import Drive
+    from servotool.model.loader import load_profile
+    from servotool.sim.firmware import build_drive
+    from servotool.sim.virtual import VirtualLink, make_motion_setup
+
+    def build(steps: str, profile_id: str = "dsx7e", **machine: float) -> VirtualPlan:
+        plan_file = tmp_path / "plan.yaml"
+        plan_file.write_text(f"profile: {profile_id}\nsteps:\n{steps}")
+        clock = VirtualClock(100.0)
+        profile = load_profile(profile_id)
+        sim = build_drive(profile, 1, clock, persist=False)
+        make_motion_setup(sim)
+        sim.settings.update(machine)
+        sim.firmware.reconfigure()
+        drive = Drive(VirtualLink([sim], clock, 115200), profile, 1)
+        safety: list[str] = []
+        runner = Runner(
+            load_plan(plan_file),
+            [drive],
+            yes=True,
+            continue_on_error=False,
+            ask=lambda _unit, _question: True,
+            log=lambda _line: None,
+            clock=clock,
+            safety=safety.append,
+        )
+        return VirtualPlan(runner, sim, clock, safety)
+
+    return build

@@ -81,6 +81,11 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
         "servotool --port sim -P sd25 tune gain-switching --yes --no-dead-man",
         "Gain 2 while moving (SD25 Po130 = 2), kept only where it helps.",
     ),
+    (
+        "tune vibration",
+        "servotool --port sim -P sd25 tune vibration",
+        "Why SD25's vibration suppression cannot be run from here (exit 2).",
+    ),
     ("param reset", "servotool --port sim param reset --yes", "Factory defaults, after an automatic backup."),
     (
         "param apply",

@@ -13,6 +13,7 @@ from servotool.errors import UnknownName
 from servotool.model.codec import field_range, format_value
 from servotool.model.loader import builtin_dir, builtin_ids, load_profile, read_profile
 from servotool.model.lookup import COMMON_GROUPS, group_members, suggest
+from servotool.model.modbus_functions import RAW_FUNCTIONS, functions_json
 from servotool.model.profile import Entry, IdentityCheck, Profile
 from servotool.model.roles import sim_extensions
 from servotool.words import count
@@ -60,7 +61,8 @@ def show(
     ),
     as_json: bool = JSON_OPT,
 ) -> None:
-    """A profile's settings, roles and entries."""
+    """A profile's settings, roles and entries, and the Modbus functions its manual documents (the rest
+    unverified, with why)."""
     p = load_profile(profile)
     members = p.entries if group is None else group_members(p.entries, group)
     if members is None:
@@ -86,6 +88,7 @@ def show(
                 "dead_man": vars(p.dead_man) if p.dead_man is not None else None,
                 "identity": _identity_json(p),
                 "sim_extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(p)],
+                "modbus_functions": functions_json(p.modbus_functions),
             }
         )
         return
@@ -113,6 +116,7 @@ def show(
             out.print("no unverified entry", markup=False)
         _print_dead_man(p)
         _print_identity(p, only_unverified=True)
+        _print_functions(p, only_unverified=True)
         found = sim_extensions(p)
         if found:
             out.print("simulator extensions (not in the manual):", markup=False)
@@ -137,6 +141,7 @@ def show(
     out.print(t)
     out.print("roles: " + ", ".join(f"{k}={v}" for k, v in sorted(p.roles.items())), markup=False)
     _print_identity(p)
+    _print_functions(p)
 
 
 def _identity_json(p: Profile) -> dict[str, object] | None:
@@ -300,6 +305,20 @@ def _boost_json(p: Profile) -> dict[str, object]:
         "source": b.source,
         "unverified": b.unverified or None,
     }
+
+
+def _print_functions(p: Profile, *, only_unverified: bool = False) -> None:
+    """The Modbus functions raw can send: the manual's lines for each one it documents, why the others are
+    unverified (said once), and which ones the drive (and the simulated one) answers."""
+    found = p.modbus_functions
+    codes = [fc for fc in RAW_FUNCTIONS if not only_unverified or fc not in found.documented]
+    t = table("FC", "Function", "Answers", "Note", title="Modbus functions: the manual's lines, or unverified")
+    for row in functions_json(found):
+        if row["code"] in codes:
+            said = f"{row['source']}" if row["source"] else "unverified"
+            t.add_row(f"{row['code']:02d}", str(row["name"]), "yes" if row["answered"] else "no", said)
+    out.print(t)
+    out.print(f"unverified Modbus functions: {found.unverified}", markup=False)
 
 
 def _boost_text(p: Profile) -> str:

@@ -5,13 +5,15 @@ from __future__ import annotations
 import csv
 import sys
 from collections.abc import Iterator
+from contextlib import contextmanager
 
 import typer
 
 from servotool.cli.common import JSON_OPT, confirm, drive, resolved
-from servotool.cli.render import emit_json, emit_json_line, out, table
-from servotool.errors import ServoError, UsageError
-from servotool.model.profile import Entry
+from servotool.cli.render import emit_json, emit_json_line, out, table, warn
+from servotool.errors import DeviceError, ModbusException, ServoError, UsageError
+from servotool.model.modbus_functions import NAMES
+from servotool.model.profile import Entry, Profile
 from servotool.ops import raw
 
 app = typer.Typer(no_args_is_help=True, help="Read and write registers by address (outside the profile).")
@@ -32,7 +34,8 @@ def read(
 ) -> None:
     """Read holding registers (FC03; --fc 4 input registers, 1 coils, 2 discrete inputs) and show them in decimal,
     signed and hex, with the entry each belongs to; with --type as 16- or 32-bit integers or floats; with
-    --interval, polled."""
+    --interval, polled. A function code the drive's manual does not document is warned of, with the profile's
+    reason (profiles show)."""
     start = raw.parse_address(address)
     if as_csv and as_json:
         raise UsageError("give --csv or --json, not both")
@@ -47,7 +50,7 @@ def read(
         raise UsageError(f"--fc {fc} reads bits: --type and --word-order are for registers")
     typed = kind != "uint16" or word_order != "big"
     interrupted = False
-    with drive(ctx) as d:
+    with _function(resolved(ctx).profile, fc), drive(ctx) as d:
         if interval is None:
             values = raw.read_values(d, start, count, kind, word_order, fc)
             owners = [raw.owner(d, v.address) if fc == 3 else None for v in values]  # the profile maps FC03 only
@@ -152,7 +155,7 @@ def write(
     as_json: bool = JSON_OPT,
 ) -> None:
     """Write one register (FC06), or several from ADDR on (FC16), or coils (--fc 5, 15), and read them back. No
-    profile check: the drive is the only judge."""
+    profile check: the drive is the only judge (a function code its manual does not document is warned of)."""
     if "=" not in assignment:
         raise UsageError(f"'{assignment}' is not ADDR=VALUE")
     left, _, right = assignment.partition("=")
@@ -160,7 +163,8 @@ def write(
     coils = _check_write_fc(fc, values)
     simulated = resolved(ctx).simulated
     last = address + len(values) - 1
-    with drive(ctx) as d:
+    sent = fc or (16 if len(values) > 1 else 6)
+    with _function(resolved(ctx).profile, sent), drive(ctx) as d:
         entry = raw.owner(d, address)
         span = f"{address}" if len(values) == 1 else f"{address}..{last}"
         what = (
@@ -181,6 +185,21 @@ def write(
     else:
         said = ", ".join(str(b) if coils else f"{b} (0x{b:04X})" for b in back)
         out.print(f"{what}: {said}, verified by read-back", markup=False)
+
+
+@contextmanager
+def _function(profile: Profile, fc: int) -> Iterator[None]:
+    """A warning before a function code the profile's manual does not document (its note: why), and a refusal
+    (exception 01) of such a code said to be one."""
+    note = profile.modbus_functions.note(fc)
+    if note:
+        warn(f"FC{fc:02d} ({NAMES[fc]}) is UNVERIFIED on {profile.model}: {note}")
+    try:
+        yield
+    except ModbusException as exc:
+        if exc.code != 1 or not note:
+            raise
+        raise DeviceError(f"{exc}; {profile.model}'s manual does not document FC{fc:02d}") from None
 
 
 def _check_write_fc(fc: int | None, values: list[int]) -> bool:

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
-from servotool.cli.common import boosted, confirm, drive
+from servotool.cli.common import boosted, confirm, drive, resolved
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, warn
 from servotool.cli.tune_score import render_comparison, render_score
@@ -29,6 +30,16 @@ SAVE_HELP = "Store a kept change in EEPROM (or keep it out of it) as the drive a
 REPORT_HELP = "Write the before/after chart and the score table to DIR (needs servotool[plot])."
 DEAD_MAN_HELP = "Move a drive that has no dead-man route (nothing stops the motor if this program dies)."
 
+# The options every function command shares, defined once (the defaults stay in each signature, as typer wants).
+Repeats = Annotated[int, typer.Option("--repeats", help=REPEATS_HELP)]
+Travel = Annotated[float, typer.Option("--travel", help=TRAVEL_HELP)]
+Keep = Annotated[bool, typer.Option("--keep", help=KEEP_HELP)]
+Save = Annotated[bool | None, typer.Option("--save/--no-save", help=SAVE_HELP)]
+Yes = Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")]
+NoDeadMan = Annotated[bool, typer.Option("--no-dead-man", help=DEAD_MAN_HELP)]
+Report = Annotated[Path | None, typer.Option("--report", metavar="DIR", help=REPORT_HELP)]
+AsJson = Annotated[bool, typer.Option("--json", help="Machine-readable result.")]
+
 
 def _start(
     ctx: typer.Context, d: Drive, yes: bool, no_dead_man: bool, what: str, motion: scoring.ScoreMotion
@@ -49,20 +60,22 @@ def _progress(as_json: bool) -> functions.Progress:
 @app.command("friction")
 def friction(
     ctx: typer.Context,
-    repeats: int = typer.Option(scoring.DEFAULT_REPEATS, "--repeats", help=REPEATS_HELP),
-    travel: float = typer.Option(2.0, "--travel", help=TRAVEL_HELP),
-    keep: bool = typer.Option(False, "--keep", help=KEEP_HELP),
-    save: bool = typer.Option(None, "--save/--no-save", help=SAVE_HELP),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
-    no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
-    report: Path = typer.Option(None, "--report", metavar="DIR", help=REPORT_HELP),
-    as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
+    repeats: Repeats = scoring.DEFAULT_REPEATS,
+    travel: Travel = 2.0,
+    keep: Keep = False,
+    save: Save = None,
+    yes: Yes = False,
+    no_dead_man: NoDeadMan = False,
+    report: Report = None,
+    as_json: AsJson = False,
 ) -> None:
-    """Friction compensation from the torques at constant speed, kept only where the score improves.
+    """Friction compensation, kept only where the score improves.
 
-    The SDC manual's procedure for every drive that maps compensation entries: a run each way below 10 r/min
-    gives the Coulomb terms, the torque at the test speed less them the damping terms (where mapped). Scored
-    before and after on following error and integrated error; put back otherwise.
+    Compensation torques (DSX7E, SDC): the SDC manual's procedure, a run each way below 10 r/min gives the
+    Coulomb terms, the torque at the test speed less them the damping terms (where mapped). The drive's own
+    compensation (SD25 Po183-187): its manual's procedure, gains at their factory values and the coefficient
+    raised to 50 % then 95 % while each step improves. Scored before and after on following error and
+    integrated error; put back otherwise.
     """
     _run(ctx, "friction", None, repeats, travel, keep, save, yes, no_dead_man, report, as_json)
 
@@ -76,14 +89,14 @@ def notch(
         help="drive: the drive's own adaptive notch, read back (default where the profile maps one); host: at a "
         "peak of the score's spectrum.",
     ),
-    repeats: int = typer.Option(scoring.DEFAULT_REPEATS, "--repeats", help=REPEATS_HELP),
-    travel: float = typer.Option(2.0, "--travel", help=TRAVEL_HELP),
-    keep: bool = typer.Option(False, "--keep", help=KEEP_HELP),
-    save: bool = typer.Option(None, "--save/--no-save", help=SAVE_HELP),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
-    no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
-    report: Path = typer.Option(None, "--report", metavar="DIR", help=REPORT_HELP),
-    as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
+    repeats: Repeats = scoring.DEFAULT_REPEATS,
+    travel: Travel = 2.0,
+    keep: Keep = False,
+    save: Save = None,
+    yes: Yes = False,
+    no_dead_man: NoDeadMan = False,
+    report: Report = None,
+    as_json: AsJson = False,
 ) -> None:
     """A torque-command notch at the machine's resonance, kept only where the score improves.
 
@@ -141,14 +154,14 @@ def gain_switching(
     factor: float = typer.Option(
         1.5, "--factor", help="Gain 2's speed-loop gain and integral time against gain 1's, above 1, at most 4."
     ),
-    repeats: int = typer.Option(scoring.DEFAULT_REPEATS, "--repeats", help=REPEATS_HELP),
-    travel: float = typer.Option(2.0, "--travel", help=TRAVEL_HELP),
-    keep: bool = typer.Option(False, "--keep", help=KEEP_HELP),
-    save: bool = typer.Option(None, "--save/--no-save", help=SAVE_HELP),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
-    no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
-    report: Path = typer.Option(None, "--report", metavar="DIR", help=REPORT_HELP),
-    as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
+    repeats: Repeats = scoring.DEFAULT_REPEATS,
+    travel: Travel = 2.0,
+    keep: Keep = False,
+    save: Save = None,
+    yes: Yes = False,
+    no_dead_man: NoDeadMan = False,
+    report: Report = None,
+    as_json: AsJson = False,
 ) -> None:
     """A stiffer second gain set while the motor turns, the first at rest, kept only where the score improves.
 
@@ -161,13 +174,24 @@ def gain_switching(
     _run(ctx, "gain-switching", None, repeats, travel, keep, save, yes, no_dead_man, report, as_json, factor)
 
 
+@app.command("vibration")
+def vibration(ctx: typer.Context) -> None:
+    """Vibration suppression: refused, with the reason, where servotool cannot run it honestly.
+
+    SD25 suppresses a load end's sway only in its position modes (Po240/Po242) or inside its own auto-tune
+    started at the panel (Po174.C): servotool moves it by JOG, where neither acts, so no score could judge a
+    change. Exits 2 and writes nothing.
+    """
+    raise UsageError(use.vibration_refusal(resolved(ctx).profile))
+
+
 @app.command("resonance")
 def resonance(
     ctx: typer.Context,
-    travel: float = typer.Option(2.0, "--travel", help=TRAVEL_HELP),
-    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
-    no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
-    as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
+    travel: Travel = 2.0,
+    yes: Yes = False,
+    no_dead_man: NoDeadMan = False,
+    as_json: AsJson = False,
 ) -> None:
     """Find resonances: the spectrum of speed and torque after a speed step, at the line's full rate.
 

@@ -96,10 +96,7 @@ class TuneFunctionStep(StepType):
             _flag(opts, key, step.name)
         motion, repeats = _motion(step, opts)
         method = use.check_function(profile, self.function, opts.get("method"))
-        if self.function == "friction":
-            if profile.role("friction_comp_fwd") is None:
-                raise UsageError(f"{step.name}: {profile.model} maps no friction compensation (role friction_comp_fwd)")
-        elif self.function == "notch" and profile.role("notch1_freq") is None:
+        if self.function == "notch" and profile.role("notch1_freq") is None:
             raise UsageError(f"{step.name}: {profile.model} maps no torque-command notch (roles notchN_freq/..)")
         elif self.function == "gain-switching":
             gain_switching.switching_entries(profile)
@@ -110,7 +107,9 @@ class TuneFunctionStep(StepType):
     def describe(self, step: Step, profile: Profile) -> str:
         motion, repeats, opts, method = self._request(step, profile)
         how = {
-            "friction": "compensation from constant-speed torques",
+            "friction": "compensation from constant-speed torques"
+            if method == "host"
+            else "the drive's compensation coefficient raised step by step",
             "notch": f"notch by the {method}",
             "gain-switching": f"gain 2 = {opts.get('factor', gain_switching.DEFAULT_FACTOR):g} x gain 1 while moving",
         }

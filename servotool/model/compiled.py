@@ -14,6 +14,7 @@ from dataclasses import fields
 from typing import Any
 
 from servotool.model.alarm_notes import AlarmCauses, AlarmLog
+from servotool.model.modbus_functions import ModbusFunctions
 from servotool.model.profile import (
     Alarm,
     DeadManRoute,
@@ -40,6 +41,7 @@ SECTIONS: dict[str, Any] = {
     "alarm_log": AlarmLog | None,
     "unverified_values": dict[str, str],
     "boost": LineBoost,
+    "modbus_functions": ModbusFunctions,
 }
 TEXTS = ("id", "model", "vendor", "version", "description", "source", "address_rule", "word_order", "unverified_note")
 

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 from servotool.errors import MissingRole, UnknownName
 from servotool.model.lookup import code_key, suggest
+from servotool.model.modbus_functions import ModbusFunctions
 
 if TYPE_CHECKING:
     from servotool.model.alarm_notes import AlarmCauses, AlarmLog
@@ -305,6 +306,7 @@ class Profile:
     alarm_log: AlarmLog | None = None  # what the drive records with its past alarms (model.alarm_notes)
     unverified_values: dict[str, str] = field(default_factory=dict)  # CODE -> why its scale/meaning is open
     boost: LineBoost = field(default_factory=LineBoost)
+    modbus_functions: ModbusFunctions = field(default_factory=ModbusFunctions)  # by the manual (model.modbus_functions)
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
 

@@ -130,6 +130,29 @@ def sim_extensions(profile: Profile) -> list[SimExtension]:
                 "speed reference (none within 1 rpm of zero); the manual names the torques, not when they switch",
             )
         )
+    viscous = profile.role("viscous_comp")
+    if viscous is not None:
+        found.append(
+            SimExtension(
+                f"viscous compensation ({viscous.code})",
+                f"NOT IN THE MANUAL: it prints the name and range only ({viscous.source}); the simulator adds "
+                f"{viscous.code} % of rated torque at the rated speed, in proportion to the speed reference, in "
+                "both directions",
+            )
+        )
+    observer = profile.role("friction_observer_coefficient")
+    trim = profile.role("friction_observer_gain_trim")
+    if observer is not None:
+        found.append(
+            SimExtension(
+                f"friction compensation ({observer.code} and its gains)",
+                "PARTLY IN THE MANUAL: it says what the parameters do (compensates viscous friction and load "
+                f"changes; gains: response to disturbances; coefficient: how much; {observer.source}), not how; "
+                "the simulator's is a disturbance observer on the configured inertia, bandwidth = gain % x the "
+                "acting speed-loop gain (gain 2 with the second gain set), adding coefficient % of its estimate "
+                "to the torque command" + (f"; {trim.code} ({trim.name}) does not act" if trim is not None else ""),
+            )
+        )
     if profile.motor is None:
         found.append(
             SimExtension("motor", "no motor data in the profile: the simulator assumes a 400 W, 3000 rpm motor")

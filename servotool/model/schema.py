@@ -9,6 +9,7 @@ from typing import Any
 from servotool.model.checker import Checker, shown
 from servotool.model.entry_schema import check_overlaps, parse_entry
 from servotool.model.identity import parse_identity
+from servotool.model.modbus_functions import ModbusFunctions, parse_modbus_functions
 from servotool.model.profile import (
     ALARM_KINDS,
     CONVENTIONS,
@@ -56,6 +57,7 @@ TOP_KEYS = {
     "alarm_causes",
     "alarm_log",
     "unverified_values",
+    "modbus_functions",
 }
 ID_PATTERN = re.compile(r"[a-z0-9][a-z0-9_-]*")
 ROLE_PATTERN = re.compile(r"[a-z][a-z0-9_]*")
@@ -102,6 +104,10 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
     word_order = chk.choice(data, "word_order", "", WORD_ORDERS, "low_first", required=True)
     line, default_unit = _parse_serial(chk, _section(chk, data, "serial"))
     limits = _parse_limits(chk, _section(chk, data, "limits"))
+    if "modbus_functions" in data:
+        functions = parse_modbus_functions(chk, data["modbus_functions"], limits.write_multiple)
+    else:
+        functions = ModbusFunctions(assumed=(3, 6, 16) if limits.write_multiple else (3, 6))
     persistence = _parse_persistence(chk, _section(chk, data, "persistence"))
     motor = _parse_motor(chk, _section(chk, data, "motor", required=False))
     unverified_note = chk.opt(data, "unverified_note", "", str, "")
@@ -163,6 +169,7 @@ def parse_profile(data: Any, where: str) -> tuple[Profile | None, list[str]]:
         identity=identity,
         **extras,
         boost=boost,
+        modbus_functions=functions,
     )
     return profile, []
 

@@ -34,7 +34,7 @@ from servotool.sim.alarms import AlarmLog
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.handover import Handover, MachineState
 from servotool.sim.identification import Identification, Progress
-from servotool.sim.loop_functions import FrictionFeedForward, GainSwitch, NotchSetting
+from servotool.sim.loop_functions import FrictionFeedForward, FrictionObserver, GainSwitch, NotchSetting
 from servotool.sim.mechanics import MechanicsSettings
 from servotool.sim.plant import (
     BRAKE_HOLD_X_RATED,
@@ -177,6 +177,7 @@ class Firmware:
             following_limit_rev=self._following_limit_rev(),
             notches=self._notches(),
             friction_ff=self._friction_ff(),
+            friction_observer=self._friction_observer(),
             gain_switch=self._gain_switch(),
         )
 
@@ -252,18 +253,33 @@ class Firmware:
 
     def _friction_ff(self) -> FrictionFeedForward:
         """The friction compensation the profile maps (roles torque_offset, friction_comp_fwd/_rev,
-        viscous_comp_fwd/_rev), each in % of rated torque (an entry in another unit is not simulated)."""
+        viscous_comp_fwd/_rev, or viscous_comp for both directions: DSX7E Pn124), each in % of rated torque (an
+        entry in another unit is not simulated)."""
 
         def pct(role: str) -> float:
             entry = self.profile.role(role)
             return self._eng(role, 0.0) if entry is not None and entry.unit == "%" else 0.0
 
+        both = pct("viscous_comp")
         return FrictionFeedForward(
             pct("torque_offset"),
             pct("friction_comp_fwd"),
             pct("friction_comp_rev"),
-            pct("viscous_comp_fwd"),
-            pct("viscous_comp_rev"),
+            pct("viscous_comp_fwd") + both,
+            pct("viscous_comp_rev") + both,
+        )
+
+    def _friction_observer(self) -> FrictionObserver:
+        """Friction compensation from a disturbance estimate (roles friction_observer_enable, _gain, _gain_2,
+        _coefficient: SD25 Po183-187, sim.loop_functions.FrictionObserver); off where the profile maps none."""
+        if self.profile.role("friction_observer_coefficient") is None:
+            return FrictionObserver()
+        enable = self.profile.role("friction_observer_enable")
+        return FrictionObserver(
+            enabled=enable is None or self.drive.bank.effective_value(enable.code) != 0,
+            coefficient_pct=self._eng("friction_observer_coefficient", 0.0),
+            gain_pct=self._eng("friction_observer_gain", 100.0),
+            gain_2_pct=self._eng("friction_observer_gain_2", 100.0),
         )
 
     def _following_limit_rev(self) -> float:

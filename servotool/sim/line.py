@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import os
 import threading
+from collections.abc import Collection
 from dataclasses import dataclass
 
 from servotool.errors import UsageError
@@ -24,13 +25,13 @@ WRITE_CODES = (6, 16)
 MAX_READ, MAX_WRITE = 125, 123  # the specification's quantity limits (FC03/04 and FC16)
 
 
-def refusal(pdu: bytes) -> int | None:
+def refusal(pdu: bytes, answered: Collection[int]) -> int | None:
     """The exception a slave answers before touching any register, as the Modbus specification has it: 01 for a
-    function the drive lacks (at any address), 03 for a quantity out of range (0, over 125 read, over 123
-    written) or a length that disagrees with the request (a byte count that is not twice the quantity or not the
-    data that came); None for a request to serve."""
+    function the drive lacks (at any address; one outside `answered`, its profile's modbus_functions), 03 for a
+    quantity out of range (0, over 125 read, over 123 written) or a length that disagrees with the request (a byte
+    count that is not twice the quantity or not the data that came); None for a request to serve."""
     fc = pdu[0] if pdu else 0
-    if fc not in READ_CODES + WRITE_CODES:
+    if fc not in READ_CODES + WRITE_CODES or fc not in answered:  # the first: all the simulated drive can serve
         return ILLEGAL_FUNCTION
     if len(pdu) < 5 or (fc in (*READ_CODES, 6) and len(pdu) != 5):
         return ILLEGAL_VALUE  # a frame the silence ended short (or long) of what its function needs
@@ -132,6 +133,11 @@ class Line:
         self.lock = lock or threading.Lock()
         self.line, self.choice, self.wired, self.default = line, choice, wired, default
         self.host: LineSettings | None = None  # what the master speaks, where it is known (the embedded simulator)
+
+    @property
+    def answered(self) -> frozenset[int]:
+        """The Modbus functions the line's drives answer, by their profiles (sim.line.refusal)."""
+        return frozenset().union(*(d.profile.modbus_functions.answered for d in self.drives.values()))
 
     def emulated(self, drive: SimulatedDrive) -> Emulated | None:
         return emulated(drive, self.line, self.choice, wired=self.wired, default=self.default)

@@ -49,6 +49,14 @@ class Notch:
         self.a2 = (k * k - 2 * zeta * w0 * k + w0 * w0) / a0
         self.z1 = self.z2 = 0.0
 
+    @property
+    def memory(self) -> list[float]:
+        """The filter's state (what it remembers of past samples), to hand the running loop over."""
+        return [self.z1, self.z2]
+
+    def recall(self, memory: list[float]) -> None:
+        self.z1, self.z2 = memory[0], memory[1]
+
     def step(self, x: float) -> float:
         """One sample (transposed direct form II)."""
         y = self.b[0] * x + self.z1
@@ -83,6 +91,54 @@ class FrictionFeedForward:
 
 
 @dataclass(frozen=True)
+class FrictionObserver:
+    """Friction compensation from an estimate of the disturbance (SD25 Po183-187, section 9.6): the manual says it
+    compensates changes of viscous friction and of a constant load (L8007), a higher gain 1/2 answers disturbances
+    faster but may vibrate on a resonance (L8042), a higher coefficient compensates more and vibrates sooner, keep it
+    at 95 % or less (L8036-8044), and it needs the inertia ratio right (L8020). How: the simulator's own (a
+    listed extension): a first-order disturbance observer on the configured inertia, whose bandwidth is the gain's
+    share of the acting speed-loop gain times OBSERVER_X, adds coefficient % of the estimate to the torque command;
+    gain 2 acts with the second gain set."""
+
+    enabled: bool = False
+    coefficient_pct: float = 0.0
+    gain_pct: float = 100.0
+    gain_2_pct: float = 100.0
+
+    @property
+    def any(self) -> bool:
+        return self.enabled and self.coefficient_pct > 0
+
+
+OBSERVER_X = 1.0  # observer bandwidth at gain 100 %: this many times the acting speed-loop gain (unverified)
+
+
+class DisturbanceObserver:
+    """d = LPF(T) - J wc (w - LPF(w)): the torque not explained by J dw/dt, low-passed at wc, without a derivative."""
+
+    def __init__(self) -> None:
+        self.torque = 0.0  # LPF(T), N*m
+        self.speed = 0.0  # LPF(w), rad/s
+        self.estimate = 0.0  # N*m
+
+    @property
+    def memory(self) -> list[float]:
+        return [self.torque, self.speed, self.estimate]
+
+    def recall(self, memory: list[float]) -> None:
+        self.torque, self.speed, self.estimate = memory
+
+    def step(self, torque_nm: float, w: float, j: float, bandwidth_hz: float, ts: float) -> float:
+        """One control period: the disturbance estimate (N*m) from the torque commanded and the measured speed."""
+        wc = 2 * math.pi * max(bandwidth_hz, 0.1)
+        k = wc * ts / (1.0 + wc * ts)
+        self.torque += (torque_nm - self.torque) * k
+        self.speed += (w - self.speed) * k
+        self.estimate = self.torque - j * wc * (w - self.speed)
+        return self.estimate
+
+
+@dataclass(frozen=True)
 class GainSwitch:
     """Gain switching (SD25 Po130, section 9.3.5, L7851-7869) on the conditions the simulator runs: 'gain1' and
     'gain2' (no switching), 'speed' (above speed_rpm: gain 2 at once; below it: gain 1 after delay_s). Gain 2 is the
@@ -108,6 +164,15 @@ class GainSelector:
         self.switch = switch
         self.active = 2 if switch.condition == "gain2" else 1
         self._below_s = 0.0
+
+    @property
+    def memory(self) -> list[float]:
+        """Which set acts and how long the speed has been below the switching speed, to hand the loop over."""
+        return [float(self.active), self._below_s]
+
+    def recall(self, memory: list[float]) -> None:
+        active, self._below_s = memory
+        self.active = 2 if active == 2 else 1
 
     def step(self, speed_rpm: float, ts: float) -> int:
         s = self.switch

@@ -25,7 +25,16 @@ import random
 from dataclasses import asdict, dataclass, field
 
 from servotool.model.profile import Motor as MotorData
-from servotool.sim.loop_functions import FrictionFeedForward, GainSelector, GainSwitch, Notch, NotchSetting
+from servotool.sim.loop_functions import (
+    OBSERVER_X,
+    DisturbanceObserver,
+    FrictionFeedForward,
+    FrictionObserver,
+    GainSelector,
+    GainSwitch,
+    Notch,
+    NotchSetting,
+)
 from servotool.sim.mechanics import Friction, Mechanics, MechanicsSettings, MotorState, friction_step
 
 TS = 125e-6  # control period, s
@@ -71,7 +80,12 @@ STATE_FIELDS = (
     "_defl_rate",
     "_locked_s",
     "_saturated_s",
+    "_t_slow",
+    "_vibration",
 )
+# With them, state() carries the loop functions' memories (sim.loop_functions) under the same names: "_notches"
+# (one per active notch), "_gain_select" and "_observer"; a process whose parameters give other notches starts its
+# own afresh.
 
 
 @dataclass(frozen=True)
@@ -103,6 +117,7 @@ class DriveGains:
     following_limit_rev: float = FOLLOWING_LIMIT_REV
     notches: tuple[NotchSetting, ...] = ()  # torque-command notches (sim.loop_functions)
     friction_ff: FrictionFeedForward = field(default_factory=FrictionFeedForward)  # friction compensation
+    friction_observer: FrictionObserver = field(default_factory=FrictionObserver)  # ... from a disturbance estimate
     gain_switch: GainSwitch = field(default_factory=GainSwitch)  # the second gain set and when it acts
 
 
@@ -172,7 +187,10 @@ class Plant:
         if old is None or old.notches != gains.notches:  # a filter keeps its state while its setting stays
             self._notches = [Notch(n, TS) for n in gains.notches if n.active(TS)]
         self._ff = gains.friction_ff if gains.friction_ff.any else None
+        if old is None or old.friction_observer.any != gains.friction_observer.any:  # a running estimate stays
+            self._observer = DisturbanceObserver() if gains.friction_observer.any else None
         j_conf = self.motor.jm * (1.0 + gains.inertia_ratio_configured)
+        self._j_conf = j_conf
         self._kp = 2 * math.pi * gains.speed_gain_hz * j_conf
         self._ti = max(gains.speed_integral_ms, 0.1) / 1000.0
         self._kp_pos = gains.position_gain_per_s
@@ -208,6 +226,8 @@ class Plant:
             self._torque_target = 0.0
             self._pos_ref = self.theta
             self._locked_s = self._saturated_s = 0.0
+            if self._observer is not None:
+                self._observer = DisturbanceObserver()
             if mode == "off":
                 self._off_s = 0.0
         self.mode = mode
@@ -377,6 +397,8 @@ class Plant:
         unclamped = self._kp * (err + self._integral / self._ti)
         if self._ff is not None:
             unclamped += self._feed_forward_nm(self._ff)
+        if self._observer is not None:
+            unclamped += self._observed_friction_nm()
         if abs(unclamped) < self._t_lim:  # anti-windup: integrate only while not saturated
             self._integral += err * TS
             self._saturated_s = 0.0
@@ -388,6 +410,15 @@ class Plant:
         """The friction compensation's torque for the speed reference now."""
         pct = ff.torque_pct(self._loop_ref / RAD_S_PER_RPM, self.motor.rated_speed_rpm)
         return pct / 100.0 * self.motor.rated_torque_nm
+
+    def _observed_friction_nm(self) -> float:
+        """The friction compensation from the disturbance estimate (FrictionObserver): coefficient % of it, the
+        observer's bandwidth following the acting gain set."""
+        setting = self.gains.friction_observer
+        gain_pct = setting.gain_2_pct if self.active_gain_set == 2 else setting.gain_pct
+        bandwidth_hz = gain_pct / 100.0 * OBSERVER_X * self._kp / (2 * math.pi * self._j_conf)
+        estimate = self._observer.step(self._t_filtered, self._w_meas, self._j_conf, bandwidth_hz, TS)  # type: ignore[union-attr]
+        return setting.coefficient_pct / 100.0 * estimate
 
     def _fence_stop(self) -> None:
         """Beyond an overtravel fence that stops: the speed in the direction of travel is forced to zero at once."""
@@ -499,6 +530,9 @@ class Plant:
         for name in STATE_FIELDS:
             value = getattr(self, name)
             out[name] = None if isinstance(value, float) and math.isinf(value) else value
+        out["_notches"] = [n.memory for n in self._notches]
+        out["_gain_select"] = self._gain_select.memory if self._gain_select is not None else None
+        out["_observer"] = self._observer.memory if self._observer is not None else None
         return out
 
     def restore(self, state: dict[str, object], shift: float = 0.0) -> None:
@@ -517,3 +551,26 @@ class Plant:
                 setattr(self, name, int(value) if name == "_theta_prev_counts" else float(value))
                 if name == "time":
                     self.time += shift
+        self._recall_loop_memory(state)
+
+    def _recall_loop_memory(self, state: dict[str, object]) -> None:
+        """The notch filters' and the gain selector's memories, where they fit this process's loop functions."""
+        notches = state.get("_notches")
+        if isinstance(notches, list) and len(notches) == len(self._notches) and all(map(_memory, notches)):
+            for notch, memory in zip(self._notches, notches, strict=True):
+                notch.recall([float(x) for x in memory])
+        selector = state.get("_gain_select")
+        if self._gain_select is not None and _memory(selector):
+            self._gain_select.recall([float(x) for x in selector])  # type: ignore[union-attr]
+        observer = state.get("_observer")
+        if self._observer is not None and _memory(observer, 3):
+            self._observer.recall([float(x) for x in observer])  # type: ignore[union-attr]
+
+
+def _memory(value: object, size: int = 2) -> bool:
+    """A loop function's memory as persisted: size finite numbers."""
+    return (
+        isinstance(value, list)
+        and len(value) == size
+        and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value)
+    )

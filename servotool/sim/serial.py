@@ -129,7 +129,7 @@ class SerialSlave:
         drives = list(self.line.drives.values()) if unit == 0 else [d for d in [self.line.drives.get(unit)] if d]
         if not drives:
             return None
-        if (code := refusal(pdu)) is not None:
+        if (code := refusal(pdu, self.line.answered)) is not None:
             return None if unit == 0 else with_crc(bytes([unit, fc | 0x80, code]))
         address = int.from_bytes(pdu[1:3], "big")
         if fc == 6:

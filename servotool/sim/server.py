@@ -97,14 +97,15 @@ class _SpecDecoder(DecodePDU):
     a function the drive lacks or a quantity out of range with the malformed `ID 80 01`, or with 02 at unmapped
     addresses."""
 
-    def __init__(self) -> None:
+    def __init__(self, answered: frozenset[int]) -> None:
         super().__init__(True)
+        self.answered = answered
 
     def decode(self, frame: bytes) -> ModbusPDU | None:
         fc = frame[0] if frame else 0
         if fc & 0x80:
             return None
-        if (code := refusal(frame)) is not None:
+        if (code := refusal(frame, self.answered)) is not None:
             return _Refusal(fc, code)
         return super().decode(frame)
 
@@ -135,7 +136,7 @@ async def _start(port: str, served: Line, trace: Callable[[bool, bytes], None] |
         broadcast_enable=True,  # unit 0: applied by every drive, unanswered
     )
     server.context = _Datastore(served)  # type: ignore[assignment]
-    server.decoder = _SpecDecoder()
+    server.decoder = _SpecDecoder(served.answered)
     try:
         await server.serve_forever(background=True)
     except Exception as exc:  # OSError, RuntimeError

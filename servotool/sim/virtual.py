@@ -79,9 +79,10 @@ class VirtualLink:
 
     def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
         """`count` registers; `spare` is not used: in process, a reply cannot be taken for another's. A function
-        other than FC03 is refused with exception 01, as the line's drive does (sim.line.refusal)."""
+        other than FC03, or one the drive's profile does not answer, is refused with exception 01, as the line's
+        drive does (sim.line.refusal)."""
         what = f"read {count} register(s) at {address} from unit {unit}"
-        if fc not in READ_CODES:
+        if fc not in READ_CODES or fc not in self._drive(unit, what).profile.modbus_functions.answered:
             raise ModbusException(1, what)
         self.requests += 1
         self._stall()
@@ -102,11 +103,11 @@ class VirtualLink:
         coils: bool = False,
     ) -> None:
         what = f"write {len(values)} register(s) at {address} to unit {unit}"
-        if coils:  # no profiled drive has coils (sim.line.refusal)
+        fc = 16 if multiple or len(values) > 1 else 6
+        if coils or fc not in self._drive(unit, what).profile.modbus_functions.answered:  # (sim.line.refusal)
             raise ModbusException(1, what)
         self.requests += 1
         self._stall()
-        fc = 16 if multiple or len(values) > 1 else 6
         self.clock.advance(wire_time(fc, len(values), self.baud) + TURNAROUND_S)
         try:
             self._drive(unit, what).write(address, values)

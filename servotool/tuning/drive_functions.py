@@ -20,7 +20,7 @@ from servotool.clock import Clock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import eng_to_raw, raw_to_eng
-from servotool.model.profile import Entry
+from servotool.model.profile import Entry, Profile
 from servotool.model.quantity import quantity
 from servotool.ops import eeprom, journal
 from servotool.ops.params import write_one
@@ -158,18 +158,33 @@ def _read_back(drive: Drive, trial: FunctionTrial) -> None:
 
 # ----- friction compensation -------------------------------------------------------------------------------------
 
-FRICTION_ROLES = ("friction_comp_fwd", "friction_comp_rev", "viscous_comp_fwd", "viscous_comp_rev")
+FRICTION_ROLES = ("friction_comp_fwd", "friction_comp_rev", "viscous_comp_fwd", "viscous_comp_rev", "viscous_comp")
+OBSERVER_ROLES = ("friction_observer_enable", "friction_observer_gain", "friction_observer_gain_2")
+OBSERVER_TRIM = "friction_observer_gain_trim"
+OBSERVER_STEPS = (50.0, 95.0)  # the coefficient raised step by step, to SD25's usual ceiling (L8036-8038)
+
+
+def friction_method(profile: Profile) -> str:
+    """How this drive compensates friction: 'feed-forward' (torques in % of rated torque: DSX7E Pn120-124, SDC
+    PN137-140) or 'observer' (a coefficient on the drive's own estimate: SD25 Po183-187); a usage error where the
+    profile maps neither."""
+    fwd = profile.role("friction_comp_fwd")
+    if fwd is not None and fwd.unit == "%":
+        return "feed-forward"
+    if profile.role("friction_observer_coefficient") is not None:
+        return "observer"
+    raise UsageError(
+        f"tune friction: {profile.model} maps no friction compensation (roles friction_comp_fwd/_rev in % of rated "
+        "torque, or friction_observer_coefficient)"
+    )
 
 
 def friction_entries(drive: Drive) -> dict[str, Entry]:
-    """The compensation entries in % of rated torque the profile maps (a usage error where it maps none)."""
-    found = {r: e for r in FRICTION_ROLES if (e := drive.profile.role(r)) is not None and e.unit == "%"}
-    if "friction_comp_fwd" not in found:
-        raise UsageError(
-            f"tune friction: {drive.profile.model} maps no friction compensation in % of rated torque "
-            "(roles friction_comp_fwd/_rev)"
-        )
-    return found
+    """The entries the drive's friction compensation is set with, by role (a usage error where it maps none)."""
+    if friction_method(drive.profile) == "observer":
+        roles = ("friction_observer_coefficient", *OBSERVER_ROLES, OBSERVER_TRIM)
+        return {r: e for r in roles if (e := drive.profile.role(r)) is not None}
+    return {r: e for r in FRICTION_ROLES if (e := drive.profile.role(r)) is not None and e.unit == "%"}
 
 
 def constant_speed_torque(
@@ -195,8 +210,9 @@ def friction_trial(
     progress: Progress = _quiet,
 ) -> FunctionTrial:
     """The compensation the constant-speed torques call for: Coulomb by direction from a leg each way below
-    10 r/min; the damping term (where mapped) from the torque at the test speed less it, scaled to the rated
-    speed (SDC L589: 'if rated speed cannot be reached, scale proportionally')."""
+    10 r/min; the damping term (where mapped; one entry for both directions takes their mean) from the torque at
+    the test speed less it, scaled to the rated speed (SDC L589: 'if rated speed cannot be reached, scale
+    proportionally')."""
     entries = friction_entries(drive)
     motor = drive.profile.motor
     rated = motor.rated_speed_rpm if motor is not None else 3000.0
@@ -210,18 +226,20 @@ def friction_trial(
         return x if x >= floor else 0.0
 
     wanted = {"friction_comp_fwd": term(slow_fwd), "friction_comp_rev": term(-slow_rev)}
-    if "viscous_comp_fwd" in entries or "viscous_comp_rev" in entries:
+    if any(r in entries for r in ("viscous_comp_fwd", "viscous_comp_rev", "viscous_comp")):
         fast_fwd, fast_rev, _ = constant_speed_torque(drive, motion.speed_rpm, motion.duration_s, clock)
         scale = rated / (motion.speed_rpm - SLOW_RPM)
-        wanted["viscous_comp_fwd"] = term((fast_fwd - slow_fwd) * scale)
-        wanted["viscous_comp_rev"] = term((slow_rev - fast_rev) * scale)
-        trial.found["viscous_fwd_at_rated"] = wanted["viscous_comp_fwd"]
-        trial.found["viscous_rev_at_rated"] = wanted["viscous_comp_rev"]
+        fwd, rev = (fast_fwd - slow_fwd) * scale, (slow_rev - fast_rev) * scale
+        wanted["viscous_comp_fwd"], wanted["viscous_comp_rev"] = term(fwd), term(rev)
+        wanted["viscous_comp"] = term((fwd + rev) / 2)
+        trial.found["viscous_fwd_at_rated"] = fwd
+        trial.found["viscous_rev_at_rated"] = rev
     what = {
         "friction_comp_fwd": "Coulomb friction, forward",
         "friction_comp_rev": "Coulomb friction, reverse",
         "viscous_comp_fwd": "damping at rated speed, forward",
         "viscous_comp_rev": "damping at rated speed, reverse",
+        "viscous_comp": "damping at rated speed, both directions",
     }
     current = {r.entry.code: r.raw for r in drive.read_entries([entries[r] for r in wanted if r in entries])}
     for role, value in wanted.items():
@@ -229,6 +247,27 @@ def friction_trial(
         if entry is None:
             continue
         trial.changes.append(Change(entry, current[entry.code], eng_to_raw(entry, value), what[role]))
+    return trial
+
+
+def observer_trial(drive: Drive, before: scoring.MeasuredScore, coefficient_pct: float) -> FunctionTrial:
+    """One step of SD25's procedure (section 9.6, L8018-8044): compensation on, its gains at their factory values
+    (step 1), the coefficient raised to coefficient_pct (step 2: gradually, usually at most 95 %)."""
+    entries = friction_entries(drive)
+    coefficient = entries["friction_observer_coefficient"]
+    held = {r.entry.code: r.raw for r in drive.read_entries(list(entries.values()))}
+    trial = FunctionTrial("friction", before=before)
+    wanted = [
+        (e, held[e.code] if e.default is None else e.default, "its factory value, as the procedure starts")
+        for r in (*OBSERVER_ROLES[1:], OBSERVER_TRIM)
+        if (e := entries.get(r)) is not None
+    ]
+    if (enable := entries.get("friction_observer_enable")) is not None:
+        wanted.insert(0, (enable, 1, "compensation on"))
+    raw = eng_to_raw(coefficient, coefficient_pct)
+    wanted.append((coefficient, raw, "how much is compensated, raised step by step"))
+    for entry, value, why in wanted:
+        trial.changes.append(Change(entry, held[entry.code], int(value), why))
     return trial
 
 

@@ -14,14 +14,18 @@ from servotool.tuning import gain_switching
 from servotool.tuning import score as scoring
 from servotool.tuning.drive_functions import (
     JUDGED,
+    OBSERVER_STEPS,
+    Change,
     FunctionTrial,
     Progress,
     adaptive_notch_trial,
     friction_entries,
+    friction_method,
     friction_trial,
     judged_trial,
     notch_entries,
     notch_trial,
+    observer_trial,
 )
 from servotool.tuning.fit.spectrum import Peak
 
@@ -41,6 +45,13 @@ def check_function(profile: Profile, function: str, method: str | None) -> str:
         raise UsageError(f"unknown function {function!r} (functions: {', '.join(FUNCTIONS)})")
     if method is not None and method not in METHODS:
         raise UsageError(f"method must be drive or host, got {method!r}")
+    if function == "friction":
+        how = friction_method(profile)
+        if method == "host" and how == "observer":
+            raise UsageError(f"tune friction: {profile.model} compensates friction by its own estimate: no host method")
+        if method == "drive" and how == "feed-forward":
+            raise UsageError(f"tune friction --method drive: {profile.model} has no friction estimate of its own")
+        return "drive" if how == "observer" else "host"
     if function != "notch":
         if method == "drive":
             raise UsageError(f"tune {function} has no drive method")
@@ -84,6 +95,8 @@ def run_function(
     before = scoring.measure(drive, motion, repeats, clock)
     if function == "gain-switching":
         trial = gain_switching.gain_switching_trial(drive, motion, before, factor or gain_switching.DEFAULT_FACTOR)
+    elif function == "friction" and chosen == "drive":
+        return _observer_steps(drive, motion, repeats, before, keep=keep, save=save, clock=clock, progress=progress)
     elif function == "friction":
         trial = friction_trial(drive, motion, before, clock, progress)
     elif chosen == "drive":
@@ -91,6 +104,83 @@ def run_function(
     else:
         trial = notch_trial(drive, before)
     return judged_trial(drive, trial, motion, repeats, keep=keep, save=save, clock=clock, progress=progress)
+
+
+VIBRATION_REFUSED = (
+    "tune vibration: NOT RUN: {model}'s vibration suppression ({codes}) acts only in its position modes "
+    "or inside its own auto-tune, neither of which servotool can command over Modbus, so no score could judge it: "
+    "set it at the drive"
+)
+
+
+def vibration_refusal(profile: Profile) -> str:
+    """Why `tune vibration` cannot run on this drive, in one line: SD25 maps its low-frequency vibration suppression
+    (roles vibration_suppression_freq/_strength: Po240/Po242, PP/CSP only, L7937) and its automatic one lives inside
+    the auto-tune started at the panel (Po174.C, L7480, L7656-7672); servotool's motions there are JOG (a speed
+    mode), where neither acts. Reads nothing from the drive."""
+    found = [e for r in ("vibration_suppression_freq", "vibration_suppression_strength") if (e := profile.role(r))]
+    if not found:
+        return f"tune vibration: {profile.model} maps no vibration suppression (roles vibration_suppression_*)"
+    return VIBRATION_REFUSED.format(model=profile.model, codes=", ".join(e.code for e in found))
+
+
+def _observer_steps(
+    drive: Drive,
+    motion: scoring.ScoreMotion,
+    repeats: int,
+    before: scoring.MeasuredScore,
+    *,
+    keep: bool,
+    save: bool | None,
+    clock: Clock | None,
+    progress: Progress,
+) -> FunctionTrial:
+    """The drive's own friction compensation (SD25 section 9.6): its coefficient raised step by step (OBSERVER_STEPS),
+    each step judged against the last one kept; the next step only after one kept. One trial comes back: the
+    changes from the drive as found to what it holds now, judged against the first score."""
+    first: FunctionTrial | None = None
+    last: FunctionTrial | None = None
+    for coefficient in OBSERVER_STEPS:
+        scored = last.after if last is not None and last.after is not None else before
+        trial = judged_trial(
+            drive,
+            observer_trial(drive, scored, coefficient),
+            motion,
+            repeats,
+            keep=keep,
+            save=save,
+            clock=clock,
+            progress=progress,
+        )
+        first = first or trial
+        if not trial.kept or not [c for c in trial.changes if c.new != c.old]:
+            if last is not None:
+                last.reason += f"; {coefficient:g} % did not improve further ({trial.reason})"
+            break
+        last = trial
+    if last is None or last is first:
+        return last or first  # type: ignore[return-value]
+    return _combined(first, last)  # type: ignore[arg-type]
+
+
+def _combined(first: FunctionTrial, last: FunctionTrial) -> FunctionTrial:
+    """Two kept steps as one trial: from the values as found to the last step's, judged first score to last."""
+    found = {c.entry.code: c.old for c in first.changes}
+    changes = [Change(c.entry, found.get(c.entry.code, c.old), c.new, c.why) for c in last.changes]
+    assert first.before is not None and last.after is not None
+    differences, verdict = scoring.compare(first.before.score, last.after.score, JUDGED["friction"])
+    return FunctionTrial(
+        "friction",
+        changes=changes,
+        before=first.before,
+        after=last.after,
+        differences=differences,
+        verdict=verdict,
+        kept=True,
+        reason=last.reason,
+        held=last.held,
+        persisted=last.persisted,
+    )
 
 
 def peak_json(p: Peak) -> dict[str, object]:

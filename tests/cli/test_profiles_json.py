@@ -64,3 +64,14 @@ def test_show_gives_the_identity_section_in_json_and_as_text_at_80_columns(cli):
     assert "So-46" in r.out and "100..9999 (sim 100)" in r.out
     r = cli("profiles", "show", "sd25", "--unverified", env={"COLUMNS": "80"})
     assert "So-46" in r.out and "unverified: encoding" in r.out
+
+
+def test_show_gives_the_modbus_functions_with_their_lines_or_why_unverified(cli):
+    """Issue 33: each code raw sends, answered or not, with the manual's lines or the profile's reason."""
+    rows = {f["code"]: f for f in cli("profiles", "show", "sd25", "--json").json()["modbus_functions"]}
+    assert sorted(rows) == [1, 2, 3, 4, 5, 6, 15, 16]
+    assert rows[3]["answered"] and rows[3]["source"].startswith("L2738") and rows[3]["unverified"] is None
+    assert not rows[4]["answered"] and rows[4]["source"] is None and "03, 06 and 16" in rows[4]["unverified"]
+    r = cli("profiles", "show", "is620p", "--unverified", env={"COLUMNS": "80"})
+    assert r.code == 0 and "Modbus functions" in r.out and "no Modbus chapter" in r.out
+    assert max(len(line) for line in r.out.splitlines()) <= 80

@@ -52,6 +52,21 @@ def test_a_function_the_drive_lacks_is_said_in_one_line(cli):
         r = cli(*SIM, "-P", profile, "raw", "read", "0x0065", "--fc", "4")
         assert r.code == 1 and "exception 01 (illegal function)" in r.err, r.err
         assert "input register" in r.err and len([x for x in r.err.splitlines() if "error" in x]) == 1
+        assert f"{profile.upper()}'s manual does not document FC04" in r.err
+
+
+def test_a_code_the_manual_does_not_document_is_warned_of_with_the_profiles_reason(cli):
+    """Issue 33: the profile's note, before the request goes out; none for a code the manual lists."""
+    r = cli(*SIM, "-P", "sdc", "raw", "read", "0", "--fc", "2")
+    warned = [x for x in r.err.splitlines() if "warning" in x]
+    assert len(warned) == 1 and "FC02 (read discrete inputs) is UNVERIFIED on SDC: not in the manual" in warned[0]
+    assert "03, 06 and 10h" in warned[0] and "L706" not in warned[0]  # the manual's lines with -v
+    assert "L706" in cli("-v", *SIM, "-P", "sdc", "raw", "read", "0", "--fc", "2").err
+    r = cli(*SIM, "-P", "is620p", "raw", "read", "0x0200")
+    assert r.code == 0 and "FC03 (read holding registers) is UNVERIFIED on IS620P: answered as assumed" in r.err
+    for args in (("raw", "read", "101"), ("raw", "write", "101=20")):
+        r = cli(*SIM, "-P", "sd25", *args)
+        assert r.code == 0 and "warning" not in r.err, r.err
     r = cli(*SIM, "raw", "read", "0x2100", "--fc", "5")
     assert r.code == 2 and "--fc 5: reads are" in r.err
 

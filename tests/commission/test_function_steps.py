@@ -6,42 +6,13 @@ from __future__ import annotations
 
 import pytest
 
-from servotool.clock import VirtualClock
-from servotool.commission.plan import load_plan
-from servotool.commission.runner import Runner
-from servotool.drive import Drive
-from servotool.model.loader import load_profile
-from servotool.sim.firmware import build_drive
-from servotool.sim.virtual import VirtualLink, make_motion_setup
+NOISE = 0.0005  # relative measurement noise of every machine here
 
 
-def _runner(tmp_path, profile_id: str, steps: str, **machine: float):
-    plan_file = tmp_path / "plan.yaml"
-    plan_file.write_text(f"profile: {profile_id}\nsteps:\n{steps}")
-    clock = VirtualClock(100.0)
-    profile = load_profile(profile_id)
-    sim = build_drive(profile, 1, clock, persist=False)
-    make_motion_setup(sim)
-    sim.settings.update(noise=0.0005, **machine)
-    sim.firmware.reconfigure()
-    drive = Drive(VirtualLink([sim], clock, 115200), profile, 1)
-    safety: list[str] = []
-    runner = Runner(
-        load_plan(plan_file),
-        [drive],
-        yes=True,
-        continue_on_error=False,
-        ask=lambda _u, _q: True,
-        log=lambda _line: None,
-        clock=clock,
-        safety=safety.append,
-    )
-    return runner, sim, safety
-
-
-def test_plan_scores_then_keeps_friction_compensation_that_improves_the_score(sim_dir, tmp_path):
+def test_plan_scores_then_keeps_friction_compensation_that_improves_the_score(virtual_plan):
     steps = "  - tune score: {repeats: 2}\n  - tune friction: {repeats: 3}\n  - tune score: {repeats: 2}\n"
-    runner, sim, safety = _runner(tmp_path, "dsx7e", steps, load_ratio=2.0, friction=0.1, viscous=0.0002)
+    plan = virtual_plan(steps, "dsx7e", noise=NOISE, load_ratio=2.0, friction=0.1, viscous=0.0002)
+    runner, sim, safety = plan.runner, plan.sim, plan.safety
     assert runner.run(), [r.detail for r in runner.results]
     first, friction, last = (r.data for r in runner.results)
     iae = first["score"]["figures"]["iae"]
@@ -59,10 +30,11 @@ def test_plan_scores_then_keeps_friction_compensation_that_improves_the_score(si
     assert not sim.firmware.plant.servo_on
 
 
-def test_plan_puts_back_a_notch_that_does_not_help(sim_dir, tmp_path):
+def test_plan_puts_back_a_notch_that_does_not_help(virtual_plan):
     """IS620P's adaptive notch at 75 Hz under a 40 Hz loop: the notch's phase lag costs more than the resonance."""
     steps = "  - set: {H08-15: 5.0, H08-00: 40}\n  - tune notch: {repeats: 3, method: drive}\n"
-    runner, sim, _ = _runner(tmp_path, "is620p", steps, load_ratio=5.0, resonance_hz=75.0, resonance_damping=0.02)
+    plan = virtual_plan(steps, "is620p", noise=NOISE, load_ratio=5.0, resonance_hz=75.0, resonance_damping=0.02)
+    runner, sim = plan.runner, plan.sim
     assert runner.run(), [r.detail for r in runner.results]
     result = runner.results[1].data["result"]
     assert result["verdict"] == "worse" and not result["kept"] and "NOT KEPT" in runner.results[1].detail
@@ -85,9 +57,10 @@ def test_dry_run_lists_the_steps_and_refuses_what_the_profile_lacks(cli, tmp_pat
     assert "Traceback" not in r.err
 
 
-def test_gain_switching_step_runs_on_sd25_and_is_refused_on_is620p_before_anything_runs(sim_dir, tmp_path, cli):
+def test_gain_switching_step_runs_on_sd25_and_is_refused_on_is620p_before_anything_runs(virtual_plan, tmp_path, cli):
     steps = "  - set: {Po013: 3.0, Po101: 6}\n  - tune gain-switching: {factor: 2, repeats: 3, no_dead_man: true}\n"
-    runner, sim, _ = _runner(tmp_path, "sd25", steps, load_ratio=3.0)
+    plan = virtual_plan(steps, "sd25", noise=NOISE, load_ratio=3.0)
+    runner, sim = plan.runner, plan.sim
     assert runner.run(), [r.detail for r in runner.results]
     result = runner.results[1].data["result"]
     assert result["kept"] and result["comparison"]["figures"]["iae"]["verdict"] == "better", result["comparison"]

@@ -73,3 +73,35 @@ def test_the_servers_replies_follow_the_specification(sim_dir, profile):
     assert r[10:12] == [b"", b""]  # unknown unit, broadcast: silence
     assert r[12] == with_crc(b"\x01\x03\x02\x00\xc8")  # the broadcast was applied
     assert r[13] == b""  # a bad CRC: silence
+
+
+def test_the_functions_served_are_the_profiles_own(sim_dir):
+    """One home: a drive whose profile answers no FC16 gets exception 01 for it from the server and the in-process
+    link alike, while FC06 to the same register is served."""
+    from dataclasses import replace
+
+    from servotool.clock import VirtualClock
+    from servotool.errors import ModbusException
+    from servotool.model.modbus_functions import ModbusFunctions
+    from servotool.model.profile import Limits
+    from servotool.sim.virtual import VirtualLink
+
+    p = load_profile("sd25")
+    single = ModbusFunctions({3: "L2738", 6: "L2739"}, (), "a drive that takes one register a request")
+    p = replace(p, modbus_functions=single, limits=Limits(p.limits.max_read, p.limits.max_write, False))
+    entry = p.entry(p.roles["inertia_ratio"])
+    a = entry.address.to_bytes(2, "big")
+    frames = [with_crc(b"\x01\x10" + a + b"\x00\x01\x02\x00\x64"), with_crc(b"\x01\x06" + a + b"\x00\x64")]
+    sim = EmbeddedSim([build_drive(p, 1, persist=False)])
+    try:
+        r = _over_tcp(sim.port, frames)
+    finally:
+        sim.close()
+    assert r == [_exception(16, 1), frames[1]]
+    clock = VirtualClock()
+    link = VirtualLink([build_drive(p, 1, clock, persist=False)], clock)
+    with pytest.raises(ModbusException) as refused:
+        link.write(1, entry.address, [100], multiple=True)
+    assert refused.value.code == 1
+    link.write(1, entry.address, [100], multiple=False)
+    assert link.read(1, entry.address, 1) == [100]

@@ -11,8 +11,6 @@ import math
 import pytest
 
 from servotool.clock import VirtualClock
-from servotool.commission.plan import load_plan
-from servotool.commission.runner import Runner
 from servotool.drive import Drive
 from servotool.model.codec import words_to_raw
 from servotool.model.loader import load_profile
@@ -25,13 +23,12 @@ from servotool.tuning.control.gains import rigidity_scale
 GAINS = ("Pn101", "Pn102", "Pn100", "Pn128", "Pn003")
 
 
-def test_a_plan_step_that_writes_gains_checks_them_and_a_failed_check_rolls_back_and_fails_the_plan(tmp_path, sim_dir):
+def test_a_plan_step_that_writes_gains_checks_them_and_a_failed_check_rolls_back_and_fails_the_plan(virtual_plan):
     """A 70 Hz two-mass load at rigidity 20 overshoots ~70 %: the plan used to report success. The plan runs
     in-process on virtual time (the runner's clock is the step's), so its premise, a gain write whose step check
     fails, does not hang on an identification in real time on a busy host."""
-    sim, runner = _virtual_plan(
-        tmp_path, load_ratio=5.0, resonance_hz=70.0, resonance_damping=0.02, steps="  - tune inertia: {rigidity: 20}\n"
-    )
+    plan = virtual_plan("  - tune inertia: {rigidity: 20}\n", load_ratio=5.0, resonance_hz=70.0, resonance_damping=0.02)
+    sim, runner = plan.sim, plan.runner
     before = _held_gains(sim)
     assert runner.run() is False
     [failed] = [r.as_json() for r in runner.results]
@@ -48,29 +45,6 @@ def test_a_plan_step_that_writes_gains_is_step_checked_in_its_dry_run_words(cli,
     assert "the gains step-checked once written" in cli("run", str(plan), "--dry-run").out
 
 
-def _virtual_plan(tmp_path, steps: str, **machine: float) -> tuple[SimulatedDrive, Runner]:
-    """A DSX7E with this machine behind it and the plan's runner, in-process on virtual time."""
-    clock = VirtualClock(100.0)
-    profile = load_profile("dsx7e")
-    sim = build_drive(profile, 1, clock, persist=False)
-    sim.settings.update(**machine)
-    sim.firmware.reconfigure()
-    make_motion_setup(sim)
-    drive = Drive(VirtualLink([sim], clock, 115200), profile, 1)
-    plan = tmp_path / "plan.yaml"
-    plan.write_text(f"profile: dsx7e\nsteps:\n{steps}")
-    runner = Runner(
-        load_plan(plan),
-        [drive],
-        yes=True,
-        continue_on_error=False,
-        ask=lambda _u, _q: True,
-        log=lambda _l: None,
-        clock=clock,
-    )
-    return sim, runner
-
-
 def _held_gains(sim: SimulatedDrive) -> dict[str, int]:
     """The DSX7E's gain registers as the simulated drive answers for them (not through servotool's read path)."""
     out = {}
@@ -80,10 +54,11 @@ def _held_gains(sim: SimulatedDrive) -> dict[str, int]:
     return out
 
 
-def test_a_plan_may_leave_the_check_out_in_so_many_words(cli, tmp_path):
+def test_a_plan_may_leave_the_check_out_in_so_many_words(cli, tmp_path, virtual_plan):
     """On virtual time, as the failed check's plan above (a real-time identification on a busy host can trip the
     drive's watchdog before any gains are written)."""
-    sim, runner = _virtual_plan(tmp_path, load_ratio=5.0, steps="  - tune inertia: {rigidity: 14, check: false}\n")
+    plan = virtual_plan("  - tune inertia: {rigidity: 14, check: false}\n", load_ratio=5.0)
+    sim, runner = plan.sim, plan.runner
     before = _held_gains(sim)
     assert runner.run() is True
     [done] = [r.as_json() for r in runner.results]

@@ -2,7 +2,7 @@
 
 The estimator gives Coulomb friction (N*m), viscous friction (N*m per rad/s) and a constant load torque (N*m).
 Drives state torque in % of rated: Coulomb and load torque as %, viscous as % at the rated speed. Where the profile
-maps compensation entries (roles friction_comp_fwd/_rev, viscous_comp_fwd/_rev, torque_offset: DSX7E Pn120-122,
+maps compensation entries (roles friction_comp_fwd/_rev, viscous_comp(_fwd/_rev), torque_offset: DSX7E Pn120-124,
 SDC PN137-140) the values for them are suggested, never written: compensation changes how the loop behaves and is
 the engineer's call.
 """
@@ -65,6 +65,7 @@ def friction_report(profile: Profile, est: FittedFriction) -> FrictionReport | N
         "friction_comp_rev": (coulomb, "Coulomb friction, reverse"),
         "viscous_comp_fwd": (viscous, "viscous friction at rated speed, forward"),
         "viscous_comp_rev": (viscous, "viscous friction at rated speed, reverse"),
+        "viscous_comp": (viscous, "viscous friction at rated speed, both directions"),
         "torque_offset": (load, "constant load torque (gravity)"),
     }
     settings = []

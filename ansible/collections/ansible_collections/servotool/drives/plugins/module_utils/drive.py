@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import replace
 from pathlib import Path
 
@@ -37,6 +37,21 @@ DESIRED_ARGS = dict(
 )
 DESIRED_EXCLUSIVE = [["parameters", "file", "content"]]
 DESIRED_ONE_OF = [["parameters", "file", "content"]]
+
+
+def desired_module():
+    """The AnsibleModule of a task that compares or applies a desired set (settings, drift): the connection and
+    desired-set options, one source of the set, check mode supported; servotool importable, else failed."""
+    from ansible.module_utils.basic import AnsibleModule
+
+    module = AnsibleModule(
+        argument_spec={**CONNECTION_ARGS, **DESIRED_ARGS},
+        mutually_exclusive=DESIRED_EXCLUSIVE,
+        required_one_of=DESIRED_ONE_OF,
+        supports_check_mode=True,
+    )
+    need_servotool(module)
+    return module
 
 
 def need_servotool(module):
@@ -113,3 +128,34 @@ def fail(module, exc, **facts):
     if hasattr(exc, "as_before"):  # servotool.ops.apply.ApplyFailed
         extra = dict(rolled_back=list(exc.rolled_back), as_before=bool(exc.as_before), written=list(exc.written))
     module.fail_json(msg=str(exc), exit_status=getattr(exc, "exit_code", 1), **facts, **extra)
+
+
+def applied(module, *, check, source=None):
+    """(drive, result, notices): the task's desired set applied to its drive (servotool.ops.apply), or only
+    compared with check; the drive's change log names `source` where it writes. Any servotool error fails the task."""
+    from servotool.errors import ServoError
+    from servotool.ops.apply import apply
+
+    notices = []
+    try:
+        with origin(module, source) if source else nullcontext(), open_drive(module, notices) as drive:
+            result = apply(drive, desired_set(module, drive.profile), check=check)
+    except ServoError as exc:
+        fail(module, exc, notices=notices)  # fail_json exits
+    return drive, result, notices
+
+
+def result_facts(module, drive, result, notices, desired_header=None):
+    """What every result of a desired set returns: notices, unit and profile, and in diff mode the drive's values
+    against the desired ones (headed `desired_header`, default 'MODEL unit N (desired)')."""
+    out = dict(notices=notices, unit=drive.unit, profile=drive.profile.id)
+    if module._diff:
+        before, after = result.diff_text()
+        where = f"{drive.profile.model} unit {drive.unit}"
+        out["diff"] = dict(
+            before=before,
+            after=after,
+            before_header=f"{where} (drive)",
+            after_header=desired_header or f"{where} (desired)",
+        )
+    return out

@@ -77,37 +77,16 @@ notices:
   elements: str
 """
 
-from ansible.module_utils.basic import AnsibleModule  # noqa: E402
 from ansible_collections.servotool.drives.plugins.module_utils.drive import (  # noqa: E402
-    CONNECTION_ARGS,
-    DESIRED_ARGS,
-    DESIRED_EXCLUSIVE,
-    DESIRED_ONE_OF,
-    desired_set,
-    fail,
-    need_servotool,
-    open_drive,
+    applied,
+    desired_module,
+    result_facts,
 )
 
 
 def main() -> None:
-    module = AnsibleModule(
-        argument_spec={**CONNECTION_ARGS, **DESIRED_ARGS},
-        mutually_exclusive=DESIRED_EXCLUSIVE,
-        required_one_of=DESIRED_ONE_OF,
-        supports_check_mode=True,
-    )
-    need_servotool(module)
-    from servotool.errors import ServoError
-    from servotool.ops.apply import apply
-
-    notices: list[str] = []
-    try:
-        with open_drive(module, notices) as drive:
-            result = apply(drive, desired_set(module, drive.profile), check=True)
-    except ServoError as exc:
-        fail(module, exc, notices=notices)
-        return
+    module = desired_module()
+    drive, result, notices = applied(module, check=True)
     differences = [
         dict(code=s["code"], name=s["name"], drive=s["before"], golden=s["desired"])
         for s in result.as_json()["settings"]
@@ -123,15 +102,8 @@ def main() -> None:
         compared=len(result.settings),
         memory=result.compared,
         missing=result.missing,
-        notices=notices,
-        unit=drive.unit,
-        profile=drive.profile.id,
     )
-    if module._diff:
-        before, after = result.diff_text()
-        where = f"{drive.profile.model} unit {drive.unit}"
-        out["diff"] = dict(before=before, after=after, before_header=f"{where} (drive)", after_header="golden")
-    module.exit_json(**out)
+    module.exit_json(**out, **result_facts(module, drive, result, notices, desired_header="golden"))
 
 
 def _shown(quantity: dict) -> str:

@@ -113,50 +113,22 @@ as_before:
   type: bool
 """
 
-from ansible.module_utils.basic import AnsibleModule  # noqa: E402
 from ansible_collections.servotool.drives.plugins.module_utils.drive import (  # noqa: E402
-    CONNECTION_ARGS,
-    DESIRED_ARGS,
-    DESIRED_EXCLUSIVE,
-    DESIRED_ONE_OF,
-    desired_set,
-    fail,
-    need_servotool,
-    open_drive,
-    origin,
+    applied,
+    desired_module,
+    result_facts,
 )
 
 
 def main() -> None:
-    module = AnsibleModule(
-        argument_spec={**CONNECTION_ARGS, **DESIRED_ARGS},
-        mutually_exclusive=DESIRED_EXCLUSIVE,
-        required_one_of=DESIRED_ONE_OF,
-        supports_check_mode=True,
-    )
-    need_servotool(module)
-    from servotool.errors import ServoError
-    from servotool.ops.apply import CHANGED, WOULD_CHANGE, apply
+    module = desired_module()
+    from servotool.ops.apply import CHANGED, WOULD_CHANGE
 
-    notices: list[str] = []
-    try:
-        with origin(module, "ansible servotool.drives.settings"), open_drive(module, notices) as drive:
-            wanted = desired_set(module, drive.profile)
-            result = apply(drive, wanted, check=module.check_mode)
-    except ServoError as exc:
-        fail(module, exc, notices=notices)
-        return
+    drive, result, notices = applied(module, check=module.check_mode, source="ansible servotool.drives.settings")
     facts = result.as_json()
     facts.pop("changed")
-    out = dict(changed=result.status in (CHANGED, WOULD_CHANGE), notices=notices, unit=drive.unit, **facts)
-    out["profile"] = drive.profile.id
-    if module._diff:
-        before, after = result.diff_text()
-        where = f"{drive.profile.model} unit {drive.unit}"
-        out["diff"] = dict(
-            before=before, after=after, before_header=f"{where} (drive)", after_header=f"{where} (desired)"
-        )
-    module.exit_json(**out)
+    out = dict(changed=result.status in (CHANGED, WOULD_CHANGE), **facts)
+    module.exit_json(**out, **result_facts(module, drive, result, notices))
 
 
 if __name__ == "__main__":
