@@ -204,7 +204,8 @@ class Drive:
         """Read one coalesced block into values; on exception 02, split it in two and read each half, down to the
         single entry the drive lacks."""
         try:
-            words = self.link.read(self.unit, start, count, spare=self._spare(start, count))
+            live = any(e.cls != "Pn" for e in group)  # monitors move by themselves: their confirmation knows it
+            words = self.link.read(self.unit, start, count, spare=self._spare(start, count), live=live)
         except ModbusException as exc:
             if exc.code != ILLEGAL_ADDRESS:
                 raise _prefixed(exc, f"reading {_names(group)}") from None

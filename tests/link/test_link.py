@@ -20,7 +20,9 @@ class CountingLink:
     def __init__(self, sim) -> None:
         self.sim, self.reads = sim, []
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), live: bool = False
+    ) -> list[int]:
         self.reads.append((address, count))
         return self.sim.read(address, count)
 
@@ -115,7 +117,9 @@ class StaleOnceLink(CountingLink):
         super().__init__(sim)
         self.stale: dict[int, list[int]] = {}
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), live: bool = False
+    ) -> list[int]:
         if (old := self.stale.pop(address, None)) is not None:
             self.reads.append((address, count))
             return old
