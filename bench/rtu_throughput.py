@@ -262,9 +262,12 @@ def against(tree: str, rounds: int, samples: int, duration: float) -> None:
     here = str(HERE.parent)
 
     def run(root: str, mode: str) -> dict[str, list[float]]:
+        # In root's folder: `python -m servotool` puts the working folder first on the path, ahead of PYTHONPATH, so
+        # started from this checkout the CLI rounds ran this checkout's code for both trees.
         env = {**os.environ, "PYTHONPATH": root}
         args = [sys.executable, str(HERE / "rtu_throughput.py"), mode, "--samples", str(samples)]
-        out = subprocess.run([*args, "--duration", str(duration)], capture_output=True, text=True, env=env, check=True)
+        args += ["--duration", str(duration)]
+        out = subprocess.run(args, capture_output=True, text=True, env=env, check=True, cwd=root)
         return json.loads(out.stdout.strip().splitlines()[-1])
 
     for mode, heads in (
