@@ -3,19 +3,21 @@ socat pty pair, and a libmodbus RTU slave on the same kind of pty pair (the yard
 least 0.8x its rate, issue 30). Then what users run on a clean line: a monitor's samples/s and a backup's duration,
 on the embedded simulator and with its line emulated at each profile's baud rate.
 
-Run: python bench/rtu_throughput.py [--requests N] [--rounds R] [--no-users] [--no-slaves] [--against DIR]
+Run: python bench/rtu_throughput.py [--requests N] [--rounds R] [--no-users] [--no-slaves] [--against DIR] [--baud B]
 Prints the embedded simulator's requests/s; on the ptys, for three masters (servotool as shipped, which listens
 3.5 characters after each reply; servotool --silence-ms 0; libmodbus), each slave's requests/s and the sim serve /
 libmodbus ratio; then one line per profile with monitor samples/s and backup ms. --against DIR (main's code:
 `git archive main | tar -x -C DIR`) prints this checkout's monitor and backup figures beside DIR's, through the
 library and through the CLI on --port sim, in interleaved rounds: issue 30 holds them within 10 % of main's on a
-clean line. The libmodbus slave is built from bench/modbus_rtu_slave.c with gcc and Debian's libmodbus-dev
+clean line. --baud B (repeatable) emulates the library's lines at B instead of each profile's factory speed. The
+libmodbus slave is built from bench/modbus_rtu_slave.c with gcc and Debian's libmodbus-dev
 (apt-get install libmodbus-dev); without them its line is skipped.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import shutil
@@ -179,10 +181,10 @@ def slaves(tmp: Path, n: int, rounds: int) -> None:
         print(f"  a real {BAUD}-baud line carries at most {ceiling:.0f} such requests/s (22 characters each)")
 
 
-def users(samples: int, show: bool = True) -> dict[str, list[float]]:
+def users(samples: int, show: bool = True, bauds: list[int] | None = None) -> dict[str, list[float]]:
     """A monitor's samples/s and a backup's duration per profile, through the library (no CLI start-up): on
-    loopback with no line emulated, and with the line emulated at the profile's factory speed. By "profile line":
-    [monitor samples/s, requests per sample, backup ms, backup requests]."""
+    loopback with no line emulated, and with the line emulated at the profile's factory speed (or at each of
+    `bauds`). By "profile line": [monitor samples/s, requests per sample, backup ms, backup requests]."""
     from servotool.drive import Drive
     from servotool.link.master import RtuMaster
     from servotool.link.ports import LinkSettings
@@ -198,11 +200,12 @@ def users(samples: int, show: bool = True) -> dict[str, list[float]]:
     figures: dict[str, list[float]] = {}
     for profile_id in ("sd25", "is620p", "sdc", "dsx7e"):
         profile = load_profile(profile_id)
-        for baud in (0, profile.line.baud):
+        for baud in (0, *(bauds or [profile.line.baud])):
             sim_drive = build_drive(profile, profile.default_unit, persist=False)
-            sim_drive.settings["line_baud"] = "factory" if baud else "fast"
+            sim_drive.settings["line_baud"] = baud or "fast"
             sim = EmbeddedSim([sim_drive], line=profile.line)
-            link = RtuMaster(LinkSettings(sim.port, profile.line, timeout=1.0, retries=2))
+            line = dataclasses.replace(profile.line, baud=baud) if baud else profile.line
+            link = RtuMaster(LinkSettings(sim.port, line, timeout=1.0, retries=2))
             try:
                 drive = Drive(link, profile, profile.default_unit)
                 entries = monitor.default_entries(profile)
@@ -256,15 +259,18 @@ def cli_users(duration: float) -> dict[str, list[float]]:
     return figures
 
 
-def against(tree: str, rounds: int, samples: int, duration: float) -> None:
+def against(tree: str, rounds: int, samples: int, duration: float, bauds: list[int] | None = None) -> None:
     """This checkout's monitor and backup figures beside another tree's (`git archive main | tar -x -C DIR`), in
     interleaved rounds (the machine's load moves between them), the median of each, and this/that."""
     here = str(HERE.parent)
 
     def run(root: str, mode: str) -> dict[str, list[float]]:
+        # In root's folder: `python -m servotool` puts the working folder first on the path, ahead of PYTHONPATH, so
+        # started from this checkout the CLI rounds ran this checkout's code for both trees.
         env = {**os.environ, "PYTHONPATH": root}
         args = [sys.executable, str(HERE / "rtu_throughput.py"), mode, "--samples", str(samples)]
-        out = subprocess.run([*args, "--duration", str(duration)], capture_output=True, text=True, env=env, check=True)
+        args += ["--duration", str(duration), *(f"--baud={b}" for b in bauds or [])]
+        out = subprocess.run(args, capture_output=True, text=True, env=env, check=True, cwd=root)
         return json.loads(out.stdout.strip().splitlines()[-1])
 
     for mode, heads in (
@@ -295,21 +301,27 @@ def main() -> None:
     ap.add_argument("--against", metavar="DIR", help="compare monitor and backup with another tree's code (main's)")
     ap.add_argument("--samples", type=int, default=200, help="monitor samples on loopback (fewer at line speed)")
     ap.add_argument("--duration", type=float, default=3.0, help="seconds of each CLI monitor run (--against)")
+    ap.add_argument(
+        "--baud",
+        type=int,
+        action="append",
+        help="monitor and backup on lines emulated at this speed (repeatable) instead of each profile's factory speed",
+    )
     ap.add_argument("--lib-json", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--cli-json", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp())
     os.environ.setdefault("SERVOTOOL_SIM_DIR", str(tmp / "sim"))
     if args.lib_json or args.cli_json:
-        print(json.dumps(users(args.samples, show=False) if args.lib_json else cli_users(args.duration)))
+        print(json.dumps(users(args.samples, False, args.baud) if args.lib_json else cli_users(args.duration)))
         return
     print(f"load average: {os.getloadavg()[0]:.2f} ({os.cpu_count()} cores)")
     if not args.no_slaves:
         slaves(tmp, args.requests, args.rounds)
     if args.against:
-        against(args.against, args.rounds, args.samples, args.duration)
+        against(args.against, args.rounds, args.samples, args.duration, args.baud)
     elif not args.no_users:
-        users(args.samples)
+        users(args.samples, bauds=args.baud)
     print(f"load average: {os.getloadavg()[0]:.2f} ({os.cpu_count()} cores)")
 
 

@@ -126,6 +126,7 @@ def coalesce_reads(
 
     A request may span a gap only when every address in the gap belongs to a readable entry, since a real
     drive answers exception 02 for unmapped addresses, and none is a hole (an address the drive turned out to lack).
+    Where the read limit splits a contiguous run, its requests differ in length wherever as many can (_distinct).
     """
     readable = readable_addresses(profile)
     wanted = sorted({e.code: e for e in entries}.values(), key=lambda e: e.address)
@@ -145,7 +146,56 @@ def coalesce_reads(
                     plans[-1] = (start, count, [*group, e])
                     continue
         plans.append((e.address, e.words, [e]))
-    return plans
+    out: list[tuple[int, int, list[Entry]]] = []
+    run: list[tuple[int, int, list[Entry]]] = []
+    for plan in plans:
+        if run and plan[0] != run[-1][0] + run[-1][1]:
+            out += _distinct(run, limit)
+            run = []
+        run.append(plan)
+    return out + _distinct(run, limit)
+
+
+def _distinct(run: list[tuple[int, int, list[Entry]]], limit: int) -> list[tuple[int, int, list[Entry]]]:
+    """A contiguous run that the read limit split into several requests, split again into as many whose lengths
+    repeat least: each shorter than the one before, or the limit, one less, ... where the entries' boundaries allow
+    no better; else as it was. Replies of equal length and equal values (a backup's blocks of zeros) repeat each
+    other byte for byte, and the link confirms a reply that repeats another request's (link/exchange.py): this
+    costs no request and saves those confirming reads."""
+    entries = [e for _start, _count, group in run for e in group]
+    if len(run) < 2 or any(b.address < a.address + a.words for a, b in pairwise(entries)):
+        return run
+    best = run
+    for shorter in (True, False):
+        plan = _split(entries, limit, len(run), shorter)
+        if plan is not None and _repeats(plan) < _repeats(best):
+            best = plan
+    return best
+
+
+def _split(entries: list[Entry], limit: int, blocks: int, shorter: bool) -> list[tuple[int, int, list[Entry]]] | None:
+    """The entries in at most `blocks` requests, each as long as its cap allows: the limit, then one less than the
+    request before (shorter) or than the cap before; None when they do not fit."""
+    out: list[tuple[int, int, list[Entry]]] = []
+    i, cap = 0, limit
+    for _ in range(blocks):
+        start, group = entries[i].address, []
+        while i < len(entries) and entries[i].address + entries[i].words - start <= cap:
+            group.append(entries[i])
+            i += 1
+        if not group:
+            return None
+        out.append((start, group[-1].address + group[-1].words - start, group))
+        if i == len(entries):
+            return out
+        cap = (out[-1][1] if shorter else cap) - 1
+    return None
+
+
+def _repeats(plans: list[tuple[int, int, list[Entry]]]) -> tuple[int, int]:
+    """(requests as long as the one before, requests as long as any other) of a split."""
+    lengths = [count for _start, count, _group in plans]
+    return sum(a == b for a, b in pairwise(lengths)), len(lengths) - len(set(lengths))
 
 
 def _names(group: list[Entry]) -> str:
@@ -204,7 +254,8 @@ class Drive:
         """Read one coalesced block into values; on exception 02, split it in two and read each half, down to the
         single entry the drive lacks."""
         try:
-            words = self.link.read(self.unit, start, count, spare=self._spare(start, count))
+            live = any(e.cls != "Pn" for e in group)  # monitors move by themselves: their confirmation knows it
+            words = self.link.read(self.unit, start, count, spare=self._spare(start, count), live=live)
         except ModbusException as exc:
             if exc.code != ILLEGAL_ADDRESS:
                 raise _prefixed(exc, f"reading {_names(group)}") from None

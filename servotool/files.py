@@ -276,7 +276,10 @@ class FileLock:
         from filelock import lock_descriptor, unlock_descriptor
 
         fd = self._open()
-        lock_descriptor(fd, poll_interval=poll_interval)  # holders keep it for milliseconds: poll often
+        # Uncontended (the common case: a simulator's every request takes it) without the blocking call's argument
+        # checks; else wait, polling often: holders keep it for milliseconds.
+        if not lock_descriptor(fd, blocking=False):
+            lock_descriptor(fd, poll_interval=poll_interval)
         try:
             yield
         finally:

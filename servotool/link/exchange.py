@@ -12,8 +12,10 @@ byte count; a write's echoed address and value) and nothing on the line says it 
    that shape for another request is confirmed, and reads pick a width that no owed reply has.
 4. Bytes before a request or after a reply are a fault of the operation, and faults leave the line to go quiet and
    be flushed; on a line that has shown faults, a read whose reply repeats its own last one is confirmed too.
-5. A confirmation is another read, at another width where one is allowed. An unambiguous confirmation stands; two
-   ambiguous ones must agree; a disagreement is a fault.
+5. A confirmation is another read, at another width where one is allowed. An unambiguous confirmation stands. Of
+   a value that changes only when written (a parameter), two ambiguous answers must agree, and a disagreement is a
+   fault. A live value (a speed, a current, a position) may move between the two reads: its answers are not
+   compared; it is read again until one answer is unambiguous or two in a row agree, and a disagreement is no fault.
 
 So, as long as copies come within the copy window and late replies within the owed window (link/ledger.py), a stray
 frame can stand in for a reply only when it answers the same registers, read in the same write epoch: never another
@@ -72,12 +74,13 @@ class LineFault(Exception):
 
 @dataclass(frozen=True)
 class _Reply:
-    """One try's answer: registers (writes: []) or an exception code, its frame, and whether it may be another's."""
+    """One try's answer: registers (writes: []) or an exception code, its frame, and why it may be another request's
+    ("" when it cannot be)."""
 
     words: list[int]
     code: int | None
     frame: bytes
-    ambiguous: bool
+    ambiguous: str
 
 
 Answer = list[int] | int  # registers, or the code of an exception reply
@@ -92,13 +95,24 @@ class _Op:
         self.tries = 0
         self.faults = 0
         self.repeating = False  # a read of registers read within the copy window (a monitor's, a trace's)
+        self.live = False  # a read of values the drive changes by itself (monitors)
+        self.unproven: list[tuple[Answer, str]] = []  # a live read's answers so far, each with why it may be another's
 
     def begin(self) -> None:
         if self.tries >= 2 * (self.retries + 2):
-            error = DeviceError(
-                f"{self.what}: no two reads in a row agreed after {self._tries()} (a value that "
-                f"changes by itself, or stray replies on the line); nothing was used"
-            )
+            if self.live and self.unproven:
+                said = ", then ".join(_said(answer) for answer, _ in self.unproven[-3:])
+                text = (
+                    f"no answer proven to be its own after {self._tries()}: the live value moved at each read "
+                    f"({said}), as a speed or a current does, so no two answers confirm each other, and each could "
+                    f"have been another request's ({self.unproven[-1][1]}); nothing was used"
+                )
+            else:
+                text = (
+                    f"no two reads in a row agreed after {self._tries()} (a value that changes by itself, or stray "
+                    f"replies on the line); nothing was used"
+                )
+            error = DeviceError(f"{self.what}: {text}")
             error.fault = "unsettled"  # the line answered: a live value (a turning motor's speed) may differ each time
             raise error
         self.tries += 1
@@ -124,7 +138,10 @@ class _Op:
                 f"(noise, termination, baud/parity mismatch, or two masters on the line)"
             )
         elif fault.kind == "disagree":
-            text = f"replies that disagree after {tries} ({fault.why}: stray replies on the line, or two masters)"
+            text = (
+                f"replies that disagree after {tries} ({fault.why}; a value that changes only when written, so one "
+                f"of them answered another request: a late or repeated reply, or two masters on the line)"
+            )
         else:
             text = (
                 f"no reply that answers it after {tries}, last {fault.why} (a late or repeated reply, an "
@@ -175,14 +192,23 @@ class Exchange:
 
     # ----- operations ----------------------------------------------------------------------------------------
     def read(
-        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = READ
+        self,
+        unit: int,
+        address: int,
+        count: int,
+        *,
+        spare: tuple[int, int] = (0, 0),
+        fc: int = READ,
+        live: bool = False,
     ) -> list[int]:
         """`count` registers at `address` (fc 3 holding, 4 input registers; fc 1 coils, 2 discrete inputs, as bits
         0/1); `spare` = registers before and after that may be read too (a whole adjacent entry each), to give this
-        read's reply another length than the replies around it."""
+        read's reply another length than the replies around it; `live`: values the drive changes by itself, whose
+        confirmation does not expect them to stay (contract point 5)."""
         kind = {1: "coil(s)", 2: "discrete input(s)", READ_INPUT: "input register(s)"}.get(fc, "register(s)")
         what = f"read {count} {kind} at {address} (0x{address:04X}) from unit {unit}"
         op = self._op(what, Request(unit, fc, address, count))
+        op.live = live
         return self._read(unit, address, count, spare, op, fc)
 
     def _read(self, unit: int, address: int, count: int, spare: tuple[int, int], op: _Op, fc: int = READ) -> list[int]:
@@ -203,7 +229,16 @@ class Exchange:
                 continue
             offset = address - req.address
             answer = reply.code if reply.code is not None else reply.words[offset : offset + count]
-            if held is not None and answer != held[0]:
+            if op.live and reply.ambiguous:
+                op.unproven.append((answer, reply.ambiguous))
+            if held is not None and op.live and _moved(held[0], answer):
+                # A live value moved between the read and its confirmation, as it may: not a fault. The first
+                # answer's own reply may still come; an ambiguous confirmation is held in its place.
+                self._owe(held[1])
+                if reply.ambiguous:
+                    held = (answer, req, reply)
+                    continue
+            elif held is not None and answer != held[0]:
                 self._disagree(held, req, reply, answer, op)  # a fault: one of the two was another's reply
                 if reply.ambiguous:
                     held = None
@@ -346,20 +381,25 @@ class Exchange:
             epoch = max(get((req.unit, a), 0) for a in range(req.address, req.address + req.count))
         return (req.unit, req.fc, req.address, req.count, epoch)
 
-    def _ambiguous(self, req: Request, rid: Rid, frame: bytes, now: float) -> bool:
-        """Whether the frame that fits `req` may be another request's reply or an old one (contract points 2-4)."""
+    def _ambiguous(self, req: Request, rid: Rid, frame: bytes, now: float) -> str:
+        """Why the frame that fits `req` may be another request's reply or an old one (contract points 2-4); "" when
+        it cannot be."""
         copied = self.ledger.copy_of(frame, now)
         if copied is not None and copied != rid:
-            return True
+            return "a copy of a reply heard for another request"
         shape = shape_of(frame)
         if frame[1] & 0x80:
-            if self.ledger.owed_by_other_at(req.unit, now, rid) or now < self._trouble_until:
-                return True
+            if self.ledger.owed_by_other_at(req.unit, now, rid):
+                return "an exception reply while another request's reply is owed"
+            if now < self._trouble_until:
+                return "an exception reply on a line that has shown faults"
         elif self.ledger.owed_by_other(shape, rid, now):
-            return True
+            return "a reply of its length is owed by an earlier failed try"
         # A copy of this read's own earlier reply, on a line that has shown faults: the same registers, but maybe a
         # moment old, and its own reply may follow (point 4).
-        return copied is not None and req.reads and now < self._trouble_until
+        if copied is not None and req.reads and now < self._trouble_until:
+            return "a copy of its own last reply on a line that has shown faults"
+        return ""
 
     def _owe(self, req: Request) -> None:
         """The request's reply may still come (a failed try, or a reply that may have been another's)."""
@@ -569,6 +609,11 @@ def _frames(data: bytes) -> list[bytes]:
         else:
             i += 1
     return found
+
+
+def _moved(first: Answer, then: Answer) -> bool:
+    """Whether a live read's two answers show values that moved (an exception code is no value)."""
+    return isinstance(first, list) and isinstance(then, list) and first != then
 
 
 def _said(answer: Answer) -> str:

@@ -60,8 +60,10 @@ class RtuMaster:
         """Whether the adapter echoes what it sends: as set, or as found out (None: not yet known)."""
         return self._exchange.echo
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
-        return self._exchange.read(unit, address, count, spare=spare, fc=fc)
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3, live: bool = False
+    ) -> list[int]:
+        return self._exchange.read(unit, address, count, spare=spare, fc=fc, live=live)
 
     def write(
         self,

@@ -39,10 +39,13 @@ class LinkSettings:
 class Link(Protocol):
     """What drive operations need from a Modbus master."""
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3, live: bool = False
+    ) -> list[int]:
         """`count` registers at `address` (fc 3 holding, 4 input registers). spare = registers before and after that
         may be read as well (whole readable entries): a master without transaction ids reads them to tell its
-        replies apart."""
+        replies apart. live: values the drive changes by itself (monitors), which a confirming read may find
+        moved."""
         ...
 
     def write(

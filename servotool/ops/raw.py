@@ -156,7 +156,16 @@ def read_registers(drive: Drive, address: int, count: int, fc: int = 3) -> list[
         )
     if address + count > 0x10000:
         raise UsageError(f"registers {address}..{address + count - 1} go past 65535")
-    return drive.link.read(drive.unit, address, count, fc=fc)
+    return drive.link.read(drive.unit, address, count, fc=fc, live=_live(drive, address, count, fc))
+
+
+def _live(drive: Drive, address: int, count: int, fc: int) -> bool:
+    """Whether the registers may move by themselves between a read and its confirmation: all but the profile's
+    parameters (FC03), whose confirmation may then compare values (link/exchange.py, point 5)."""
+    if fc != 3:
+        return True
+    parameters = {a for e in drive.profile.entries if e.cls == "Pn" for a in e.addresses}
+    return not parameters.issuperset(range(address, address + count))
 
 
 def write_registers(drive: Drive, address: int, values: list[int]) -> list[int]:

@@ -109,7 +109,8 @@ class SimulatedDrive:
             "soft_reset": _soft_reset,
             "eeprom_save": _eeprom_save,
         }
-        self.on_read: list[Callable[[SimulatedDrive], None]] = []
+        self.on_read: list[Callable[[SimulatedDrive], None]] = []  # before a read's answer, told `reading`
+        self.reading: range | None = None  # the registers the read being answered asks for
         self.on_param_change: list[Callable[[SimulatedDrive, Entry, int], None]] = []
         self.on_reload: list[Callable[[SimulatedDrive], None]] = []
         self._take_extra()
@@ -161,8 +162,12 @@ class SimulatedDrive:
         """Registers for a read request; raises SimRefusal for a Modbus exception."""
         with self.session():
             self._check_present(address, count)
-            for hook in self.on_read:
-                hook(self)
+            self.reading = range(address, address + count)
+            try:
+                for hook in self.on_read:
+                    hook(self)
+            finally:
+                self.reading = None
             return self.bank.read(address, count)
 
     def write(self, address: int, values: list[int]) -> None:

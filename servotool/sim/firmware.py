@@ -71,7 +71,9 @@ class Firmware:
         self._handover = Handover(self.clock)
         self._power_on()
         self._take_machine_state()
-        drive.on_read.append(lambda _d: self.update())
+        # The registers the monitors are written into: a read of parameters alone does not need them refreshed.
+        self._monitor_addresses = frozenset(a for e in self.profile.entries if e.cls != "Pn" for a in e.addresses)
+        drive.on_read.append(lambda d: self.update(d.reading))
         drive.on_param_change.append(self._param_changed)
         drive.on_reload.append(self._reloaded)
         drive.bank.before_write.append(self._store_machine_state)
@@ -311,8 +313,10 @@ class Firmware:
         return self.alarms.history
 
     # ----- time ----------------------------------------------------------------------------------------------
-    def update(self) -> None:
-        """Integrate the plant up to now, applying the watchdog and identification on the way; refresh monitors."""
+    def update(self, reading: range | None = None) -> None:
+        """Integrate the plant up to now, applying the watchdog and identification on the way; refresh the monitors,
+        for a read only when it touches one (or an alarm record is to be stored): refreshing them costs more than
+        the rest of an answer, and a parameter's value does not depend on them."""
         now = self.clock.now()
         if self._watched():
             expiry = self.last_host + self._eng("comm_timeout", FAKE_WATCHDOG_MS) / 1000.0
@@ -339,7 +343,10 @@ class Firmware:
                 self.ident = None
                 self.segment = None
             self.alarms.record(self.plant.alarm, self._alarm_context())  # also alarms raised with the servo off
-        self._refresh_monitors()
+        if reading is None or self.alarms.new_record or not self._monitor_addresses.isdisjoint(reading):
+            self._refresh_monitors()
+        else:
+            monitors.skip_refresh(self.plant)  # the noise stream advances per answer all the same (seeded runs)
 
     def _watched(self) -> bool:
         """Whether a host watchdog runs: the profile's documented one (comm_timeout role) whenever the host holds

@@ -47,6 +47,13 @@ def refresh(
     _refresh_status_word(profile, bank, p, jogging=jogging, identifying=identifying)
 
 
+def skip_refresh(p: Plant) -> None:
+    """Draw the measurement noise `refresh` draws (speed, torque, and the torque the current follows), in its order,
+    without writing anything: an answer that needs no monitor costs little, and a seeded run's noise still follows
+    the answers the drive gave, whichever registers they asked for."""
+    _ = (p.speed_rpm, p.torque_pct, p.torque_pct)
+
+
 def refresh_inputs(profile: Profile, bank: RegisterBank, monitor: int, encoder: tuple[int, int]) -> None:
     """The input monitor (forced_inputs.monitor) and the absolute encoder's single-turn counts and multi-turn count."""
     if profile.forced_inputs is not None:

@@ -54,14 +54,17 @@ class RegisterBank:
     eeprom_writes: int = 0
     path: Path | None = None
     _by_address: dict[int, Entry] = field(default_factory=dict, repr=False)
+    _entries: dict[str, Entry] = field(default_factory=dict, repr=False)  # by code as the profile spells it
     _stamp: tuple[int, int, int] | None = field(default=None, repr=False)  # the state file as last read/written
     _held: bool = field(default=False, repr=False)
     _dirty: bool = field(default=False, repr=False)
     _file_lock: FileLock | None = field(default=None, repr=False)
+    _lock_for: Path | None = field(default=None, repr=False)  # the state file the lock was checked against
     before_write: list[Callable[[], None]] = field(default_factory=list, repr=False)  # e.g. store the plant state
 
     def __post_init__(self) -> None:
         for e in self.profile.entries:
+            self._entries[e.code] = e
             for a in e.addresses:
                 self._by_address[a] = e
         defaults = {
@@ -90,8 +93,10 @@ class RegisterBank:
 
     def _lock(self) -> FileLock:
         assert self.path is not None
-        if self._file_lock is None or self._file_lock.path.parent != self.path.parent:
-            self._file_lock = FileLock(self.path.with_name(self.path.name + ".lock"))
+        if self._file_lock is None or self._lock_for is not self.path:  # identity: a request's cheap check
+            if self._file_lock is None or self._file_lock.path.parent != self.path.parent:
+                self._file_lock = FileLock(self.path.with_name(self.path.name + ".lock"))
+            self._lock_for = self.path
         return self._file_lock
 
     def reload(self) -> bool:
@@ -235,7 +240,7 @@ class RegisterBank:
 
     def set_live(self, code: str, raw: int, *, wrap: bool = False) -> None:
         """Set a monitor/status value: clamped to the entry's range, or wrapped into it like a multi-turn counter."""
-        entry = self.profile.entry(code)
+        entry = self._entries.get(code) or self.profile.entry(code)
         if wrap:
             self.live[entry.code] = (int(raw) - entry.min) % (entry.max - entry.min + 1) + entry.min
         else:

@@ -77,10 +77,12 @@ class VirtualLink:
             raise DeviceError(f"{what}: no response (no simulated drive has unit {unit})")
         return drive
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
-        """`count` registers; `spare` is not used: in process, a reply cannot be taken for another's. A function
-        other than FC03, or one the drive's profile does not answer, is refused with exception 01, as the line's
-        drive does (sim.line.refusal)."""
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3, live: bool = False
+    ) -> list[int]:
+        """`count` registers; `spare` and `live` are not used: in process, a reply cannot be taken for another's. A
+        function other than FC03, or one the drive's profile does not answer, is refused with exception 01, as the
+        line's drive does (sim.line.refusal)."""
         what = f"read {count} register(s) at {address} from unit {unit}"
         if fc not in READ_CODES or fc not in self._drive(unit, what).profile.modbus_functions.answered:
             raise ModbusException(1, what)

@@ -3,6 +3,7 @@ plays late, repeated and lost replies exactly where they hurt."""
 
 from __future__ import annotations
 
+import re
 from collections import deque
 
 import pytest
@@ -316,3 +317,49 @@ def test_after_a_fault_an_exception_reply_counts_only_when_repeated():
     with pytest.raises(ModbusException):
         ex.read(1, 0x20, 1)  # a clean line: believed at once
     assert line.sent == 1
+
+
+class MovingLine(ScriptedLine):
+    """A ScriptedLine whose register 20 is a live value: it moves by `step` at every read that reaches the drive."""
+
+    def __init__(self, script: list[str], step: int) -> None:
+        super().__init__({10: 111, 20: 222}, script)
+        self.step = step
+
+    def _serve(self, frame: bytes) -> bytes:
+        reply = super()._serve(frame)
+        self.regs[20] += self.step
+        return reply
+
+
+def test_a_live_value_that_moved_before_its_confirmation_is_read_again_not_called_a_stray_reply():
+    # As in the test above, 10's held reply stands in for the read of 20, which is confirmed. 20 is live here: the
+    # confirmation finds it moved, which a speed does and is no fault; it is read until two answers agree.
+    line = ScriptedLine({10: 111, 20: 222}, ["held:2"])
+    ex = exchange(line, retries=1)
+    assert ex.read(1, 10, 1) == [111]
+    ex.retries = 0
+    assert ex.read(1, 20, 1, live=True) == [222]
+
+
+def test_a_live_value_no_answer_of_which_can_be_proven_fails_saying_so():
+    # Every answer is ambiguous (a reply of its length is owed by 10's failed try) and the value moves at each read:
+    # nothing is used, and the error says what happened, not that there were stray replies or two masters.
+    line = MovingLine(["held:9"], step=1)
+    ex = exchange(line, retries=1)
+    assert ex.read(1, 10, 1) == [111]
+    with pytest.raises(DeviceError) as err:
+        ex.read(1, 20, 1, live=True)
+    text = str(err.value)
+    moved = re.search(r"the live value moved at each read \(\[(\d+)\], then \[(\d+)\], then \[(\d+)\]\)", text)
+    assert moved is not None and [int(v) - int(moved[1]) for v in moved.groups()] == [0, 1, 2], text
+    assert "a reply of its length is owed by an earlier failed try" in text and "two masters" not in text
+    assert err.value.fault == "unsettled"
+
+
+def test_a_parameter_whose_ambiguous_answers_disagree_is_still_a_fault():
+    line = MovingLine(["held:9"], step=1)
+    ex = exchange(line, retries=1)
+    assert ex.read(1, 10, 1) == [111]
+    with pytest.raises(DeviceError, match=r"replies that disagree .* a value that changes only when written"):
+        ex.read(1, 20, 1)

@@ -224,3 +224,17 @@ def test_ignored_writes_are_named_by_code_or_address():
     assert parse_addresses(profile, "Pn008, 0x2004,8197") == {0x2008, 0x2009, 0x2004, 8197}  # Pn008 is a u32
     with pytest.raises(UsageError, match="Pn999"):
         parse_addresses(profile, "Pn999")
+
+
+def test_a_monitor_on_a_line_that_repeats_replies_never_calls_a_moving_value_a_stray_reply(sim_serve, cli):
+    """Through the CLI and `sim serve`'s fault proxy, with the drive's measurement noise on: a speed or a current
+    moves between a read and its confirming read, which is no stray reply. The monitor either runs, or stops saying
+    that the live value moved and why its replies could not be proven (it said 'stray replies on the line, or two
+    masters' before)."""
+    port = sim_serve("--faults", "duplicate:30%", "--fault-seed", "4")
+    r = cli("--port", port, "monitor", "--duration", "3", "--rate", "100", "--json")
+    assert "two masters" not in r.err and "stray replies" not in r.err, r.err
+    if r.code == 0:
+        assert r.out.count("\n") >= 2, r.out
+    else:
+        assert r.code == 1 and "the live value moved at each read" in r.err, r.err

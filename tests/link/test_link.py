@@ -20,7 +20,9 @@ class CountingLink:
     def __init__(self, sim) -> None:
         self.sim, self.reads = sim, []
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), live: bool = False
+    ) -> list[int]:
         self.reads.append((address, count))
         return self.sim.read(address, count)
 
@@ -42,6 +44,23 @@ def test_reading_every_parameter_is_coalesced_within_the_drive_limit(sim_dir, pr
     assert len(link.reads) == len(coalesce_reads(profile, params))
     # Coalescing happened: far fewer requests than entries (SD25's 10-register limit still groups a few).
     assert len(link.reads) * 2 < len(params)
+
+
+def test_a_run_the_read_limit_splits_is_read_in_requests_of_different_lengths():
+    # IS620P's H11-12..H11-91, 80 registers in a row (1- and 2-register entries): six requests at its limit of 16
+    # either way, but of lengths that repeat least rather than 15, 15, 15, 15, 15, 5: replies of equal length and
+    # equal values would repeat each other byte for byte, and the link confirms a reply that repeats another
+    # request's with a read.
+    profile = load_profile("is620p")
+    run = [e for e in profile.entries if e.readable and 4364 <= e.address < 4364 + 80]
+    plans = coalesce_reads(profile, run)
+    lengths = [count for _, count, _ in plans]
+    assert sum(lengths) == 80 and len(plans) == 6 and len(set(lengths)) == 5, lengths
+    assert [e.code for _, _, group in plans for e in group] == [e.code for e in run]
+    assert all(start + count == plans[i + 1][0] for i, (start, count, _) in enumerate(plans[:-1]))
+    # Where each can be shorter than the one before, it is: 65 registers from H17-00 on (16, 15, 14, 13, 7).
+    h17 = [e for e in profile.entries if e.readable and 5888 <= e.address < 5888 + 65]
+    assert [count for _, count, _ in coalesce_reads(profile, h17)] == [16, 15, 14, 13, 7]
 
 
 def test_a_modbus_exception_names_the_entry_and_the_exception(cli, sim_dir):
@@ -115,7 +134,9 @@ class StaleOnceLink(CountingLink):
         super().__init__(sim)
         self.stale: dict[int, list[int]] = {}
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), live: bool = False
+    ) -> list[int]:
         if (old := self.stale.pop(address, None)) is not None:
             self.reads.append((address, count))
             return old

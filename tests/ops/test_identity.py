@@ -123,7 +123,7 @@ class _Refusing:
     def __init__(self, code: int) -> None:
         self.code = code
 
-    def read(self, unit, address, count, *, spare=(0, 0)):
+    def read(self, unit, address, count, *, spare=(0, 0), live=False):
         from servotool.errors import ModbusException
 
         raise ModbusException(self.code, f"unit {unit}")

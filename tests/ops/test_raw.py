@@ -75,3 +75,25 @@ def test_fc04_reaches_the_drive_through_the_one_master_and_is_refused(serve):
             raw.read_values(d, 101, 1, fc=4)
         assert refused.value.code == 1
         assert raw.read_values(d, 101, 1)[0].value == raw.read_values(d, 101, 1)[0].value  # the line stays in step
+
+
+def test_a_raw_read_is_live_unless_every_register_is_a_parameters(sim_dir):
+    from servotool.errors import ModbusException
+
+    # The link confirms a live value by identity, not by value (a monitor moves between two reads): a raw read of a
+    # monitor, of an unmapped register or with another function than FC03 is live; one of parameters alone is not.
+    with open_drives(resolve(ConnectOptions(port="sim", profile="dsx7e")), notice=lambda _m: None) as (d,):
+        asked: list[bool] = []
+        read = d.link.read
+
+        def recording(unit, address, count, **kw):
+            asked.append(kw.get("live", False))
+            return read(unit, address, count, **kw)
+
+        d.link.read = recording  # type: ignore[method-assign]
+        monitor = d.profile.entry("Un000").address
+        raw.read_registers(d, 0x2100, 2)
+        raw.read_registers(d, monitor, 1)
+        with pytest.raises(ModbusException):  # the simulated drive has no coils
+            raw.read_registers(d, 0x2100, 1, fc=1)
+    assert asked == [False, True, True]
