@@ -233,9 +233,12 @@ class Exchange:
                 op.unproven.append((answer, reply.ambiguous))
             if held is not None and op.live and _moved(held[0], answer):
                 # A live value moved between the read and its confirmation, as it may: not a fault. The first
-                # answer's own reply may still come; an ambiguous confirmation is held in its place.
+                # answer's own reply may still come; an ambiguous confirmation is held in its place once the line
+                # has gone quiet (as after any disagreement: its own reply may still come too).
                 self._owe(held[1])
                 if reply.ambiguous:
+                    self._owe(req)
+                    self._quiet(LineFault("disagree", len(reply.frame)), self.clock.now())
                     held = (answer, req, reply)
                     continue
             elif held is not None and answer != held[0]:
