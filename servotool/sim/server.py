@@ -9,6 +9,7 @@ import asyncio
 import logging
 import socket
 import threading
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -69,12 +70,27 @@ class _Datastore:
     async def _serve(
         self, drive: SimulatedDrive, fc: int, address: int, count: int, values: list[int] | None
     ) -> list[int] | ExcCodes:
+        arrived = time.perf_counter()  # the drive's own work (the plant's integration) happens within the wire time
         result, delay = self.line.serve(drive, fc, address, count, values)
         if isinstance(result, int):
             return ExcCodes(result)
         if delay:
-            await asyncio.sleep(delay)
+            await _wait_until(arrived + delay)
         return result
+
+
+# asyncio's timers wake on the selector's whole milliseconds (epoll rounds a timeout up): a wait on them alone comes
+# up to a millisecond late, as much as a request's whole wire time at 115200 baud. The last of it is slept on this
+# thread instead (the line carries one frame at a time: nothing else is due on it meanwhile).
+COARSE_TIMER_S = 0.0015
+
+
+async def _wait_until(end: float) -> None:
+    """Wait until `end` (time.perf_counter), to within the OS's sleep precision rather than the event loop's tick."""
+    if (coarse := end - time.perf_counter() - COARSE_TIMER_S) > 0:
+        await asyncio.sleep(coarse)
+    if (left := end - time.perf_counter()) > 0:
+        time.sleep(left)
 
 
 class _Refusal(ModbusPDU):
