@@ -110,7 +110,7 @@ def coalesce_reads(
     A request may span a gap only when every address in the gap belongs to a readable entry, since a real
     drive answers exception 02 for unmapped addresses, and none is a hole (an address the drive turned out to lack).
     """
-    readable = {a for e in profile.entries if e.readable for a in e.addresses} - holes
+    readable = profile.readable_addresses() - holes if holes else profile.readable_addresses()
     wanted = sorted({e.code: e for e in entries}.values(), key=lambda e: e.address)
     plans: list[tuple[int, int, list[Entry]]] = []
     limit = profile.limits.max_read
