@@ -36,10 +36,13 @@ import os
 import random
 import re
 import statistics
+import sys
 import tempfile
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from servotool.clock import VirtualClock
 from servotool.drive import Drive, coalesce_reads
@@ -176,11 +179,11 @@ class Cell:
         )
 
 
-def draws(quick: bool, seed: int = 16) -> list[tuple[float, float, float, float, float]]:
+def draws(quick: bool, seed: int = 16, count: int | None = None) -> list[tuple[float, float, float, float, float]]:
     """The machines of one cell: a seeded sample of the grid (the same for every profile and baud)."""
     rng = random.Random(seed)
     grid = list(itertools.product(LOADS, COULOMB, VISCOUS, GRAVITY, NOISE))
-    return rng.sample(grid, 14 if quick else 60)
+    return rng.sample(grid, count or (14 if quick else 60))
 
 
 @dataclass
@@ -295,9 +298,47 @@ def profiles_table(quick: bool, remedies: bool = False) -> bool:
     return met
 
 
+# Real time (--realtime): each profile at the line it is used at. SD25's factory 9600 baud is boosted for the
+# identification (issue 31 item 1): 57600 stands for it.
+REALTIME_ROWS = [("sd25", 57600), ("sdc", 9600), ("is620p", 57600), ("dsx7e", 115200)]
+
+
+def parse_rows(text: str) -> list[tuple[str, int]]:
+    """'sd25:57600,sdc:9600' -> [("sd25", 57600), ("sdc", 9600)]."""
+    rows = []
+    for item in text.split(","):
+        pid, _, baud = item.partition(":")
+        rows.append((pid.strip(), int(baud) if baud else FACTORY_BAUD[pid.strip()]))
+    return rows
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="a smaller grid")
+    ap.add_argument(
+        "--realtime",
+        action="store_true",
+        help="through the CLI in real time against `sim serve` in its own process (bench/realtime.py)",
+    )
+    ap.add_argument("--burner", action="store_true", help="with --realtime: one CPU-burning process beside it")
+    ap.add_argument("--embedded", action="store_true", help="with --realtime: --port sim (the simulator in-process)")
+    ap.add_argument(
+        "--rows",
+        type=parse_rows,
+        default=None,
+        help="with --realtime: PROFILE:BAUD,... (default: " + ",".join(f"{p}:{b}" for p, b in REALTIME_ROWS) + ")",
+    )
+    ap.add_argument(
+        "--machines", type=int, default=None, help="with --realtime: machines per row (default 14, 60 without --quick)"
+    )
+    ap.add_argument(
+        "--draw-seed",
+        type=int,
+        default=16,
+        help="seed of the machines drawn (16: the bench's own; another: a set it has never used)",
+    )
+    ap.add_argument("--tcp-port", type=int, default=0, help="with --realtime: sim serve's port (0: any free one)")
+    ap.add_argument("-v", "--verbose", action="store_true", help="with --realtime: each run's outcome")
     ap.add_argument("--profiles", action="store_true", help="every profile at its factory line speed and 19200")
     ap.add_argument(
         "--remedies",
@@ -306,6 +347,21 @@ def main() -> None:
     )
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
+    if args.realtime:
+        from realtime import realtime_table
+
+        count = args.machines or (14 if args.quick else 60)
+        machines = draws(args.quick, args.draw_seed, count)
+        realtime_table(
+            args.rows or REALTIME_ROWS,
+            machines,
+            line_rate,
+            burner=args.burner,
+            embedded=args.embedded,
+            tcp_port=args.tcp_port,
+            verbose=args.verbose,
+        )
+        return
     if args.profiles:
         profiles_table(args.quick, args.remedies)
         return
