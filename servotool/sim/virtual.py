@@ -48,11 +48,12 @@ def make_motion_setup(sim: SimulatedDrive) -> None:
 @dataclass(frozen=True)
 class HostStalls:
     """A host that stalls now and then before it sends a request (a loaded laptop, a scheduler tick, a USB
-    adapter's latency timer): each request, with probability `rate`, waits a uniform 10 ms..max_s first; seeded."""
+    adapter's latency timer): each request, with probability `rate`, waits a uniform min_s..max_s first; seeded."""
 
     rate: float
     max_s: float = 0.05
     seed: int = 1
+    min_s: float = 0.01
 
 
 class VirtualLink:
@@ -69,7 +70,7 @@ class VirtualLink:
 
     def _stall(self) -> None:
         if self.stalls is not None and self._stall_rng.random() < self.stalls.rate:
-            self.clock.advance(self._stall_rng.uniform(0.01, self.stalls.max_s))
+            self.clock.advance(self._stall_rng.uniform(self.stalls.min_s, self.stalls.max_s))
 
     def _drive(self, unit: int, what: str) -> SimulatedDrive:
         drive = self.drives.get(unit)
