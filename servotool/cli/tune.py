@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -18,11 +19,12 @@ from servotool.model.codec import as_held, raw_to_eng
 from servotool.model.profile import Profile
 from servotool.motion import deadman
 from servotool.ops import eeprom
-from servotool.tuning import gain_search, identify, planning, preflight, step, tune
+from servotool.tuning import budget, gain_search, identify, planning, preflight, step, tune
 from servotool.tuning.control.friction import friction_report
-from servotool.tuning.errors import TuneDeclined
+from servotool.tuning.errors import TravelNeeded, TuneDeclined
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
+DEFAULT_TRAVEL_REV = 2.0
 
 
 def _clean(value: Any) -> Any:
@@ -104,6 +106,19 @@ def _estimate_json(result: identify.Result) -> dict[str, Any]:
         "travel_rev": round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None,
         "time_s": round(result.time_used_s, 2),
         "cycles": result.cycles,
+        **_needs_json(result.plan),
+    }
+
+
+def _needs_json(plan: planning.MotionPlan | None) -> dict[str, Any]:
+    """What the line needed, as said before moving (the motor alone), and the time budget the motion had."""
+    needs = plan.needs if plan is not None else None
+    if needs is None:
+        return {}
+    return {
+        "needed_travel_rev": needs.lightest.travel_rev if needs.lightest.reachable else None,
+        "needed_time_s": _rounded(needs.lightest.time_s, 1) if needs.lightest.reachable else None,
+        "time_budget_s": _rounded(plan.time_budget_s, 1) if plan is not None else None,
     }
 
 
@@ -118,10 +133,10 @@ def inertia(
         None, "--accel-time", help="Ramp time of each move in ms (default: from the link's sampling rate, 100..500 ms)."
     ),
     travel: float = typer.Option(
-        2.0,
+        None,
         "--travel",
-        help="Travel limit: range of axis positions in revolutions. More "
-        "travel, stronger accelerations: a refusal on a slow line says how much would do.",
+        help="Travel limit: range of axis positions in revolutions (default 2). More travel, stronger "
+        "accelerations: before moving servotool says what the line needs, and asks for it once in a terminal.",
     ),
     direction: str = typer.Option(
         "both",
@@ -191,6 +206,8 @@ def inertia(
 
     Gains are changed only with --rigidity or --bandwidth.
     """
+    given_travel = travel is not None
+    travel = travel if travel is not None else DEFAULT_TRAVEL_REV
     _check_options(method, rigidity, bandwidth, no_gains, save_trace)
     if report is not None:
         from servotool.report.tune_report import check_folder
@@ -228,11 +245,12 @@ def inertia(
                 approve_motion=ask.approve_motion,
                 on_proposal=ask.show,
                 approve_write=ask.approve_write,
+                choose_travel=None if yes or given_travel or as_json else ask.choose_travel,
             )
         except TuneDeclined:
             raise typer.Exit(1) from None
         except ServoError as exc:  # refused, tripped, travel exceeded, link lost
-            _failed(exc, report, d.profile, as_json and ask.moving)
+            _failed(exc, report, d.profile, as_json and (ask.moving or isinstance(exc, TravelNeeded)))
             raise
         profile = d.profile
     if report is not None:
@@ -249,6 +267,8 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
         _report(report, refused, profile, None, str(exc))
     if as_json:
         cure = refusal.remedy if refusal is not None else None
+        needed = exc if isinstance(exc, TravelNeeded) else None
+        suggested = cure.suggested_rev if cure is not None else needed.travel_rev if needed is not None else None
         emit_json(
             _clean(
                 {
@@ -257,7 +277,10 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
                     **(_estimate_json(refused) if refused else {}),
                     "ratio": refused.new_ratio if refused else None,
                     "written": False,
-                    "suggested_travel_rev": cure.suggested_rev if cure is not None else None,
+                    "suggested_travel_rev": suggested,
+                    "needed_travel_rev": needed.travel_rev if needed is not None else None,
+                    "needed_time_s": _rounded(needed.time_s, 1) if needed is not None else None,
+                    "moved": needed.moved if needed is not None else True,
                 }
             )
         )
@@ -284,6 +307,8 @@ class _Dialog:
             else "motion: the drive's own identification (its parameters set torque and travel), then host "
             "moves that check its result"
         )
+        if motion is not None and motion.needs is not None:
+            info(f"needs: {motion.needs.words()}")
         if self.step_check:
             info(
                 f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(self.travel):.2f} s forward "
@@ -297,6 +322,17 @@ class _Dialog:
             info(deadman.sentence(self.dead_man))
         self.moving = confirm("Move the axis now?", self.yes)
         return self.moving
+
+    def choose_travel(self, needs: budget.Needs) -> float | None:
+        """Asked once, before moving, where the line needs more travel than the default allows."""
+        light = needs.lightest
+        if not light.reachable or not sys.stdin.isatty():
+            return None
+        info(f"needs: {needs.words()}")
+        if confirm(f"Allow {light.travel_rev:g} rev of travel (the axis must have the room)?", False):
+            self.travel = light.travel_rev
+            return light.travel_rev
+        return None
 
     def show(self, proposal: tune.Proposal) -> None:
         self.moving = False
