@@ -153,7 +153,7 @@ def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
     out, wall = tune(port, profile, baud, env)
     tries = 1
     named = out.get("needed_travel_rev")
-    if not out.get("ok") and named is not None and not out.get("moved", True):
+    if not out.get("ok") and named is not None:  # named before moving, or after the pilot: followed once
         out, more = tune(port, profile, baud, env, float(named))
         wall += more
         tries = 2
