@@ -117,9 +117,8 @@ def test_falling_axis_is_refused_before_any_motion_and_identified_once_a_brake_h
     assert r.code == 2 and "moving with the servo off" in r.err and "pilot" not in r.err
     cli("sim", "reset", "--power-cycle")  # the fallen axis at rest again
     cli("sim", "config", "--brake", "on")
-    r = cli("--port", "sim", "tune", "inertia", "--yes", "--json")
-    assert r.code == 0, r.err
-    assert r.json()["ratio"] == pytest.approx(3.0, rel=0.05)
+    _r, res = tune_ok(cli, "--port", "sim", "tune", "inertia", "--yes")
+    assert near(res, 3.0), res
 
 
 def test_refusal_writes_the_trace_and_a_json_reason(cli, tmp_path):
