@@ -56,6 +56,14 @@ from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, TuneResult, tune_inertia
 
 TRAVEL_REV = 2.0
+# The simulated DSX7E's 500 ms host watchdog lets a dead host's motor run on 9 rev at 1080 rpm: 2 rev of travel leave
+# it 184 rpm (tuning.planning.fit_run_on), too little to identify; its rows get the travel its run-on needs.
+DSX7E_TRAVEL_REV = 12.0
+
+
+def bench_travel(profile_id: str) -> float:
+    """The travel limit a bench row identifies within: 2 rev, or what the drive's dead-man run-on needs."""
+    return DSX7E_TRAVEL_REV if profile_id == "dsx7e" else TRAVEL_REV
 
 
 def fit_brake(plant: Plant) -> None:
@@ -94,7 +102,7 @@ def identify_once(
     brake: bool = True,
     profile_id: str = "dsx7e",
     viscous: float = 0.0005,
-    travel_rev: float = TRAVEL_REV,
+    travel_rev: float | None = None,
     follow: bool = True,
     stalls: HostStalls | None = None,
 ) -> TuneResult:
@@ -104,7 +112,8 @@ def identify_once(
     try:
         return _identify(ratio, friction, gravity, noise, baud, seed, brake, profile_id, viscous, travel_rev, stalls)
     except TravelNeeded as exc:
-        if not follow or not math.isfinite(exc.travel_rev) or exc.travel_rev <= travel_rev:
+        used = travel_rev if travel_rev is not None else bench_travel(profile_id)
+        if not follow or not math.isfinite(exc.travel_rev) or exc.travel_rev <= used:
             raise
         return _identify(
             ratio, friction, gravity, noise, baud, seed, brake, profile_id, viscous, exc.travel_rev, stalls
@@ -121,7 +130,7 @@ def _identify(
     brake: bool,
     profile_id: str,
     viscous: float,
-    travel_rev: float,
+    travel_rev: float | None,
     stalls: HostStalls | None = None,
 ) -> TuneResult:
     profile = load_profile(profile_id)
@@ -140,7 +149,8 @@ def _identify(
     make_motion_setup(sim)
     drive = Drive(VirtualLink([sim], clock, baud, stalls), profile, 1)
     drive.dead_man_waived = True
-    return tune_inertia(drive, TuneRequest(travel_rev=travel_rev, dry_run=True), clock=clock)
+    travel = travel_rev if travel_rev is not None else bench_travel(profile_id)
+    return tune_inertia(drive, TuneRequest(travel_rev=travel, dry_run=True), clock=clock)
 
 
 def line_rate(profile_id: str, baud: int) -> float:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from inertia_accuracy import TRAVEL_REV, fit_brake
+from inertia_accuracy import bench_travel, fit_brake
 
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
@@ -68,7 +68,7 @@ def identify(ratio: float, machine: dict[str, float], baud: int, seed: int, prof
     drive = Drive(VirtualLink([sim], clock, baud), profile, 1)
     drive.dead_man_waived = True  # as --no-dead-man: SD25 and SDC have no dead-man route (the others keep theirs)
     try:
-        r = tune_inertia(drive, TuneRequest(travel_rev=TRAVEL_REV, dry_run=True), clock=clock)
+        r = tune_inertia(drive, TuneRequest(travel_rev=bench_travel(profile_id), dry_run=True), clock=clock)
     except IdentificationRefused as exc:
         return "refused", exc.result.estimate, str(exc).removeprefix("identification refused: ")
     except ServoError as exc:

@@ -148,11 +148,16 @@ def tune(port: str, profile: str, baud: int, env: dict[str, str], travel: float 
         return {"ok": False, "reason": (r.stderr.strip().splitlines() or ["no output"])[-1]}, wall
 
 
+def _value(field: dict | None) -> float | None:
+    """A JSON quantity's number ({"value": ..., "unit": ...}), None for null."""
+    return field.get("value") if isinstance(field, dict) else None
+
+
 def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
     """One machine as a user runs it: once, and where servotool names a travel before moving, once more with it."""
     out, wall = tune(port, profile, baud, env)
     tries = 1
-    named = out.get("needed_travel_rev")
+    named = _value(out.get("needed_travel"))
     if not out.get("ok") and named is not None:  # named before moving, or after the pilot: followed once
         out, more = tune(port, profile, baud, env, float(named))
         wall += more
@@ -161,14 +166,14 @@ def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
         ok=bool(out.get("ok")),
         ratio=out.get("ratio"),
         ratio_std=out.get("ratio_std"),
-        samples_per_s=out.get("samples_per_s"),
-        travel_rev=out.get("travel_rev"),
-        time_s=out.get("time_s"),
+        samples_per_s=_value(out.get("sample_rate")),
+        travel_rev=_value(out.get("travel")),
+        time_s=_value(out.get("time")),
         wall_s=wall,
         reason=out.get("reason") or "",
         notes=list(out.get("notes") or []),
-        named_travel_rev=out.get("needed_travel_rev", named),
-        named_time_s=out.get("needed_time_s"),
+        named_travel_rev=_value(out.get("needed_travel")) or named,
+        named_time_s=_value(out.get("needed_time")),
         tries=tries,
     )
 

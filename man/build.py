@@ -41,16 +41,31 @@ port; the client still speaks real RTU frames with CRC).
 Output that comes from a simulated drive says so once on standard error.
 .PP
 Anything that moves the motor first prints what stops the motor if this program stops (kill, crash, pulled
-cable) and the bound: "if this program stops, the motor stops within X rev (Y s)" (\fBdead_man\fR in \fB\-\-json\fR).
-Ctrl\-C stops at once; speed and travel limits (\fB\-\-travel\fR) are checked before and during motion.
+cable) and the bound: "if this program stops, the motor stops within X rev (Y s)" (\fBdead_man\fR and
+\fBsafety\fR in \fB\-\-json\fR; never hidden by \fB\-q\fR). With a travel limit, the planned travel and that bound
+must fit inside it: an identification or step check lowers its speed until they do, a JOG is refused naming the
+speed that fits.
+However a motion ends (its end, Ctrl\-C, SIGTERM, SIGHUP, a lost line, an error, a failed check) one stop sequence
+runs, which a second Ctrl\-C cannot interrupt: zero speed, rest, the servo back as found, the heartbeat stopped
+and forced inputs released, every parameter the motion wrote (its protections too) put back, then the drive read
+back. The last line says what it read ("stopped, servo off" and the
+values read back) or, where that could not be proven, "COULD NOT CONFIRM THE MOTOR STOPPED" and why, with exit
+status 4.
+.B servotool stop
+stops a drive whatever moved it.
 .TS
 l l l.
 Drive	If the host dies	Bound
-DSX7E	its host watchdog Pn620 (kept alive by Fn032) stops the motor with E25	speed x (Pn620 + ramp/2)
-IS620P	the running multi\-segment position move (H11 segment 1) ends and stops	one segment: 3 beats at speed + stop
-SD25	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR
-SDC	nothing: no Modbus timeout, no bounded route	none: needs \fB\-\-no\-dead\-man\fR
+DSX7E	watchdog Pn620 (fed by Fn032) stops it, E25; simulator only, not in the manual	speed x (Pn620 + ramp/2)
+IS620P	the running multi\-segment position move (H11 segment 1) ends and stops	one segment and one braking
+SD25	nothing: no Modbus timeout; forced DIs ignore wired inputs	none: \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
+SDC	nothing: no Modbus timeout, no bounded route	none: \fB\-\-no\-dead\-man\fR or \fB\-\-heartbeat\fR
 .TE
+With \fB\-\-heartbeat dtr|rts\fR a control line of the USB\-RS485 adapter toggles at every beat of a motion for a
+retriggerable watchdog relay on the drive's main contactor; the bound is then the relay's time
+(\fB\-\-heartbeat\-timeout\-ms\fR). For a motion's duration servotool also sets the drive's own protections
+where the profile maps them (speed limit, SD25's overtravel fence and locked\-rotor trip, SDC's saturation trip) and
+puts them back; SD25's DIs are forced while it moves, so its wired inputs are ignored (main power still stops it).
 The IS620P route is unverified (the start of a segment is the general IS620P manual's); see
 \fBservotool profiles show \fIID\fB \-\-unverified\fR for each profile's route, its manual lines and the simulator's
 extensions. The simulator stops nothing the manual does not: \fBsim config \-\-fake\-watchdog on\fR (NOT REAL, off
@@ -70,8 +85,9 @@ cannot tell warns once.
 TAIL = r""".SH PLAN FILES
 A plan for \fBservotool run\fR is YAML (loaded safely: values are data, nothing but these steps can run).
 Optional top keys \fBport\fR, \fBprofile\fR, \fBbaud\fR, \fBparity\fR, \fBstopbits\fR, \fBtimeout\fR,
-\fBretries\fR (the command line wins) and \fBunits\fR (a list of unit ids: several axes on one line; each step
-runs on every axis in turn, \fB\-\-unit\fR picks one of them); then \fBsteps\fR, a list run in order:
+\fBretries\fR (the command line wins), \fBunits\fR (a list of unit ids: several axes on one line; each step
+runs on every axis in turn, \fB\-\-unit\fR picks one of them), \fBallow_outside\fR and \fBoverwrite\fR (see
+below); then \fBsteps\fR, a list run in order:
 .TP
 .B "set: {CODE: VALUE, ...}"
 Write parameters in engineering units, verified by read\-back; unchanged values are not rewritten.
@@ -80,18 +96,20 @@ Write parameters in engineering units, verified by read\-back; unchanged values 
 Read parameters or monitors and fail (exit 3) unless each is within the bounds (a bare VALUE allows half a
 resolution step).
 .TP
-.BR "backup: FILE" ", " "restore: FILE"
-Back up to or restore from FILE, relative to the plan; \fB{unit}\fR in the name is replaced by the unit id, and
-with several units a name without it gets \fB\-unit\fIN\fR before its suffix.
+.BR "backup: FILE | {file: FILE, overwrite: BOOL}" ", " "restore: FILE"
+Back up to or restore from FILE; \fB{unit}\fR in the name is replaced by the unit id, and with several units a
+name without it gets \fB\-unit\fIN\fR before its suffix.
 .TP
 .B "jog: {speed: RPM, time: S, max_travel: REV, no_dead_man: BOOL}"
 A timed JOG (negative speed: reverse) with the same checks and dead\-man as \fBservotool jog\fR;
 \fBno_dead_man: true\fR acknowledges a drive without one (SD25, SDC), as \fB\-\-no\-dead\-man\fR does.
 .TP
 .B "tune inertia: {rigidity: N | bandwidth: HZ, travel: REV, max_speed: RPM, \
-accel_time: MS, direction: D, repeats: N, gains: BOOL, report: DIR, no_dead_man: BOOL}"
+accel_time: MS, direction: D, repeats: N, gains: BOOL, check: BOOL, report: DIR, no_dead_man: BOOL}"
 Identify the load inertia and write it, then the matching gains only with \fBrigidity\fR or \fBbandwidth\fR
-(or \fBgains: true\fR: at the drive's current level); without them the gains are left as they are. \fBreport\fR
+(or \fBgains: true\fR: at the drive's current level); without them the gains are left as they are. Gains written
+are step-checked: a failed check writes the previous ones back and fails the step, with the reason in the report;
+\fBcheck: false\fR leaves the check out. \fBreport\fR
 writes the same folder of charts as \fBtune inertia \-\-report\fR (beside the plan, one per axis).
 .TP
 .BR "wait: S" ", " "alarm clear:" ", " "prompt: QUESTION"
@@ -102,9 +120,18 @@ Make the plan's writes survive a power cycle the way the drive does it: its save
 with its EEPROM switch set (nothing to do on drives that store every write).
 .PP
 Any step may carry \fBunit: N\fR or a list to run on some axes only.
-The whole plan is checked against the profile before the first step runs; an error names the plan's line.
+A file a plan names is relative to the plan's folder (\fB~\fR is the home folder) and must stay inside that
+folder, symbolic links followed, unless the plan says \fBallow_outside: true\fR; a file (or report folder) that
+exists is replaced only where the step or the plan says \fBoverwrite: true\fR, or \fB\-\-force\fR does.
+The whole plan is checked before the first step runs, the same way by \fB\-\-dry\-run\fR, which also lists
+every file the run would write: each step against the profile, each file (outside the folder, existing without
+overwrite, written twice, a restore whose file neither exists nor is written by an earlier step); every
+problem is reported at once and names the plan's line.
+Once the port is open, before anything is written, the run also reads the settings each motion step needs
+(the profile's motion setup, with what earlier \fBset\fR steps write) and refuses a step the drive is not set up for.
 A run writes a JSON report (steps, values written, results, timing) next to the plan as
-\fIPLAN\fB.report.json\fR or to \fB\-\-report\fR, also when it fails or is interrupted.
+\fIPLAN\fB.report.json\fR (replaced by each run) or to \fB\-\-report\fR (an existing file that is not a plan
+report only with \fB\-\-force\fR), also when it fails or is interrupted.
 .SH SHELL COMPLETION
 \fBservotool \-\-install\-completion\fR installs completion for the current shell;
 \fBservotool \-\-show\-completion\fR prints the script instead.
@@ -146,6 +173,8 @@ Success.
 .TP
 .B 1
 Device or I/O error: port, timeout, CRC, Modbus exception, a motion or identification that failed.
+Also a difference found: \fBparam diff\fR, \fBparam apply \-\-check\fR, \fBfleet drift\fR and
+\fBfleet apply \-\-check\fR when a drive differs.
 .TP
 .B 2
 Usage or validation error: unknown code, value out of range, bad file or plan, missing confirmation, a drive
@@ -155,8 +184,16 @@ Nothing is written to a drive before all values of a command are validated.
 .B 3
 Verification mismatch: a value read back differs, or an expectation or alarm clear failed.
 .TP
+.B 4
+A motion's stop could not be proven: reading the drive back did not show the motor at rest, the servo as found and
+the motion's settings as they were (or the drive did not answer); the last line says so in capitals. It wins over
+every other status.
+.TP
+.B 5
+Some drives of a \fBfleet\fR command failed; the others were done (the table and \fB\-\-json\fR say which).
+.TP
 .B 130
-Interrupted (Ctrl\-C); any motion was stopped first.
+Interrupted (Ctrl\-C, SIGTERM, SIGHUP); any motion was stopped first, and the last line says what the drive read.
 """
 
 SEE_ALSO = r""".SH SEE ALSO

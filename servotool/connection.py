@@ -21,7 +21,9 @@ SIM_DEFAULT_PROFILE = "dsx7e"
 
 
 ECHO = {"auto": None, "on": True, "off": False}
-FLOATS = ("timeout", "turnaround_ms", "silence_ms", "travel")
+FLOATS = ("timeout", "turnaround_ms", "silence_ms", "travel", "heartbeat_timeout_ms")
+HEARTBEAT_LINES = ("dtr", "rts")
+HEARTBEAT_TIMEOUT_MS = 1000.0  # the relay's time when none is given (README: the wiring recipe)
 
 
 PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
@@ -44,6 +46,9 @@ class ConnectOptions:
     echo: str | None = None  # auto, on or off
     turnaround_ms: float | None = None
     silence_ms: float | None = None
+    heartbeat: str | None = None  # dtr or rts: a control line toggled at each keep-alive beat (a watchdog relay)
+    heartbeat_timeout_ms: float | None = None  # the relay's time
+    boost: bool | None = None  # raise the line where the profile allows (True: even beside other devices)
 
 
 ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
@@ -52,7 +57,7 @@ ENV = {f.name: f"SERVOTOOL_{f.name.upper()}" for f in fields(ConnectOptions)}
 def _convert(name: str, value: Any, where: str) -> Any:
     if value is None or value == "":
         return None
-    if name == "no_identity_check":
+    if name in ("no_identity_check", "boost"):
         return _flag(value, where)
     if name == "echo" and isinstance(value, bool):  # YAML reads a bare on/off as a boolean
         return "on" if value else "off"
@@ -141,6 +146,8 @@ class Resolved:
     travel: float | None = None  # soft travel limit (rev) from the environment or config file
     identity_check: bool = True  # check the drive answering against the profile before any write
     confirmed: frozenset[int] = frozenset()  # units whose identity checks were read when the profile was found
+    heartbeat_timeout_s: float | None = None  # the watchdog relay's time, where settings.heartbeat names a line
+    boost: bool | None = None  # a faster line for long exchanges: True even beside other devices, False never
 
     @property
     def simulated(self) -> bool:
@@ -173,6 +180,7 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         # longer than a real drive ever takes to answer
         timeout=opts.timeout if opts.timeout is not None else (2.0 if port == SIM_PORT else REAL_TIMEOUT),
         retries=opts.retries if opts.retries is not None else (0 if port == SIM_PORT else REAL_RETRIES),
+        heartbeat=heartbeat_line(opts, port),
         **rs485(opts),
     )
     if not (math.isfinite(settings.timeout) and 0 < settings.timeout <= 3600):
@@ -187,7 +195,35 @@ def resolve(cli: ConnectOptions, *, need_port: bool = True) -> Resolved:
         check_unit(opts.unit if opts.unit is not None else profile.default_unit),
         identity_check=not opts.no_identity_check,
         travel=opts.travel,
+        heartbeat_timeout_s=heartbeat_timeout_s(opts) if settings.heartbeat else None,
+        boost=opts.boost,
     )
+
+
+def heartbeat_line(opts: ConnectOptions, port: str) -> str | None:
+    """The control line the heartbeat toggles (dtr, rts), None without one; UsageError for a bad name or a port
+    with no control lines (the simulator, RTU over TCP)."""
+    if opts.heartbeat is None:
+        if opts.heartbeat_timeout_ms is not None:
+            raise UsageError("--heartbeat-timeout-ms goes with --heartbeat dtr|rts")
+        return None
+    line = opts.heartbeat.strip().lower()
+    if line not in HEARTBEAT_LINES:
+        raise UsageError(f"bad heartbeat '{opts.heartbeat}': use dtr or rts (a control line of the serial adapter)")
+    if port == SIM_PORT or port.startswith("tcp://"):
+        raise UsageError(
+            f"--heartbeat {line} toggles a control line of a USB-RS485 adapter for a watchdog relay: {port} has "
+            "none (the simulator and RTU over TCP have no control lines)"
+        )
+    return line
+
+
+def heartbeat_timeout_s(opts: ConnectOptions) -> float:
+    """The watchdog relay's time in seconds (default HEARTBEAT_TIMEOUT_MS); UsageError outside 200..60000 ms."""
+    ms = opts.heartbeat_timeout_ms if opts.heartbeat_timeout_ms is not None else HEARTBEAT_TIMEOUT_MS
+    if not (math.isfinite(ms) and 200 <= ms <= 60_000):
+        raise UsageError(f"bad heartbeat-timeout-ms {ms:g}: must be 200..60000 ms (the relay's time)")
+    return ms / 1000.0
 
 
 def rs485(opts: ConnectOptions) -> dict[str, Any]:

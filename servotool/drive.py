@@ -7,10 +7,11 @@ from dataclasses import dataclass
 from itertools import pairwise
 
 from servotool.errors import DeviceError, ModbusException, UsageError, VerifyError
-from servotool.link.ports import Link
+from servotool.link.ports import ControlLine, Link
 from servotool.model.codec import (
     fields_json,
     format_value,
+    json_text,
     json_value,
     parse_value,
     raw_to_eng,
@@ -50,6 +51,8 @@ class Reading:
             "raw": self.raw,
             "unit": e.unit,
         }
+        if (text := json_text(e, self.raw)) is not None:
+            out["text"] = text
         if (fields := fields_json(e, self.raw)) is not None:
             out["fields"] = fields
             meanings = {f: m for f, v in fields.items() if (m := e.field_enums.get(f.upper(), {}).get(v))}
@@ -59,6 +62,8 @@ class Reading:
             out["meaning"] = e.enum[self.raw]
         if e.default is not None:
             out["default"] = json_value(e, e.default)
+            if (text := json_text(e, e.default)) is not None:
+                out["default_text"] = text
             out["changed"] = self.changed
         return out
 
@@ -143,6 +148,10 @@ class Drive:
         self.link = link
         # The user acknowledged host motion without a dead-man on this drive (--no-dead-man): see motion/deadman.
         self.dead_man_waived = False
+        # A hardware dead-man (--heartbeat): the adapter's control line a watchdog relay watches, toggled at each
+        # keep-alive beat (motion/keepalive), and the relay's time in seconds.
+        self.heartbeat_line: ControlLine | None = None
+        self.heartbeat_timeout_s: float | None = None
         self.profile = profile
         self.unit = unit
         self.port = port

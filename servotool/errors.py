@@ -85,6 +85,17 @@ class VerifyError(ServoError):
     exit_code = 3
 
 
+class StopUnconfirmed(ServoError):
+    """A motion ended, but reading the drive back could not prove the motor at rest, the servo as found and the
+    motion's settings as they were (`report`: servotool.motion.stop.StopReport). Exit 4, over every other code."""
+
+    exit_code = 4
+
+    def __init__(self, message: str, report: object) -> None:
+        super().__init__(message)
+        self.stop_report = report
+
+
 class FileProblem(UsageError):
     """A file that cannot be used as it is: 'FILE: [line N: ]PROBLEM' (cannot read, not UTF-8, invalid YAML)."""
 

@@ -7,7 +7,9 @@ the usual places on Windows and macOS); SERVOTOOL_CONFIG, SERVOTOOL_SIM_DIR and 
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -84,7 +86,20 @@ def write_atomic(path: Path, text: str | bytes, *, replace: bool = True, durable
     replace=False an existing file is never replaced, not even one that appears meanwhile: FileExistsError.
     durable=False skips the fsync (for state rewritten many times a second). Returns the new file's stat.
     Other failures are OSError, for the caller to word.
+
+    A target that exists and is no regular file (/dev/null, /dev/stdout, a FIFO, a terminal) is written through,
+    not renamed over: renaming a file over /dev/null, as root, would replace the device for every program.
     """
+    try:
+        found = path.stat()
+    except (FileNotFoundError, NotADirectoryError):
+        found = None
+    if found is not None and not stat.S_ISREG(found.st_mode) and not stat.S_ISDIR(found.st_mode):
+        if not replace:
+            raise FileExistsError(errno.EEXIST, "exists", str(path))
+        with open(path, "wb") if isinstance(text, bytes) else open(path, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            return os.fstat(fh.fileno())
     path.parent.mkdir(parents=True, exist_ok=True)
     import tempfile
 

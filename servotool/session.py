@@ -91,22 +91,36 @@ class Bus:
             if self.sim:
                 self.sim.close()
             raise
+        if self.sim:  # the simulated drives hear the speed the master speaks (a line boost changes it)
+            self.link.line_listeners.append(self.sim.host_speaks)
         self.checked: set[int] = set(resolved.confirmed)
 
-    def drives(self, units: list[int] | None = None) -> list[Drive]:
+    def drives(self, units: list[int] | None = None, bare: bool = False) -> list[Drive]:
         """A Drive for each unit (the bus's own by default), on this link; UsageError for a unit the embedded
-        simulator does not serve."""
+        simulator does not serve. bare: nothing read or written first, neither a raised line nor the identity put
+        right nor a journal (`servotool stop`: nothing may fail before its first write); the next command does
+        them."""
         from servotool.files import sim_state_dir
-        from servotool.ops.journal import recover_at_start
+        from servotool.ops.journal import boost_record, recover_at_start
 
         units = units or self.units
         if self.sim and (others := [u for u in units if u not in self.units]):
             served = ",".join(map(str, self.units))
             raise UsageError(f"the simulated drives here are unit {served}, not {','.join(map(str, others))}")
         drives = [Drive(self.link, self.resolved.profile, u, port=self.port) for u in units]
+        line = self.link.control_line()
+        for d in drives:  # one line for the bus: a relay per adapter, wired to every drive's enable or contactor
+            d.heartbeat_line, d.heartbeat_timeout_s = line, self.resolved.heartbeat_timeout_s
+        if bare:
+            return drives
+        unchecked = [d for d in drives if d.unit not in self.checked]
+        raised = self.resolved.profile.boost.available and any(boost_record(d) for d in unchecked)
+        if raised:  # a line a killed process left raised comes first (ops.boost loads only then)
+            from servotool.ops.boost import recover_boost
+
+            recover_boost(unchecked, self.notice)
         # Before anything is written: the drive answering must be the one the profile describes. The embedded
         # simulator is built from the profile itself.
-        unchecked = [d for d in drives if d.unit not in self.checked]
         if self.resolved.identity_check and not self.resolved.simulated and unchecked:
             from servotool.ops.identity import confirm, warning_text
             from servotool.ops.journal import know_identity
@@ -135,11 +149,13 @@ def open_drives(
     units: list[int] | None = None,
     trace: Trace | None = None,
     notice: Callable[[str], None] | None = None,
+    bare: bool = False,
 ) -> Iterator[list[Drive]]:
-    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit."""
+    """Open the link (starting the embedded simulator for --port sim) and yield one Drive per unit. bare: no
+    identity check and no journal recovery first (`servotool stop`: nothing may fail before its first write)."""
     bus = Bus(resolved, units, trace, notice)
     try:
-        yield bus.drives()
+        yield bus.drives(bare=bare)
     finally:
         bus.close()
 

@@ -50,10 +50,11 @@ def factory_line(sim_dir, monkeypatch) -> Path:
 
 @pytest.fixture
 def cli(sim_dir):
-    """Run `python -m servotool ARGS` as a user would; returns exit code, stdout, stderr."""
+    """Run `python -m servotool ARGS` as a user would, on a screen wide enough that nothing wraps (stdout and
+    stderr are wrapped to COLUMNS; tests of the width give their own); returns exit code, stdout, stderr."""
 
     def run(*args: str, input: str | None = None, env: dict[str, str] | None = None, timeout: float = 120) -> Result:
-        full_env = {**os.environ, "COLUMNS": "200", **(env or {})}
+        full_env = {**os.environ, "COLUMNS": "1000", **(env or {})}
         proc = subprocess.run(
             [sys.executable, "-m", "servotool", *args],
             capture_output=True,

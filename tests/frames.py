@@ -33,3 +33,20 @@ def parse_response_frame(frame: bytes) -> tuple[int, int, list[int]]:
     if isinstance(pdu, ExceptionResponse):
         raise ModbusException(pdu.exception_code, f"unit {pdu.dev_id}")
     return pdu.dev_id, pdu.function_code, list(getattr(pdu, "registers", []))
+
+
+def plain_read(port: str, address: int, count: int, unit: int = 1) -> list[int]:
+    """Holding registers read by pymodbus' own client over RTU on TCP (a served simulator's tcp://HOST:N port):
+    an independent reader, without servotool's link or its recovery."""
+    from pymodbus import FramerType
+    from pymodbus.client import ModbusTcpClient
+
+    host, _, number = port.removeprefix("tcp://").rpartition(":")
+    client = ModbusTcpClient(host, port=int(number), framer=FramerType.RTU, timeout=2)
+    try:
+        assert client.connect()
+        reply = client.read_holding_registers(address, count=count, device_id=unit)
+        assert not reply.isError(), reply
+        return list(reply.registers)
+    finally:
+        client.close()

@@ -53,6 +53,26 @@ def test_an_atomic_write_replaces_only_when_allowed_and_leaves_no_temporary_file
         assert path.stat().st_mode & 0o777 == 0o600  # private, as mkstemp makes it
 
 
+@pytest.mark.skipif(os.name != "posix", reason="a terminal device by path")
+def test_an_atomic_write_to_a_device_writes_through_it_and_leaves_the_device(tmp_path):
+    """`param backup -o /dev/null --force` as root once renamed a regular file over /dev/null: a device (here a
+    terminal, as harmless to write) is written through, and stays a device."""
+    import stat
+
+    master, slave = os.openpty()
+    try:
+        device = Path(os.ttyname(slave))
+        files.write_atomic(device, b"through\n")
+        assert stat.S_ISCHR(device.stat().st_mode)
+        assert os.read(master, 100).replace(b"\r", b"") == b"through\n"
+        with pytest.raises(FileExistsError):
+            files.write_atomic(device, b"again\n", replace=False)
+        assert not list(device.parent.glob(f".{device.name}.*"))  # no temporary file beside it
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
 BROKEN = "a: [1, 2\nb: 3\n"
 
 

@@ -27,6 +27,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("servotool.report",),  # pictures of measurements and tune results (plan steps write tune reports)
     ("servotool.commission",),
     ("servotool.session",),
+    ("servotool.fleet",),  # many buses at once, a worker each, on sessions (issue 35)
     ("servotool.cli", "servotool.__main__"),
 )
 # Known upward imports still to be removed, each with why it exists.

@@ -7,8 +7,9 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from servotool.cli.common import JSON_OPT, confirm, drive, resolved, state
+from servotool.cli.common import JSON_OPT, boosted, confirm, drive, resolved, state
 from servotool.cli.render import emit_json, err, info, out, progress, table, warn
+from servotool.cli.values import footnote, json_mark, texts, unit_text
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import format_value, json_value
 from servotool.model.loader import load_profile
@@ -42,28 +43,52 @@ def backup_cmd(
         help="yaml (checksummed; the default) or csv (for a spreadsheet; "
         "restore reads it too). Default: from the file name's suffix.",
     ),
+    snapshot: bool = typer.Option(
+        False,
+        "--snapshot",
+        help="A snapshot for version control: no time stamp or checksum, one line per value with its reading as a "
+        "comment, so a diff of two shows only what changed (default name PROFILE-unitN.yaml).",
+    ),
+    machine: str = typer.Option(
+        None, "--machine", help="The machine a snapshot names in its header. Env: SERVOTOOL_MACHINE."
+    ),
     as_json: bool = JSON_OPT,
 ) -> None:
     """Save every readable parameter (and the drive's identity) to a checksummed YAML file, or a CSV."""
+    import os
+
     from servotool.ops import backup
     from servotool.ops.params import select
 
     kind = (fmt or (output.suffix.lstrip(".") if output is not None and output.suffix else "yaml")).lower()
     if kind not in ("yaml", "yml", "csv"):
         raise UsageError(f"--format must be yaml or csv, not '{fmt or kind}'")
+    if snapshot and kind == "csv":
+        raise UsageError("a snapshot is YAML: give --snapshot or --format csv, not both")
+    machine = machine or os.environ.get("SERVOTOOL_MACHINE") or ""
+    if machine and not snapshot:
+        raise UsageError("--machine names the machine in a snapshot's header: give --snapshot too")
     backup.check_output(output or Path(f"new.{kind}"), force=force)  # before reading the drive (24 s at 1200 Bd)
     with drive(ctx) as d:
         entries = select(d.profile)
-        with progress("reading parameters", len(entries), enabled=not as_json) as advance:
+        with (
+            boosted(ctx, [d], "the backup"),
+            progress("reading parameters", len(entries), enabled=not as_json) as advance,
+        ):
             b = backup.take(d, progress=advance)
         suffix = "csv" if kind == "csv" else "yaml"
-        path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
-        backup.save(b, d.profile, path, force=force, fmt=suffix)
+        if snapshot:
+            b.machine = machine
+            path = output or Path(f"{d.profile.id}-unit{d.unit}.yaml")
+            backup.check_output(path, force=force)
+        else:
+            path = output or Path(f"{d.profile.id}-unit{d.unit}-{b.created[:19].replace(':', '')}.{suffix}")
+        backup.save(b, d.profile, path, force=force, fmt="snapshot" if snapshot else suffix)
     if as_json:
         emit_json(
             {
                 "file": str(path),
-                "format": "csv" if kind == "csv" else "yaml",
+                "format": "snapshot" if snapshot else "csv" if kind == "csv" else "yaml",
                 "entries": len(b.values),
                 "checksum": b.checksum(),
                 "identity": b.identity,
@@ -91,7 +116,8 @@ def diff_cmd(
 ) -> None:
     """Differences between the drive and a file, two files, a file or the drive and the factory defaults.
 
-    A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning.
+    A diff writes nothing, so an edited file or one of another model is compared anyway, with a warning. Exit
+    status 0 when they are equal, 1 when they differ (for scripts and CI).
     """
     from servotool.ops import backup
     from servotool.ops.eeprom import compared_memory
@@ -106,12 +132,15 @@ def diff_cmd(
             profile = d.profile
             current = _read_all(d, as_json)
             missing = list(d.missing)
-        _show_diff(
-            backup.diff(profile, current, backup.defaults(profile)),
-            ("drive", "factory default"),
-            missing,
-            as_json,
-            compared_memory(profile),
+        _differ(
+            _show_diff(
+                profile,
+                backup.diff(profile, current, backup.defaults(profile)),
+                ("drive", "factory default"),
+                missing,
+                as_json,
+                compared_memory(profile),
+            )
         )
         return
 
@@ -141,7 +170,13 @@ def diff_cmd(
         labels = ("drive", str(file))
         diffs = [x for x in backup.diff(profile, current, a.values) if x.entry.code not in missing]
         compared = compared_memory(profile)
-    _show_diff(diffs, labels, missing, as_json, compared)
+    _differ(_show_diff(profile, diffs, labels, missing, as_json, compared))
+
+
+def _differ(differences: int) -> None:
+    """Exit 1 when a comparison found differences (0 when equal), as diff(1) does."""
+    if differences:
+        raise typer.Exit(1)
 
 
 def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
@@ -153,17 +188,20 @@ def _read_all(d: Drive, as_json: bool) -> dict[str, int]:
 
 
 def _show_diff(
+    profile: Profile,
     diffs: list[backup.Difference],
     labels: tuple[str, str],
     missing: list[str],
     as_json: bool,
     compared: str | None = None,
-) -> None:
-    """The differences; compared names the drive's memory a drive diff read (RAM, which may not be EEPROM)."""
+) -> int:
+    """The differences (returns how many); compared names the drive's memory a drive diff read (RAM, which may not
+    be EEPROM)."""
     if as_json:
-        data = {"a": labels[0], "b": labels[1], "differences": [x.as_json() for x in diffs], "missing": missing}
+        differences = [{**x.as_json(), "value_unverified": json_mark(profile, x.entry)} for x in diffs]
+        data = {"a": labels[0], "b": labels[1], "differences": differences, "missing": missing}
         emit_json({**data, **({"compared": compared} if compared else {})})
-        return
+        return len(diffs)
     if compared == "RAM":
         info(
             "compared with the drive's RAM: what EEPROM holds (what a power cycle brings back) cannot be read over "
@@ -175,7 +213,7 @@ def _show_diff(
     labels = (drive or labels[0], labels[1])
     if not diffs:
         out.print(f"no differences between {labels[0]} and {labels[1]}", markup=False)
-        return
+        return 0
     t = table("Code", "Name", labels[0], labels[1], "Unit", "Needs")
     for x in diffs:
         e = x.entry
@@ -184,10 +222,13 @@ def _show_diff(
             e.name,
             "" if x.a is None else format_value(e, x.a),
             "" if x.b is None else format_value(e, x.b),
-            e.unit,
+            unit_text(profile, e),
             MARK.get(e.effect, ""),
         )
     out.print(t)
+    if (note := footnote(profile, [x.entry for x in diffs])) is not None:
+        out.print(note, markup=False)
+    return len(diffs)
 
 
 @app.command("restore")
@@ -214,27 +255,29 @@ def restore_cmd(
     """
     from servotool.ops import backup, restore
     from servotool.ops.eeprom import compared_memory
-    from servotool.ops.params import select
+    from servotool.ops.params import read_settings, select
 
     profile = resolved(ctx).profile
     b = backup.load(file, profile, force=force)  # every file problem is refused before connecting
     for w in b.warnings:
         warn(w)
-    with drive(ctx) as d:
+    speed = profile.boost.code if profile.boost.available else None
+    names_speed = speed is not None and any(profile.entry(c).code == speed for c in include or [])
+    with drive(ctx) as d, boosted(ctx, [d], "the restore", allow=not names_speed):
         entries = select(d.profile)
         with progress("reading the drive", len(entries), enabled=not as_json) as advance:
-            current = {r.entry.code: r.raw for r in d.read_entries(entries, partial=True, progress=advance)}
+            current = read_settings(d, progress=advance)
         plan = restore.restore_changes(d.profile, b, current, only=only, include=include or [], ram_only=ram_only)
         compared = compared_memory(d.profile)
         if not as_json:
-            _show_plan(plan, compared)
+            _show_plan(d.profile, plan, compared)
         if dry_run or plan.empty:
             if as_json:
                 emit_json(
                     {
                         "dry_run": dry_run,
                         "compared": compared,
-                        "changes": _changes_json(plan),
+                        "changes": _changes_json(d.profile, plan),
                         "store_again": [e.code for e, _ in plan.again],
                         "written": [],
                         "stored_again": [],
@@ -259,7 +302,7 @@ def restore_cmd(
             {
                 "dry_run": False,
                 "compared": compared,
-                "changes": _changes_json(plan),
+                "changes": _changes_json(d.profile, plan),
                 "store_again": [e.code for e, _ in plan.again],
                 "written": [e.code for e in report.written],
                 "stored_again": [e.code for e in report.stored_again],
@@ -290,14 +333,22 @@ def restore_cmd(
         out.print("power-cycle the drive for: " + ", ".join(e.code for e in plan.needs_power_cycle), markup=False)
 
 
-def _changes_json(plan: restore.RestoreChanges) -> list[dict[str, object]]:
+def _changes_json(profile: Profile, plan: restore.RestoreChanges) -> list[dict[str, object]]:
     return [
-        {"code": e.code, "old": json_value(e, old), "new": json_value(e, new), "unit": e.unit, "effect": e.effect}
+        {
+            "code": e.code,
+            "old": json_value(e, old),
+            "new": json_value(e, new),
+            **texts(e, old=old, new=new),
+            "unit": e.unit,
+            "effect": e.effect,
+            "value_unverified": json_mark(profile, e),
+        }
         for e, old, new in plan.changes
     ]
 
 
-def _show_plan(plan: restore.RestoreChanges, compared: str) -> None:
+def _show_plan(profile: Profile, plan: restore.RestoreChanges, compared: str) -> None:
     if plan.changes:
         t = table(
             "Code",
@@ -309,8 +360,17 @@ def _show_plan(plan: restore.RestoreChanges, compared: str) -> None:
             title=f"{count(len(plan.changes), 'change')}, in order",
         )
         for e, old, new in plan.changes:
-            t.add_row(e.code, e.name, format_value(e, old), format_value(e, new), e.unit, MARK.get(e.effect, ""))
+            t.add_row(
+                e.code,
+                e.name,
+                format_value(e, old),
+                format_value(e, new),
+                unit_text(profile, e),
+                MARK.get(e.effect, ""),
+            )
         out.print(t)
+        if (note := footnote(profile, [e for e, _, _ in plan.changes])) is not None:
+            out.print(note, markup=False)
     if plan.again:
         info(
             f"and {count(len(plan.again), 'value')} the drive's RAM already holds, written again under the EEPROM "

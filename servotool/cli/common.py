@@ -17,6 +17,7 @@ from servotool.errors import UsageError
 from servotool.session import Bus, open_drives, resolve_or_find
 
 if TYPE_CHECKING:
+    from servotool.ops.boost import BoostFacts
     from servotool.ops.scan import Found
 
 
@@ -110,18 +111,20 @@ def drive(ctx: typer.Context) -> Iterator[Drive]:
 
 
 @contextmanager
-def _drives(ctx: typer.Context, units: list[int] | None) -> Iterator[list[Drive]]:
+def _drives(ctx: typer.Context, units: list[int] | None, bare: bool = False) -> Iterator[list[Drive]]:
     res = resolved(ctx)
     if (bus := state(ctx).bus) is not None:
-        yield bus.drives(units or [res.unit])
+        yield bus.drives(units or [res.unit], bare=bare)
         return
-    with open_drives(res, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)) as found:
+    trace = trace_frame if Verbosity.level > 0 else None
+    with open_drives(res, units, trace=trace, notice=notice_for(ctx), bare=bare) as found:
         yield found
 
 
 @contextmanager
-def drives(ctx: typer.Context, units: list[int]) -> Iterator[list[Drive]]:
-    with _drives(ctx, units) as found:
+def drives(ctx: typer.Context, units: list[int], bare: bool = False) -> Iterator[list[Drive]]:
+    """Drives for these units (in the shell, on its open port); bare: see session.Bus.drives."""
+    with _drives(ctx, units, bare) as found:
         yield found
 
 
@@ -140,6 +143,22 @@ def drives_for(ctx: typer.Context, res: Resolved, units: list[int]) -> Iterator[
         return
     with open_drives(res, units, trace=trace_frame if Verbosity.level > 0 else None, notice=notice_for(ctx)) as found:
         yield found
+
+
+@contextmanager
+def boosted(
+    ctx: typer.Context, found: list[Drive], what: str, *, allow: bool = True, res: Resolved | None = None
+) -> Iterator[BoostFacts]:
+    """The line raised for a long exchange (identification, trace, backup, restore) as --boost/--no-boost and the
+    profile allow (ops.boost); allow=False keeps the factory line (a restore that writes the baud entry). res: the
+    options a command resolved itself (a plan's)."""
+    from servotool.ops.boost import line_boost
+
+    res = res or resolved(ctx)
+    with line_boost(
+        found, res.boost if allow else False, sole=res.simulated, notice=notice_for(ctx), what=what
+    ) as facts:
+        yield facts
 
 
 def confirm(question: str, yes: bool) -> bool:

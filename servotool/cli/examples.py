@@ -20,7 +20,11 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
     ("param list", "servotool --port sim param list --changed", "Only what differs from the factory default."),
     ("param backup", "servotool --port sim param backup -o axis1.yaml", "Every parameter to a checksummed file."),
     ("param diff", "servotool --port sim param diff axis1.yaml", "The drive against a backup."),
-    ("param diff", "servotool --port sim param diff --factory", "The drive against its factory defaults."),
+    (
+        "param diff",
+        "servotool --port sim param diff --factory",
+        "The drive against its factory defaults; they differ (exit 1).",
+    ),
     ("param restore", "servotool --port sim param restore axis1.yaml --dry-run", "What a restore would write."),
     ("param restore", "servotool --port sim param restore axis1.yaml --yes", "Write the differences, verified."),
     ("raw read", "servotool --port sim raw read 0x2100 2", "Two registers by address, FC03."),
@@ -30,6 +34,8 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
     ("jog", "servotool --port sim jog --speed 300 --time 2", "JOG forward at 300 rpm for 2 s."),
     ("param set", "servotool --port sim -P sdc param set PN4=3", "SDC in JOG mode, as its jog needs."),
     ("jog", "servotool --port sim -P sdc jog -s 100 -t 1 --no-dead-man", "SDC has no dead-man: acknowledge it."),
+    ("stop", "servotool --port sim stop", "Zero speed and servo off, read back (exit 4 if unproven)."),
+    ("stop", "servotool --port sim -P sd25 stop --json", "SD25: its forced inputs released too (So-58)."),
     ("trace", "servotool --port sim trace Un000 Un002 --duration 0.5 -o start.csv", "Half a second, at once."),
     (
         "trace",
@@ -51,8 +57,39 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
         "Identify, write the ratio and gains; charts in the folder tune-report.",
     ),
     ("param reset", "servotool --port sim param reset --yes", "Factory defaults, after an automatic backup."),
+    (
+        "param apply",
+        "servotool --port sim param apply examples/golden-gains.yaml --check --diff",
+        "What the file would change, before/after; nothing written (exit 1).",
+    ),
+    (
+        "param apply",
+        "servotool --port sim param apply examples/golden-gains.yaml",
+        "Write only what differs, read back: changed or unchanged.",
+    ),
     ("sim reset", "servotool sim reset -P sd25 --power-cycle", "Power-cycle the simulated SD25."),
     ("run", "servotool run examples/commission.yaml --dry-run", "Check a plan against the profile; touch nothing."),
+    (
+        "fleet backup",
+        "servotool fleet backup examples/fleet.yaml -o snapshots",
+        "Snapshot every machine's drives at once, a worker per bus.",
+    ),
+    (
+        "fleet apply",
+        "servotool fleet apply examples/fleet.yaml --check",
+        "What each drive's golden file would change (exit 1).",
+    ),
+    (
+        "fleet apply",
+        "servotool fleet apply examples/fleet.yaml",
+        "Every drive to its golden file; a failed one stops no other.",
+    ),
+    (
+        "fleet drift",
+        "servotool fleet drift examples/fleet.yaml",
+        "Every drive against its golden file; exit 1 when one differs.",
+    ),
+    ("log", "servotool log --machine press-02", "What servotool changed on press-02: when, who, old -> new."),
     (
         "shell",
         "printf 'param get Pn004\\nalarm show\\n' | servotool --port sim shell",

@@ -13,15 +13,17 @@ import typer
 
 from servotool.cli.common import confirm, drive, resolved
 from servotool.cli.keys import raw_keys
-from servotool.cli.render import Verbosity, caution, emit_json, err, info, notice
+from servotool.cli.render import Verbosity, caution, emit_json, err, info, notice, safety
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
+from servotool.model.quantity import quantity
 from servotool.model.roles import FEATURE
 from servotool.motion.caveats import motion_caveats
-from servotool.motion.deadman import sentence
+from servotool.motion.deadman import DeadManBound, lines
 from servotool.motion.hold import HoldToRun
 from servotool.motion.jog_plan import JogPlan
 from servotool.motion.setup import check_setup
+from servotool.motion.stop import StopReport
 from servotool.motion.travel import TravelLimit
 from servotool.ops.trace import Sampler, motion_entries
 from servotool.ops.trace_file import check_writable, write_trace
@@ -39,27 +41,32 @@ def travel_limit(ctx: typer.Context, travel: float | None) -> TravelLimit | None
     return TravelLimit(configured, "config file / SERVOTOOL_TRAVEL") if configured is not None else None
 
 
-def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> None:
+def confirm_motion(ctx: typer.Context, d: Drive, yes: bool, feature: str = FEATURE) -> list[str]:
     """Refuse while the drive lacks its motion setup; on a real port name the unverified motion entries (ask
-    before moving) and a missing drive-side watchdog."""
+    before moving) and a missing drive-side watchdog. Returns the cautions given (for --json)."""
     simulated = resolved(ctx).simulated
     # A real drive reads back a power-cycle value before it acts on it; the simulator says what is in effect.
     check_setup(d, feature, partial(effective_values, d.profile, d.unit) if simulated else None)
     if simulated:
-        return
+        return []
     caveats = motion_caveats(d.profile, feature)
-    caution(caveats.lines())
+    lines = caveats.lines()
+    caution(lines)
     if caveats.unverified:
         codes = ", ".join(e.code for _, e, _ in caveats.unverified)
         if not confirm(f"Move the motor through unverified entries ({codes})?", yes):
             raise ServoError("cancelled: nothing moved")
+    return lines
 
 
 @contextmanager
 def _traced(ctx: typer.Context, d: Drive, path: Path | None) -> Iterator[Sampler | None]:
-    """A recording of the JOG's own motion, written however the JOG ends (stopped, failed, interrupted)."""
+    """The JOG's speed read back to back between its keep-alive beats, as fast as the line allows (its peak is
+    then the line's, not the beat's); with a path, a recording of its motion, written however the JOG ends
+    (stopped, failed, interrupted)."""
+    speed = d.profile.role("speed_feedback")
     if path is None:
-        yield None
+        yield Sampler(d, [speed]) if speed is not None else None
         return
     from servotool.cli.trace import about_lines
 
@@ -123,19 +130,21 @@ def jog(
 ) -> None:
     """JOG the motor. Before moving it prints what stops the motor if this program stops, and the bound."""
     _check_options(seconds, interactive, toggle, trace_file)
+    show = _Speeds(seconds)
     with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
         d.dead_man_waived = no_dead_man
         jogger = guarded_jogger(d)
         if sampler is not None:
             jogger.idle = sampler.sample_for
+            show.sampler = sampler
         plan = jogger.plan(speed, seconds, max_travel, travel_limit(ctx, travel))
-        confirm_motion(ctx, d, yes)
+        cautions = confirm_motion(ctx, d, yes)
         info(
             plan.describe() + ("" if not interactive else f"  [{'toggle' if toggle else 'hold a key to move'}: {KEYS}]")
         )
         if plan.dead_man is not None:
-            info(sentence(plan.dead_man))
-        show = _Speeds(seconds)
+            for line in lines(plan.dead_man):
+                safety(line)
         try:
             if interactive:
                 hold = None if toggle else HoldToRun(jogger.clock, jogger.keepalive_s)
@@ -154,29 +163,56 @@ def jog(
             else:
                 jogger.run(plan, show)
         except KeyboardInterrupt:
-            err.print("\nservotool: JOG stopped by Ctrl-C", markup=False)
-            raise typer.Exit(130) from None
+            if err.is_terminal:
+                err.print("")  # after the speed line; the last line says what the stop read back
+            raise
         if err.is_terminal:
             err.print("")
-        final = jogger.speed()
-    _result(plan, seconds, show, final, as_json)
+    _result(plan, seconds, show, jogger.last_stop, as_json, cautions)
 
 
-def _result(plan: JogPlan, seconds: float | None, show: _Speeds, final: float | None, as_json: bool) -> None:
+def _result(
+    plan: JogPlan,
+    seconds: float | None,
+    show: _Speeds,
+    stopped: StopReport | None,
+    as_json: bool,
+    cautions: list[str],
+) -> None:
+    final = stopped.speed_rpm if stopped is not None else None
     sign = plan.direction if seconds is not None else 1  # a timed reverse JOG peaks at a negative speed
+    peak, rate = show.measured_peak()
     if as_json:
         emit_json(
             {
-                "speed_rpm": plan.speed_rpm * plan.direction,
-                "time_s": seconds,
-                "peak_speed_rpm": round(show.peak, 1) * sign,
-                "median_speed_rpm": round(statistics.median(show.late), 1) * sign if show.late else None,
-                "final_speed_rpm": final,
+                "speed": quantity(plan.speed_rpm * plan.direction, "rpm"),
+                "time": quantity(seconds, "s"),
+                "ramp": quantity(plan.accel_ms, "ms", text=plan.ramp or None),
+                "peak_speed": quantity(round(peak, 1) * sign, "rpm"),
+                "speed_sample_rate": quantity(round(rate, 1) if rate is not None else None, "Hz"),
+                "median_speed": quantity(round(statistics.median(show.late), 1) * sign if show.late else None, "rpm"),
+                "final_speed": quantity(final, "rpm"),
                 "dead_man": plan.dead_man.as_json() if plan.dead_man is not None else None,
+                "safety": safety_lines(plan.dead_man, cautions),
+                "stop": stopped.as_json() if stopped is not None else None,
             }
         )
     else:
-        notice(f"JOG done: peak {show.peak * sign:.1f} rpm, now {final if final is not None else '?'} rpm")  # a result
+        now = f"{final:g} rpm" if final is not None else "?"
+        notice(f"JOG done: peak {peak * sign:.1f} rpm{_coarse(rate)}, now {now}")  # a result
+
+
+def _coarse(rate: float | None) -> str:
+    """How finely the peak was sampled: the speed read as fast as the line allows between the beats."""
+    if rate is None:
+        return ""
+    return f" (speed read {rate:.0f} times a second)"
+
+
+def safety_lines(bound: DeadManBound | None, cautions: list[str]) -> list[str]:
+    """The safety lines printed before moving, for --json: the dead-man bound (or NO DEAD-MAN), what else bounds
+    the motion (protections, forced inputs), and the cautions."""
+    return (lines(bound) if bound is not None else []) + cautions
 
 
 def _check_options(seconds: float | None, interactive: bool, toggle: bool, trace_file: Path | None) -> None:
@@ -197,6 +233,18 @@ class _Speeds:
     def __init__(self, seconds: float | None) -> None:
         self.seconds, self.peak = seconds, 0.0
         self.late: list[float] = []
+        self.sampler: Sampler | None = None  # the speed read between the beats
+
+    def measured_peak(self) -> tuple[float, float | None]:
+        """The peak speed over every reading (the beats' and the sampler's between them), and how many readings a
+        second the sampler made (None without one)."""
+        if self.sampler is None or len(self.sampler.samples) < 2:
+            return self.peak, None
+        code = self.sampler.entries[0].code
+        samples = self.sampler.samples
+        peak = max([self.peak, *(abs(s.values[code]) for s in samples)])
+        span = samples[-1].t - samples[0].t
+        return peak, (len(samples) - 1) / span if span > 0 else None
 
     def __call__(self, t: float, rpm: float | None) -> None:
         if rpm is not None:

@@ -7,7 +7,7 @@ import os
 import signal
 import sys
 import threading
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import typer
 
@@ -18,7 +18,7 @@ from servotool.cli.common import State, take_options
 from servotool.cli.lazy import lazy, lazy_group
 from servotool.cli.render import Verbosity, emit_json, err, json_emitted
 from servotool.connection import ConnectOptions
-from servotool.errors import ServoError
+from servotool.errors import ServoError, StopUnconfirmed
 
 # Each command's module is imported when that command runs (a typer app or a command function, "module:name"); the
 # help is the one line `servotool --help` lists.
@@ -26,6 +26,7 @@ COMMANDS = {
     "param": lazy(
         "servotool.cli.param:app",
         "servotool.cli.backup:app",
+        "servotool.cli.apply:app",
         help="Read, set, list, back up and restore drive parameters.",
     ),
     "profiles": lazy("servotool.cli.profiles:app", help="List, show and check drive profiles."),
@@ -34,6 +35,7 @@ COMMANDS = {
     "tune": lazy("servotool.cli.tune:app", help="Identify load inertia and set gains."),
     "monitor": lazy("servotool.cli.monitor:monitor", help="Watch live values with units, min/max and a trend."),
     "jog": lazy("servotool.cli.jog:jog", help="JOG the motor, timed or by keys; first says what stops it."),
+    "stop": lazy("servotool.cli.stop:stop", help="Stop the motor, whatever moved it; then read it back at rest."),
     "run": lazy("servotool.cli.run:run", help="Validate a commissioning plan, then run it on one or more axes."),
     "raw": lazy("servotool.cli.raw:app", help="Read and write registers by address (outside the profile)."),
     "scan": lazy("servotool.cli.scan:scan", help="Find drives on a bus and the profile each matches."),
@@ -41,6 +43,8 @@ COMMANDS = {
     "trace": lazy("servotool.cli.trace:trace", help="Capture entries around a trigger, as fast as the line allows."),
     "plot": lazy("servotool.cli.plot:plot", help="Draw any servotool CSV in the terminal or as a PNG."),
     "shell": lazy("servotool.cli.shell:shell", help="One open port, the same commands at a prompt, live status."),
+    "fleet": lazy("servotool.cli.fleet:app", help="Many machines at once: backup, drift and apply per inventory."),
+    "log": lazy("servotool.cli.log:log", help="The change log: every value servotool changed, per drive or machine."),
 }
 
 app = typer.Typer(
@@ -95,6 +99,21 @@ def main(
         "--silence-ms",
         help="Silence that ends a frame (default: 3.5 characters at the baud rate). Env: SERVOTOOL_SILENCE_MS.",
     ),
+    heartbeat: str = typer.Option(
+        None,
+        "--heartbeat",
+        help="dtr|rts: a hardware dead-man. Toggle this control line of the USB-RS485 adapter at each keep-alive "
+        "beat of a motion, for a retriggerable watchdog relay wired to the drive's enable input or main contactor "
+        "(README: the hardware dead-man); it stops toggling when the motion ends, on a late beat and on every exit. "
+        "RTS only where the adapter does not use RTS to switch its RS485 driver's direction. Serial ports only. "
+        "Env: SERVOTOOL_HEARTBEAT.",
+    ),
+    heartbeat_timeout_ms: float = typer.Option(
+        None,
+        "--heartbeat-timeout-ms",
+        help="The watchdog relay's time: it drops the drive this long after the last toggle (default 1000). "
+        "Env: SERVOTOOL_HEARTBEAT_TIMEOUT_MS.",
+    ),
     profile: str = typer.Option(
         None,
         "--profile",
@@ -109,6 +128,13 @@ def main(
         help="Skip the check, made before "
         "any write, that the drive answering is the one the profile describes. "
         "Env: SERVOTOOL_NO_IDENTITY_CHECK=1.",
+        show_default=False,
+    ),
+    boost: bool = typer.Option(
+        None,
+        "--boost/--no-boost",
+        help="Raise the line for identification, trace, backup and restore where the profile allows (SD25 to "
+        "57600 baud; default: unless another device answers on the bus); --boost even then. Env: SERVOTOOL_BOOST.",
         show_default=False,
     ),
     verbose: int = typer.Option(0, "--verbose", "-v", count=True, help="Show every Modbus frame in hex."),
@@ -140,7 +166,10 @@ def main(
             echo=echo,
             turnaround_ms=turnaround_ms,
             silence_ms=silence_ms,
+            heartbeat=heartbeat,
+            heartbeat_timeout_ms=heartbeat_timeout_ms,
             no_identity_check=no_identity_check or None,
+            boost=boost,
         ),
     )
     Verbosity.level = -1 if quiet else verbose
@@ -166,19 +195,22 @@ def dispatch(argv: list[str], given: State) -> int:
     root = typer.main.get_command(app)
     args = list(argv)
     as_json = "--json" in args[: args.index("--")] if "--" in args else "--json" in args
+    since = _stops_made()  # a shell runs many commands in one process: the stops of this one count
     try:
         args = hoist_globals(root, args)
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)
     except ServoError as exc:
         from servotool.cli.messages import error_code, error_text  # words for a failure, loaded on one
 
-        return _fail(error_code(exc), error_text(exc, given.options, Verbosity.level > 0), exc.exit_code, as_json)
-    except (KeyboardInterrupt, typer.Abort):
-        return _fail("interrupted", "interrupted", 130, as_json)
+        text = error_text(exc, given.options, Verbosity.level > 0)
+        return _fail(error_code(exc), text, exc.exit_code, as_json, exc, since)
+    except (KeyboardInterrupt, typer.Abort) as exc:
+        # click turns Ctrl-C into Abort: what the interrupt carries (notes, the stop's report) is on its cause
+        return _fail("interrupted", "interrupted", 130, as_json, exc.__cause__ or exc, since)
     except BrokenPipeError:  # `| head` closed the pipe: nothing more to say, to anyone
         _broken_pipe()
     except Exception as exc:
-        if (code := _usage_error(exc, as_json)) is not None:
+        if (code := _usage_error(exc, as_json, since)) is not None:
             return code
         if os.environ.get("SERVOTOOL_DEBUG"):  # a bug: still one line for the user, the traceback on request
             raise
@@ -187,10 +219,18 @@ def dispatch(argv: list[str], given: State) -> int:
             f"internal error: {type(exc).__name__}: {exc} (SERVOTOOL_DEBUG=1 shows the traceback)",
             1,
             as_json,
+            exc,
+            since,
         )
     if result == 130:  # typer turns Ctrl-C into a silent exit 130: say it as for any failure
-        return _fail("interrupted", "interrupted", 130, as_json)
-    return result if isinstance(result, int) else 0
+        return _fail("interrupted", "interrupted", 130, as_json, None, since)
+    status = result if isinstance(result, int) else 0
+    report = _stop_report(None, since)
+    if report is not None:  # a command that moved ends with what the drive was read to be
+        err.print(f"servotool: {report.describe()}", markup=False)
+        if not report.confirmed:
+            return STOP_UNCONFIRMED
+    return status
 
 
 def _broken_pipe() -> NoReturn:
@@ -234,16 +274,45 @@ def _interrupt_on_termination() -> None:
             signal.signal(getattr(signal, name), _terminated)
 
 
-def _fail(code: str, message: str, status: int, as_json: bool) -> int:
-    """Say why on stderr (and as a JSON object on stdout for --json, unless the command printed its own)."""
+STOP_UNCONFIRMED = 4  # the exit status of a command whose motion's stop could not be proven (errors.StopUnconfirmed)
+
+
+def _stops_made() -> int:
+    """How many stops this process has made so far (motion/stop.py, looked at only where a motion ran)."""
+    stops = sys.modules.get("servotool.motion.stop")
+    return len(stops.reports()) if stops is not None else 0
+
+
+def _stop_report(exc: BaseException | None, since: int = 0) -> Any:
+    """The stop report the last line gives: the one a failure carries, else the first unproven or the last stop
+    this command made (the process's stops from `since` on)."""
+    attached = getattr(exc, "stop_report", None)
+    if attached is not None:
+        return attached
+    stops = sys.modules.get("servotool.motion.stop")
+    return stops.final(stops.reports()[since:]) if stops is not None else None
+
+
+def _fail(code: str, message: str, status: int, as_json: bool, exc: BaseException | None = None, since: int = 0) -> int:
+    """Say why on stderr (and as a JSON object on stdout for --json, unless the command printed its own); what the
+    failure left (its notes) follows, and where a motion ran the last line says what its stop read back."""
     sys.stdout.flush()
     err.print(f"servotool: {'error: ' if code not in ('interrupted', 'internal') else ''}{message}", markup=False)
+    for note in getattr(exc, "__notes__", ()):
+        err.print(f"servotool: {note}", markup=False)
+    report = _stop_report(exc, since)
+    if report is not None:
+        if not isinstance(exc, StopUnconfirmed):  # its own message is the line
+            err.print(f"servotool: {report.describe()}", markup=False)
+        if not report.confirmed:
+            status, code = STOP_UNCONFIRMED, "stop_unconfirmed"
     if as_json and not json_emitted():
-        emit_json({"error": {"code": code, "message": message, "exit_status": status}})
+        error = {"code": code, "message": message, "exit_status": status}
+        emit_json({"error": error, **({"stop": report.as_json()} if report is not None else {})})
     return status
 
 
-def _usage_error(exc: Exception, as_json: bool) -> int | None:
+def _usage_error(exc: Exception, as_json: bool, since: int = 0) -> int | None:
     """Report typer's own usage errors (bad option value, unknown option) in one line; None for other exceptions.
 
     Matched by shape: typer vendors click privately, so its exception classes are not importable API.
@@ -257,7 +326,7 @@ def _usage_error(exc: Exception, as_json: bool) -> int | None:
             print(text)
         return code
     where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
-    return _fail("usage", f"{' '.join(str(message()).split())}{where}", code, as_json)
+    return _fail("usage", f"{' '.join(str(message()).split())}{where}", code, as_json, None, since)
 
 
 if __name__ == "__main__":  # `python -m servotool.cli.main` runs too, rather than exiting 0 having done nothing

@@ -37,6 +37,7 @@ OPTION_FLAGS = {
     "turnaround_ms": "--turnaround-ms",
     "silence_ms": "--silence-ms",
     "no_identity_check": "--no-identity-check",
+    "boost": "--boost",
 }
 
 
@@ -46,7 +47,7 @@ def connection_args(given: ConnectOptions) -> list[str]:
     for f in fields(ConnectOptions):
         value = getattr(given, f.name)
         if isinstance(value, bool):
-            args += [OPTION_FLAGS[f.name]] if value else []
+            args += [OPTION_FLAGS[f.name]] if value else (["--no-boost"] if f.name == "boost" else [])
         elif value is not None:
             args += [OPTION_FLAGS[f.name], f"{value:g}" if isinstance(value, float) else str(value)]
     return args

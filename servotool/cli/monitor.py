@@ -15,6 +15,7 @@ from rich.text import Text
 from servotool.cli import complete
 from servotool.cli.common import drive, resolved
 from servotool.cli.render import emit_json_line, info, out, table
+from servotool.cli.values import json_mark
 from servotool.errors import UsageError
 from servotool.model.codec import decimals
 from servotool.ops.monitor import CsvLog, CsvMode, Monitor, Sample, check_duration, check_rate, resolve_entries
@@ -34,8 +35,11 @@ def _fmt(value: float, decimals: int) -> str:
 def _title(mon: Monitor) -> str:
     rate = mon.achieved_rate
     count = f"{mon.samples} sample{'' if mon.samples == 1 else 's'}"
-    return f"{mon.drive.profile.model} unit {mon.drive.unit}: {count}" + (
-        f", {rate:.1f} Hz" if rate is not None else ""
+    marked = any(mon.drive.profile.value_unverified(e) for e in mon.entries)
+    return (
+        f"{mon.drive.profile.model} unit {mon.drive.unit}: {count}"
+        + (f", {rate:.1f} Hz" if rate is not None else "")
+        + ("; * unit or scale unverified" if marked else "")
     )
 
 
@@ -44,7 +48,8 @@ def monitor_table(mon: Monitor, width: int) -> Table:
     rows = []
     for s in mon.series.values():
         d = decimals(s.entry)
-        rows.append([s.entry.code, s.entry.name, _fmt(s.last, d), s.entry.unit, _fmt(s.low, d), _fmt(s.high, d)])
+        unit = s.entry.unit + ("*" if mon.drive.profile.value_unverified(s.entry) else "")  # the title says why
+        rows.append([s.entry.code, s.entry.name, _fmt(s.last, d), unit, _fmt(s.low, d), _fmt(s.high, d)])
     heads = ["Code", "Name", "Value", "Unit", "Min", "Max"]
     natural = [max([len(h)] + [len(r[i]) for r in rows]) for i, h in enumerate(heads)]
     fixed = sum(natural) - natural[1]
@@ -66,18 +71,18 @@ def monitor_table(mon: Monitor, width: int) -> Table:
 
 
 def _sample_json(mon: Monitor, s: Sample) -> dict[str, object]:
-    """One JSON line: values rounded to each entry's resolution, with their units."""
-    series = mon.series
-    values = {
-        c: round(v, decimals(series[c].entry)) if isinstance(v, float) and c in series else v
-        for c, v in s.values.items()
-    }
-    return {
-        "t": round(s.t, 4),
-        "time": s.wall.isoformat(timespec="milliseconds"),
-        "values": values,
-        "units": {c: series[c].entry.unit for c in s.values if c in series},
-    }
+    """One JSON line: each value rounded to its entry's resolution, with its unit (and, where the manual leaves
+    its scale or meaning open, why)."""
+    profile = mon.drive.profile
+    values: dict[str, object] = {}
+    for c, v in s.values.items():
+        entry = mon.series[c].entry
+        values[c] = {
+            "value": round(v, decimals(entry)) if isinstance(v, float) else v,
+            "unit": entry.unit,
+            "value_unverified": json_mark(profile, entry),
+        }
+    return {"t": round(s.t, 4), "time": s.wall.isoformat(timespec="milliseconds"), "values": values}
 
 
 def monitor_chart(mon: Monitor, history: deque[Sample], width: int, height: int) -> Text:
@@ -157,6 +162,40 @@ def _show(
         out.print(monitor_table(mon, out.width))
 
 
+def _monitor_io(
+    ctx: typer.Context,
+    codes: list[str] | None,
+    rate: float,
+    duration: float | None,
+    *,
+    once: bool,
+    as_json: bool,
+    others: tuple[Path | None, bool],
+) -> None:
+    """monitor --io: the terminals, live (cli/io_view.py)."""
+    from servotool.cli.io_view import show_io
+    from servotool.ops.terminals import TerminalReader
+
+    if codes:
+        raise UsageError("--io shows the drive's inputs and outputs: give no codes with it")
+    if others[0] is not None or others[1]:
+        raise UsageError("--io does not take --csv or --plot")
+    if resolved(ctx).profile.io is None:
+        TerminalReader.refuse(resolved(ctx).profile)
+    interrupted = False
+    with drive(ctx) as d:
+        reader = TerminalReader(d)
+        mon = Monitor(d, reader.monitors)
+        try:
+            show_io(reader, mon, rate, duration, once=once, as_json=as_json)
+        except KeyboardInterrupt:
+            interrupted = True
+    if not once:
+        info(f"{count(mon.samples, 'sample')} in {mon.elapsed:.2f} s")
+    if interrupted:
+        raise typer.Exit(130)
+
+
 def monitor(
     ctx: typer.Context,
     codes: list[str] = typer.Argument(
@@ -185,10 +224,19 @@ def monitor(
         help="A scrolling chart instead of the table (one panel per unit); "
         "plain lines when the output is not a terminal.",
     ),
+    io: bool = typer.Option(
+        False,
+        "--io",
+        help="The digital inputs and outputs instead: each terminal's level and the function the drive's "
+        "parameters assign it, as the manual names it.",
+    ),
 ) -> None:
     """Watch live values with units, min/max and a trend; report the sample rate achieved."""
     check_rate(rate)
     check_duration(duration)
+    if io:
+        _monitor_io(ctx, codes, rate, duration, once=once, as_json=as_json, others=(csv_file, plot))
+        return
     mode = _csv_mode(csv_file, force, append)
     # Everything the user typed is checked before the port is opened: codes against the profile, the CSV path.
     entries = resolve_entries(resolved(ctx).profile, codes or [])

@@ -3,18 +3,23 @@
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING
 
 import typer
 
 from servotool.cli import complete
 from servotool.cli.common import JSON_OPT, drive, state
 from servotool.cli.render import emit_json, info, out, progress, table, warn
+from servotool.cli.values import footnote, json_mark, spoken, texts, unit_text
 from servotool.connection import resolve
 from servotool.drive import Reading
 from servotool.errors import UnknownName
-from servotool.model.codec import format_field, format_value, get_field, json_value, split_field
+from servotool.model.codec import format_field, format_value, get_field, json_text, json_value, split_field
 from servotool.model.lookup import class_name, search, suggest
 from servotool.words import count
+
+if TYPE_CHECKING:
+    from servotool.model.profile import Profile
 
 app = typer.Typer(help="Read, set and list drive parameters.")
 
@@ -36,16 +41,26 @@ def get(
         readings = d.read_entries([e for e, _ in targets])
     if as_json:
         emit_json(
-            [r.as_json() if f is None else _field_json(r, f) for r, (_, f) in zip(readings, targets, strict=True)]
+            [
+                _reading_json(d.profile, r) if f is None else _field_json(r, f)
+                for r, (_, f) in zip(readings, targets, strict=True)
+            ]
         )
         return
     t = table("Code", "Name", "Value", "Unit")
     for r, (e, f) in zip(readings, targets, strict=True):
         if f is None:
-            t.add_row(e.code, e.name, r.text, e.unit)
+            t.add_row(e.code, e.name, r.text, unit_text(d.profile, e))
         else:
             t.add_row(f"{e.code}.{f}", e.name, format_field(e, r.raw, f), "")
     out.print(t)
+    if (note := footnote(d.profile, [e for e, f in targets if f is None])) is not None:
+        out.print(note, markup=False)
+
+
+def _reading_json(profile: Profile, r: Reading) -> dict[str, object]:
+    """A value read, with why the manual leaves its scale or meaning open (value_unverified, null when it does not)."""
+    return {**r.as_json(), "value_unverified": json_mark(profile, r.entry)}
 
 
 def _field_json(r: Reading, field: str) -> dict[str, object]:
@@ -56,7 +71,7 @@ def _field_json(r: Reading, field: str) -> dict[str, object]:
         "name": e.name,
         "field": field,
         "value": value,
-        "entry_value": format_value(e, r.raw),
+        "entry_text": format_value(e, r.raw),
         "raw": r.raw,
     }
     if (meaning := e.field_enums.get(field.upper(), {}).get(value)) is not None:
@@ -105,34 +120,42 @@ def set_(
                         "code": e.code,
                         "old": json_value(e, old),
                         "new": json_value(e, new),
+                        **texts(e, old=old, new=new),
                         "unit": e.unit,
                         "effect": e.effect,
+                        "value_unverified": json_mark(d.profile, e),
                     }
                     for e, old, new in plan.changes
                 ],
-                "unchanged": [{"code": e.code, "value": json_value(e, v), "unit": e.unit} for e, v in plan.unchanged],
+                "unchanged": [
+                    {
+                        "code": e.code,
+                        "value": json_value(e, v),
+                        **({"text": t} if (t := json_text(e, v)) is not None else {}),
+                        "unit": e.unit,
+                        "value_unverified": json_mark(d.profile, e),
+                    }
+                    for e, v in plan.unchanged
+                ],
                 "persisted": persisted,
                 "stored": [e.code for e in stored],
             }
         )
         return
     for e, v in plan.unchanged:
-        info(f"{e.code} already {format_value(e, v)} {e.unit}".rstrip())
+        info(f"{e.code} already {spoken(d.profile, e, format_value(e, v))}")
     if dry_run:
         for e, old, new in plan.changes:
-            out.print(
-                f"would set {e.code} ({e.name}): {format_value(e, old)} -> {format_value(e, new)} {e.unit}",
-                markup=False,
-            )
+            new_text = spoken(d.profile, e, format_value(e, new))
+            out.print(f"would set {e.code} ({e.name}): {format_value(e, old)} -> {new_text}", markup=False)
         return
     if persisted is False:
         warn(eeprom.ram_only_warning(d.profile))
     for r in results:
         note = f" [{r.note}]" if r.note and r.entry.effect != "unknown" else ""
-        unit = f" {r.entry.unit}" if r.entry.unit else ""
         out.print(
             f"{r.entry.code} ({r.entry.name}): {format_value(r.entry, r.old) if r.old is not None else '?'} -> "
-            f"{format_value(r.entry, r.new)}{unit}{note}",
+            f"{spoken(d.profile, r.entry, format_value(r.entry, r.new))}{note}",
             markup=False,
         )
     if save:  # after the changes it stored
@@ -176,6 +199,7 @@ def list_(
         entries = params.select(d.profile, group=group, classes=classes)
         with progress("reading", len(entries), enabled=not (as_json or as_csv)) as advance:
             readings = d.read_entries(entries, partial=True, progress=advance)
+    read = len(readings)
     if changed:
         readings = [r for r in readings if r.changed]
     if as_csv:
@@ -183,19 +207,25 @@ def list_(
         return
     if as_json:
         emit_json(
-            [r.as_json() for r in readings]
+            [_reading_json(d.profile, r) for r in readings]
             + [
                 {"code": e.code, "name": e.name, "value": None, "missing": "not on this drive"}
                 for e in d.missing.values()
             ]
         )
         return
+    if not readings:  # a line, not a table with no rows
+        what = "differs from its factory default" if changed else "could be read"
+        out.print(f"{d.profile.model} unit {d.unit}: no entry {what} ({count(read, 'entry')} read)", markup=False)
+        return
     t = table("Code", "Name", "Value", "Unit", "Default", "", title=f"{d.profile.model} unit {d.unit}")
     for r in readings:
         e = r.entry
         default = format_value(e, e.default) if e.default is not None else ""
-        t.add_row(e.code, e.name, r.text, e.unit, default, "*" if r.changed else "")
+        t.add_row(e.code, e.name, r.text, unit_text(d.profile, e), default, "*" if r.changed else "")
     out.print(t)
+    if (note := footnote(d.profile, [r.entry for r in readings])) is not None:
+        out.print(note, markup=False)
 
 
 @app.command("find")

@@ -77,7 +77,7 @@ def show(
                 "source": p.source,
                 "address_rule": p.address_rule,
                 "unverified_note": p.unverified_note,
-                "serial": {**vars(p.line), "unit": p.default_unit},
+                "serial": {**vars(p.line), "unit": p.default_unit, "boost": _boost_json(p)},
                 "limits": vars(p.limits),
                 "word_order": p.word_order,
                 "persistence": vars(p.persistence),
@@ -98,13 +98,19 @@ def show(
         f"{lim.max_write}/write; 32-bit word order {p.word_order}; EEPROM: {p.persistence.mode}",
         markup=False,
     )
+    out.print(f"line boost: {_boost_text(p)}", markup=False)
     if p.unverified_note:
         out.print(f"[yellow]note:[/yellow] {p.unverified_note}")
     if unverified:
-        t = table("Code", "Name", "Why unverified", title=count(len(entries), "unverified entry", "unverified entries"))
-        for e in entries:
-            t.add_row(e.code, e.name, e.unverified)
-        out.print(t)
+        if entries:
+            t = table(
+                "Code", "Name", "Why unverified", title=count(len(entries), "unverified entry", "unverified entries")
+            )
+            for e in entries:
+                t.add_row(e.code, e.name, e.unverified)
+            out.print(t)
+        else:
+            out.print("no unverified entry", markup=False)
         _print_dead_man(p)
         _print_identity(p, only_unverified=True)
         found = sim_extensions(p)
@@ -280,6 +286,29 @@ def _profile_paths(names: list[str]) -> list[Path]:
         builtin_dir() / f"{ids[n.lower()]}.yaml" if not Path(n).exists() and n.lower() in ids else Path(n)
         for n in names
     ]
+
+
+def _boost_json(p: Profile) -> dict[str, object]:
+    b = p.boost
+    if not b.available:
+        return {"available": False, "why": b.none or None, "source": b.source or None}
+    return {
+        "available": True,
+        "code": b.code,
+        "to_baud": b.to_baud,
+        "rates": {str(k): v for k, v in b.rates.items()},
+        "source": b.source,
+        "unverified": b.unverified or None,
+    }
+
+
+def _boost_text(p: Profile) -> str:
+    """Whether and how the line is raised for long exchanges (serial.boost), with what is not checked."""
+    b = p.boost
+    if not b.available:
+        return f"none: {b.none}" if b.none else "none (the profile does not say)"
+    text = f"{b.code} raised to {b.to_baud} baud for identification, trace, backup and restore ({b.source})"
+    return text + (f"; unverified: {b.unverified}" if b.unverified else "")
 
 
 def _print_dead_man(p: Profile) -> None:

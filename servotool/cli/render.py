@@ -28,7 +28,8 @@ if TYPE_CHECKING:
 
 NAME_MIN = 20  # a wrapped name or description keeps at least this many columns: readable
 UNLIMITED = 10_000  # "no width": nothing wraps
-WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note", "Result"}  # text columns: these wrap
+# text columns: these wrap
+WRAP = {"Name", "Description", "Meaning", "Why unverified", "Why", "Note", "Result", "Function", "Recorded"}
 # Columns dropped first when a table is too wide, least useful first; tables may give their own order.
 DROP_ORDER = (
     "Address",
@@ -59,6 +60,69 @@ def _stdout_width() -> int | None:
         return os.get_terminal_size(sys.stderr.fileno()).columns
     except (OSError, ValueError, AttributeError):
         return UNLIMITED
+
+
+def text_width(stderr: bool = False) -> int:
+    """The width plain text is wrapped to on stdout (or stderr): its terminal's, else COLUMNS; piped stdout takes
+    stderr's terminal, and with no terminal at all nothing is wrapped (UNLIMITED)."""
+    stream = sys.stderr if stderr else sys.stdout
+    if _isatty(stream):
+        return _columns(stream)
+    if (columns := os.environ.get("COLUMNS", "")).isdigit() and int(columns) > 0:
+        return int(columns)
+    if not stderr and _isatty(sys.stderr):
+        return _columns(sys.stderr)
+    return UNLIMITED
+
+
+def _columns(stream: IO[str]) -> int:
+    """A terminal's width; one that reports none (0, a pty nobody sized) is read as COLUMNS, else 80, as rich does."""
+    try:
+        columns = os.get_terminal_size(stream.fileno()).columns
+    except (OSError, ValueError, AttributeError):
+        columns = 0
+    if columns > 0:
+        return columns
+    given = os.environ.get("COLUMNS", "")
+    return int(given) if given.isdigit() and int(given) > 0 else 80
+
+
+def _isatty(stream: IO[str]) -> bool:
+    try:
+        return stream.isatty()
+    except (ValueError, AttributeError):
+        return False
+
+
+def cells(text: str) -> int:
+    """Columns a text takes on a terminal: East Asian wide characters take two (the manuals' 本次 in a note)."""
+    import unicodedata
+
+    return sum(2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text)
+
+
+def wrap(text: str, width: int | None = None, *, indent: str = "", hanging: str = "  ") -> str:
+    """Text broken between words to fit `width` columns (default: stdout's text_width): the first line after
+    `indent`, the rest after `indent` + `hanging`. A word longer than the width stays whole."""
+    width = text_width() if width is None else width
+    out: list[str] = []
+    for paragraph in text.split("\n"):
+        if cells(indent + paragraph) <= width:
+            out.append(indent + paragraph)
+            continue
+        words = paragraph.lstrip(" ")
+        lead = indent + paragraph[: len(paragraph) - len(words)]
+        line, used = lead, cells(lead)
+        for word in words.split(" "):
+            size = cells(word)
+            if line.strip() and used + 1 + size > width:
+                out.append(line.rstrip(" "))
+                line, used = lead + hanging + word, cells(lead + hanging) + size
+            else:
+                sep = " " if line.strip() else ""
+                line, used = line + sep + word, used + len(sep) + size
+        out.append(line.rstrip(" "))
+    return "\n".join(out)
 
 
 def _is_terminal(file: IO[str]) -> bool:
@@ -136,6 +200,7 @@ class _Stream:
         return sys.stderr if self._stderr else sys.stdout
 
     def print(self, *objects: Any, **kwargs: Any) -> None:
+        objects = self._wrapped(objects, kwargs)
         text = self._plain(objects, kwargs) if self._console is None else None
         if text is None:
             self.console.print(*objects, **kwargs)
@@ -143,6 +208,17 @@ class _Stream:
         file = self._file()
         file.write(text)
         file.flush()
+
+    def _wrapped(self, objects: tuple[Any, ...], kwargs: dict[str, Any]) -> tuple[Any, ...]:
+        """A line of text broken between words to the stream's width (its terminal's, or COLUMNS), the rest of a
+        long line indented: a terminal would break it anywhere, mid-word. Not wrapped without any width (a file, a
+        script's pipe), nor text with markup, whose width is rich's to count."""
+        if len(objects) != 1 or type(objects[0]) is not str or set(kwargs) - {"markup", "style"}:
+            return objects
+        if "[" in objects[0] and kwargs.get("markup", True) is not False:
+            return objects
+        width = text_width(self._stderr)
+        return objects if width >= UNLIMITED else (wrap(objects[0], width),)
 
     def _plain(self, objects: tuple[Any, ...], kwargs: dict[str, Any]) -> str | None:
         """What rich would print for these, when it is plain text; None when rich must print it."""
@@ -184,6 +260,12 @@ def info(text: str) -> None:
 
 def notice(text: str) -> None:
     """A line on stderr that --quiet does not hide (that the drive is simulated, for one)."""
+    err.print(text, markup=False)
+
+
+def safety(text: str) -> None:
+    """A safety line on stderr: what stops the motor if this program stops and how far it can run on, a missing
+    dead-man, wired inputs that do not act. Never hidden by --quiet (and given in --json by the command too)."""
     err.print(text, markup=False)
 
 

@@ -2,20 +2,22 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
 import typer
 
-from servotool.cli.common import drives_for, resolved_from, state
+from servotool.cli.common import boosted, drives_for, resolved_from, state
 from servotool.cli.messages import error_text
-from servotool.cli.render import Verbosity, emit_json, info, notice, out, warn
+from servotool.cli.render import Verbosity, emit_json, info, notice, out, safety, warn
 from servotool.commission.plan import Plan, load_plan
-from servotool.commission.runner import Report, Runner
-from servotool.commission.steps import validate
+from servotool.commission.plan_files import report_problem
+from servotool.commission.prerequisites import motion_setup
+from servotool.commission.runner import Report, Runner, writes_to_drives
+from servotool.commission.steps import Checked, validate
 from servotool.connection import Resolved, merge, options_from
 from servotool.errors import ServoError, UsageError
+from servotool.files import backup_dir
 from servotool.words import count
 
 
@@ -27,7 +29,12 @@ def run(
     continue_on_error: bool = typer.Option(
         False, "--continue-on-error", help="Run the remaining steps after a failed one."
     ),
-    report: Path = typer.Option(None, "--report", help="Report file (default: PLAN.report.json next to the plan)."),
+    report: Path = typer.Option(
+        None, "--report", help="Report file (default: PLAN.report.json next to the plan, replaced by each run)."
+    ),
+    force: bool = typer.Option(
+        False, "--force", help="Files the plan writes, and --report, may replace existing ones (as overwrite: true)."
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
 ) -> None:
     """Validate a commissioning plan completely, then run its steps on one or more axes."""
@@ -35,20 +42,22 @@ def run(
     cli_opts = state(ctx).options
     resolved = resolved_from(merge(cli_opts, options_from(plan.options, str(plan_file))))
     units = _units(plan, cli_opts.unit, resolved.unit)
-    lines = validate(plan, resolved.profile)
+    # Everything that can be known before anything moves is checked now, the same for a dry run: every step
+    # against the profile, every file the steps write or read, the report.
+    report_path = _report_path(plan_file, report, force)
+    checked = validate(plan, resolved.profile, units, force=force)
     if dry_run:
-        _show_dry_run(plan, plan_file, resolved, units, lines, as_json)
+        _show_dry_run(plan, plan_file, resolved, units, checked, report_path, as_json)
         return
-    # Everything that can be known before the first write is checked now.
     if not yes and any(st.name == "prompt" for st in plan.steps) and not sys.stdin.isatty():
         raise UsageError("the plan has operator prompts: run it in a terminal or pass --yes")
-    report_path = _report_path(plan_file, report)
     several = len(units) > 1
 
     def ask(unit: int, question: str) -> bool:
         return typer.confirm(f"unit {unit}: {question}" if several else question, default=False, err=True)
 
-    with drives_for(ctx, resolved, units) as drives:
+    long = any(st.name in LONG_STEPS for st in plan.steps)  # the automatic backup before the plan is one too
+    with drives_for(ctx, resolved, units) as drives, boosted(ctx, drives, "the plan", allow=long, res=resolved):
         runner = Runner(
             plan,
             drives,
@@ -57,6 +66,8 @@ def run(
             ask=ask,
             log=info,
             word=lambda exc: error_text(exc, cli_opts),
+            safety=safety,
+            force=force,
         )
         rep = Report(report_path, runner, profile=resolved.profile.id, port=resolved.settings.port, units=units)
         if rep.previous is not None:
@@ -70,6 +81,7 @@ def run(
         ok: bool | None = None
         try:
             runner.check_units()
+            runner.check_setup()
             runner.back_up(notice)
             ok = runner.run()
         except ServoError:
@@ -93,6 +105,9 @@ def run(
         raise typer.Exit(int(failures[0].data.get("exit_code", 1)) if failures else 1)
 
 
+LONG_STEPS = ("tune inertia", "backup", "restore")  # steps whose exchanges a raised line shortens (ops.boost)
+
+
 def _units(plan: Plan, given: int | None, default: int) -> list[int]:
     """The axes to run: the plan's (or the resolved unit), narrowed to one of them by --unit."""
     if given is None or not plan.units:
@@ -103,8 +118,15 @@ def _units(plan: Plan, given: int | None, default: int) -> list[int]:
 
 
 def _show_dry_run(
-    plan: Plan, plan_file: Path, resolved: Resolved, units: list[int], lines: list[str], as_json: bool
+    plan: Plan,
+    plan_file: Path,
+    resolved: Resolved,
+    units: list[int],
+    checked: Checked,
+    report_path: Path,
+    as_json: bool,
 ) -> None:
+    autos = backup_dir() if writes_to_drives(plan) else None
     if as_json:
         emit_json(
             {
@@ -115,8 +137,12 @@ def _show_dry_run(
                 "units": units,
                 "steps": [
                     {"step": st.index + 1, "line": st.line, "name": st.name, "would": line.split(": ", 1)[1]}
-                    for st, line in zip(plan.steps, lines, strict=True)
+                    for st, line in zip(plan.steps, checked.lines, strict=True)
                 ],
+                "files": [f.as_json() for f in checked.files],
+                "report": str(report_path),
+                "auto_backups": None if autos is None else {"units": units, "folder": str(autos)},
+                "drive_setup": [a for r in motion_setup(plan, resolved.profile) for a in r.assignments()],
             }
         )
         return
@@ -125,15 +151,29 @@ def _show_dry_run(
         f"{', '.join(map(str, units))}; valid. Would run:",
         markup=False,
     )
-    for line in lines:
+    for line in checked.lines:
         out.print("  " + line, markup=False)
+    out.print("Would write:", markup=False)
+    if autos is not None:
+        out.print(f"  an automatic backup of unit(s) {', '.join(map(str, units))} into {autos}/", markup=False)
+    for f in (f for f in checked.files if f.writes):
+        what = f"{f.kind}, step {f.step.index + 1}, unit {f.unit}" + ("; replaces the existing one" if f.exists else "")
+        out.print(f"  {f.path}{'/' if f.kind == 'tune report' else ''} ({what})", markup=False)
+    out.print(f"  {report_path} (the run's report)", markup=False)
+    for f in (f for f in checked.files if not f.writes):
+        out.print(f"Would read: {f.path} ({f.kind}, step {f.step.index + 1}, unit {f.unit})", markup=False)
+    if needed := motion_setup(plan, resolved.profile):
+        settings = ", ".join(", ".join(r.assignments()) for r in needed)
+        out.print(f"Would check on each axis first, before anything moves: {settings} (host motion)", markup=False)
 
 
-def _report_path(plan_file: Path, report: Path | None) -> Path:
-    """--report, else PLAN.report.json beside the plan; refused before anything runs if it cannot be written."""
+def _report_path(plan_file: Path, report: Path | None, force: bool) -> Path:
+    """--report, else PLAN.report.json beside the plan (each run replaces it); refused before anything runs if it
+    cannot be written, or if --report names a file that is not a plan report (without --force)."""
     path = report or plan_file.with_suffix(".report.json")
     if str(path).startswith("-"):
         raise UsageError(f"--report '{path}' looks like an option, not a file name")
-    if not path.parent.is_dir() or not os.access(path.parent, os.W_OK):
-        raise UsageError(f"cannot write the report into {path.parent}: no such folder or not writable")
+    problem = report_problem(path, force=force or report is None)
+    if problem is not None:
+        raise UsageError(problem)
     return path

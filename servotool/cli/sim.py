@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import typer
 
 from servotool.cli.common import state
@@ -12,6 +10,7 @@ from servotool.connection import SIM_DEFAULT_PROFILE, ConnectOptions, check_unit
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
 from servotool.model.profile import Profile
+from servotool.model.quantity import quantity
 from servotool.model.roles import sim_extensions
 from servotool.sim import state as sim_state
 from servotool.sim.device import SIM_SETTINGS, line_choice
@@ -177,6 +176,20 @@ def config(
         "motion after 500 ms of host silence on a drive whose manual documents no "
         "communication timeout. The real drive keeps running.",
     ),
+    segment_restart: str = typer.Option(
+        None,
+        "--segment-restart",
+        help="on|off (default off), segment route (IS620P): on, a start edge during a running segment restarts it "
+        "at once from where the axis is; off, it waits until the segment has settled, and a falling edge brakes "
+        "the segment (the stricter reading; the manual documents neither).",
+    ),
+    inputs: int = typer.Option(None, "--inputs", help=SIM_SETTINGS["inputs"][4] + ".", min=0, max=255),
+    di_monitor: str = typer.Option(
+        None,
+        "--di-monitor",
+        help="forced|terminals, NOT IN THE MANUAL as terminals (default forced): what the input monitor shows while "
+        "the inputs are forced; the manual's words read as the forced levels.",
+    ),
     missing: str = typer.Option(
         None,
         "--missing",
@@ -188,6 +201,8 @@ def config(
     """Set the simulated machine's true properties (persisted with the drive; never readable over Modbus)."""
     brake_on = None if brake is None else _on_off(brake, "--brake")
     fake_on = None if fake_watchdog is None else _on_off(fake_watchdog, "--fake-watchdog")
+    restart_on = None if segment_restart is None else _on_off(segment_restart, "--segment-restart")
+    monitor = None if di_monitor is None else _choice(di_monitor, "--di-monitor", DI_MONITOR)
     p, u = _target(ctx, profile, unit)
     if missing is not None:
         sim_state.set_missing(p, u, [c.strip() for c in missing.split(",") if c.strip()])
@@ -203,6 +218,9 @@ def config(
         line_baud=_line_choice(line_baud),
         brake=brake_on,
         fake_watchdog=fake_on,
+        segment_restart=restart_on,
+        inputs=inputs,
+        di_monitor=monitor,
         resonance_hz=resonance_hz,
         resonance_damping=resonance_damping,
         backlash_rad=backlash_rad,
@@ -237,7 +255,13 @@ def show(
                 "settings": status.settings,
                 "pending_power_cycle": status.pending_power_cycle,
                 "eeprom_writes": status.eeprom_writes,
-                "running": dataclasses.asdict(run) if run else None,
+                "running": {
+                    "servo_on": run.servo_on,
+                    "alarm": run.alarm,
+                    "position": quantity(run.position_rev, "rev"),
+                }
+                if run
+                else None,
                 "missing": list(status.missing),
                 "extensions": [{"what": x.what, "why": x.why} for x in sim_extensions(status.profile)],
             }
@@ -263,11 +287,20 @@ def _line_choice(value: str | None) -> str | int | None:
         raise UsageError(f"--line-baud: {exc}") from None
 
 
+DI_MONITOR = ("forced", "terminals")
+
+
 def _on_off(value: str, option: str) -> int:
-    choices = {"on": 1, "off": 0}
-    if value.lower() not in choices:
-        raise UsageError(f"{option} must be on or off, not {value!r}")
-    return choices[value.lower()]
+    return _choice(value, option, ("off", "on"))
+
+
+def _choice(value: str, option: str, names: tuple[str, ...]) -> int:
+    """The index of a named choice (off/on, forced/terminals); UsageError naming the choices."""
+    if value.lower() not in names:
+        raise UsageError(
+            f"{option} must be {' or '.join(names[::-1] if names == ('off', 'on') else names)}, not {value!r}"
+        )
+    return names.index(value.lower())
 
 
 def _print_settings(status: sim_state.SimStatus) -> None:
@@ -282,7 +315,10 @@ def _print_settings(status: sim_state.SimStatus) -> None:
             over = env_choice() if value == "factory" else None
             shown = str(value) if over is None else f"{over} ({LINE_ENV})"
         else:
-            shown = ("on" if value else "off") if name in ("brake", "fake_watchdog") else f"{value:g}"
+            shown = (
+                ("on" if value else "off") if name in ("brake", "fake_watchdog", "segment_restart") else f"{value:g}"
+            )
+        shown = DI_MONITOR[int(value)] if name == "di_monitor" else shown
         t.add_row(name, shown, SIM_SETTINGS[name][4])
     out.print(t)
     if status.missing:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from servotool.cli.common import drive, resolved
+from servotool.cli.common import boosted, drive, resolved
 from servotool.cli.render import info, out
 from servotool.clock import utc_now
 from servotool.connection import Resolved
@@ -18,18 +18,20 @@ from servotool.ops.trace import TRIGGER_FORMS, Capture, Tracer, Window, parse_tr
 from servotool.ops.trace_file import capture_json, capture_table, check_writable, trace_csv, write_trace
 
 
-def about_lines(res: Resolved, detail: str) -> list[str]:
-    """The CSV header's '# ' lines: the drive, the line settings, what was captured, when."""
+def about_lines(res: Resolved, detail: str, baud: int | None = None) -> list[str]:
+    """The CSV header's '# ' lines: the drive, the line settings (baud: the speed it ran at, where a boost raised
+    it), what was captured, when."""
     s, p = res.settings, res.profile
+    line = s.line.describe() if baud in (None, s.line.baud) else f"{baud} {s.line.describe().split()[1]} (raised)"
     return [
         f"servotool trace: {p.model} (profile {p.id}) unit {res.unit}",
-        f"line: {s.port}, {s.line.describe()}, timeout {s.timeout:g} s",
+        f"line: {s.port}, {line}, timeout {s.timeout:g} s",
         detail,
         f"started: {utc_now().isoformat(timespec='seconds')}",
     ]
 
 
-def _about(res: Resolved, tracer: Tracer, expr: str | None, window: Window) -> list[str]:
+def _about(res: Resolved, tracer: Tracer, expr: str | None, window: Window, baud: int) -> list[str]:
     size = f"{window.samples} samples" if window.samples is not None else f"{window.duration_s:g} s"
     trig = (
         f"{tracer.trigger.describe()} ({expr}), {window.pre_share * 100:g} % before it"
@@ -37,7 +39,7 @@ def _about(res: Resolved, tracer: Tracer, expr: str | None, window: Window) -> l
         else "none (free run)"
     )
     return about_lines(
-        res, f"trigger: {trig}; capture {size}; {tracer.sampler.requests_per_sample} request(s) per sample"
+        res, f"trigger: {trig}; capture {size}; {tracer.sampler.requests_per_sample} request(s) per sample", baud
     )
 
 
@@ -74,9 +76,9 @@ def trace(
     trig = parse_trigger(res.profile, trigger) if trigger else None
     captures: list[Capture] = []
     interrupted = False
-    with drive(ctx) as d:
+    with drive(ctx) as d, boosted(ctx, [d], "the trace") as line:
         tracer = Tracer(d, entries, trig, window, repeat=repeat, timeout_s=timeout)
-        about = _about(res, tracer, trigger, window)
+        about = _about(res, tracer, trigger, window, line.baud)
         info(f"trace armed: {about[2].removeprefix('trigger: ')}")
         try:
             for cap in tracer.run():

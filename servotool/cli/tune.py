@@ -10,14 +10,16 @@ from typing import Any
 
 import typer
 
-from servotool.cli.common import confirm, drive, resolved
-from servotool.cli.jog import confirm_motion
-from servotool.cli.render import emit_json, info, out, table, warn
+from servotool.cli.common import boosted, confirm, drive, resolved
+from servotool.cli.jog import confirm_motion, safety_lines
+from servotool.cli.render import emit_json, err, info, out, safety, table, warn
+from servotool.cli.values import json_mark, spoken, unit_text
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.model.codec import as_held, raw_to_eng
 from servotool.model.profile import Profile
-from servotool.motion import deadman
+from servotool.model.quantity import quantity
+from servotool.motion import deadman, protect, stop
 from servotool.ops import eeprom
 from servotool.tuning import budget, gain_search, identify, planning, preflight, step, tune
 from servotool.tuning.control.friction import friction_report
@@ -47,7 +49,7 @@ def _rounded(value: float | None, decimals: int) -> float | None:
     return None if value is None or not math.isfinite(value) else round(value, decimals)
 
 
-def _gains_json(changes: Any) -> list[dict[str, Any]]:
+def _gains_json(changes: Any, profile: Profile | None = None) -> list[dict[str, Any]]:
     return [
         {
             "role": c.role,
@@ -55,16 +57,17 @@ def _gains_json(changes: Any) -> list[dict[str, Any]]:
             "old": as_held(c.entry, c.old),
             "new": as_held(c.entry, c.new),
             "unit": c.entry.unit,
+            "value_unverified": json_mark(profile, c.entry) if profile is not None else None,
         }
         for c in changes
     ]
 
 
 def _step_json(response: step.StepResponse | None) -> dict[str, Any] | None:
-    if response is None:
-        return None
-    summary = response.summary()
-    return {**summary, **{k: _rounded(summary[k], 2) for k in ("overshoot_pct", "settling_ms", "ripple_pct")}}
+    return response.summary() if response is not None else None
+
+
+STEP_FIGURES = ("overshoot", "settling", "ripple", "interval", "overshoot_bound")
 
 
 def _check_options(
@@ -94,17 +97,15 @@ def _estimate_json(result: identify.Result) -> dict[str, Any]:
         "method": result.method,
         "old_ratio": round(result.old_ratio, 4) if result.old_ratio is not None else None,
         "ratio_std": _sig(est.ratio_std) if est else None,
-        "coulomb_nm": _sig(est.coulomb_nm) if est else None,
-        "coulomb_std_nm": _sig(est.coulomb_std_nm) if est else None,
-        "viscous_nm_per_rad_s": _sig(est.viscous_nm_per_rad_s) if est else None,
-        "load_torque_nm": _sig(est.load_torque_nm) if est else None,
-        "load_torque_std_nm": _sig(est.load_torque_std_nm) if est else None,
+        "coulomb": quantity(_sig(est.coulomb_nm), "N·m", std=_sig(est.coulomb_std_nm)) if est else None,
+        "viscous": quantity(_sig(est.viscous_nm_per_rad_s), "N·m·s/rad") if est else None,
+        "load_torque": quantity(_sig(est.load_torque_nm), "N·m", std=_sig(est.load_torque_std_nm)) if est else None,
         "residual_rel": _rounded(est.residual_rel, 4) if est else None,
         "notes": list(est.notes) if est else [],
         "samples": len(result.trace.t),
-        "samples_per_s": round(result.samples_per_s, 1),
-        "travel_rev": round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None,
-        "time_s": round(result.time_used_s, 2),
+        "sample_rate": quantity(round(result.samples_per_s, 1), "Hz"),
+        "travel": quantity(round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None, "rev"),
+        "time": quantity(round(result.time_used_s, 2), "s"),
         "cycles": result.cycles,
         **_needs_json(result.plan),
     }
@@ -115,10 +116,11 @@ def _needs_json(plan: planning.MotionPlan | None) -> dict[str, Any]:
     needs = plan.needs if plan is not None else None
     if needs is None:
         return {}
+    light = needs.lightest
     return {
-        "needed_travel_rev": needs.lightest.travel_rev if needs.lightest.reachable else None,
-        "needed_time_s": _rounded(needs.lightest.time_s, 1) if needs.lightest.reachable else None,
-        "time_budget_s": _rounded(plan.time_budget_s, 1) if plan is not None else None,
+        "needed_travel": quantity(light.travel_rev if light.reachable else None, "rev"),
+        "needed_time": quantity(_rounded(light.time_s, 1) if light.reachable else None, "s"),
+        "time_budget": quantity(_rounded(plan.time_budget_s, 1) if plan is not None else None, "s"),
     }
 
 
@@ -197,8 +199,8 @@ def inertia(
     check: bool = typer.Option(
         None,
         "--check/--no-check",
-        help="Step check after writing gains; on failure the "
-        "previous gains go back (default: on with the simulated drive).",
+        help="Step check after writing gains; on failure the previous gains go back (default: on with the "
+        "simulated drive; a real drive asks, and without a terminal needs one of the two).",
     ),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
 ) -> None:
@@ -213,10 +215,10 @@ def inertia(
         from servotool.report.tune_report import check_folder
 
         check_folder(report)
-    verify = check if check is not None else resolved(ctx).simulated
+    writes_gains = (rigidity is not None or bandwidth is not None) and not dry_run
     request = tune.TuneRequest(
         force=force,
-        verify=verify and (rigidity is not None or bandwidth is not None),
+        verify=_step_check_choice(ctx, check, writes_gains, yes),
         method=method,
         max_speed=max_speed,
         accel_time_ms=accel_time,
@@ -231,10 +233,9 @@ def inertia(
         step_check=step_check,
         trace_path=save_trace,
     )
-    if step_check:
-        step.step_duration_s(travel)  # refused before the drive is opened
+    tune.check_request(resolved(ctx).profile, request)  # refused before the drive is opened (or its line raised)
 
-    with drive(ctx) as d:
+    with drive(ctx) as d, boosted(ctx, [d], "the identification"):
         d.dead_man_waived = no_dead_man
         ask = _Dialog(ctx, d, yes=yes, method=method, step_check=step_check, travel=travel, as_json=as_json)
         try:
@@ -249,13 +250,40 @@ def inertia(
             )
         except TuneDeclined:
             raise typer.Exit(1) from None
+        except KeyboardInterrupt as exc:
+            _notes(exc)
+            raise
         except ServoError as exc:  # refused, tripped, travel exceeded, link lost
             _failed(exc, report, d.profile, as_json and (ask.moving or isinstance(exc, TravelNeeded)))
             raise
         profile = d.profile
     if report is not None:
         _report(report, res.identified, profile, res)
-    _render(res, profile, as_json, ask.dead_man)
+    _render(res, profile, as_json, ask.dead_man, ask.safety + ask.cautions)
+
+
+def _notes(interrupt: KeyboardInterrupt) -> None:
+    """What an interrupt left said before it leaves (typer turns it into a bare exit 130): the gains written back,
+    or the new ones that stay."""
+    for note in getattr(interrupt, "__notes__", ()):
+        err.print(f"servotool: {note}", markup=False)
+
+
+CHECK_WHAT = "a 200 rpm step forward and back once they are written; the previous gains go back if it fails"
+
+
+def _step_check_choice(ctx: typer.Context, check: bool | None, writes_gains: bool, yes: bool) -> bool:
+    """Whether the gains are step-checked once written: as --check/--no-check say; on the simulated drive, yes; on
+    a real one the choice is the user's: asked in a terminal, else a usage error (before anything moves)."""
+    if not writes_gains:
+        return False
+    if check is not None:
+        return check
+    if resolved(ctx).simulated:
+        return True
+    if yes or not sys.stdin.isatty():
+        raise UsageError(f"writing gains on a real drive needs --check ({CHECK_WHAT}) or --no-check")
+    return typer.confirm(f"Step-check the gains ({CHECK_WHAT})?", default=True, err=True)
 
 
 def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: bool) -> None:
@@ -269,18 +297,23 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
         cure = refusal.remedy if refusal is not None else None
         needed = exc if isinstance(exc, TravelNeeded) else None
         suggested = cure.suggested_rev if cure is not None else needed.travel_rev if needed is not None else None
+        rolled = exc.facts if isinstance(exc, tune.GainsRolledBack) else {}
         emit_json(
             _clean(
                 {
                     "ok": False,
                     "reason": str(exc),
                     **(_estimate_json(refused) if refused else {}),
-                    "ratio": refused.new_ratio if refused else None,
-                    "written": False,
-                    "suggested_travel_rev": suggested,
-                    "needed_travel_rev": needed.travel_rev if needed is not None else None,
-                    "needed_time_s": _rounded(needed.time_s, 1) if needed is not None else None,
+                    # refused: no ratio stands (what was measured is in the report); rolled back: it does
+                    "ratio": round(exc.ratio, 4) if isinstance(exc, tune.GainsRolledBack) and exc.ratio else None,
+                    "written": bool(rolled.get("kept")),  # a rollback keeps the ratio written before the gains
+                    "suggested_travel": quantity(suggested, "rev"),
+                    "needed_travel": quantity(needed.travel_rev if needed is not None else None, "rev"),
+                    "needed_time": quantity(_rounded(needed.time_s, 1) if needed is not None else None, "s"),
                     "moved": needed.moved if needed is not None else True,
+                    "rolled_back": bool(rolled),
+                    "rollback_reason": rolled.get("reason"),
+                    "step_check": _step_json(exc.response) if isinstance(exc, tune.GainsRolledBack) else None,
                 }
             )
         )
@@ -297,10 +330,12 @@ class _Dialog:
         self.step_check, self.travel, self.as_json = step_check, travel, as_json
         self.moving = False  # identifying: a failure now reports what was measured
         self.dead_man: deadman.DeadManBound | None = None
+        self.cautions: list[str] = []
+        self.safety: list[str] = []  # the safety lines printed (for --json)
 
     def approve_motion(self, motion: planning.MotionPlan | None) -> bool:
         if self.method == "host" or self.step_check:
-            confirm_motion(self.ctx, self.d, self.yes, preflight.FEATURE)
+            self.cautions = confirm_motion(self.ctx, self.d, self.yes, preflight.FEATURE)
         info(
             f"motion: {motion.describe()}"
             if motion is not None
@@ -309,17 +344,22 @@ class _Dialog:
         )
         if motion is not None and motion.needs is not None:
             info(f"needs: {motion.needs.words()}")
-        if self.step_check:
-            info(
-                f"step check: {step.STEP_SPEED_RPM:g} rpm for {step.step_duration_s(self.travel):.2f} s forward "
-                "and back, before and after"
-            )
         if self.method == "host" and motion is not None:
-            self.dead_man = deadman.motion_bound(self.d, motion.speed_rpm, motion.ramp_s)
-        elif self.step_check:
-            self.dead_man = deadman.motion_bound(self.d, step.STEP_SPEED_RPM, 0.0)
-        if self.dead_man is not None:
-            info(deadman.sentence(self.dead_man))
+            bound = planning.identification_bound(self.d, motion)
+            deadman.check(bound, self.d.dead_man_waived)
+            self.dead_man = protect.planned_bound(self.d, bound, motion.speed_rpm, motion.travel_limit_rev)
+            for line in deadman.lines(self.dead_man):
+                self._safety(line)
+        if self.step_check:
+            check = step.plan_step(self.d, self.travel)
+            info(f"step check: {check.describe()}, before and after")
+            if self.dead_man is None:  # the step check's bound, with the protections it sets
+                self.dead_man = protect.planned_bound(self.d, check.bound, check.speed_rpm, self.travel)
+                first, *more = deadman.lines(self.dead_man)
+                for line in (f"step check: {first}", *more):
+                    self._safety(line)
+            else:
+                self._safety(f"step check: {deadman.sentence(check.bound)}")
         self.moving = confirm("Move the axis now?", self.yes)
         return self.moving
 
@@ -333,6 +373,10 @@ class _Dialog:
             self.travel = light.travel_rev
             return light.travel_rev
         return None
+
+    def _safety(self, line: str) -> None:
+        safety(line)
+        self.safety.append(line)
 
     def show(self, proposal: tune.Proposal) -> None:
         self.moving = False
@@ -357,11 +401,17 @@ def _friction_json(profile: Profile, est: Any) -> dict[str, Any] | None:
     report = friction_report(profile, est) if est is not None else None
     if report is None:
         return None
+    rated = "% of rated torque"
     return {
-        "coulomb_pct": _rounded(report.coulomb_pct, 2),
-        "viscous_pct_at_rated_speed": _rounded(report.viscous_pct_at_rated, 2),
-        "load_pct": _rounded(report.load_pct, 2),
-        "compensation": {s.entry.code: as_held(s.entry, s.value) for s in report.settings},
+        "coulomb": quantity(_rounded(report.coulomb_pct, 2), rated),
+        "viscous_at_rated_speed": quantity(_rounded(report.viscous_pct_at_rated, 2), rated),
+        "load": quantity(_rounded(report.load_pct, 2), rated),
+        "compensation": {
+            s.entry.code: quantity(
+                as_held(s.entry, s.value), s.entry.unit, value_unverified=json_mark(profile, s.entry)
+            )
+            for s in report.settings
+        },
     }
 
 
@@ -374,10 +424,20 @@ def _report(
     info(f"report: {len(written.files)} files in {folder} (open {folder / 'report.md'})")
 
 
+def _stop_json() -> dict[str, Any] | None:
+    """What the last motion's stop read back (motion/stop.py), for --json."""
+    report = stop.final()
+    return report.as_json() if report is not None else None
+
+
 def _render(
-    res: tune.TuneResult, profile: Profile, as_json: bool, dead_man: deadman.DeadManBound | None = None
+    res: tune.TuneResult,
+    profile: Profile,
+    as_json: bool,
+    dead_man: deadman.DeadManBound | None = None,
+    cautions: list[str] | None = None,
 ) -> None:
-    """The outcome, after the writes."""
+    """The outcome, after the writes (cautions: the safety lines and cautions given before moving)."""
     proposal, sugg = res.proposal, res.proposal.suggestion
     entry, changes = proposal.parameter, proposal.gain_changes
     if as_json:
@@ -389,20 +449,28 @@ def _render(
                     "ratio": round(res.ratio, 4),
                     "friction": _friction_json(profile, res.identified.estimate),
                     "parameter": entry.code if entry else None,
-                    "parameter_value": raw_to_eng(entry, proposal.parameter_raw)
+                    "parameter_value": quantity(
+                        raw_to_eng(entry, proposal.parameter_raw),
+                        entry.unit,
+                        value_unverified=json_mark(profile, entry),
+                    )
                     if entry and proposal.parameter_raw is not None
                     else None,
                     "written": res.ratio_stored,
                     "persisted": res.persisted,
-                    "gains": _gains_json(changes),
+                    "gains": _gains_json(changes, profile),
                     "gains_written": res.gains_written,
-                    "bandwidth_hz": _rounded(sugg.bandwidth_hz, 2) if sugg else None,
+                    "bandwidth": quantity(_rounded(sugg.bandwidth_hz, 2), "Hz") if sugg else None,
                     "rigidity": sugg.rigidity if sugg else None,
-                    "phase_margin_deg": _rounded(proposal.margins.phase_deg, 1) if proposal.margins else None,
-                    "gain_margin_db": _rounded(proposal.margins.gain_db, 1) if proposal.margins else None,
+                    "phase_margin": quantity(_rounded(proposal.margins.phase_deg, 1), "°")
+                    if proposal.margins
+                    else None,
+                    "gain_margin": quantity(_rounded(proposal.margins.gain_db, 1), "dB") if proposal.margins else None,
                     "step_before": _step_json(res.step_before),
                     "step_after": _step_json(res.step_after),
                     "dead_man": dead_man.as_json() if dead_man is not None else None,
+                    "safety": cautions or [],
+                    "stop": _stop_json(),
                 }
             )
         )
@@ -431,6 +499,8 @@ def _render(
     if res.step_after is not None:
         label = "step check after writing the gains:" if res.verified is not None else "step after: "
         out.print(f"{label} {res.step_after.describe()}", markup=False)
+    if (sampled := res.step_after or res.step_before) is not None:
+        out.print(f"step {sampled.sampling()}", markup=False)
 
 
 def _show(proposal: tune.Proposal) -> None:
@@ -438,7 +508,7 @@ def _show(proposal: tune.Proposal) -> None:
     result, entry, sugg, changes = proposal.identified, proposal.parameter, proposal.suggestion, proposal.gain_changes
     est = result.estimate
     old = f"{result.old_ratio:.2f}" if result.old_ratio is not None else "(not a drive parameter)"
-    param = f"  ({entry.code} = {proposal.parameter_value:g} {entry.unit})" if entry is not None else ""
+    param = f"  ({entry.code} = {spoken(proposal.profile, entry, f'{proposal.parameter_value:g}')})" if entry else ""
     out.print(
         f"load inertia ratio (J_load/J_motor): {old} -> {result.new_ratio:.2f}"
         + (f" ± {est.ratio_std:.2f}" if est else "")
@@ -447,6 +517,8 @@ def _show(proposal: tune.Proposal) -> None:
     )
     if est:
         travel = f"{result.travel_used_rev:.2f} rev, " if result.travel_used_rev is not None else ""
+        peaks = [m.peak_rpm for m in est.moves if math.isfinite(m.peak_rpm)]
+        travel += f"moves reached {min(peaks):.0f}-{max(peaks):.0f} rpm, " if peaks else ""
         out.print(
             f"friction {est.coulomb_nm:.4f} ± {est.coulomb_std_nm:.4f} N·m, viscous "
             f"{est.viscous_nm_per_rad_s:.2e} N·m·s/rad, load torque {est.load_torque_nm:.4f} ± "
@@ -460,8 +532,8 @@ def _show(proposal: tune.Proposal) -> None:
             out.print(f"in drive units: {report.describe()}", markup=False)
             for s in report.settings:
                 out.print(
-                    f"  friction compensation (suggested, not written): {s.entry.code} = {s.value:g} "
-                    f"{s.entry.unit} ({s.what})",
+                    f"  friction compensation (suggested, not written): {s.entry.code} = "
+                    f"{spoken(proposal.profile, s.entry, f'{s.value:g}')} ({s.what})",
                     markup=False,
                 )
     if changes and sugg is not None:
@@ -475,7 +547,8 @@ def _show(proposal: tune.Proposal) -> None:
             + (f" (rigidity {sugg.rigidity})" if sugg.rigidity is not None else ""),
         )
         for c in changes:
-            t.add_row(c.entry.code, c.entry.name, f"{c.old:g}", f"{c.new:g}", c.entry.unit)  # the role: in JSON
+            unit = unit_text(proposal.profile, c.entry)
+            t.add_row(c.entry.code, c.entry.name, f"{c.old:g}", f"{c.new:g}", unit)  # the role: in JSON
         out.print(t)
         if proposal.margins is not None:
             out.print(f"margins on the identified inertia: {proposal.margins.describe()}", markup=False)
@@ -487,7 +560,8 @@ def gains(
     load_ratio: float = typer.Option(
         None,
         "--load-ratio",
-        help="J_load/J_motor to tune for (default: the drive's inertia-ratio parameter, as tune inertia wrote it).",
+        help="J_load/J_motor to tune for (default: the drive's inertia-ratio parameter, as tune inertia wrote it; "
+        "given, the margins are those of this load under the drive's own ratio, which is not written).",
     ),
     start: int = typer.Option(None, "--from", help="First rigidity level to try (default: the drive's current)."),
     top: int = typer.Option(None, "--to", help="Highest level to try (default: the highest the margins allow)."),
@@ -522,34 +596,46 @@ def gains(
                 + (f": FAILED ({trial.failure})" if trial.failure else "")
             )
 
-    with drive(ctx) as d:
+    with drive(ctx) as d, boosted(ctx, [d], "the step checks"):
         d.dead_man_waived = no_dead_man
-        confirm_motion(ctx, d, yes, "tune gains")
+        cautions = confirm_motion(ctx, d, yes, "tune gains")
+        check = step.plan_step(d, travel)  # the bound of each level's step check, with the protections it sets
+        bound = protect.planned_bound(d, check.bound, check.speed_rpm, travel)
+        info(f"step check: {check.describe()}, at each level")
+        for line in deadman.lines(bound):
+            safety(line)
         if not confirm("Move the axis now (a speed step forward and back at each level)?", yes):
             raise typer.Exit(1)
         try:
             res = gain_search.search_gains(
                 d, load_ratio=load_ratio, start=start, top=top, travel_rev=travel, save=save, progress=show
             )
+        except KeyboardInterrupt as exc:
+            _notes(exc)
+            raise
         except gain_search.GainSearchFailed as exc:
-            _render_search(exc.search, as_json, ok=False)
+            _render_search(exc.search, as_json, ok=False, safety_json=safety_lines(bound, cautions), bound=bound)
             raise
         profile = d.profile
     if res.persisted is False:
         warn(eeprom.ram_only_warning(profile))
-    _render_search(res, as_json, ok=True)
+    _render_search(res, as_json, ok=True, safety_json=safety_lines(bound, cautions), bound=bound)
 
 
-def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None:
+def _render_search(
+    res: gain_search.GainSearch,
+    as_json: bool,
+    ok: bool,
+    safety_json: list[str] | None = None,
+    bound: deadman.DeadManBound | None = None,
+) -> None:
     rows = [
         {
             "level": t.level,
-            "speed_gain_hz": round(t.speed_gain_hz, 2),
-            "phase_margin_deg": round(t.margins.phase_deg, 1),
-            "gain_margin_db": _clean(round(t.margins.gain_db, 1)),
-            "overshoot_pct": _rounded(t.response.overshoot_pct, 2) if t.response else None,
-            "settling_ms": _rounded(t.response.settling_ms, 2) if t.response else None,
-            "ripple_pct": round(t.response.ripple_pct, 2) if t.response else None,
+            "speed_gain": quantity(round(t.speed_gain_hz, 2), "Hz"),
+            "phase_margin": quantity(_rounded(t.margins.phase_deg, 1), "°"),
+            "gain_margin": quantity(_rounded(t.margins.gain_db, 1), "dB"),
+            **{k: (t.response.summary()[k] if t.response else None) for k in STEP_FIGURES},
             "failure": t.failure,
         }
         for t in res.trials
@@ -560,11 +646,15 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
                 {
                     "ok": ok,
                     "load_ratio": _rounded(res.load_ratio, 4),
+                    "drive_ratio": _rounded(res.own_ratio, 4) if res.own_ratio is not None else None,
                     "levels": rows,
                     "chosen": res.chosen,
                     "reason": res.reason,
                     "gains": _gains_json(res.changes),
                     "persisted": res.persisted,
+                    "dead_man": bound.as_json() if bound is not None else None,
+                    "safety": safety_json or [],
+                    "stop": _stop_json(),
                 }
             )
         )
@@ -578,21 +668,29 @@ def _render_search(res: gain_search.GainSearch, as_json: bool, ok: bool) -> None
         "Settling",
         "Result",
         drop=("Settling",),
-        title=f"rigidity levels tried (load ratio {res.load_ratio:.2f})",
+        title=f"rigidity levels tried (load ratio {res.load_ratio:.2f}"
+        + (
+            ")"
+            if res.own_ratio is None or abs(res.own_ratio - res.load_ratio) < 0.005
+            else f"; the drive's own {res.own_ratio:.2f}, by which it scales its speed gain, left as it is)"
+        ),
     )
     for r in rows:
-        settle = f"{r['settling_ms']:.0f} ms" if r["settling_ms"] is not None else "-"
-        over = f"{r['overshoot_pct']:.0f} %" if r["overshoot_pct"] is not None else "-"
-        gm = f"{r['gain_margin_db']:.1f} dB" if r["gain_margin_db"] is not None else "inf"
+        settle = f"{r['settling']['value']:.0f} ms" if r["settling"] is not None else "-"
+        over = f"{r['overshoot']['value']:.0f} %" if r["overshoot"] is not None else "-"
+        gm = f"{r['gain_margin']['value']:.1f} dB" if r["gain_margin"] is not None else "inf"
         t.add_row(
             str(r["level"]),
-            f"{r['speed_gain_hz']:.1f} Hz",
-            f"{r['phase_margin_deg']:.0f}°, {gm}",
+            f"{r['speed_gain']['value']:.1f} Hz",
+            f"{r['phase_margin']['value']:.0f}°, {gm}",
             over,
             settle,
             r["failure"] or "ok",
         )
     out.print(t)
+    sampled = next((t.response for t in res.trials if t.response is not None), None)
+    if sampled is not None:
+        out.print(f"step checks {sampled.sampling()}", markup=False)
     if res.chosen is not None:
         out.print(
             f"{res.reason}; kept level {res.chosen}: "

@@ -5,16 +5,19 @@ from __future__ import annotations
 from typing import Any
 
 from servotool.commission.plan import JOG_KEYS, TUNE_KEYS, Step
+from servotool.commission.plan_files import FileUse
 from servotool.commission.step_type import Outcome, RunContext, StepType, number_in
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import parse_value
 from servotool.model.profile import Profile
+from servotool.model.quantity import quantity
 from servotool.model.roles import motion_route
-from servotool.motion.deadman import sentence
+from servotool.motion.deadman import lines, sentence
 from servotool.report.charts import need_matplotlib
 from servotool.report.tune_report import write_tune_report
 from servotool.tuning.identify import IdentificationRefused
+from servotool.tuning.planning import MotionPlan, identification_bound
 from servotool.tuning.stable_hold import guarded_jogger
 from servotool.tuning.tune import TuneRequest, check_request, tune_inertia
 
@@ -47,6 +50,11 @@ class JogStep(StepType):
         drive.dead_man_waived = _waived(step.arg)
         jogger = guarded_jogger(drive)
         plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
+        if plan.dead_man is not None:  # the bound, then what else bounds the motion (protections, forced inputs)
+            first, *more = lines(plan.dead_man)
+            ctx.safety(f"unit {drive.unit}: {first}")
+            for line in more:
+                ctx.safety(line)
         jogger.run(plan)
         bound = plan.dead_man
         return Outcome(
@@ -75,10 +83,11 @@ def _report_option(arg: Any) -> str | None:
 
 
 class TuneInertiaStep(StepType):
-    """`tune inertia: {rigidity, bandwidth, travel, max_speed, accel_time, direction, repeats, gains, report}`: what
-    `servotool tune inertia --yes` does (host method): the gains are set only with rigidity or bandwidth (or
-    `gains: true`: at the drive's own current level), as the command leaves them alone without; `report: DIR`
-    writes the charts and report.md there (as `--report DIR`)."""
+    """`tune inertia: {rigidity, bandwidth, travel, max_speed, accel_time, direction, repeats, gains, check,
+    report}`: what `servotool tune inertia --yes --check` does (host method): the gains are set only with rigidity
+    or bandwidth (or `gains: true`: at the drive's own current level), as the command leaves them alone without,
+    and are step-checked once written (a failed check writes the previous gains back and fails the step; `check:
+    false` leaves the check out); `report: DIR` writes the charts and report.md there (as `--report DIR`)."""
 
     name = "tune inertia"
 
@@ -97,6 +106,9 @@ class TuneInertiaStep(StepType):
         gains = opts.get("gains", rigidity is not None or bandwidth is not None)
         if not isinstance(gains, bool):
             raise UsageError("tune inertia gains must be true or false")
+        check = opts.get("check", True)  # gains written in a plan are step-checked unless the plan says not
+        if not isinstance(check, bool):
+            raise UsageError("tune inertia check must be true or false")
         if rigidity is not None and (isinstance(rigidity, bool) or not isinstance(rigidity, int)):
             raise UsageError(f"tune inertia rigidity must be a whole number, got {rigidity!r}")
         request = TuneRequest(
@@ -110,6 +122,7 @@ class TuneInertiaStep(StepType):
             direction=direction,
             repeats=None if repeats is None else int(repeats),
             gains=gains,
+            verify=gains and check,
             rigidity=rigidity,
             bandwidth_hz=None if bandwidth is None else number_in(bandwidth, "tune inertia bandwidth", 0, 10_000),
         )
@@ -125,20 +138,32 @@ class TuneInertiaStep(StepType):
             if profile.role("inertia_ratio") is not None
             else f"; the ratio is reported, not written ({profile.id} maps no inertia-ratio parameter)"
         )
+        check = self.request(step.arg, profile).verify
         return (
             f"tune inertia: {motion.describe()}"
             + ("" if gains else "; gains left as they are")
+            + ("; the gains step-checked once written" if check else "; gains NOT step-checked" if gains else "")
             + reported
             + (f"; report to {report}" if report else "")
         )
+
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
+        report = _report_option(step.arg)
+        return [FileUse(report, "tune report")] if report else []
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         request = self.request(step.arg, drive.profile)
         drive.dead_man_waived = _waived(step.arg)
         report = _report_option(step.arg)
         folder = ctx.path(report, drive.unit) if report else None
+
+        def announce(motion: MotionPlan | None) -> bool:
+            if motion is not None:
+                ctx.safety(f"unit {drive.unit}: {sentence(identification_bound(drive, motion))}")
+            return True
+
         try:
-            res = tune_inertia(drive, request)
+            res = tune_inertia(drive, request, approve_motion=announce)
         except IdentificationRefused as exc:
             if folder is not None:
                 write_tune_report(folder, exc.result, drive.profile, None, str(exc))
@@ -151,15 +176,20 @@ class TuneInertiaStep(StepType):
         entry, value = proposal.parameter, proposal.parameter_value
         data: dict[str, Any] = {"ratio": round(res.ratio, 4)}
         if entry is not None:
-            data[entry.code] = value
+            data[entry.code] = quantity(value, entry.unit)
+        checked = ""
         if request.gains:
-            data["gains"] = {c.entry.code: c.new for c in proposal.gain_changes}
+            data["gains"] = {c.entry.code: quantity(c.new, c.entry.unit) for c in proposal.gain_changes}
+        if res.verified is not None:
+            data["step_check"] = res.verified.summary()
+            checked = f"; gains step-checked: overshoot {res.verified.overshoot_pct:.0f} %"
         data["persisted"] = res.persisted
         if folder is not None:
             data["report"] = str(folder / "report.md")
         if entry is None:
             return Outcome(
-                f"load ratio {res.ratio:.2f} (nothing to write: {drive.profile.id} maps no inertia-ratio parameter)",
+                f"load ratio {res.ratio:.2f} (nothing to write: {drive.profile.id} maps no inertia-ratio parameter)"
+                + checked,
                 data,
             )
-        return Outcome(f"load ratio {res.ratio:.2f} -> {entry.code}={value:g}", data)
+        return Outcome(f"load ratio {res.ratio:.2f} -> {entry.code}={value:g}{checked}", data)

@@ -5,12 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servotool.commission.plan import Step
+from servotool.commission.plan_files import FileUse
 from servotool.commission.step_type import Outcome, RunContext, StepType, no_argument
 from servotool.drive import Drive
 from servotool.errors import UsageError, VerifyError
 from servotool.model.codec import format_value, json_value, parse_value, raw_to_eng
 from servotool.model.profile import Entry, Profile
-from servotool.ops import backup, params, restore
+from servotool.ops import backup, changelog, params, restore
 from servotool.ops.eeprom import check_power_cycle, persistence
 from servotool.ops.journal import port_lock
 from servotool.words import count
@@ -122,15 +123,16 @@ class ExpectStep(StepType):
         ]
         if bad:
             raise VerifyError("expectation failed: " + "; ".join(bad))
-        meanings = {r.entry.code: r.entry.enum[r.raw] for r in readings if r.raw in r.entry.enum}
-        return Outcome(
-            "as expected",
-            {
-                "values": values,
-                "units": {x.entry.code: x.entry.unit for x in exps},
-                **({"meanings": meanings} if meanings else {}),
-            },
-        )
+        # Each value with its unit (the one way JSON gives units), and its meaning where the entry names it.
+        found = {
+            r.entry.code: {
+                "value": values[r.entry.code],
+                "unit": r.entry.unit,
+                **({"meaning": r.entry.enum[r.raw]} if r.raw in r.entry.enum else {}),
+            }
+            for r in readings
+        }
+        return Outcome("as expected", {"values": found})
 
 
 class _FileStep(StepType):
@@ -167,11 +169,15 @@ class BackupStep(StepType):
         name, overwrite = self.target(step)
         return f"backup {name}" + (" (replacing an existing file)" if overwrite else "")
 
-    def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
         name, overwrite = self.target(step)
-        path = ctx.path(name, drive.unit)
-        if path.exists() and not overwrite:  # before reading the drive: a refusal costs nothing
-            raise UsageError(f"{path} exists; the step must say 'overwrite: true' to replace it")
+        return [FileUse(name, "backup", overwrite)]
+
+    def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
+        name, step_says = self.target(step)
+        path, overwrite = ctx.path(name, drive.unit), ctx.may_replace(step_says)
+        if path.exists() and not overwrite:  # checked before the run; a file made meanwhile is still kept
+            raise UsageError(f"{path} exists; say 'overwrite: true' (in the step or the plan) or pass --force")
         written = backup.write_backup(drive, path, force=overwrite)
         return Outcome(f"saved to {written}", {"file": str(written)})
 
@@ -180,6 +186,10 @@ class RestoreStep(_FileStep):
     """`restore: FILE`: a backup file put back completely."""
 
     name = "restore"
+
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
+        self.describe(step, profile)
+        return [FileUse(step.arg, "restore")]
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         path = ctx.path(step.arg, drive.unit)
@@ -209,6 +219,7 @@ class SaveStep(StepType):
         written = list(ctx.written.get(drive.unit, {}).values())
         if mode == "ram":
             drive.trigger("eeprom_save", "save")
+            changelog.event(drive, "store", memory=changelog.EEPROM, note="the drive's store function: RAM to EEPROM")
             return Outcome("parameters stored in EEPROM", {"stored": [e.code for e, _ in written]})
         if mode == "immediate":
             return Outcome("nothing to do: the drive stores every write", {"stored": [e.code for e, _ in written]})

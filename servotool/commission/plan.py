@@ -15,7 +15,15 @@ from servotool.files import compose_yaml, parse_yaml, read_text
 STEP_NAMES = ("set", "expect", "backup", "restore", "jog", "tune inertia", "wait", "alarm clear", "save", "prompt")
 
 
-TOP_KEYS = {"port", "profile", "units", "unit", "steps", "baud", "parity", "stopbits", "timeout", "retries"}
+CONNECTION_KEYS = {"port", "profile", "baud", "parity", "stopbits", "timeout", "retries"}
+
+
+# allow_outside: the files the plan names may lie outside its folder; overwrite: the files it writes may replace
+# existing ones (a backup step may also say it for its own file).
+FILE_KEYS = {"allow_outside", "overwrite"}
+
+
+TOP_KEYS = CONNECTION_KEYS | FILE_KEYS | {"units", "unit", "steps"}
 
 
 JOG_KEYS = {"speed", "time", "max_travel", "no_dead_man"}
@@ -30,6 +38,7 @@ TUNE_KEYS = {
     "direction",
     "repeats",
     "gains",
+    "check",
     "report",
     "no_dead_man",
 }
@@ -50,10 +59,12 @@ class Step:
 @dataclass
 class Plan:
     path: Path
-    options: dict[str, Any]
+    options: dict[str, Any]  # connection options
     units: list[int]
     steps: list[Step]
     problems: list[str] = field(default_factory=list)  # step errors found while loading, reported by validate
+    allow_outside: bool = False
+    overwrite: bool = False
 
 
 def _fail(path: Path, line: int, msg: str) -> UsageError:
@@ -74,8 +85,12 @@ def load_plan(path: Path) -> Plan:
     for key in data:
         if key not in TOP_KEYS:
             raise _fail(path, key_lines.get(str(key), 1), f"unknown key '{key}' (known: {', '.join(sorted(TOP_KEYS))})")
+    for key in FILE_KEYS & set(data):
+        if not isinstance(data[key], bool):
+            raise _fail(path, key_lines[key], f"{key} must be true or false, got {data[key]!r}")
+    options = {k: v for k, v in data.items() if k in CONNECTION_KEYS}
     try:
-        options_from({k: v for k, v in data.items() if k not in ("steps", "units", "unit")}, "plan")
+        options_from(options, "plan")
     except UsageError as exc:
         bad = next((k for k in data if f" {k} must" in str(exc)), "")
         raise _fail(path, key_lines.get(bad, 1), str(exc).removeprefix("plan: ")) from None
@@ -94,8 +109,15 @@ def load_plan(path: Path) -> Plan:
             steps.append(_step(path, i, raw, node.start_mark.line + 1, units))
         except UsageError as exc:  # every step's problem is reported, in one pass (validate raises)
             problems.append(str(exc))
-    options = {k: v for k, v in data.items() if k not in ("steps", "units", "unit")}
-    return Plan(path, options, units or [], steps, problems)
+    return Plan(
+        path,
+        options,
+        units or [],
+        steps,
+        problems,
+        allow_outside=data.get("allow_outside", False),
+        overwrite=data.get("overwrite", False),
+    )
 
 
 def _step(path: Path, i: int, raw: Any, line: int, units: list[int] | bool | None) -> Step:

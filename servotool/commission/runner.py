@@ -58,12 +58,18 @@ class Runner:
         log: Callable[[str], None],
         word: Callable[[ServoError], str] = str,
         clock: Clock | None = None,
+        safety: Callable[[str], None] | None = None,
+        force: bool = False,
     ) -> None:
-        """word turns a failed step's error into its report line (the CLI adds fix commands)."""
+        """word turns a failed step's error into its report line (the CLI adds fix commands); safety shows a
+        motion step's dead-man bound before it moves (never quiet); force: files the plan writes may replace
+        existing ones (`run --force`)."""
         self.plan, self.drives = plan, drives
         self.clock = clock or RealClock()
         self.continue_on_error, self.log, self.word = continue_on_error, log, word
-        self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives}, self.clock)
+        self.context = RunContext(plan, len(drives) > 1, yes, ask, {d.unit: {} for d in drives}, self.clock, force)
+        if safety is not None:
+            self.context.safety = safety
         self.results: list[StepResult] = []
         self.current: Step | None = None  # the step running (or the last one run)
         self.auto_backups: dict[int, str] = {}
@@ -78,11 +84,23 @@ class Runner:
             except DeviceError as exc:
                 raise DeviceError(f"unit {d.unit} does not answer, so nothing was run: {exc}") from None
 
+    def check_setup(self) -> None:
+        """The drive settings every motion step needs, on every axis, before anything is written: one UsageError
+        naming each step, axis and setting (worded as a failed step would be), not a refusal after the plan has
+        already written and moved."""
+        from servotool.commission.prerequisites import unmet
+
+        problems = [
+            f"{step.where()}, unit {d.unit}: {self.word(exc)}" for d in self.drives for step, exc in unmet(self.plan, d)
+        ]
+        if problems:
+            raise UsageError("nothing was run: " + "; ".join(problems))
+
     def back_up(self, notice: Callable[[str], None]) -> None:
         """An automatic backup of every axis before the plan's first write (a plan that only reads needs none)."""
         from servotool.ops.backup import auto_backup
 
-        if all(s.name in READ_ONLY_STEPS for s in self.plan.steps):
+        if not writes_to_drives(self.plan):
             return
         for d in self.drives:
             self.auto_backups[d.unit] = str(auto_backup(d, "before-plan"))
@@ -100,7 +118,9 @@ class Runner:
                     outcome = kind.run(step, drive, self.context)
                     detail, data, ok = outcome.detail, outcome.data, True
                 except ServoError as exc:
-                    detail, data, ok = self.word(exc), {"error": type(exc).__name__, "exit_code": exc.exit_code}, False
+                    detail, ok = self.word(exc), False
+                    # the error's own facts where it has them (a rollback: why, and the step check that failed)
+                    data = {"error": type(exc).__name__, "exit_code": exc.exit_code, **getattr(exc, "facts", {})}
                 result = StepResult(step, drive.unit, ok, detail, self.clock.now() - t0, data)
                 self.results.append(result)
                 self.after_step()
@@ -108,6 +128,11 @@ class Runner:
                 if not ok and not self.continue_on_error:
                     return False
         return all(r.ok for r in self.results)
+
+
+def writes_to_drives(plan: Plan) -> bool:
+    """Whether a step may write to a drive (and the run takes an automatic backup of every axis first)."""
+    return not all(s.name in READ_ONLY_STEPS for s in plan.steps)
 
 
 def read_report(path: Path) -> dict[str, Any] | None:

@@ -9,6 +9,7 @@ from typing import Any, ClassVar
 
 from servotool.clock import Clock, RealClock
 from servotool.commission.plan import Plan, Step
+from servotool.commission.plan_files import FileUse, resolve
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.profile import Entry, Profile
@@ -24,19 +25,21 @@ class RunContext:
     ask: Callable[[int, str], bool]
     written: dict[int, dict[str, tuple[Entry, int]]] = field(default_factory=dict)
     clock: Clock = field(default_factory=RealClock)
+    force: bool = False  # `run --force`: files may be replaced
+    # A safety line before a step moves (the dead-man bound, NO DEAD-MAN): shown even where step lines are quiet.
+    safety: Callable[[str], None] = field(default=lambda _line: None)
 
     def wrote(self, drive: Drive, entry: Entry, raw: int) -> None:
         self.written.setdefault(drive.unit, {})[entry.code] = (entry, raw)
 
     def path(self, text: str, unit: int) -> Path:
-        """A file named in the plan: {unit} replaced (several axes and no {unit}: -unitN added), relative to the
-        plan's folder."""
-        name = text.replace("{unit}", str(unit))
-        if self.several and "{unit}" not in text:
-            p = Path(name)
-            name = str(p.with_name(f"{p.stem}-unit{unit}{p.suffix}"))
-        path = Path(name)
-        return path if path.is_absolute() else self.plan.path.parent / path
+        """A file named in the plan, resolved as plan_files.resolve does it (and checked, before the run, by
+        plan_files.plan_files)."""
+        return resolve(self.plan, text, unit, self.several)
+
+    def may_replace(self, step_says: bool = False) -> bool:
+        """Whether a file the step writes may replace an existing one: the step, the plan or --force says so."""
+        return step_says or self.plan.overwrite or self.force
 
 
 @dataclass(frozen=True)
@@ -60,6 +63,10 @@ class StepType:
     def describe(self, step: Step, profile: Profile) -> str:
         """What the step would do (the dry run's line); raises as validate() does."""
         raise NotImplementedError
+
+    def files(self, step: Step, profile: Profile) -> list[FileUse]:
+        """The files the step writes or reads, as named in the plan (checked before anything runs)."""
+        return []
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         raise NotImplementedError

@@ -3,9 +3,12 @@ whole plan before anything is written."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from servotool.commission.motion_steps import JogStep, TuneInertiaStep
 from servotool.commission.param_steps import BackupStep, ExpectStep, RestoreStep, SaveStep, SetStep
 from servotool.commission.plan import Plan, Step
+from servotool.commission.plan_files import PlanFile, plan_files
 from servotool.commission.step_type import Outcome, RunContext, StepType, no_argument
 from servotool.drive import Drive
 from servotool.errors import UsageError
@@ -87,10 +90,19 @@ def step_type(step: Step) -> StepType:
     return kind
 
 
-def validate(plan: Plan, profile: Profile) -> list[str]:
-    """Check every step against the profile before anything runs; returns a description per step. Every problem
-    of the plan is reported at once (one line, '; ' between them), not one per run."""
-    lines, problems = [], list(plan.problems)
+@dataclass(frozen=True)
+class Checked:
+    """A plan checked as a whole before anything runs: what each step would do, and every file it would use."""
+
+    lines: list[str]  # 'PLAN:LINE: what the step does', one a step
+    files: list[PlanFile]
+
+
+def validate(plan: Plan, profile: Profile, units: list[int] | None = None, *, force: bool = False) -> Checked:
+    """Check every step against the profile, and the files the steps use on these axes (the plan's, by default),
+    before anything runs. Every problem of the plan is reported at once (one line, '; ' between them), not one per
+    run: a real run and its dry run stop at the same ones, before anything moves."""
+    lines, problems, uses = [], list(plan.problems), []
     for step in plan.steps:
         try:
             if step.units and plan.units and not set(step.units) <= set(plan.units):
@@ -98,11 +110,14 @@ def validate(plan: Plan, profile: Profile) -> list[str]:
             kind = step_type(step)
             kind.validate(step, profile)
             lines.append(kind.describe(step, profile))
+            uses.append((step, kind.files(step, profile)))
         except UsageError as exc:
             msg = str(exc)
             problems.append(msg if msg.startswith(("step ", str(plan.path))) else f"{step.where()}: {msg}")
+    files, file_problems = plan_files(plan, units or plan.units or [profile.default_unit], uses, force=force)
+    problems += file_problems
     if len(problems) == 1:
         raise UsageError(problems[0])
     if problems:
         raise UsageError(f"{plan.path}: {len(problems)} problems: " + "; ".join(problems))
-    return [f"{plan.path}:{s.line}: {d}" for s, d in zip(plan.steps, lines, strict=True)]
+    return Checked([f"{plan.path}:{s.line}: {d}" for s, d in zip(plan.steps, lines, strict=True)], files)

@@ -54,10 +54,12 @@ class _Op:
 
     def begin(self) -> None:
         if self.tries >= 2 * (self.retries + 2):
-            raise DeviceError(
+            error = DeviceError(
                 f"{self.what}: no two reads in a row agreed after {self._tries()} (a value that "
                 f"changes by itself, or stray replies on the line); nothing was used"
             )
+            error.fault = "unsettled"  # the line answered: a live value (a turning motor's speed) may differ each time
+            raise error
         self.tries += 1
 
     def spend(self, fault: LineFault) -> None:

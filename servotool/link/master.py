@@ -7,10 +7,14 @@ from __future__ import annotations
 
 import select
 import socket
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from servotool.link.exchange import Exchange, Wire
-from servotool.link.ports import LinkSettings, Trace, open_serial, open_tcp, parse_tcp
+from servotool.link.ports import ControlLine, LinkSettings, Trace, open_serial, open_tcp, parse_tcp
+from servotool.model.profile import LineSettings
 
 if TYPE_CHECKING:  # pyserial's platform module (serialposix imports fcntl) loads only with a real port
     import serial
@@ -23,6 +27,7 @@ class RtuMaster:
 
     def __init__(self, settings: LinkSettings, trace: Trace | None = None) -> None:
         self.settings = settings
+        self.line_listeners: list[Callable[[LineSettings], None]] = []  # told when set_line changes the speed
         tcp = parse_tcp(settings.port)
         self._port: socket.socket | serial.Serial
         wire: Wire
@@ -30,7 +35,7 @@ class RtuMaster:
             self._port = open_tcp(settings.port, settings.timeout)
             wire = _SocketWire(self._port)
         else:
-            self._port = open_serial(settings.port, settings.line, settings.timeout)
+            self._port = open_serial(settings.port, settings.line, settings.timeout, settings.heartbeat)
             wire = _SerialWire(self._port)
         silence = settings.silence if settings.silence is not None else 0.0 if tcp else _frame_gap(settings.line.baud)
         self._exchange = Exchange(
@@ -60,6 +65,45 @@ class RtuMaster:
         self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
     ) -> None:
         self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent)
+
+    def control_line(self) -> ControlLine | None:
+        """The control line the settings name for a heartbeat (held low since the port opened), None without."""
+        name = self.settings.heartbeat
+        if name is None or parse_tcp(self.settings.port):
+            return None
+        return ControlLine(self._port, name)  # type: ignore[arg-type]
+
+    @property
+    def line(self) -> LineSettings:
+        """The line settings the master speaks now."""
+        return self.settings.line
+
+    def set_line(self, line: LineSettings) -> None:
+        """Speak at other line settings from the next request on (a drive whose baud entry changed it): the serial
+        port's own settings, and the frame-ending silence that follows the baud rate; over tcp:// only the record
+        (and the listeners: the embedded simulator hears what its host speaks)."""
+        if line == self.settings.line:
+            return
+        if not isinstance(self._port, socket.socket):
+            self._port.baudrate, self._port.parity, self._port.stopbits = line.baud, line.parity, line.stopbits
+            self._port.reset_input_buffer()
+            if self.settings.silence is None:
+                self._exchange.settle = _frame_gap(line.baud)
+        self.settings = replace(self.settings, line=line)
+        for listener in self.line_listeners:
+            listener(line)
+
+    @contextmanager
+    def quick(self, timeout: float) -> Iterator[None]:
+        """One try per request with a short timeout and no wait for late replies, for the block (probing ids that
+        are silent by design, or a line speed on trial); the link's own settings afterwards."""
+        ex = self._exchange
+        saved = ex.timeout, ex.retries, ex.late_window, ex.flush_gap
+        ex.timeout, ex.retries, ex.late_window, ex.flush_gap = timeout, 0, 0.0, min(ex.flush_gap, timeout / 2)
+        try:
+            yield
+        finally:
+            ex.timeout, ex.retries, ex.late_window, ex.flush_gap = saved
 
     def hurry(self) -> None:
         """For a bus scan, where most ids are silent by design: after a silent try, neither wait for a late reply

@@ -33,6 +33,7 @@ class LinkSettings:
     echo: bool | None = False  # the adapter echoes what it sends (None: find out from the first replies)
     turnaround: float = 0.0  # s of quiet after a reply before the next request (slow drives' transceivers)
     silence: float | None = None  # s of quiet that ends a frame; None: RTU's 3.5 characters at the baud rate
+    heartbeat: str | None = None  # dtr or rts: a control line kept low at open and toggled by the heartbeat
 
 
 class Link(Protocol):
@@ -110,13 +111,14 @@ PARITY_NAMES = {"N": "none", "E": "even", "O": "odd"}
 SYSFS_USB_SERIAL = Path("/sys/bus/usb-serial/devices")
 
 
-def open_serial(port: str, line: LineSettings, timeout: float) -> serial.Serial:
-    """Open and configure a serial port for exclusive use; DeviceError naming the real cause when it will not."""
+def open_serial(port: str, line: LineSettings, timeout: float, low: str | None = None) -> serial.Serial:
+    """Open and configure a serial port for exclusive use; DeviceError naming the real cause when it will not.
+    low: a control line (dtr, rts) held low from the moment the port opens (a heartbeat's resting level)."""
     import serial
 
     try:
-        return serial.Serial(
-            port,
+        s = serial.Serial(
+            None,
             baudrate=line.baud,
             bytesize=line.bytesize,
             parity=line.parity,
@@ -124,8 +126,25 @@ def open_serial(port: str, line: LineSettings, timeout: float) -> serial.Serial:
             timeout=timeout,
             exclusive=True,
         )
+        if low is not None:
+            setattr(s, low, False)  # pyserial applies it as the port opens: no pulse before the first beat
+        s.port = port
+        s.open()
+        return s
     except Exception as exc:  # SerialException, OSError, termios.error (not an OSError), ValueError
         raise DeviceError(f"cannot open port {port}: {port_problem(port, exc, line)}") from None
+
+
+class ControlLine:
+    """One modem control line (DTR or RTS) of an open serial port, set high or low: what a heartbeat toggles."""
+
+    def __init__(self, port: serial.SerialBase, name: str) -> None:
+        self.port, self.name = port, name
+        self.level = False
+
+    def set(self, level: bool) -> None:
+        setattr(self.port, self.name, level)
+        self.level = level
 
 
 def open_tcp(port: str, timeout: float) -> socket.socket:

@@ -119,6 +119,19 @@ def split_field(profile: Profile, text: str) -> tuple[Entry, str | None]:
     return entry, entry.fields[field_index(entry, name)]
 
 
+def part_value(entry: Entry, raw: int, part: str | None) -> int:
+    """The value of CODE.PART in a raw value: a digit field (Po407.X), a named bit (Pn408.DI1), or the whole value."""
+    if part is None:
+        return raw
+    upper = part.upper()
+    if entry.format == "digits":
+        names = [f.upper() for f in entry.fields]
+        index = names.index(upper)
+        return (raw >> (entry.field_width * index)) & ((1 << entry.field_width) - 1)
+    bit = next(b for b, name in entry.bits.items() if name.upper() == upper)
+    return raw >> bit & 1
+
+
 def fields_json(entry: Entry, raw: int) -> dict[str, int] | None:
     """{field: value}, highest field first, for a displayable digit value; None otherwise."""
     if entry.format != "digits" or not _displayable(entry, raw):
@@ -169,11 +182,16 @@ def format_value(entry: Entry, raw: int) -> str:
     return text
 
 
-def json_value(entry: Entry, raw: int) -> int | float | str:
-    """Value for machine-readable output: engineering number, or the manual's text for encoded formats."""
-    if entry.format in ("digits", "hex"):
-        return format_value(entry, raw)
+def json_value(entry: Entry, raw: int) -> int | float:
+    """Value for machine-readable output: always a number (the engineering value; for an encoded entry, two-/four-
+    parameter digits, hex, a bit field, the register's value); json_text gives the manual's form beside it."""
     return raw_to_eng(entry, raw)
+
+
+def json_text(entry: Entry, raw: int) -> str | None:
+    """The manual's form of an encoded value ('d 1 21', 'b1200', '0x0003 [DI1 DI2]') for a `text` field beside the
+    number; None for a plain number."""
+    return format_value(entry, raw) if entry.format in ("digits", "hex", "bits") else None
 
 
 def parse_value(entry: Entry, text: str, *, raw: bool = False, current: int | None = None) -> int:

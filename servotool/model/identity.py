@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from typing import Any
 
-from servotool.model.checker import Checker
+from servotool.model.checker import Checker, shown
 from servotool.model.profile import Entry, Identity, IdentityCheck, Limits, Profile
 
 CHECK_KEYS = {"code", "address", "absent", "range", "sim", "source", "unverified"}
@@ -27,27 +28,34 @@ def read_plan(checks: tuple[IdentityCheck, ...], max_read: int) -> list[tuple[in
     return plans
 
 
-def parse_identity(chk: Checker, raw: Any, entries: dict[str, Entry], limits: Limits) -> Identity | None:
-    """The optional `identity` mapping: {firmware, model, checks: [...]}; problems go to the checker."""
-    if raw is None:
-        return None
+def parse_identity(
+    chk: Checker, raw: Any, entries: dict[str, Entry], limits: Limits, broken: Collection[str] = ()
+) -> Identity | None:
+    """The `identity` mapping: {firmware, model, checks: [...]}; problems go to the checker. A check naming a
+    broken entry (one of `broken`, upper-case codes) is left out without a problem of its own."""
     if not isinstance(raw, dict):
-        chk.bad("identity", "expected a mapping {firmware, model, checks}")
+        chk.bad("identity", f"expected a mapping {{firmware, model, checks}}, got {shown(raw)}")
         return None
     chk.known_keys(raw, ("firmware", "model", "checks"), "identity")
     items = raw.get("checks")
     if not isinstance(items, list) or not items:
-        chk.bad("identity.checks", "expected a non-empty list of {code|address, range, sim, source}")
+        chk.bad(
+            "identity.checks", f"expected a non-empty list of {{code|address, range, sim, source}}, got {shown(items)}"
+        )
         return None
-    checks = [c for i, item in enumerate(items) if (c := _parse_check(chk, item, f"identity.checks[{i}]", entries))]
+    checks = [
+        c for i, item in enumerate(items) if (c := _parse_check(chk, item, f"identity.checks[{i}]", entries, broken))
+    ]
     checked = {c.code.upper() for c in checks if c.code}
     names: dict[str, str] = {}
     for key in ("firmware", "model"):
-        code = raw.get(key)
-        if code is None:
+        if key not in raw or len(checks) < len(items):  # a broken check may be the one it names
             continue
-        if not isinstance(code, str) or code.upper() not in entries:
-            chk.bad(f"identity.{key}", f"names unknown entry {code!r}")
+        code = chk.need(raw, key, "identity", str)
+        if code is None or code.upper() in broken:
+            continue
+        if code.upper() not in entries:
+            chk.bad(f"identity.{key}", f"names unknown entry {shown(code)}")
         elif code.upper() not in checked:
             chk.bad(f"identity.{key}", f"{code} must also be one of the checks (they are what is read)")
         else:
@@ -64,9 +72,11 @@ def parse_identity(chk: Checker, raw: Any, entries: dict[str, Entry], limits: Li
     return Identity(tuple(checks), names.get("firmware", ""), names.get("model", ""))
 
 
-def _parse_check(chk: Checker, item: Any, loc: str, entries: dict[str, Entry]) -> IdentityCheck | None:
+def _parse_check(
+    chk: Checker, item: Any, loc: str, entries: dict[str, Entry], broken: Collection[str]
+) -> IdentityCheck | None:
     if not isinstance(item, dict):
-        chk.bad(loc, "expected a mapping")
+        chk.bad(loc, f"expected a mapping, got {shown(item)}")
         return None
     chk.known_keys(item, CHECK_KEYS, loc)
     before = len(chk.problems)
@@ -74,7 +84,7 @@ def _parse_check(chk: Checker, item: Any, loc: str, entries: dict[str, Entry]) -
     unverified = chk.opt(item, "unverified", loc, str, "")
     absent = chk.opt(item, "absent", loc, bool, False)
     sim = chk.opt(item, "sim", loc, int, None)
-    span = _range(chk, item.get("range"), f"{loc}.range")
+    span = _range(chk, item["range"], f"{loc}.range") if "range" in item else None
     if ("code" in item) == ("address" in item):
         chk.bad(loc, "give either 'code' (an entry of this profile) or 'address' (one it does not have)")
         return None
@@ -91,8 +101,10 @@ def _parse_check(chk: Checker, item: Any, loc: str, entries: dict[str, Entry]) -
         return IdentityCheck(address, 1, "", True, None, None, source, unverified)
     code = chk.need(item, "code", loc, str)
     entry = entries.get(str(code).upper()) if code is not None else None
+    if code is not None and str(code).upper() in broken:
+        return None
     if code is not None and entry is None:
-        chk.bad(f"{loc}.code", f"names unknown entry {code!r}")
+        chk.bad(f"{loc}.code", f"names unknown entry {shown(code)}")
     if entry is not None:
         _check_entry(chk, f"{loc} ({entry.code})", entry, absent, span, sim)
     if len(chk.problems) > before or entry is None or source is None:
@@ -123,11 +135,9 @@ def _check_entry(
 
 
 def _range(chk: Checker, raw: Any, loc: str) -> tuple[int, int] | None:
-    if raw is None:
-        return None
     ok = isinstance(raw, list) and len(raw) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in raw)
     if not ok or raw[0] > raw[1]:
-        chk.bad(loc, "expected [lo, hi] raw values with lo <= hi")
+        chk.bad(loc, f"expected [lo, hi] raw values with lo <= hi, got {shown(raw)}")
         return None
     return raw[0], raw[1]
 

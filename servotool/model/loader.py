@@ -1,14 +1,16 @@
 """Loading profiles: built-in ids and files, parsed and validated once per process.
 
-A parsed profile is also kept in the user cache folder, compiled (pickled) and keyed by the file's content and the
-model code that parsed it, so that the next process loads it in a few milliseconds instead of parsing the YAML.
+A parsed profile is also kept in the user cache folder as JSON (servotool.model.compiled), keyed by the file's
+content and the model code that parsed it, so that the next process loads it in a few milliseconds instead of
+parsing the YAML. Nothing in that folder is ever run: the file is data, carries a SHA-256 of its body, and is used
+only when the hash, the key and (on POSIX) its owner match; anything else is rebuilt from the YAML.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import os
-import pickle
 import sys
 from functools import cache
 from pathlib import Path
@@ -18,6 +20,9 @@ from servotool.errors import FileProblem, ProfileError, UnknownName
 from servotool.files import cache_dir, parse_yaml, read_text, write_atomic
 from servotool.model.lookup import suggest
 from servotool.model.profile import Profile
+
+CACHE_FORMAT = "servotool-compiled-profile/1"
+CACHE_SUFFIX = ".json"
 
 
 def builtin_dir() -> Path:
@@ -45,30 +50,53 @@ def _code_stamp() -> bytes:
     return digest.digest()
 
 
-def _cache_file(path: Path, text: str) -> Path:
-    key = hashlib.sha256(_code_stamp() + str(path.resolve()).encode() + b"\0" + text.encode()).hexdigest()[:32]
-    return cache_dir() / "profiles" / f"{path.stem}-{key}.pickle"
+def _cache_key(path: Path, text: str) -> str:
+    """What a compiled profile was made from: this model code, the file's place and its text."""
+    return hashlib.sha256(_code_stamp() + str(path.resolve()).encode() + b"\0" + text.encode()).hexdigest()
 
 
-def _cached(where: Path) -> tuple[Profile | None, list[str]] | None:
+def _cache_file(key: str, path: Path) -> Path:
+    return cache_dir() / "profiles" / f"{path.stem}-{key[:32]}{CACHE_SUFFIX}"
+
+
+def _cached(where: Path, key: str) -> tuple[Profile | None, list[str]] | None:
+    """The compiled profile in the cache file, or None: missing, damaged, edited (its body no longer matches its
+    hash), made from another file or code (its key), or not owned by this user (root, with a user's HOME, does
+    not take the user's files for its own)."""
+    from servotool.model.compiled import from_data
+
     try:
-        found = pickle.loads(where.read_bytes())
-    except FileNotFoundError:
+        with where.open("rb") as fh:
+            st = os.fstat(fh.fileno())
+            if os.name == "posix" and (st.st_uid != os.geteuid() or st.st_mode & 0o022):
+                return None
+            head, _, body = fh.read().partition(b"\n")
+        header = json.loads(head)
+        if (
+            not isinstance(header, dict)
+            or header.get("format") != CACHE_FORMAT
+            or header.get("key") != key
+            or header.get("sha256") != hashlib.sha256(body).hexdigest()
+        ):
+            return None
+        return from_data(json.loads(body))
+    except (OSError, ValueError):  # a damaged or foreign cache file is rebuilt, never trusted
         return None
-    except Exception:  # a damaged or foreign cache file is rebuilt, never trusted
-        return None
-    return found if isinstance(found, tuple) and len(found) == 2 else None
 
 
-def _store(where: Path, parsed: tuple[Profile | None, list[str]]) -> None:
-    """Keep the compiled profile (replacing those of older versions of the file); a cache that cannot be
-    written is no error."""
+def _store(where: Path, key: str, parsed: tuple[Profile | None, list[str]]) -> None:
+    """Keep the compiled profile (replacing those of older versions of the file, and any pickle the cache held
+    before it was JSON); a cache that cannot be written is no error."""
+    from servotool.model.compiled import to_data
+
+    body = json.dumps(to_data(parsed), ensure_ascii=False, separators=(",", ":")).encode()
+    header = {"format": CACHE_FORMAT, "key": key, "sha256": hashlib.sha256(body).hexdigest()}
     try:
         stem = where.name.rsplit("-", 1)[0] + "-"
         for old in os.listdir(where.parent) if where.parent.is_dir() else []:
-            if old.startswith(stem) and old.endswith(".pickle"):
+            if old.startswith(stem) and old.endswith((CACHE_SUFFIX, ".pickle")):
                 (where.parent / old).unlink(missing_ok=True)
-        write_atomic(where, pickle.dumps(parsed, protocol=pickle.HIGHEST_PROTOCOL), durable=False)
+        write_atomic(where, json.dumps(header).encode() + b"\n" + body, durable=False)
     except OSError:
         pass
 
@@ -79,8 +107,9 @@ def _parse(path: Path) -> tuple[Profile | None, list[str]]:
         text = read_text(path)
     except FileProblem as exc:
         return None, [str(exc)]
-    where = _cache_file(path, text)
-    if (hit := _cached(where)) is not None:
+    key = _cache_key(path, text)
+    where = _cache_file(key, path)
+    if (hit := _cached(where, key)) is not None:
         return hit
     try:
         data = parse_yaml(text, path)
@@ -89,7 +118,7 @@ def _parse(path: Path) -> tuple[Profile | None, list[str]]:
     from servotool.model.schema import parse_profile  # the parser only when the cache has not the profile
 
     parsed = parse_profile(data, str(path))
-    _store(where, parsed)
+    _store(where, key, parsed)
     return parsed
 
 

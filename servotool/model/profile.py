@@ -4,9 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from servotool.errors import MissingRole, UnknownName
 from servotool.model.lookup import code_key, suggest
+
+if TYPE_CHECKING:
+    from servotool.model.alarm_notes import AlarmCauses, AlarmLog
+    from servotool.model.terminals import IoMap
 
 CLASSES = ("Pn", "Un", "Sn", "Fn")
 
@@ -32,10 +37,24 @@ PERSISTENCE = ("immediate", "ram", "switchable")
 DEFAULT_ACCESS = {"Pn": "rw", "Un": "ro", "Sn": "ro", "Fn": "wo"}
 
 
-ALARM_KINDS = ("overspeed", "overload", "following_error", "comm_timeout", "inertia_id_failed", "other")
+ALARM_KINDS = (
+    "overspeed",
+    "overload",
+    "following_error",
+    "comm_timeout",
+    "inertia_id_failed",
+    "overtravel",
+    "locked_rotor",
+    "saturation",
+    "other",
+)
 
 
 CONVENTIONS = {"inertia_ratio": ("load_over_motor", "total_over_motor")}
+
+
+# A ramp time whose reference speed a profile does not describe is read as the time to this speed (or the rated one).
+UNDESCRIBED_RAMP_RPM = 1000.0
 
 
 @dataclass(frozen=True)
@@ -109,6 +128,27 @@ class LineSettings:
 
 
 @dataclass(frozen=True)
+class LineBoost:
+    """Whether and how the drive's own line can be raised for a long exchange (profile `serial.boost`): the baud
+    entry, its codes (raw -> baud) and the speed to raise it to; `none` says why a drive has no boost."""
+
+    code: str = ""
+    rates: dict[int, int] = field(default_factory=dict)
+    to_baud: int = 0
+    source: str = ""
+    unverified: str = ""
+    none: str = ""
+
+    @property
+    def available(self) -> bool:
+        return bool(self.code) and self.to_baud > 0
+
+    def code_of(self, baud: int) -> int | None:
+        """The entry's raw value for a baud rate (None: the drive has no code for it)."""
+        return next((raw for raw, b in self.rates.items() if b == baud), None)
+
+
+@dataclass(frozen=True)
 class Limits:
     max_read: int = 125
     max_write: int = 123
@@ -179,6 +219,30 @@ class DeadManRoute:
     unverified: str = ""
     if_host_dies: str = ""
     start_value: int = 1  # segment: the value OR-ed into role segment_start's servo-on value to start a move
+    # The speed role jog_accel's ramp time runs up to (rpm); 0: the motor's rated speed, None: not described (the
+    # slower of 1000 rpm and the rated speed is assumed). ramp_source: the manual lines, or why it is inferred.
+    ramp_reference_rpm: float | None = None
+    ramp_source: str = ""
+
+
+FORCED_MONITOR = ("forced", "terminals")
+
+
+@dataclass(frozen=True)
+class ForcedInputs:
+    """Host motion asserts its trigger by forcing the drive's digital inputs (profile key forced_inputs, SD25
+    So-57/So-58): while forcing is on, the `levels` entry replaces every input's level. `monitor` is the input-level
+    monitor, and `monitor_shows` what it shows while forcing is on: the forced levels, or still the terminals."""
+
+    switch_code: str
+    levels_code: str
+    monitor_code: str
+    source: str
+    digit: str = ""  # the switch's field (digits format) that turns forcing on
+    on: int = 1
+    off: int = 0
+    monitor_shows: str = "forced"
+    unverified: str = ""
 
 
 @dataclass(frozen=True)
@@ -233,8 +297,14 @@ class Profile:
     conventions: dict[str, str] = field(default_factory=dict)
     motion_setup: list[SetupItem] = field(default_factory=list)
     dead_man: DeadManRoute | None = None
+    forced_inputs: ForcedInputs | None = None
     unverified_note: str = ""
     identity: Identity | None = None
+    io: IoMap | None = None  # the drive's digital inputs and outputs (model.terminals)
+    alarm_causes: AlarmCauses | None = None  # the manual's causes and remedies (model.alarm_notes)
+    alarm_log: AlarmLog | None = None  # what the drive records with its past alarms (model.alarm_notes)
+    unverified_values: dict[str, str] = field(default_factory=dict)  # CODE -> why its scale/meaning is open
+    boost: LineBoost = field(default_factory=LineBoost)
     path: Path | None = None
     _by_code: dict[str, Entry] = field(default_factory=dict, repr=False)
 
@@ -302,6 +372,20 @@ class Profile:
 
     def alarm_of_kind(self, kind: str) -> Alarm | None:
         return next((a for a in self.alarms if a.kind == kind), None)
+
+    def ramp_rpm(self) -> float:
+        """The speed the drive's ramp time (role jog_accel) runs up to, as the profile reads its manual
+        (dead_man.ramp_reference_rpm: SDC's PN29 per 1000 rpm, the simulated DSX7E's Pn513 to the rated speed); where
+        the profile does not say, the slower reading: 1000 rpm or the rated speed, whichever is lower."""
+        rated = self.motor.rated_speed_rpm if self.motor is not None else 3000.0
+        reference = self.dead_man.ramp_reference_rpm if self.dead_man is not None else None
+        if reference is None:
+            return min(UNDESCRIBED_RAMP_RPM, rated)
+        return reference or rated
+
+    def value_unverified(self, entry: Entry) -> str:
+        """Why this entry's value (its scale, unit or meaning) is not confirmed by the manual; "" when it is."""
+        return self.unverified_values.get(entry.code.upper(), "")
 
     def load_ratio_from_param(self, eng: float) -> float:
         """J_load/J_motor from the inertia-ratio parameter's engineering value, per the profile's convention."""

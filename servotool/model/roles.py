@@ -70,6 +70,23 @@ def sim_extensions(profile: Profile) -> list[SimExtension]:
                 "500 ms of host silence; the real drive documents no communication timeout",
             )
         )
+    if profile.dead_man is not None and profile.dead_man.route == "segment":
+        found.append(
+            SimExtension(
+                "sim config --segment-restart",
+                "for comparison, off by default: a start edge during a running segment restarts it at once from "
+                "where the axis is (the reading before issue 29); the default queues it until the segment has "
+                "settled and brakes the segment on a falling edge; the manual documents neither",
+            )
+        )
+    if profile.forced_inputs is not None and profile.forced_inputs.monitor_shows == "forced":
+        found.append(
+            SimExtension(
+                "sim config --di-monitor terminals",
+                "NOT IN THE MANUAL, off by default: the input monitor shows the wired terminals while the inputs "
+                f"are forced; the manual's words read as the forced levels ({profile.forced_inputs.source})",
+            )
+        )
     if profile.motor is None:
         found.append(
             SimExtension("motor", "no motor data in the profile: the simulator assumes a 400 W, 3000 rpm motor")

@@ -51,6 +51,9 @@ def motion_caveats(profile: Profile, feature: str = FEATURE) -> MotionCaveats:
             unverified.append((role, e, reason))
     setup = requirements(profile)
     unverified += [("setup", r.entry, r.item.unverified) for r in setup if r.item.unverified]
+    forced = profile.forced_inputs
+    if forced is not None and forced.unverified:
+        unverified.append(("forced inputs", profile.entry(forced.switch_code), forced.unverified))
     timeout = route.entries.get("comm_timeout")
     return MotionCaveats(
         tuple(unverified),

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 from servotool.errors import UsageError
+from servotool.model.profile import Profile
 from servotool.motion.deadman import DeadManBound
 from servotool.motion.travel import TravelLimit
 
@@ -33,6 +34,21 @@ def checked_travel(
     return estimate
 
 
+def ramp_words(profile: Profile, accel_ms: float | None) -> str:
+    """The ramp in the drive's own terms: its entry, its time, and the speed that time runs up to where the profile
+    says (dead_man.ramp_reference_rpm: 0 for the rated speed); '' without a ramp entry."""
+    entry = profile.role("jog_accel")
+    if entry is None or accel_ms is None:
+        return ""
+    # Read defensively: the reference is a dead_man key of issue 29's stop work, absent from older profiles.
+    reference = getattr(profile.dead_man, "ramp_reference_rpm", None)
+    if reference is None:
+        return f"ramp {entry.code} = {accel_ms:g} ms (the speed it runs up to is not in the profile)"
+    rated = profile.motor.rated_speed_rpm if profile.motor is not None else None
+    to = f"{reference:g} rpm" if reference else "the rated speed" + (f" ({rated:g} rpm)" if rated else "")
+    return f"ramp {entry.code} = {accel_ms:g} ms from 0 to {to}"
+
+
 @dataclass(frozen=True)
 class JogPlan:
     speed_rpm: float
@@ -43,10 +59,11 @@ class JogPlan:
     travel_rev: float | None  # estimate for a timed jog
     dead_man: DeadManBound | None = None
     travel_limit: TravelLimit | None = None
+    ramp: str = ""  # ramp_words: the ramp in the drive's own terms
 
     def describe(self) -> str:
         what = "forward" if self.direction > 0 else "reverse"
         more = f" for {self.seconds:g} s (about {self.travel_rev:.2f} rev)" if self.seconds is not None else ""
-        ramp = f", ramp {self.accel_ms:g} ms" if self.accel_ms is not None else ""
+        ramp = f", {self.ramp}" if self.ramp else f", ramp {self.accel_ms:g} ms" if self.accel_ms is not None else ""
         limit = f", {self.travel_limit.describe()}" if self.travel_limit is not None else ""
         return f"JOG {what} at {self.speed_rpm:g} rpm{more}{ramp}{limit}"

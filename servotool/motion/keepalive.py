@@ -1,7 +1,10 @@
 """The dead-man beat: host motion keeps writing, or the drive's watchdog stops the motor.
 
 One implementation for every motion servotool commands (JOG, identification, step response, the drive's own
-identification): the beat period from the drive's watchdog setting, and the beat write itself.
+identification): the beat period from the drive's watchdog setting, and the beat write itself. With a hardware
+dead-man (--heartbeat), each beat also toggles a control line of the USB-RS485 adapter for a watchdog relay wired to
+the drive's enable input or main contactor: the line rests low, and stops toggling (low) when the motion ends, when a
+beat comes too late for the relay and on every exit (the OS drops the line when the port closes, also after kill -9).
 """
 
 from __future__ import annotations
@@ -10,8 +13,18 @@ from collections.abc import Callable
 
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
-from servotool.errors import UsageError
+from servotool.errors import DeviceError, UsageError
+from servotool.link.ports import ControlLine
 from servotool.model.codec import raw_to_eng
+
+HEARTBEAT_BEATS = 4  # beats per relay time at least: a late beat is caught (at half the time) before the relay drops
+# Toggling this long before a motion's first command: the relay closes and, where it switches the drive's main
+# contactor, the drive's DC bus charges before anything moves.
+HEARTBEAT_LEAD_S = 1.0
+
+
+class HeartbeatMissed(DeviceError):
+    """A beat came too late for the watchdog relay: the heartbeat stopped for good (the relay drops the drive)."""
 
 
 def keepalive_interval_s(drive: Drive, default_s: float = 0.1) -> float:
@@ -19,6 +32,8 @@ def keepalive_interval_s(drive: Drive, default_s: float = 0.1) -> float:
 
     Raises UsageError when the watchdog is too short to keep any motion alive over a serial link.
     """
+    if drive.heartbeat_timeout_s is not None:  # the relay needs a beat every quarter of its time
+        default_s = min(default_s, drive.heartbeat_timeout_s / HEARTBEAT_BEATS)
     timeout = drive.profile.role("comm_timeout")
     if timeout is None:
         return default_s
@@ -30,7 +45,41 @@ def keepalive_interval_s(drive: Drive, default_s: float = 0.1) -> float:
             f"the drive's host watchdog {timeout.code} = {timeout_s * 1000:g} ms is too short "
             "to keep a motion alive over this link (at least 60 ms)"
         )
-    return timeout_s / 3
+    return min(timeout_s / 3, default_s) if drive.heartbeat_timeout_s is not None else timeout_s / 3
+
+
+class Heartbeat:
+    """The toggling of one control line for a retriggerable watchdog relay: at every beat, unless the beat comes
+    later than half the relay's time after the one before (the relay may be about to drop the drive: toggling on
+    would switch it on again mid-motion), which stops it for good."""
+
+    def __init__(self, line: ControlLine, timeout_s: float, clock: Clock) -> None:
+        self.line, self.timeout_s, self.clock = line, timeout_s, clock
+        self.last: float | None = None
+        self.toggles = 0
+        self.stopped = False
+
+    def toggle(self) -> None:
+        """One toggle, now; HeartbeatMissed (and stopped, the line low) when it comes too late. Once stopped it
+        toggles no more (the stop that follows a missed beat still beats the drive's own watchdog)."""
+        now = self.clock.now()
+        if self.stopped:
+            return
+        if self.last is not None and now - self.last > self.timeout_s / 2:
+            self.stop()
+            raise HeartbeatMissed(
+                f"a keep-alive beat came {(now - self.last) * 1000:.0f} ms after the one before, over half the "
+                f"watchdog relay's {self.timeout_s * 1000:g} ms: the heartbeat ({self.line.name}) stopped and the "
+                "relay drops the drive's enable"
+            )
+        self.line.set(not self.line.level)
+        self.last, self.toggles = now, self.toggles + 1
+
+    def stop(self) -> None:
+        """No more toggles; the line low (its resting level, as the OS leaves it when the port closes)."""
+        self.stopped = True
+        if self.line.level:
+            self.line.set(False)
 
 
 class KeepAlive:
@@ -47,6 +96,8 @@ class KeepAlive:
         self.resend = resend
         self.count = 0
         self.last = self.clock.now()
+        line, relay_s = drive.heartbeat_line, drive.heartbeat_timeout_s
+        self.heartbeat = Heartbeat(line, relay_s, self.clock) if line is not None and relay_s is not None else None
 
     @classmethod
     def for_drive(cls, drive: Drive, clock: Clock | None = None, resend: Callable[[], None] | None = None) -> KeepAlive:
@@ -66,7 +117,9 @@ class KeepAlive:
         self.last = self.clock.now()
 
     def beat(self) -> None:
-        """One beat, now."""
+        """One beat, now (and the heartbeat's toggle: HeartbeatMissed when it came too late)."""
+        if self.heartbeat is not None:
+            self.heartbeat.toggle()
         self.count = (self.count + 1) & 0xFFFF
         if self.entry is not None:
             self.drive.write_raw(self.entry, self.count if self.entry.max >= 0xFFFF else 1)
@@ -77,3 +130,26 @@ class KeepAlive:
     def beat_if_due(self) -> None:
         if self.due():
             self.beat()
+
+    def toggle_if_due(self) -> None:
+        """The heartbeat's toggle alone where a beat's interval has passed since its last (a motion whose drive
+        needs fewer writes than the relay needs toggles)."""
+        hb = self.heartbeat
+        if hb is not None and (hb.last is None or self.clock.now() - hb.last >= self.interval_s):
+            hb.toggle()
+
+    def heartbeat_lead(self, idle: Callable[[float], None]) -> None:
+        """Before a motion's first command: toggle for HEARTBEAT_LEAD_S (idle: how to wait between toggles)."""
+        hb = self.heartbeat
+        if hb is None:
+            return
+        end = self.clock.now() + HEARTBEAT_LEAD_S
+        while self.clock.now() < end:
+            hb.toggle()
+            idle(min(self.interval_s, max(0.0, end - self.clock.now())))
+        hb.toggle()
+
+    def stop_heartbeat(self) -> None:
+        """The motion has ended: no more toggles, the line low."""
+        if self.heartbeat is not None:
+            self.heartbeat.stop()

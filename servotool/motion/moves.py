@@ -135,3 +135,4 @@ class Mover(Jogger):
                 ka.beat()
         else:
             ka.beat_if_due()
+        ka.toggle_if_due()  # a watchdog relay (--heartbeat) needs its toggle every beat, writes or not

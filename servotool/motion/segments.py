@@ -8,6 +8,7 @@ from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.roles import MotionRoute
 from servotool.motion import deadman
+from servotool.motion.stop import StoppedElsewhere
 
 
 class SegmentMoves:
@@ -19,26 +20,31 @@ class SegmentMoves:
         self.feature = feature
         dead_man = drive.profile.dead_man
         self.start_bits = dead_man.start_value if dead_man is not None else 1
-        motor = drive.profile.motor
-        self.rated_rpm = motor.rated_speed_rpm if motor is not None else 3000.0
+        self.ramp_rpm = drive.profile.ramp_rpm()  # the speed the ramp time runs up to
         self.moving = 0  # the direction of the running move (0: none or braking)
         self._raw: int | None = None  # the displacement last written
         self._per_rev: float | None = None
         self.start_high = True  # the start bits may be on: a move needs them off first
         self.ends_itself = False  # the running move's own segment stops it (see length_rev)
         self.own_s: float | None = None  # the next fresh move accelerates this long, then stops (once)
+        self.single = False  # own moves of any length (the caller's bound is the move: the step check's)
 
     def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
         """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own where
-        own_s is set, see length_rev); direction 0 brakes a running move at the ramp (read as time to rated speed).
+        own_s is set, see length_rev); direction 0 stops a running move at the drive's ramp.
         False when there was nothing to do."""
         own_s, self.own_s = self.own_s, None
         if direction:
             rev, self.ends_itself = self.length_rev(speed_rpm, beat_s, ramp_ms, own_s)
             rev *= direction
         elif self.moving:
+            # A stop: the start edges with the shortest displacement the drive takes. On one reading of the firmware
+            # the new segment replaces the running one and brakes at the ramp; on the other (the simulator's
+            # default) the falling edge brakes the running one and the queued segment adds one displacement unit,
+            # where a braking-length segment added the whole braking distance again (identification at 1080 rpm
+            # on 2 rev then ran into its travel limit).
             self.ends_itself = False
-            rev = self.moving * deadman.braking_rev(speed_rpm, ramp_ms, self.rated_rpm)
+            rev = self.moving * 0.5 / self.units_per_rev()
         else:
             return False
         self.moving = direction
@@ -51,12 +57,13 @@ class SegmentMoves:
         """The length of a fresh move, and whether it is the move's own. A move that accelerates for own_s and then
         stops (identification) is one segment of its own where that is no longer than the dead-man's: the drive
         brakes it at its end by itself, with no re-arm and no stop command (three writes a move on IS620P)."""
-        bounded = deadman.segment_rev(speed_rpm, beat_s, ramp_ms)
-        if own_s is None or not ramp_ms or ramp_ms <= 0:
+        bounded = deadman.segment_rev(speed_rpm, beat_s, ramp_ms, self.ramp_rpm)
+        if own_s is None or ramp_ms is None or ramp_ms < 0:
             return bounded, False
-        to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.rated_rpm
-        own = abs(speed_rpm) / 60.0 * own_s * min(1.0, own_s / to_speed_s)  # up for own_s, down as long
-        return (own, True) if own <= bounded else (bounded, False)
+        to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.ramp_rpm
+        # up for own_s, down as long (a ramp of 0: at speed for own_s)
+        own = abs(speed_rpm) / 60.0 * own_s * (min(1.0, own_s / to_speed_s) if to_speed_s > 0 else 1.0)
+        return (own, True) if own <= bounded or self.single else (bounded, False)
 
     def distance_raw(
         self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None, own_s: float | None = None
@@ -84,6 +91,12 @@ class SegmentMoves:
             self._raw = raw
         start = self.route.entries["segment_start"]
         if self.start_high:
+            # A re-arm, the servo on since the first move: where it reads off, something switched it off
+            # ('servotool stop'), and the S-ON this write carries would switch it back on.
+            if not self.drive.read_entries([start])[0].raw & 1:
+                raise StoppedElsewhere(
+                    f"{start.code} reads the servo off: the drive was stopped from elsewhere ('servotool stop'?)"
+                )
             self.drive.write_raw(start, 1)  # servo on, start bits off ...
         self.drive.write_raw(start, 1 | self.start_bits)  # ... then on: the edge starts the move
         self.start_high = True

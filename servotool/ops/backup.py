@@ -15,7 +15,7 @@ from servotool.clock import utc_now
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
 from servotool.files import backup_dir, load_yaml, write_atomic
-from servotool.model.codec import format_value, json_value
+from servotool.model.codec import format_value, json_text, json_value
 from servotool.model.identity import identity_entries
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup_csv
@@ -37,6 +37,8 @@ class Backup:
     path: Path | None = None
     warnings: list[str] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)  # Pn entries the drive lacks (not in values)
+    machine: str = ""  # the machine a snapshot names (a fleet inventory's or an Ansible host's name)
+    snapshot: bool = False  # read from a snapshot (to_snapshot): no time stamp, no checksum
 
     def checksum(self) -> str:
         canon = json.dumps(
@@ -51,12 +53,13 @@ class Backup:
         )
         return hashlib.sha256(canon.encode()).hexdigest()
 
+    def sorted_values(self, profile: Profile) -> dict[str, int]:
+        """The values in register-address order (then code): the same order in every file of a drive."""
+        return dict(sorted(self.values.items(), key=lambda item: (profile.entry(item[0]).address, item[0])))
+
     def to_yaml(self, profile: Profile) -> str:
-        text = {
-            code: format_value(profile.entry(code), raw)
-            + (f" {profile.entry(code).unit}" if profile.entry(code).unit else "")
-            for code, raw in self.values.items()
-        }
+        values = self.sorted_values(profile)
+        text = {code: _display(profile.entry(code), raw) for code, raw in values.items()}
         doc = {
             "servotool_backup": FORMAT,
             "profile": self.profile,
@@ -67,15 +70,51 @@ class Backup:
             "tool_version": self.tool_version,
             "identity": self.identity,
             "checksum": self.checksum(),
-            "values": self.values,
+            "values": values,
             "display": text,
         }
         if self.missing:
-            doc["missing"] = {code: "not on this drive" for code in self.missing}
+            doc["missing"] = {code: "not on this drive" for code in sorted(self.missing)}
         return (
             "# servotool parameter backup; values are raw register integers, 'display' is for reading only\n"
             + _dump(doc)
         )
+
+    def to_snapshot(self, profile: Profile) -> str:
+        """The backup as a snapshot for version control: keyed by the drive (profile, model, unit, machine and its
+        identity entries, firmware among them), no time stamp, tool version or checksum, one line per value in
+        address order with its reading as a comment, so that a diff of two snapshots of a drive shows only the
+        values that changed. The last key, `complete`, tells a whole file from a truncated one."""
+        head: dict[str, Any] = {
+            "servotool_backup": FORMAT,
+            "snapshot": True,
+            "profile": self.profile,
+            "profile_version": self.profile_version,
+            "model": self.model,
+            "unit": self.unit,
+        }
+        if self.machine:
+            head["machine"] = self.machine
+        head["identity"] = self.identity
+        rows = []
+        for code, raw in self.sorted_values(profile).items():
+            key = _dump({code: raw}).rstrip("\n")
+            rows.append(f"  {key}  # {_display(profile.entry(code), raw)}".rstrip() + "\n")
+        tail = {"missing": {code: "not on this drive" for code in sorted(self.missing)}} if self.missing else {}
+        on = f" on {self.machine}" if self.machine else ""
+        return (
+            f"# servotool snapshot of {self.model} unit {self.unit}{on}: raw register values, each with its reading "
+            "as a comment;\n# no time stamp, so that two snapshots of a drive differ only where its settings do\n"
+            + _dump(head)
+            + ("values:\n" + "".join(rows) if rows else "values: {}\n")
+            + (_dump(tail) if tail else "")
+            + "complete: true\n"
+        )
+
+
+def _display(entry: Entry, raw: int) -> str:
+    """A value as a backup shows it for reading: the manual's form and the unit ('25.0 Hz', 'd 1 21')."""
+    return format_value(entry, raw) + (f" {entry.unit}" if entry.unit else "")
 
 
 def _dump(doc: dict[str, Any]) -> str:
@@ -123,8 +162,8 @@ def check_output(path: Path, *, force: bool = False) -> None:
 
 
 def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False, fmt: str = "yaml") -> Path:
-    """Write atomically (YAML, or with fmt="csv" a table for a spreadsheet); never replace an existing file unless
-    forced."""
+    """Write atomically (YAML, with fmt="snapshot" a snapshot for version control, or with fmt="csv" a table for a
+    spreadsheet); never replace an existing file unless forced."""
     exists = UsageError(f"{path} exists; choose another name or pass --force to replace it")
     if path.exists() and not force:
         raise exists
@@ -135,7 +174,10 @@ def save(backup: Backup, profile: Profile, path: Path, *, force: bool = False, f
         "created": backup.created,
         "tool_version": backup.tool_version,
     }
-    text = backup_csv.to_csv(profile, meta, backup.values) if fmt == "csv" else backup.to_yaml(profile)
+    if fmt == "csv":
+        text = backup_csv.to_csv(profile, meta, backup.sorted_values(profile))
+    else:
+        text = backup.to_snapshot(profile) if fmt == "snapshot" else backup.to_yaml(profile)
     try:
         write_atomic(path, text, replace=force)
     except FileExistsError:
@@ -185,12 +227,18 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
     data = load_yaml(path)
     if not isinstance(data, dict) or data.get("servotool_backup") != FORMAT:
         raise UsageError(f"{what}: not a servotool backup file (format {FORMAT})")
-    for key, kind in (("profile", str), ("model", str), ("unit", int), ("values", dict), ("checksum", str)):
+    snapshot = data.get("snapshot") is True
+    needed = (("profile", str), ("model", str), ("unit", int), ("values", dict))
+    for key, kind in (*needed, *((("checksum", str),) if not snapshot else ())):
         if not isinstance(data.get(key), kind) or isinstance(data.get(key), bool):
             raise UsageError(f"{what}: '{key}' is missing or of the wrong type (truncated or edited file?)")
-    display = data.get("display")
-    if not isinstance(display, dict) or set(map(str, display)) != set(map(str, data["values"])):
-        raise UsageError(f"{what}: the file is incomplete (truncated?): its value and display sections differ")
+    if snapshot:
+        if data.get("complete") is not True:
+            raise UsageError(f"{what}: the snapshot is incomplete (truncated?): it does not end with 'complete: true'")
+    else:
+        display = data.get("display")
+        if not isinstance(display, dict) or set(map(str, display)) != set(map(str, data["values"])):
+            raise UsageError(f"{what}: the file is incomplete (truncated?): its value and display sections differ")
     warnings = []
     if data["model"] != profile.model or data["profile"] != profile.id:
         msg = f"{what}: backup of a {data['model']} ({data['profile']}), not of this {profile.model} ({profile.id})"
@@ -222,8 +270,10 @@ def load(path: Path, profile: Profile, *, force: bool = False) -> Backup:
         path,
         warnings,
         [profile.entry(str(c)).code for c in missing],
+        str(data.get("machine", "")),
+        snapshot,
     )
-    if b.checksum() != data["checksum"]:
+    if not snapshot and b.checksum() != data["checksum"]:
         msg = f"{what}: checksum mismatch: the values were edited or damaged"
         if not force:
             raise UsageError(msg + "; --force to use it anyway")
@@ -255,6 +305,9 @@ class Difference:
             "a": None if self.a is None else json_value(e, self.a),
             "b": None if self.b is None else json_value(e, self.b),
         }
+        for key, raw in (("a", self.a), ("b", self.b)):  # an encoded value's manual form beside its number
+            if raw is not None and (text := json_text(e, raw)) is not None:
+                out[f"{key}_text"] = text
         for key, raw in (("a", self.a), ("b", self.b)):
             if raw is not None and raw in e.enum:
                 out[f"{key}_meaning"] = e.enum[raw]

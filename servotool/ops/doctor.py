@@ -16,6 +16,7 @@ from servotool.link.ports import SYSFS_USB_SERIAL, LinkSettings, parse_tcp, usb_
 from servotool.model.identity import read_plan
 from servotool.model.loader import load_profile
 from servotool.model.profile import LineSettings, Profile
+from servotool.model.quantity import quantity
 from servotool.ops.scan import PROBE_ADDRESS
 
 
@@ -86,10 +87,12 @@ class Health:
             "retries": self.retries,
             "retry_rate": round(self.retries / self.count, 4),
             "echo": self.echo,
-            "rtt_ms": self.rtt_ms(),
-            "achieved_rate": round(self.achieved_rate, 1),
-            "theoretical_rate": round(theory, 1) if theory else None,
-            "latency_timer": {"path": self.latency.path, "ms": self.latency.ms} if self.latency else None,
+            "rtt": {**rtt, "unit": "ms"} if (rtt := self.rtt_ms()) is not None else None,
+            "achieved_rate": quantity(round(self.achieved_rate, 1), "requests/s"),
+            "theoretical_rate": quantity(round(theory, 1) if theory else None, "requests/s"),
+            "latency_timer": {"path": self.latency.path, "value": self.latency.ms, "unit": "ms"}
+            if self.latency
+            else None,
         }
 
 

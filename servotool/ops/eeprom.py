@@ -110,9 +110,10 @@ def ram_writes(drive: Drive) -> Iterator[None]:
     (IS620P's factory H0C-13 = 1 stores every write); the switch is put back afterwards. The port's lock is held
     on every drive: the motion's settings are journaled (ops.journal.note_settings) for the next command to put
     back if this process dies, and only a dead holder's record may be recovered."""
+    from servotool.ops.changelog import temporary
     from servotool.ops.journal import port_lock
 
-    with port_lock(drive):
+    with port_lock(drive), temporary(drive):
         if drive.profile.persistence.mode != "switchable":
             yield
             return
@@ -184,8 +185,10 @@ def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
 
     save=None leaves the drive as it is (a RAM-only drive stays RAM-only); save=True makes the writes permanent
     with as few EEPROM writes as the drive allows; save=False keeps them out of EEPROM where the drive lets us.
-    The batch holds the port's lock, so no other servotool process writes while the switch is changed.
+    The batch holds the port's lock, so no other servotool process writes while the switch is changed. Its
+    changes are history: each goes into the drive's change log with the memory it went to (ops.changelog).
     """
+    from servotool.ops import changelog
     from servotool.ops.journal import port_lock
 
     p = drive.profile.persistence
@@ -196,10 +199,13 @@ def persistence(drive: Drive, save: bool | None) -> Iterator[dict[str, bool]]:
             wanted = current if save is None else (eeprom if save else ram)
             state["persisted"] = wanted == eeprom
             purpose = "store the writes in EEPROM" if wanted == eeprom else "keep the writes out of EEPROM"
-            with _switched(drive, entry, current, wanted, state, purpose):
+            memory = changelog.EEPROM if wanted == eeprom else changelog.RAM
+            with _switched(drive, entry, current, wanted, state, purpose), changelog.lasting(drive, memory):
                 yield state
             return
-        yield state
+        with changelog.lasting(drive, changelog.EEPROM if p.mode == "immediate" else changelog.RAM):
+            yield state
         if p.mode == "ram" and save and can_save(drive.profile):
             drive.trigger("eeprom_save", "--save")
             state["persisted"] = True
+            changelog.event(drive, "store", memory=changelog.EEPROM, note="the drive's store function: RAM to EEPROM")

@@ -2,7 +2,8 @@
 
 Before the EEPROM switch is changed for a batch of writes (SD25 Po505, IS620P H0C-13), its original raw value is
 recorded here; a restore records its automatic backup and targets; a motion records the settings it changes for
-its duration (JOG speed, ramp, segment displacement, the hold's gains) with their original raw values. A record
+its duration (JOG speed, ramp, segment displacement, the hold's gains, the drive's protections) with their original
+raw values, and a motion that forces the drive's inputs (SD25 So-58) the value that releases them. A record
 outlives only a process that died (kill -9, power loss of the PC, a line that stopped answering): the next command
 on that drive finds it, puts the settings and the switch back and says what the interrupted operation left.
 Records live beside the automatic backups, one file per bus, profile and unit, the bus named as the device resolves
@@ -107,6 +108,29 @@ def port_lock(drive: Drive, notice: Notice | None = None, clock: Clock | None = 
         held.depth -= 1
         if held.depth == 0:
             held.lock.release()
+
+
+@contextmanager
+def lock_if_free(drive: Drive) -> Iterator[bool]:
+    """Hold the drive's port for the block if nobody does (yields True), without the recovery port_lock runs
+    (ops.boost puts the line back first: until then the drive may not answer at this speed); False when a live
+    holder has it (it will put back what it changed itself)."""
+    if not drive.port:
+        yield True
+        return
+    held = _lock_of(drive.port)
+    if held.depth:
+        yield True
+        return
+    if not held.lock.try_acquire():
+        yield False
+        return
+    held.depth += 1
+    try:
+        yield True
+    finally:
+        held.depth -= 1
+        held.lock.release()
 
 
 # ----- records ---------------------------------------------------------------------------------------------------
@@ -242,6 +266,11 @@ def _recover_record(drive: Drive, record: dict[str, Any], keep: dict[str, Any]) 
     """The lines of one record's recovery; what must wait (loop gains while the motor turns) goes into keep."""
     lines: list[str] = []
     pid = record.get("pid")
+    forcing = record.get("forcing")
+    if isinstance(forcing, dict):  # first, moving or not: it is what stops a forced JOG
+        lines.append(_release_forcing(drive, forcing, pid))
+    if isinstance(record.get("boost"), dict):  # the line's speed: put back by ops.boost before the drive is read
+        keep["boost"] = record["boost"]
     if record.get("settings") or record.get("servo"):  # before the switch: written back in RAM, as changed
         line, left = _end_motion(drive, record, pid)
         lines.append(line)
@@ -364,6 +393,26 @@ def _put_switch_back(drive: Drive, switch: dict[str, Any], pid: object) -> str:
     return (
         f"servotool: put {entry.code} back to {format_value(entry, original)} (was "
         f"{format_value(entry, now)}): a servotool process (pid {pid}) ended with it changed"
+    )
+
+
+def _release_forcing(drive: Drive, forcing: dict[str, Any], pid: object) -> str:
+    """Release the inputs a dead process's motion forced (every input follows its terminal again: a forced JOG
+    trigger drops), and put the forced value back."""
+    valid = _valid_settings(
+        drive,
+        {str(forcing.get("switch")): forcing.get("released"), str(forcing.get("levels")): forcing.get("original")},
+    )
+    if valid is None or len(valid) != 2:
+        return f"servotool: ignored a damaged journal record for unit {drive.unit} ({record_path(drive)})"
+    (switch, released), (levels, original) = [(drive.profile.entry(c), raw) for c, raw in valid.items()]
+    drive.write_verified(switch, released)
+    if drive.read_entries([levels])[0].raw != original:
+        drive.write_verified(levels, original)
+    return (
+        f"servotool: released the drive's forced inputs ({switch.code} = {format_value(switch, released)}): a "
+        f"servotool process (pid {pid}) ended during a motion with them forced; its inputs follow their terminals "
+        "again"
     )
 
 
@@ -530,6 +579,24 @@ def clear_switch(drive: Drive) -> None:
     _update(drive, switch=None)
 
 
+def note_boost(drive: Drive, boost: dict[str, Any]) -> None:
+    """Record a raised line (the baud entry's original and raised raw values, both speeds) before it is raised:
+    the next command finds the drive at either speed and puts it back (ops.boost.recover_boost)."""
+    _update(drive, boost={**boost, "since": RealClock().wall()})
+
+
+def clear_boost(drive: Drive) -> None:
+    """The line is confirmed back at its factory speed: the record goes."""
+    _update(drive, boost=None)
+
+
+def boost_record(drive: Drive) -> dict[str, Any] | None:
+    """The raised line this drive's record holds (None: none), with the pid of the process that raised it."""
+    record = read_record(drive) if drive.port else None
+    boost = record.get("boost") if record else None
+    return {**boost, "pid": record.get("pid")} if isinstance(boost, dict) and record else None
+
+
 def note_settings(drive: Drive, originals: dict[str, int]) -> None:
     """Record the original raw values (code -> raw) of settings a motion changes until it ends (added to those
     recorded already, whose originals stay); call again whenever one is added."""
@@ -543,6 +610,17 @@ def note_settings(drive: Drive, originals: dict[str, int]) -> None:
 def note_servo(drive: Drive, code: str) -> None:
     """A motion may switch the servo on through this entry: a dead process's is switched off at standstill."""
     _update(drive, servo=code)
+
+
+def note_forcing(drive: Drive, switch: str, released: int, levels: str, original: int) -> None:
+    """Before a motion forces the drive's inputs: the switch's value that releases them and the forced value's
+    original, for the next command to release them first should this process die."""
+    _update(drive, forcing={"switch": switch, "released": released, "levels": levels, "original": original})
+
+
+def clear_forcing(drive: Drive) -> None:
+    """The inputs are released: the record goes."""
+    _update(drive, forcing=None)
 
 
 def clear_motion(drive: Drive, *, servo_off: bool) -> None:

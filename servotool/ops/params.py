@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from contextlib import nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from servotool.drive import Drive, WriteResult
 from servotool.errors import ServoError, UnknownName, UsageError
@@ -28,8 +28,13 @@ def select(profile: Profile, *, group: str | None = None, classes: tuple[str, ..
 
 def read_settings(drive: Drive, progress: Callable[[int], None] | None = None) -> dict[str, int]:
     """Every readable parameter as the drive holds it (code -> raw, coalesced); entries it lacks are left out (and
-    listed in drive.missing)."""
-    return {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)}
+    listed in drive.missing). An entry a raised line holds for the command (ops.boost) reads as its original,
+    which is what the drive keeps and gets back when the command ends."""
+    from servotool.ops.boost import held_originals
+
+    values = {r.entry.code: r.raw for r in drive.read_entries(select(drive.profile), partial=True, progress=progress)}
+    values.update({code: raw for code, raw in held_originals(drive).items() if code in values})
+    return values
 
 
 @dataclass(frozen=True)
@@ -38,10 +43,12 @@ class PreparedSet:
 
     changes: list[tuple[Entry, int, int]]  # entry, old raw, new raw
     unchanged: list[tuple[Entry, int]]
+    missing: list[Entry] = field(default_factory=list)  # with partial=True: entries the drive lacks, left out
 
 
-def prepare_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> PreparedSet:
-    """Parse and range-check every CODE=VALUE, then read current values; nothing is written."""
+def prepare_set(drive: Drive, assignments: list[str], *, raw: bool = False, partial: bool = False) -> PreparedSet:
+    """Parse and range-check every CODE=VALUE, then read current values; nothing is written. partial=True leaves
+    out (in `missing`) an entry the drive lacks instead of failing with NotOnDrive."""
     if not assignments:
         raise UsageError("nothing to set: give CODE=VALUE ...")
     parsed: dict[str, tuple[Entry, list[str]]] = {}
@@ -62,10 +69,14 @@ def prepare_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> P
             if field is not None:
                 fields_given[entry.code] = {field}
         parsed[entry.code][1].append(text)
-    current = {r.entry.code: r.raw for r in drive.read_entries([e for e, _ in parsed.values() if e.readable])}
+    readable = [e for e, _ in parsed.values() if e.readable]
+    current = {r.entry.code: r.raw for r in drive.read_entries(readable, partial=partial)}
+    missing = [e for e in readable if e.code not in current]
     changes: list[tuple[Entry, int, int]] = []
     unchanged: list[tuple[Entry, int]] = []
     for entry, texts in parsed.values():
+        if entry.readable and entry.code not in current:
+            continue
         old = current.get(entry.code)
         # Field input (Po001.Y=1, X=0) is relative to the drive's current value, so parse again with it.
         new = drive.parse_assignment(texts[0], raw=raw, current=old)[1]
@@ -75,7 +86,7 @@ def prepare_set(drive: Drive, assignments: list[str], *, raw: bool = False) -> P
             unchanged.append((entry, new))
         else:
             changes.append((entry, old if old is not None else new, new))
-    return PreparedSet(changes, unchanged)
+    return PreparedSet(changes, unchanged, missing)
 
 
 def set_assignments(
@@ -92,8 +103,14 @@ def set_assignments(
 
 
 def write_one(drive: Drive, entry: Entry, raw: int, old: int | None = None) -> WriteResult:
-    """The one path every parameter write takes (set, restore, plans): write, then verify by read-back."""
-    return drive.write_verified(entry, raw, old)
+    """The one path every parameter write takes (set, restore, plans): write, then verify by read-back. A change
+    made inside a batch of lasting writes goes into the drive's change log (ops.changelog)."""
+    from servotool.ops import changelog
+
+    [old] = changelog.before_write(drive, [(entry, old)])
+    result = drive.write_verified(entry, raw, old)
+    changelog.after_write(drive, [result])
+    return result
 
 
 def write_runs(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[list[tuple[Entry, int, int]]]:
@@ -128,10 +145,15 @@ def write_changes(drive: Drive, changes: list[tuple[Entry, int, int]]) -> list[W
 def write_run(drive: Drive, run: list[tuple[Entry, int, int]]) -> list[WriteResult]:
     """One run of write_runs (entry, old, new): a lone entry by write_one, adjacent ones in one verified FC16
     request."""
+    from servotool.ops import changelog
+
     if len(run) == 1:
         entry, old, new = run[0]
         return [write_one(drive, entry, new, old)]
-    return drive.write_block_verified([(e, new, old) for e, old, new in run])
+    olds = changelog.before_write(drive, [(e, old) for e, old, _new in run])
+    results = drive.write_block_verified([(e, new, old) for (e, _, new), old in zip(run, olds, strict=True)])
+    changelog.after_write(drive, results)
+    return results
 
 
 def apply_set(drive: Drive, plan: PreparedSet) -> list[WriteResult]:

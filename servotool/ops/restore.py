@@ -159,7 +159,8 @@ def check_servo_off(drive: Drive, entries: list[Entry], what: str) -> None:
     if entries and servo_is_on(drive):
         codes = ", ".join(e.code for e in entries[:6]) + (" ..." if len(entries) > 6 else "")
         raise UsageError(
-            f"{what} changes {codes}, which the drive accepts only with the servo off: switch the servo off first"
+            f"{what} changes {codes}, which the drive accepts only with the servo off: switch the servo off first "
+            "('servotool stop')"
         )
 
 
@@ -214,7 +215,7 @@ def restore(
                             refused.append((run[0][0], str(exc)))  # an exception reply: nothing was written
                             continue
                         # The failed entries too: a write that did not read back may still have changed them.
-                        rolled, undo_failed = _roll_back(drive, [*done, *(e for e, _, _ in run)], before.values)
+                        rolled, undo_failed = roll_back(drive, [*done, *(e for e, _, _ in run)], before.values)
                         failed = (run[0][0].code, exc, rolled, undo_failed)
                         break
                     for entry, _old, _new in run:
@@ -326,7 +327,7 @@ def _read_again(drive: Drive, code: str) -> int | None:
     return None
 
 
-def _roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> tuple[list[str], dict[str, str]]:
+def roll_back(drive: Drive, touched: list[Entry], snapshot: dict[str, int]) -> tuple[list[str], dict[str, str]]:
     """Put touched entries back to the snapshot, newest first (each tried a few times); returns (the entries
     written back, each verified by read-back; code -> why for those that could not be undone). Every other
     touched entry was read back equal to the snapshot."""
@@ -372,13 +373,17 @@ def restore_file(drive: Drive, path: Path, notice: Notice | None = None) -> str:
 
 
 def factory_reset(drive: Drive, notice: Notice | None = None, progress: Callable[[int], None] | None = None) -> Path:
-    """Automatic backup (progress: entries read), then the profile's factory-reset function."""
+    """Automatic backup (progress: entries read), then the profile's factory-reset function (a line in the change
+    log naming the backup: the values it replaced are there)."""
     drive.profile.need_role("factory_reset", "param reset")
     check_servo_off(drive, [e for e in drive.profile.of_class("Pn") if e.effect == "servo_off"], "a factory reset")
     auto = auto_backup(drive, "before-reset", progress)
     if notice:
         notice(f"automatic backup of the drive's current state: {auto}")
     drive.trigger("factory_reset", "param reset")
+    from servotool.ops.changelog import event
+
+    event(drive, "factory_reset", auto_backup=str(auto))
     return auto
 
 

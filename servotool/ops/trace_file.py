@@ -16,6 +16,7 @@ from servotool.errors import UsageError
 from servotool.files import read_text, write_atomic
 from servotool.model.codec import as_held
 from servotool.model.profile import Entry
+from servotool.model.quantity import quantity
 from servotool.ops.trace import Capture
 
 TIME_COLUMNS = ("t_s", "elapsed_s")
@@ -76,10 +77,10 @@ def capture_json(cap: Capture, entries: list[Entry]) -> dict[str, Any]:
         "capture": cap.index,
         "samples": tm.samples,
         "pre_trigger_samples": cap.pre_samples,
-        "rate_hz": _num(tm.rate_hz),
-        "jitter_ms": _num(tm.jitter_ms),
-        "max_interval_ms": _num(tm.max_gap_ms),
-        "t_s": [round(t, 5) for t in cap.t],
+        "rate": quantity(_num(tm.rate_hz), "Hz"),
+        "jitter": quantity(_num(tm.jitter_ms), "ms"),
+        "max_interval": quantity(_num(tm.max_gap_ms), "ms"),
+        "t": {"unit": "s", "values": [round(t, 5) for t in cap.t]},
         "values": {e.code: {"unit": e.unit, "values": [as_held(e, v) for v in cap.values[e.code]]} for e in entries},
     }
 

@@ -13,7 +13,8 @@ from servotool.report.terminal import by_unit
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-MISSING = "charts need matplotlib: pip install 'servotool[plot]'"
+# servotool is installed from its checkout (no package index has it): the extra is named on the checkout's path.
+MISSING = "charts need matplotlib: in the servotool checkout, pip install '.[plot]' (or pip install matplotlib)"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 

@@ -1,41 +1,23 @@
-"""Numbers behind the tune charts, from the identification's trace and estimate: the model torque and the gains
-with the room left to their limits (each move's own estimate comes with the estimate: InertiaEstimate.moves)."""
+"""Numbers behind the tune charts, from the identification's trace and estimate: the speeds the moves reached and
+the gains with the room left to their limits (each move's own estimate and the fitted windows come with the
+estimate: InertiaEstimate.moves, .fitted_windows)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from servotool.model.codec import raw_to_eng
-from servotool.tuning.fit.signals import RPM_TO_RAD_S
 from servotool.tuning.identify import Result
 from servotool.tuning.tune import TuneResult
 
 
-def _zero_band(rpm: np.ndarray, noise_rpm: float) -> float:
-    """The estimator's default zero-speed band."""
-    noise = noise_rpm if math.isfinite(noise_rpm) else 0.0
-    return max(0.02 * float(np.max(np.abs(rpm))) if rpm.size else 0.0, 3.0 * noise)
-
-
-def model_torque_pct(result: Result, rated_torque_nm: float) -> np.ndarray:
-    """The torque (% of rated) the fitted model says the motion took: J·dω/dt + Tc·sign(ω) + B·ω + Tg."""
+def move_speeds(result: Result) -> tuple[float, float] | None:
+    """(lowest, highest) of the speeds the moves reached (each move's peak over its fitted windows), for saying
+    what the moves ran at beside what was planned; None without them."""
     est = result.estimate
-    assert est is not None
-    t = np.asarray(result.trace.t, dtype=float)
-    rpm = np.asarray(result.trace.aligned_speed(), dtype=float)
-    w = rpm * RPM_TO_RAD_S
-    band = _zero_band(rpm, est.speed_noise_rpm)
-    sgn = np.where(rpm >= band, 1.0, np.where(rpm <= -band, -1.0, 0.0))
-    dw = np.gradient(w, t) if t.size > 2 else np.zeros_like(w)
-    coef = [
-        0.0 if not math.isfinite(x) else x
-        for x in (est.j_total_kgm2, est.coulomb_nm, est.viscous_nm_per_rad_s, est.load_torque_nm)
-    ]
-    torque = coef[0] * dw + coef[1] * sgn + coef[2] * w + coef[3]
-    return torque / rated_torque_nm * 100.0
+    peaks = [m.peak_rpm for m in est.moves if math.isfinite(m.peak_rpm)] if est is not None else []
+    return (min(peaks), max(peaks)) if peaks else None
 
 
 @dataclass(frozen=True)

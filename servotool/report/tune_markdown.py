@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 from servotool.model.profile import Profile
-from servotool.report.tune_facts import GainRow
+from servotool.report.tune_facts import GainRow, move_speeds
+from servotool.tuning.fit import MoveEstimate
 from servotool.tuning.identify import Result
 from servotool.tuning.tune import TuneResult
 
@@ -28,12 +30,16 @@ def report_markdown(
     old = f"{result.old_ratio:.2f}" if result.old_ratio is not None else "not a drive parameter"
     lines = [f"# Inertia tune: {profile.model} (profile {profile.id})", ""]
     lines += [f"**Refused:** {reason}", ""] if reason else []
+    found = (  # a refused result is no result: no ratio is given for it
+        "none: the identification was refused"
+        if reason
+        else f"{result.new_ratio:.2f}" + (f" ± {est.ratio_std:.2f} (1σ)" if est else "")
+    )
     lines += [
         "| | |",
         "|---|---|",
         f"| method | {result.method} |",
-        f"| load inertia ratio (J_load/J_motor) | {old} → {result.new_ratio:.2f}"
-        + (f" ± {est.ratio_std:.2f} (1σ) |" if est else " |"),
+        f"| load inertia ratio (J_load/J_motor) | {old} → {found} |",
     ]
     if est is not None:
         lines += [
@@ -44,19 +50,21 @@ def report_markdown(
             f"| windows / excitation | {est.n_windows} / {_f(est.excitation, '.1f')}× the speed noise |",
         ]
     travel = f"{result.travel_used_rev:.2f} rev" if result.travel_used_rev is not None else "n/a"
+    reached = move_speeds(result)
+    planned = f"planned up to {result.plan.speed_rpm:.0f} rpm" if result.plan is not None else ""
+    speeds = (
+        f"reached {reached[0]:.0f}-{reached[1]:.0f} rpm" + (f" ({planned})" if planned else "")
+        if reached
+        else planned or "n/a"
+    )
     lines += [
         f"| samples | {len(result.trace.t)} at {result.samples_per_s:.0f}/s, {result.cycles} cycles, "
         f"{result.time_used_s:.1f} s, travel {travel} |",
+        f"| move speeds | {speeds} |",
         "",
     ]
     if est is not None and est.moves:
-        ratios = [m.load_ratio for m in est.moves]
-        spread = float(np.std(ratios, ddof=1)) if len(ratios) > 1 else 0.0
-        lines += [
-            f"Per move (friction and load held at the fit): {len(est.moves)} moves, ratios "
-            f"{min(ratios):.2f}..{max(ratios):.2f}, spread {spread:.2f} (1σ).",
-            "",
-        ]
+        lines += _moves_lines(est.moves)
     if tune is not None:
         written = "written" if tune.ratio_stored else "not written"
         gains = ("gains written" if tune.gains_written else "gains not written") if rows else "gains unchanged"
@@ -77,3 +85,19 @@ def report_markdown(
     for name, heading in charts:
         lines += [f"## {heading}", "", f"![{heading}]({name})", ""]
     return "\n".join(lines)
+
+
+def _moves_lines(moves: Sequence[MoveEstimate]) -> list[str]:
+    """Each move's own ratio and uncertainty; a move that gives none, with why."""
+    fitted = [m for m in moves if m.fitted]
+    ratios = [m.load_ratio for m in fitted]
+    spread = float(np.std(ratios, ddof=1)) if len(ratios) > 1 else 0.0
+    head = (
+        f"Per move (friction and load held at the fit, each with its own 1σ): {len(fitted)} of {len(moves)} moves "
+        + (f"give ratios {min(ratios):.2f}..{max(ratios):.2f}, spread {spread:.2f} (1σ)." if ratios else "give none.")
+    )
+    lines = [head, "", "| move | direction | peak speed | ratio |", "|---|---|---|---|"]
+    for i, m in enumerate(moves, 1):
+        ratio = f"{m.load_ratio:.2f} ± {m.ratio_std:.2f}" if m.fitted else f"none ({m.why})"
+        lines.append(f"| {i} | {'forward' if m.direction > 0 else 'reverse'} | {_f(m.peak_rpm, '.0f')} rpm | {ratio} |")
+    return [*lines, ""]

@@ -59,6 +59,22 @@ SIM_SETTINGS: dict[str, tuple[type, float | int | str, float, float, str]] = {
     "gear": (float, 10.0, 1.0, 1000.0, "gear ratio between motor and arm (motor turns per arm turn)"),
     "cogging": (float, 0.0, 0.0, 0.2, "cogging torque ripple amplitude, fraction of rated torque"),
     "cogging_periods": (int, 6, 1, 200, "cogging ripple periods per motor revolution"),
+    "inputs": (
+        int,
+        0,
+        0,
+        255,
+        "wired digital input levels, bit n = DI n+1 (e.g. 4 = DI3 closed); the drive acts on them unless its "
+        "inputs are forced",
+    ),
+    "di_monitor": (
+        int,
+        0,
+        0,
+        1,
+        "NOT IN THE MANUAL (forced/terminals): what the input monitor shows while the inputs are forced; the manual's "
+        "words read as the forced levels (forced, the default)",
+    ),
     "fake_watchdog": (
         int,
         0,
@@ -66,6 +82,15 @@ SIM_SETTINGS: dict[str, tuple[type, float | int | str, float, float, str]] = {
         1,
         "NOT REAL (on/off): stop host motion after 500 ms of host silence on a drive "
         "whose manual documents no communication timeout; off by default, as on the real drive",
+    ),
+    "segment_restart": (
+        int,
+        0,
+        0,
+        1,
+        "for comparison (on/off, default off): a start edge during a running segment restarts segment 1 at once "
+        "from where the axis is; off: it is queued until the running segment ends and settles, and a falling "
+        "edge brakes the running segment (the stricter reading; neither is in the manual)",
     ),
 }
 

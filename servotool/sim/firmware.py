@@ -24,10 +24,12 @@ from __future__ import annotations
 
 from servotool.clock import Clock, RealClock
 from servotool.model.codec import eng_to_raw, raw_to_eng
+from servotool.model.forcing import trigger_bits
 from servotool.model.gain_units import to_canonical
 from servotool.model.profile import Entry, Motor, Profile
+from servotool.model.roles import jog_direction
 from servotool.model.setup import requirements
-from servotool.sim import functions, monitors
+from servotool.sim import functions, monitors, protections
 from servotool.sim.alarms import AlarmLog
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.handover import Handover, MachineState
@@ -69,6 +71,7 @@ class Firmware:
         drive.on_reload.append(self._reloaded)
         drive.bank.before_write.append(self._store_machine_state)
         functions.install(drive, self)
+        self.plant.set_protections(self._protections())
         self.update()
 
     def _power_on(self) -> None:
@@ -80,6 +83,7 @@ class Firmware:
         self.ident: Identification | None = None
         self.segment: Segment | None = None
         self._start_level = False
+        self._queued = False  # a start edge came during a running segment: it starts once that one has settled
         self.alarms.recorded = False
 
     # ----- the running state, shared with other processes through the state file -----------------------------
@@ -120,6 +124,8 @@ class Firmware:
         self._take_machine_state()
         self.plant.set_settings(self._plant_settings())
         self.plant.set_gains(self._gains())
+        self.plant.set_protections(self._protections())
+        self.inputs_changed()  # the wired inputs may have changed (sim config), or forcing ended (power cycle)
 
     # ----- settings ------------------------------------------------------------------------------------------
     def _plant_settings(self) -> PlantSettings:
@@ -156,9 +162,13 @@ class Firmware:
             speed_integral_ms=self._eng("speed_loop_integral", 20.0) if integral else 20.0,
             position_gain_per_s=self._gain("position_loop_gain", 40.0),
             torque_filter_ms=self._gain("torque_filter", 0.5),
-            torque_limit_pct=min(self._eng("torque_limit_fwd", 300.0), self._eng("torque_limit_rev", 300.0)),
+            torque_limit_pct=min(
+                self._eng("torque_limit_fwd", 300.0),
+                self._eng("torque_limit_rev", 300.0),
+                self._eng("overload_multiple", 300.0),
+            ),
             max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
-            jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)),
+            jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)) * self.motor.rated_speed_rpm / self.profile.ramp_rpm(),
             following_limit_rev=self._following_limit_rev(),
         )
 
@@ -175,10 +185,15 @@ class Firmware:
     def _param_changed(self, _drive: SimulatedDrive, _entry: Entry, _raw: int) -> None:
         self.update()
         self.plant.set_gains(self._gains())
+        self.plant.set_protections(self._protections())
+
+    def _protections(self) -> protections.Protections:
+        return protections.protections(self.profile, self.drive.bank, self.motor, self.plant.position_rev)
 
     def reconfigure(self) -> None:
-        """Apply changed simulated-machine settings (sim config)."""
+        """Apply changed simulated-machine settings (sim config): the machine, the wired inputs."""
         self.plant.set_settings(self._plant_settings())
+        self.inputs_changed()
 
     @property
     def alarm_history(self) -> list[int]:
@@ -198,17 +213,21 @@ class Firmware:
             self._advance_identification(self.ident, now)
         if self.mode == "stopping":
             self._advance_stop(now)
-        if self.mode == "segment" and self.segment is not None:
-            if self.segment.advance(self.plant, now, self._ramp_rev_s2()):
-                self.segment = None
-                self.mode = "servo"  # the move ended: the drive holds there, servo on
+        while self.mode == "segment" and self.segment is not None:
+            if not self.segment.advance(self.plant, now, self._ramp_rev_s2()):
+                break
+            self.segment = None
+            self.mode = "servo"  # the move ended: the drive holds there, servo on
+            if self._queued:  # the start edge that came meanwhile (strict trigger semantics): it runs now
+                self._queued = False
+                self._start_segment()
         self.plant.advance_to(now)
         if self.plant.alarm is not None:
             if self.mode != "off":
                 self.mode = "off"
                 self.ident = None
                 self.segment = None
-            self.alarms.record(self.plant.alarm)  # also alarms raised with the servo off
+            self.alarms.record(self.plant.alarm, self._alarm_context())  # also alarms raised with the servo off
         self._refresh_monitors()
 
     def _watched(self) -> bool:
@@ -252,7 +271,7 @@ class Firmware:
         self.plant.raise_alarm(kind)
         self.mode = "off"
         self.ident = None
-        self.alarms.record(self.plant.alarm)
+        self.alarms.record(self.plant.alarm, self._alarm_context())
 
     # ----- actions (what the drive's functions trigger; see servotool.sim.functions) -------------------------
     def _host_alive(self) -> None:
@@ -289,17 +308,43 @@ class Firmware:
         self.jog_dir = direction
         self.plant.set_speed_command(direction * self._eng("jog_speed", 100.0))
 
+    def inputs_changed(self) -> None:
+        """The digital input levels changed (forced value, forcing switch, wired terminals): a JOG trigger among them
+        (role jog's bits, the JOGU/JOGD functions of a forced-input drive) starts or stops the JOG."""
+        jog = self.profile.role("jog")
+        if self.profile.forced_inputs is None or jog is None:
+            return
+        levels = protections.input_levels(self.profile, self.drive.bank, int(self.drive.settings["inputs"]))
+        self.jog(jog_direction(jog, levels & trigger_bits(self.profile)))
+
     def _ramp_rev_s2(self) -> float:
         """The drive's ramp (role jog_accel: time from 0 to rated speed) in rev/s^2, as the plant runs it."""
         return self.motor.rated_speed_rpm / 60.0 / max(self.plant.gains.jog_accel_ms / 1000.0, 1e-3)
 
     def segment_start(self, level: bool) -> None:
-        """The segment start input: a rising edge with the servo on starts segment 1 afresh from here."""
+        """The segment start input (IS620P PosInSen on a VDI): a rising edge with the servo on starts segment 1
+        from here. During a running segment (unverified, not in the manual; issue 29 cites a third-party account of
+        Inovance firmware): a rising edge is queued until the segment ends and settles, a falling edge brakes it.
+        `sim config --segment-restart on` takes the older reading for comparison: a rising edge restarts segment 1
+        at once from the present position, a falling edge does nothing."""
         self.keep_alive()
-        rising = level and not self._start_level
+        rising, falling = level and not self._start_level, self._start_level and not level
         self._start_level = level
-        if not rising or self.mode not in ("servo", "segment") or self.plant.alarm is not None:
+        if self.mode not in ("servo", "segment") or self.plant.alarm is not None:
             return
+        running = self.mode == "segment" and self.segment is not None
+        if running and not self.drive.settings["segment_restart"]:
+            if falling and self.segment is not None:
+                self.segment.brake(self.plant)
+                self._queued = False  # the level went away before the queued start could act
+            elif rising:
+                self._queued = True
+            return
+        if rising:
+            self._start_segment()
+
+    def _start_segment(self) -> None:
+        """Segment 1 from here, with the parameters now in effect."""
         per_rev = self._eng("segment_units_per_rev", 0.0) or float(self.motor.counts_per_rev)
         distance = self._eng("segment_distance", 0.0) / per_rev
         self.segment = Segment.start(self.plant, distance, self._eng("segment_speed", 0.0))
@@ -322,6 +367,7 @@ class Firmware:
             self.plant.set_mode("off")
             self.mode = "off"
             self.segment = None
+            self._queued = False
 
     def reset_alarm(self) -> None:
         """Clear the latched alarm if its cause is gone; one that stays latched is not entered again."""
@@ -384,6 +430,11 @@ class Firmware:
         self.plant.set_gains(self._gains())
         self.drive.bank.save()
 
+    def _alarm_context(self) -> dict[str, float]:
+        """What the drive records beside an alarm now; its run time counts from the simulated drive's first start."""
+        started = self.drive.bank.extra.setdefault("first_start", self.clock.now())
+        return monitors.alarm_context(self.profile, self.drive.bank, self.plant, self.clock.now() - started)
+
     def _refresh_monitors(self) -> None:
         monitors.refresh(
             self.profile,
@@ -392,6 +443,17 @@ class Firmware:
             self.alarms,
             jogging=self.mode == "jog",
             identifying=self.mode == "ident",
+        )
+        monitors.refresh_inputs(
+            self.profile,
+            self.drive.bank,
+            protections.input_monitor(
+                self.profile,
+                self.drive.bank,
+                int(self.drive.settings["inputs"]),
+                bool(self.drive.settings["di_monitor"]),
+            ),
+            protections.encoder_position(self.motor, self.plant.position_rev),
         )
 
 

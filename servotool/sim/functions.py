@@ -26,6 +26,7 @@ class FirmwareActions(Protocol):
     def reset_alarm(self) -> None: ...
     def reboot(self) -> None: ...
     def identify(self, start: bool) -> None: ...
+    def inputs_changed(self) -> None: ...
 
 
 def motion_handlers(fw: FirmwareActions, start_value: int = 0) -> dict[str, FnHandler]:
@@ -53,10 +54,16 @@ def install(drive: SimulatedDrive, fw: FirmwareActions) -> None:
         }
     )
     by_code: dict[str, list[FnHandler]] = {}
+    forced = drive.profile.forced_inputs
     for role, code in drive.profile.roles.items():
         entry = drive.profile.entry(code)
+        if forced is not None and role == "jog":
+            continue  # a forced-input trigger acts through the input levels (below)
         if role in motion and entry is not None and entry.cls != "Fn":
             by_code.setdefault(entry.code.upper(), []).append(motion[role])
+    if forced is not None:
+        for code in (forced.switch_code, forced.levels_code):
+            by_code.setdefault(code.upper(), []).append(lambda _d, _e, _raw: fw.inputs_changed())
 
     def parameter_written(d: SimulatedDrive, entry: Entry, raw: int) -> None:
         for handler in by_code.get(entry.code.upper(), []):

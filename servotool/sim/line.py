@@ -89,9 +89,25 @@ def emulated(
     if chosen == LINE_FAST or (chosen == LINE_FACTORY and wired):
         return None
     base = line or drive.profile.line
+    if (own := entry_baud(drive)) is not None:
+        return Emulated(LineSettings(own, base.parity, base.stopbits, base.bytesize))
     if chosen == LINE_FACTORY:
         return Emulated(base)
     return Emulated(LineSettings(int(chosen), base.parity, base.stopbits, base.bytesize))
+
+
+def entry_baud(drive: SimulatedDrive) -> int | None:
+    """The speed the drive's own baud entry sets, where the profile maps its codes (serial.boost) and the entry
+    holds another code than the factory line's; None while it holds the factory code (the line is then the one
+    the drives are reached at, or the emulation asked for) or where its codes are not known. A change takes
+    effect as the manual has it, at once (the value in effect)."""
+    boost = drive.profile.boost
+    if not boost.available:
+        return None
+    code = drive.bank.effective_value(boost.code)
+    if code == boost.code_of(drive.profile.line.baud):
+        return None
+    return boost.rates.get(code)
 
 
 class Line:
@@ -112,6 +128,7 @@ class Line:
         self.drives = {d.unit: d for d in drives}
         self.lock = lock or threading.Lock()
         self.line, self.choice, self.wired, self.default = line, choice, wired, default
+        self.host: LineSettings | None = None  # what the master speaks, where it is known (the embedded simulator)
 
     def emulated(self, drive: SimulatedDrive) -> Emulated | None:
         return emulated(drive, self.line, self.choice, wired=self.wired, default=self.default)
@@ -126,11 +143,18 @@ class Line:
 
     def serve(
         self, drive: SimulatedDrive, fc: int, address: int, count: int, values: list[int] | None
-    ) -> tuple[list[int] | int, float]:
+    ) -> tuple[list[int] | int | None, float]:
         """Registers read (none for a write) or the exception code, and the seconds the emulated line takes to
-        carry the request and the answer (0 when fast)."""
+        carry the request and the answer (0 when fast); None for no answer at all: a drive whose baud entry set
+        another speed than the master speaks (self.host) hears only garbage. A write that changes the drive's
+        speed is answered at the old one, then the new one holds."""
         try:
             with self.lock:
+                # the speed in effect before this request (as the last request left the drive's state)
+                timed = self.emulated(drive)
+                deaf = self.host is not None and (own := entry_baud(drive)) is not None and own != self.host.baud
+                if deaf:
+                    return None, 0.0
                 drive.bank.entries_in(address, count)  # an unmapped address is exception 02 before all else
                 if values is not None:
                     drive.write(address, values)
@@ -138,15 +162,15 @@ class Line:
                 else:
                     registers = drive.read(address, count)
         except SimRefusal as exc:
-            return exc.code, self._seconds(drive, 3, 0)  # a request and a 5-character exception reply
+            return exc.code, _seconds(timed, 3, 0)  # a request and a 5-character exception reply
         except Exception:  # a simulator bug must answer like a faulty slave, not kill the server
             logging.getLogger("servotool.sim").exception("simulator failure")
             return DEVICE_FAILURE, 0.0
-        return registers, self._seconds(drive, fc, count)
+        return registers, _seconds(timed, fc, count)
 
-    def _seconds(self, drive: SimulatedDrive, fc: int, count: int) -> float:
-        timed = self.emulated(drive)
-        return timed.seconds(fc, count) if timed is not None else 0.0
+
+def _seconds(timed: Emulated | None, fc: int, count: int) -> float:
+    return timed.seconds(fc, count) if timed is not None else 0.0
 
 
 def _timing_text(timed: Emulated | None, wired: bool) -> str:

@@ -38,6 +38,9 @@ BRAKE_HOLD_X_RATED = 2.5  # brake holding torque: above the largest configurable
 BRAKE_ENGAGE_RPM = 30.0  # brake closes after servo off below this speed (IS620P H02-11 default) ...
 BRAKE_DELAY_S = 0.5  # ... or this long after servo off at speed (IS620P H02-12 default)
 ESTOP_MAX_S = 0.5  # an alarm stop at the torque limit lasts at most this long, then the motor is switched off
+OVERSPEED_X_MAX = 1.2  # the overspeed alarm: this many times the motor's top speed (IS620P H0A-08 = 0: automatic)
+LOCKED_SPEED_SHARE = 0.1  # a locked rotor: under this share of the commanded speed ...
+LOCKED_TORQUE_SHARE = 0.9  # ... with the torque at this share of its limit or more
 # The plant's dynamic state, as persisted between processes serving one simulated drive (the drive stays powered).
 STATE_FIELDS = (
     "time",
@@ -63,6 +66,8 @@ STATE_FIELDS = (
     "_estop_s",
     "_defl",
     "_defl_rate",
+    "_locked_s",
+    "_saturated_s",
 )
 
 
@@ -95,6 +100,20 @@ class DriveGains:
     following_limit_rev: float = FOLLOWING_LIMIT_REV
 
 
+@dataclass(frozen=True)
+class Protections:
+    """The drive's own protections that act on the motion (sim.protections reads them from its parameters).
+
+    fence: (lowest, highest) position in revolutions of the plant's position and what the drive does beyond it:
+    "stop" forces the speed in the direction of travel to zero at once (the reverse stays free), "alarm" latches
+    the overtravel alarm. locked_rotor_s / saturation_s: how long a locked rotor (torque at its limit, the motor
+    barely turning under a commanded speed) or a saturated speed regulator lasts before its alarm; None: off."""
+
+    fence: tuple[float, float, str] | None = None
+    locked_rotor_s: float | None = None
+    saturation_s: float | None = None
+
+
 class Plant:
     """Motor, load and the drive's control loops, integrated on demand."""
 
@@ -123,6 +142,9 @@ class Plant:
         self._estop_s = 0.0  # time in the alarm stop
         self._defl = 0.0  # a compliant coupling's deflection (motor minus load angle), rad; 0 when rigid
         self._defl_rate = 0.0  # and its rate, rad/s
+        self._locked_s = 0.0  # how long the rotor has been locked under a speed command
+        self._saturated_s = 0.0  # how long the speed regulator's output has sat at the torque limit
+        self.protections = Protections()
         self.set_settings(settings)
         self.set_gains(gains)
 
@@ -144,6 +166,9 @@ class Plant:
         self._t_lim = gains.torque_limit_pct / 100.0 * self.motor.rated_torque_nm
         self._ramp = self.motor.rated_speed_rpm * RAD_S_PER_RPM / max(gains.jog_accel_ms / 1000.0, 1e-3)
 
+    def set_protections(self, protections: Protections) -> None:
+        self.protections = protections
+
     def set_mode(self, mode: str) -> None:
         if mode not in ("off", "speed", "torque", "position"):
             raise ValueError(f"unknown mode {mode}")
@@ -155,6 +180,7 @@ class Plant:
             self._target = 0.0
             self._torque_target = 0.0
             self._pos_ref = self.theta
+            self._locked_s = self._saturated_s = 0.0
             if mode == "off":
                 self._off_s = 0.0
         self.mode = mode
@@ -298,6 +324,7 @@ class Plant:
             return 0.0
         if mode == "torque":
             return self._torque_target
+        self._fence_stop()
         step = self._ramp * TS if mode in ("speed", "position") else math.inf
         self._ref += max(-step, min(step, self._target - self._ref))
         if mode == "position" and self._profile_moving:
@@ -313,7 +340,21 @@ class Plant:
         unclamped = self._kp * (err + self._integral / self._ti)
         if abs(unclamped) < self._t_lim:  # anti-windup: integrate only while not saturated
             self._integral += err * TS
+            self._saturated_s = 0.0
+        else:
+            self._saturated_s += TS
         return max(-self._t_lim, min(self._t_lim, unclamped))
+
+    def _fence_stop(self) -> None:
+        """Beyond an overtravel fence that stops: the speed in the direction of travel is forced to zero at once."""
+        fence = self.protections.fence
+        if fence is None or fence[2] != "stop":
+            return
+        rev = self.position_rev
+        if rev >= fence[1]:
+            self._target, self._ref = min(self._target, 0.0), min(self._ref, 0.0)
+        elif rev <= fence[0]:
+            self._target, self._ref = max(self._target, 0.0), max(self._ref, 0.0)
 
     def _step(self) -> None:
         # the torque applied now was commanded one period ago (computation delay), then filtered
@@ -357,12 +398,35 @@ class Plant:
                 self._off_s = self._estop_s  # the brake delay runs from the alarm: at most 0.5 s to the brake
         if self.alarm is not None:
             return
-        if abs(self.w) > 1.1 * self.gains.max_speed_rpm * RAD_S_PER_RPM:
+        if abs(self.w) > OVERSPEED_X_MAX * self.motor.max_speed_rpm * RAD_S_PER_RPM:
             self.raise_alarm("overspeed")
         elif self._heat > OVERLOAD_LIMIT:
             self.raise_alarm("overload")
         elif self.mode == "position" and abs(self._pos_ref - self.theta) > self.gains.following_limit_rev * 2 * math.pi:
             self.raise_alarm("following_error")
+        else:
+            self._protections_trip()
+
+    def _protections_trip(self) -> None:
+        """The alarms of the drive's own protections: overtravel (a fence that alarms), a locked rotor, a saturated
+        speed regulator."""
+        p = self.protections
+        fence = p.fence
+        if fence is not None and fence[2] == "alarm" and not fence[0] <= self.position_rev <= fence[1]:
+            self.raise_alarm("overtravel")
+            return
+        commanded = abs(self._target)
+        locked = (
+            self.mode in ("speed", "position")
+            and commanded > 0.0
+            and abs(self.w) < LOCKED_SPEED_SHARE * commanded
+            and abs(self._t_applied) >= LOCKED_TORQUE_SHARE * self._t_lim
+        )
+        self._locked_s = self._locked_s + TS if locked else 0.0
+        if p.locked_rotor_s is not None and self._locked_s >= p.locked_rotor_s:
+            self.raise_alarm("locked_rotor")
+        elif p.saturation_s is not None and self.mode != "off" and self._saturated_s >= p.saturation_s:
+            self.raise_alarm("saturation")
 
     def _motion_state(self) -> MotorState:
         return MotorState(self.w, self.theta, self._defl, self._defl_rate)

@@ -295,8 +295,12 @@ class RegisterBank:
 
     def apply_parameter(self, entry: Entry, raw: int) -> None:
         """Store an accepted parameter write in RAM (and EEPROM when the drive persists writes)."""
-        # The EEPROM switch itself is modelled as always stored (the manuals do not say); other writes follow it.
-        persist = self.persists_writes() or self.profile.persistence.is_switch(entry.code)
+        # The EEPROM switch itself is modelled as always stored (the manuals do not say); other writes follow it. A
+        # forcing switch is never stored (SD25 So-58: 'not written to EEPROM', cleared at power-up, L5260-5287).
+        forced = self.profile.forced_inputs
+        persist = (self.persists_writes() or self.profile.persistence.is_switch(entry.code)) and not (
+            forced is not None and entry.code.upper() == forced.switch_code.upper()
+        )
         self.ram[entry.code] = raw
         if entry.effect != "power_cycle":
             self.effective[entry.code] = raw

@@ -72,6 +72,8 @@ class _Datastore:
     ) -> list[int] | ExcCodes:
         arrived = time.perf_counter()  # the drive's own work (the plant's integration) happens within the wire time
         result, delay = self.line.serve(drive, fc, address, count, values)
+        if result is None:  # the drive hears garbage at this speed: no answer, as from a unit nobody serves
+            raise NoSuchIdException(f"unit {drive.unit} listens at another speed")
         if isinstance(result, int):
             return ExcCodes(result)
         if delay:
@@ -260,6 +262,7 @@ class EmbeddedSim:
         self.drives = drives
         self.lock = threading.Lock()
         self.line = Line(drives, self.lock, line, default=env_choice())
+        self.line.host = line
         self._loop = asyncio.new_event_loop()
         self.proxy: FaultProxy | None = None
         # Started on this thread, before the loop's own thread runs it: a wait for that thread at each step of
@@ -280,6 +283,11 @@ class EmbeddedSim:
         self.port = f"tcp://127.0.0.1:{port}"
         self._thread = threading.Thread(target=self._loop.run_forever, name="servotool-sim", daemon=True)
         self._thread.start()
+
+    def host_speaks(self, line: LineSettings) -> None:
+        """The master now speaks at these settings (its own set_line): a drive whose baud entry set another speed
+        stays silent."""
+        self.line.host = line
 
     async def _stop(self) -> None:
         try:

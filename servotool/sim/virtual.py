@@ -34,7 +34,7 @@ def wire_time(fc: int, count: int, baud: int, bits: int = 11) -> float:
 
 def make_motion_setup(sim: SimulatedDrive) -> None:
     """The profile's motion setup made on a simulated drive, stored and power-cycled (SD25's DI functions act only
-    after a power cycle), then made again for what a power-up clears (SD25's So-58): as a user sets up the drive."""
+    after a power cycle), then made again for anything a power-up clears: as a user sets up the drive."""
     for power_up in range(2):
         for req in requirements(sim.profile):
             now = sim.bank.effective_value(req.entry.code)

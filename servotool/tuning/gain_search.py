@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
-from servotool.model.codec import raw_to_eng
+from servotool.model.codec import format_value, raw_to_eng
+from servotool.motion.interrupts import held_interrupts
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, step
@@ -41,6 +42,7 @@ class LevelTrial:
 class GainSearch:
     load_ratio: float
     start_level: int
+    own_ratio: float | None = None  # the drive's own ratio parameter (None: it has none)
     trials: list[LevelTrial] = field(default_factory=list)
     chosen: int | None = None
     changes: list[GainChange] = field(default_factory=list)  # the chosen level's writes (old: before the search)
@@ -58,16 +60,25 @@ class GainSearchFailed(ServoError):
         self.search = search
 
 
+def own_load_ratio(drive: Drive) -> float | None:
+    """The drive's own inertia-ratio parameter as J_load/J_motor (identified by tune inertia); None where the
+    profile maps none."""
+    entry = drive.profile.role("inertia_ratio")
+    if entry is None:
+        return None
+    return drive.profile.load_ratio_from_param(float(raw_to_eng(entry, drive.read_entries([entry])[0].raw)))
+
+
 def drive_load_ratio(drive: Drive, load_ratio: float | None) -> float:
     """The load ratio to tune for: given, else the drive's inertia-ratio parameter (identified by tune inertia)."""
     if load_ratio is not None:
         if not 0 <= load_ratio <= 1000:
             raise UsageError("--load-ratio must be 0..1000 (J_load/J_motor)")
         return load_ratio
-    entry = drive.profile.role("inertia_ratio")
-    if entry is None:
+    own = own_load_ratio(drive)
+    if own is None:
         raise UsageError(f"{drive.profile.id} keeps no inertia ratio: give --load-ratio (from tune inertia --dry-run)")
-    return drive.profile.load_ratio_from_param(float(raw_to_eng(entry, drive.read_entries([entry])[0].raw)))
+    return own
 
 
 def search_gains(
@@ -85,28 +96,47 @@ def search_gains(
     clock = clock or RealClock()
     p = drive.profile
     eeprom.check_save_request(p, save)
-    duration = step.step_duration_s(travel_rev)
+    step.step_duration_s(travel_rev)
     scale = rigidity_scale(p)
     ratio = drive_load_ratio(drive, load_ratio)
+    own = own_load_ratio(drive) if load_ratio is not None else ratio
     motor = p.motor
     assert motor is not None
-    j_total = motor.rotor_inertia_kgcm2 * 1e-4 * (1 + ratio)
+    jm = motor.rotor_inertia_kgcm2 * 1e-4
+    j_total = jm * (1 + ratio)
+    # The drive scales its speed gain by the ratio it holds, which --load-ratio does not change: the margins are
+    # those of the load given under the drive's own ratio.
+    configured = jm * (1 + own) if own is not None and own != ratio else None
     first = scale.check(start) if start is not None else gain_writes.current_level(drive, scale)
-    highest = gain_writes.safe_level(p, scale, j_total, scale.check(top) if top is not None else None)
+    highest = gain_writes.safe_level(p, scale, j_total, scale.check(top) if top is not None else None, configured)
     if highest is None or highest < first:
-        raise UsageError(f"no level from {first} up keeps 45° and 6 dB of margin on load ratio {ratio:.2f}")
+        held = p.role("inertia_ratio")
+        under = (
+            f" under the drive's own ratio {own:.2f} ({held.code}), by which it scales its gains: write "
+            f"{held.code} = {p.param_from_load_ratio(ratio):g} first, or run tune inertia"
+            if configured is not None and held is not None and own is not None
+            else ""
+        )
+        raise UsageError(f"no level from {first} up keeps 45° and 6 dB of margin on load ratio {ratio:.2f}{under}")
     preflight(drive, "host")
-    search = GainSearch(ratio, first)
+    check = step.plan_step(drive, travel_rev)
+    search = GainSearch(ratio, first, own_ratio=own)
     original: list[GainChange] = []
     for level in range(first, highest + 1):
-        sugg, changes, found = gain_writes.gain_changes(drive, ratio, rigidity=level, bandwidth_hz=None)
+        sugg, changes, found = gain_writes.gain_changes(
+            drive, ratio, rigidity=level, bandwidth_hz=None, configured_kgm2=configured
+        )
         original = original or changes
-        _write(drive, changes, False)
         try:
-            response: StepResponse | None = step.step_response(drive, step.STEP_SPEED_RPM, duration, clock)
-            failure = response.failure() if response is not None else None
-        except ServoError as exc:
-            response, failure = None, str(exc)
+            _write(drive, changes, False)
+            try:
+                response: StepResponse | None = step.step_response(drive, check.speed_rpm, check.duration_s, clock)
+                failure = response.failure() if response is not None else None
+            except ServoError as exc:
+                response, failure = None, str(exc)
+        except BaseException as exc:  # Ctrl-C, SIGTERM, a lost line: no level was chosen, the gains go back
+            _roll_back(drive, original, save, exc)
+            raise
         trial = LevelTrial(level, sugg.speed_loop_gain_hz, found, response, failure)
         search.trials.append(trial)
         if progress is not None:
@@ -116,6 +146,7 @@ def search_gains(
     passed = [t.level for t in search.trials if t.failure is None]
     if not passed:
         _restore(drive, original, save)
+        search.reason = f"level {first} failed its step check ({search.trials[0].failure}): previous gains written back"
         raise GainSearchFailed(
             f"level {first} already fails its step check ({search.trials[0].failure}): the "
             "previous gains were written back",
@@ -123,7 +154,9 @@ def search_gains(
         )
     failed = any(t.failure is not None for t in search.trials)
     chosen = max(first, passed[-1] - BACK_OFF_LEVELS) if failed else passed[-1]
-    _sugg, changes, _m = gain_writes.gain_changes(drive, ratio, rigidity=chosen, bandwidth_hz=None)
+    _sugg, changes, _m = gain_writes.gain_changes(
+        drive, ratio, rigidity=chosen, bandwidth_hz=None, configured_kgm2=configured
+    )
     search.chosen = chosen
     last = search.trials[-1]
     search.reason = (
@@ -145,7 +178,24 @@ def _write(drive: Drive, changes: list[GainChange], save: bool | None) -> bool:
     return outcome["persisted"]
 
 
-def _restore(drive: Drive, original: list[GainChange], save: bool | None) -> None:
-    with eeprom.persistence(drive, save):
+def _restore(drive: Drive, original: list[GainChange], save: bool | None, raise_held: bool = True) -> None:
+    with held_interrupts(raise_held), eeprom.persistence(drive, save):
         for c in original:
             write_one(drive, c.entry, c.old_raw)
+
+
+def _roll_back(drive: Drive, original: list[GainChange], save: bool | None, exc: BaseException) -> None:
+    """The gains before the search back after an interrupt; a note on it says so, or that a level's gains stay."""
+    try:
+        _restore(drive, original, save, raise_held=False)
+    except ServoError as failure:
+        exc.add_note(
+            f"the search was interrupted and writing the previous gains back failed ({failure}): the gains of the "
+            "level being checked stay"
+        )
+        return
+    exc.add_note(
+        "the search was interrupted during a step check: the gains before it were written back ("
+        + ", ".join(f"{c.entry.code} {format_value(c.entry, c.old_raw)}" for c in original)
+        + ")"
+    )

@@ -37,24 +37,40 @@ class GainChange:
     old_raw: int = 0
 
 
-def configured_inertia(profile: Profile, j_total_kgm2: float) -> float:
-    """The inertia the drive's speed gain is computed with once the ratio is written: the identified one, or the
-    rotor's alone where the drive has no ratio parameter (SDC: its speed gain is absolute, F3's levels are for
-    "large-inertia loads" below the factory level)."""
+def configured_inertia(profile: Profile, j_total_kgm2: float, configured_kgm2: float | None = None) -> float:
+    """The inertia the drive's speed gain is computed with: the one its ratio parameter holds (configured_kgm2,
+    where that is not the load's: `tune gains --load-ratio` writes no ratio), else the load's once the ratio is
+    written, or the rotor's alone where the drive has no ratio parameter (SDC: its speed gain is absolute, F3's
+    levels are for "large-inertia loads" below the factory level)."""
     motor = profile.motor
     assert motor is not None
-    return j_total_kgm2 if profile.role("inertia_ratio") is not None else motor.rotor_inertia_kgcm2 * 1e-4
+    if profile.role("inertia_ratio") is None:
+        return motor.rotor_inertia_kgcm2 * 1e-4
+    return configured_kgm2 if configured_kgm2 is not None else j_total_kgm2
 
 
-def loop_margins(profile: Profile, loop: LoopGains, j_total_kgm2: float, viscous: float = 0.0) -> Margins:
-    return margins(loop, j_total_kgm2, configured_inertia(profile, j_total_kgm2), viscous)
+def loop_margins(
+    profile: Profile,
+    loop: LoopGains,
+    j_total_kgm2: float,
+    viscous: float = 0.0,
+    configured_kgm2: float | None = None,
+) -> Margins:
+    return margins(loop, j_total_kgm2, configured_inertia(profile, j_total_kgm2, configured_kgm2), viscous)
 
 
-def safe_level(profile: Profile, scale: RigidityScale, j_total_kgm2: float, upto: int | None = None) -> int | None:
+def safe_level(
+    profile: Profile,
+    scale: RigidityScale,
+    j_total_kgm2: float,
+    upto: int | None = None,
+    configured_kgm2: float | None = None,
+) -> int | None:
     """The highest level (up to `upto`) whose gains keep the minimum margins; None when none does."""
     top = scale.highest if upto is None else upto
     for level in range(top, scale.lowest - 1, -1):
-        if loop_margins(profile, scale.factory.scaled(scale.factor(level)), j_total_kgm2).ok():
+        loop = scale.factory.scaled(scale.factor(level))
+        if loop_margins(profile, loop, j_total_kgm2, configured_kgm2=configured_kgm2).ok():
             return level
     return None
 
@@ -68,10 +84,17 @@ def current_level(drive: Drive, scale: RigidityScale) -> int:
 
 
 def gain_changes(
-    drive: Drive, load_ratio: float, *, rigidity: int | None, bandwidth_hz: float | None, force: bool = False
+    drive: Drive,
+    load_ratio: float,
+    *,
+    rigidity: int | None,
+    bandwidth_hz: float | None,
+    force: bool = False,
+    configured_kgm2: float | None = None,
 ) -> tuple[GainSuggestion, list[GainChange], Margins]:
     """Gains for the identified inertia at the drive's own level (its current one when neither is given), mapped
-    onto the profile's gain roles (and its rigidity parameter), with their margins; MarginRefused unless forced."""
+    onto the profile's gain roles (and its rigidity parameter), with their margins (configured_kgm2: the inertia
+    the drive's ratio parameter holds, where it is not the load's); MarginRefused unless forced."""
     p = drive.profile
     motor = p.motor
     assert motor is not None
@@ -88,10 +111,10 @@ def gain_changes(
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    found = loop_margins(p, sugg.loop, sugg.j_total_kgm2)
+    found = loop_margins(p, sugg.loop, sugg.j_total_kgm2, configured_kgm2=configured_kgm2)
     if not found.ok() and not force:
         what = f"rigidity {rigidity}" if rigidity is not None else f"{bandwidth_hz:g} Hz"
-        safe = safe_level(p, scale, sugg.j_total_kgm2, rigidity)
+        safe = safe_level(p, scale, sugg.j_total_kgm2, rigidity, configured_kgm2)
         hint = (
             f"the highest level that keeps them is {safe} (--rigidity {safe})" if safe is not None else "no level does"
         )

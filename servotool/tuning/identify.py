@@ -16,7 +16,7 @@ from servotool.model.roles import status_bit
 from servotool.motion.deadman import drive_timeout_s
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.moves import Mover
-from servotool.motion.rest import RestWatch
+from servotool.motion.stop import MotionStop, StopReport
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
 from servotool.tuning import budget
@@ -117,10 +117,10 @@ class Identifier:
             d, self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d), self.timing
         )
         t0 = self.timing.now()
-        d.trigger("inertia_id", FEATURE)
         status = p.role("servo_status")
         ident_bit = status_bit(status, "identifying") if status is not None else None
-        try:
+        with MotionStop(_OwnIdentification(d, keepalive, self.timing)):  # however it ends: aborted, proven at rest
+            d.trigger("inertia_id", FEATURE)
             while self.timing.now() - t0 < timeout_s:
                 self.timing.sleep(min(0.1, keepalive.interval_s))
                 keepalive.beat()
@@ -130,12 +130,6 @@ class Identifier:
                     break
             else:
                 raise IdentificationFailed(f"the drive's identification did not finish within {timeout_s:g} s")
-        except BaseException:
-            try:
-                d.trigger("inertia_id", FEATURE, 0)
-            except ServoError:
-                pass  # the drive's watchdog stops it
-            raise
         active = active_alarm(d)
         if active:
             raise IdentificationFailed(f"the drive stopped its identification with alarm {active}")
@@ -144,6 +138,41 @@ class Identifier:
         if not keep and new_raw != old_raw:
             write_one(d, ratio_e, old_raw)
         return Result("drive", old, new, None, Trace(), None, None, self.timing.now() - t0, 0.0)
+
+
+class _OwnIdentification:
+    """The drive's own identification as the stop sequence sees it (motion/stop.py): its zero command aborts it."""
+
+    def __init__(self, drive: Drive, keepalive: KeepAlive, clock: Clock) -> None:
+        self.drive, self.keepalive, self.clock = drive, keepalive, clock
+
+    def command_zero(self) -> float | None:
+        self.drive.trigger("inertia_id", FEATURE, 0)
+        return None
+
+    def keep_alive(self) -> None:
+        self.keepalive.beat()
+
+    def start_protection(self, saved: dict[str, int]) -> None:
+        pass  # the drive's own motion: nothing of servotool's to set on it
+
+    def release(self) -> bool:
+        self.keepalive.stop_heartbeat()
+        return False  # nothing forced
+
+    def leave(self) -> None:
+        servo = self.drive.profile.role("servo_on")
+        if servo is not None:
+            self.drive.write_raw(servo, 0)
+
+    def snapshot(self, need_ramp: bool) -> dict[str, int]:
+        return {}  # the drive writes only its result, which the caller keeps or puts back
+
+    def stop_wait_s(self) -> float:
+        return 3.0
+
+    def stopped(self, report: StopReport) -> None:
+        pass
 
 
 Estimate = Callable[[Trace, EstimatorSettings], InertiaEstimate]
@@ -210,9 +239,9 @@ class _HostRun:
         p = d.profile
         self.drive, self.jogger, self.timing, self.plan, self.progress = d, jogger, timing, plan, progress
         self.estimate, self.torque_limit, self.old_ratio = estimate, torque_limit, old_ratio
+        jogger.protect_for(plan.speed_rpm, plan.travel_limit_rev)  # the drive's own, set with the settings
         self.jog_accel = p.need_role("jog_accel", FEATURE)
-        assert p.motor is not None
-        self.rated_rpm = p.motor.rated_speed_rpm
+        self.ramp_rpm = p.ramp_rpm()  # the speed the drive's ramp time runs up to
         self.stop_band = max(3.0, 4.0 * (rest.speed_noise_rpm if rest is not None else 0.0))
         self.sampler = Sampler(d, self.timing, plan.travel_limit_rev, self._beat)
         # A torque read in whole percent: its step error would repeat in every move of the same acceleration.
@@ -226,6 +255,7 @@ class _HostRun:
         self.torque_cap_pct = budget.torque_cap_pct(torque_limit)
 
     def _beat(self, lead_s: float = 0.0) -> None:
+        self.jogger.watch_inputs()
         # No dead-man on the drive (route none, waived): nothing watches the beat, and its writes would only
         # take samples' time on a slow line.
         bound = self.jogger.dead_man
@@ -293,7 +323,7 @@ class _HostRun:
         jogger.start(
             direction,
             speed,
-            eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.rated_rpm / speed),
+            eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.ramp_rpm / speed),
             self.ramp if guard.band is not None else None,
         )
         start = self.timing.now()
@@ -582,28 +612,15 @@ class _HostRun:
         travel = self.plan.travel_limit_rev
         return Remedy(travel, found.travel_rev, found.travel_rev / travel, True, found.bound, found.time_s)
 
-    def settle(self) -> None:
-        """Wait (bounded) for the axis to rest before the servo goes off: a ringing loop swings through zero."""
-        watch, end = RestWatch(self.stop_band), self.timing.now() + 3 * self.ramp + 0.5
-        while self.timing.now() < end:
-            speed = self.jogger.speed()
-            if speed is None or watch.at_rest(self.timing.now(), speed):
-                return
-            self._beat()
-
     def run(self) -> Result:
         settings = EstimatorSettings(fit_load_torque=len(self.plan.directions) > 1)
         jogger = self.jogger
-        saved = jogger.settings_to_restore()
-        hold = StableHold(self.drive, jogger.route.kind, saved)
-        try:
+        # However the motion ends, the stop sequence waits (bounded) for the axis to rest inside this motion's speed
+        # band before the servo goes off (a ringing loop swings through zero), and proves it; the drive's protections
+        # (protect_for, above) are set inside it before the first move and put back with the motion's settings.
+        with jogger.stopping(band_rpm=self.stop_band, need_ramp=True) as saved:
+            hold = StableHold(self.drive, jogger.route.kind, saved)
             cycles = self.cycles(self.pilot(hold, settings), settings)
-            self.settle()
-        except BaseException:
-            jogger.stop_quietly()
-            raise
-        finally:
-            jogger.leave_and_restore(saved)
         s = self.sampler
         rate = s.rate()
         est = self.estimate(s.trace, settings)

@@ -10,6 +10,9 @@ from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
 from servotool.model.profile import Profile
+from servotool.motion import deadman
+from servotool.motion.deadman import DeadManBound
+from servotool.motion.keepalive import keepalive_interval_s
 from servotool.tuning import budget
 from servotool.tuning.budget import Needs
 from servotool.tuning.fit import EstimatorSettings
@@ -23,6 +26,8 @@ from servotool.tuning.preflight import DEFAULT_SAMPLES_PER_S, FEATURE, RestCheck
 SAMPLES_PER_RAMP = 7.0
 MIN_RAMP_S = 0.1  # ... and at least this long (a loop with factory gains on an unknown load follows them)
 
+
+MIN_SPEED_RPM = 30.0  # no identification below this test speed
 
 # Automatic repeats stop before the motion (with its pilot) would take longer than this, unless the line needs more
 # (budget: MotionPlan.time_budget_s).
@@ -82,6 +87,7 @@ class MotionPlan:
     speed_limit_rpm: float = math.inf  # the motor's rated speed, or --max-speed below it
     time_budget_s: float = TIME_BUDGET_S  # adaptive repeats stop before the motion would take longer
     needs: Needs | None = None  # what the line needs for the fit's limit (both directions, automatic ramps)
+    run_on_limited: bool = False  # the speed was lowered so that a dead host's run-on stays inside the travel
 
     @property
     def move_travel_rev(self) -> float:
@@ -118,6 +124,11 @@ class MotionPlan:
             f"({self.speed_rpm / self.ramp_s:.0f} rpm/s), {self.move_travel_rev:.2f} rev per move, "
             f"{self.excursion_rev:.2f} rev of travel in all (limit {self.travel_limit_rev:g} rev), about "
             f"{self.duration_s:.1f} s; a pilot move at a quarter of that speed first"
+            + (
+                "; the speed is lowered so that a dead host's run-on stays inside the travel"
+                if self.run_on_limited
+                else ""
+            )
         )
 
 
@@ -164,7 +175,7 @@ def plan_motion(
         limit = min(limit, max_speed)
     speed = min(speed, limit)
     plan = MotionPlan(speed, ramp, dirs, cycles, travel_rev, adaptive, limit)
-    if speed < 30.0:
+    if speed < MIN_SPEED_RPM:
         raise UsageError(
             f"travel limit {travel_rev:g} rev is too small for an identification with "
             f"{ramp * 1000:.0f} ms ramps (needs at least {30 / 60 * ramp / 0.9:.2f} rev per move); "
@@ -199,7 +210,7 @@ def plan_host_motion(
     }
     plan_motion(drive.profile, **options)
     rest = check_at_rest(drive, timing)
-    plan = plan_motion(drive.profile, **options, samples_per_s=rest.samples_per_s)
+    plan = fit_run_on(drive, plan_motion(drive.profile, **options, samples_per_s=rest.samples_per_s))
     return with_needs(plan, drive, rest), rest
 
 
@@ -226,6 +237,65 @@ def with_needs(plan: MotionPlan, drive: Drive, rest: RestCheck) -> MotionPlan:
     found = budget.needs(line, plan.travel_limit_rev, EstimatorSettings().max_rel_uncertainty)
     planned = replace(plan, needs=found)
     return planned.budgeted(found.lightest.time_s) if found.enough else planned
+
+
+def identification_bound(drive: Drive, plan: MotionPlan) -> DeadManBound:
+    """What a dead host lets the motor run on during this identification, as printed before moving. Most drives:
+    the route's bound at the test speed. The segment route (IS620P): each test move is one segment of its own where
+    that is no longer than a re-armed one (SegmentMoves.length_rev), ending where the move was to end anyway; the
+    pilot's moves are re-armed segments at a quarter of the speed."""
+    return _reach(drive, plan)[0]
+
+
+def _reach(drive: Drive, plan: MotionPlan) -> tuple[DeadManBound, float]:
+    """(the printed bound, how far from its start the axis can get if the host dies at the worst moment)."""
+    beat = min(0.1, keepalive_interval_s(drive))
+    reference = drive.profile.ramp_rpm()
+    timeout = deadman.drive_timeout_s(drive) if drive.profile.role("comm_timeout") is not None else None
+
+    def ramp_ms(speed: float) -> float:  # the ramp set so that the move reaches its speed in ramp_s
+        return plan.ramp_s * 1000.0 * reference / speed
+
+    def at(speed: float) -> DeadManBound:
+        return deadman.bound(drive, speed, beat, ramp_ms(speed), drive.dead_man_waived, timeout)
+
+    test = at(plan.speed_rpm)
+    if test.stop_rev is None:
+        return test, math.inf
+    if test.route != "segment":
+        return test, plan.excursion_rev + test.stop_rev
+    pilot_speed = plan.speed_rpm * PILOT_SHARE
+    # The pilot runs re-armed segments from rest, each SEGMENT_BEATS beats at its speed and its braking from where
+    # it started; its stop command comes before a second one is due (so no braked segment runs before a queued one).
+    pilot_rev = deadman.segment_rev(pilot_speed, beat, ramp_ms(pilot_speed), reference)
+    pilot_s = deadman.SEGMENT_BEATS * beat + plan.ramp_s
+    test_rev = deadman.segment_rev(plan.speed_rpm, beat, ramp_ms(plan.speed_rpm), reference)
+    assert test.stop_s is not None
+    own = plan.move_travel_rev <= test_rev  # SegmentMoves.length_rev: a single segment that ends where its move does
+    moves = (plan.move_travel_rev, 2.0 * plan.ramp_s) if own else (test.stop_rev, test.stop_s)
+    reach = max(plan.excursion_rev + (0.0 if own else test.stop_rev), pilot_rev)
+    return replace(test, stop_rev=max(moves[0], pilot_rev), stop_s=max(moves[1], pilot_s)), reach
+
+
+def fit_run_on(drive: Drive, plan: MotionPlan) -> MotionPlan:
+    """The plan's travel and what a dead host lets the motor run on beyond it fit inside the travel limit: else
+    the speed is lowered until they do, or (not even 30 rpm) refused naming a longer travel or a shorter watchdog.
+    Nothing to fit where nothing bounds the run-on (--no-dead-man: the NO DEAD-MAN line says so)."""
+    bound, reach = _reach(drive, plan)
+    if not bound.bounded or reach <= plan.travel_limit_rev:
+        return plan
+    speed = deadman.largest_fitting_speed(
+        plan.speed_rpm,
+        lambda v: _reach(drive, replace(plan, speed_rpm=v))[1] <= plan.travel_limit_rev,
+        MIN_SPEED_RPM,
+    )
+    if speed is None:
+        raise UsageError(
+            f"travel limit {plan.travel_limit_rev:g} rev leaves no room for an identification and what a dead host "
+            f"lets the motor run on ({bound.stop_rev:.2f} rev at {plan.speed_rpm:.0f} rpm, {bound.route}): raise "
+            f"--travel{deadman.timeout_remedy(drive, bound)}"
+        )
+    return replace(plan, speed_rpm=speed, run_on_limited=True)
 
 
 # A suggested travel aims this far past the shortfall, and is at least MIN_REMEDY_GAIN times the old one: the

@@ -56,7 +56,9 @@ def preflight(drive: Drive, method: str) -> None:
     if active:
         raise UsageError(f"refusing to move: alarm {active} is active (clear it first)")
     if servo_is_on(drive) or (method == "host" and Jogger(drive, feature=FEATURE).servo_already_on()):
-        raise UsageError("refusing to move: the servo is on (enabled from elsewhere); switch it off first")
+        raise UsageError(
+            "refusing to move: the servo is on (enabled from elsewhere); switch it off first ('servotool stop')"
+        )
 
 
 def drive_method_dead_man(drive: Drive) -> DeadManBound:

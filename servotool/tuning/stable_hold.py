@@ -20,7 +20,7 @@ A motion that must show or keep the drive's own speed loop while the load is unk
 identification, a JOG: guarded_jogger) lowers only the position gain (soften_position).
 Each change is a parameter written through ops.params.write_one (RAM only where the drive has a switch: the
 identification runs inside ops.eeprom.ram_writes), its original value recorded in the motion's settings to put
-back (motion.jogger.Jogger.leave_and_restore), so the drive ends as it was found.
+back by the stop sequence (motion.stop), so the drive ends as it was found.
 """
 
 from __future__ import annotations

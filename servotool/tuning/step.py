@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -10,10 +12,13 @@ from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.codec import raw_to_eng
-from servotool.motion.jogger import Jogger
+from servotool.model.quantity import quantity
+from servotool.motion import deadman
+from servotool.motion.deadman import DeadManBound
 from servotool.motion.keepalive import keepalive_interval_s
-from servotool.ops.eeprom import ram_writes
+from servotool.motion.moves import Mover
 from servotool.tuning.errors import IdentificationFailed
+from servotool.tuning.gain_writes import drive_loop
 from servotool.tuning.preflight import FEATURE, active_alarm
 from servotool.tuning.stable_hold import StableHold
 
@@ -22,7 +27,8 @@ OVERSHOOT_LIMIT_PCT = 35.0  # a PI speed loop at 45 degrees of phase margin over
 
 @dataclass(frozen=True)
 class StepResponse:
-    """Speed step through JOG with the shortest ramp the drive allows."""
+    """Speed step through JOG with the shortest ramp the drive allows. Times count from the moment the step command
+    went out; the first sample is the speed at rest just before it, so every step starts from the same zero."""
 
     target_rpm: float
     overshoot_pct: float
@@ -31,32 +37,92 @@ class StepResponse:
     ripple_pct: float = 0.0  # speed's standard deviation over the second half, % of the target (ringing)
     t_s: tuple[float, ...] = field(default=(), repr=False)  # the forward step's samples, for its chart
     speed_rpm: tuple[float, ...] = field(default=(), repr=False)
+    interval_ms: float = 0.0  # median time between speed samples (speed only, over the line)
+    longest_gap_ms: float = 0.0
+    command_ms: float = 0.0  # how long the step command took to send (the drive may start anywhere inside it)
+    loop_hz: float | None = None  # the speed loop's gain while stepping (what the overshoot's length follows)
 
-    def summary(self) -> dict[str, float | int | None]:
-        """The figures without the samples."""
+    def summary(self) -> dict[str, Any]:
+        """The figures without the samples, each a value with its unit (model.quantity)."""
+
+        def q(x: float | None, unit: str) -> dict[str, Any] | None:
+            return quantity(None if x is None or not math.isfinite(x) else round(x, 2), unit)
+
         return {
-            "target_rpm": self.target_rpm,
-            "overshoot_pct": self.overshoot_pct,
-            "settling_ms": self.settling_ms,
+            "target": q(self.target_rpm, "rpm"),
+            "overshoot": q(self.overshoot_pct, "%"),
+            "settling": q(self.settling_ms, "ms"),
             "samples": self.samples,
-            "ripple_pct": self.ripple_pct,
+            "ripple": q(self.ripple_pct, "%"),
+            "interval": q(self.interval_ms, "ms"),
+            "longest_gap": q(self.longest_gap_ms, "ms"),
+            "command": q(self.command_ms, "ms"),
+            "overshoot_bound": q(self.overshoot_bound_pct, "%"),
         }
 
+    @property
+    def overshoot_ms(self) -> float | None:
+        """About how long a speed loop at loop_hz stays over its target on a step: half a period at its gain."""
+        return 1000.0 / (2.0 * self.loop_hz) if self.loop_hz else None
+
+    @property
+    def overshoot_bound_pct(self) -> float | None:
+        """The most the overshoot can be, given the samples: a lobe of overshoot_ms sampled every interval_ms is
+        caught at least cos(pi * interval / (2 * lobe)) of its height; None when samples may miss it altogether."""
+        lobe = self.overshoot_ms
+        if lobe is None:
+            return self.overshoot_pct
+        if self.interval_ms >= lobe:
+            return None
+        return self.overshoot_pct / math.cos(math.pi * self.interval_ms / (2.0 * lobe))
+
+    @property
+    def overshoot_visible(self) -> bool:
+        """Whether the sampling is fine enough to bound the overshoot it judges."""
+        return self.overshoot_bound_pct is not None
+
     def failure(self, overshoot_limit_pct: float = OVERSHOOT_LIMIT_PCT) -> str | None:
-        """Why this response fails the check after writing gains (None: it passes)."""
+        """Why this response fails the check after writing gains (None: it passes). The overshoot judged is the
+        most it can be between the samples; a step sampled too coarsely to bound it proves nothing and fails."""
         if self.settling_ms is None:
             return "the speed does not settle"
-        if self.overshoot_pct > overshoot_limit_pct:
-            return f"overshoot {self.overshoot_pct:.0f} % over the {overshoot_limit_pct:g} % limit"
+        bound = self.overshoot_bound_pct
+        if bound is None:
+            return (
+                f"sampled every {self.interval_ms:.0f} ms, too coarse to see the overshoot of a "
+                f"{self.loop_hz:.0f} Hz speed loop (about {self.overshoot_ms:.0f} ms long): not proven"
+            )
+        if bound > overshoot_limit_pct:
+            if round(bound) == round(self.overshoot_pct):
+                return f"overshoot {bound:.0f} % over the {overshoot_limit_pct:g} % limit"
+            return (
+                f"overshoot up to {bound:.0f} % (measured {self.overshoot_pct:.0f} %, sampled every "
+                f"{self.interval_ms:.0f} ms) over the {overshoot_limit_pct:g} % limit"
+            )
         if self.ripple_pct > RIPPLE_LIMIT_PCT:
             return f"the speed rings ({self.ripple_pct:.1f} % ripple at constant speed)"
         return None
 
+    def sampling(self) -> str:
+        """The check's sampling limit, in words."""
+        gap = f", longest gap {self.longest_gap_ms:.0f} ms" if self.longest_gap_ms > 1.5 * self.interval_ms else ""
+        return (
+            f"sampled every {self.interval_ms:.0f} ms{gap} (speed only, over the line: no drive-side trace): an "
+            "overshoot shorter than that may be missed"
+        )
+
     def describe(self) -> str:
         settle = f"{self.settling_ms:.0f} ms" if self.settling_ms is not None else "does not settle"
+        bound = self.overshoot_bound_pct
+        over = f"{self.overshoot_pct:.1f} %" + (
+            " (NOT RESOLVED at this sampling)"
+            if bound is None
+            else f" (up to {bound:.1f} % between samples)"
+            if bound > self.overshoot_pct + 0.05
+            else ""
+        )
         return (
-            f"{self.target_rpm:.0f} rpm step: overshoot {self.overshoot_pct:.1f} %, settling (5 %) {settle}, "
-            f"ripple {self.ripple_pct:.1f} %"
+            f"{self.target_rpm:.0f} rpm step: overshoot {over}, settling (5 %) {settle}, ripple {self.ripple_pct:.1f} %"
         )
 
 
@@ -75,34 +141,89 @@ def step_duration_s(travel_rev: float, speed_rpm: float = STEP_SPEED_RPM) -> flo
     return duration
 
 
+@dataclass(frozen=True)
+class StepPlan:
+    """A step check that fits its travel limit: its speed, how long each step runs, and what a dead host lets the
+    motor run on (printed before moving)."""
+
+    speed_rpm: float
+    duration_s: float
+    bound: DeadManBound
+
+    def describe(self) -> str:
+        lowered = "" if self.speed_rpm >= STEP_SPEED_RPM else " (lowered so that a dead host's run-on fits the travel)"
+        return f"{self.speed_rpm:.0f} rpm{lowered} for {self.duration_s:.2f} s forward and back"
+
+
+MIN_STEP_S = 0.2  # a step shorter than this shows no settling
+
+
+def plan_step(drive: Drive, travel_rev: float) -> StepPlan:
+    """The step check's speed and time: each step and what a dead host lets the motor run on from its end fit
+    inside the travel limit (STEP_SPEED_RPM where they do, else lower; refused where not even 20 rpm fits)."""
+    step_duration_s(travel_rev)  # the travel's own check, as before the drive is opened
+    ramp = drive.profile.need_role("jog_accel", FEATURE)  # the check runs at its shortest ramp
+    ramp_ms = float(raw_to_eng(ramp, ramp.min))
+    beat = min(0.1, keepalive_interval_s(drive))
+    timeout = deadman.drive_timeout_s(drive) if drive.profile.role("comm_timeout") is not None else None
+    room = 0.9 * travel_rev
+
+    def bound(speed: float, duration_s: float = MIN_STEP_S) -> DeadManBound:
+        b = deadman.bound(drive, speed, beat, ramp_ms, drive.dead_man_waived, timeout)
+        if b.route != "segment":
+            return b
+        # On the segment route each step is one segment of its own, ending where the step ends: that is its bound.
+        return replace(b, stop_rev=speed / 60.0 * duration_s, stop_s=duration_s + (b.stop_s or 0.0) / 2.0)
+
+    def run_on(speed: float) -> float:
+        if bound(speed).route == "segment":
+            return 0.0  # the step's own segment ends inside its travel
+        return bound(speed).stop_rev or 0.0  # nothing bounds it (--no-dead-man): nothing to fit
+
+    def fits(speed: float) -> bool:
+        return 1.3 * speed / 60.0 * MIN_STEP_S + run_on(speed) <= room
+
+    speed = deadman.largest_fitting_speed(STEP_SPEED_RPM, fits, 20.0)
+    if speed is None:
+        b = bound(STEP_SPEED_RPM)
+        raise UsageError(
+            f"--travel {travel_rev:g} leaves no room for a step check and what a dead host lets the motor run on "
+            f"({run_on(STEP_SPEED_RPM):.2f} rev at {STEP_SPEED_RPM:g} rpm, {b.route}): give more --travel"
+            + deadman.timeout_remedy(drive, b)
+        )
+    duration = min(0.6, (room - run_on(speed)) / (1.3 * speed / 60.0))
+    b = bound(speed, duration)
+    deadman.check(b, drive.dead_man_waived)
+    return StepPlan(speed, duration, b)
+
+
 def step_response(
     drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None, load_unknown: bool = False
 ) -> StepResponse:
     """Command a JOG speed step forward, sample the speed, then the same step back to where it started.
 
-    JOG parameters are put back afterwards (their writes kept out of EEPROM where the drive has a switch); the
-    keep-alive beats at the drive's watchdog rate. load_unknown (the check before identification): on a route that
+    However it ends, the motion's stop sequence stops the motor, puts the JOG parameters back (their writes kept out
+    of EEPROM where the drive has a switch) and reads the drive back (motion/stop.py); the keep-alive beats at the
+    drive's watchdog rate. load_unknown (the check before identification): on a route that
     holds position between the steps, the position gain is lowered meanwhile so that the hold cannot swing up on
     a load far above the configured ratio (tuning.stable_hold); the speed loop being checked is left as it is.
     """
-    with ram_writes(drive):
-        return _step_response(drive, speed_rpm, duration_s, timing, load_unknown)
-
-
-def _step_response(
-    drive: Drive, speed_rpm: float, duration_s: float, timing: Clock | None, load_unknown: bool
-) -> StepResponse:
     p, timing = drive.profile, timing or RealClock()
-    jogger = Jogger(drive, keepalive_interval_s(drive), FEATURE, timing)
+    jogger = Mover(drive, keepalive_interval_s(drive), FEATURE, timing)
+    # The drive's own protections for the step and back (it stays within the travel step_duration_s allowed it),
+    # set inside the stop scope below before the first step.
+    jogger.protect_for(speed_rpm, 1.3 * speed_rpm / 60.0 * duration_s / 0.9)
     jog_accel = p.need_role("jog_accel", FEATURE)
     speed_e = p.need_role("speed_feedback", FEATURE)
-    saved = jogger.settings_to_restore()
+    loop_hz = drive_loop(drive).speed_hz
     t: list[float] = []
     v: list[float] = []
+    command_s = 0.0
 
     def speed() -> float:
         value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
-        jogger.keepalive.beat_if_due()
+        jogger.keep_alive()
+        jogger.watch_inputs()
         return value
 
     def stop() -> None:
@@ -111,16 +232,23 @@ def _step_response(
         while timing.now() < end and abs(speed()) > 3:
             timing.sleep(0.02)
 
-    try:
+    with jogger.stopping(need_ramp=True) as saved:  # however the check ends: the one stop sequence
         if load_unknown:
             StableHold(drive, jogger.route.kind, saved).soften_position()
-        jogger.set_speed(speed_rpm)
+        if jogger.segments is not None:
+            jogger.segments.single = True  # each step one segment of its own: its bound is the step (plan_step)
+        jogger.set_speed(speed_rpm)  # the settings before the first step, so that its time counts from the command
         jogger.set_ramp(jog_accel.min)
         for direction in (1, -1):
+            rest = speed()  # the same zero for every step: at rest, just before the command
             t0 = timing.now()
-            jogger.command(direction)
-            while timing.now() - t0 < duration_s:
-                now = timing.now() - t0
+            jogger.start(direction, speed_rpm, jog_accel.min, stop_after_s=duration_s)
+            if direction > 0:
+                command_s = timing.now() - t0
+                t.append(0.0)
+                v.append(rest)
+            # nothing but the speed in this loop (the keep-alive only when due): the line's full rate
+            while (now := timing.now() - t0) < duration_s:
                 value = speed()
                 if direction > 0:
                     t.append(now)
@@ -129,11 +257,6 @@ def _step_response(
         active = active_alarm(drive)
         if active:
             raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
-    except BaseException:
-        jogger.stop_quietly()
-        raise
-    finally:
-        jogger.leave_and_restore(saved)
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = (
@@ -141,6 +264,7 @@ def _step_response(
     )
     late = [x for tt, x in zip(t, v, strict=True) if tt >= duration_s / 2]
     ripple = float(np.std(late)) / speed_rpm * 100 if len(late) > 2 else 0.0
+    gaps = np.diff(np.asarray(t[1:])) * 1000.0  # between the samples taken after the command
     return StepResponse(
         speed_rpm,
         max(0.0, (max(v, default=0.0) - speed_rpm) / speed_rpm * 100),
@@ -149,4 +273,8 @@ def _step_response(
         ripple,
         tuple(t),
         tuple(v),
+        interval_ms=float(np.median(gaps)) if gaps.size else duration_s * 1000.0,
+        longest_gap_ms=float(np.max(gaps)) if gaps.size else duration_s * 1000.0,
+        command_ms=command_s * 1000.0,
+        loop_hz=loop_hz,
     )

@@ -15,7 +15,9 @@ from pathlib import Path
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import ServoError, UsageError
+from servotool.model.codec import format_value
 from servotool.model.profile import Entry, Profile
+from servotool.motion.interrupts import held_interrupts
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, identify, planning, preflight, step
@@ -152,13 +154,25 @@ class TuneResult:
 
 
 class GainsRolledBack(ServoError):
-    """The step check after writing the gains failed; the previous gains were written back."""
+    """The step check after writing the gains failed; the previous gains were written back. `reason` is why the
+    check failed, `facts` the rollback as a report carries it."""
 
     exit_code = 1
 
-    def __init__(self, message: str, response: StepResponse | None) -> None:
+    def __init__(self, message: str, response: StepResponse | None, reason: str = "") -> None:
         super().__init__(message)
-        self.response = response
+        self.response, self.reason = response, reason
+        self.kept: list[str] = []  # codes written before the gains that stay (the inertia ratio)
+        self.ratio: float | None = None  # the identified ratio those gains were for
+
+    @property
+    def facts(self) -> dict[str, object]:
+        return {
+            "rolled_back": True,
+            "reason": self.reason or str(self),
+            "kept": self.kept,
+            "step_check": self.response.summary() if self.response is not None else None,
+        }
 
 
 def tune_inertia(
@@ -190,10 +204,10 @@ def tune_inertia(
     if request.method == "host":
         motion, rest = request.host_motion(drive, clock)
         motion, request = _enough_travel(drive, request, motion, rest, choose_travel)
-    step_s = step.step_duration_s(request.travel_rev) if request.step_check else None
+    step_plan = step.plan_step(drive, request.travel_rev) if request.step_check else None  # the travel chosen
     if approve_motion is not None and not approve_motion(motion):
         raise TuneDeclined("nothing moved")
-    before = _step(drive, step_s, clock, load_unknown=True)
+    before = _step(drive, step_plan, clock, load_unknown=True)
     try:
         result = (
             ident.run_host(motion, progress=progress, rest=rest)
@@ -219,13 +233,24 @@ def tune_inertia(
     written, persisted = _write(drive, proposal, approved, request.save)
     # The host method stores the ratio by writing it; the drive method's drive stored its own (kept unless dry run).
     stored = (proposal.writes_ratio and written != []) if request.method == "host" else not request.dry_run
-    verified = (
-        verify_gains(drive, proposal.gain_changes, request, clock)
-        if request.verify and approved and proposal.gain_changes
-        else None
-    )
+    try:
+        verified = (
+            verify_gains(drive, proposal.gain_changes, request, clock)
+            if request.verify and approved and proposal.gain_changes
+            else None
+        )
+    except GainsRolledBack as exc:
+        gains = {c.entry.code for c in proposal.gain_changes}
+        exc.kept = [entry.code for entry, _raw in written if entry.code not in gains]
+        exc.ratio = proposal.ratio
+        raise
     changed = stored or bool(written)  # SDC stores no ratio: its gains changed all the same
-    after = verified or (_step(drive, step_s, clock) if before is not None and changed else None)
+    try:
+        after = verified or (_step(drive, step_plan, clock) if before is not None and changed else None)
+    except BaseException as exc:  # the check only measures: what was written stays, and the user is told
+        if written:
+            exc.add_note(f"the values written before the step check stay: {_written_words(written)}")
+        raise
     return TuneResult(
         proposal,
         stored,
@@ -263,7 +288,7 @@ def _enough_travel(
             repeats=request.repeats,
             samples_per_s=rest.samples_per_s,
         )
-        motion = planning.with_needs(plan, drive, rest)
+        motion = planning.with_needs(planning.fit_run_on(drive, plan), drive, rest)
         needs = motion.needs
         assert needs is not None
     if needs.from_ratio is None:
@@ -283,19 +308,50 @@ def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, 
     previous gains go back (by the same EEPROM rule) and GainsRolledBack is raised."""
     response: StepResponse | None = None
     try:
-        response = step.step_response(drive, step.STEP_SPEED_RPM, step.step_duration_s(request.travel_rev), clock)
+        check = step.plan_step(drive, request.travel_rev)
+        response = step.step_response(drive, check.speed_rpm, check.duration_s, clock)
         fault = response.failure()
     except ServoError as exc:
         fault = str(exc)
+    except BaseException as exc:  # Ctrl-C, SIGTERM: the check did not pass, so the gains it checks do not stay
+        _roll_back(drive, changes, request.save, exc, "the step check after writing the gains was interrupted")
+        raise
     if fault is None:
         assert response is not None
         return response
-    with eeprom.persistence(drive, request.save):
-        for c in changes:
-            write_one(drive, c.entry, c.old_raw)
+    _roll_back(drive, changes, request.save)
     raise GainsRolledBack(
-        f"step check after writing the gains failed ({fault}): the previous gains were written back", response
+        f"step check after writing the gains failed ({fault}): the previous gains were written back", response, fault
     )
+
+
+def _roll_back(
+    drive: Drive, changes: list[GainChange], save: bool | None, exc: BaseException | None = None, why: str = ""
+) -> None:
+    """The previous gains written back (by the same EEPROM rule) with interrupts held; with `exc` (the interrupt or
+    failure that ended the check), a note on it says what was done, or that the new gains stay."""
+    try:
+        with held_interrupts(raise_held=exc is None), eeprom.persistence(drive, save):
+            for c in changes:
+                write_one(drive, c.entry, c.old_raw)
+    except ServoError as failure:
+        if exc is None:
+            raise
+        exc.add_note(
+            f"{why}: writing the previous gains back failed ({failure}); the new gains stay: "
+            + _written_words([(c.entry, c.raw) for c in changes])
+        )
+        return
+    if exc is not None:
+        exc.add_note(
+            f"{why}: the previous gains were written back ("
+            + ", ".join(f"{c.entry.code} {format_value(c.entry, c.old_raw)}" for c in changes)
+            + ")"
+        )
+
+
+def _written_words(written: list[tuple[Entry, int]]) -> str:
+    return ", ".join(f"{e.code} = {format_value(e, raw)}" for e, raw in written)
 
 
 def check_drive_result(drive: Drive, result: identify.Result, request: TuneRequest, clock: Clock) -> None:
@@ -349,5 +405,7 @@ def _write(
     return writes, outcome["persisted"]
 
 
-def _step(drive: Drive, seconds: float | None, clock: Clock, load_unknown: bool = False) -> StepResponse | None:
-    return step.step_response(drive, step.STEP_SPEED_RPM, seconds, clock, load_unknown) if seconds is not None else None
+def _step(drive: Drive, plan: step.StepPlan | None, clock: Clock, load_unknown: bool = False) -> StepResponse | None:
+    if plan is None:
+        return None
+    return step.step_response(drive, plan.speed_rpm, plan.duration_s, clock, load_unknown)

@@ -111,7 +111,7 @@ def test_piped_monitor_streams_lines_and_ctrl_c_exits_130(sim_dir):
     )
     try:
         first = proc.stdout.readline()  # arrives while the command still runs: line-buffered
-        assert '"Un000"' in first and '"units"' in first
+        assert '"Un000"' in first and '"unit": "rpm"' in first
         proc.send_signal(signal.SIGINT)
         rest, err = proc.communicate(timeout=30)
     finally:
@@ -168,10 +168,15 @@ def test_an_option_value_that_looks_like_an_option_is_refused_before_anything_ru
 def test_quiet_keeps_results_and_errors(cli, tmp_path):
     r = cli("-q", "--port", "sim", "jog", "--speed", "100", "--time", "0.2")
     assert r.code == 0 and "JOG done: peak" in r.err and "SIMULATED" not in r.err  # the banner goes
-    assert "if this program stops" not in r.err  # progress words go
-    (tmp_path / "axis-1.yaml").write_text("taken\n")
+    assert "JOG forward at" not in r.err  # progress words go
+    assert "if this program stops, the motor stops within" in r.err  # the safety line stays (issue 29)
+    assert r.err.strip().splitlines()[-1].startswith("servotool: stopped, servo off")  # so does the stop's proof
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nprofile: dsx7e\nsteps:\n  - backup: axis-{unit}.yaml\n")
+    plan.write_text("port: sim\nprofile: dsx7e\nsteps:\n  - expect: {Pn101: 99.0}\n")
     r = cli("-q", "run", str(plan), "--yes")
-    assert r.code == 2 and "plan FAILED" in r.out
-    assert "FAIL unit 1 step 1 (backup, line 4):" in r.err and "axis-1.yaml exists" in r.err  # why, though quiet
+    assert r.code == 3 and "plan FAILED" in r.out
+    assert "FAIL unit 1 step 1 (expect, line 4):" in r.err and "Pn101=18 not in" in r.err  # why, though quiet
+    (tmp_path / "axis-1.yaml").write_text("taken\n")
+    plan.write_text("port: sim\nprofile: dsx7e\nsteps:\n  - backup: axis-{unit}.yaml\n")
+    r = cli("-q", "run", str(plan), "--yes")  # refused before the run: the error, though quiet
+    assert r.code == 2 and "step 1 (backup, line 4), unit 1:" in r.err and "axis-1.yaml exists" in r.err

@@ -25,12 +25,21 @@ def test_find_searches_codes_names_and_descriptions_without_a_drive(cli):
 
 
 def test_diff_factory_compares_the_drive_with_its_defaults(cli):
-    assert cli("--port", "sim", "param", "diff", "--factory").out.startswith("no differences")
+    r = cli("--port", "sim", "param", "diff", "--factory")
+    assert r.code == 0 and r.out.startswith("no differences")
     cli("--port", "sim", "param", "set", "Pn101=25")
     r = cli("--port", "sim", "param", "diff", "--factory", "--json")
-    assert r.code == 0
+    assert r.code == 1  # they differ: exit 1, for scripts (issue 35)
     assert r.json()["differences"] == [
-        {"code": "Pn101", "name": "Speed loop gain", "unit": "Hz", "effect": "unknown", "a": 25.0, "b": 18.0}
+        {
+            "code": "Pn101",
+            "name": "Speed loop gain",
+            "unit": "Hz",
+            "effect": "unknown",
+            "a": 25.0,
+            "b": 18.0,
+            "value_unverified": "unit/scale not printed (unit column empty); inferred",
+        }
     ]
     assert cli("--port", "sim", "param", "diff").code == 2  # neither a file nor --factory
 

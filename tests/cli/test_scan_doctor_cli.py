@@ -45,15 +45,15 @@ def test_doctor_prints_its_figures_and_json(cli, line):
     assert r.code == 0, r.err
     data = r.json()
     assert data["requests"] == 5 and data["answered"] == 5 and data["failures"] == 0 and data["echo"] is False
-    assert data["rtt_ms"]["min"] <= data["rtt_ms"]["median"] <= data["rtt_ms"]["max"]
-    assert data["achieved_rate"] > 0 and data["theoretical_rate"] is None  # no line settings over tcp
+    assert data["rtt"]["min"] <= data["rtt"]["median"] <= data["rtt"]["max"] and data["rtt"]["unit"] == "ms"
+    assert data["achieved_rate"]["value"] > 0 and data["theoretical_rate"] is None  # no line settings over tcp
 
 
 def test_doctor_counts_failures_of_a_silent_unit(cli, line):
     r = cli("--timeout", "0.05", "--retries", "0", "doctor", "--port", line, "-u", "9", "--count", "3", "--json")
     assert r.code == 0, r.err
     data = r.json()
-    assert data["failures"] == 3 and data["error_rate"] == 1.0 and data["rtt_ms"] is None
+    assert data["failures"] == 3 and data["error_rate"] == 1.0 and data["rtt"] is None
 
 
 def test_scan_table_fits_80_columns_one_row_per_drive(cli, line):

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 import sys
 import time
 
@@ -20,6 +19,7 @@ from servotool.cli.shell_complete import candidates
 from servotool.model.codec import raw_to_eng, words_to_raw
 from servotool.model.loader import load_profile
 from tests.conftest import ROOT
+from tests.terminal import Terminal
 
 
 def _speed_rpm(port: str) -> float:
@@ -34,37 +34,6 @@ def _speed_rpm(port: str) -> float:
         return float(raw_to_eng(entry, words_to_raw(entry, reply.registers)))
     finally:
         client.close()
-
-
-class Terminal:
-    """A tmux session running one command, read as the screen shows it."""
-
-    def __init__(self, command: str, name: str) -> None:
-        self.name = name
-        subprocess.run(["tmux", "new-session", "-d", "-s", name, "-x", "110", "-y", "30", command], check=True)
-
-    def keys(self, *keys: str, literal: bool = False) -> None:
-        subprocess.run(["tmux", "send-keys", "-t", self.name, *(["-l"] if literal else []), *keys], check=True)
-
-    def type(self, text: str) -> None:
-        self.keys(text, literal=True)
-
-    def screen(self) -> str:
-        done = subprocess.run(
-            ["tmux", "capture-pane", "-p", "-S", "-500", "-t", self.name], capture_output=True, text=True
-        )
-        return done.stdout
-
-    def wait_for(self, text: str, timeout: float = 30, count: int = 1) -> str:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if (screen := self.screen()).count(text) >= count:
-                return screen
-            time.sleep(0.1)
-        raise AssertionError(f"{text!r} (x{count}) not on the screen after {timeout} s:\n{self.screen()}")
-
-    def close(self) -> None:
-        subprocess.run(["tmux", "kill-session", "-t", self.name], capture_output=True)
 
 
 def test_a_session_in_a_terminal(sim_dir, sim_serve, tmp_path):
@@ -83,7 +52,7 @@ def test_a_session_in_a_terminal(sim_dir, sim_serve, tmp_path):
     command = (
         f"cd {ROOT} && {exports} {sys.executable} -m servotool --port {port} -P dsx7e shell; echo exit $? > {ended}"
     )
-    term = Terminal(command, f"servotool-shell-{os.getpid()}")
+    term = Terminal(command, tmp_path)
     try:
         term.wait_for("servotool>")
         term.wait_for("servo off")  # the status line, read while the prompt waits
@@ -106,7 +75,7 @@ def test_a_session_in_a_terminal(sim_dir, sim_serve, tmp_path):
             seen = _speed_rpm(port)
         assert 250 <= seen <= 400  # it runs (forward; a speed loop may overshoot its 300 rpm on the way)
         term.keys("C-c")
-        term.wait_for("JOG stopped by Ctrl-C")
+        term.wait_for("servotool: stopped, servo off")  # the stop sequence's last line: what it read back
         term.wait_for("servotool>", count=4)  # the prompt again: still in the shell
         deadline = time.monotonic() + 5
         while abs(_speed_rpm(port)) > 10 and time.monotonic() < deadline:

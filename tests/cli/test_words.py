@@ -48,7 +48,14 @@ def test_unknown_code_suggests_and_the_fix_command_keeps_the_connection_options(
 def test_other_spellings_units_and_enum_names_end_to_end(cli):
     r = cli("--port", "sim", "-P", "is620p", "param", "set", "H08.00=30Hz", "--json")
     assert r.code == 0, r.err
-    assert r.json()["changed"][0] == {"code": "H08-00", "old": 25.0, "new": 30.0, "unit": "Hz", "effect": "unknown"}
+    assert r.json()["changed"][0] == {
+        "code": "H08-00",
+        "old": 25.0,
+        "new": 30.0,
+        "unit": "Hz",
+        "effect": "unknown",
+        "value_unverified": "raw scale inferred from the decimals printed in the range",
+    }
     r = cli("--port", "sim", "param", "set", "Pn027=3000Hz")
     assert r.code == 2 and "is in rpm" in r.err
     r = cli("--port", "sim", "-P", "sdc", "param", "set", "PN4=jog")

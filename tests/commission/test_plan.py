@@ -25,7 +25,7 @@ steps:
   - expect: {Pn101: 25.0, Un100: 0}
   - set: {Pn102: 30.0}
     unit: 2
-  - tune inertia: {rigidity: 12}
+  - tune inertia: {rigidity: 12, travel: 12}
   - expect: {Un000: {value: 0, tol: 10}}
   - backup: axis-{unit}.yaml
   - prompt: Is the machine clear?
@@ -207,20 +207,25 @@ def test_a_tune_step_writes_by_the_drives_eeprom_rule_like_the_command(cli, tmp_
     r = run_plan(cli, str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     tuned = r.json()["steps"][1]
-    assert tuned["persisted"] is False and tuned["H08-15"] != before
+    assert tuned["persisted"] is False and tuned["H08-15"]["value"] != before and tuned["H08-15"]["unit"] == "x"
     assert cli("sim", "reset", "-P", "is620p", "--power-cycle").code == 0
     assert cli("--port", "sim", "-P", "is620p", "param", "get", "H08-15", "--json").json()[0]["value"] == before
 
 
-def test_a_jog_step_on_a_drive_not_set_up_reports_the_fix_with_the_users_connection_options(cli, tmp_path):
-    """The library says which settings differ; the report says how to fix them, for the drive the user named."""
+def test_a_jog_step_on_a_drive_not_set_up_is_refused_before_anything_runs_with_the_fix(cli, tmp_path):
+    """The library says which settings differ; the refusal says how to fix them, for the drive the user named, and
+    comes before the plan's first step (issue 33: a plan stopped only after it had written and moved)."""
     plan = tmp_path / "plan.yaml"
-    plan.write_text("steps:\n  - jog: {speed: 100, time: 0.2}\n")
+    plan.write_text("steps:\n  - set: {PN22: 50}\n  - jog: {speed: 100, time: 0.2}\n")
     r = cli("--port", "sim", "--profile", "sdc", "run", str(plan), "--yes", "--json")
     assert r.code == 2, r.err
-    detail = r.json()["steps"][0]["detail"]
-    assert "needs drive setup first: PN4 = 3" in detail
-    assert "'servotool --port sim --profile sdc param set PN4=3'" in detail
+    assert "step 2 (jog, line 3), unit 1: JOG needs drive setup first: PN4 = 3 (now 0)" in r.err
+    assert "'servotool --port sim --profile sdc param set PN4=3'" in r.err
+    assert json.loads((tmp_path / "plan.report.json").read_text())["status"] == "failed before step 1"
+    assert cli("--port", "sim", "-P", "sdc", "param", "get", "PN22", "--json").json()[0]["value"] == 120
+    plan.write_text("steps:\n  - set: {PN4: 3}\n  - jog: {speed: 100, time: 0.2}\n")
+    r = cli("--port", "sim", "--profile", "sdc", "run", str(plan), "--dry-run")
+    assert r.code == 0 and "Would check on each axis first, before anything moves: PN4=3" in r.out, r.err
 
 
 def test_a_plan_backs_up_every_axis_first_and_its_report_says_where_it_stopped(cli, tmp_path, sim_dir):

@@ -10,7 +10,9 @@ from tests.tuning.realtime_cli import run_plan
 def test_a_tune_step_writes_its_report_beside_the_plan(cli, tmp_path):
     pytest.importorskip("matplotlib")
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nsteps:\n  - tune inertia: {rigidity: 12, max_speed: 600, report: 'tune-{unit}'}\n")
+    plan.write_text(
+        "port: sim\nsteps:\n  - tune inertia: {rigidity: 12, max_speed: 600, travel: 12, report: 'tune-{unit}'}\n"
+    )
     r = cli("run", str(plan), "--dry-run")
     assert r.code == 0 and "report to tune-{unit}" in r.out, r.err
     r = run_plan(cli, str(plan), "--yes", "--json")

@@ -14,7 +14,7 @@ def test_a_plan_tune_step_without_rigidity_leaves_the_gains_as_they_were(cli, tm
     cli("sim", "config", "--load-ratio", "4")
     before = gains()
     plan = tmp_path / "plan.yaml"
-    plan.write_text("port: sim\nsteps:\n  - tune inertia: {}\n")
+    plan.write_text("port: sim\nsteps:\n  - tune inertia: {travel: 12}\n")
     r = run_plan(cli, str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     step = r.json()["steps"][0]

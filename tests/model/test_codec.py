@@ -204,4 +204,4 @@ def test_backups_with_the_old_display_forms_still_diff_and_restore(cli, tmp_path
     r = cli(*sim, "param", "restore", str(f), "--yes")
     assert r.code == 0, r.err
     r = cli(*sim, "param", "get", "Po001", "Po175", "--json")
-    assert [v["value"] for v in r.json()] == ["d 0 5", "b2311"]
+    assert [(v["value"], v["text"]) for v in r.json()] == [(5, "d 0 5"), (0x2311, "b2311")]

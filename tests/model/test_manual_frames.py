@@ -108,7 +108,7 @@ def test_cli_writes_the_manual_forms_with_the_examples_frames(cli):
     assert ">> 01 06 00 01 01 0a 59 9d" in r.err and ">> 01 06 01 2c 12 34 44 88" in r.err
     assert "d 1 21 -> d 1 10" in r.out and "b1000 -> b1234" in r.out
     r = cli("--profile", "sd25", "--port", "sim", "param", "get", "Po001", "Po300", "--json")
-    assert [(v["value"], v["raw"]) for v in r.json()] == [("d 1 10", 266), ("b1234", 0x1234)]
+    assert [(v["value"], v["text"], v["raw"]) for v in r.json()] == [(266, "d 1 10", 266), (0x1234, "b1234", 0x1234)]
     assert r.json()[0]["fields"] == {"Y": 1, "X": 10}
 
 
@@ -118,7 +118,7 @@ def test_cli_code_field_set_changes_only_that_field(cli):
     assert r.code == 0, r.err
     assert ">> 01 06 00 af 13 11" in r.err  # D, B, A kept: 0x1211 -> 0x1311
     r = cli("--profile", "sd25", "--port", "sim", "param", "get", "Po175", "Po175.C", "Po175.d", "--json")
-    assert [v["value"] for v in r.json()] == ["b1311", 3, 1]
+    assert [v["value"] for v in r.json()] == [0x1311, 3, 1] and r.json()[0]["text"] == "b1311"
     assert r.json()[1]["meaning"] == "rigid direct coupling"
     r = cli("--profile", "sd25", "--port", "sim", "param", "get", "Po001.Y")
     assert "Po001.Y" in r.out and "1 (CCW seen from the shaft)" in r.out

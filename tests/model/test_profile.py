@@ -21,7 +21,7 @@ GOOD = {
     "description": "test drive",
     "source": "test",
     "address_rule": "address = n",
-    "serial": {"baud": 9600, "parity": "N", "stopbits": 1, "unit": 1},
+    "serial": {"baud": 9600, "parity": "N", "stopbits": 1, "bytesize": 8, "unit": 1},
     "limits": {"max_read": 10, "max_write": 10},
     "word_order": "low_first",
     "persistence": {"mode": "immediate"},
@@ -75,18 +75,18 @@ def test_good_profile_loads(tmp_path):
         (lambda d: d["entries"][0].update(default=200), "entries[0] (P1).default: 200 outside min..max 0..100"),
         (lambda d: d["entries"][1].update(address=1), "address 1 (0x0001) overlaps P1"),
         (lambda d: d["entries"][2].update(code="p1"), "duplicate code"),
-        (lambda d: d["entries"][0].update(type="u17"), "'u17' is not one of"),
+        (lambda d: d["entries"][0].update(type="u17"), '"u17" is not one of'),
         (lambda d: d["entries"][0].pop("effect"), "Pn entry needs 'effect'"),
-        (lambda d: d["entries"][0].update(min=-5), "outside the u16 range"),
-        (lambda d: d["roles"].update(jog="F9"), "roles.jog: names unknown entry 'F9'"),
-        (lambda d: d.update(word_order="middle"), "word_order: 'middle' is not one of"),
-        (lambda d: d["limits"].update(max_read=500), "limits.max_read: must be 1..125"),
+        (lambda d: d["entries"][0].update(min=-5), "entries[0] (P1).min: -5 is outside 0..65535 (the u16 range)"),
+        (lambda d: d["roles"].update(jog="F9"), 'roles.jog: names unknown entry "F9"'),
+        (lambda d: d.update(word_order="middle"), 'word_order: "middle" is not one of'),
+        (lambda d: d["limits"].update(max_read=500), "limits.max_read: 500 is outside 1..125"),
         (lambda d: d["entries"][0].update(colour="red"), "unknown key 'colour'"),
         (lambda d: d["entries"][0].update(format="digits"), "format: digits needs 'fields'"),
         (lambda d: d.pop("model"), "missing required key 'model'"),
         (
             lambda d: d.update(motion_setup=[{"code": "P9", "value": 1, "reason": "r", "source": "s"}]),
-            "motion_setup[0] (P9).code: names unknown entry 'P9'",
+            'motion_setup[0] (P9).code: names unknown entry "P9"',
         ),
         (
             lambda d: d.update(motion_setup=[{"code": "U1", "value": 1, "reason": "r", "source": "s"}]),
@@ -133,7 +133,7 @@ def test_all_problems_are_reported_not_just_the_first(tmp_path):
     assert len(problems) >= 2
 
 
-def test_locations_count_broken_entries_and_references_to_them_are_not_unknown(tmp_path):
+def test_locations_count_broken_entries_and_references_to_them_are_not_blamed_too(tmp_path):
     import copy
 
     data = copy.deepcopy(GOOD)
@@ -141,9 +141,9 @@ def test_locations_count_broken_entries_and_references_to_them_are_not_unknown(t
     data["entries"][2]["address"] = 2  # U1 (entries[2]) overlaps P2
     data["roles"]["inertia_ratio"] = "P1"
     _, problems = read_profile(write(tmp_path, data))
+    assert len(problems) == 2, problems  # P1's own problem, and the overlap; the role naming P1 adds none
+    assert any('entries[0] (P1).default: expected an integer, got "ten"' in p for p in problems), problems
     assert any("entries[2] (U1): address 2 (0x0002) overlaps P2" in p for p in problems), problems
-    assert any("roles.inertia_ratio: names broken entry 'P1'" in p for p in problems), problems
-    assert not any("unknown entry" in p for p in problems), problems
 
 
 def test_invalid_yaml_names_the_line(tmp_path):
@@ -203,7 +203,10 @@ def test_motion_setup_values_read_as_users_type_them():
     po407 = reqs["sd25"]["Po407"]
     assert po407.fields == ("X",) and po407.met(0x011A) and po407.met(26) and not po407.met(0x1B)
     assert po407.assignments() == ["Po407.X=26"]
-    assert reqs["sd25"]["So-58"].item.unverified  # the digit meaning is a figure
+    assert "So-58" not in reqs["sd25"]  # servotool forces the DIs itself for a motion (forced_inputs)
+    forced = load_profile("sd25").forced_inputs
+    assert forced is not None and forced.switch_code == "So-58" and forced.levels_code == "So-57"
+    assert forced.monitor_shows == "forced" and "which digit" in forced.unverified  # the digit meaning is a figure
 
 
 @pytest.mark.parametrize(
@@ -211,9 +214,9 @@ def test_motion_setup_values_read_as_users_type_them():
     [
         ({"field_ranges": {"Q": [0, 1]}}, "unknown field"),
         ({"field_ranges": {"X": [0, 100]}}, r"0 <= lo <= hi <= 99"),
-        ({"field_ranges": {"X": [5, 9]}}, r"field X=1 outside its range 5\.\.9"),
-        ({"field_ranges": {"Y": [0, 1]}, "max": 0x00FF}, "exclude field values"),
-        ({"format": "dec", "field_ranges": {"X": [0, 1]}}, "needs format: digits"),
+        ({"field_ranges": {"X": [5, 9]}}, r"field X=1 is outside field_ranges.X 5\.\.9"),
+        ({"field_ranges": {"Y": [0, 1]}, "max": 0x00FF, "default": 0x0001}, "exclude field values"),
+        ({"format": "dec", "field_ranges": {"X": [0, 1]}}, "field_ranges need format: digits"),
     ],
 )
 def test_profile_checker_rejects_bad_field_ranges(extra, message):

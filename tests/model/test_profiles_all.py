@@ -47,7 +47,7 @@ def test_display_encoded_sd25_values_read_and_write_in_the_manuals_form(cli):
     assert "d 1 21" in r.out and "d 1 1" in r.out
     r = cli("--port", "sim", "--profile", "sd25", "param", "set", "--save", "Po001=X=20", "--json")
     assert r.code == 0, r.err
-    assert r.json()["changed"][0]["new"] == "d 1 20"
+    assert r.json()["changed"][0]["new"] == 0x0114 and r.json()["changed"][0]["new_text"] == "d 1 20"
     assert cli("--port", "sim", "--profile", "sd25", "param", "set", "Po001=X=100").code == 2
 
 

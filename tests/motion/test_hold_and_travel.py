@@ -74,7 +74,8 @@ def test_a_held_key_jogs_and_letting_go_stops_within_a_beat(sim_dir):
 def test_the_travel_limit_stops_an_interactive_jog_before_it_passes_the_limit(sim_dir):
     sim, d, clock = _virtual()
     jogger = Jogger(d, clock=clock)
-    plan = jogger.plan(600, None, travel=TravelLimit(3.0, "--travel"))
+    # 250 rpm: DSX7E's 500 ms watchdog lets a dead host's motor run on 2.1 rev, which the guard keeps ahead of it
+    plan = jogger.plan(250, None, travel=TravelLimit(3.0, "--travel"))
     start = sim.firmware.plant.position_rev
     with pytest.raises(TravelLimitHit, match=r"travel limit ±3 rev \(--travel\) reached at \+\d\.\d\d rev"):
         jogger.run(plan, command=lambda: 1)  # a key that never lets go
@@ -105,12 +106,14 @@ def test_the_axis_position_is_tracked_across_the_counter_wrap(sim_dir):
 
 def test_the_bound_is_facts_from_route_speed_beat_and_ramp(sim_dir):
     _sim, d, _clock = _virtual()
-    b = deadman.bound(d, 600, 0.1, 200.0)  # DSX7E: its watchdog Pn620 = 500 ms
-    assert b.route == "drive_timeout" and b.stop_rev == pytest.approx(10 * (0.5 + 0.12 / 2))
-    assert b.stop_s == pytest.approx(0.62) and deadman.sentence(b).endswith("within 5.60 rev (0.62 s)")
+    # DSX7E: its watchdog Pn620 = 500 ms, then Pn513's 200 ms ramp read as time to the rated 3000 rpm: 0.04 s
+    b = deadman.bound(d, 600, 0.1, 200.0)
+    assert b.route == "drive_timeout" and b.stop_rev == pytest.approx(10 * (0.5 + 0.04 / 2))
+    assert b.stop_s == pytest.approx(0.54) and deadman.sentence(b).endswith("within 5.20 rev (0.54 s)")
     _sim, d, _clock = _virtual("is620p")
-    b = deadman.bound(d, 600, 0.1, 100.0)  # a segment: 3 beats at speed plus the stop
-    assert b.route == "segment" and b.stop_rev == pytest.approx(10 * 0.3 + 10 * 0.06 / 2)
+    b = deadman.bound(d, 600, 0.1, 100.0)  # a segment: 3 beats at speed plus the stop (H11-15 per 1000 rpm)
+    # ... and the braking of the segment before it, with the speed loop's lag (the stricter reading of the trigger)
+    assert b.route == "segment" and b.stop_rev == pytest.approx(10 * 0.3 + 10 * 0.06 / 2 + 10 * 0.06 / 2 + 10 * 0.02)
     _sim, d, _clock = _virtual("sdc")
     b = deadman.bound(d, 600, 0.1, 100.0)
     assert b.route == "none" and b.stop_rev is None

@@ -12,12 +12,11 @@ import time
 
 import pytest
 
-from servotool.connection import ConnectOptions, resolve
 from servotool.model.loader import load_profile
 from servotool.model.roles import motion_route
 from servotool.motion.deadman import route_of
 from servotool.ops.journal import LOOP_ROLES
-from servotool.session import open_drives
+from tests.reader import Reader
 
 from .test_motion import PROFILES, ROOT, read, set_up
 
@@ -27,12 +26,10 @@ UNBOUNDED = [p for p in PROFILES if p not in BOUNDED]
 
 
 def sample(port: str, profile: str) -> tuple[float, int | None]:
-    """(speed rpm, raw position counter or None) read by a second client."""
-    with open_drives(resolve(ConnectOptions(port=port, profile=profile)), notice=lambda _m: None) as (d,):
-        entries = [d.profile.need_role("speed_feedback", "test")]
-        pos = d.profile.role("position_feedback")
-        readings = d.read_entries(entries + ([pos] if pos is not None else []))
-        return float(readings[0].eng), readings[1].raw if pos is not None else None
+    """(speed rpm, raw position counter or None) read by an independent client (no servotool recovery first)."""
+    with Reader(port, profile) as r:
+        pos = r.profile.role("position_feedback")
+        return r.eng("speed_feedback"), r.raw(pos.code) if pos is not None else None
 
 
 def moved_rev(profile: str, before: int, after: int) -> float:

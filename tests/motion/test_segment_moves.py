@@ -11,6 +11,7 @@ from servotool.model.codec import eng_to_raw
 from servotool.model.loader import load_profile
 from servotool.motion import deadman
 from servotool.motion.moves import Mover
+from servotool.motion.stop import stop_sequence
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
 
@@ -24,7 +25,7 @@ def _jogger(sim_dir):
     make_motion_setup(sim)
     d = Drive(VirtualLink([sim], clock, 57600), profile, 1)
     jogger = Mover(d, BEAT_S, "test", clock)
-    saved = jogger.settings_to_restore()
+    saved = jogger.snapshot(need_ramp=True)
     writes: list[tuple[int, list[int]]] = []
     write = d.link.write
     d.link.write = lambda unit, address, values, **kw: (
@@ -35,8 +36,8 @@ def _jogger(sim_dir):
 
 
 def _ramp_raw(jogger: Mover, up_s: float, speed: float) -> int:
-    """The ramp parameter (time to rated speed) that reaches `speed` in up_s."""
-    return eng_to_raw(jogger.profile.entry("H11-15"), up_s * 1000.0 * 3000.0 / speed)
+    """The ramp parameter (time to the profile's ramp reference speed) that reaches `speed` in up_s."""
+    return eng_to_raw(jogger.profile.entry("H11-15"), up_s * 1000.0 * jogger.profile.ramp_rpm() / speed)
 
 
 def test_a_move_that_stops_after_its_ramp_is_one_segment_and_needs_no_stop_write(sim_dir):
@@ -45,7 +46,8 @@ def test_a_move_that_stops_after_its_ramp_is_one_segment_and_needs_no_stop_write
     jogger.start(1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=0.1)
     block = [v for a, v in writes if a == distance.address]
     assert len(block) == 1 and len(block[0]) == 4  # displacement, speed and ramp in one request
-    assert block[0][0] == pytest.approx(600.0 / 60.0 * 0.1 * 10000, abs=2)  # up 0.1 s, down as long
+    # up 0.1 s, down as long (the ramp in whole ms per 1000 rpm: 167 ms, 0.2 % off)
+    assert block[0][0] == pytest.approx(600.0 / 60.0 * 0.1 * 10000, rel=0.003)
     writes.clear()
     clock.advance(0.35)  # longer than two beats: never re-armed
     jogger.keep_alive()
@@ -53,7 +55,7 @@ def test_a_move_that_stops_after_its_ramp_is_one_segment_and_needs_no_stop_write
     assert writes == []
     clock.advance(0.5)
     assert abs(sim.firmware.plant.true_speed_rpm) < 5.0
-    jogger.leave_and_restore(saved)
+    assert stop_sequence(jogger.drive, jogger, saved, wait_s=1.0, clock=clock).confirmed
 
 
 def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_dir):
@@ -68,7 +70,8 @@ def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_d
     # A move longer than the dead-man's segment is not one of its own: beat-sized, re-armed before it would end.
     ramp = _ramp_raw(jogger, 0.1, 600.0)
     jogger.start(-1, 600.0, ramp, stop_after_s=2.0)
-    bound = deadman.segment_rev(600.0, BEAT_S, 100.0 * 3000.0 / 600.0) * 10000
+    ref = jogger.profile.ramp_rpm()
+    bound = deadman.segment_rev(600.0, BEAT_S, float(ramp), ref) * 10000
     assert abs(jogger.segments.written_distance()) == pytest.approx(bound, abs=2)
     writes.clear()
     clock.advance(1.5 * BEAT_S)
@@ -78,4 +81,4 @@ def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_d
     jogger.keep_alive()
     assert len(writes) == 2  # two beats: re-armed (the start edge)
     jogger.command(0)
-    jogger.leave_and_restore(saved)
+    assert stop_sequence(jogger.drive, jogger, saved, wait_s=1.0, clock=clock).confirmed

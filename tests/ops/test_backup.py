@@ -307,7 +307,7 @@ def test_backup_file_has_the_metadata_and_a_checksum_of_the_values(auto_dir, tmp
     with sim() as d:
         backup.write_backup(d, f)
     data = yaml.safe_load(f.read_text())
-    assert data["profile"] == "dsx7e" and data["profile_version"] == "1.0" and data["model"] == "DSX7E"
+    assert data["profile"] == "dsx7e" and data["profile_version"] == "1.1" and data["model"] == "DSX7E"
     assert data["unit"] == 1 and data["tool_version"] and data["created"].endswith("+00:00")
     assert list(data["identity"]) == ["Un200", "Un201", "Un202", "Un203", "Un204", "Un205"]  # the identity checks
     assert len(data["values"]) == 108 and data["display"]["Pn100"] == "32.0 1/s"
@@ -364,7 +364,7 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     r = cli("--port", "sim", "param", "backup", "-o", str(b))
     assert r.code == 2 and "exists" in r.err
     r = cli("param", "diff", str(a), str(b), "--json")
-    assert r.code == 0, r.err
+    assert r.code == 1, r.err  # they differ (issue 35: 0 equal, 1 differ)
     rows = {x["code"]: x for x in r.json()["differences"]}
     assert set(rows) == {"Pn100", "Pn008"} and rows["Pn008"]["effect"] == "power_cycle"
     assert rows["Pn100"]["a"] == 32.0 and rows["Pn100"]["b"] == 45.0
@@ -375,7 +375,7 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     edited = tmp_path / "edited.yaml"
     edited.write_text(b.read_text().replace("Pn100: 450", "Pn100: 460"))
     r = cli("param", "diff", str(a), str(edited), "--json")  # a diff writes nothing: compared anyway
-    assert r.code == 0 and "checksum mismatch" in r.err and "warning" in r.err
+    assert r.code == 1 and "checksum mismatch" in r.err and "warning" in r.err
     assert {x["code"]: x["b"] for x in r.json()["differences"]}["Pn100"] == 46.0
     r = cli("--port", "sim", "param", "reset")  # no --yes and stdin is not a terminal
     assert r.code == 2 and "pass --yes" in r.err
@@ -383,7 +383,7 @@ def test_cli_backup_reset_diff_and_restore(auto_dir, tmp_path, cli):
     assert r.code == 0 and "automatic backup of the drive's current state:" in r.err, r.err
     assert "power-cycle the drive for the defaults of: Pn008" in r.out
     r = cli("--port", "sim", "param", "diff", str(b))
-    assert r.code == 0 and re.search(r"Pn100 .* 32\.0 .* 45\.0 .* 1/s", r.out), r.out
+    assert r.code == 1 and re.search(r"Pn100 .* 32\.0 .* 45\.0 .* 1/s", r.out), r.out
     assert re.search(r"Pn008 .* power cycle", r.out), r.out
     r = cli("--port", "sim", "param", "restore", str(b))
     assert r.code == 2 and "pass --yes" in r.err

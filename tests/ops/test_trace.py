@@ -9,6 +9,7 @@ from servotool.clock import VirtualClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
+from servotool.motion.stop import stop_sequence
 from servotool.ops.trace import Sampler, Tracer, TraceSample, TriggerBuffer, Window, parse_trigger
 from servotool.ops.trace_file import read_table, write_trace
 from servotool.sim.firmware import build_drive
@@ -133,7 +134,7 @@ def test_a_trace_of_a_jog_on_the_simulator_catches_the_start_with_its_rate(sim_d
         timeout_s=5,
     )
     (cap,) = list(tracer.run())
-    jogger.stop()
+    assert stop_sequence(d, jogger, {}, wait_s=1.0, clock=clock).confirmed
     speed = cap.values[SPEED.code]
     assert cap.pre_samples == 50 and len(speed) == 200
     assert speed[49] < 150 <= speed[50]  # the trigger sample at t = 0

@@ -18,7 +18,7 @@ pytest.importorskip("matplotlib")
 
 from servotool.report import tune_report
 from servotool.report.charts import MISSING, PNG_SIGNATURE, need_matplotlib, save, table_figure
-from servotool.report.tune_facts import gain_rows, model_torque_pct
+from servotool.report.tune_facts import gain_rows
 
 
 def assert_png(path: Path) -> tuple[int, int]:
@@ -97,7 +97,7 @@ def test_without_matplotlib_the_message_is_one_line(monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(UsageError) as exc:
         need_matplotlib()
-    assert str(exc.value) == MISSING and "servotool[plot]" in MISSING
+    assert str(exc.value) == MISSING and "pip install '.[plot]'" in MISSING
 
 
 def test_every_tune_chart_shows_the_tune_s_data(tuned, tmp_path):
@@ -109,23 +109,39 @@ def test_every_tune_chart_shows_the_tune_s_data(tuned, tmp_path):
     travel = [x - trace.position[0] for x in trace.position if x is not None]
     assert motion["travel"][1] == pytest.approx(travel) and max(map(abs, travel)) > 0.2
 
+    est = result.estimate
     fit = lines_of(tune_report.fit_figure(result, profile))
-    model = model_torque_pct(result, profile.motor.rated_torque_nm)
-    assert fit["model: J·dω/dt + friction + load"][1] == pytest.approx(list(model))
-    resid = [m - q for m, q in zip(trace.torque, model, strict=True)]
+    pct = 100.0 / profile.motor.rated_torque_nm
+    wins = est.fitted_windows
+    centres = [(w.t0 + w.t1) / 2 for w in wins]
+    assert fit["measured, each window's average"] == (
+        pytest.approx(centres),
+        pytest.approx([w.measured_nm * pct for w in wins]),
+    )
+    model_x, model_y = fit["model: J·Δω/Δt + friction + load, in the windows fitted"]
+    drawn = [(x, y) for x, y in zip(model_x, model_y, strict=True) if not math.isnan(x)]
+    assert [x for x, _y in drawn] == pytest.approx(centres)
+    assert [y for _x, y in drawn] == pytest.approx([w.model_nm * pct for w in wins])
+    # the model is drawn only inside the windows fitted: between runs of windows the line breaks
+    assert all(any(w.t0 <= x <= w.t1 for w in wins) for x, _y in drawn) and any(math.isnan(x) for x in model_x)
+    resid = [(w.measured_nm - w.model_nm) * pct for w in wins]
     assert fit["measured − model"][1] == pytest.approx(resid)
-    # the fitted model explains the torque: the residual is small against the torque swing
+    # the window residual of the title is what is drawn: small against the torque swing
     assert (sum(r * r for r in resid) / len(resid)) ** 0.5 < 0.25 * (max(trace.torque) - min(trace.torque))
 
-    moves = result.estimate.moves
+    moves = [m for m in est.moves if m.fitted]
     assert len(moves) >= 4 and {m.direction for m in moves} == {1, -1}
     assert all(abs(m.load_ratio - 3.0) < 3 * m.ratio_std + 0.05 for m in moves)  # the simulated load ratio is 3
     fig = tune_report.moves_figure(result)
-    assert list(fig.axes[0].collections[-1].get_offsets()[:, 1]) == pytest.approx([m.load_ratio for m in moves])
+    plotted = fig.axes[0].collections
+    ys = [list(c.get_offsets()[:, 1]) for c in plotted if len(c.get_offsets()) == len(moves)]
+    assert pytest.approx([m.load_ratio for m in moves]) in ys
 
     step = lines_of(tune_report.step_figure(res.step_before, res.step_after))
     before = next(v for k, v in step.items() if k.startswith("before: overshoot"))
     assert before == ([t * 1000 for t in res.step_before.t_s], list(res.step_before.speed_rpm))
+    after = next(v for k, v in step.items() if k.startswith("after: overshoot"))
+    assert before[0][0] == after[0][0] == 0.0 and abs(before[1][0]) < 10 and abs(after[1][0]) < 10  # one zero
     assert step[f"after: settled at {res.step_after.settling_ms:.0f} ms"][0][0] == pytest.approx(
         res.step_after.settling_ms
     )
@@ -146,6 +162,7 @@ def test_the_report_folder_holds_valid_pngs_and_a_report_that_links_them(tuned, 
     for p in report.files[:-1]:
         assert f"]({p.name})" in md
     assert f"{res.ratio:.2f}" in md and "overshoot" in md and res.proposal.gain_changes[0].entry.code in md
+    assert "| move speeds | reached " in md and "| move | direction | peak speed | ratio |" in md
 
 
 def test_a_report_folder_that_is_a_file_is_refused(tmp_path):
@@ -161,3 +178,50 @@ def test_each_capture_of_a_repeated_trace_is_its_own_line():
     assert lines["Un002 [%] #1"][1] == table.series[2].values[:50]
     assert lines["Un002 [%] #2"][1] == table.series[2].values[50:]
     assert "Un000 [rpm] #2" in terminal_chart(table, 100, 30, color=False).text
+
+
+def _result_with(result, **changes):
+    """The tune's result with its estimate changed (a made-up move, a refusal)."""
+    import dataclasses
+
+    return dataclasses.replace(result, estimate=dataclasses.replace(result.estimate, **changes))
+
+
+def test_a_move_without_a_ratio_of_its_own_is_marked_not_plotted(tuned):
+    """A move that cannot be fitted was plotted at -0.99 (no load is lighter than nothing); it is marked along the
+    bottom with why, and the axis is the fitted moves'."""
+    from servotool.tuning.fit import MoveEstimate
+
+    _profile, res = tuned
+    moves = res.identified.estimate.moves
+    lost = MoveEstimate(1, math.nan, math.nan, 3, 40.0, "no load gives it: J 0.01 x the rotor's")
+    fig = tune_report.moves_figure(_result_with(res.identified, moves=(*moves, lost)))
+    ax = fig.axes[0]
+    low, high = ax.get_ylim()
+    assert low > 1.0 and high < 5.0  # scaled to the fitted moves around 3, not stretched to -0.99
+    [marked] = [c for c in ax.collections if c.get_label().startswith("no ratio of its own (")]
+    assert len(moves) + 1 in list(marked.get_offsets()[:, 0])
+
+
+def test_one_very_uncertain_move_runs_off_the_axis_instead_of_flattening_the_others(tuned):
+    import dataclasses
+
+    _profile, res = tuned
+    moves = list(res.identified.estimate.moves)
+    i = next(i for i, m in enumerate(moves) if m.fitted)
+    moves[i] = dataclasses.replace(moves[i], ratio_std=1400.0)
+    fig = tune_report.moves_figure(_result_with(res.identified, moves=tuple(moves)))
+    ax = fig.axes[0]
+    low, high = ax.get_ylim()
+    assert high - low < 10
+    assert any(t.get_text() == "± 1.4e+03" for t in ax.texts)
+
+
+def test_a_refused_result_shows_no_ratio(tuned, tmp_path):
+    profile, res = tuned
+    refused = _result_with(res.identified, ok=False, reason="inertia too uncertain (7.8 % of J_total > 2 %)")
+    tune_report.write_tune_report(tmp_path / "rep", refused, profile, None, "identification refused: too uncertain")
+    md = (tmp_path / "rep" / "report.md").read_text()
+    assert "none: the identification was refused" in md and f"→ {res.ratio:.2f}" not in md
+    fig = tune_report.fit_figure(refused, profile)
+    assert fig._suptitle.get_text().startswith("REFUSED fit") and "ratio" not in fig._suptitle.get_text()

@@ -29,8 +29,9 @@ def test_a_latched_alarm_and_the_motion_state_survive_into_another_process(sim_d
     clock.advance(2.0)
     first.read("Un100")
     second = regs(build_drive(profile, 1, clock))  # e.g. the next `--port sim` command
-    assert second.read("Un100") == 0x25 and second.history()[0] == 0x25
+    assert second.read("Un100") == 0x25 and second.drive.firmware.alarms.records()[0]["code"] == 0x25
     second.write("Fn030", 1)  # reset in the second, running JOG there, seen by the first
+    assert second.history()[0] == 0x25
     second.write("Fn001", 1)
     clock.advance(0.1)
     assert first.read("Un100") == 0 and first.drive.firmware.mode == "jog" and first.read("Un000") > 0

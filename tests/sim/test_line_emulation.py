@@ -135,3 +135,22 @@ def test_sim_show_says_what_the_drive_is_timed_by(cli, factory_line):
     assert cli("sim", "show", "-P", "sd25", "--json").json()["settings"]["line_baud"] == "fast"
     assert cli("sim", "config", "-P", "sd25", "--line-baud", "19200").code == 0
     assert cli("sim", "show", "-P", "sd25", "--json").json()["settings"]["line_baud"] == 19200
+
+
+def test_a_baud_entry_changes_the_line_after_its_own_reply(factory_line):
+    """SD25's Po504 takes effect at once (manual 6.2.4): the write that changes it is answered at the old speed,
+    every later answer comes at the new one; its factory code leaves the line as the connection has it."""
+    from servotool.sim.line import Line
+
+    sd25 = build_drive(load_profile("sd25"), 1, persist=False)
+    line = Line([sd25])
+    _regs, took = line.serve(sd25, 6, 504, 1, [5])  # Po504 = 5 (57600)
+    assert took == pytest.approx(Emulated(LineSettings(9600)).seconds(6, 1))
+    _regs, took = line.serve(sd25, 3, 504, 1, None)
+    assert took == pytest.approx(Emulated(LineSettings(57600)).seconds(3, 1))
+    assert line.describe() == "line emulated at 57600 baud 8N1"
+    line.host = LineSettings(9600)  # a master still at 9600 is not heard ...
+    assert line.serve(sd25, 3, 504, 1, None) == (None, 0.0)
+    line.host = LineSettings(57600)  # ... one at 57600 is
+    assert line.serve(sd25, 6, 504, 1, [2])[0] == []
+    assert line.describe() == "line emulated at 9600 baud 8N1"

@@ -66,16 +66,27 @@ def test_an_alarm_latched_by_one_sim_process_is_seen_by_the_next(sim_dir, cli):
     assert cli("sim", "config", "--load-torque", "-1.5", "--brake", "on").code == 0  # pushes forward
     assert cli("--port", "sim", "param", "set", "Pn025=20", "Pn026=20").code == 0  # too weak to hold it
     r = cli("--port", "sim", "jog", "--speed", "100", "--time", "0.5")
-    assert r.code == 1 and "E17" in r.err
+    # The drive's own stop at 20 % torque struggles with the load: read back still turning, the stop says so
+    # (exit 4); read back at rest once the drive's stop has switched off, the JOG failed with the alarm (exit 1)
+    assert "E17" in r.err and (
+        (r.code == 4 and "COULD NOT CONFIRM THE MOTOR STOPPED: the speed reads" in r.err)
+        or (r.code == 1 and "alarm E17 Overspeed latched" in r.err.splitlines()[-1])
+    ), r.err
     r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
-    assert [v["value"] for v in r.json()] == [23, 23]
+    assert [v["value"] for v in r.json()] == [23, 0]  # the current fault; the log keeps those before it
     running = cli("sim", "show", "--json").json()["running"]
-    assert running["alarm"] == "overspeed" and not running["servo_on"] and running["position_rev"] > 1
+    # (whether the drive's own stop at its torque limit has switched off yet depends on when the state was saved)
+    assert running["alarm"] == "overspeed" and running["position"]["value"] > 1
     assert "alarm overspeed" in cli("sim", "show").out
     assert cli("sim", "reset", "--power-cycle").code == 0
     r = cli("--port", "sim", "param", "get", "Un100", "Un106", "--json")
     assert [v["value"] for v in r.json()] == [0, 23]  # power on clears the alarm, not the history
-    assert cli("sim", "show", "--json").json()["running"] is None  # fresh from power on
+    # fresh from power on (the `param get` put back what the unproven stop's journal record held: a write, so a
+    # running state is saved, the power-on one)
+    running = cli("sim", "show", "--json").json()["running"]
+    assert running is None or (
+        not running["servo_on"] and running["alarm"] is None and running["position"]["value"] == 0
+    )
 
 
 def test_sim_config_sets_the_brake_and_sim_show_displays_it(cli):

@@ -78,11 +78,15 @@ def test_travel_check_stops_an_axis_that_runs_away(sim_dir):
         plant.set_settings(replace(plant.settings, load_torque_nm=3.5 * rated))
 
     _after_motion_reads(sim_drive, 150, overload)
-    with pytest.raises(TravelExceeded, match="travel limit 2 rev"):
+    with pytest.raises(TravelExceeded, match="travel limit 2 rev") as raised:
         _run_host(identify.Identifier(d, timing), timing)
     plant = sim_drive.firmware.plant
     assert sim_drive.firmware.mode == "off" and not plant.servo_on
-    assert sim_drive.firmware.plant.alarm is None  # stopped by the identification, not by a drive alarm
+    # The stop saw the motor speed up instead of slowing and switched the servo off at once; the load keeps
+    # driving it (no brake), which the stop reads back and says instead of "stopped".
+    report = raised.value.stop_report
+    assert report.servo_on is False and not report.confirmed
+    assert "speed reads" in report.describe() and report.describe().startswith("COULD NOT CONFIRM THE MOTOR STOPPED")
 
 
 def test_an_active_alarm_refuses_before_any_motion(sim_dir):

@@ -8,6 +8,7 @@ import pytest
 
 from servotool.clock import VirtualClock
 from servotool.drive import Drive, coalesce_reads
+from servotool.errors import UsageError
 from servotool.model.codec import eng_to_raw
 from servotool.model.loader import load_profile
 from servotool.ops.params import write_one
@@ -100,10 +101,12 @@ def test_gains_at_a_safe_level_pass_the_step_check_and_stay(sim_dir):
 
 
 def test_tune_gains_raises_the_level_until_a_step_check_fails_and_backs_off(sim_dir):
-    """Told a load 20x the real one, the gains come out 21x too stiff: a level inside the computed margins still
-    overshoots on the machine; the search stops there, backs off one level and keeps that level's gains."""
+    """Drive and user believe a load of 4 on a bare motor: the gains come out 5x too stiff, and a level inside the
+    computed margins still overshoots on the machine; the search stops there, backs off one level and keeps that
+    level's gains."""
     _sim, d, clock = set_up("dsx7e", load_ratio=0.0, friction=0.02, noise=0.002)
-    res = search_gains(d, load_ratio=20.0, clock=clock)
+    _believe(d, 4.0)
+    res = search_gains(d, clock=clock)  # the drive's own ratio
     failed = [t for t in res.trials if t.failure]
     assert len(failed) == 1 and failed[0] is res.trials[-1]  # stopped at the first failure
     assert [t.level for t in res.trials] == list(range(13, failed[0].level + 1))  # from the drive's own level up
@@ -115,10 +118,25 @@ def test_tune_gains_raises_the_level_until_a_step_check_fails_and_backs_off(sim_
 
 def test_tune_gains_that_fail_at_the_first_level_put_the_old_gains_back(sim_dir):
     _sim, d, clock = set_up("dsx7e", load_ratio=0.0, friction=0.02, noise=0.002)
+    _believe(d, 60.0)
     before = _raws(d)
     with pytest.raises(GainSearchFailed, match="previous gains were written back"):
         search_gains(d, load_ratio=60.0, start=22, clock=clock)
     assert _raws(d) == before
+
+
+def _believe(d, ratio: float) -> None:
+    """The drive's own ratio parameter set to `ratio` (a wrong identification): it scales its gains by that."""
+    entry = d.profile.role("inertia_ratio")
+    d.write_raw(entry, round(d.profile.param_from_load_ratio(ratio) / entry.scale))
+
+
+def test_a_given_load_ratio_is_tuned_under_the_ratio_the_drive_holds(sim_dir):
+    """tune gains --load-ratio 20 on a drive that holds 1.5: the drive scales its gains by 1.5, so the loop runs
+    8x softer than gains computed as if 20 were written, and no level keeps the margins: it says why and what to do."""
+    _sim, d, clock = set_up("dsx7e", load_ratio=0.0, friction=0.02, noise=0.002)
+    with pytest.raises(UsageError, match=r"under the drive's own ratio 1\.50 \(Pn004\).*write Pn004 = 2100 first"):
+        search_gains(d, load_ratio=20.0, clock=clock)
 
 
 def test_friction_is_reported_in_drive_units_with_the_drives_compensation_entries(sim_dir):

@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from servotool.tuning.fit.estimate import EstimatorSettings, InertiaEstimate, MoveEstimate, Partial
+from servotool.tuning.fit.estimate import EstimatorSettings, FittedWindow, InertiaEstimate, MoveEstimate, Partial
 from servotool.tuning.fit.regression import Regression
-from servotool.tuning.fit.subsets import subset_js
+from servotool.tuning.fit.subsets import MIN_SUBSET_SHARE
 from servotool.tuning.fit.verdict import Verdict
 
 
@@ -34,6 +34,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
         r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
     r.notes.extend(verdict.notes)
     r.moves = per_move(verdict, jm)
+    r.fitted_windows = fitted_windows(verdict)
     if j <= 0:
         return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")
     if r.res_rel > cfg.max_rel_residual:
@@ -68,15 +69,62 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
 
 
 MIN_MOVE_WINDOWS = 3  # a move shown on its own needs this many windows (fewer than a subset compared: a picture)
+MIN_MOVE_PEAK_SHARE = 0.2  # a run of one speed sign below this share of the fastest is a hold's swing, not a move
 
 
 def per_move(verdict: Verdict, jm: float) -> tuple[MoveEstimate, ...]:
     """Each move's J, as the subset check takes a subset's (fit.subsets.subset_js): from its own windows of the model
-    the checks settled on, the other parameters held at the whole fit's; moves too small for a J of their own are
-    left out."""
-    fit = verdict.fit
+    the checks settled on, the other parameters held at the whole fit's; its uncertainty from the scatter of its own
+    windows about that J. A move with too little speed change, or whose J no load can give (below the rotor's own
+    inertia by more than 3 of its sigmas, or less certain than J itself), is kept with the reason and no ratio; a
+    run far slower than the moves (a position hold swinging back after a move) is no move and left out."""
+    fit, resid = verdict.fit, verdict.resid
+    dw = fit.x[:, 0]
+    total = float(dw @ dw)
+    peaks = {
+        label: max(
+            float(np.max(np.abs(fit.rpm[s : e + 1])))
+            for s, e in zip(fit.starts[fit.groups == label], fit.ends[fit.groups == label], strict=True)
+        )
+        for label in sorted(set(fit.groups[fit.groups >= 0].tolist()))
+    }
+    fastest = max(peaks.values(), default=0.0)
     out = []
-    for move in subset_js(fit.x[:, 0], verdict.j, verdict.j_std, verdict.resid, fit.groups, MIN_MOVE_WINDOWS):
-        direction = int(np.sign(fit.w[fit.starts[fit.groups == move.label][0]]))
-        out.append(MoveEstimate(direction, move.j / jm - 1.0, move.j_std / jm, move.windows))
+    for label, peak in peaks.items():
+        if peak < MIN_MOVE_PEAK_SHARE * fastest:
+            continue
+        m = fit.groups == label
+        idx = np.flatnonzero(m)
+        direction = int(np.sign(fit.w[fit.starts[idx[0]]]))
+        info, n = float(dw[m] @ dw[m]), idx.size
+        if n < MIN_MOVE_WINDOWS or info <= MIN_SUBSET_SHARE * total:
+            why = f"too little speed change in its {n} window{'s' if n != 1 else ''} for a J of its own"
+            out.append(MoveEstimate(direction, math.nan, math.nan, n, peak, why))
+            continue
+        shift = float(dw[m] @ resid[m]) / info
+        own = resid[m] - shift * dw[m]
+        j, j_std = verdict.j + shift, math.sqrt(float(own @ own) / max(1, n - 1) / info)
+        ratio, ratio_std = j / jm - 1.0, j_std / jm
+        why = ""
+        if j <= 0 or ratio + 3.0 * ratio_std < 0:
+            why = f"no load gives it: J {j / jm:.2f} x the rotor's (± {ratio_std:.2f}), below the rotor alone"
+        elif j_std >= abs(j):
+            why = f"its J is less certain than J itself (± {ratio_std:.2f} on a ratio of {ratio:.2f})"
+        if why:
+            out.append(MoveEstimate(direction, math.nan, math.nan, n, peak, why))
+        else:
+            out.append(MoveEstimate(direction, ratio, ratio_std, n, peak))
     return tuple(out)
+
+
+def fitted_windows(verdict: Verdict) -> tuple[FittedWindow, ...]:
+    """The windows of the model used, each with its measured and modelled average torque."""
+    fit = verdict.fit
+    t0, t1 = fit.t[fit.starts], fit.t[fit.ends]
+    span = np.where(t1 > t0, t1 - t0, np.nan)
+    measured, model = fit.y / span, (fit.y - verdict.resid) / span
+    return tuple(
+        FittedWindow(float(a), float(b), float(q), float(k))
+        for a, b, q, k in zip(t0, t1, measured, model, strict=True)
+        if math.isfinite(q) and math.isfinite(k)
+    )

@@ -67,12 +67,31 @@ class EstimatorSettings:
 @dataclass(frozen=True)
 class MoveEstimate:
     """The load ratio one move (a run of one speed sign) gives on its own: J from its windows, with friction and load
-    torque held at the whole fit's (so the moves can be compared with each other and with the whole)."""
+    torque held at the whole fit's (so the moves can be compared with each other and with the whole), and its own
+    uncertainty, from the scatter of its own windows about it. A move that gives no J of its own (too little speed
+    change, or none a real load can have) says why and carries NaN."""
 
     direction: int  # +1 forward, -1 reverse
     load_ratio: float
-    ratio_std: float  # 1 sigma: the whole fit's, scaled by the share of the speed change this move carries
+    ratio_std: float  # 1 sigma from this move's own windows
     windows: int
+    peak_rpm: float = math.nan  # the highest speed its windows reached
+    why: str = ""  # why it gives no ratio of its own; empty when it does
+
+    @property
+    def fitted(self) -> bool:
+        return not self.why
+
+
+@dataclass(frozen=True)
+class FittedWindow:
+    """One window the estimate stands on: its span (s) and its average torque, measured and as the model used
+    explains it (N*m); only where the model was fitted."""
+
+    t0: float
+    t1: float
+    measured_nm: float
+    model_nm: float
 
 
 @dataclass(frozen=True)
@@ -117,6 +136,8 @@ class InertiaEstimate:
     """How many times short of its limit a refusal that more excitation would cure fell (else NaN)."""
     moves: tuple[MoveEstimate, ...] = ()
     """Each move's own ratio, in the order run (none where the fit stopped before its checks)."""
+    fitted_windows: tuple[FittedWindow, ...] = ()
+    """The windows of the model the estimate stands on (none where the fit stopped before its checks)."""
 
 
 class Refused(Exception):
@@ -154,6 +175,7 @@ class Partial:
     notes: list[str] = field(default_factory=list)
     shortfall: float = math.nan
     moves: tuple[MoveEstimate, ...] = ()
+    fitted_windows: tuple[FittedWindow, ...] = ()
 
     def refuse(self, reason: str, advice: str = "") -> InertiaEstimate:
         return self.result(ok=False, reason=reason, advice=advice)
@@ -186,4 +208,5 @@ class Partial:
             advice=advice,
             shortfall=self.shortfall,
             moves=self.moves,
+            fitted_windows=self.fitted_windows,
         )

@@ -1,0 +1,208 @@
+"""The one stop sequence (motion/stop.py): every way a motion ends stops the motor, puts the servo and the motion's
+settings back and reads the drive back; a second interrupt cannot cut it short; a line that stops answering is said
+in capitals, not 'stopped'. On virtual time against the in-process simulated drive."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import pytest
+
+from servotool.clock import VirtualClock
+from servotool.drive import Drive
+from servotool.errors import DeviceError, StopUnconfirmed
+from servotool.model.loader import load_profile
+from servotool.motion import stop
+from servotool.motion.interrupts import GUARD
+from servotool.motion.jogger import Jogger
+from servotool.sim.firmware import build_drive
+from servotool.sim.virtual import VirtualLink, make_motion_setup
+
+PROFILES = ("dsx7e", "is620p", "sd25", "sdc")
+
+
+def _jogger(profile_id: str) -> tuple[object, Jogger, VirtualClock]:
+    profile = load_profile(profile_id)
+    clock = VirtualClock(10.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    make_motion_setup(sim)
+    d = Drive(VirtualLink([sim], clock, profile.line.baud), profile, 1)
+    d.dead_man_waived = True
+    return sim, Jogger(d, 0.1, "test", clock), clock
+
+
+def _settings(sim, jogger: Jogger) -> dict[str, int]:
+    return {e.code: sim.bank.effective_value(e.code) for e in jogger._written_settings()}
+
+
+@pytest.mark.parametrize("profile_id", PROFILES)
+def test_an_interrupted_jog_is_stopped_and_its_settings_read_back_as_found(sim_dir, profile_id):
+    sim, jogger, _clock = _jogger(profile_id)
+    before = _settings(sim, jogger)
+    plan = jogger.plan(500, 5.0)
+    samples = []
+
+    def interrupt(t: float, speed: float | None) -> None:
+        samples.append(speed)
+        if len(samples) == 8:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as raised:
+        jogger.run(plan, interrupt)
+    assert max(abs(s or 0) for s in samples) > 300  # it ran
+    report = raised.value.stop_report
+    assert report.confirmed, report.describe()
+    assert report.describe().startswith("stopped, servo off")
+    assert abs(sim.firmware.plant.true_speed_rpm) < 10 and not sim.firmware.plant.servo_on
+    assert _settings(sim, jogger) == before and report.settings_back
+    assert stop.final() is report
+
+
+def test_a_second_interrupt_during_the_stop_is_held_until_it_is_done(sim_dir):
+    """timeout(1) signals the process and then its group: the second SIGINT came while the stop ran and left
+    SDC's servo on (issue 29). Now it is held: the stop finishes, one KeyboardInterrupt leaves."""
+    sim, jogger, _clock = _jogger("sdc")
+    before = _settings(sim, jogger)
+    plan = jogger.plan(300, 5.0)
+    count = {"samples": 0, "reads_in_stop": 0}
+
+    def first(t: float, speed: float | None) -> None:
+        count["samples"] += 1
+        if count["samples"] == 6:
+            os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C ...
+
+    def second(_drive) -> None:  # ... and another on the stop sequence's own reads
+        if count["samples"] >= 6 and GUARD.armed is False and count["reads_in_stop"] < 3:
+            count["reads_in_stop"] += 1
+            os.kill(os.getpid(), signal.SIGINT)
+
+    sim.on_read.append(second)
+    with pytest.raises(KeyboardInterrupt) as raised:
+        jogger.run(plan, first)
+    assert count["reads_in_stop"] == 3  # they came, and were held
+    assert raised.value.stop_report.confirmed
+    assert sim.bank.effective_value("PN95") == 0 and abs(sim.firmware.plant.true_speed_rpm) < 10
+    assert _settings(sim, jogger) == before
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handlers are back
+
+
+class _Cut(VirtualLink):
+    """A line that stops answering after `answers` more exchanges."""
+
+    answers = 10**9
+
+    def read(self, unit: int, address: int, count: int) -> list[int]:
+        self._spend()
+        return super().read(unit, address, count)
+
+    def write(self, unit: int, address: int, values: list[int], **kw: object) -> None:
+        self._spend()
+        super().write(unit, address, values, **kw)
+
+    def _spend(self) -> None:
+        self.answers -= 1
+        if self.answers < 0:
+            raise DeviceError(f"unit 1 did not answer (read timed out after {1.0:g} s)")
+
+
+def test_a_line_lost_mid_motion_is_said_in_capitals_not_stopped(sim_dir):
+    profile = load_profile("dsx7e")
+    clock = VirtualClock(10.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    link = _Cut([sim], clock, profile.line.baud)
+    jogger = Jogger(Drive(link, profile, 1), 0.1, "test", clock)
+    plan = jogger.plan(500, 5.0)
+
+    def cut(t: float, speed: float | None) -> None:
+        if t > 0.5:
+            link.answers = 0
+
+    with pytest.raises(DeviceError) as raised:
+        jogger.run(plan, cut)
+    report = raised.value.stop_report
+    assert not report.confirmed
+    assert report.describe().startswith("COULD NOT CONFIRM THE MOTOR STOPPED: ")
+    assert "did not answer" in report.describe() and "servotool stop" in report.describe()
+    # The simulated DSX7E's own watchdog (Pn620) stops it: what the bound printed before moving promised.
+    clock.advance(1.0)
+    sim.firmware.update()
+    assert abs(sim.firmware.plant.true_speed_rpm) < 10
+
+
+class _Unsettled(VirtualLink):
+    """A line whose speed reads do not agree twice in a row while the motor turns (the link's confirmation after an
+    interrupted request, link/exchange.py): they fail as 'unsettled' once `unsettled` is set, above 10 rpm."""
+
+    unsettled = False
+    speed_address = -1
+    failed = 0
+
+    def read(self, unit: int, address: int, count: int) -> list[int]:
+        words = super().read(unit, address, count)
+        sim = self.drives[unit]
+        if self.unsettled and address == self.speed_address and abs(sim.firmware.plant.true_speed_rpm) > 10:
+            self.failed += 1
+            error = DeviceError("no two reads in a row agreed")
+            error.fault = "unsettled"
+            raise error
+        return words
+
+
+def test_speed_reads_that_never_agree_while_it_turns_are_waited_out_not_taken_for_a_dead_line(sim_dir):
+    """bench/ctrl_c_storm.py after the merge with main: SDC at 9600 baud, Ctrl-C in the step check: the reply of the
+    interrupted request made the link confirm every read, the ramping speed never agreed, and the stop said COULD
+    NOT CONFIRM though the line answered; it waits on, and the read-back at rest proves the stop."""
+    profile = load_profile("dsx7e")
+    clock = VirtualClock(10.0)
+    sim = build_drive(profile, 1, clock, persist=False)
+    make_motion_setup(sim)
+    link = _Unsettled([sim], clock, profile.line.baud)
+    link.speed_address = profile.need_role("speed_feedback", "test").address
+    d = Drive(link, profile, 1)
+    d.dead_man_waived = True
+    jogger = Jogger(d, 0.1, "test", clock)
+    plan = jogger.plan(500, 5.0)
+
+    def interrupt(t: float, speed: float | None) -> None:
+        if t > 0.5:
+            link.unsettled = True
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as raised:
+        jogger.run(plan, interrupt)
+    report = raised.value.stop_report
+    assert link.failed > 0  # the speed did not settle while it ramped down
+    assert report.confirmed, report.describe()
+    assert abs(sim.firmware.plant.true_speed_rpm) < 10 and not sim.firmware.plant.servo_on
+
+
+def test_a_normal_end_whose_stop_cannot_be_proven_fails_with_exit_4(sim_dir):
+    _sim, jogger, _clock = _jogger("dsx7e")
+    plan = jogger.plan(300, 0.5)
+    original = stop._speed
+    stop._speed = lambda drive: 300.0  # reads as still turning, whatever the drive does
+    try:
+        with pytest.raises(StopUnconfirmed) as raised:
+            jogger.run(plan)
+    finally:
+        stop._speed = original
+    assert raised.value.exit_code == 4
+    assert "the speed reads 300 rpm" in str(raised.value)
+
+
+def test_servotool_stop_zeroes_switches_off_and_releases_forcing_on_every_profile(sim_dir):
+    for profile_id in PROFILES:
+        sim, jogger, clock = _jogger(profile_id)
+        jogger.set_speed(400)
+        if jogger.inputs is not None:  # SD25: its DIs forced as a motion forces them (So-58 on, JOGU in So-57)
+            jogger.inputs.engage()
+        jogger.command(1)
+        clock.advance(0.15)  # inside IS620P's first segment (3 beats)
+        sim.firmware.update()
+        assert abs(sim.firmware.plant.true_speed_rpm) > 300, profile_id
+        report = stop.stop_drive(jogger.drive, 3.0, clock)
+        assert report.confirmed, (profile_id, report.describe())
+        assert abs(sim.firmware.plant.true_speed_rpm) < 10 and not sim.firmware.plant.servo_on
+        if profile_id == "sd25":
+            assert sim.bank.effective_value("So-58") == 0 and "So-58 released" in report.describe()
