@@ -29,7 +29,7 @@ from dataclasses import dataclass
 EFFICIENCY = 3.5
 TARGET_SHARE = 0.7  # the prediction aims this far below the limit: a few moves' jackknife misjudges by a third
 MOTION_SHARE = 0.85  # of the rest check's sampling rate, what the motion keeps (position reads, commands)
-RMS_TORQUE_PCT = 80.0  # the motion's r.m.s. torque, % of rated: an overload protection carries it indefinitely
+RMS_TORQUE_PCT = 80.0  # an r.m.s. torque, % of rated, that an overload protection carries indefinitely (not a cap)
 TORQUE_SHARE = 0.6  # of the drive's torque limit, what an acceleration may take
 DEFAULT_LIMIT_PCT = 300.0  # a drive whose limit servotool cannot read: the usual servo motor's peak
 MIN_EXCITATION = 10.0 * math.sqrt(2.0) * 1.3  # the speed change a window needs against the speed noise, with margin
@@ -69,9 +69,10 @@ class Line:
 
 def torque_cap_pct(limit_pct: float | None) -> float:
     """The acceleration torque a move may take (% of rated): a share of the drive's limit (the rest: friction and
-    gravity), and no more than an r.m.s. of RMS_TORQUE_PCT over a motion that spends about half its time in ramps,
-    which the drive's overload (I^2t) protection carries however long the motion."""
-    return min(TORQUE_SHARE * (limit_pct or DEFAULT_LIMIT_PCT), RMS_TORQUE_PCT * math.sqrt(2.0))
+    gravity). An r.m.s. cap of RMS_TORQUE_PCT (what the overload protection carries indefinitely) was tried: it cut a
+    bare motor's moves at 57600 baud and 12 rev of travel below the 2 % limit (test_dither); the drive's own I^2t
+    protection stops a motion that overloads it, with an alarm the identification names."""
+    return TORQUE_SHARE * (limit_pct or DEFAULT_LIMIT_PCT)
 
 
 @dataclass(frozen=True)

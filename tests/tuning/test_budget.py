@@ -3,7 +3,6 @@ measured sample rate, the torque limits and the travel allowed."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import pytest
@@ -54,9 +53,8 @@ def test_a_line_that_cannot_reach_the_target_says_so_with_what_came_closest():
     assert "cannot reach 2 %" in found.words(0.02)
 
 
-def test_the_acceleration_torque_stays_within_what_the_overload_protection_carries():
-    assert budget.torque_cap_pct(300.0) == math.sqrt(2.0) * budget.RMS_TORQUE_PCT
-    assert budget.torque_cap_pct(100.0) == budget.TORQUE_SHARE * 100.0
+def test_the_acceleration_torque_is_a_share_of_the_drives_limit():
+    assert budget.torque_cap_pct(300.0) == budget.TORQUE_SHARE * 300.0
     assert budget.torque_cap_pct(None) == budget.torque_cap_pct(budget.DEFAULT_LIMIT_PCT)
 
 

@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from servotool.tuning.fit.quantization import floor
 from servotool.tuning.planning import DITHER_MIN, DITHER_MIN_RAMP_S, dither, dithered
@@ -76,11 +75,6 @@ def test_a_fast_line_dithers_by_shorter_ramps_below_the_planned_floor() -> None:
     assert dithered(0.06, 1000.0, 3, 1000.0)[0] == DITHER_MIN_RAMP_S
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="merge of stop (issue 29) and main: this machine comes out 2.2 % of J_total against the 2 % limit (main "
-    "1.92 %, stop before the merge 1.76 %); bench/inertia_accuracy.py --profiles must measure the IS620P 57600 row",
-)
 def test_a_bare_motor_at_57600_is_accepted_within_its_3_sigma(sim_dir) -> None:
     """bench --profiles IS620P 57600, machine 12 (no load, gravity -40 %, torque in whole percent): refused 'torque
     reads in 1 % steps against an acceleration torque of 1.0 %' while the dither lowered the speed of 0.1 s ramps."""
