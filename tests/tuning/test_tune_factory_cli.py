@@ -7,10 +7,8 @@ import re
 
 import pytest
 
-from servotool.drive import coalesce_reads
 from servotool.model.loader import load_profile
 from servotool.motion.deadman import route_of
-from servotool.sim.virtual import TURNAROUND_S, wire_time
 from tests.motion.test_motion import SETUP
 from tests.tuning.realtime_cli import near, tune_json
 
@@ -48,10 +46,6 @@ def test_identification_through_the_cli_at_the_factory_line_speed(cli, profile):
     # DSX7E's 500 ms watchdog lets a dead host's motor run on 1.7 rev at 200 rpm: 2 rev leave no useful speed
     room = ["--travel", "12"] if route_of(p).route == "drive_timeout" else []
     r, res = tune_json(cli, "--port", "sim", "--profile", profile, "tune", "inertia", "--yes", "--dry-run", *ack, *room)
-    entries = [p.role("speed_feedback"), p.role("torque_feedback")]
-    line = 1.0 / sum(wire_time(3, count, p.line.baud) + TURNAROUND_S for _a, count, _g in coalesce_reads(p, entries))
-    if "sample_rate" in res:  # no faster than the emulated line carries, however idle the host
-        assert res["sample_rate"]["value"] <= 1.05 * line, (res["sample_rate"], line)
     if r.code == 0:
         assert near(res, 20.0), res
         assert res["travel"]["value"] <= (12.0 if room else 2.0)
