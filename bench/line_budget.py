@@ -91,7 +91,7 @@ class RecordingLink(VirtualLink):
         super().__init__(drives, clock, baud)
         self.log = []
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
         self.log.append(Request(self.clock.now(), wire_time(3, count, self.baud) + TURNAROUND_S, kind_of()))
         return super().read(unit, address, count)
 

@@ -1,11 +1,13 @@
-"""Does servotool ever accept a wrong value on a bad line? Param get, set, backup, restore and monitor-like reads
-through the real client path (RtuMaster + Drive, RTU over TCP) to simulated drives behind a fault-injecting line
-(servotool.sim.faults), at 1, 5 and 20 % of replies for each fault kind and mixed, on every profile. Every value is
-checked against the simulator's true state; a restore that fails must not claim a state the drive is not in.
+"""Does servotool ever accept a wrong value on a bad line? Param get, set, backup, restore, monitor-like and
+trace-like reads through the real client path (RtuMaster + Drive, RTU over TCP) to simulated drives behind a
+fault-injecting line (servotool.sim.faults), at 1, 5 and 20 % of replies for each fault kind and mixed, and with
+writes to 1, 5 and 20 % of the settable entries acknowledged but ignored, on every profile. Every value is checked
+against the simulator's true state; a restore that fails must not claim a state the drive is not in.
 
-Run: python bench/line_faults.py [--quick] [--tries N] [--seed S]
+Run: python bench/line_faults.py [--quick] [--tries N] [--seed S] [--profile P ...] [--clean N]
 Prints one row per fault kind, rate and operation (profiles summed): tries, ok, clean error, silent wrong,
-traceback, hang. The target is silent wrong = 0 everywhere.
+traceback, hang. The target is silent wrong = 0 everywhere. --clean N instead times each operation N times on a
+clean line per profile (ms per operation, the median), to compare the link's cost before and after a change.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import random
+import statistics
 import sys
 import tempfile
 import threading
@@ -29,15 +32,16 @@ from servotool.model.codec import words_to_raw
 from servotool.model.loader import load_profile
 from servotool.model.profile import Entry, Profile
 from servotool.ops import backup, monitor, restore
+from servotool.ops.trace import motion_entries
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.faults import KINDS, LineFaults, parse_rates
 from servotool.sim.firmware import build_drive
 from servotool.sim.server import EmbeddedSim
 
 PROFILES = ("sd25", "is620p", "sdc", "dsx7e")
-FAULTS = (*KINDS, "mixed", "mixed+echo")
+FAULTS = (*KINDS, "mixed", "mixed+echo", "ignored")  # ignored: writes to RATE of the settable entries
 RATES = (0.01, 0.05, 0.20)
-OPS = ("get", "set", "backup", "restore", "monitor")
+OPS = ("get", "set", "backup", "restore", "monitor", "trace")
 OUTCOMES = ("ok", "error", "WRONG", "traceback", "hang")
 TIMEOUT_S, LATE_S, HANG_S = 0.1, 0.15, 30.0  # late replies come after the timeout, within the late window
 VERBOSE = False
@@ -71,6 +75,7 @@ class Bench:
             and e.max > e.min
         ]
         self.monitors = monitor.default_entries(profile)
+        self.traced = motion_entries(profile)
 
     def truth(self, entry: Entry) -> int:
         assert self.sim.proxy is not None
@@ -104,6 +109,11 @@ class Bench:
     def monitor(self, drive: Drive) -> None:
         for _ in range(8):
             for r in drive.read_entries(self.monitors):
+                self.check(r.entry, r.raw)
+
+    def trace(self, drive: Drive) -> None:
+        for _ in range(16):
+            for r in drive.read_entries(self.traced):
                 self.check(r.entry, r.raw)
 
     def restore(self, drive: Drive) -> None:
@@ -178,9 +188,32 @@ def _guarded(fn: Callable[[], None]) -> str:
     return result[0] if result else "hang"
 
 
-def line(kind: str, rate: float, seed: int) -> LineFaults:
+def line(kind: str, rate: float, seed: int, settable: list[Entry]) -> LineFaults:
+    if kind == "ignored":
+        rng = random.Random(seed)
+        ignored = rng.sample(settable, max(1, round(rate * len(settable))))
+        return LineFaults(seed=seed, ignore_writes=frozenset(a for e in ignored for a in e.addresses))
     spec = "mixed" if kind.startswith("mixed") else kind
     return LineFaults(parse_rates(f"{spec}:{rate}"), seed=seed, late_s=LATE_S, echo=kind.endswith("+echo"))
+
+
+def clean(n: int) -> None:
+    """Each operation n times on a clean line, per profile: the median ms per operation."""
+    print(f"{'profile':<8} " + " ".join(f"{op:>9}" for op in OPS) + f"   (ms per operation, median of {n})")
+    for profile_id in PROFILES:
+        bench = Bench(load_profile(profile_id), 1)
+        times = []
+        try:
+            for op in OPS:
+                took = []
+                for _ in range(n):
+                    t0 = time.perf_counter()
+                    assert bench.run(op, LineFaults()) == "ok"
+                    took.append((time.perf_counter() - t0) * 1000)
+                times.append(statistics.median(took))
+        finally:
+            bench.close()
+        print(f"{profile_id:<8} " + " ".join(f"{t:>9.1f}" for t in times))
 
 
 def main() -> None:
@@ -188,16 +221,23 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="a short sample: 20 %% only, one profile per fault kind")
     ap.add_argument("--tries", type=int, default=1, help="tries per profile, fault kind, rate and operation")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--profile", action="append", choices=PROFILES, help="only these profiles (repeatable)")
     ap.add_argument("-v", "--verbose", action="store_true", help="print each clean error")
+    ap.add_argument("--clean", type=int, metavar="N", help="time each operation N times on a clean line instead")
     args = ap.parse_args()
     global VERBOSE
     VERBOSE = args.verbose
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     os.environ.setdefault("SERVOTOOL_BACKUP_DIR", tempfile.mkdtemp())  # the restores' automatic backups
+    if args.clean:
+        clean(args.clean)
+        return
     rates = (0.20,) if args.quick else RATES
     counts: dict[tuple[str, float, str], Counter[str]] = {}
     t0 = time.monotonic()
     for p_index, profile_id in enumerate(PROFILES):
+        if args.profile and profile_id not in args.profile:
+            continue
         bench = Bench(load_profile(profile_id), args.seed)
         try:
             for k_index, kind in enumerate(FAULTS):
@@ -207,7 +247,8 @@ def main() -> None:
                     for op in OPS:
                         cell = counts.setdefault((kind, rate, op), Counter())
                         for t in range(args.tries):
-                            cell[bench.run(op, line(kind, rate, args.seed * 1000 + t))] += 1
+                            faults = line(kind, rate, args.seed * 1000 + t, bench.settable)
+                            cell[bench.run(op, faults)] += 1
         finally:
             bench.close()
     report(counts, time.monotonic() - t0)

@@ -107,6 +107,18 @@ class NotOnDrive(ModbusException):
         self.code, self.entries = ILLEGAL_ADDRESS, entries
 
 
+_READABLE: dict[int, tuple[list[Entry], frozenset[int]]] = {}
+
+
+def readable_addresses(profile: Profile) -> frozenset[int]:
+    """Every address of the profile's readable entries (kept per profile: a backup coalesces 80 times)."""
+    cached = _READABLE.get(id(profile))
+    if cached is None or cached[0] is not profile.entries:
+        cached = (profile.entries, frozenset(a for e in profile.entries if e.readable for a in e.addresses))
+        _READABLE[id(profile)] = cached
+    return cached[1]
+
+
 def coalesce_reads(
     profile: Profile, entries: Iterable[Entry], holes: frozenset[int] = frozenset()
 ) -> list[tuple[int, int, list[Entry]]]:
@@ -115,7 +127,7 @@ def coalesce_reads(
     A request may span a gap only when every address in the gap belongs to a readable entry, since a real
     drive answers exception 02 for unmapped addresses, and none is a hole (an address the drive turned out to lack).
     """
-    readable = profile.readable_addresses() - holes if holes else profile.readable_addresses()
+    readable = readable_addresses(profile)
     wanted = sorted({e.code: e for e in entries}.values(), key=lambda e: e.address)
     plans: list[tuple[int, int, list[Entry]]] = []
     limit = profile.limits.max_read
@@ -123,7 +135,7 @@ def coalesce_reads(
         if plans:
             start, count, group = plans[-1]
             end = start + count
-            gap_ok = all(a in readable for a in range(end, e.address))
+            gap_ok = all(a in readable and a not in holes for a in range(end, e.address))
             new_count = e.address + e.words - start
             if e.address >= end and gap_ok and new_count <= limit:
                 plans[-1] = (start, new_count, [*group, e])
@@ -156,6 +168,9 @@ class Drive:
         self.unit = unit
         self.port = port
         self.missing: dict[str, Entry] = {}  # entries the drive answered exception 02 for, this run, by code
+        readable = [e for e in profile.entries if e.readable]
+        self._starting = {e.address: e for e in readable}  # readable entries by first and by past-last address
+        self._ending = {e.address + e.words: e for e in readable}
 
     # ----- reading -------------------------------------------------------------------------------------------
     def read_entries(
@@ -189,7 +204,7 @@ class Drive:
         """Read one coalesced block into values; on exception 02, split it in two and read each half, down to the
         single entry the drive lacks."""
         try:
-            words = self.link.read(self.unit, start, count)
+            words = self.link.read(self.unit, start, count, spare=self._spare(start, count))
         except ModbusException as exc:
             if exc.code != ILLEGAL_ADDRESS:
                 raise _prefixed(exc, f"reading {_names(group)}") from None
@@ -206,6 +221,18 @@ class Drive:
         for e in group:
             off = e.address - start
             values[e.code] = words_to_raw(e, words[off : off + e.words])
+
+    def _spare(self, start: int, count: int) -> tuple[int, int]:
+        """Registers of the readable entries just before and just after a block (none the drive lacks), within the
+        profile's read limit: the link may read them too, so that this read's reply differs in length from the
+        replies around it (link/exchange.py)."""
+        room = self.profile.limits.max_read - count
+        spare = []
+        for e in (self._starting.get(start + count), self._ending.get(start)):
+            words = e.words if e is not None and e.code not in self.missing and e.words <= room else 0
+            spare.append(words)
+            room -= words
+        return spare[1], spare[0]
 
     def read(self, *codes: str) -> list[Reading]:
         return self.read_entries(self.profile.entry(c) for c in codes)
@@ -258,13 +285,22 @@ class Drive:
         """Write, read back, and raise VerifyError when the drive holds something else."""
         self.write_raw(entry, raw)
         if entry.readable:
-            back = self.read_entries([entry])[0].raw
-            if back != raw:
-                raise VerifyError(
-                    f"{entry.code}: wrote {format_value(entry, raw)} but the drive reads back "
-                    f"{format_value(entry, back)}"
-                )
+            self._verify({entry.code: (entry, raw)})
         return WriteResult(entry, old, raw)
+
+    def _verify(self, written: dict[str, tuple[Entry, int]]) -> None:
+        """Read back what was written; VerifyError for the first entry the drive holds otherwise. A read-back that
+        disagrees is read once more before it is believed: a stray reply that slipped through must not make a
+        stored value look lost."""
+        entries = [e for e, _ in written.values()]
+        back = {r.entry.code: r.raw for r in self.read_entries(entries)}
+        if differ := [e for e in entries if back[e.code] != written[e.code][1]]:
+            back.update((r.entry.code, r.raw) for r in self.read_entries(differ))
+        for e, raw in written.values():
+            if back[e.code] != raw:
+                raise VerifyError(
+                    f"{e.code}: wrote {format_value(e, raw)} but the drive reads back {format_value(e, back[e.code])}"
+                )
 
     def write_block_verified(self, items: list[tuple[Entry, int, int | None]]) -> list[WriteResult]:
         """Write entries at adjacent addresses in one FC16 request, then verify each by one coalesced read-back.
@@ -281,13 +317,8 @@ class Drive:
             self.link.write(self.unit, first.address, words, multiple=True)
         except DeviceError as exc:
             raise _prefixed(exc, f"writing {', '.join(e.code for e, _, _ in items)}") from None
-        readable = [e for e, _, _ in items if e.readable]
-        back = {r.entry.code: r.raw for r in self.read_entries(readable)} if readable else {}
-        for e, raw, _ in items:
-            if e.code in back and back[e.code] != raw:
-                raise VerifyError(
-                    f"{e.code}: wrote {format_value(e, raw)} but the drive reads back {format_value(e, back[e.code])}"
-                )
+        if readable := {e.code: (e, raw) for e, raw, _ in items if e.readable}:
+            self._verify(readable)
         return [WriteResult(e, old, raw) for e, raw, old in items]
 
     def trigger(self, role: str, feature: str, value: int | None = None) -> None:

@@ -56,6 +56,24 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
         "servotool --port sim tune inertia --yes --rigidity 16 --report tune-report",
         "Identify, write the ratio and gains; charts in the folder tune-report.",
     ),
+    ("tune score", "servotool --port sim tune score --yes --save before.json", "Score the response: 3 runs."),
+    (
+        "tune score",
+        "servotool --port sim tune score --yes --before before.json",
+        "Score again and compare: a verdict only beyond the spread.",
+    ),
+    ("tune compare", "servotool tune compare before.json before.json", "Two saved scores, figure by figure."),
+    ("tune resonance", "servotool --port sim tune resonance --yes", "Peaks after a step; the line's limit."),
+    (
+        "tune friction",
+        "servotool --port sim tune friction --yes",
+        "Friction compensation, kept only where the score improves.",
+    ),
+    (
+        "tune notch",
+        "servotool --port sim -P is620p tune notch --yes",
+        "A notch at a resolved resonance, judged likewise (IS620P).",
+    ),
     ("param reset", "servotool --port sim param reset --yes", "Factory defaults, after an automatic backup."),
     (
         "param apply",

@@ -32,7 +32,12 @@ COMMANDS = {
     "profiles": lazy("servotool.cli.profiles:app", help="List, show and check drive profiles."),
     "sim": lazy("servotool.cli.sim:app", help="The simulated drive: serve it, configure its machine, reset it."),
     "alarm": lazy("servotool.cli.alarm:app", help="Show, clear and list the drive's alarms."),
-    "tune": lazy("servotool.cli.tune:app", help="Identify load inertia and set gains."),
+    "tune": lazy(
+        "servotool.cli.tune:app",
+        "servotool.cli.tune_score:app",
+        "servotool.cli.tune_functions:app",
+        help="Inertia, gains, response scores and the drive's tuning functions.",
+    ),
     "monitor": lazy("servotool.cli.monitor:monitor", help="Watch live values with units, min/max and a trend."),
     "jog": lazy("servotool.cli.jog:jog", help="JOG the motor, timed or by keys; first says what stops it."),
     "stop": lazy("servotool.cli.stop:stop", help="Stop the motor, whatever moved it; then read it back at rest."),
@@ -80,7 +85,12 @@ def main(
     unit: int = typer.Option(
         None, "--unit", "-u", help="Modbus unit id 1..247 (default: the profile's). Env: SERVOTOOL_UNIT."
     ),
-    timeout: float = typer.Option(None, "--timeout", help="Response timeout in seconds. Env: SERVOTOOL_TIMEOUT."),
+    timeout: float = typer.Option(
+        None,
+        "--timeout",
+        help="Response timeout in seconds, beyond the request's and reply's time on the wire at the baud rate "
+        "(a long reply at 2400 baud is waited for). Env: SERVOTOOL_TIMEOUT.",
+    ),
     retries: int = typer.Option(None, "--retries", help="Retries after a timeout. Env: SERVOTOOL_RETRIES."),
     echo: str = typer.Option(
         None,

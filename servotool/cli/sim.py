@@ -56,16 +56,25 @@ def serve(
     faults: str = typer.Option(
         None,
         "--faults",
-        help="A bad line (tcp:// ports): KIND:RATE[,...] of crc, drop, "
-        "late, duplicate, truncate, garbage or mixed, RATE as 0.05 or 5%, per reply.",
+        help="A bad line (tcp:// ports): KIND:RATE[,...], RATE as 0.05 or 5% per reply: crc, drop, late (by "
+        "--late-ms), stale (held until just before the reply 1-8 requests later), duplicate (again after a gap of "
+        "0..--fault-gap-ms), unit (from another unit id), truncate, garbage, burst (2-6 faulty replies in a row), "
+        "echo (per request: it comes back after such a gap), or mixed (all of them).",
     ),
     fault_seed: int = typer.Option(1, "--fault-seed", help="Seed of the line's faults (same seed, same faults)."),
     late_ms: float = typer.Option(500.0, "--late-ms", help="How late a 'late' reply comes, ms."),
+    gap_ms: float = typer.Option(50.0, "--fault-gap-ms", help="Longest gap before a duplicate or an echo, ms."),
+    ignore_writes: str = typer.Option(
+        None,
+        "--ignore-writes",
+        help="CODE|ADDRESS[,...] (tcp:// ports): a write to these registers is acknowledged but not made, as by "
+        "a drive that ignores it (FC06 or FC16 covering one; reads then show the old value).",
+    ),
     response_delay: float = typer.Option(0.0, "--response-delay", help="Delay every reply by this many ms."),
     echo: bool = typer.Option(False, "--echo", help="Echo each request back to the master, as some adapters do."),
 ) -> None:
     """Serve simulated drives in the foreground (Ctrl-C stops) for any Modbus RTU master."""
-    from servotool.sim.faults import LineFaults, parse_rates
+    from servotool.sim.faults import LineFaults, parse_addresses, parse_rates
     from servotool.sim.server import serve_units
 
     p = _profile(ctx, profile)
@@ -85,13 +94,15 @@ def serve(
                 info(f"servotool: unit {u} powered on; now in effect: {', '.join(codes)}")
 
     bad_line = None
-    if faults or response_delay or echo:
+    if faults or response_delay or echo or ignore_writes:
         bad_line = LineFaults(
             parse_rates(faults or ""),
             seed=fault_seed,
             late_s=late_ms / 1000.0,
+            gap_s=gap_ms / 1000.0,
             response_delay_s=response_delay / 1000.0,
             echo=echo,
+            ignore_writes=parse_addresses(p, ignore_writes or ""),
         )
     try:
         serve_units(

@@ -1,29 +1,44 @@
-"""Request and reply on an RTU line, which has no transaction id: accept only a reply that provably answers.
+"""Request and reply on an RTU line, which has no transaction id: use only a reply proven to answer its request.
 
-Every reply is matched to its request (unit, function, byte count; a write's echoed address and value), and bytes
-after it make it suspect. After a fault the line is left to go quiet (a late reply's window) and flushed. A read
-that follows a fault is confirmed by a second read that must agree, when a stale reply of the same shape could
-stand in for it; a failed write is read back before it is sent again, and a write that is not safe to repeat (an Fn
-trigger) never is. Every operation has a bounded number of tries.
+The contract. A frame is taken as the answer to a request when its head and CRC fit the request (unit, function,
+byte count; a write's echoed address and value) and nothing on the line says it may be another's:
 
-The promise holds for replies that come within the late window (one timeout) after their timeout; a later reply
-is caught only when it stands in for a read that confirmation checks, so a drive slower than that needs a longer
---timeout.
+1. A read that follows one repeating a read made within the copy window (a monitor's, a trace's) differs from it in
+   reply length wherever the profile lets a read widen by an adjacent entry (`spare`): a copy of that read's reply,
+   or its own reply that such a copy stood in for (point 4), cannot fit.
+2. A frame that repeats, byte for byte, one heard within the copy window (link/ledger.py) for another request (or
+   for the same read before a write to its registers) may be that frame's copy: the read is confirmed.
+3. A try that failed owes its reply, which may come later than any timeout: a reply of that shape for another
+   request is confirmed, and reads pick a width that no owed reply has.
+4. Bytes before a request or after a reply are a fault of the operation, and faults leave the line to go quiet and
+   be flushed; on a line that has shown faults, a read whose reply repeats its own last one is confirmed too.
+5. A confirmation is another read, at another width where one is allowed. An unambiguous confirmation stands; two
+   ambiguous ones must agree; a disagreement is a fault.
+
+So, as long as copies come within the copy window and late replies within the owed window (link/ledger.py), a stray
+frame can stand in for a reply only when it answers the same registers, read in the same write epoch: never another
+request's value. A write's acknowledgement shows only its address and value or count; what a write stored is proven
+by reading it back (drive.py). Every operation has a bounded number of tries; a failed write is read back before it
+is sent again, and a write that is not safe to repeat (an Fn trigger) never is.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 from typing import Protocol
 
 from servotool.clock import Clock, RealClock
 from servotool.errors import DeviceError, ModbusException
+from servotool.link.crc import crc_ok, with_crc
+from servotool.link.ledger import COPY_WINDOW, OWED_MIN_S, OWED_TIMEOUTS, Ledger, Rid, shape_of
 from servotool.link.ports import Trace
 from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, NotAnswer, Request
 
 # Silence that ends a frame. RTU's 3.5 characters, but USB-serial adapters and TCP gateways deliver bytes in
 # bursts (an FTDI's latency timer holds them up to 16 ms), so a frame is only taken as over after this long.
 FRAME_GAP = 0.05
+GAP_CHARS = 7  # the 3.5-character silences before a request and before its reply
 
 
 class Wire(Protocol):
@@ -36,21 +51,37 @@ class Wire(Protocol):
 
 
 class LineFault(Exception):
-    """One try got no reply that answers it: silent, garbled, or stray (a valid frame for another request)."""
+    """One try got no reply that answers it: silent, garbled, stray (a valid frame for another request), or a
+    confirmation that disagrees."""
 
-    def __init__(self, kind: str, received: int, why: str = "") -> None:
+    def __init__(self, kind: str, received: int, why: str = "", data: bytes = b"") -> None:
         super().__init__(kind)
         self.kind, self.received, self.why = kind, received, why
+        self.data = data  # the bytes this try got, when they may hold another request's frame
+
+
+@dataclass(frozen=True)
+class _Reply:
+    """One try's answer: registers (writes: []) or an exception code, its frame, and whether it may be another's."""
+
+    words: list[int]
+    code: int | None
+    frame: bytes
+    ambiguous: bool
+
+
+Answer = list[int] | int  # registers, or the code of an exception reply
+Held = tuple[Answer, Request, _Reply]  # an ambiguous answer awaiting its confirmation, with its request and reply
 
 
 class _Op:
     """One read or write operation: its tries, its faults and its budget."""
 
-    def __init__(self, what: str, retries: int, timeout: float, outcome: str = "") -> None:
-        self.what, self.retries, self.timeout, self.outcome = what, retries, timeout, outcome
+    def __init__(self, what: str, retries: int, timeout: float, outcome: str = "", wire: str = "") -> None:
+        self.what, self.retries, self.timeout, self.outcome, self.wire = what, retries, timeout, outcome, wire
         self.tries = 0
         self.faults = 0
-        self.troubled = False  # a fault or stray bytes: the line's replies need proof
+        self.repeating = False  # a read of registers read within the copy window (a monitor's, a trace's)
 
     def begin(self) -> None:
         if self.tries >= 2 * (self.retries + 2):
@@ -64,7 +95,6 @@ class _Op:
 
     def spend(self, fault: LineFault) -> None:
         self.faults += 1
-        self.troubled = True
         if self.faults > self.retries:
             raise self.error(fault)
 
@@ -75,7 +105,7 @@ class _Op:
         tries = self._tries()
         if fault.kind == "silent":
             text = (
-                f"no response within {self.timeout:g} s after {tries} "
+                f"no response within {self.timeout:g} s{self.wire} after {tries} "
                 f"(wrong unit id, baud/parity, wiring, or the drive is off)"
             )
         elif fault.kind == "garbled":
@@ -83,6 +113,8 @@ class _Op:
                 f"garbled response after {tries}, {fault.received} bytes with a bad CRC or framing "
                 f"(noise, termination, baud/parity mismatch, or two masters on the line)"
             )
+        elif fault.kind == "disagree":
+            text = f"replies that disagree after {tries} ({fault.why}: stray replies on the line, or two masters)"
         else:
             text = (
                 f"no reply that answers it after {tries}, last {fault.why} (a late or repeated reply, an "
@@ -94,7 +126,8 @@ class _Op:
 
 
 class Exchange:
-    """Reads and writes over a Wire with reply matching, quiet-and-flush after faults, and confirmation."""
+    """Reads and writes over a Wire with reply matching, a ledger of what the line may still deliver, quiet-and-flush
+    after faults, and confirmation."""
 
     def __init__(
         self,
@@ -105,29 +138,83 @@ class Exchange:
         settle: float = 0.0,
         turnaround: float = 0.0,
         echo: bool | None = False,
+        char_s: float = 0.0,
+        baud: int = 0,
         trace: Trace | None = None,
         clock: Clock | None = None,
     ) -> None:
         self.wire, self.timeout, self.retries, self.settle = wire, timeout, retries, settle
         self.turnaround = turnaround  # quiet after the last byte heard, before a request
-        self._heard = -float("inf")  # when the last byte came
+        self.char_s, self.baud = char_s, baud  # a character's time on the line (0: not known), for the deadlines
+        self._heard_at = -float("inf")  # when the last byte came
         self.echo = echo  # the adapter echoes what we send; None: find out
-        self.late_window = timeout  # how long after its timeout a late reply may still come
+        self.late_window = timeout  # how long after its deadline a late reply is waited for after silence
         self.flush_gap = FRAME_GAP  # the silence that ends what is left of a failed try
         self.trace, self.clock = trace, clock or RealClock()
         self.requests = 0
-        self._suspect = False  # the last operation met a fault: confirm the next reads
-        self._recent: deque[Request] = deque(maxlen=8)
+        self.ledger = Ledger(owed_s=max(OWED_MIN_S, OWED_TIMEOUTS * timeout))
+        self._previous: dict[int, tuple[int, bool]] = {}  # by unit: the last read's reply byte count, and whether
+        # it repeated a read made within the copy window
+        self._asked: dict[tuple[int, int, int], float] = {}  # (unit, address, count) -> when it was last read
+        self._written: dict[tuple[int, int], int] = {}  # (unit, address) -> the number of the last write to it
+        self._writes = 0
+        self._narrow: set[tuple[int, int, int]] = set()  # reads whose widening met an exception
+        self._trouble_until = -float("inf")  # bytes nobody asked for or a garbled reply were met lately: copies of a
+        # read's own reply are confirmed, and so are exception replies
+        self._sent: deque[bytes] = deque(maxlen=16)  # the latest requests, whose echoes may come back
 
     # ----- operations ----------------------------------------------------------------------------------------
-    def read(self, unit: int, address: int, count: int) -> list[int]:
-        op = _Op(
-            f"read {count} register(s) at {address} (0x{address:04X}) from unit {unit}", self.retries, self.timeout
-        )
-        try:
-            return self._read(Request(unit, READ, address, count), op)
-        finally:
-            self._suspect = op.troubled
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+        """`count` registers at `address`; `spare` = registers before and after that may be read too (a whole
+        adjacent entry each), to give this read's reply another length than the replies around it."""
+        what = f"read {count} register(s) at {address} (0x{address:04X}) from unit {unit}"
+        op = self._op(what, Request(unit, READ, address, count))
+        return self._read(unit, address, count, spare, op)
+
+    def _read(self, unit: int, address: int, count: int, spare: tuple[int, int], op: _Op) -> list[int]:
+        now, key = self.clock.now(), (unit, address, count)
+        op.repeating = now - self._asked.get(key, -float("inf")) <= COPY_WINDOW
+        self._asked[key] = now
+        held: Held | None = None
+        while True:
+            req = self._shape(unit, address, count, spare, held[1] if held else None)
+            try:
+                reply = self._attempt(req, op)
+            except LineFault:
+                held = None
+                continue
+            if reply.code is not None and req.count != count:
+                self._narrow.add((unit, address, count))  # the widening met it: ask for the registers alone
+                held = None
+                continue
+            offset = address - req.address
+            answer = reply.code if reply.code is not None else reply.words[offset : offset + count]
+            if held is not None and answer != held[0]:
+                self._disagree(held, req, reply, answer, op)  # a fault: one of the two was another's reply
+                if reply.ambiguous:
+                    held = None
+                    continue
+            elif held is None and reply.ambiguous:
+                held = (answer, req, reply)
+                continue
+            if isinstance(answer, int):
+                raise ModbusException(answer, op.what)
+            return answer
+
+    def _disagree(self, held: Held, req: Request, reply: _Reply, answer: Answer, op: _Op) -> None:
+        """A confirmation that disagrees with the answer it confirms: a fault (one of the two may have been another
+        request's reply, or a live value moved). The first request's own reply may still come. A confirmation no
+        more certain than the first answer leaves both dropped and the line to go quiet, and spends a try's budget;
+        an unambiguous one stands, and the fault is only counted."""
+        first, first_req, _ = held
+        fault = LineFault("disagree", len(reply.frame), f"{_said(first)}, then {_said(answer)}")
+        self._owe(first_req)  # no mark of a troubled line: a live value may simply have moved between the reads
+        if not reply.ambiguous:
+            op.faults += 1
+            return
+        self._owe(req)
+        self._quiet(fault, self.clock.now())
+        op.spend(fault)
 
     def write(
         self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
@@ -139,110 +226,191 @@ class Exchange:
             if idempotent
             else "it may or may not have run; not sent again, since running it twice is not safe"
         )
-        op = _Op(
-            f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}",
-            self.retries,
-            self.timeout,
-            outcome,
-        )
+        op = self._op(f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}", req, outcome)
         if self.echo is None and fc == WRITE_ONE:
             self._probe_echo(unit, address)
         refused: int | None = None
-        try:
-            while True:
-                try:
-                    self._attempt(req, op)
-                    return
-                except LineFault as fault:
-                    if not idempotent:
-                        raise op.error(fault) from None
-                except ModbusException as exc:
-                    # After a fault, a stale exception reply could stand in for this write's: an idempotent
-                    # write is refused only when the drive says so twice in a row.
-                    if not idempotent or not (self._suspect or op.troubled) or exc.code == refused:
-                        raise
-                    refused = exc.code
-                    continue
-                if self._holds(req, op):
-                    return
-        finally:
-            self._suspect = op.troubled
-
-    def _read(self, req: Request, op: _Op) -> list[int]:
-        previous: list[int] | int | None = None
         while True:
             try:
-                words = self._attempt(req, op)
-            except LineFault:
-                previous = None
-                continue
-            except ModbusException as exc:
-                # An exception reply names no address, so after a fault a stale one could stand in for this
-                # read's reply: believe it (an entry the drive lacks, say) only when it comes twice in a row.
-                if not (self._suspect or op.troubled) or exc.code == previous:
-                    raise
-                previous = exc.code
-                continue
-            if not (self._suspect or op.troubled) or not self._ambiguous(req) or words == previous:
-                return words
-            previous = words
+                reply = self._attempt(req, op)
+            except LineFault as fault:
+                if not idempotent:
+                    raise op.error(fault) from None
+            else:
+                if reply.code is not None:
+                    # A stray exception reply could stand in for this write's: an idempotent write is refused only
+                    # when the drive says so twice in a row.
+                    if not idempotent or not reply.ambiguous or reply.code == refused:
+                        raise ModbusException(reply.code, op.what)
+                    refused = reply.code
+                    continue
+                if not reply.ambiguous:
+                    return
+                fault = LineFault("stray", len(reply.frame), "an acknowledgement that may be an earlier write's")
+                self._owe(req)
+                if not idempotent:
+                    raise op.error(fault) from None
+                op.spend(fault)
+            if self._holds(req, op):
+                return
+
+    def _op(self, what: str, req: Request, outcome: str = "") -> _Op:
+        """An operation on `req`; where the frames take a good part of the timeout on the wire, its silence error
+        says that they were waited for on top of it."""
+        wire = ""
+        if (wire_s := self._wire_time(req)) >= 0.25 * self.timeout:
+            wire = f" beyond the {wire_s * 1000:.0f} ms the request and reply take on the wire at {self.baud} baud,"
+        return _Op(what, self.retries, self.timeout, outcome, wire)
 
     def _probe_echo(self, unit: int, address: int) -> None:
         """Find out whether the adapter echoes before a first FC06 write, whose reply repeats the request (one copy
         alone cannot tell echo from reply): any answer to a one-register read tells, even an exception."""
         try:
             self._attempt(Request(unit, READ, address, 1), _Op("echo probe", 0, self.timeout))
-        except (LineFault, DeviceError):  # ModbusException too: the reply's head already told
+        except (LineFault, DeviceError):
             pass
 
     def _holds(self, req: Request, op: _Op) -> bool:
         """Whether the drive already holds what a failed write sent (then sending it again is not needed)."""
         try:
-            return self._read(Request(req.unit, READ, req.address, req.count), op) == list(req.values)
+            return self._read(req.unit, req.address, req.count, (0, 0), op) == list(req.values)
         except ModbusException:
             return False  # not readable here: cannot tell, and the write is safe to repeat
 
-    def _ambiguous(self, req: Request) -> bool:
-        """Whether a stale reply to a recent request could pass for this read's reply (same unit and register
-        count, other address). A stale reply to the very same read carries the same registers."""
-        return any(
-            r.fc == READ and r.unit == req.unit and r.count == req.count and r.address != req.address
-            for r in self._recent
-        )
+    # ----- which request, and who may answer it -------------------------------------------------------------
+    def _shape(self, unit: int, address: int, count: int, spare: tuple[int, int], avoid: Request | None) -> Request:
+        """The read to send for `count` registers at `address`: of the widths `spare` allows, the narrowest whose reply
+        length no owed reply has and that differs from an answer being confirmed and from the last read's when that
+        one repeated (contract point 1)."""
+        before, after = (0, 0) if (unit, address, count) in self._narrow else spare
+        if not before and not after:
+            return Request(unit, READ, address, count)
+        now = self.clock.now()
+        previous = self._previous.get(unit)
+        best: tuple[tuple[bool, ...], Request] | None = None
+        for lead, tail in dict.fromkeys(((0, 0), (0, after), (before, 0), (before, after))):
+            req = Request(unit, READ, address - lead, count + lead + tail)
+            rid, shape = self._rid(req), (unit, READ, 2 * req.count)
+            score = (
+                self.ledger.owed_by_other(shape, rid, now),
+                avoid is not None and req.count == avoid.count,
+                previous is not None and previous[1] and req.count * 2 == previous[0],
+            )
+            if best is None or score < best[0]:
+                best = (score, req)
+            if not any(score):
+                break
+        assert best is not None
+        return best[1]
+
+    def _rid(self, req: Request) -> Rid:
+        """A request's identity: a read's includes the number of the last write to its registers; a write's is what
+        its acknowledgement shows (an FC16 one echoes no values, so a copy of one for the same registers fits: what
+        a write stored is proven by reading it back, drive.Drive.write_verified)."""
+        if req.fc != READ:
+            return (req.unit, req.fc, req.address, req.values[0] if req.fc == WRITE_ONE else req.count)
+        epoch = 0
+        if self._written:
+            get = self._written.get
+            epoch = max(get((req.unit, a), 0) for a in range(req.address, req.address + req.count))
+        return (req.unit, READ, req.address, req.count, epoch)
+
+    def _ambiguous(self, req: Request, rid: Rid, frame: bytes, now: float) -> bool:
+        """Whether the frame that fits `req` may be another request's reply or an old one (contract points 2-4)."""
+        copied = self.ledger.copy_of(frame, now)
+        if copied is not None and copied != rid:
+            return True
+        shape = shape_of(frame)
+        if frame[1] & 0x80:
+            if self.ledger.owed_by_other_at(req.unit, now, rid) or now < self._trouble_until:
+                return True
+        elif self.ledger.owed_by_other(shape, rid, now):
+            return True
+        # A copy of this read's own earlier reply, on a line that has shown faults: the same registers, but maybe a
+        # moment old, and its own reply may follow (point 4).
+        return copied is not None and req.fc == READ and now < self._trouble_until
+
+    def _owe(self, req: Request) -> None:
+        """The request's reply may still come (a failed try, or a reply that may have been another's)."""
+        if req.fc == READ:
+            shape: tuple[int, ...] = (req.unit, READ, 2 * req.count)
+        else:
+            shape = shape_of(req.frame if req.fc == WRITE_ONE else with_crc(req.frame[:6]))
+        self.ledger.owe(shape, self._rid(req), self.clock.now())
+
+    def _stray(self, data: bytes) -> None:
+        """Bytes nobody asked for: record the frames among them (copies of them are then known) and let each one
+        that is no copy pay the reply owed with its shape."""
+        now = self.clock.now()
+        self._trouble_until = now + self.ledger.owed_s
+        for frame in _frames(data):
+            if self.ledger.copy_of(frame, now) is None:
+                self.ledger.pay(frame)
+            self.ledger.heard(frame, None, now)
 
     # ----- one try ------------------------------------------------------------------------------------------
-    def _attempt(self, req: Request, op: _Op) -> list[int]:
+    def _attempt(self, req: Request, op: _Op) -> _Reply:
         try:
             return self._try(req, op)
         except OSError as exc:  # ConnectionError too: the port or socket is gone
             raise DeviceError(f"{op.what}: link lost ({exc or type(exc).__name__})") from None
 
-    def _try(self, req: Request, op: _Op) -> list[int]:
+    def _try(self, req: Request, op: _Op) -> _Reply:
         op.begin()
-        if self._take_pending(0.0):
-            op.troubled = True  # bytes nobody asked for: a late or repeated reply
-        if (wait := self._heard + self.turnaround - self.clock.now()) > 0:
+        if pending := self._take_pending(0.0):
+            self._stray(pending)  # bytes nobody asked for: a late or repeated reply
+        if (wait := self._heard_at + self.turnaround - self.clock.now()) > 0:
             self.clock.sleep(wait)
+        rid = self._rid(req)
         self.requests += 1
-        self._recent.append(req)
+        if req.fc == READ:
+            self._previous[req.unit] = (2 * req.count, op.repeating)
+        else:
+            self._writes += 1
+            for a in range(req.address, req.address + req.count):
+                self._written[(req.unit, a)] = self._writes
         sent_at = self.clock.now()
+        deadline = sent_at + self.timeout + self._wire_time(req)
         if self.trace:
             self.trace(True, req.frame)
+        self._sent.append(req.frame)
         self.wire.send(req.frame)
         try:
-            frame, extra = self._receive(req, sent_at + self.timeout)
+            frame, extra = self._receive(req, deadline)
             try:
                 words = req.answer(frame, op.what)
+                code = None
+            except ModbusException as exc:
+                words, code = [], exc.code
             except NotAnswer as exc:
-                raise _fault(exc, len(frame) + len(extra)) from None
-            if extra:
-                raise LineFault("extra", len(frame) + len(extra), f"{len(extra)} more bytes after the reply")
-            return words
+                raise _fault(exc, len(frame) + len(extra), frame + extra) from None
+            now = self.clock.now()
+            if extra and extra != frame * (len(extra) // len(frame)):
+                self.ledger.heard(frame, rid, now)
+                raise LineFault("extra", len(frame) + len(extra), f"{len(extra)} more bytes after the reply", extra)
+            if extra:  # copies of the reply itself: a repeating line, but this reply stands as its own copies do
+                self._trouble_until = now + self.ledger.owed_s
+            ambiguous = self._ambiguous(req, rid, frame, now)
+            self.ledger.heard(frame, rid, now)
+            return _Reply(words, code, frame, ambiguous)
         except LineFault as exc:
             fault = exc
-        self._quiet(fault, sent_at)
+        if fault.kind != "silent" or fault.data:
+            # Silence alone shows nothing on the line that repeats or comes late: the reply it owes is in the ledger,
+            # and one that comes within the late window is a stray frame that marks the line (a probe of ids that
+            # are silent by design, before a line speed's trial, does not make every repeated read confirmed).
+            self._trouble_until = self.clock.now() + self.ledger.owed_s
+        self._owe(req)
+        self._quiet(fault, deadline)
         op.spend(fault)
         raise fault
+
+    def _wire_time(self, req: Request) -> float:
+        """Seconds the request and its longest reply take on the line, at the baud rate when it is known."""
+        if not self.char_s:
+            return 0.0
+        reply = 5 + 2 * req.count if req.fc == READ else 8
+        return (len(req.frame) + reply + GAP_CHARS) * self.char_s
 
     def _receive(self, req: Request, deadline: float) -> tuple[bytes, bytes]:
         """(reply frame, bytes after it) for req; LineFault when none came in time, NotAnswer when the bytes
@@ -252,7 +420,10 @@ class Exchange:
             try:
                 n = req.reply_length(buf)
             except NotAnswer as exc:
-                raise _fault(exc, len(buf)) from None
+                if (rest := self._skip_stray(buf, deadline)) is None:
+                    raise _fault(exc, len(buf), buf) from None
+                buf = rest  # a whole frame for another request, set aside: the reply may still follow
+                continue
             if n is not None and len(buf) >= n:
                 return buf[:n], buf[n:] + self._take_pending(self.settle)
             left = deadline - self.clock.now()
@@ -262,6 +433,28 @@ class Exchange:
             if buf and not chunk:
                 raise LineFault("garbled", len(buf), "a partial reply")  # the line went quiet mid-frame
             buf += chunk
+
+    def _skip_stray(self, buf: bytes, deadline: float) -> bytes | None:
+        """What follows the whole valid frame for another request (an echo of one of ours, a late, repeated or
+        foreign reply) that `buf` starts with, once it is in and recorded; None when it is no such frame."""
+        echoed = next((f for f in self._sent if buf.startswith(f[: len(buf)])), None)
+        while True:
+            if echoed is not None and not buf.startswith(echoed[: len(buf)]):
+                echoed = None  # it only began like one of our requests
+            n = len(echoed) if echoed is not None else _frame_length(buf)
+            if n is not None and len(buf) >= n:
+                break
+            left = deadline - self.clock.now()
+            if left <= 0 or not (chunk := self._recv(min(left, FRAME_GAP))):
+                return None
+            buf += chunk
+        if echoed is not None and buf.startswith(echoed):
+            self._trouble_until = self.clock.now() + self.ledger.owed_s
+            return buf[n:]
+        if not crc_ok(buf[:n]):
+            return None
+        self._stray(buf[:n])
+        return buf[n:]
 
     def _skip_echo(self, req: Request, deadline: float) -> bytes:
         """Read back our own transmission when the adapter echoes it; the bytes after it."""
@@ -286,15 +479,17 @@ class Exchange:
         return buf[len(sent) :]
 
     # ----- the line -----------------------------------------------------------------------------------------
-    def _quiet(self, fault: LineFault, sent_at: float) -> None:
+    def _quiet(self, fault: LineFault, deadline: float) -> None:
         """Drop what is left of a failed try: a garbled or repeated reply is over once the line is quiet; after
-        another request's reply, the real one may still come (until the timeout); after silence, a late reply
-        (until the late-reply window has passed)."""
-        if fault.kind in ("silent", "stray"):
-            until = sent_at + self.timeout + (self.late_window if fault.kind == "silent" else 0.0)
+        another request's reply or a disagreement, the real one may still come (until the deadline); after
+        silence, a late reply (until the late-reply window has passed)."""
+        data = fault.data
+        if fault.kind in ("silent", "stray", "disagree"):
+            until = deadline + (self.late_window if fault.kind == "silent" else 0.0)
             while (left := until - self.clock.now()) > 0:
-                self._recv(left)
-        self._take_pending(max(self.settle, self.flush_gap))
+                data += self._recv(left)
+        if data := data + self._take_pending(max(self.settle, self.flush_gap)):
+            self._stray(data)
 
     def _take_pending(self, quiet: float, until: int = 0) -> bytes:
         """Bytes already waiting, and those that follow within `quiet` s of each other (or until `until` came)."""
@@ -308,11 +503,41 @@ class Exchange:
     def _recv(self, timeout: float) -> bytes:
         data = self.wire.recv(max(0.0, timeout))
         if data:
-            self._heard = self.clock.now()
+            self._heard_at = self.clock.now()
             if self.trace:
                 self.trace(False, data)
         return data
 
 
-def _fault(exc: NotAnswer, received: int) -> LineFault:
-    return LineFault("garbled" if exc.garbled else "stray", received, str(exc))
+def _frame_length(head: bytes) -> int | None:
+    """The length of the reply frame `head` starts (a read's, a write acknowledgement, an exception); None until
+    three bytes are in, or for a function no reply of ours has."""
+    if len(head) < 3:
+        return None
+    fc = head[1]
+    if fc & 0x80:
+        return 5
+    if fc in (3, 4):
+        return 5 + head[2]
+    return 8 if fc in (WRITE_ONE, WRITE_MANY) else None
+
+
+def _frames(data: bytes) -> list[bytes]:
+    """The CRC-valid reply frames among stray bytes (a read's, a write acknowledgement, an exception)."""
+    found, i = [], 0
+    while i + 5 <= len(data):
+        n = _frame_length(data[i:]) or 8
+        if i + n <= len(data) and crc_ok(data[i : i + n]):
+            found.append(data[i : i + n])
+            i += n
+        else:
+            i += 1
+    return found
+
+
+def _said(answer: Answer) -> str:
+    return f"exception {answer:02d}" if isinstance(answer, int) else str(answer)
+
+
+def _fault(exc: NotAnswer, received: int, data: bytes) -> LineFault:
+    return LineFault("garbled" if exc.garbled else "stray", received, str(exc), data)

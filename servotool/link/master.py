@@ -45,6 +45,8 @@ class RtuMaster:
             settle=silence,
             turnaround=settings.turnaround,
             echo=settings.echo,
+            char_s=_char_time(settings.line),
+            baud=settings.line.baud,
             trace=trace,
         )
 
@@ -58,8 +60,8 @@ class RtuMaster:
         """Whether the adapter echoes what it sends: as set, or as found out (None: not yet known)."""
         return self._exchange.echo
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
-        return self._exchange.read(unit, address, count)
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+        return self._exchange.read(unit, address, count, spare=spare)
 
     def write(
         self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
@@ -81,7 +83,8 @@ class RtuMaster:
     def set_line(self, line: LineSettings) -> None:
         """Speak at other line settings from the next request on (a drive whose baud entry changed it): the serial
         port's own settings, and the frame-ending silence that follows the baud rate; over tcp:// only the record
-        (and the listeners: the embedded simulator hears what its host speaks)."""
+        (and the listeners: the embedded simulator hears what its host speaks). The deadlines allow for the frames'
+        wire time at the new speed either way."""
         if line == self.settings.line:
             return
         if not isinstance(self._port, socket.socket):
@@ -89,6 +92,7 @@ class RtuMaster:
             self._port.reset_input_buffer()
             if self.settings.silence is None:
                 self._exchange.settle = _frame_gap(line.baud)
+        self._exchange.char_s, self._exchange.baud = _char_time(line), line.baud  # the deadlines' wire time
         self.settings = replace(self.settings, line=line)
         for listener in self.line_listeners:
             listener(line)
@@ -113,6 +117,11 @@ class RtuMaster:
 
     def close(self) -> None:
         self._port.close()
+
+
+def _char_time(line: LineSettings) -> float:
+    """Seconds one character takes on the line: start bit, data bits, parity bit, stop bits."""
+    return (1 + line.bytesize + (line.parity != "N") + line.stopbits) / line.baud
 
 
 def _frame_gap(baud: int) -> float:

@@ -39,7 +39,11 @@ class LinkSettings:
 class Link(Protocol):
     """What drive operations need from a Modbus master."""
 
-    def read(self, unit: int, address: int, count: int) -> list[int]: ...
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+        """`count` registers at `address`. spare = registers before and after that may be read as well (whole
+        readable entries): a master without transaction ids reads them to tell its replies apart."""
+        ...
+
     def write(
         self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
     ) -> None:
@@ -111,9 +115,12 @@ PARITY_NAMES = {"N": "none", "E": "even", "O": "odd"}
 SYSFS_USB_SERIAL = Path("/sys/bus/usb-serial/devices")
 
 
-def open_serial(port: str, line: LineSettings, timeout: float, low: str | None = None) -> serial.Serial:
-    """Open and configure a serial port for exclusive use; DeviceError naming the real cause when it will not.
-    low: a control line (dtr, rts) held low from the moment the port opens (a heartbeat's resting level)."""
+def open_serial(
+    port: str, line: LineSettings, timeout: float, low: str | None = None, doing: str = "open port"
+) -> serial.Serial:
+    """Open and configure a serial port for exclusive use; DeviceError naming the real cause when it will not
+    ('cannot {doing} {port}: ...'). low: a control line (dtr, rts) held low from the moment the port opens (a
+    heartbeat's resting level)."""
     import serial
 
     try:
@@ -132,7 +139,7 @@ def open_serial(port: str, line: LineSettings, timeout: float, low: str | None =
         s.open()
         return s
     except Exception as exc:  # SerialException, OSError, termios.error (not an OSError), ValueError
-        raise DeviceError(f"cannot open port {port}: {port_problem(port, exc, line)}") from None
+        raise DeviceError(f"cannot {doing} {port}: {port_problem(port, exc, line)}") from None
 
 
 class ControlLine:

@@ -9,38 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from servotool.errors import ModbusException
+from servotool.link.crc import crc_ok, with_crc
 
 READ, WRITE_ONE, WRITE_MANY = 3, 6, 16
 EXCEPTION_LENGTH = 5
-
-
-def _crc_table() -> list[int]:
-    table = []
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-        table.append(crc)
-    return table
-
-
-_TABLE = _crc_table()
-
-
-def crc16(data: bytes) -> int:
-    """The Modbus CRC-16 of data (sent low byte first)."""
-    crc = 0xFFFF
-    for b in data:
-        crc = (crc >> 8) ^ _TABLE[(crc ^ b) & 0xFF]
-    return crc
-
-
-def with_crc(body: bytes) -> bytes:
-    return body + crc16(body).to_bytes(2, "little")
-
-
-def crc_ok(frame: bytes) -> bool:
-    return len(frame) >= 4 and crc16(frame[:-2]) == int.from_bytes(frame[-2:], "little")
 
 
 class NotAnswer(Exception):

@@ -344,14 +344,6 @@ class Profile:
             self.__dict__["_alias_index"] = index
         return index
 
-    def readable_addresses(self) -> frozenset[int]:
-        """Every address of a readable entry (built on first use: a coalesced read asks for it every time)."""
-        found: frozenset[int] | None = self.__dict__.get("_readable_index")
-        if found is None:
-            found = frozenset(a for e in self.entries if e.readable for a in e.addresses)
-            self.__dict__["_readable_index"] = found
-        return found
-
     def role(self, name: str) -> Entry | None:
         """The entry a semantic role maps to, or None when the profile lacks it."""
         code = self.roles.get(name)

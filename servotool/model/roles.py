@@ -87,6 +87,37 @@ def sim_extensions(profile: Profile) -> list[SimExtension]:
                 f"are forced; the manual's words read as the forced levels ({profile.forced_inputs.source})",
             )
         )
+    notch = profile.role("notch1_freq")
+    if notch is not None:
+        width = profile.role("notch1_width")
+        depth = profile.role("notch1_depth") or profile.role("notch1_attenuation")
+        found.append(
+            SimExtension(
+                "notch width and depth levels",
+                "NOT IN THE MANUAL: it names a frequency, a width level and a depth level per notch "
+                f"({notch.code}, {width.code if width else '-'}, {depth.code if depth else '-'}: {notch.source}) but "
+                "not the filter they make; the simulator's notch passes depth % at its centre (SD25: cuts depth %, "
+                "its sense not stated) over a -3 dB band of width x 10 % of the centre frequency",
+            )
+        )
+    adaptive = profile.role("adaptive_notch")
+    if adaptive is not None:
+        found.append(
+            SimExtension(
+                f"adaptive notch ({adaptive.code})",
+                "NOT IN THE MANUAL: it names the modes, not how the drive finds a resonance; the simulator's sets "
+                "notch 3 at the machine's own resonance (width level 2, depth 0) once the torque command vibrates "
+                "(above 20 Hz, 1 % of rated torque RMS) with the servo on",
+            )
+        )
+    if any(profile.role(r) is not None for r in ("friction_comp_fwd", "friction_comp_rev", "torque_offset")):
+        found.append(
+            SimExtension(
+                "friction compensation by direction",
+                "NOT IN THE MANUAL: the simulator adds the forward or reverse compensation by the sign of the "
+                "speed reference (none within 1 rpm of zero); the manual names the torques, not when they switch",
+            )
+        )
     if profile.motor is None:
         found.append(
             SimExtension("motor", "no motor data in the profile: the simulator assumes a 400 W, 3000 rpm motor")

@@ -34,6 +34,7 @@ from servotool.sim.alarms import AlarmLog
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.handover import Handover, MachineState
 from servotool.sim.identification import Identification, Progress
+from servotool.sim.loop_functions import FrictionFeedForward, NotchSetting
 from servotool.sim.mechanics import MechanicsSettings
 from servotool.sim.plant import (
     BRAKE_HOLD_X_RATED,
@@ -50,6 +51,10 @@ DEFAULT_MOTOR = Motor(source="servotool default: 400 W, 3000 rpm")
 # motion, ramped and without an alarm, when no motion-role write arrives for this long.
 FAKE_WATCHDOG_MS = 500.0
 COUNT_UNITS = ("counts", "count", "pulse", "pulses", "p")
+NOTCHES = 4  # notch roles notch1_* .. notch4_*
+ADAPT_VIBRATION_PCT = 1.0  # the simulator's adaptive notch acts once the torque command vibrates this much
+ADAPTIVE_NOTCH = 3  # the notch an adaptive notch takes (IS620P: notch 3 for one, 3 and 4 for two; unverified)
+ADAPTED_WIDTH, ADAPTED_DEPTH = 2, 0  # and how it sets it
 STOP_STEP_S = 0.01  # a quiet ramp-down after host loss is checked for standstill at this resolution
 
 
@@ -170,6 +175,72 @@ class Firmware:
             max_speed_rpm=min(self._eng("max_speed", self.motor.max_speed_rpm), self.motor.max_speed_rpm * 1.2),
             jog_accel_ms=max(1.0, self._eng("jog_accel", 200.0)) * self.motor.rated_speed_rpm / self.profile.ramp_rpm(),
             following_limit_rev=self._following_limit_rev(),
+            notches=self._notches(),
+            friction_ff=self._friction_ff(),
+        )
+
+    def _notches(self) -> tuple[NotchSetting, ...]:
+        """The torque-command notches the profile maps: roles notchN_freq, notchN_width and notchN_depth (% passed
+        at the centre, IS620P's depth level) or notchN_attenuation (% cut there: how the simulator reads SD25's
+        depth, whose sense its manual leaves open, so that its factory notches pass everything)."""
+        found = []
+        for n in range(1, NOTCHES + 1):
+            if self.profile.role(f"notch{n}_freq") is None:
+                continue
+            if self.profile.role(f"notch{n}_depth") is not None:
+                depth = self._eng(f"notch{n}_depth", 100.0)
+            else:
+                depth = 100.0 - self._eng(f"notch{n}_attenuation", 0.0)
+            found.append(NotchSetting(self._eng(f"notch{n}_freq", 0.0), self._eng(f"notch{n}_width", 0.0), depth))
+        return tuple(found)
+
+    def _adapt_notch(self) -> None:
+        """The drive's adaptive notch (role adaptive_notch: IS620P H09-02), a simulator extension: its manual names
+        the modes, not how the drive finds a resonance. Modes 1 and 2 set notch ADAPTIVE_NOTCH at the machine's own
+        resonance once the torque command vibrates (ADAPT_VIBRATION_PCT) with the servo on; mode 3 only reports it
+        (role resonance_result); a machine without a resonance in the notch's range gets nothing."""
+        entry = self.profile.role("adaptive_notch")
+        if entry is None:
+            return
+        mode = self.drive.bank.effective_value(entry.code)
+        hz = self.plant.settings.mechanics.resonance_hz
+        freq = self.profile.role(f"notch{ADAPTIVE_NOTCH}_freq")
+        self.plant.watch_vibration = mode in (1, 2, 3)
+        if mode not in (1, 2, 3) or hz <= 0 or freq is None or not self.plant.servo_on:
+            return
+        if self.plant.vibration_pct < ADAPT_VIBRATION_PCT:
+            return
+        raw = eng_to_raw(freq, hz, clamp=False)
+        if not freq.min <= raw <= freq.max:
+            return
+        wanted = {"freq": raw, "width": ADAPTED_WIDTH, "depth": ADAPTED_DEPTH}
+        found = self.profile.role("resonance_result")
+        changed = False
+        if mode == 3:
+            targets = [(found, raw)] if found is not None else []
+        else:
+            targets = [(self.profile.role(f"notch{ADAPTIVE_NOTCH}_{k}"), v) for k, v in wanted.items()]
+        for target, value in targets:
+            if target is not None and self.drive.bank.effective_value(target.code) != value:
+                self.drive.bank.apply_parameter(target, value)
+                changed = True
+        if changed:
+            self.plant.set_gains(self._gains())
+
+    def _friction_ff(self) -> FrictionFeedForward:
+        """The friction compensation the profile maps (roles torque_offset, friction_comp_fwd/_rev,
+        viscous_comp_fwd/_rev), each in % of rated torque (an entry in another unit is not simulated)."""
+
+        def pct(role: str) -> float:
+            entry = self.profile.role(role)
+            return self._eng(role, 0.0) if entry is not None and entry.unit == "%" else 0.0
+
+        return FrictionFeedForward(
+            pct("torque_offset"),
+            pct("friction_comp_fwd"),
+            pct("friction_comp_rev"),
+            pct("viscous_comp_fwd"),
+            pct("viscous_comp_rev"),
         )
 
     def _following_limit_rev(self) -> float:
@@ -222,6 +293,7 @@ class Firmware:
                 self._queued = False
                 self._start_segment()
         self.plant.advance_to(now)
+        self._adapt_notch()
         if self.plant.alarm is not None:
             if self.mode != "off":
                 self.mode = "off"

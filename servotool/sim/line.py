@@ -27,14 +27,17 @@ MAX_READ, MAX_WRITE = 125, 123  # the specification's quantity limits (FC03/04 a
 def refusal(pdu: bytes) -> int | None:
     """The exception a slave answers before touching any register, as the Modbus specification has it: 01 for a
     function the drive lacks (at any address), 03 for a quantity out of range (0, over 125 read, over 123
-    written, a byte count that disagrees); None for a request to serve."""
+    written) or a length that disagrees with the request (a byte count that is not twice the quantity or not the
+    data that came); None for a request to serve."""
     fc = pdu[0] if pdu else 0
     if fc not in READ_CODES + WRITE_CODES:
         return ILLEGAL_FUNCTION
-    if fc != 6 and len(pdu) >= 5:
+    if len(pdu) < 5 or (fc in (*READ_CODES, 6) and len(pdu) != 5):
+        return ILLEGAL_VALUE  # a frame the silence ended short (or long) of what its function needs
+    if fc != 6:
         count = int.from_bytes(pdu[3:5], "big")
         limit = MAX_READ if fc in READ_CODES else MAX_WRITE
-        if not 1 <= count <= limit or (fc == 16 and (len(pdu) < 6 or pdu[5] != 2 * count)):
+        if not 1 <= count <= limit or (fc == 16 and (len(pdu) < 6 or pdu[5] != 2 * count or len(pdu) != 6 + pdu[5])):
             return ILLEGAL_VALUE
     return None
 

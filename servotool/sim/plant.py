@@ -25,6 +25,7 @@ import random
 from dataclasses import asdict, dataclass, field
 
 from servotool.model.profile import Motor as MotorData
+from servotool.sim.loop_functions import FrictionFeedForward, Notch, NotchSetting
 from servotool.sim.mechanics import Friction, Mechanics, MechanicsSettings, MotorState, friction_step
 
 TS = 125e-6  # control period, s
@@ -41,6 +42,8 @@ ESTOP_MAX_S = 0.5  # an alarm stop at the torque limit lasts at most this long, 
 OVERSPEED_X_MAX = 1.2  # the overspeed alarm: this many times the motor's top speed (IS620P H0A-08 = 0: automatic)
 LOCKED_SPEED_SHARE = 0.1  # a locked rotor: under this share of the commanded speed ...
 LOCKED_TORQUE_SHARE = 0.9  # ... with the torque at this share of its limit or more
+VIBRATION_LOWPASS_S = 1.0 / (2 * math.pi * 20.0)  # the torque command's vibration: what lies above 20 Hz ...
+VIBRATION_AVERAGE_S = 0.05  # ... as an RMS over about this long (the simulator's adaptive notch watches it)
 # The plant's dynamic state, as persisted between processes serving one simulated drive (the drive stays powered).
 STATE_FIELDS = (
     "time",
@@ -98,6 +101,8 @@ class DriveGains:
     max_speed_rpm: float = 6000.0
     jog_accel_ms: float = 200.0  # time from 0 to rated speed
     following_limit_rev: float = FOLLOWING_LIMIT_REV
+    notches: tuple[NotchSetting, ...] = ()  # torque-command notches (sim.loop_functions)
+    friction_ff: FrictionFeedForward = field(default_factory=FrictionFeedForward)  # friction compensation
 
 
 @dataclass(frozen=True)
@@ -144,6 +149,9 @@ class Plant:
         self._defl_rate = 0.0  # and its rate, rad/s
         self._locked_s = 0.0  # how long the rotor has been locked under a speed command
         self._saturated_s = 0.0  # how long the speed regulator's output has sat at the torque limit
+        self._t_slow = 0.0  # the torque command low-passed (VIBRATION_LOWPASS_S) ...
+        self._vibration = 0.0  # ... and the mean square of what lies above it, N*m^2
+        self.watch_vibration = False  # measured only while something watches it (an adaptive notch that adapts)
         self.protections = Protections()
         self.set_settings(settings)
         self.set_gains(gains)
@@ -158,7 +166,11 @@ class Plant:
         self._rng = random.Random(settings.seed)
 
     def set_gains(self, gains: DriveGains) -> None:
+        old = getattr(self, "gains", None)
         self.gains = gains
+        if old is None or old.notches != gains.notches:  # a filter keeps its state while its setting stays
+            self._notches = [Notch(n, TS) for n in gains.notches if n.active(TS)]
+        self._ff = gains.friction_ff if gains.friction_ff.any else None
         j_conf = self.motor.jm * (1.0 + gains.inertia_ratio_configured)
         self._kp = 2 * math.pi * gains.speed_gain_hz * j_conf
         self._ti = max(gains.speed_integral_ms, 0.1) / 1000.0
@@ -264,6 +276,11 @@ class Plant:
         return round((self._pos_ref - self.theta) / (2 * math.pi) * self.motor.counts_per_rev)
 
     @property
+    def vibration_pct(self) -> float:
+        """The torque command's content above 20 Hz, RMS over about 50 ms, in % of rated torque."""
+        return math.sqrt(max(self._vibration, 0.0)) / self.motor.rated_torque_nm * 100.0
+
+    @property
     def load_rate_pct(self) -> float:
         return self._load
 
@@ -338,12 +355,19 @@ class Plant:
             self._loop_ref = self._ref
         err = self._loop_ref - self._w_meas
         unclamped = self._kp * (err + self._integral / self._ti)
+        if self._ff is not None:
+            unclamped += self._feed_forward_nm(self._ff)
         if abs(unclamped) < self._t_lim:  # anti-windup: integrate only while not saturated
             self._integral += err * TS
             self._saturated_s = 0.0
         else:
             self._saturated_s += TS
         return max(-self._t_lim, min(self._t_lim, unclamped))
+
+    def _feed_forward_nm(self, ff: FrictionFeedForward) -> float:
+        """The friction compensation's torque for the speed reference now."""
+        pct = ff.torque_pct(self._loop_ref / RAD_S_PER_RPM, self.motor.rated_speed_rpm)
+        return pct / 100.0 * self.motor.rated_torque_nm
 
     def _fence_stop(self) -> None:
         """Beyond an overtravel fence that stops: the speed in the direction of travel is forced to zero at once."""
@@ -359,6 +383,12 @@ class Plant:
     def _step(self) -> None:
         # the torque applied now was commanded one period ago (computation delay), then filtered
         t_cmd = self._controller()
+        if self._notches:
+            for notch in self._notches:
+                t_cmd = notch.step(t_cmd)
+        if self.watch_vibration:
+            self._t_slow += (t_cmd - self._t_slow) * (TS / (VIBRATION_LOWPASS_S + TS))
+            self._vibration += ((t_cmd - self._t_slow) ** 2 - self._vibration) * (TS / VIBRATION_AVERAGE_S)
         applied_target = self._t_delayed
         self._t_delayed = t_cmd
         if self._tf > 0:

@@ -1,4 +1,5 @@
-"""Serve simulated drives as Modbus RTU slaves with pymodbus' server (serial line or RTU-over-TCP).
+"""Serve simulated drives as Modbus RTU slaves: RTU over TCP with pymodbus' server, a serial line with
+sim/serial.py's framing.
 
 The only module of the simulator that touches pymodbus.
 """
@@ -17,11 +18,11 @@ from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import NoSuchIdException
 from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
-from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from servotool.errors import DeviceError
-from servotool.link.ports import open_serial, parse_tcp, port_problem
+from servotool.link.ports import parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.firmware import build_drive
@@ -124,8 +125,8 @@ class _SpecDecoder(DecodePDU):
         return super().decode(frame)
 
 
-async def _start(port: str, served: Line, line: LineSettings, trace: Callable[[bool, bytes], None] | None):
-    """pymodbus' server on a port (serial at `line`'s settings, or tcp://), answering as `served` has it."""
+async def _start(port: str, served: Line, trace: Callable[[bool, bytes], None] | None):
+    """pymodbus' RTU-over-TCP server for the drives on a tcp://HOST:PORT spec, started, answering as `served` has it."""
     # The server wants a datastore to start with; the line takes its place below.
     devices = [SimDevice(id=unit, simdata=[SimData(address=0, datatype=DataType.UINT16)]) for unit in served.drives]
 
@@ -135,43 +136,26 @@ async def _start(port: str, served: Line, line: LineSettings, trace: Callable[[b
         return data
 
     tcp = parse_tcp(port)
-    server: ModbusTcpServer | ModbusSerialServer
-    if tcp:
-        try:  # pymodbus says only 'Could not start listen': bind once here, where the cause gets named
-            socket.create_server(tcp).close()
-        except OSError as exc:
-            raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
-        # A real RS485 slave stays silent for other unit ids, so missing devices get no answer.
-        server = ModbusTcpServer(
-            devices,
-            framer=FramerType.RTU,
-            address=tcp,
-            trace_packet=hook if trace else None,
-            ignore_missing_devices=True,
-            broadcast_enable=True,
-        )
-    else:
-        # pymodbus would fail with a bare '(22, Invalid argument)' for, say, parity on a pty: open it once here,
-        # where the cause gets named.
-        open_serial(port, line, 0.1).close()
-        server = ModbusSerialServer(
-            devices,
-            framer=FramerType.RTU,
-            port=port,
-            baudrate=line.baud,
-            parity=line.parity,
-            stopbits=line.stopbits,
-            bytesize=line.bytesize,
-            trace_packet=hook if trace else None,
-            ignore_missing_devices=True,
-            broadcast_enable=True,  # unit 0: applied by every drive, unanswered
-        )
+    assert tcp is not None, "a serial line is framed by sim/serial.py"
+    try:  # pymodbus says only 'Could not start listen': bind once here, where the cause gets named
+        socket.create_server(tcp).close()
+    except OSError as exc:
+        raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
+    # A real RS485 slave stays silent for other unit ids, so missing devices get no answer.
+    server = ModbusTcpServer(
+        devices,
+        framer=FramerType.RTU,
+        address=tcp,
+        trace_packet=hook if trace else None,
+        ignore_missing_devices=True,
+        broadcast_enable=True,  # unit 0: applied by every drive, unanswered
+    )
     server.context = _Datastore(served)  # type: ignore[assignment]
     server.decoder = _SpecDecoder()
     try:
         await server.serve_forever(background=True)
-    except Exception as exc:  # OSError, termios.error, pyserial's errors, RuntimeError
-        raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc, line)}") from None
+    except Exception as exc:  # OSError, RuntimeError
+        raise DeviceError(f"cannot serve on {port}: {port_problem(port, exc)}") from None
     return server
 
 
@@ -191,15 +175,23 @@ def serve_forever(
 ) -> None:
     """Serve in the foreground until interrupted; with faults, behind a bad line on the tcp:// port. The answers
     are timed as on the line the drives are set to (`line`, else their profile's) unless `choice`, their own
-    setting or SERVOTOOL_SIM_LINE_BAUD says otherwise (line.emulated); on a serial port, by the port itself."""
+    setting or SERVOTOOL_SIM_LINE_BAUD says otherwise (line.emulated); on a serial port, by the port itself. A
+    serial port is framed by sim/serial.py (the 3.5-character rule pymodbus' framer cannot keep), RTU over TCP by
+    pymodbus."""
     tcp = parse_tcp(port)
     if faults is not None and not tcp:
         raise DeviceError(f"cannot serve on {port}: line faults need a tcp://HOST:PORT port")
     served = Line(drives, threading.Lock(), line, choice, wired=not tcp, default=env_choice())
+    if not tcp:
+        from servotool.sim.serial import SerialSlave
+
+        slave = SerialSlave(port, served, line or LineSettings(), trace)
+        slave.serve(ready=(lambda: ready(port, served)) if ready else None)
+        return
 
     async def main() -> None:
         proxy = None
-        server = await _start("tcp://127.0.0.1:0" if faults else port, served, line or LineSettings(), trace)
+        server = await _start("tcp://127.0.0.1:0" if faults else port, served, trace)
         bound = bound_port(server) if tcp else 0
         if faults is not None and tcp:
             from servotool.sim.faults import FaultProxy
@@ -269,9 +261,10 @@ class EmbeddedSim:
         # the start would cost a scheduling round trip each on a busy machine.
         try:
             self._server: ModbusTcpServer | None = self._loop.run_until_complete(
-                _start("tcp://127.0.0.1:0", self.line, LineSettings(), None)
+                _start("tcp://127.0.0.1:0", self.line, None)
             )
             port = bound_port(self._server)
+            self.direct_port = f"tcp://127.0.0.1:{port}"  # the drives themselves, behind any bad line
             if faults is not None:
                 from servotool.sim.faults import FaultProxy
 

@@ -78,7 +78,8 @@ class VirtualLink:
             raise DeviceError(f"{what}: no response (no simulated drive has unit {unit})")
         return drive
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+        """`count` registers; `spare` is not used: in process, a reply cannot be taken for another's."""
         what = f"read {count} register(s) at {address} from unit {unit}"
         self.requests += 1
         self._stall()

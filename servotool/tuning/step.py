@@ -11,7 +11,7 @@ import numpy as np
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
-from servotool.model.codec import raw_to_eng
+from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.quantity import quantity
 from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
@@ -197,6 +197,18 @@ def plan_step(drive: Drive, travel_rev: float) -> StepPlan:
     return StepPlan(speed, duration, b)
 
 
+@dataclass(frozen=True)
+class Leg:
+    """One leg of a step motion: samples from the moment its command went out (the first: at rest just before)."""
+
+    direction: int
+    ramp_ms: float  # the JOG ramp of this leg (time from 0 to rated speed)
+    t: tuple[float, ...]
+    speed_rpm: tuple[float, ...]
+    torque_pct: tuple[float, ...]  # empty where the leg read no torque
+    command_ms: float  # how long its command took to send
+
+
 def step_response(
     drive: Drive, speed_rpm: float, duration_s: float = 0.6, timing: Clock | None = None, load_unknown: bool = False
 ) -> StepResponse:
@@ -208,6 +220,24 @@ def step_response(
     holds position between the steps, the position gain is lowered meanwhile so that the hold cannot swing up on
     a load far above the configured ratio (tuning.stable_hold); the speed loop being checked is left as it is.
     """
+    legs, loop_hz = step_legs(drive, speed_rpm, duration_s, timing, load_unknown=load_unknown)
+    return _response(legs[0], speed_rpm, duration_s, loop_hz)
+
+
+def step_legs(
+    drive: Drive,
+    speed_rpm: float,
+    duration_s: float,
+    timing: Clock | None = None,
+    *,
+    load_unknown: bool = False,
+    back_ramp_ms: float | None = None,
+    torque: bool = False,
+) -> tuple[list[Leg], float | None]:
+    """The step motion: forward at the shortest ramp for duration_s, stop, then back for as long (at back_ramp_ms,
+    a trapezoid, where given: no farther, since a JOG stops at the ramp it starts with), stop; speed (and torque
+    where asked, in the fewest requests) at the line's full rate. Returns the legs and the speed loop's gain. It
+    ends through the motion's one stop sequence (step_response)."""
     p, timing = drive.profile, timing or RealClock()
     jogger = Mover(drive, keepalive_interval_s(drive), FEATURE, timing)
     # The drive's own protections for the step and back (it stays within the travel step_duration_s allowed it),
@@ -215,21 +245,21 @@ def step_response(
     jogger.protect_for(speed_rpm, 1.3 * speed_rpm / 60.0 * duration_s / 0.9)
     jog_accel = p.need_role("jog_accel", FEATURE)
     speed_e = p.need_role("speed_feedback", FEATURE)
+    read = [speed_e, p.need_role("torque_feedback", FEATURE)] if torque else [speed_e]
     loop_hz = drive_loop(drive).speed_hz
-    t: list[float] = []
-    v: list[float] = []
-    command_s = 0.0
+    legs: list[Leg] = []
 
-    def speed() -> float:
-        value = float(raw_to_eng(speed_e, drive.read_entries([speed_e])[0].raw))
+    def sample() -> tuple[float, float | None]:
+        readings = drive.read_entries(read)
         jogger.keep_alive()
         jogger.watch_inputs()
-        return value
+        values = [float(raw_to_eng(r.entry, r.raw)) for r in readings]
+        return values[0], (values[1] if torque else None)
 
     def stop() -> None:
         jogger.command(0)
         end = timing.now() + 2.0
-        while timing.now() < end and abs(speed()) > 3:
+        while timing.now() < end and abs(sample()[0]) > 3:
             timing.sleep(0.02)
 
     with jogger.stopping(need_ramp=True) as saved:  # however the check ends: the one stop sequence
@@ -240,23 +270,33 @@ def step_response(
         jogger.set_speed(speed_rpm)  # the settings before the first step, so that its time counts from the command
         jogger.set_ramp(jog_accel.min)
         for direction in (1, -1):
-            rest = speed()  # the same zero for every step: at rest, just before the command
+            ramp_raw = jog_accel.min
+            if direction < 0 and back_ramp_ms is not None:
+                ramp_raw = eng_to_raw(jog_accel, back_ramp_ms)
+            rest, rest_torque = sample()  # the same zero for every step: at rest, just before the command
+            t, v, q = [0.0], [rest], [rest_torque]
             t0 = timing.now()
-            jogger.start(direction, speed_rpm, jog_accel.min, stop_after_s=duration_s)
-            if direction > 0:
-                command_s = timing.now() - t0
-                t.append(0.0)
-                v.append(rest)
-            # nothing but the speed in this loop (the keep-alive only when due): the line's full rate
+            jogger.start(direction, speed_rpm, ramp_raw, stop_after_s=duration_s)
+            command_s = timing.now() - t0
+            # nothing but the samples in this loop (the keep-alive only when due): the line's full rate
             while (now := timing.now() - t0) < duration_s:
-                value = speed()
-                if direction > 0:
-                    t.append(now)
-                    v.append(value)
+                value, moment = sample()
+                t.append(now)
+                v.append(value)
+                q.append(moment)
             stop()
+            torques = tuple(float(x) for x in q if x is not None) if torque else ()
+            ramp_ms = float(raw_to_eng(jog_accel, ramp_raw))
+            legs.append(Leg(direction, ramp_ms, tuple(t), tuple(v), torques, command_s * 1000.0))
         active = active_alarm(drive)
         if active:
             raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
+    return legs, loop_hz
+
+
+def _response(leg: Leg, speed_rpm: float, duration_s: float, loop_hz: float | None) -> StepResponse:
+    """The forward leg's overshoot, settling and ripple."""
+    t, v = list(leg.t), list(leg.speed_rpm)
     band = 0.05 * speed_rpm  # 5 %: a 2 % band sits inside typical speed-reading noise
     outside = [i for i, x in enumerate(v) if abs(x - speed_rpm) > band]
     settled = (
@@ -275,6 +315,6 @@ def step_response(
         tuple(v),
         interval_ms=float(np.median(gaps)) if gaps.size else duration_s * 1000.0,
         longest_gap_ms=float(np.max(gaps)) if gaps.size else duration_s * 1000.0,
-        command_ms=command_s * 1000.0,
+        command_ms=leg.command_ms,
         loop_hz=loop_hz,
     )

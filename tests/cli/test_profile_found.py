@@ -25,6 +25,13 @@ def _identity_requests(profile_id: str) -> list[str]:
     return frames
 
 
+def _reads(err: str) -> list[str]:
+    """The -v requests, a read sent again at once counted once: the link's confirmation of a reply that repeats one
+    heard for another read (SD25's So-00 and So-46 both answer 100), not a second look at the identity."""
+    sent = [line for line in err.splitlines() if line.startswith(">> ")]
+    return [line for i, line in enumerate(sent) if i == 0 or sent[i - 1] != line]
+
+
 @pytest.mark.parametrize("profile", PROFILES)
 def test_the_drive_answering_names_its_profile(cli, sim_serve, profile):
     port = sim_serve("-P", profile)
@@ -36,7 +43,7 @@ def test_the_drive_answering_names_its_profile(cli, sim_serve, profile):
     found = [line for line in r.err.splitlines() if "found:" in line]
     assert len(found) == 1 and f"{p.model} (profile {profile}) by " in found[0], r.err
     for request in _identity_requests(profile):  # read to find it, not again to check it
-        assert r.err.count(request) == 1, (request, r.err)
+        assert _reads(r.err).count(request) == 1, (request, r.err)
 
 
 def test_the_profile_given_still_decides(cli, sim_serve):

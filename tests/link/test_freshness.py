@@ -8,8 +8,8 @@ from collections import deque
 import pytest
 
 from servotool.errors import DeviceError
+from servotool.link.crc import with_crc
 from servotool.link.exchange import Exchange
-from servotool.link.rtu import with_crc
 
 TIMEOUT = 0.1
 REPLY_S = 0.001
@@ -18,13 +18,17 @@ REPLY_S = 0.001
 class ScriptedLine:
     """A Wire to one drive (unit 1) on virtual time; each request is answered as the next script step says:
     ok, drop (acted on, no reply), lost (never reached the drive), dup (answered twice), late:S (answered S s
-    after the request)."""
+    after the request), copy:G (answered, and again G s later), held:N (answered just before the reply to the N-th
+    request after it: later than any timeout). Addresses in `refuse` answer exception 02."""
 
-    def __init__(self, regs: dict[int, int], script: list[str], then: str = "ok") -> None:
-        self.regs, self.script, self.then = dict(regs), deque(script), then
+    def __init__(
+        self, regs: dict[int, int], script: list[str], then: str = "ok", refuse: frozenset[int] = frozenset()
+    ) -> None:
+        self.regs, self.script, self.then, self.refuse = dict(regs), deque(script), then, refuse
         self.now = 0.0
         self.sent: list[bytes] = []
         self._due: list[tuple[float, bytes]] = []
+        self._held: list[list] = []  # [requests still to pass, frame]
 
     def writes(self) -> int:
         return sum(1 for f in self.sent if f[1] in (6, 16))
@@ -32,13 +36,25 @@ class ScriptedLine:
     def send(self, frame: bytes) -> None:
         self.sent.append(frame)
         step = self.script.popleft() if self.script else self.then
+        for held in self._held:
+            held[0] -= 1
+        due = b"".join(f for n, f in self._held if n == 0)
+        self._held = [h for h in self._held if h[0] > 0]
         if step == "lost":
             return
         reply = self._serve(frame)
         if step == "drop":
             return
-        delay = float(step.partition(":")[2]) if step.startswith("late") else REPLY_S
-        self._due += [(self.now + delay, reply)] * (2 if step == "dup" else 1)
+        kind, _, arg = step.partition(":")
+        if kind == "held":
+            self._held.append([int(arg), reply])
+            return
+        delay = float(arg) if kind == "late" else REPLY_S
+        if due:
+            self._due.append((self.now + delay / 2, due))
+        self._due.append((self.now + delay, reply))
+        if kind in ("dup", "copy"):
+            self._due.append((self.now + delay + (float(arg) if kind == "copy" else 0.0), reply))
 
     def inject(self, delay: float, data: bytes) -> None:
         """Bytes that arrive on the line `delay` s from now, whatever is asked."""
@@ -56,6 +72,8 @@ class ScriptedLine:
 
     def _serve(self, frame: bytes) -> bytes:
         fc, address = frame[1], int.from_bytes(frame[2:4], "big")
+        if self.refuse & set(range(address, address + int.from_bytes(frame[4:6], "big"))):
+            return with_crc(bytes([1, fc | 0x80, 2]))
         if fc == 3:
             count = int.from_bytes(frame[4:6], "big")
             data = b"".join(self.regs.get(a, 0).to_bytes(2, "big") for a in range(address, address + count))
@@ -91,13 +109,93 @@ def exchange(line: ScriptedLine, retries: int = 2) -> Exchange:
 
 def test_a_late_reply_is_not_taken_for_the_answer_to_the_next_read():
     # The first read's reply comes after its timeout and its late window, while the second read is out; both
-    # read one register, so only the link's confirmation can tell the replies apart.
+    # read one register and cannot widen, so only the ledger of owed replies tells them apart.
     line = ScriptedLine({10: 111, 20: 222}, ["late:0.3", "late:0.08"])
     ex = exchange(line, retries=0)
     with pytest.raises(DeviceError, match=r"no response within 0\.1 s after 1 try"):
         ex.read(1, 10, 1)
+    ex.retries = 1
     assert ex.read(1, 20, 1) == [222]
     assert ex.read(1, 10, 1) == [111]
+
+
+def test_a_monitors_repeated_read_takes_another_length_so_its_copies_cannot_answer_the_next():
+    # A monitor reads 10 and 20 over and over. A copy of 10's reply stands in for its next read (the same registers,
+    # read a moment ago), and the reply it displaced follows: the read of 20 after it is widened by the entry after
+    # 20, so that reply has another length and is set aside.
+    line = ScriptedLine({10: 111, 20: 222, 21: 7}, ["ok", "ok", "copy:0.0005"])
+    ex = exchange(line)
+    for _ in range(3):
+        assert ex.read(1, 10, 1) == [111]
+        assert ex.read(1, 20, 1, spare=(0, 1)) == [222]
+    assert [f[4:6] for f in line.sent[:4]] == [b"\x00\x01", b"\x00\x01", b"\x00\x01", b"\x00\x02"]
+
+
+def test_silence_alone_does_not_make_a_monitors_repeated_reads_confirmed():
+    # A try nobody answers (a probe of an id that is silent by design, before a line speed's trial) leaves its reply
+    # owed but shows nothing that repeats: the repeated reads after it alternate their widths and are used as they
+    # come, one request each.
+    line = ScriptedLine({10: 111, 20: 222, 21: 7}, ["lost"])
+    ex = exchange(line, retries=0)
+    with pytest.raises(DeviceError, match="no response"):
+        ex.read(1, 10, 1)
+    assert [ex.read(1, 20, 1, spare=(0, 1)) for _ in range(6)] == [[222]] * 6
+    assert len(line.sent) == 1 + 6
+
+
+def test_a_read_that_repeats_none_is_not_widened():
+    line = ScriptedLine({10: 111, 20: 222, 21: 7}, [])
+    ex = exchange(line)
+    assert ex.read(1, 10, 1) == [111] and ex.read(1, 20, 1, spare=(0, 1)) == [222]  # a backup's reads
+    assert [f[4:6] for f in line.sent] == [b"\x00\x01", b"\x00\x01"]
+
+
+def test_a_copy_of_another_reads_reply_is_confirmed_not_used():
+    # Same length, no room to widen: the copy repeats a reply heard for another request, so the read is confirmed.
+    line = ScriptedLine({10: 111, 20: 222}, ["copy:0.0005"])
+    ex = exchange(line)
+    assert ex.read(1, 10, 1) == [111]
+    assert ex.read(1, 20, 1) == [222]
+    assert ex.read(1, 10, 1) == [111]
+
+
+def test_a_reply_held_later_than_any_timeout_never_answers_another_read():
+    # The first try's reply is held until just before the reply to the second request after it (the read of 20):
+    # it is owed, so the read of 20 is confirmed, and its disagreeing confirmation is a fault.
+    line = ScriptedLine({10: 111, 20: 222}, ["held:2"])
+    ex = exchange(line, retries=2)
+    assert ex.read(1, 10, 1) == [111]  # the first try silent, the second answered
+    assert ex.read(1, 20, 1) == [222]
+    assert ex.read(1, 10, 1) == [111]
+
+
+def test_two_confirmations_that_disagree_are_a_fault():
+    line = ScriptedLine({10: 111, 20: 222}, ["held:2"])
+    ex = exchange(line, retries=1)
+    assert ex.read(1, 10, 1) == [111]
+    ex.retries = 0
+    with pytest.raises(DeviceError, match=r"replies that disagree after \d tries \(\[111\], then \[222\]"):
+        ex.read(1, 20, 1)
+
+
+def test_a_widened_read_that_meets_an_exception_asks_for_its_registers_alone():
+    line = ScriptedLine({10: 111, 20: 222}, [], refuse=frozenset({21}))
+    ex = exchange(line)
+    assert [ex.read(1, 20, 1, spare=(0, 1)) for _ in range(2)] == [[222], [222]]  # a monitor's
+    assert ex.read(1, 20, 1, spare=(0, 1)) == [222]  # widened to 20..21 first: 21 is refused
+    assert ex.read(1, 20, 1, spare=(0, 1)) == [222]  # and not widened again
+    counts = [b"\x00\x01", b"\x00\x01", b"\x00\x02", b"\x00\x01", b"\x00\x01"]
+    assert [f[4:6] for f in line.sent] == counts
+
+
+def test_the_deadline_allows_for_the_frames_time_on_the_wire():
+    # 16 registers at 2400 baud: the request and reply take 238 ms on the wire, beyond a 0.2 s timeout.
+    char_s = 11 / 2400
+    line = ScriptedLine({a: a for a in range(16)}, ["late:0.35", "lost"])
+    ex = Exchange(line, timeout=0.2, retries=0, char_s=char_s, baud=2400, clock=LineClock(line))
+    assert ex.read(1, 0, 16) == list(range(16))
+    with pytest.raises(DeviceError, match=r"no response within 0\.2 s beyond the 238 ms the request and reply take"):
+        ex.read(1, 0, 16)
 
 
 def test_a_late_reply_within_the_late_window_is_flushed():
@@ -190,10 +288,11 @@ def test_after_a_fault_an_exception_reply_counts_only_when_repeated():
 
     stale_02 = with_crc(bytes([1, 0x83, 2]))  # names no address: could answer any earlier read
     data = with_crc(bytes([1, 3, 2, 0, 42]))
-    line = QueuedLine([b"", stale_02, data, data])  # after a fault, data is confirmed by a second read
+    line = QueuedLine([b"", stale_02, data, data, data])  # the silent read owes a reply: data is confirmed too
     ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=LineClock(line))
     with pytest.raises(DeviceError, match="no response"):
         ex.read(1, 0x10, 1)  # silent: its reply may still come
+    ex.retries = 1
     assert ex.read(1, 0x20, 1) == [42]  # the exception that came first was not believed
     line = QueuedLine([stale_02, stale_02])
     ex = Exchange(line, timeout=TIMEOUT, retries=0, clock=LineClock(line))

@@ -8,7 +8,7 @@ import threading
 import pytest
 
 from servotool.drive import Drive, coalesce_reads
-from servotool.errors import DeviceError
+from servotool.errors import DeviceError, VerifyError
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.server import EmbeddedSim
@@ -20,7 +20,7 @@ class CountingLink:
     def __init__(self, sim) -> None:
         self.sim, self.reads = sim, []
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
         self.reads.append((address, count))
         return self.sim.read(address, count)
 
@@ -105,3 +105,41 @@ def test_silence_is_reported_as_no_response(sim_dir):
         link.close()
     finally:
         sim.close()
+
+
+class StaleOnceLink(CountingLink):
+    """A link whose first read after a write answers with the register's value before the write: a stray reply
+    that slipped through during a read-back."""
+
+    def __init__(self, sim) -> None:
+        super().__init__(sim)
+        self.stale: dict[int, list[int]] = {}
+
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
+        if (old := self.stale.pop(address, None)) is not None:
+            self.reads.append((address, count))
+            return old
+        return super().read(unit, address, count)
+
+    ignore = False  # acknowledge writes but make none
+
+    def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None:
+        self.stale[address] = self.sim.read(address, len(values))
+        if not self.ignore:
+            super().write(unit, address, values, multiple=multiple)
+
+
+def test_a_read_back_that_disagrees_is_read_again_before_it_is_reported(sim_dir):
+    profile = load_profile("dsx7e")
+    sim = build_drive(profile, 1, persist=False)
+    link = StaleOnceLink(sim)
+    drive = Drive(link, profile, 1)
+    entry = profile.entry("Pn101")
+    assert drive.write_verified(entry, 225).new == 225  # the stale 180 read back first, then 225
+    assert link.reads == [(entry.address, 1), (entry.address, 1)]
+    items = [(profile.entry("Pn101"), 230, None), (profile.entry("Pn102"), 320, None)]
+    assert [r.new for r in drive.write_block_verified(items)] == [230, 320]
+    link.ignore, link.reads = True, []  # a drive that ignores the write reads back its old value twice: reported
+    with pytest.raises(VerifyError, match=r"Pn101: wrote 23\.5 but the drive reads back 23\.0"):
+        drive.write_verified(entry, 235)
+    assert link.reads == [(entry.address, 1), (entry.address, 1)]

@@ -165,7 +165,7 @@ class RecordingLink:
         self.regs: dict[int, int] = {}
         self.writes: list[tuple[int, list[int], bool]] = []
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
         return [self.regs.get(a, 0) for a in range(address, address + count)]
 
     def write(self, unit: int, address: int, values: list[int], *, multiple: bool = True) -> None:

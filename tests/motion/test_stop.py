@@ -92,9 +92,9 @@ class _Cut(VirtualLink):
 
     answers = 10**9
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
+    def read(self, unit: int, address: int, count: int, **kw: tuple[int, int]) -> list[int]:
         self._spend()
-        return super().read(unit, address, count)
+        return super().read(unit, address, count, **kw)
 
     def write(self, unit: int, address: int, values: list[int], **kw: object) -> None:
         self._spend()
@@ -138,8 +138,8 @@ class _Unsettled(VirtualLink):
     speed_address = -1
     failed = 0
 
-    def read(self, unit: int, address: int, count: int) -> list[int]:
-        words = super().read(unit, address, count)
+    def read(self, unit: int, address: int, count: int, **kw: tuple[int, int]) -> list[int]:
+        words = super().read(unit, address, count, **kw)
         sim = self.drives[unit]
         if self.unsettled and address == self.speed_address and abs(sim.firmware.plant.true_speed_rpm) > 10:
             self.failed += 1

@@ -494,12 +494,12 @@ class Flaky:
         self.after = None  # reads (and writes) counted from the refusal on
         self.armed = False
 
-    def read(self, unit, address, count):
+    def read(self, unit, address, count, **kw):
         if self.after is not None:
             self.after["reads"] += 1
             if self.after["reads"] in self.reads_lost:
                 raise DeviceError(f"read {count} register(s) at {address}: no response within 1 s")
-        return self.link.read(unit, address, count)
+        return self.link.read(unit, address, count, **kw)
 
     def write(self, unit, address, values, **kw):
         if self.armed and (address, values) == (self.refuse[0], [self.refuse[1]]):

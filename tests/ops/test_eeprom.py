@@ -212,8 +212,8 @@ class IgnoresWrites:
         self.link, self.address, self.after, self.revert = link, address, after, revert
         self.others = 0
 
-    def read(self, unit, address, count):
-        return self.link.read(unit, address, count)
+    def read(self, unit, address, count, **kw):
+        return self.link.read(unit, address, count, **kw)
 
     def write(self, unit, address, values, **kw):
         if address == self.address and self.revert is None:

@@ -123,7 +123,7 @@ class _Refusing:
     def __init__(self, code: int) -> None:
         self.code = code
 
-    def read(self, unit, address, count):
+    def read(self, unit, address, count, *, spare=(0, 0)):
         from servotool.errors import ModbusException
 
         raise ModbusException(self.code, f"unit {unit}")

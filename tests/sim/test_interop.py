@@ -305,3 +305,35 @@ def test_mbpoll_unsupported_function_is_illegal_function_at_any_address(pty_line
             timeout=30,
         )
         assert coils.returncode != 0 and "Illegal function" in coils.stderr, coils.stderr
+
+
+# ----- Modbus over Serial Line 2.5.1.1: a frame ends at the 3.5-character silence ---------------------------------
+def test_an_incomplete_frame_is_dropped_at_the_silence_and_the_next_request_answered(pty_line):
+    import serial
+
+    from servotool.link.crc import with_crc
+
+    _, master = pty_line
+    request = with_crc(bytes([1, 3, 0x20, 0x04, 0, 1]))  # Pn004
+    with serial.Serial(str(master), 19200, timeout=0.3) as port:
+        port.write(request[:5])  # cut short; the silence after it ends it
+        assert port.read(16) == b""  # nothing answers an incomplete frame
+        port.write(request)
+        assert port.read(7) == with_crc(bytes([1, 3, 2, 0, 250]))  # and the next request is not swallowed
+    assert read(master, 0x2004) == [250]
+
+
+def test_an_fc16_whose_byte_count_disagrees_with_its_data_gets_exception_03(pty_line):
+    _, master = pty_line
+    lib, ctx = _libmodbus(master)
+    try:
+        # Byte count 4 for one register, 2 data bytes, a valid CRC: the silence ends it 2 bytes early.
+        short = _raw_exchange(lib, ctx, 1, bytes([16, 0x20, 0x04, 0, 1, 4, 0x01, 0x2C]))
+        # Byte count 2 for two registers.
+        inconsistent = _raw_exchange(lib, ctx, 1, bytes([16, 0x20, 0x04, 0, 2, 2, 0x01, 0x2C]))
+    finally:
+        lib.modbus_close(ctx)
+        lib.modbus_free(ctx)
+    assert short[:3] == bytes([1, 0x90, 3]), short.hex(" ")
+    assert inconsistent[:3] == bytes([1, 0x90, 3]), inconsistent.hex(" ")
+    assert read(master, 0x2004) == [250]  # nothing written, and the next request answered

@@ -6,7 +6,7 @@ import socket
 
 import pytest
 
-from servotool.link.rtu import with_crc
+from servotool.link.crc import with_crc
 from servotool.model.loader import load_profile
 from servotool.sim.firmware import build_drive
 from servotool.sim.server import EmbeddedSim

@@ -116,8 +116,12 @@ def test_every_simulator_extension_is_listed_and_the_fake_watchdog_is_off_and_la
     the only watchdog a drive without a documented timeout can get is the labelled fake one, off by default."""
     shown = cli("sim", "show", "-P", "sdc", "--json").json()
     assert shown["settings"]["fake_watchdog"] == 0
-    assert [x["what"] for x in shown["extensions"]] == ["sim config --fake-watchdog"]
-    assert "NOT REAL" in shown["extensions"][0]["why"]
+    # the fake watchdog, and how the friction compensation the manual names switches (issue 34)
+    assert [x["what"] for x in shown["extensions"]] == [
+        "sim config --fake-watchdog",
+        "friction compensation by direction",
+    ]
+    assert "NOT REAL" in shown["extensions"][0]["why"] and "NOT IN THE MANUAL" in shown["extensions"][1]["why"]
     assert cli("sim", "config", "-P", "sdc", "--fake-watchdog", "on").code == 0
     text = cli("sim", "show", "-P", "sdc").out
     assert "fake_watchdog" in text and "simulator extensions" in text
@@ -130,6 +134,7 @@ def test_every_simulator_extension_is_listed_and_the_fake_watchdog_is_off_and_la
     r = cli("profiles", "show", "is620p", "--unverified")
     assert "dead-man route: segment" in r.out and "simulator extensions (not in the manual):" in r.out
     assert "SIM.COMM" not in r.out  # the invented alarm is gone
+    assert "notch width and depth levels: NOT IN THE MANUAL" in r.out  # the notch's shape is the simulator's
     assert cli("profiles", "show", "sd25", "--json").json()["dead_man"]["route"] == "none"
 
 

@@ -19,9 +19,9 @@ def _record(d):
     log: list[tuple[float, str, int, object]] = []
     link, read, write = d.link, d.link.read, d.link.write
 
-    def rec_read(unit, address, count):
+    def rec_read(unit, address, count, **kw):
         log.append((link.clock.now(), "R", address, count))
-        return read(unit, address, count)
+        return read(unit, address, count, **kw)
 
     def rec_write(unit, address, values, **kw):
         log.append((link.clock.now(), "W", address, list(values)))
