@@ -163,7 +163,7 @@ class TuneInertiaStep(StepType):
             return True
 
         try:
-            res = tune_inertia(drive, request, approve_motion=announce)
+            res = tune_inertia(drive, request, clock=ctx.clock, approve_motion=announce)
         except IdentificationRefused as exc:
             if folder is not None:
                 write_tune_report(folder, exc.result, drive.profile, None, str(exc))
