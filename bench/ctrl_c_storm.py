@@ -5,7 +5,8 @@ client (pymodbus' own, bench/plain_reader.py: none of servotool's link or recove
 
 Pass, per run:
 - Ctrl-C: once the command has exited, the speed reads under 10 rpm and the servo as found (off), the command's
-  last line says so ("stopped, servo off") and its exit status is 130; after `tune gains`, the gains read as they
+  last line says so ("stopped, servo off", or before the motor moved "nothing moved: at rest, servo off") and its
+  exit status is 130; after `tune gains`, the gains read as they
   were before it (the level being checked was rolled back).
 - SD25 (forced DIs): forcing reads released (So-58.X = 0) after every exit, a Ctrl-C's and a stop's.
 - kill -9: within the printed time (plus the reader's margin) the motor is at rest and has travelled at most the
@@ -55,6 +56,8 @@ GAINS.update({"sd25": ("Po101", "Po102", "Po301"), "sdc": ("PN17", "PN18", "PN5"
 BOUND_RE = re.compile(r"motor stops within ([0-9.]+) rev \(([0-9.]+) s\)")
 EXCURSION_RE = re.compile(r"([0-9.]+) rev of travel in all \(limit ([0-9.]+) rev\)")
 REST_RPM = 10.0
+# The last line of an interrupted motion command: its stop's read-back, or (before it moved) the read-back alone.
+PROVEN = ("servotool: stopped", "servotool: nothing moved")
 TRAVEL_REV = 6.0
 COMMANDS: dict[str, list[str]] = {
     "jog": ["jog", "--speed", "300", "--time", "8", "--yes"],
@@ -272,7 +275,7 @@ def interrupt(served: Served, kind: str, moment_s: float) -> Outcome:
         problems.append("servo on after exit")
     if snap.forcing:  # SD25: the motion forced its DIs; released on every exit, the wired inputs act again
         problems.append(f"forcing reads {snap.forcing} after exit (was {found.forcing})")
-    if status == 130 and not (tail and tail[-1].startswith("servotool: stopped")):
+    if status == 130 and not (tail and tail[-1].startswith(PROVEN)):
         problems.append(f"last line: {tail[-1] if tail else '(none)'}")
     if status == 130 and gains_before is not None and served.gains() != gains_before:
         problems.append(f"gains {served.gains()} after, {gains_before} before")

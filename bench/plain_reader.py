@@ -86,6 +86,10 @@ class PlainReader:
             self.raw(self.profile.entry(forcing)) & 0xF if forcing else None,
         )
 
+    def settings(self) -> dict[str, int]:
+        """Every readable parameter (class Pn) of the profile, code -> raw: what a command left on the drive."""
+        return {e.code: self.raw(e) for e in self.profile.entries if e.cls == "Pn" and e.readable}
+
     def revolutions(self, before: int, after: int) -> float:
         """Revolutions between two raw position counter readings (shortest way round a 32-bit wrap)."""
         motor = self.profile.motor

@@ -49,8 +49,8 @@ However a motion ends (its end, Ctrl\-C, SIGTERM, SIGHUP, a lost line, an error,
 runs, which a second Ctrl\-C cannot interrupt: zero speed, rest, the servo back as found, the heartbeat stopped
 and forced inputs released, every parameter the motion wrote (its protections too) put back, then the drive read
 back. The last line says what it read ("stopped, servo off" and the
-values read back) or, where that could not be proven, "COULD NOT CONFIRM THE MOTOR STOPPED" and why, with exit
-status 4.
+values read back; "nothing moved: at rest, servo off" for a Ctrl\-C before the first motion) or, where that could
+not be proven, "COULD NOT CONFIRM THE MOTOR STOPPED" and why, with exit status 4.
 .B servotool stop
 stops a drive whatever moved it.
 .TS

@@ -23,7 +23,7 @@ from servotool.motion.deadman import DeadManBound, lines
 from servotool.motion.hold import HoldToRun
 from servotool.motion.jog_plan import JogPlan
 from servotool.motion.setup import check_setup
-from servotool.motion.stop import StopReport
+from servotool.motion.stop import StopReport, proven_on_interrupt
 from servotool.motion.travel import TravelLimit
 from servotool.ops.trace import Sampler, motion_entries
 from servotool.ops.trace_file import check_writable, write_trace
@@ -131,7 +131,7 @@ def jog(
     """JOG the motor. Before moving it prints what stops the motor if this program stops, and the bound."""
     _check_options(seconds, interactive, toggle, trace_file)
     show = _Speeds(seconds)
-    with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler:
+    with drive(ctx) as d, _traced(ctx, d, trace_file) as sampler, proven_on_interrupt(d):
         d.dead_man_waived = no_dead_man
         jogger = guarded_jogger(d)
         if sampler is not None:

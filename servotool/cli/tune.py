@@ -235,7 +235,8 @@ def inertia(
     )
     tune.check_request(resolved(ctx).profile, request)  # refused before the drive is opened (or its line raised)
 
-    with drive(ctx) as d, boosted(ctx, [d], "the identification"):
+    # An interrupt before the first motion, between motions or at a prompt ends with the drive read back.
+    with drive(ctx) as d, stop.proven_on_interrupt(d), boosted(ctx, [d], "the identification"):
         d.dead_man_waived = no_dead_man
         ask = _Dialog(ctx, d, yes=yes, method=method, step_check=step_check, travel=travel, as_json=as_json)
         try:
@@ -596,7 +597,7 @@ def gains(
                 + (f": FAILED ({trial.failure})" if trial.failure else "")
             )
 
-    with drive(ctx) as d, boosted(ctx, [d], "the step checks"):
+    with drive(ctx) as d, stop.proven_on_interrupt(d), boosted(ctx, [d], "the step checks"):
         d.dead_man_waived = no_dead_man
         cautions = confirm_motion(ctx, d, yes, "tune gains")
         check = step.plan_step(d, travel)  # the bound of each level's step check, with the protections it sets

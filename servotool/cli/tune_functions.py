@@ -14,6 +14,7 @@ from servotool.cli.tune_score import render_comparison, render_score
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.quantity import quantity
+from servotool.motion.stop import proven_on_interrupt
 from servotool.ops import eeprom
 from servotool.tuning import drive_functions as functions
 from servotool.tuning import score as scoring
@@ -66,7 +67,7 @@ def friction(
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
     _check_report(report)
-    with drive(ctx) as d, boosted(ctx, [d], "tune friction"):
+    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], "tune friction"):
         eeprom.check_save_request(d.profile, save)
         functions.friction_entries(d)
         motion = _start(ctx, d, yes, no_dead_man, "friction", motion)
@@ -107,7 +108,7 @@ def notch(
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
     _check_report(report)
-    with drive(ctx) as d, boosted(ctx, [d], "tune notch"):
+    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], "tune notch"):
         eeprom.check_save_request(d.profile, save)
         functions.notch_entries(d)
         chosen = method or ("drive" if d.profile.role("adaptive_notch") is not None else "host")
@@ -139,7 +140,7 @@ def resonance(
     inside the drive's notch range. Writes nothing.
     """
     motion = scoring.motion_for(travel)
-    with drive(ctx) as d, boosted(ctx, [d], "tune resonance"):
+    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], "tune resonance"):
         motion = _start(ctx, d, yes, no_dead_man, "resonance", motion)
         measured = scoring.measure(d, motion, 1)
         peaks, nyquist = functions.resonance_peaks(measured)

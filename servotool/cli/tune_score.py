@@ -10,6 +10,7 @@ from servotool.cli.common import boosted, confirm, drive
 from servotool.cli.jog import confirm_motion
 from servotool.cli.render import emit_json, info, out, table
 from servotool.errors import UsageError
+from servotool.motion.stop import proven_on_interrupt
 from servotool.tuning import score as scoring
 from servotool.tuning.fit.score import FIGURES, Difference, Figure, Score
 
@@ -60,7 +61,7 @@ def score(
     scoring.check_repeats(repeats)
     _writable(save)
     old = scoring.load(before) if before is not None else None
-    with drive(ctx) as d, boosted(ctx, [d], "the test motion"):
+    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], "the test motion"):
         d.dead_man_waived = no_dead_man
         motion = scoring.planned(d, motion)
         if old is not None and (why := scoring.comparable(old[1], motion)):

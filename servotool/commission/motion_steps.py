@@ -14,6 +14,7 @@ from servotool.model.profile import Profile
 from servotool.model.quantity import quantity
 from servotool.model.roles import motion_route
 from servotool.motion.deadman import lines, sentence
+from servotool.motion.stop import proven_on_interrupt
 from servotool.report.charts import need_matplotlib
 from servotool.report.tune_report import write_tune_report
 from servotool.tuning.identify import IdentificationRefused
@@ -48,14 +49,15 @@ class JogStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         drive.dead_man_waived = _waived(step.arg)
-        jogger = guarded_jogger(drive)
-        plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
-        if plan.dead_man is not None:  # the bound, then what else bounds the motion (protections, forced inputs)
-            first, *more = lines(plan.dead_man)
-            ctx.safety(f"unit {drive.unit}: {first}")
-            for line in more:
-                ctx.safety(line)
-        jogger.run(plan)
+        with proven_on_interrupt(drive):  # an interrupt before the JOG moves ends with the drive read back
+            jogger = guarded_jogger(drive)
+            plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
+            if plan.dead_man is not None:  # the bound, then what else bounds the motion (protections, forced inputs)
+                first, *more = lines(plan.dead_man)
+                ctx.safety(f"unit {drive.unit}: {first}")
+                for line in more:
+                    ctx.safety(line)
+            jogger.run(plan)
         bound = plan.dead_man
         return Outcome(
             plan.describe() + (f"; {sentence(bound)}" if bound is not None else ""),
@@ -163,7 +165,8 @@ class TuneInertiaStep(StepType):
             return True
 
         try:
-            res = tune_inertia(drive, request, clock=ctx.clock, approve_motion=announce)
+            with proven_on_interrupt(drive):  # an interrupt before a motion, or between two, ends with a read-back
+                res = tune_inertia(drive, request, clock=ctx.clock, approve_motion=announce)
         except IdentificationRefused as exc:
             if folder is not None:
                 write_tune_report(folder, exc.result, drive.profile, None, str(exc))

@@ -8,8 +8,8 @@ byte count; a write's echoed address and value) and nothing on the line says it 
    or its own reply that such a copy stood in for (point 4), cannot fit.
 2. A frame that repeats, byte for byte, one heard within the copy window (link/ledger.py) for another request (or
    for the same read before a write to its registers) may be that frame's copy: the read is confirmed.
-3. A try that failed owes its reply, which may come later than any timeout: a reply of that shape for another
-   request is confirmed, and reads pick a width that no owed reply has.
+3. A try that failed (or that Ctrl-C interrupted) owes its reply, which may come later than any timeout: a reply of
+   that shape for another request is confirmed, and reads pick a width that no owed reply has.
 4. Bytes before a request or after a reply are a fault of the operation, and faults leave the line to go quiet and
    be flushed; on a line that has shown faults, a read whose reply repeats its own last one is confirmed too.
 5. A confirmation is another read, at another width where one is allowed. An unambiguous confirmation stands; two
@@ -374,8 +374,8 @@ class Exchange:
         if self.trace:
             self.trace(True, req.frame)
         self._sent.append(req.frame)
-        self.wire.send(req.frame)
         try:
+            self.wire.send(req.frame)
             frame, extra = self._receive(req, deadline)
             try:
                 words = req.answer(frame, op.what)
@@ -395,6 +395,11 @@ class Exchange:
             return _Reply(words, code, frame, ambiguous)
         except LineFault as exc:
             fault = exc
+        except KeyboardInterrupt:
+            # Interrupted (Ctrl-C, a terminate signal) with the reply perhaps on its way: it is owed as a failed
+            # try's is, so that it cannot pass for the answer to the next request of its shape.
+            self._owe(req)
+            raise
         if fault.kind != "silent" or fault.data:
             # Silence alone shows nothing on the line that repeats or comes late: the reply it owes is in the ledger,
             # and one that comes within the late window is a stray frame that marks the line (a probe of ids that

@@ -14,8 +14,8 @@ Interrupts are held while it runs (motion/interrupts.py).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from contextlib import ExitStack
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -26,7 +26,7 @@ from servotool.model.codec import format_value, raw_to_eng
 from servotool.model.forcing import is_forcing, switch_value
 from servotool.model.profile import Entry
 from servotool.model.quantity import quantity
-from servotool.motion.interrupts import GUARD
+from servotool.motion.interrupts import GUARD, held_interrupts
 from servotool.motion.rest import SETTLE_S, STOPPED_RPM, RestWatch
 from servotool.ops import alarms
 from servotool.ops.status import servo_is_on
@@ -54,6 +54,7 @@ class StopReport:
     alarm: str = ""  # an alarm the drive shows now ("E25 host watchdog"): it stopped, and says why
     problems: tuple[str, ...] = ()  # what could not be done or proven
     band_rpm: float = PROOF_BAND_RPM  # |speed| under this counts as at rest (a noisy speed reading widens it)
+    moved: bool = True  # False: an interrupt came before any motion of the command (read back only, nothing written)
 
     @property
     def confirmed(self) -> bool:
@@ -81,11 +82,14 @@ class StopReport:
             read.append(self.forcing)
         if self.alarm:
             read.append(f"alarm {self.alarm} latched (see 'servotool alarm')")
+        if not self.moved:
+            return f"nothing moved: {'at rest, ' if self.at_rest else ''}{servo} (read back: {', '.join(read)})"
         return f"stopped, {servo} (read back: {', '.join(read)})"
 
     def as_json(self) -> dict[str, object]:
         return {
             "confirmed": self.confirmed,
+            "moved": self.moved,
             "speed": quantity(None if self.speed_rpm is None else round(self.speed_rpm, 1), "rpm"),
             "at_rest": self.at_rest,
             "servo_on": self.servo_on,
@@ -253,6 +257,80 @@ def _speed(drive: Drive) -> float | None:
     return float(raw_to_eng(entry, drive.read_entries([entry])[0].raw)) if entry is not None else None
 
 
+@dataclass
+class _Read:
+    """The drive as the stop's last step read it (what a failed reading leaves as it was)."""
+
+    speed_rpm: float | None = None
+    at_rest: bool | None = None
+    servo_on: bool | None = None
+    servo_code: str = ""
+    forcing_on: bool | None = None
+    forcing: str = ""
+    alarm: str = ""
+
+
+def _read_drive(drive: Drive, read: _Read, band: float, idle: Callable[[float], None]) -> None:
+    """Servo state, forced inputs, alarm and the speed twice SETTLE_S apart (no swing through zero), into `read`."""
+    read.servo_on, read.servo_code = servo_state(drive)
+    read.forcing_on, read.forcing = forcing_state(drive)
+    state = alarms.confirmed(drive)
+    read.alarm = f"{state.display} {state.name}" if state is not None else ""
+    first = _speed(drive)
+    if first is None:
+        return
+    idle(SETTLE_S)
+    speed = _speed(drive)
+    assert speed is not None
+    read.speed_rpm = speed
+    read.at_rest = abs(first) < band and abs(speed) < band
+
+
+def _report(
+    steps: _Steps,
+    read: _Read,
+    band: float,
+    servo_found_on: bool,
+    since: str,
+    more: list[str] | None = None,
+    settings: tuple[str, ...] = (),
+    settings_back: bool = False,
+    moved: bool = True,
+) -> StopReport:
+    """The facts, with what the drive read that proves no stop (since: when the speed should have been at rest)
+    and the sequence's `more` problems."""
+    if read.at_rest is False and read.speed_rpm is not None:
+        steps.problems.append(f"the speed reads {read.speed_rpm:g} rpm (not under {band:g} rpm{since})")
+    if read.servo_on is not None and read.servo_on != servo_found_on:
+        steps.problems.append(f"{read.servo_code} reads the servo {'on' if read.servo_on else 'off'}")
+    steps.problems += more or []
+    return StopReport(
+        read.speed_rpm,
+        read.at_rest,
+        read.servo_on,
+        servo_found_on,
+        read.servo_code,
+        settings,
+        settings_back,
+        read.forcing,
+        read.alarm,
+        tuple(steps.problems),
+        band,
+        moved,
+    )
+
+
+def read_back(drive: Drive, *, moved: bool, clock: Clock | None = None) -> StopReport:
+    """The stop sequence's last step alone, for an interrupt that no motion's stop answered (proven_on_interrupt:
+    before the first motion of a command, between two): nothing of servotool's moves the drive or holds it then
+    (each motion's stop has run, or none started), so nothing is written; the drive is read as the stop reads it.
+    moved: a motion of the command ran (and its stop) before the interrupt."""
+    clock = clock or RealClock()
+    steps, read = _Steps(), _Read()
+    steps.run("reading the drive back", lambda: _read_drive(drive, read, PROOF_BAND_RPM, clock.sleep), tries=2)
+    return _report(steps, read, PROOF_BAND_RPM, False, "", moved=moved)
+
+
 def stop_sequence(
     drive: Drive,
     halt: Halt,
@@ -315,48 +393,15 @@ def stop_sequence(
 
     if entries:
         steps.run(f"putting back {len(entries)} setting(s)", put_back_settings)
-    servo_on, servo_code = None, ""
-
-    alarm = forced = ""
-    forcing_on: bool | None = None
-
-    def read_back() -> None:
-        nonlocal speed, servo_on, servo_code, at_rest, alarm, forced, forcing_on
-        servo_on, servo_code = servo_state(drive)
-        forcing_on, forced = forcing_state(drive)
-        state = alarms.confirmed(drive)
-        alarm = f"{state.display} {state.name}" if state is not None else ""
-        first = _speed(drive)
-        if first is None:
-            return
-        idle(SETTLE_S)
-        speed = _speed(drive)
-        assert speed is not None
-        at_rest = abs(first) < band and abs(speed) < band  # two readings apart: no swing through zero
-
-    steps.run("reading the drive back", read_back, tries=2)
-    if at_rest is False and speed is not None:
-        steps.problems.append(f"the speed reads {speed:g} rpm (not under {band:g} rpm {wait_s:.1f} s after the stop)")
-    if servo_on is not None and servo_on != servo_found_on:
-        steps.problems.append(f"{servo_code} reads the servo {'on' if servo_on else 'off'}")
-    if released[0] and forcing_on:
-        steps.problems.append(f"{forced} (the release did not take)")
+    read = _Read(speed, at_rest)
+    steps.run("reading the drive back", lambda: _read_drive(drive, read, band, idle), tries=2)
+    more = []
+    if released[0] and read.forcing_on:
+        more.append(f"{read.forcing} (the release did not take)")
     if entries and not back and not any("setting" in p for p in steps.problems):
-        steps.problems.append("the motion's settings could not be put back")
-    report = StopReport(
-        speed,
-        at_rest,
-        servo_on,
-        servo_found_on,
-        servo_code,
-        tuple(e.code for e in entries),
-        back,
-        forced,
-        alarm,
-        tuple(steps.problems),
-        band,
-    )
-    return report
+        more.append("the motion's settings could not be put back")
+    codes = tuple(e.code for e in entries)
+    return _report(steps, read, band, servo_found_on, f" {wait_s:.1f} s after the stop", more, codes, back)
 
 
 # ----- a motion's life: from its snapshot to its proven stop ---------------------------------------------------
@@ -397,9 +442,15 @@ class MotionStop:
 
         GUARD.enter()
         try:  # nothing is written before the snapshot: a failure here leaves nothing to stop
-            self._stack.enter_context(ram_writes(self.motion.drive))
-            self.saved = self.motion.snapshot(self.need_ramp)
-        except BaseException:
+            self._stack.enter_context(ram_writes(self.motion.drive))  # the port's lock, then the EEPROM switch
+            # The snapshot journals what it read: an interrupt waits for its end, then gets the stop (which clears
+            # the record): no record of a motion that no stop followed.
+            with held_interrupts():
+                self.saved = self.motion.snapshot(self.need_ramp)
+        except BaseException as exc:
+            if isinstance(exc, KeyboardInterrupt) and self.saved:
+                self._finish(exc)
+                raise
             try:
                 self._stack.close()
             finally:
@@ -451,12 +502,15 @@ class MotionStop:
             exc.stop_report = report  # type: ignore[attr-defined]
             if closing is not None:
                 exc.add_note(f"after the stop: {closing}")
+            if held and not isinstance(exc, KeyboardInterrupt):
+                # Ctrl-C came while a failure's stop ran: the command ends as interrupted, not on with the failure
+                raise _interrupt_after(exc, report) from exc
             return
         if closing is not None:
             closing.stop_report = report  # type: ignore[attr-defined]
             raise closing
         if held:
-            interrupt = KeyboardInterrupt()
+            interrupt = GUARD.interrupt()
             interrupt.stop_report = report  # type: ignore[attr-defined]
             raise interrupt
         if not report.confirmed:
@@ -464,6 +518,47 @@ class MotionStop:
 
 
 GUARD.protected.update({MotionStop.__exit__.__code__, MotionStop._finish.__code__, stop_sequence.__code__})
+
+
+@contextmanager
+def proven_on_interrupt(drive: Drive, clock: Clock | None = None) -> Iterator[None]:
+    """`with proven_on_interrupt(drive):` around a motion command, from before it says its bound to its end: the
+    first interrupt raises as ever, later ones are held (motion/interrupts), and an interrupt that no motion's stop
+    answered (before the first motion: its plan lines, pre-motion reads, a prompt; between two motions) ends with
+    the drive read back (read_back: 'nothing moved: at rest, servo off', or the stopped line after a motion), its
+    report recorded and attached to the exception as a motion's stop attaches its own. What was written before the
+    interrupt is put back by its owner on the way out (a motion's stop, the EEPROM switch, a gain rollback)."""
+    since = len(_REPORTS)
+    GUARD.enter()
+    try:
+        yield
+    except BaseException as exc:
+        # A prompt turns the interrupt into its own exception (click's Abort), whose context is the interrupt.
+        interrupted = isinstance(exc, KeyboardInterrupt) or isinstance(exc.__context__, KeyboardInterrupt)
+        held = GUARD.held > 0  # one held on the failure's way out (a stop, a rollback): the command is interrupted
+        if (interrupted or held) and getattr(exc, "stop_report", None) is None:
+            GUARD.armed = False
+            report = read_back(drive, moved=len(_REPORTS) > since, clock=clock)
+            _REPORTS.append(report)
+            exc.stop_report = report  # type: ignore[attr-defined]
+        if held and not interrupted:
+            raise _interrupt_after(exc, exc.stop_report) from exc  # type: ignore[attr-defined]
+        raise
+    finally:
+        GUARD.leave()
+
+
+def _interrupt_after(failure: BaseException, report: StopReport) -> KeyboardInterrupt:
+    """The interrupt held while a failure was on its way out, which it replaces (the failure said in a note)."""
+    interrupt = GUARD.interrupt()
+    interrupt.stop_report = report  # type: ignore[attr-defined]
+    interrupt.add_note(f"it came as the command failed: {failure}")
+    for note in getattr(failure, "__notes__", ()):
+        interrupt.add_note(note)
+    return interrupt
+
+
+GUARD.protected.add(proven_on_interrupt.__wrapped__.__code__)
 
 
 # ----- `servotool stop` ----------------------------------------------------------------------------------------

@@ -266,6 +266,23 @@ def test_an_echoing_adapter_is_recognised_and_its_echo_never_taken_for_a_reply()
         ex.write(1, 10, [6], multiple=False)
 
 
+def test_a_read_interrupted_while_its_reply_is_on_the_way_is_not_answered_by_that_reply():
+    # Ctrl-C lands between a read's request and its reply (a motion command interrupted before it moves); the next
+    # read, of another register, goes out before the stale reply arrives and comes back after it: only the link's
+    # confirmation can tell them apart (issue 29: SDC's read-back took a stale 1 for PN95 and said the servo on).
+    class InterruptedLine(ScriptedLine):
+        def recv(self, timeout: float) -> bytes:
+            if len(self.sent) == 1 and timeout > 0:  # waiting for the first reply
+                raise KeyboardInterrupt
+            return super().recv(timeout)
+
+    line = InterruptedLine({10: 1, 20: 0}, ["late:0.01", "late:0.02"])
+    ex = exchange(line)
+    with pytest.raises(KeyboardInterrupt):
+        ex.read(1, 10, 1)
+    assert ex.read(1, 20, 1) == [0]
+
+
 class QueuedLine:
     """A Wire whose n-th request gets the n-th scripted reply (b"" for none), on virtual time."""
 

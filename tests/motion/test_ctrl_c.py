@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from bench.ctrl_c_storm import PROFILES, Served, interrupt, kill
+from bench.ctrl_c_storm import COMMANDS, GAINS, PROFILES, ROOT, Served, interrupt, kill, no_dead_man
 from bench.plain_reader import PlainReader
 
 
@@ -41,6 +41,58 @@ def test_ctrl_c_at_seeded_moments_and_kill_9_leave_the_drive_as_the_bench_requir
     outcomes.append(kill(s, "jog", 0.2))
     failures = [f"{o.kind}: {o.why}" for o in outcomes if not o.ok]
     assert not failures, failures
+
+
+# A Ctrl-C at a named point (bench/interrupt_at.py raises SIGINT in the process there), and how the command's last
+# line must begin: before anything moved the read-back alone; once a motion's scope began, its stop.
+NAMED_POINTS = (
+    ("step", "bound", "servotool: nothing moved: at rest, servo off"),  # plan lines and pre-motion reads to come
+    ("gains", "step-check", "servotool: nothing moved: at rest, servo off"),  # a level's gains written, not checked
+    ("jog", "bound", "servotool: nothing moved: at rest, servo off"),
+    ("ident", "snapshot", "servotool: stopped, servo off"),  # its settings journaled, nothing written
+    ("gains", "protections", "servotool: stopped, servo off"),  # the drive's protections written, not moved
+)
+
+
+@pytest.mark.parametrize("profile", ["sdc", "dsx7e"])
+def test_ctrl_c_before_the_motor_moves_ends_with_the_drive_read_back_and_everything_put_back(served, profile):
+    """Issue 29 follow-up: a Ctrl-C after the bound line but before the first motion (0.1-0.3 s on SDC at 9600 baud)
+    exited 130 with 'servotool: interrupted' and no read-back. Delivered at named points, not moments: every one ends
+    with exit 130 and the drive read back, and a plain Modbus client reads it at rest, servo off, every parameter
+    as before (gains, protections, JOG speed and ramp), and nothing left for the next command to put right."""
+    s = served(profile)
+    with PlainReader(s.port, profile) as reader:
+        found = reader.settings()
+    failures = []
+    for kind, point, last in NAMED_POINTS:
+        json_out = ["--json"] if kind == "jog" else []
+        command = [*COMMANDS[kind], *no_dead_man(profile), *json_out]
+        r = subprocess.run(
+            [sys.executable, str(ROOT / "bench" / "interrupt_at.py"), point, "--port", s.port, "-P", profile, *command],
+            cwd=ROOT,
+            env=s.env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        lines = [line for line in r.stderr.splitlines() if line.strip()]
+        snap = s.read()
+        where = f"{kind} at {point}"
+        if r.returncode != 130 or not lines or not lines[-1].startswith(last):
+            failures.append(f"{where}: exit {r.returncode}, last line {lines[-1] if lines else '(none)'}")
+        if abs(snap.speed_rpm) >= 10 or snap.servo_on or snap.alarm:
+            failures.append(f"{where}: the plain reader reads {snap}")
+        if json_out and r.returncode == 130:
+            stop = json.loads(r.stdout).get("stop") or {}
+            if not (stop.get("confirmed") and stop.get("moved") is False and stop.get("servo_on") is False):
+                failures.append(f"{where}: --json stop {stop}")
+        after = s.cli("param", "get", GAINS[profile][0])  # the journal left nothing to put right
+        if after.returncode != 0 or "pid " in after.stderr:
+            failures.append(f"{where}: the next command said {after.stderr.strip()[-200:]}")
+    with PlainReader(s.port, profile) as reader:
+        left = {code: raw for code, raw in reader.settings().items() if found[code] != raw}
+    assert not failures, failures
+    assert not left, f"written and not put back: {left} (found { ({c: found[c] for c in left}) })"
 
 
 def test_servotool_stop_stops_a_motor_another_process_left_running_and_releases_forcing(served):

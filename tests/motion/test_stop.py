@@ -87,6 +87,33 @@ def test_a_second_interrupt_during_the_stop_is_held_until_it_is_done(sim_dir):
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handlers are back
 
 
+def test_a_ctrl_c_during_the_stop_of_a_failed_motion_ends_the_command_as_interrupted(sim_dir):
+    """A Ctrl-C held while the stop after a failure ran was dropped with the failure's way out: the command went on
+    (tune gains' next level, its write) or ended with the failure's exit 1 (bench/ctrl_c_storm.py, SDC gains, 1 in
+    6 at load 5-7). The interrupt wins, the failure in a note."""
+    sim, jogger, _clock = _jogger("sdc")
+    plan = jogger.plan(300, 5.0)
+    count = {"samples": 0, "sent": False}
+
+    def fail(t: float, speed: float | None) -> None:
+        count["samples"] += 1
+        if count["samples"] == 6:
+            raise DeviceError("the line dropped a reply")
+
+    def ctrl_c(_drive) -> None:
+        if count["samples"] >= 6 and GUARD.armed is False and not count["sent"]:
+            count["sent"] = True
+            os.kill(os.getpid(), signal.SIGINT)
+
+    sim.on_read.append(ctrl_c)
+    with pytest.raises(KeyboardInterrupt) as raised:
+        jogger.run(plan, fail)
+    assert count["sent"]
+    assert raised.value.stop_report.confirmed
+    assert any("the line dropped a reply" in note for note in raised.value.__notes__)
+    assert sim.bank.effective_value("PN95") == 0 and abs(sim.firmware.plant.true_speed_rpm) < 10
+
+
 class _Cut(VirtualLink):
     """A line that stops answering after `answers` more exchanges."""
 

