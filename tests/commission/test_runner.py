@@ -31,7 +31,7 @@ def virtual_runner(tmp_path, steps: str) -> tuple[Runner, VirtualClock]:
     return runner, clock
 
 
-def test_a_wait_step_and_the_report_run_on_the_runners_clock(tmp_path):
+def test_a_wait_step_and_the_report_run_on_the_runners_clock(tmp_path, sim_dir):
     runner, clock = virtual_runner(tmp_path, "  - wait: 3600\n  - expect: {Un100: 0}\n")
     report = Report(tmp_path / "r.json", runner, profile="dsx7e", port="virtual", units=[1])
     assert runner.run()  # an hour of virtual time: no real waiting
@@ -41,7 +41,7 @@ def test_a_wait_step_and_the_report_run_on_the_runners_clock(tmp_path):
     assert data["finished"].startswith("1970-01-01") or data["finished"].startswith("1969-12-31")
 
 
-def test_a_running_report_whose_process_is_gone_reads_as_interrupted(tmp_path):
+def test_a_running_report_whose_process_is_gone_reads_as_interrupted(tmp_path, sim_dir):
     import os
     import socket
     import subprocess
