@@ -7,7 +7,15 @@ import time
 
 import pytest
 
-from tests.tuning.realtime_cli import LOADED_J_SHARE, assert_said, near, skip_if_loaded, tune_json, tune_ok
+from tests.tuning.realtime_cli import (
+    LOADED_J_SHARE,
+    STALL_WORDS,
+    assert_said,
+    near,
+    skip_if_loaded,
+    tune_json,
+    tune_ok,
+)
 
 
 @pytest.mark.parametrize("ratio", [0.0, 6.0, 30.0])
@@ -227,10 +235,10 @@ def test_step_check_shows_the_better_response_after_tuning(cli):
 def test_motion_stays_inside_a_small_travel_limit(cli):
     cli("sim", "config", "--load-ratio", "30")  # far from the configured 1.5: the loop overshoots
     r, res = tune_json(cli, "--port", "sim", "tune", "inertia", "--yes", "--travel", "1", "--no-gains")
-    if r.code == 0:
-        assert res["travel"]["value"] <= 1.0
-    else:  # stopped at the limit (a stall let a move run on: named as such) or refused for the short travel
-        assert "travel" in res["reason"], res["reason"]
+    if "travel" in res:  # whatever the outcome, the axis moved inside the limit
+        assert res["travel"]["value"] <= 1.0, res
+    if r.code == 1:  # refused for the short travel (naming one), or stopped by a stall the words name as such
+        assert "travel" in res["reason"] or any(w in res["reason"] for w in STALL_WORDS), res["reason"]
 
 
 def test_identification_works_wherever_the_axis_stands(cli):
