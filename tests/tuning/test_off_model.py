@@ -9,13 +9,18 @@ from bench.inertia_accuracy import bench_travel
 from servotool.tuning.fit.signals import torque_step
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, tune_inertia
-from tests.tuning.realtime_cli import near, tune_json
+from tests.tuning.realtime_cli import STALL_WORDS, near, tune_json
 from tests.tuning.test_tune_robustness import set_up
 
 OFF_MODEL_WORDS = ("load varies over the travel", "inertia differs", "resonance", "lost motion")
 # An accepted result further off than the rigid loads' worst target (issue 16: 3 %) must say why; closer, the truth
 # inside its stated 3 sigma is what the issue asks (backlash 0.05 rad comes out +0.8..2.2 % with a 3 sigma of 2.8-3 %).
 WORST_RIGID = 0.03
+# Backlash through the CLI: J 35 % low and refused as not fitting until the windows where the motor turns alone were
+# left out; a loaded host that starves the sampling (--port sim: 1700-2300 samples/s at load 4-5) may still leave
+# too few clear windows, and the refusal then names backlash, the load's own mechanics.
+NOT_FITTED = ("model does not fit the data", "backlash")
+STARVED_HZ = 1000.0
 
 
 def _outcome(sim, d, clock):
@@ -101,8 +106,10 @@ def test_through_the_cli_an_arm_load_is_flagged_or_refused_with_its_reason(cli):
     r, data = tune_json(cli, "--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--travel", "12")
     if r.code == 0:
         assert near(data, 5.0), data
-        if abs(data["ratio"] - 5.0) > WORST_RIGID * 6.0:
-            assert any(w in n for n in data["notes"] for w in OFF_MODEL_WORDS), data
+        if abs(data["ratio"] - 5.0) > WORST_RIGID * 6.0:  # further off than a rigid load: says why (the load, or
+            # the host's stalls it saw in the log: a loaded host alone biases a real-time run by a few %)
+            said = (*OFF_MODEL_WORDS, *STALL_WORDS)
+            assert any(w in n for n in data["notes"] for w in said), (data["ratio"], data["notes"])
 
 
 def test_through_the_cli_backlash_is_identified_clear_of_its_lost_motion_and_flagged(cli):
@@ -111,7 +118,12 @@ def test_through_the_cli_backlash_is_identified_clear_of_its_lost_motion_and_fla
     1 % and the result says why it was fitted that way. Real time, judged as a loaded CI holds it (realtime_cli);
     on virtual time: test_an_off_model_load_is_refused_or_flagged_in_words_never_wrong_and_tight (backlash 0.1)."""
     assert cli("sim", "config", "--load-ratio", "2", "--backlash-rad", "0.1", "--friction", "0.02").code == 0
-    r, data = tune_json(cli, "--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--travel", "12")
+    args = ("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--travel", "12")
+    r, data = tune_json(cli, *args, honest=NOT_FITTED)
+    if r.code == 1 and NOT_FITTED[0] in data["reason"]:  # the old failure, unless the host starved the sampling
+        rate = data["sample_rate"]["value"]
+        assert rate < STARVED_HZ, f"{data['reason']} at {rate} samples/s"
+        pytest.skip(f"the host is too loaded for this real-time run ({rate} samples/s): {data['reason'][:120]}")
     if r.code == 0:
         assert near(data, 2.0), data
         assert any(n.startswith("off-model: lost motion") for n in data["notes"]), data["notes"]
