@@ -430,7 +430,8 @@ class MotionStop:
     inside; however it leaves, the stop sequence runs
     with interrupts held, inside the drive's RAM-only writes (ops.eeprom.ram_writes), and its report is recorded
     (and attached to the exception that ended it, as `stop_report`). A normal end whose stop is not proven raises
-    StopUnconfirmed; an interrupt held during the stop is raised after it."""
+    StopUnconfirmed, one whose read-back shows an alarm DeviceError (the motion started without one, so the drive
+    tripped during it: not a success); an interrupt held during the stop is raised after it."""
 
     def __init__(self, motion: Motion, band_rpm: float = STOPPED_RPM, need_ramp: bool = False) -> None:
         self.motion, self.band_rpm, self.need_ramp = motion, band_rpm, need_ramp
@@ -515,6 +516,10 @@ class MotionStop:
             raise interrupt
         if not report.confirmed:
             raise StopUnconfirmed(report.describe(), report)
+        if report.alarm:  # a motion starts only without one (preflight): the drive tripped during it
+            tripped = DeviceError(f"the drive latched alarm {report.alarm} during the motion (see 'servotool alarm')")
+            tripped.stop_report = report  # type: ignore[attr-defined]
+            raise tripped
 
 
 GUARD.protected.update({MotionStop.__exit__.__code__, MotionStop._finish.__code__, stop_sequence.__code__})

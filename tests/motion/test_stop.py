@@ -218,6 +218,26 @@ def test_a_normal_end_whose_stop_cannot_be_proven_fails_with_exit_4(sim_dir):
     assert "the speed reads 300 rpm" in str(raised.value)
 
 
+def test_a_motion_during_which_the_drive_latched_an_alarm_is_not_a_success(sim_dir):
+    # The host's watchdog trips as the servo goes off (a stall at the end of the motion): the stop is proven, and
+    # the command still fails, naming the alarm, instead of ending 'stopped' with exit 0.
+    sim, jogger, _clock = _jogger("dsx7e")
+    plan = jogger.plan(300, 0.5)
+    leave = jogger.leave
+
+    def leave_and_trip() -> None:
+        leave()
+        sim.firmware.trip("comm_timeout")
+
+    jogger.leave = leave_and_trip
+    with pytest.raises(DeviceError) as raised:
+        jogger.run(plan)
+    report = raised.value.stop_report
+    assert report.confirmed and report.alarm.startswith("E25"), report.describe()
+    assert "latched alarm E25" in str(raised.value) and raised.value.exit_code == 1
+    assert "alarm E25" in report.describe() and not sim.firmware.plant.servo_on
+
+
 def test_servotool_stop_zeroes_switches_off_and_releases_forcing_on_every_profile(sim_dir):
     for profile_id in PROFILES:
         sim, jogger, clock = _jogger(profile_id)
