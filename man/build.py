@@ -112,6 +112,16 @@ are step-checked: a failed check writes the previous ones back and fails the ste
 \fBcheck: false\fR leaves the check out. \fBreport\fR
 writes the same folder of charts as \fBtune inertia \-\-report\fR (beside the plan, one per axis).
 .TP
+.B "tune score: {repeats: N, travel: REV, speed: RPM, no_dead_man: BOOL}"
+The measured score of \fBtune score\fR; the report carries every figure with its unit, spread and resolution.
+.TP
+.BR "tune friction:" ", " "tune notch:" ", " "tune gain-switching: {repeats: N, travel: REV, keep: BOOL, \
+save: BOOL, method: drive|host, factor: X, no_dead_man: BOOL}"
+What the command of the same name does (\fBmethod\fR for the notch, \fBfactor\fR for gain switching): score
+before, set up, score after, keep only where the score improves beyond its spread (or \fBkeep: true\fR), put
+back otherwise, read back; the report carries both scores and the comparison, and a later \fBsave:\fR stores
+what was kept.
+.TP
 .BR "wait: S" ", " "alarm clear:" ", " "prompt: QUESTION"
 Pause; reset the alarm; ask the operator (answered yes by \fB\-\-yes\fR; refused without a terminal).
 .TP

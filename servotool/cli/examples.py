@@ -74,6 +74,11 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
         "servotool --port sim -P is620p tune notch --yes",
         "A notch at a resolved resonance, judged likewise (IS620P).",
     ),
+    (
+        "tune gain-switching",
+        "servotool --port sim -P sd25 tune gain-switching --yes --no-dead-man",
+        "Gain 2 while moving (SD25 Po130 = 2), kept only where it helps.",
+    ),
     ("param reset", "servotool --port sim param reset --yes", "Factory defaults, after an automatic backup."),
     (
         "param apply",
@@ -87,6 +92,11 @@ EXAMPLES: tuple[tuple[str, str, str], ...] = (
     ),
     ("sim reset", "servotool sim reset -P sd25 --power-cycle", "Power-cycle the simulated SD25."),
     ("run", "servotool run examples/commission.yaml --dry-run", "Check a plan against the profile; touch nothing."),
+    (
+        "run",
+        "servotool run examples/tune-functions.yaml --dry-run",
+        "A plan's score and friction steps, listed; nothing moves.",
+    ),
     (
         "fleet backup",
         "servotool fleet backup examples/fleet.yaml -o snapshots",

@@ -105,7 +105,8 @@ def run(
         raise typer.Exit(int(failures[0].data.get("exit_code", 1)) if failures else 1)
 
 
-LONG_STEPS = ("tune inertia", "backup", "restore")  # steps whose exchanges a raised line shortens (ops.boost)
+# steps whose exchanges a raised line shortens (ops.boost)
+LONG_STEPS = ("tune inertia", "tune score", "tune friction", "tune notch", "tune gain-switching", "backup", "restore")
 
 
 def _units(plan: Plan, given: int | None, default: int) -> list[int]:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import typer
 
@@ -17,8 +16,9 @@ from servotool.model.quantity import quantity
 from servotool.motion.stop import proven_on_interrupt
 from servotool.ops import eeprom
 from servotool.tuning import drive_functions as functions
+from servotool.tuning import function_run as use
+from servotool.tuning import gain_switching as gs
 from servotool.tuning import score as scoring
-from servotool.tuning.fit.spectrum import Peak
 
 app = typer.Typer(no_args_is_help=True, help="Run the drive's own tuning functions, judged by a measured score.")
 
@@ -64,19 +64,7 @@ def friction(
     gives the Coulomb terms, the torque at the test speed less them the damping terms (where mapped). Scored
     before and after on following error and integrated error; put back otherwise.
     """
-    motion = scoring.motion_for(travel)
-    scoring.check_repeats(repeats)
-    _check_report(report)
-    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], "tune friction"):
-        eeprom.check_save_request(d.profile, save)
-        functions.friction_entries(d)
-        motion = _start(ctx, d, yes, no_dead_man, "friction", motion)
-        before = scoring.measure(d, motion, repeats)
-        trial = functions.friction_trial(d, motion, before, progress=_progress(as_json))
-        trial = functions.judged_trial(d, trial, motion, repeats, keep=keep, save=save, progress=_progress(as_json))
-        profile = d.profile
-    _report(report, trial)
-    _render(trial, as_json, profile.id)
+    _run(ctx, "friction", None, repeats, travel, keep, save, yes, no_dead_man, report, as_json)
 
 
 @app.command("notch")
@@ -103,27 +91,74 @@ def notch(
     it set; --method host notches only a peak the line's sampling resolves (below 80 % of the Nyquist limit) inside
     the drive's notch range. Put back where the score does not improve beyond its spread.
     """
-    if method not in (None, "drive", "host"):
+    _run(ctx, "notch", method, repeats, travel, keep, save, yes, no_dead_man, report, as_json)
+
+
+def _run(
+    ctx: typer.Context,
+    function: str,
+    method: str | None,
+    repeats: int,
+    travel: float,
+    keep: bool,
+    save: bool | None,
+    yes: bool,
+    no_dead_man: bool,
+    report: Path | None,
+    as_json: bool,
+    factor: float | None = None,
+) -> None:
+    """The one use case (tuning.function_run.run_function), asked for and rendered."""
+    if method not in (None, *use.METHODS):
         raise UsageError("--method must be drive or host")
     motion = scoring.motion_for(travel)
     scoring.check_repeats(repeats)
     _check_report(report)
-    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], "tune notch"):
+    with drive(ctx) as d, proven_on_interrupt(d), boosted(ctx, [d], f"tune {function}"):
+        use.check_function(d.profile, function, method)
+        use.check_entries(d, function)
         eeprom.check_save_request(d.profile, save)
-        functions.notch_entries(d)
-        chosen = method or ("drive" if d.profile.role("adaptive_notch") is not None else "host")
-        if chosen == "drive" and d.profile.role("adaptive_notch") is None:
-            raise UsageError(f"tune notch --method drive: {d.profile.model} maps no adaptive notch")
-        motion = _start(ctx, d, yes, no_dead_man, "notch", motion)
-        before = scoring.measure(d, motion, repeats)
-        if chosen == "drive":
-            trial = functions.adaptive_notch_trial(d, motion, before, progress=_progress(as_json))
-        else:
-            trial = functions.notch_trial(d, before)
-        trial = functions.judged_trial(d, trial, motion, repeats, keep=keep, save=save, progress=_progress(as_json))
+        motion = _start(ctx, d, yes, no_dead_man, function, motion)
+        trial = use.run_function(
+            d,
+            function,
+            motion,
+            repeats,
+            method=method,
+            keep=keep,
+            save=save,
+            factor=factor,
+            progress=_progress(as_json),
+        )
         profile = d.profile
     _report(report, trial)
     _render(trial, as_json, profile.id)
+
+
+@app.command("gain-switching")
+def gain_switching(
+    ctx: typer.Context,
+    factor: float = typer.Option(
+        1.5, "--factor", help="Gain 2's speed-loop gain and integral time against gain 1's, above 1, at most 4."
+    ),
+    repeats: int = typer.Option(scoring.DEFAULT_REPEATS, "--repeats", help=REPEATS_HELP),
+    travel: float = typer.Option(2.0, "--travel", help=TRAVEL_HELP),
+    keep: bool = typer.Option(False, "--keep", help=KEEP_HELP),
+    save: bool = typer.Option(None, "--save/--no-save", help=SAVE_HELP),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before moving."),
+    no_dead_man: bool = typer.Option(False, "--no-dead-man", help=DEAD_MAN_HELP),
+    report: Path = typer.Option(None, "--report", metavar="DIR", help=REPORT_HELP),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable result."),
+) -> None:
+    """A stiffer second gain set while the motor turns, the first at rest, kept only where the score improves.
+
+    On the speed condition the manual documents (SD25 Po130 = 2: above Po131 gain 2 at once, below it gain 1
+    after Po135): gain 2 is gain 1's speed gain and integral time times --factor. Judged on following error,
+    integrated error, overshoot and settling; put back otherwise. Refused where the manual does not describe the
+    conditions (IS620P H08-09).
+    """
+    gs.check_factor(factor)
+    _run(ctx, "gain-switching", None, repeats, travel, keep, save, yes, no_dead_man, report, as_json, factor)
 
 
 @app.command("resonance")
@@ -148,7 +183,7 @@ def resonance(
     data = {
         "sample_rate": quantity(round(2 * nyquist, 1), "Hz"),
         "nyquist": quantity(round(nyquist, 1), "Hz"),
-        "peaks": [_peak_json(p) for p in peaks],
+        "peaks": [use.peak_json(p) for p in peaks],
         "notch": proposal,
     }
     if as_json:
@@ -178,34 +213,8 @@ def _report(folder: Path | None, trial: functions.FunctionTrial) -> None:
             info(f"wrote {path}")
 
 
-def _peak_json(p: Peak) -> dict[str, Any]:
-    return {"frequency": quantity(round(p.hz, 1), "Hz"), "amplitude": round(p.amplitude, 3), "resolved": p.resolvable}
-
-
 def _render(trial: functions.FunctionTrial, as_json: bool, profile_id: str) -> None:
-    data: dict[str, Any] = {
-        "function": trial.function,
-        "changes": [
-            {
-                "code": c.entry.code,
-                "old": quantity(c.old_value, c.entry.unit),
-                "new": quantity(c.new_value, c.entry.unit),
-                "what": c.why,
-            }
-            for c in trial.changes
-        ],
-        "found": {k: round(v, 3) for k, v in trial.found.items()},
-        "peaks": [_peak_json(p) for p in trial.peaks],
-        "verdict": trial.verdict,
-        "judged_on": list(functions.JUDGED.get(trial.function, ())),
-        "kept": trial.kept,
-        "reason": trial.reason,
-        "held": {c.entry.code: quantity(trial.held.get(c.entry.code), c.entry.unit) for c in trial.changes},
-        "persisted": trial.persisted,
-        "before": scoring.score_json(trial.before, profile_id) if trial.before else None,
-        "after": scoring.score_json(trial.after, profile_id) if trial.after else None,
-        "comparison": scoring.comparison_json(trial.differences, trial.verdict) if trial.after else None,
-    }
+    data = use.trial_json(trial, profile_id)
     if as_json:
         emit_json(data)
         return
@@ -213,7 +222,7 @@ def _render(trial: functions.FunctionTrial, as_json: bool, profile_id: str) -> N
         render_score(trial.before.score, trial.before.motion.describe())
     if trial.after is not None:
         render_comparison(trial.differences, trial.verdict)
-        out.print(f"judged on: {', '.join(data['judged_on'])}", markup=False)
+        out.print(f"judged on: {', '.join(functions.JUDGED.get(trial.function, ()))}", markup=False)
     out.print(f"{'KEPT' if trial.kept else 'NOT KEPT'}: {trial.reason}", markup=False)
     if trial.held:
         held = ", ".join(f"{code} = {value:g}" for code, value in trial.held.items())

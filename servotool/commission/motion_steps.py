@@ -48,7 +48,7 @@ class JogStep(StepType):
         return f"jog {speed:g} rpm for {secs:g} s"
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
-        drive.dead_man_waived = _waived(step.arg)
+        drive.dead_man_waived = waived(step.arg)
         with proven_on_interrupt(drive):  # an interrupt before the JOG moves ends with the drive read back
             jogger = guarded_jogger(drive)
             plan = jogger.plan(float(step.arg["speed"]), float(step.arg["time"]), step.arg.get("max_travel"))
@@ -65,7 +65,7 @@ class JogStep(StepType):
         )
 
 
-def _waived(arg: Any) -> bool:
+def waived(arg: Any) -> bool:
     """`no_dead_man: true` in a motion step: the plan's author acknowledges a drive without a dead-man."""
     value = (arg or {}).get("no_dead_man", False) if isinstance(arg, dict) else False
     if not isinstance(value, bool):
@@ -155,7 +155,7 @@ class TuneInertiaStep(StepType):
 
     def run(self, step: Step, drive: Drive, ctx: RunContext) -> Outcome:
         request = self.request(step.arg, drive.profile)
-        drive.dead_man_waived = _waived(step.arg)
+        drive.dead_man_waived = waived(step.arg)
         report = _report_option(step.arg)
         folder = ctx.path(report, drive.unit) if report else None
 

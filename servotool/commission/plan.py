@@ -12,7 +12,22 @@ from servotool.connection import options_from
 from servotool.errors import UsageError
 from servotool.files import compose_yaml, parse_yaml, read_text
 
-STEP_NAMES = ("set", "expect", "backup", "restore", "jog", "tune inertia", "wait", "alarm clear", "save", "prompt")
+STEP_NAMES = (
+    "set",
+    "expect",
+    "backup",
+    "restore",
+    "jog",
+    "tune inertia",
+    "tune score",
+    "tune friction",
+    "tune notch",
+    "tune gain-switching",
+    "wait",
+    "alarm clear",
+    "save",
+    "prompt",
+)
 
 
 CONNECTION_KEYS = {"port", "profile", "baud", "parity", "stopbits", "timeout", "retries"}

@@ -14,7 +14,15 @@ from servotool.errors import SetupRequired
 from servotool.model.profile import Profile
 from servotool.model.setup import Requirement, requirements, setup_required
 
-MOTION_STEPS = {"jog": "JOG", "tune inertia": "tune inertia"}  # step -> the feature named in the refusal
+# step -> the feature named in the refusal
+MOTION_STEPS = {
+    "jog": "JOG",
+    "tune inertia": "tune inertia",
+    "tune score": "tune score",
+    "tune friction": "tune friction",
+    "tune notch": "tune notch",
+    "tune gain-switching": "tune gain-switching",
+}
 
 
 def motion_setup(plan: Plan, profile: Profile) -> list[Requirement]:

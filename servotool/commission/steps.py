@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from servotool.commission.function_steps import TuneFunctionStep, TuneScoreStep
 from servotool.commission.motion_steps import JogStep, TuneInertiaStep
 from servotool.commission.param_steps import BackupStep, ExpectStep, RestoreStep, SaveStep, SetStep
 from servotool.commission.plan import Plan, Step
@@ -75,6 +76,10 @@ STEP_TYPES: dict[str, StepType] = {
         RestoreStep(),
         JogStep(),
         TuneInertiaStep(),
+        TuneScoreStep(),
+        TuneFunctionStep("friction"),
+        TuneFunctionStep("notch"),
+        TuneFunctionStep("gain-switching"),
         WaitStep(),
         AlarmClearStep(),
         SaveStep(),

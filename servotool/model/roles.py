@@ -100,6 +100,18 @@ def sim_extensions(profile: Profile) -> list[SimExtension]:
                 "its sense not stated) over a -3 dB band of width x 10 % of the centre frequency",
             )
         )
+    switch = profile.role("gain_switch_mode")
+    if switch is not None and profile.role("speed_loop_gain_2") is not None and switch.enum:
+        found.append(
+            SimExtension(
+                f"gain switching ({switch.code})",
+                "PARTLY SIMULATED: the simulator runs the conditions 'no switching' (gain 1 or 2) and 'speed' "
+                f"(above the switching speed gain 2 at once, below it gain 1 after the delay: {switch.source}); the "
+                "others (input, position error, pulse input) act as gain 1 (no GAIN-SEL input or pulse train is "
+                "simulated); the switching times (the manual names them, not the transition's shape) are not "
+                "modelled: the gains change at once",
+            )
+        )
     adaptive = profile.role("adaptive_notch")
     if adaptive is not None:
         found.append(

@@ -34,7 +34,7 @@ from servotool.sim.alarms import AlarmLog
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.handover import Handover, MachineState
 from servotool.sim.identification import Identification, Progress
-from servotool.sim.loop_functions import FrictionFeedForward, NotchSetting
+from servotool.sim.loop_functions import FrictionFeedForward, GainSwitch, NotchSetting
 from servotool.sim.mechanics import MechanicsSettings
 from servotool.sim.plant import (
     BRAKE_HOLD_X_RATED,
@@ -177,7 +177,30 @@ class Firmware:
             following_limit_rev=self._following_limit_rev(),
             notches=self._notches(),
             friction_ff=self._friction_ff(),
+            gain_switch=self._gain_switch(),
         )
+
+    def _gain_switch(self) -> GainSwitch:
+        """The second gain set and its condition (roles gain_switch_mode, speed_loop_gain_2, speed_loop_integral_2,
+        position_loop_gain_2, gain_switch_speed, gain_switch_delay), on the conditions the profile's mode entry
+        names (its enum); a mode entry that names none (IS620P H08-09: the manual lists no conditions) is inert."""
+        mode_e = self.profile.role("gain_switch_mode")
+        if mode_e is None or self.profile.role("speed_loop_gain_2") is None:
+            return GainSwitch()
+        condition = mode_e.enum.get(self.drive.bank.effective_value(mode_e.code), "")
+        return GainSwitch(
+            condition=condition,
+            speed_rpm=self._eng("gain_switch_speed", 10.0),
+            delay_s=self._eng("gain_switch_delay", 100.0) / 1000.0,
+            speed_gain_hz=self._gain("speed_loop_gain_2", 40.0),
+            speed_integral_ms=self._eng("speed_loop_integral_2", 20.0),
+            position_gain_per_s=self._gain_as("position_loop_gain_2", "position_loop_gain", 40.0),
+        )
+
+    def _gain_as(self, role: str, like: str, default: float) -> float:
+        """A second-set gain in canonical units, read as its first-set role is (gain_units.to_canonical)."""
+        entry = self.profile.role(role)
+        return default if entry is None else to_canonical(like, entry, self._eng(role, default))
 
     def _notches(self) -> tuple[NotchSetting, ...]:
         """The torque-command notches the profile maps: roles notchN_freq, notchN_width and notchN_depth (% passed

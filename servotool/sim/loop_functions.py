@@ -80,3 +80,43 @@ class FrictionFeedForward:
         return any(
             (self.offset_pct, self.coulomb_fwd_pct, self.coulomb_rev_pct, self.viscous_fwd_pct, self.viscous_rev_pct)
         )
+
+
+@dataclass(frozen=True)
+class GainSwitch:
+    """Gain switching (SD25 Po130, section 9.3.5, L7851-7869) on the conditions the simulator runs: 'gain1' and
+    'gain2' (no switching), 'speed' (above speed_rpm: gain 2 at once; below it: gain 1 after delay_s). Gain 2 is the
+    second speed-loop gain, integral time and position gain. Other conditions (DI, position error, pulse input)
+    are not simulated: gain 1 (the simulated drive has no pulse input and no GAIN-SEL input)."""
+
+    condition: str = "gain1"
+    speed_rpm: float = 10.0
+    delay_s: float = 0.1
+    speed_gain_hz: float = 40.0
+    speed_integral_ms: float = 20.0
+    position_gain_per_s: float = 40.0
+
+    @property
+    def any(self) -> bool:
+        return self.condition in ("gain2", "speed")
+
+
+class GainSelector:
+    """Which gain set acts now (1 or 2), stepped once a control period with the measured speed."""
+
+    def __init__(self, switch: GainSwitch) -> None:
+        self.switch = switch
+        self.active = 2 if switch.condition == "gain2" else 1
+        self._below_s = 0.0
+
+    def step(self, speed_rpm: float, ts: float) -> int:
+        s = self.switch
+        if s.condition != "speed":
+            return self.active
+        if abs(speed_rpm) > s.speed_rpm:
+            self.active, self._below_s = 2, 0.0
+        elif self.active == 2:
+            self._below_s += ts
+            if self._below_s >= s.delay_s:
+                self.active = 1
+        return self.active

@@ -25,7 +25,7 @@ import random
 from dataclasses import asdict, dataclass, field
 
 from servotool.model.profile import Motor as MotorData
-from servotool.sim.loop_functions import FrictionFeedForward, Notch, NotchSetting
+from servotool.sim.loop_functions import FrictionFeedForward, GainSelector, GainSwitch, Notch, NotchSetting
 from servotool.sim.mechanics import Friction, Mechanics, MechanicsSettings, MotorState, friction_step
 
 TS = 125e-6  # control period, s
@@ -103,6 +103,7 @@ class DriveGains:
     following_limit_rev: float = FOLLOWING_LIMIT_REV
     notches: tuple[NotchSetting, ...] = ()  # torque-command notches (sim.loop_functions)
     friction_ff: FrictionFeedForward = field(default_factory=FrictionFeedForward)  # friction compensation
+    gain_switch: GainSwitch = field(default_factory=GainSwitch)  # the second gain set and when it acts
 
 
 @dataclass(frozen=True)
@@ -174,9 +175,23 @@ class Plant:
         j_conf = self.motor.jm * (1.0 + gains.inertia_ratio_configured)
         self._kp = 2 * math.pi * gains.speed_gain_hz * j_conf
         self._ti = max(gains.speed_integral_ms, 0.1) / 1000.0
+        self._kp_pos = gains.position_gain_per_s
+        sw = gains.gain_switch
+        if old is None or old.gain_switch != sw:  # the selector keeps its state while its setting stays
+            self._gain_select = GainSelector(sw) if sw.any else None
+        # (speed loop P, integral time, position gain) of gain set 1 and 2
+        self._gain_sets = (
+            (self._kp, self._ti, self._kp_pos),
+            (2 * math.pi * sw.speed_gain_hz * j_conf, max(sw.speed_integral_ms, 0.1) / 1000.0, sw.position_gain_per_s),
+        )
         self._tf = max(gains.torque_filter_ms, 0.0) / 1000.0
         self._t_lim = gains.torque_limit_pct / 100.0 * self.motor.rated_torque_nm
         self._ramp = self.motor.rated_speed_rpm * RAD_S_PER_RPM / max(gains.jog_accel_ms / 1000.0, 1e-3)
+
+    @property
+    def active_gain_set(self) -> int:
+        """The gain set acting now (1 or 2: gain switching)."""
+        return self._gain_select.active if self._gain_select is not None else 1
 
     def set_protections(self, protections: Protections) -> None:
         self.protections = protections
@@ -318,6 +333,8 @@ class Plant:
             and self.mech.at_rest(self._motion_state(), self._brake_nm(), self._load_friction())
         ):
             self._cool(t - self.time)
+            if self._gain_select is not None:  # at rest: below any switching speed all this while
+                self._gain_select.step(0.0, t - self.time)
             self._off_s += t - self.time
             self.time = t  # at rest, nothing acting: nothing to integrate
             self._w_meas = 0.0
@@ -336,6 +353,9 @@ class Plant:
     def _controller(self) -> float:
         """Torque command of this control period (before the filter)."""
         mode = self.mode
+        if self._gain_select is not None:  # the condition is watched whatever the servo does
+            chosen = self._gain_select.step(self._w_meas / RAD_S_PER_RPM, TS)
+            self._kp, self._ti, self._kp_pos = self._gain_sets[chosen - 1]
         if mode == "off":
             self._integral = 0.0
             return 0.0
@@ -349,7 +369,7 @@ class Plant:
             self._loop_ref = self._ref
         elif mode == "position":  # ... and at rest the position loop holds where the profile stopped
             limit = self.gains.max_speed_rpm * RAD_S_PER_RPM
-            correction = self.gains.position_gain_per_s * (self._pos_ref - self.theta)
+            correction = self._kp_pos * (self._pos_ref - self.theta)
             self._loop_ref = max(-limit, min(limit, correction))
         else:
             self._loop_ref = self._ref

@@ -38,6 +38,8 @@ LATE_SHARE = 0.4  # after the reversal first)
 JUDGED = {
     "friction": ("following_error_rms", "following_error_peak", "iae"),
     "notch": ("overshoot", "settling", "ripple", "iae", "following_error_rms"),
+    # a stiffer gain while moving is for tracking, and must not cost overshoot or settling
+    "gain-switching": ("following_error_rms", "following_error_peak", "iae", "overshoot", "settling"),
 }
 MIN_COMP_PCT = 0.5  # a friction term below this share of rated torque (or two torque-reading steps) is left at 0:
 #                    nothing to compensate that the score could show
@@ -382,4 +384,10 @@ def notch_trial(drive: Drive, before: scoring.MeasuredScore) -> FunctionTrial:
     return trial
 
 
-__all__ = ["FEATURE", "FunctionTrial", "friction_trial", "judged_trial", "notch_trial"]
+__all__ = [
+    "FEATURE",
+    "FunctionTrial",
+    "friction_trial",
+    "judged_trial",
+    "notch_trial",
+]

@@ -327,8 +327,9 @@ def test_a_drive_not_set_up_refuses_in_one_line_and_its_fix_lets_the_jog_run(cli
     r = cli("--port", "sim", "--profile", profile, "jog", "--speed", "100", "--time", "0.5", "--json", *ack(profile))
     assert r.code == 0, r.err
     # IS620P's JOG runs in bursts on the simulator's strict reading of its segment trigger: its peak, not median
+    # (a burst restarted late by a busy host peaks up to ~10 % over: 109 rpm seen at load 5 on 2 cores)
     speed = r.json()["peak_speed" if profile == "is620p" else "median_speed"]["value"]
-    assert speed == pytest.approx(100, abs=8)
+    assert speed == pytest.approx(100, abs=14 if profile == "is620p" else 8)
 
 
 def test_a_power_cycle_setting_written_but_not_in_effect_is_named_on_the_simulator(cli):
