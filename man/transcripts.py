@@ -73,9 +73,15 @@ def _path_with_servotool(tmp: Path) -> str:
 
 
 def masked(text: str) -> str:
-    """Numbers as #, runs of table padding as one space: what may differ from run to run."""
-    text = re.sub(r"\d+(\.\d+)?(e[-+]?\d+)?", "#", text)
-    return re.sub(r"[ ─━]+", " ", text)
+    """Numbers as #, runs of table padding as one space, wrapped lines joined, a frame's bytes as #, an
+    identification's move lines left out (it stops once its estimate is tight: a move more or less), a sampling
+    gap's mention dropped: what may differ from run to run."""
+    text = re.sub(r"(?m)^move \d+/\d+ (forward|reverse) at .*\n", "", text)
+    text = re.sub(r"(?m)^(<<|>>)( [0-9a-f]{2})+", r"\1 #", text)
+    text = re.sub(r"[-−+]?\d+(\.\d+)?(e[-+]?\d+)?", "#", text)  # a sign too: a speed reads -1 or 0 rpm at rest
+    text = text.replace(", longest gap # ms", "")  # said only when the host left a gap in the sampling
+    text = re.sub(r"[ ─━]+", " ", text)
+    return re.sub(r"\n (?=\S)", " ", text)  # a wrapped line joined: where it wraps follows the numbers' widths
 
 
 def main() -> int:
@@ -92,7 +98,9 @@ def main() -> int:
         return 0
     old, new = (re.findall(BLOCK, t) for t in (readme, fresh))
     for a, b in zip(old, new, strict=True):
-        sys.stdout.writelines(difflib.unified_diff(a.splitlines(True), b.splitlines(True), "README.md", "now"))
+        if masked(a) != masked(b):  # the lines that differ beyond the masked numbers, shown as masked
+            lines = (masked(t).splitlines(True) for t in (a, b))
+            sys.stdout.writelines(difflib.unified_diff(*lines, "README.md (masked)", "now (masked)"))
     print("README.md's transcripts differ from what the code prints: python man/transcripts.py rewrites them")
     return 1
 

@@ -33,7 +33,17 @@ from servotool.errors import DeviceError, ModbusException
 from servotool.link.crc import crc_ok, with_crc
 from servotool.link.ledger import COPY_WINDOW, OWED_MIN_S, OWED_TIMEOUTS, Ledger, Rid, shape_of
 from servotool.link.ports import Trace
-from servotool.link.rtu import READ, WRITE_MANY, WRITE_ONE, NotAnswer, Request
+from servotool.link.rtu import (
+    READ,
+    READ_COILS,
+    READ_INPUT,
+    WRITE_COIL,
+    WRITE_COILS,
+    WRITE_MANY,
+    WRITE_ONE,
+    NotAnswer,
+    Request,
+)
 
 # Silence that ends a frame. RTU's 3.5 characters, but USB-serial adapters and TCP gateways deliver bytes in
 # bursts (an FTDI's latency timer holds them up to 16 ms), so a frame is only taken as over after this long.
@@ -164,20 +174,24 @@ class Exchange:
         self._sent: deque[bytes] = deque(maxlen=16)  # the latest requests, whose echoes may come back
 
     # ----- operations ----------------------------------------------------------------------------------------
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
-        """`count` registers at `address`; `spare` = registers before and after that may be read too (a whole
-        adjacent entry each), to give this read's reply another length than the replies around it."""
-        what = f"read {count} register(s) at {address} (0x{address:04X}) from unit {unit}"
-        op = self._op(what, Request(unit, READ, address, count))
-        return self._read(unit, address, count, spare, op)
+    def read(
+        self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = READ
+    ) -> list[int]:
+        """`count` registers at `address` (fc 3 holding, 4 input registers; fc 1 coils, 2 discrete inputs, as bits
+        0/1); `spare` = registers before and after that may be read too (a whole adjacent entry each), to give this
+        read's reply another length than the replies around it."""
+        kind = {1: "coil(s)", 2: "discrete input(s)", READ_INPUT: "input register(s)"}.get(fc, "register(s)")
+        what = f"read {count} {kind} at {address} (0x{address:04X}) from unit {unit}"
+        op = self._op(what, Request(unit, fc, address, count))
+        return self._read(unit, address, count, spare, op, fc)
 
-    def _read(self, unit: int, address: int, count: int, spare: tuple[int, int], op: _Op) -> list[int]:
+    def _read(self, unit: int, address: int, count: int, spare: tuple[int, int], op: _Op, fc: int = READ) -> list[int]:
         now, key = self.clock.now(), (unit, address, count)
         op.repeating = now - self._asked.get(key, -float("inf")) <= COPY_WINDOW
         self._asked[key] = now
         held: Held | None = None
         while True:
-            req = self._shape(unit, address, count, spare, held[1] if held else None)
+            req = self._shape(unit, address, count, spare, held[1] if held else None, fc)
             try:
                 reply = self._attempt(req, op)
             except LineFault:
@@ -217,17 +231,31 @@ class Exchange:
         op.spend(fault)
 
     def write(
-        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+        self,
+        unit: int,
+        address: int,
+        values: list[int],
+        *,
+        multiple: bool = True,
+        idempotent: bool = True,
+        coils: bool = False,
     ) -> None:
-        fc = WRITE_ONE if len(values) == 1 and not multiple else WRITE_MANY
+        """Write registers (FC06 for one unless `multiple`, else FC16), or with `coils` bits 0/1 (FC05, FC15)."""
+        single = len(values) == 1 and not multiple
+        fc = (WRITE_COIL if single else WRITE_COILS) if coils else WRITE_ONE if single else WRITE_MANY
         req = Request(unit, fc, address, len(values), tuple(values))
         outcome = (
             "the drive may or may not hold the new value"
             if idempotent
             else "it may or may not have run; not sent again, since running it twice is not safe"
         )
-        op = self._op(f"write {len(values)} register(s) at {address} (0x{address:04X}) to unit {unit}", req, outcome)
-        if self.echo is None and fc == WRITE_ONE:
+        what = "coil(s)" if coils else "register(s)"
+        op = self._op(
+            f"write {len(values)} {what} at {address} (0x{address:04X}) to unit {unit}",
+            req,
+            outcome,
+        )
+        if self.echo is None and req.repeated:
             self._probe_echo(unit, address)
         refused: int | None = None
         while True:
@@ -273,28 +301,31 @@ class Exchange:
     def _holds(self, req: Request, op: _Op) -> bool:
         """Whether the drive already holds what a failed write sent (then sending it again is not needed)."""
         try:
-            return self._read(req.unit, req.address, req.count, (0, 0), op) == list(req.values)
+            fc = READ_COILS if req.fc in (WRITE_COIL, WRITE_COILS) else READ
+            return self._read(req.unit, req.address, req.count, (0, 0), op, fc) == list(req.values)
         except ModbusException:
             return False  # not readable here: cannot tell, and the write is safe to repeat
 
     # ----- which request, and who may answer it -------------------------------------------------------------
-    def _shape(self, unit: int, address: int, count: int, spare: tuple[int, int], avoid: Request | None) -> Request:
+    def _shape(
+        self, unit: int, address: int, count: int, spare: tuple[int, int], avoid: Request | None, fc: int = READ
+    ) -> Request:
         """The read to send for `count` registers at `address`: of the widths `spare` allows, the narrowest whose reply
         length no owed reply has and that differs from an answer being confirmed and from the last read's when that
         one repeated (contract point 1)."""
         before, after = (0, 0) if (unit, address, count) in self._narrow else spare
         if not before and not after:
-            return Request(unit, READ, address, count)
+            return Request(unit, fc, address, count)
         now = self.clock.now()
         previous = self._previous.get(unit)
         best: tuple[tuple[bool, ...], Request] | None = None
         for lead, tail in dict.fromkeys(((0, 0), (0, after), (before, 0), (before, after))):
-            req = Request(unit, READ, address - lead, count + lead + tail)
-            rid, shape = self._rid(req), (unit, READ, 2 * req.count)
+            req = Request(unit, fc, address - lead, count + lead + tail)
+            rid, shape = self._rid(req), (unit, fc, req.data_bytes)
             score = (
                 self.ledger.owed_by_other(shape, rid, now),
                 avoid is not None and req.count == avoid.count,
-                previous is not None and previous[1] and req.count * 2 == previous[0],
+                previous is not None and previous[1] and req.data_bytes == previous[0],
             )
             if best is None or score < best[0]:
                 best = (score, req)
@@ -307,13 +338,13 @@ class Exchange:
         """A request's identity: a read's includes the number of the last write to its registers; a write's is what
         its acknowledgement shows (an FC16 one echoes no values, so a copy of one for the same registers fits: what
         a write stored is proven by reading it back, drive.Drive.write_verified)."""
-        if req.fc != READ:
-            return (req.unit, req.fc, req.address, req.values[0] if req.fc == WRITE_ONE else req.count)
+        if not req.reads:
+            return (req.unit, req.fc, req.address, req.values[0] if req.repeated else req.count)
         epoch = 0
         if self._written:
             get = self._written.get
             epoch = max(get((req.unit, a), 0) for a in range(req.address, req.address + req.count))
-        return (req.unit, READ, req.address, req.count, epoch)
+        return (req.unit, req.fc, req.address, req.count, epoch)
 
     def _ambiguous(self, req: Request, rid: Rid, frame: bytes, now: float) -> bool:
         """Whether the frame that fits `req` may be another request's reply or an old one (contract points 2-4)."""
@@ -328,14 +359,14 @@ class Exchange:
             return True
         # A copy of this read's own earlier reply, on a line that has shown faults: the same registers, but maybe a
         # moment old, and its own reply may follow (point 4).
-        return copied is not None and req.fc == READ and now < self._trouble_until
+        return copied is not None and req.reads and now < self._trouble_until
 
     def _owe(self, req: Request) -> None:
         """The request's reply may still come (a failed try, or a reply that may have been another's)."""
-        if req.fc == READ:
-            shape: tuple[int, ...] = (req.unit, READ, 2 * req.count)
+        if req.reads:
+            shape: tuple[int, ...] = (req.unit, req.fc, req.data_bytes)
         else:
-            shape = shape_of(req.frame if req.fc == WRITE_ONE else with_crc(req.frame[:6]))
+            shape = shape_of(req.frame if req.repeated else with_crc(req.frame[:6]))
         self.ledger.owe(shape, self._rid(req), self.clock.now())
 
     def _stray(self, data: bytes) -> None:
@@ -363,8 +394,8 @@ class Exchange:
             self.clock.sleep(wait)
         rid = self._rid(req)
         self.requests += 1
-        if req.fc == READ:
-            self._previous[req.unit] = (2 * req.count, op.repeating)
+        if req.reads:
+            self._previous[req.unit] = (req.data_bytes, op.repeating)
         else:
             self._writes += 1
             for a in range(req.address, req.address + req.count):
@@ -414,7 +445,7 @@ class Exchange:
         """Seconds the request and its longest reply take on the line, at the baud rate when it is known."""
         if not self.char_s:
             return 0.0
-        reply = 5 + 2 * req.count if req.fc == READ else 8
+        reply = 5 + req.data_bytes if req.reads else 8
         return (len(req.frame) + reply + GAP_CHARS) * self.char_s
 
     def _receive(self, req: Request, deadline: float) -> tuple[bytes, bytes]:
@@ -472,11 +503,11 @@ class Exchange:
                 return buf
             buf += self._recv(left)
         if not buf.startswith(sent):
-            if self.echo is None and req.fc != WRITE_ONE:
+            if self.echo is None and not req.repeated:
                 self.echo = False
             return buf
-        if self.echo is None and req.fc == WRITE_ONE:
-            # An FC06 reply repeats the request: one copy alone is the echo or the reply, which cannot be told.
+        if self.echo is None and req.repeated:
+            # An FC05/FC06 reply repeats the request: one copy alone is the echo or the reply, which cannot be told.
             buf += self._take_pending(max(0.0, deadline - self.clock.now()), until=len(sent) * 2 - len(buf))
             if len(buf) < 2 * len(sent):
                 raise LineFault("stray", len(buf), "one copy of a write that may be an echo")
@@ -522,9 +553,9 @@ def _frame_length(head: bytes) -> int | None:
     fc = head[1]
     if fc & 0x80:
         return 5
-    if fc in (3, 4):
+    if fc in (1, 2, 3, 4):
         return 5 + head[2]
-    return 8 if fc in (WRITE_ONE, WRITE_MANY) else None
+    return 8 if fc in (WRITE_COIL, WRITE_ONE, WRITE_COILS, WRITE_MANY) else None
 
 
 def _frames(data: bytes) -> list[bytes]:

@@ -25,7 +25,7 @@ Shape = tuple[int, ...]  # what a reply's head shows: (unit, fc, byte count) for
 def shape_of(frame: bytes) -> Shape:
     """The shape of a reply frame: a read's by its unit, function and byte count; a write acknowledgement or an
     exception by all its bytes (what they echo is all they show)."""
-    if len(frame) > 5 and frame[1] in (3, 4):
+    if len(frame) > 5 and frame[1] in (1, 2, 3, 4):
         return (frame[0], frame[1], frame[2])
     return tuple(frame)
 

@@ -60,13 +60,20 @@ class RtuMaster:
         """Whether the adapter echoes what it sends: as set, or as found out (None: not yet known)."""
         return self._exchange.echo
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
-        return self._exchange.read(unit, address, count, spare=spare)
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
+        return self._exchange.read(unit, address, count, spare=spare, fc=fc)
 
     def write(
-        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+        self,
+        unit: int,
+        address: int,
+        values: list[int],
+        *,
+        multiple: bool = True,
+        idempotent: bool = True,
+        coils: bool = False,
     ) -> None:
-        self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent)
+        self._exchange.write(unit, address, values, multiple=multiple, idempotent=idempotent, coils=coils)
 
     def control_line(self) -> ControlLine | None:
         """The control line the settings name for a heartbeat (held low since the port opened), None without."""

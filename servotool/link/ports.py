@@ -39,16 +39,24 @@ class LinkSettings:
 class Link(Protocol):
     """What drive operations need from a Modbus master."""
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
-        """`count` registers at `address`. spare = registers before and after that may be read as well (whole
-        readable entries): a master without transaction ids reads them to tell its replies apart."""
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
+        """`count` registers at `address` (fc 3 holding, 4 input registers). spare = registers before and after that
+        may be read as well (whole readable entries): a master without transaction ids reads them to tell its
+        replies apart."""
         ...
 
     def write(
-        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+        self,
+        unit: int,
+        address: int,
+        values: list[int],
+        *,
+        multiple: bool = True,
+        idempotent: bool = True,
+        coils: bool = False,
     ) -> None:
-        """Write registers. idempotent=False (an Fn trigger) means a write whose fate is unknown is never sent
-        again; an idempotent one may be."""
+        """Write registers (with `coils`, bits 0/1: FC05/FC15). idempotent=False (an Fn trigger) means a write
+        whose fate is unknown is never sent again; an idempotent one may be."""
         ...
 
     def close(self) -> None: ...

@@ -40,7 +40,7 @@ def expected_length(frame: bytes) -> int | None:
     if len(frame) < 2:
         return None
     fc = frame[1]
-    if fc in (*READ_CODES, 1, 2, 5, 6):
+    if fc in (*READ_CODES, 1, 2, 4, 5, 6):  # every function of fixed request length, served or refused
         return 8
     if fc in (15, 16):
         return 9 + frame[6] if len(frame) >= 7 else None

@@ -16,7 +16,7 @@ from servotool.model.setup import requirements
 from servotool.sim.device import SimulatedDrive
 from servotool.sim.registers import SimRefusal
 
-READ_CODES = (3, 4)
+READ_CODES = (3,)  # no manual lists FC04 (SD25 ch.1.2, SDC: 03/06/16 only; IS620P prints no Modbus chapter)
 TURNAROUND_S = 0.0005  # the drive's reply delay and the host's turnaround, per request
 
 
@@ -78,9 +78,12 @@ class VirtualLink:
             raise DeviceError(f"{what}: no response (no simulated drive has unit {unit})")
         return drive
 
-    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0)) -> list[int]:
-        """`count` registers; `spare` is not used: in process, a reply cannot be taken for another's."""
+    def read(self, unit: int, address: int, count: int, *, spare: tuple[int, int] = (0, 0), fc: int = 3) -> list[int]:
+        """`count` registers; `spare` is not used: in process, a reply cannot be taken for another's. A function
+        other than FC03 is refused with exception 01, as the line's drive does (sim.line.refusal)."""
         what = f"read {count} register(s) at {address} from unit {unit}"
+        if fc not in READ_CODES:
+            raise ModbusException(1, what)
         self.requests += 1
         self._stall()
         self.clock.advance(wire_time(3, count, self.baud) + TURNAROUND_S)
@@ -90,9 +93,18 @@ class VirtualLink:
             raise ModbusException(exc.code, what) from None
 
     def write(
-        self, unit: int, address: int, values: list[int], *, multiple: bool = True, idempotent: bool = True
+        self,
+        unit: int,
+        address: int,
+        values: list[int],
+        *,
+        multiple: bool = True,
+        idempotent: bool = True,
+        coils: bool = False,
     ) -> None:
         what = f"write {len(values)} register(s) at {address} to unit {unit}"
+        if coils:  # no profiled drive has coils (sim.line.refusal)
+            raise ModbusException(1, what)
         self.requests += 1
         self._stall()
         fc = 16 if multiple or len(values) > 1 else 6

@@ -255,7 +255,7 @@ def test_libmodbus_broadcast_write_is_applied_by_every_drive_and_unanswered(pty_
 SPEC_EXCEPTIONS = [
     (bytes([3, 0x20, 0x04, 0, 0]), 3),  # read 0 registers
     (bytes([3, 0x20, 0x04, 0, 126]), 3),  # read 126
-    (bytes([4, 0x20, 0x04, 0, 200]), 3),  # FC04 likewise
+    (bytes([4, 0x20, 0x04, 0, 1]), 1),  # FC04: no manual lists it
     (bytes([16, 0x20, 0x04, 0, 0, 0]), 3),  # write 0 registers
     (bytes([16, 0x20, 0x04, 0, 124, 2, 0, 1]), 3),  # write 124 (an RTU frame cannot carry them all)
     (bytes([1, 0, 100, 0, 1]), 1),  # read coils: unsupported, at an unmapped address
@@ -337,3 +337,10 @@ def test_an_fc16_whose_byte_count_disagrees_with_its_data_gets_exception_03(pty_
     assert short[:3] == bytes([1, 0x90, 3]), short.hex(" ")
     assert inconsistent[:3] == bytes([1, 0x90, 3]), inconsistent.hex(" ")
     assert read(master, 0x2004) == [250]  # nothing written, and the next request answered
+
+
+def test_raw_read_agrees_with_mbpoll(pty_line, cli):
+    _, master = pty_line
+    r = cli("--port", str(master), "--baud", "19200", "--profile", "dsx7e", "raw", "read", "0x2100", "3", "--json")
+    assert r.code == 0, r.err
+    assert [x["value"] for x in r.json()] == read(master, 0x2100, 3)

@@ -115,9 +115,10 @@ def test_bad_options_are_refused_before_anything_moves(cli, args, message):
 
 def test_one_direction_identifies_with_friction_and_load_torque_combined(cli):
     cli("sim", "config", "--load-ratio", "6", "--friction", "0.03")
-    # 8 rev: six moves one way and what DSX7E's 500 ms watchdog lets a dead host's motor run on fit at 400 rpm
-    r, res = tune_ok(cli, "--port", "sim", "tune", "inertia", "--yes", "--direction", "forward", "--travel", "8")
-    assert near(res, 6.0) and res["travel"]["value"] <= 8.0
+    # 16 rev: six moves one way with room to accelerate, and a dead host's run-on inside the travel (at 8 rev the
+    # moves were held to 407 rpm and a busy host left them 3.4 % uncertain: refused 1 in 2 with two CPU burners)
+    r, res = tune_ok(cli, "--port", "sim", "tune", "inertia", "--yes", "--direction", "forward", "--travel", "16")
+    assert near(res, 6.0) and res["travel"]["value"] <= 16.0
     assert any("one direction" in n for n in r.json()["notes"])
 
 
@@ -237,6 +238,8 @@ def test_motion_stays_inside_a_small_travel_limit(cli):
     r, res = tune_json(cli, "--port", "sim", "tune", "inertia", "--yes", "--travel", "1", "--no-gains")
     if "travel" in res:  # whatever the outcome, the axis moved inside the limit
         assert res["travel"]["value"] <= 1.0, res
+    else:  # stopped before a travel was measured (a busy host's stall tripped the drive's watchdog): said, stopped
+        assert r.code == 1 and r.err.splitlines()[-1].startswith("servotool: stopped"), r.err
     if r.code == 1:  # refused for the short travel (naming one), or stopped by a stall the words name as such
         assert "travel" in res["reason"] or any(w in res["reason"] for w in STALL_WORDS), res["reason"]
 

@@ -17,6 +17,8 @@ description:
   - The module runs on the managed host and returns the file's text; the control node writes it, as C(fetch)
     brings a file back, without a file on the managed host in between.
 version_added: "0.1.0"
+extends_documentation_fragment:
+  - servotool.drives.connection
 options:
   dest:
     description: Folder on the control node for the backups (handled by the action plugin).
@@ -26,33 +28,6 @@ options:
     description: Also return the snapshot's text in the result.
     type: bool
     default: false
-  port:
-    description: Serial port, C(tcp://HOST:PORT) or C(sim).
-    type: str
-    required: true
-  profile:
-    description: Drive profile id; found from the drive when left out.
-    type: str
-  unit:
-    description: Modbus unit id (default the profile's).
-    type: int
-  baud:
-    description: Baud rate (default the profile's).
-    type: int
-  parity:
-    description: Parity (default the profile's).
-    type: str
-    choices: [N, E, O]
-  stopbits:
-    description: Stop bits (default the profile's).
-    type: int
-    choices: [1, 2]
-  timeout:
-    description: Seconds to wait for each answer.
-    type: float
-  retries:
-    description: Tries after a timeout.
-    type: int
   machine:
     description: The machine's name in the file's folder and header (default the inventory host name).
     type: str

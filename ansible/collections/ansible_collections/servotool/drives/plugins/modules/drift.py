@@ -14,34 +14,9 @@ description:
   - The comparison is the check mode of the settings module (servotool.ops.apply), so C(drift) reports exactly what
     C(settings) would change.
 version_added: "0.1.0"
+extends_documentation_fragment:
+  - servotool.drives.connection
 options:
-  port:
-    description: Serial port, C(tcp://HOST:PORT) or C(sim).
-    type: str
-    required: true
-  profile:
-    description: Drive profile id; found from the drive when left out.
-    type: str
-  unit:
-    description: Modbus unit id (default the profile's).
-    type: int
-  baud:
-    description: Baud rate (default the profile's).
-    type: int
-  parity:
-    description: Parity (default the profile's).
-    type: str
-    choices: [N, E, O]
-  stopbits:
-    description: Stop bits (default the profile's).
-    type: int
-    choices: [1, 2]
-  timeout:
-    description: Seconds to wait for each answer.
-    type: float
-  retries:
-    description: Tries after a timeout.
-    type: int
   machine:
     description: The machine's name (unused by a comparison; accepted so module_defaults can give it to every module).
     type: str

@@ -14,11 +14,9 @@ description:
     torque, ...), and returns them as the fact C(servotool_drives), keyed by unit id.
   - Writes nothing.
 version_added: "0.1.0"
+extends_documentation_fragment:
+  - servotool.drives.connection
 options:
-  port:
-    description: Serial port, C(tcp://HOST:PORT) or C(sim).
-    type: str
-    required: true
   profile:
     description: Drive profile id; found from the first unit's answers when left out.
     type: str
@@ -29,23 +27,6 @@ options:
     description: Several unit ids on the bus, read in turn.
     type: list
     elements: int
-  baud:
-    description: Baud rate (default the profile's).
-    type: int
-  parity:
-    description: Parity (default the profile's).
-    type: str
-    choices: [N, E, O]
-  stopbits:
-    description: Stop bits (default the profile's).
-    type: int
-    choices: [1, 2]
-  timeout:
-    description: Seconds to wait for each answer.
-    type: float
-  retries:
-    description: Tries after a timeout.
-    type: int
   machine:
     description: The machine's name, returned with the facts (default this host's name).
     type: str
