@@ -189,15 +189,24 @@ def trace_estimate(profile: Profile, torque_limit_pct: float | None) -> Estimate
 
     def estimate(trace: Trace, settings: EstimatorSettings) -> InertiaEstimate:
         cfg = replace(settings, max_window_intervals=max(6, int(trace.rate() / 5)), torque_step_pct=step_pct)
-        return estimate_inertia(
-            trace.t,
-            trace.aligned_speed(),
-            trace.torque,
+        t, speed, torque = trace.fitted()
+        est = estimate_inertia(
+            t,
+            speed,
+            torque,
             rated_torque_nm=motor.rated_torque_nm,
             rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
             torque_limit_pct=torque_limit_pct,
             settings=cfg,
         )
+        if not trace.late:
+            return est
+        said = (
+            f"{trace.late} of {len(trace.t)} samples left out of the fit: their exchange took longer than the line's "
+            "own time (the host was late sending the request or taking the answer: a busy machine?), so when the "
+            "drive took them is not known"
+        )
+        return replace(est, notes=(*est.notes, said))
 
     return estimate
 

@@ -4,6 +4,7 @@ due, and the travel band the axis has covered."""
 from __future__ import annotations
 
 import csv
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,13 @@ from servotool.tuning.preflight import FEATURE
 POSITION_SHARE = 0.06
 POSITION_MIN_GAP_S = 0.05
 POSITION_MAX_GAP_S = 0.5
+# A drive takes its reading when the request arrives: a sample is stamped when its request goes out, and one whose
+# exchange took longer than the line's shortest recent one by more than this (s, or this share of that exchange) is
+# kept for the motion's guard but left out of the fit: the host was late somewhere inside it (descheduled before the
+# request went out, or after the answer came), so when the drive took the reading is not known.
+LATE_S = 0.001
+LATE_SHARE = 0.25
+LATE_HISTORY = 32
 
 
 @dataclass
@@ -36,6 +44,20 @@ class Trace:
     # When speed and torque cannot share one request (SD25 reads at most 10 registers), the speed is read a
     # request earlier: its own times, to bring it onto the torque's time base before the fit.
     speed_t: list[float] = field(default_factory=list)
+    # False where the sample's exchange overran the line's own time (LATE_S): its time is not known, no fit uses it.
+    on_time: list[bool] = field(default_factory=list)
+
+    def fitted(self) -> tuple[list[float], list[float], list[float]]:
+        """(times, speed at those times, torque) of the samples whose time is known: what the fit may use."""
+        speed = self.aligned_speed()
+        keep = self.on_time if len(self.on_time) == len(self.t) else [True] * len(self.t)
+        chosen = [i for i, ok in enumerate(keep) if ok]
+        return [self.t[i] for i in chosen], [speed[i] for i in chosen], [self.torque[i] for i in chosen]
+
+    @property
+    def late(self) -> int:
+        """Samples left out of the fit because their exchange overran the line's time."""
+        return self.on_time.count(False)
 
     def aligned_speed(self) -> list[float]:
         """Speed at the torque's sample times; the speed itself if read together.
@@ -100,6 +122,7 @@ class Sampler:
         self.pos_t = self.t0
         self.pos_every = POSITION_MIN_GAP_S
         self.lo = self.hi = self.pred = 0.0
+        self._took: deque[float] = deque(maxlen=LATE_HISTORY)
 
     @property
     def travel_rev(self) -> float:
@@ -117,37 +140,50 @@ class Sampler:
         t = self.trace.t
         return t[-1] - t[-2] if len(t) > 1 else 0.0
 
-    def _read(self) -> tuple[float, float, int | None]:
+    def _read(self) -> tuple[float, float, int | None, float]:
+        """(speed, torque, position raw or None, when the torque's request went out); the speed's own time is kept
+        where it takes a request of its own."""
         d, trace = self.drive, self.trace
         pos_raw = None
         if self.together:
+            sent = self.timing.now()
             entries = [self.speed_e, self.torque_e] + ([self.pos_e] if self.pos_free and self.pos_e else [])
             readings = d.read_entries(entries)
             if len(readings) > 2:
                 pos_raw = readings[2].raw
         else:
-            readings = d.read_entries([self.speed_e])
             trace.speed_t.append(self.timing.now() - self.t0)
+            readings = d.read_entries([self.speed_e])
+            sent = self.timing.now()
             readings += d.read_entries([self.torque_e])
         return (
             float(raw_to_eng(self.speed_e, readings[0].raw)),
             float(raw_to_eng(self.torque_e, readings[1].raw)),
             pos_raw,
+            sent,
         )
+
+    def _on_time(self, took: float) -> bool:
+        """Whether an exchange that took `took` s kept to the line's time (the shortest of the recent ones)."""
+        self._took.append(took)
+        usual = min(self._took)
+        return took <= usual + max(LATE_S, LATE_SHARE * usual)
 
     def sample(self) -> None:
         """One sample of speed and torque (and position when due); raises TravelLimitReached past the limit."""
         trace = self.trace
-        speed, torque, pos_raw = self._read()
+        start = self.timing.now()
+        speed, torque, pos_raw, sent = self._read()
         now = self.timing.now()
         if trace.t:  # travel between position reads, from the speed (checked before it is reached)
-            self.pred += 0.5 * (speed + trace.speed[-1]) / 60.0 * (now - self.t0 - trace.t[-1])
-        trace.t.append(now - self.t0)
+            self.pred += 0.5 * (speed + trace.speed[-1]) / 60.0 * (sent - self.t0 - trace.t[-1])
+        trace.t.append(sent - self.t0)
         trace.speed.append(speed)
         trace.torque.append(torque)
         trace.position.append(None)
+        trace.on_time.append(self._on_time(now - start))
         if pos_raw is not None:
-            self._position(pos_raw / self.counts, now)
+            self._position(pos_raw / self.counts, sent)
         elif self.pos_e is not None and (self.pos is None or now - self.pos_t >= self.pos_every):
             start = self.timing.now()
             x = self.drive.read_entries([self.pos_e])[0].raw / self.counts
