@@ -33,25 +33,49 @@ def stall(t: np.ndarray, rpm: np.ndarray) -> tuple[float, float]:
     return (float(np.max(gaps[long])) if np.any(long) else 0.0), usual
 
 
+def words(t: np.ndarray, rpm: np.ndarray) -> str:
+    """The words for the log's longest stall while the axis moved; empty where it has none."""
+    gap, usual = stall(t, rpm)
+    if gap <= 0:
+        return ""
+    return (
+        f"sampling gaps of up to {1000 * gap:.0f} ms while the axis moved (usually {1000 * usual:.2g} ms: the host "
+        "stalled, a busy machine?)"
+    )
+
+
 def name(v: Verdict, rigid: Verdict) -> Verdict:
     """The verdict with the gaps named in place of the mechanics the checks blamed, on a log with a stall; `rigid`:
-    the rigid fit's, whose J stands where a model of mechanics was fitted (its change counted as uncertainty)."""
+    the rigid fit's, whose J stands where a model of mechanics was fitted (its change counted as uncertainty). An
+    accepted result on such a log says so in its notes, whatever the checks found."""
     fit = v.fit
-    gap, usual = stall(fit.t, fit.rpm)
-    if gap <= 0 or not (v.fitted or v.widening or v.refuse):
+    said = words(fit.t, fit.rpm)
+    if not said:
         return v
-    words = (
-        f"sampling gaps of up to {1000 * gap:.0f} ms while the axis moved (usually {1000 * usual:.2g} ms: the host "
-        "stalled, a busy machine?) make the moves uneven"
-    )
+    uneven = f"{said} make the moves uneven"
     if v.refuse:
         return replace(
             v,
-            refuse=f"{words}: parts of the log disagree beyond what this can tell apart; run it again on a quieter "
+            refuse=f"{uneven}: parts of the log disagree beyond what this can tell apart; run it again on a quieter "
             "host",
         )
     if v.fitted:
         j_std = math.hypot(max(v.j_std, rigid.j_std), v.j - rigid.j)
-        said = Cause(f"{words}: J uncertain by what a model of mechanics would change", curable=False)
-        return replace(v, fit=rigid.fit, x=rigid.x, j=rigid.j, j_std=j_std, resid=rigid.resid, fitted=(), widening=said)
-    return replace(v, widening=Cause(f"{words}: parts of the log disagree", curable=False))
+        cause = Cause(f"{uneven}: J uncertain by what a model of mechanics would change", curable=False)
+        note = f"{uneven}: J taken from the rigid model, its uncertainty widened by what a model of mechanics changes"
+        return replace(
+            v,
+            fit=rigid.fit,
+            x=rigid.x,
+            j=rigid.j,
+            j_std=j_std,
+            resid=rigid.resid,
+            fitted=(),
+            widening=cause,
+            remarks=(*v.remarks, note),
+        )
+    if v.widening:
+        cause = Cause(f"{uneven}: parts of the log disagree", curable=False)
+        kept = tuple(r for r in v.remarks if not r.startswith("off-model:"))  # the mechanics a check blamed
+        return replace(v, widening=cause, remarks=(*kept, f"{uneven}: its uncertainty widened"))
+    return replace(v, remarks=(*v.remarks, f"{said}: the windows the fit stands on leave them out"))
