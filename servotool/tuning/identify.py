@@ -189,11 +189,12 @@ def trace_estimate(profile: Profile, torque_limit_pct: float | None) -> Estimate
 
     def estimate(trace: Trace, settings: EstimatorSettings) -> InertiaEstimate:
         cfg = replace(settings, max_window_intervals=max(6, int(trace.rate() / 5)), torque_step_pct=step_pct)
-        t, speed, torque = trace.fitted()
+        t, speed, torque, position = trace.fitted()
         est = estimate_inertia(
             t,
             speed,
             torque,
+            position_rev=position,
             rated_torque_nm=motor.rated_torque_nm,
             rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
             torque_limit_pct=torque_limit_pct,

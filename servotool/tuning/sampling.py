@@ -4,6 +4,7 @@ due, and the travel band the axis has covered."""
 from __future__ import annotations
 
 import csv
+import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ POSITION_MAX_GAP_S = 0.5
 LATE_S = 0.001
 LATE_SHARE = 0.25
 LATE_HISTORY = 32
+GAP_READ_EXCHANGES = 4.0  # a gap in the fitted samples longer than this many exchanges has the position read after it
 
 
 @dataclass
@@ -47,12 +49,14 @@ class Trace:
     # False where the sample's exchange overran the line's own time (LATE_S): its time is not known, no fit uses it.
     on_time: list[bool] = field(default_factory=list)
 
-    def fitted(self) -> tuple[list[float], list[float], list[float]]:
-        """(times, speed at those times, torque) of the samples whose time is known: what the fit may use."""
+    def fitted(self) -> tuple[list[float], list[float], list[float], list[float]]:
+        """(times, speed at those times, torque, position or NaN where none was read) of the samples whose time is
+        known: what the fit may use."""
         speed = self.aligned_speed()
         keep = self.on_time if len(self.on_time) == len(self.t) else [True] * len(self.t)
         chosen = [i for i, ok in enumerate(keep) if ok]
-        return [self.t[i] for i in chosen], [speed[i] for i in chosen], [self.torque[i] for i in chosen]
+        position = [math.nan if (x := self.position[i]) is None else x for i in chosen]
+        return [self.t[i] for i in chosen], [speed[i] for i in chosen], [self.torque[i] for i in chosen], position
 
     @property
     def late(self) -> int:
@@ -123,6 +127,7 @@ class Sampler:
         self.pos_every = POSITION_MIN_GAP_S
         self.lo = self.hi = self.pred = 0.0
         self._took: deque[float] = deque(maxlen=LATE_HISTORY)
+        self._fitted_at = math.inf  # when the last sample the fit may use was taken
 
     @property
     def travel_rev(self) -> float:
@@ -181,15 +186,21 @@ class Sampler:
         trace.speed.append(speed)
         trace.torque.append(torque)
         trace.position.append(None)
-        trace.on_time.append(self._on_time(now - start))
+        on_time = self._on_time(now - start)
+        trace.on_time.append(on_time)
+        # The fit's position is the speed's integral, which no gap in the fitted samples can be integrated across:
+        # after one, the drive's position is read at once.
+        after_gap = on_time and sent - self._fitted_at > GAP_READ_EXCHANGES * min(self._took)
+        if on_time:
+            self._fitted_at = sent
         if pos_raw is not None:
             self._position(pos_raw / self.counts, sent)
-        elif self.pos_e is not None and (self.pos is None or now - self.pos_t >= self.pos_every):
+        elif self.pos_e is not None and (self.pos is None or now - self.pos_t >= self.pos_every or after_gap):
             start = self.timing.now()
             x = self.drive.read_entries([self.pos_e])[0].raw / self.counts
-            took = self.timing.now() - start
-            self.pos_every = min(POSITION_MAX_GAP_S, max(POSITION_MIN_GAP_S, took / POSITION_SHARE))
-            self._position(x, self.timing.now())
+            read_at = self.timing.now()
+            self.pos_every = min(POSITION_MAX_GAP_S, max(POSITION_MIN_GAP_S, (read_at - start) / POSITION_SHARE))
+            self._position(x, read_at, speed / 60.0 * (read_at - sent))
         # Travel from the position reads, predicted from the speed between them (from the speed alone where the
         # profile has no usable position feedback).
         self.lo, self.hi = min(self.lo, self.pred), max(self.hi, self.pred)
@@ -198,8 +209,10 @@ class Sampler:
         if self.beat is not None:
             self.beat()
 
-    def _position(self, x: float, now: float) -> None:
-        self.trace.position[-1] = x
+    def _position(self, x: float, now: float, since_sample: float = 0.0) -> None:
+        """The drive's position `x` (rev) read at `now`; the sample's own is x less the `since_sample` rev the axis
+        went on after it."""
+        self.trace.position[-1] = x - since_sample
         self.pos, self.pos_t, self.pred = x, now, x
         first = len(self.trace.t) == 1
         self.lo, self.hi = (x, x) if first else (min(self.lo, x), max(self.hi, x))

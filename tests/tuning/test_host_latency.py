@@ -41,7 +41,7 @@ def test_a_host_that_stalls_is_accepted_within_its_3_sigma_or_refused_without_a_
         return
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - 3.0) <= 3 * est.ratio_std
-    t, speed, _torque = res.identified.trace.fitted()
+    t, speed, _torque, _position = res.identified.trace.fitted()
     if gaps.stall(np.asarray(t), np.asarray(speed))[0] > 0:  # accepted on a log with a stall: says so (seeds 1
         # and 2 were accepted with no note at all)
         assert any("the host stalled" in n for n in est.notes), est.notes

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
 from servotool.sim.virtual import TURNAROUND_S, HostStalls, wire_time
+from servotool.tuning.fit.signals import anchored
 from servotool.tuning.sampling import LATE_S, LATE_SHARE, Sampler, Trace
 from tests.tuning.test_tune_robustness import set_up
 
@@ -61,9 +64,35 @@ def test_a_sample_is_timed_when_the_drive_took_it_or_left_out_of_the_fit(sim_dir
     s = Sampler(d, clock, 100.0)
     for _ in range(300):
         s.sample()
-    t, _speed, _torque = s.trace.fitted()
+    t, _speed, _torque, _position = s.trace.fitted()
     taken = [(when, request) for (when, request), ok in zip(took, s.trace.on_time, strict=True) if ok]
     assert len(taken) == len(t) and 0 < s.trace.late < 0.4 * len(took)
     for stamp, (when, request) in zip(np.asarray(t) + s.t0, taken, strict=True):
         # at most its request, and what the line's own time tolerates (SD25: two requests a sample)
         assert 0.0 <= when - stamp <= request + max(LATE_S, LATE_SHARE * 2 * request) + 1e-9, (stamp, when)
+
+
+def test_after_a_gap_in_the_fitted_samples_the_drives_position_is_read_at_once(sim_dir):
+    """The fit's position is the speed's integral, which cannot cross a stall (a move may run through it): the first
+    sample the fit may use after a gap carries the drive's own position."""
+    _sim, d, clock = set_up("dsx7e", 115200, stalls=HostStalls(0.05, 0.2, 5, 0.05, after_reply=0.5))
+    s = Sampler(d, clock, 100.0)
+    for _ in range(400):
+        s.sample()
+    t = np.asarray(s.trace.t)
+    fitted = np.flatnonzero(s.trace.on_time)
+    after = [i for a, i in itertools.pairwise(fitted) if t[i] - t[a] > 0.04]
+    assert after and all(s.trace.position[i] is not None for i in after)
+
+
+def test_the_fits_position_is_set_anew_after_each_gap_by_the_drives_readings():
+    """A move through a 300 ms stall: the speed's integral misses the 2 rev turned in it; the readings put it back,
+    and a stretch with none keeps the offset of the one before it."""
+    t = np.concatenate([np.arange(0.0, 0.3, 0.003), np.arange(0.6, 0.9, 0.003), np.arange(0.95, 1.2, 0.003)])
+    truth = np.where(t < 0.45, 0.0, 2.0 * 2 * np.pi)  # rad: the axis turned 2 rev inside the first gap
+    cum_w = np.zeros_like(t)  # the speed's integral: nothing outside the gaps
+    readings = np.full_like(t, np.nan)
+    readings[[5, 120]] = truth[[5, 120]]  # one reading before the stall, one after it; none after the second gap
+    position = anchored(t, cum_w, readings, 6.0)
+    assert position == pytest.approx(truth)
+    assert anchored(t, cum_w, None, 6.0) is cum_w
