@@ -196,11 +196,11 @@ class Sampler:
         if pos_raw is not None:
             self._position(pos_raw / self.counts, sent)
         elif self.pos_e is not None and (self.pos is None or now - self.pos_t >= self.pos_every or after_gap):
-            start = self.timing.now()
+            asked = self.timing.now()
             x = self.drive.read_entries([self.pos_e])[0].raw / self.counts
             read_at = self.timing.now()
-            self.pos_every = min(POSITION_MAX_GAP_S, max(POSITION_MIN_GAP_S, (read_at - start) / POSITION_SHARE))
-            self._position(x, read_at, speed / 60.0 * (read_at - sent))
+            self.pos_every = min(POSITION_MAX_GAP_S, max(POSITION_MIN_GAP_S, (read_at - asked) / POSITION_SHARE))
+            self._position(x, read_at, speed / 60.0 * (asked - sent))
         # Travel from the position reads, predicted from the speed between them (from the speed alone where the
         # profile has no usable position feedback).
         self.lo, self.hi = min(self.lo, self.pred), max(self.hi, self.pred)
@@ -210,8 +210,8 @@ class Sampler:
             self.beat()
 
     def _position(self, x: float, now: float, since_sample: float = 0.0) -> None:
-        """The drive's position `x` (rev) read at `now`; the sample's own is x less the `since_sample` rev the axis
-        went on after it."""
+        """The drive's position `x` (rev), known at `now`; the sample's own is x less the `since_sample` rev the axis
+        went on between the sample and the position's request (the drive takes both when a request arrives)."""
         self.trace.position[-1] = x - since_sample
         self.pos, self.pos_t, self.pred = x, now, x
         first = len(self.trace.t) == 1
