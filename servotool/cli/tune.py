@@ -103,6 +103,7 @@ def _estimate_json(result: identify.Result) -> dict[str, Any]:
         "residual_rel": _rounded(est.residual_rel, 4) if est else None,
         "notes": list(est.notes) if est else [],
         "samples": len(result.trace.t),
+        "samples_left_out": result.trace.late,  # their exchange overran the line's time: when taken is not known
         "sample_rate": quantity(round(result.samples_per_s, 1), "Hz"),
         "travel": quantity(round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None, "rev"),
         "time": quantity(round(result.time_used_s, 2), "s"),

@@ -190,7 +190,7 @@ def trace_estimate(profile: Profile, torque_limit_pct: float | None) -> Estimate
     def estimate(trace: Trace, settings: EstimatorSettings) -> InertiaEstimate:
         cfg = replace(settings, max_window_intervals=max(6, int(trace.rate() / 5)), torque_step_pct=step_pct)
         t, speed, torque, position = trace.fitted()
-        est = estimate_inertia(
+        return estimate_inertia(
             t,
             speed,
             torque,
@@ -200,14 +200,6 @@ def trace_estimate(profile: Profile, torque_limit_pct: float | None) -> Estimate
             torque_limit_pct=torque_limit_pct,
             settings=cfg,
         )
-        if not trace.late:
-            return est
-        said = (
-            f"{trace.late} of {len(trace.t)} samples left out of the fit: their exchange took longer than the line's "
-            "own time (the host was late sending the request or taking the answer: a busy machine?), so when the "
-            "drive took them is not known"
-        )
-        return replace(est, notes=(*est.notes, said))
 
     return estimate
 
