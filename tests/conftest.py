@@ -25,6 +25,17 @@ class Result:
         return json.loads(self.out)
 
 
+@pytest.fixture(autouse=True)
+def _no_terminal_size_from_the_runner(monkeypatch) -> None:
+    """Output is judged as a pipe gives it: not wrapped, unless a test gives its own COLUMNS. The runner's
+    COLUMNS and LINES are not the test's: pytest imports readline, whose GNU library puts LINES=24 COLUMNS=80
+    in the process environment (below os.environ) without a terminal, so a child started without env= gets them,
+    and pytest-xdist's workers start with them in os.environ (as with a developer's exported COLUMNS)."""
+    for name in ("COLUMNS", "LINES"):
+        monkeypatch.delenv(name, raising=False)
+        os.unsetenv(name)
+
+
 @pytest.fixture
 def sim_dir(tmp_path, monkeypatch) -> Path:
     """Each test gets its own simulated drives (state files), automatic-backup folder and no user config; its
