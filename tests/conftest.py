@@ -15,6 +15,19 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def _children_keep_their_bytecode() -> None:
+    """Where the runner sets PYTHONDONTWRITEBYTECODE, every `python -m servotool` the tests start (about a
+    thousand) would compile servotool's modules from source again: a quarter of a `param get`'s CPU time, which
+    an installed package, its .pyc files written by pip, never spends. The children (and pytest-xdist's workers)
+    keep their bytecode in the pytest cache folder instead, outside the source tree, as bench/startup.py does."""
+    if os.environ.get("PYTHONDONTWRITEBYTECODE") and not os.environ.get("PYTHONPYCACHEPREFIX"):
+        del os.environ["PYTHONDONTWRITEBYTECODE"]
+        os.environ["PYTHONPYCACHEPREFIX"] = str(ROOT / ".pytest_cache" / "pycache")
+
+
+_children_keep_their_bytecode()
+
+
 @dataclass
 class Result:
     code: int
