@@ -15,6 +15,19 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def _children_keep_their_bytecode() -> None:
+    """Where the runner sets PYTHONDONTWRITEBYTECODE, every `python -m servotool` the tests start (about a
+    thousand) would compile servotool's modules from source again: a quarter of a `param get`'s CPU time, which
+    an installed package, its .pyc files written by pip, never spends. The children (and pytest-xdist's workers)
+    keep their bytecode in the pytest cache folder instead, outside the source tree, as bench/startup.py does."""
+    if os.environ.get("PYTHONDONTWRITEBYTECODE") and not os.environ.get("PYTHONPYCACHEPREFIX"):
+        del os.environ["PYTHONDONTWRITEBYTECODE"]
+        os.environ["PYTHONPYCACHEPREFIX"] = str(ROOT / ".pytest_cache" / "pycache")
+
+
+_children_keep_their_bytecode()
+
+
 @dataclass
 class Result:
     code: int
@@ -23,6 +36,17 @@ class Result:
 
     def json(self):
         return json.loads(self.out)
+
+
+@pytest.fixture(autouse=True)
+def _no_terminal_size_from_the_runner(monkeypatch) -> None:
+    """Output is judged as a pipe gives it: not wrapped, unless a test gives its own COLUMNS. The runner's
+    COLUMNS and LINES are not the test's: pytest imports readline, whose GNU library puts LINES=24 COLUMNS=80
+    in the process environment (below os.environ) without a terminal, so a child started without env= gets them,
+    and pytest-xdist's workers start with them in os.environ (as with a developer's exported COLUMNS)."""
+    for name in ("COLUMNS", "LINES"):
+        monkeypatch.delenv(name, raising=False)
+        os.unsetenv(name)
 
 
 @pytest.fixture

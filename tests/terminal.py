@@ -35,5 +35,14 @@ class Terminal:
             time.sleep(0.1)
         raise AssertionError(f"{text!r} (x{count}) not on the screen after {timeout} s:\n{self.screen()}")
 
+    def wait_for_bottom(self, text: str, timeout: float = 30) -> str:
+        """The screen once its last non-blank line holds `text` (a status line redrawn after a command's output)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in (bottom := (self.screen().strip().splitlines() or [""])[-1]):
+                return bottom
+            time.sleep(0.1)
+        raise AssertionError(f"{text!r} not on the bottom line after {timeout} s:\n{self.screen()}")
+
     def close(self) -> None:
         self._tmux("kill-server", check=False)

@@ -37,9 +37,12 @@ def fleet(sim_dir, tmp_path):
 
 
 def dead_port() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp://127.0.0.1:{s.getsockname()[1]}"  # closed again: nothing listens there
+    """A loopback port where nothing listens: bound and never listening, held until the next call (closed, the
+    port could go to another test's `sim serve` meanwhile)."""
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    dead_port.keep = s  # type: ignore[attr-defined]
+    return f"tcp://127.0.0.1:{s.getsockname()[1]}"
 
 
 def test_backup_drift_and_apply_run_every_bus_and_a_failure_leaves_the_others_done(fleet, cli, tmp_path):
