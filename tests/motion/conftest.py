@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -19,7 +20,7 @@ def serve(profile: str):
         cwd=ROOT,
         stderr=subprocess.PIPE,
         text=True,
-        env=dict(os.environ),
+        env={**os.environ, "PYTHONFAULTHANDLER": "1"},  # SIGABRT prints its threads' stacks (end() below)
     )
     line = proc.stderr.readline()
     m = re.search(r"(tcp://127\.0\.0\.1:\d+)", line)
@@ -27,13 +28,28 @@ def serve(profile: str):
     return proc, m.group(1)
 
 
+def end(proc: subprocess.Popen) -> None:
+    """Terminate a served drive; one that has not ended 10 s later fails the test with its threads' stacks (a
+    terminate once went unanswered for 10 s in CI: the stacks say where it waited)."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGABRT)
+        try:
+            _out, said = proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _out, said = proc.communicate()
+        pytest.fail(f"sim serve still ran 10 s after SIGTERM; its stacks:\n{said[-4000:]}")
+
+
 @pytest.fixture
 def served(sim_dir):
     """`servotool sim serve` (DSX7E) on a free loopback port; yields its tcp:// address."""
     proc, port = serve("dsx7e")
     yield port
-    proc.terminate()
-    proc.wait(timeout=10)
+    end(proc)
 
 
 @pytest.fixture
@@ -48,5 +64,4 @@ def served_as(sim_dir):
 
     yield start
     for proc in procs:
-        proc.terminate()
-        proc.wait(timeout=10)
+        end(proc)
