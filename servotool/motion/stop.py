@@ -248,7 +248,8 @@ def _wait_for_rest(
             if clock.now() >= end:
                 return False, speed
             steps.run("feeding the drive's watchdog", halt.keep_alive)
-            steps.run("waiting", lambda: idle(poll_s))
+            if not steps.run("waiting", lambda: idle(poll_s)):  # a JOG's trace samples while it waits
+                break
             continue
         except Exception as exc:  # the wait ends; the servo-off comes next all the same
             steps.problems.append(f"reading the speed failed ({type(exc).__name__}: {exc})")
