@@ -1,4 +1,5 @@
-"""The built wheel carries the profiles: installed (not editable), run from another directory, it finds them."""
+"""The built wheel carries every module and the profiles: installed (not editable), run from another directory, it
+finds them. The README's first command installs this way; the suite's editable install would hide a missing package."""
 
 from __future__ import annotations
 
@@ -40,3 +41,6 @@ def test_installed_wheel_lists_its_profiles_from_another_directory(tmp_path):
     )
     assert proc.returncode == 0, proc.stderr
     assert {"dsx7e", "sd25", "is620p", "sdc"} <= {p["id"] for p in json.loads(proc.stdout)}
+    source = {p.relative_to(ROOT).as_posix() for p in (ROOT / "servotool").rglob("*.py")}
+    installed = {p.relative_to(target).as_posix() for p in (target / "servotool").rglob("*.py")}
+    assert source - installed == set(), "modules the wheel leaves out (pyproject.toml's packages)"
