@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import gc
 import io
 import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -90,19 +92,32 @@ def _in_process(args: tuple[str, ...], input: str | None, env: dict[str, str]) -
     sys.stdin, sys.stdout, sys.stderr = io.StringIO(input or ""), out, err
     sys.argv = [str(ROOT / "servotool" / "__main__.py"), *args]  # as `python -m servotool` sets it (the change log's)
     render.out._console = render.err._console = None
+    threads = set(threading.enumerate())
+    gc.freeze()  # the test process's heap (every test's objects) is no collection's to walk during a real-time motion
     try:
         try:
             code = dispatch(list(args), State())
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     finally:
+        gc.unfreeze()
         render.out._console = render.err._console = None
         sys.stdin, sys.stdout, sys.stderr = saved_streams
         sys.argv = saved_argv
         os.chdir(saved_cwd)
         os.environ.clear()
         os.environ.update(saved_env)
+    _no_thread_left(threads, args)
     return Result(code, out.getvalue(), err.getvalue())
+
+
+def _no_thread_left(before: set[threading.Thread], args: tuple[str, ...]) -> None:
+    """A command ends its threads (a child's exit would wait for one, or cut a daemon short): one still running
+    here would go on in the test process, unseen."""
+    left = [t for t in threading.enumerate() if t not in before]
+    for thread in left:
+        thread.join(timeout=5)
+    assert not [t for t in left if t.is_alive()], f"servotool {' '.join(args)} left threads running: {left}"
 
 
 class _PipedText(io.StringIO):
