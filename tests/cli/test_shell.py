@@ -4,6 +4,7 @@ line, the history, and Ctrl-D to leave. The motion is judged by a plain Modbus c
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -168,3 +169,10 @@ def test_the_status_line_reads_only_while_the_prompt_waits():
     assert reads and status.text.startswith("read ")
     for c0, c1 in commands:
         assert all(r1 <= c0 or r0 >= c1 for r0, r1 in reads), (commands, reads)
+
+
+def test_a_json_error_after_a_json_result_in_the_shell_is_a_json_object_too(cli):
+    r = cli("--port", "sim", "shell", input="param get Pn101 --json\nparam get Pn999 --json\n")
+    first, _, second = r.out.partition("\n]\n")
+    assert json.loads(first + "\n]")[0]["code"] == "Pn101"
+    assert json.loads(second)["error"]["code"] == "unknown_name", r.out
