@@ -16,7 +16,7 @@ from servotool.cli import complete
 from servotool.cli.argv import hoist_globals
 from servotool.cli.common import State, take_options
 from servotool.cli.lazy import lazy, lazy_group
-from servotool.cli.render import Verbosity, emit_json, err, json_emitted
+from servotool.cli.render import Verbosity, emit_json, err, json_emitted, new_command
 from servotool.connection import ConnectOptions
 from servotool.errors import ServoError, StopUnconfirmed
 
@@ -206,6 +206,7 @@ def dispatch(argv: list[str], given: State) -> int:
     args = list(argv)
     as_json = "--json" in args[: args.index("--")] if "--" in args else "--json" in args
     since = _stops_made()  # a shell runs many commands in one process: the stops of this one count
+    new_command()
     try:
         args = hoist_globals(root, args)
         result = root.main(args=args, prog_name="servotool", standalone_mode=False, obj=given)

@@ -321,6 +321,12 @@ def emit_json_line(data: Any) -> None:
     sys.stdout.flush()
 
 
+def new_command() -> None:
+    """Forget what the previous command printed (`servotool shell` runs many in one process): a JSON document or
+    JSON lines of its own must not keep the next command's error from being a JSON object, or make it one line."""
+    _emitted[0] = _streaming[0] = False
+
+
 def json_emitted() -> bool:
     """Whether this command has printed a JSON document already (an error then adds none)."""
     return _emitted[0]

@@ -93,8 +93,10 @@ def test_with_json_an_error_is_a_json_object_too(cli):
     assert r.code == 2 and r.json()["error"]["code"] == "usage" and "--bogus" in r.err
 
 
-def test_a_timeout_is_one_line_and_leaves_no_asyncio_noise(cli):
-    r = cli("--port", "sim", "--timeout", "0.001", "--retries", "0", "param", "list")
+def test_a_timeout_is_one_line_and_leaves_no_asyncio_noise(cli_process):
+    r = cli_process(  # a process: asyncio's noise is printed at the interpreter's exit
+        "--port", "sim", "--timeout", "0.001", "--retries", "0", "param", "list"
+    )
     assert r.code == 1 and "no response" in r.err
     assert "Task was destroyed" not in r.err and "Traceback" not in r.err
 

@@ -42,6 +42,7 @@ def test_an_interrupted_jog_is_stopped_and_its_settings_read_back_as_found(sim_d
     before = _settings(sim, jogger)
     plan = jogger.plan(500, 5.0)
     samples = []
+    since = len(stop.reports())  # this process's stops so far (other tests' commands): the CLI counts from here too
 
     def interrupt(t: float, speed: float | None) -> None:
         samples.append(speed)
@@ -56,7 +57,7 @@ def test_an_interrupted_jog_is_stopped_and_its_settings_read_back_as_found(sim_d
     assert report.describe().startswith("stopped, servo off")
     assert abs(sim.firmware.plant.true_speed_rpm) < 10 and not sim.firmware.plant.servo_on
     assert _settings(sim, jogger) == before and report.settings_back
-    assert stop.final() is report
+    assert stop.final(stop.reports()[since:]) is report
 
 
 def test_a_second_interrupt_during_the_stop_is_held_until_it_is_done(sim_dir):
