@@ -1,7 +1,9 @@
-"""Shared fixtures: an isolated simulated-drive state dir and a CLI runner that uses the real entry point."""
+"""Shared fixtures: an isolated simulated-drive state dir and a CLI runner that runs the CLI as a user would."""
 
 from __future__ import annotations
 
+import _thread
+import faulthandler
 import gc
 import io
 import json
@@ -9,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -75,10 +78,13 @@ def factory_line(sim_dir, monkeypatch) -> Path:
     return sim_dir
 
 
-def _in_process(args: tuple[str, ...], input: str | None, env: dict[str, str]) -> Result:
+def _in_process(args: tuple[str, ...], input: str | None, env: dict[str, str], timeout: float) -> Result:
     """One command line through the CLI's own dispatch (what `servotool shell` runs for each line it reads), in this
     process: its environment, working directory, stdin and stdout/stderr as a piped child's, the output consoles
-    made anew. A child costs ~0.18 s of CPU to start (interpreter, imports, profile), a thousand times a run."""
+    made anew. A child costs ~0.18 s of CPU to start (interpreter, imports, profile), a thousand times a run. A
+    command still running after `timeout` is interrupted as a Ctrl-C would (its stop sequence runs) and the test
+    fails with every thread's stack at that moment, as a child's timeout failed it: a hang is not left to the CI's
+    own limit, with nothing said of where it waited."""
     from servotool.cli import render
     from servotool.cli.common import State
     from servotool.cli.main import dispatch
@@ -92,6 +98,7 @@ def _in_process(args: tuple[str, ...], input: str | None, env: dict[str, str]) -
     sys.stdin, sys.stdout, sys.stderr = io.StringIO(input or ""), out, err
     sys.argv = [str(ROOT / "servotool" / "__main__.py"), *args]  # as `python -m servotool` sets it (the change log's)
     render.out._console = render.err._console = None
+    deadline = _Deadline(timeout)
     threads = set(threading.enumerate())
     gc.freeze()  # the test process's heap (every test's objects) is no collection's to walk during a real-time motion
     try:
@@ -100,6 +107,7 @@ def _in_process(args: tuple[str, ...], input: str | None, env: dict[str, str]) -
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
     finally:
+        deadline.cancel()
         gc.unfreeze()
         render.out._console = render.err._console = None
         sys.stdin, sys.stdout, sys.stderr = saved_streams
@@ -108,7 +116,31 @@ def _in_process(args: tuple[str, ...], input: str | None, env: dict[str, str]) -
         os.environ.clear()
         os.environ.update(saved_env)
     _no_thread_left(threads, args)
+    if deadline.stacks is not None:
+        pytest.fail(f"servotool {' '.join(args)} still ran after {timeout} s; its threads then:\n{deadline.stacks}")
     return Result(code, out.getvalue(), err.getvalue())
+
+
+class _Deadline:
+    """After `timeout` s: every thread's stack kept, then the main thread interrupted (a KeyboardInterrupt, as a
+    user's Ctrl-C), unless cancelled first."""
+
+    def __init__(self, timeout: float) -> None:
+        self.stacks: str | None = None
+        self._timer = threading.Timer(timeout, self._expire)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _expire(self) -> None:
+        with tempfile.TemporaryFile("w+") as dump:
+            faulthandler.dump_traceback(dump, all_threads=True)
+            dump.seek(0)
+            self.stacks = dump.read()
+        _thread.interrupt_main()
+
+    def cancel(self) -> None:
+        self._timer.cancel()
+        self._timer.join()
 
 
 def _no_thread_left(before: set[threading.Thread], args: tuple[str, ...]) -> None:
@@ -151,7 +183,7 @@ def cli(sim_dir):
         full_env = {**os.environ, "COLUMNS": "1000", **(env or {})}
         if os.environ.get("SERVOTOOL_TEST_CLI") == "process":
             return _child(args, input, full_env, timeout)
-        return _in_process(args, input, full_env)
+        return _in_process(args, input, full_env, timeout)
 
     return run
 
