@@ -116,7 +116,7 @@ class FitData:
     torque_step_pct: float  # the torque reading's resolution, % of rated (0: finer or unknown)
     w: np.ndarray  # rad/s
     kink: np.ndarray
-    position: np.ndarray  # rad, integral of w at each sample
+    position: np.ndarray  # rad at each sample (fit.signals.anchored)
     starts: np.ndarray
     ends: np.ndarray
     torque: np.ndarray  # N*m
@@ -142,7 +142,7 @@ def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: fl
         torque_step_pct=sig.torque_step_pct,
         w=sig.w,
         kink=sig.kink,
-        position=sig.cum_w,
+        position=sig.position,
         starts=reg.starts,
         ends=reg.ends,
         torque=sig.torque,

@@ -34,13 +34,20 @@ class Signals:
     cum_t: np.ndarray
     cum_w: np.ndarray
     moves: np.ndarray
+    position: np.ndarray  # rad: cum_w, set after each stall by the drive's own position readings where the log has them
 
 
 def signals(
-    t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: float, cfg: EstimatorSettings, r: Partial
+    t: np.ndarray,
+    rpm: np.ndarray,
+    pct: np.ndarray,
+    rated_torque_nm: float,
+    cfg: EstimatorSettings,
+    r: Partial,
+    position_rad: np.ndarray | None = None,
 ) -> Signals:
     """Noise, zero-speed band, the torque reading's step, kinks (torque steps) and the Hermite integrals of torque
-    and speed."""
+    and speed; the position over the log (position_rad: the drive's readings, NaN where none was read)."""
     noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm)
     r.speed_noise_rpm = noise_rpm
     peak = float(np.max(np.abs(rpm)))
@@ -49,6 +56,7 @@ def signals(
     torque = pct / 100.0 * rated_torque_nm
     kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct, GAP_INTERVALS)
     r.n_kinks = int(np.count_nonzero(kink))
+    cum_w = cumulative_hermite(t, w, kink)
     return Signals(
         t=t,
         rpm=rpm,
@@ -60,9 +68,30 @@ def signals(
         band=band,
         kink=kink,
         cum_t=cumulative_hermite(t, torque, kink),
-        cum_w=cumulative_hermite(t, w, kink),
+        cum_w=cum_w,
         moves=move_ids(rpm, band),
+        position=anchored(t, cum_w, position_rad, GAP_INTERVALS),
     )
+
+
+def anchored(t: np.ndarray, cum_w: np.ndarray, position_rad: np.ndarray | None, gap_intervals: float) -> np.ndarray:
+    """The position at each sample: the integral of the speed, its offset set anew after every gap of more than
+    gap_intervals median intervals (a host stall: the speed is not known across it, and a move may run through it)
+    from the drive's position readings inside each stretch between gaps; a stretch with none keeps the offset of
+    the one before it (of the first that has one, at the start)."""
+    if position_rad is None or t.size < 2 or not np.any(np.isfinite(position_rad)):
+        return cum_w
+    stretch = np.zeros(t.size, dtype=int)
+    stretch[1:] = np.cumsum(np.diff(t) > gap_intervals * float(np.median(np.diff(t))))
+    read = np.isfinite(position_rad)
+    offsets = np.full(int(stretch[-1]) + 1, np.nan)
+    for k in range(offsets.size):
+        here = read & (stretch == k)
+        if np.any(here):
+            offsets[k] = float(np.median(position_rad[here] - cum_w[here]))
+    known = np.flatnonzero(np.isfinite(offsets))
+    filled = offsets[known[np.clip(np.searchsorted(known, np.arange(offsets.size), side="right") - 1, 0, None)]]
+    return cum_w + filled[stretch]
 
 
 def line_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
