@@ -7,6 +7,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
 from servotool.errors import ServoError
@@ -23,6 +25,7 @@ from servotool.tuning import budget
 from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.fit.signals import stall
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
     MIN_RAMP_S,
@@ -218,9 +221,10 @@ STARVE_SHARE = 0.5  # a gap this share of a drive's watchdog timeout is named wi
 TARGET_TOLERANCE = 0.1  # a host-timed move rests within this share of its travel of its target (_tolerance)
 EXTEND_AIM = 0.85  # a time budget is extended to reach this share of the uncertainty limit (_extended)
 CATCH_UP_RAMPS = 2.0  # a move short of its target runs on for at most this many ramps more
-FIT_LEAD_S = 1.0  # the dead-man is fed before an estimate between moves as if it took up to this long
 REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) between moves
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
+LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
+LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
 
 
 class _HostRun:
@@ -250,7 +254,6 @@ class _HostRun:
         self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT
         self.ramp = plan.ramp_s
         self.guard = BandGuard(gap_s=rest.longest_gap_s if rest is not None else 0.0)
-        self.fit_s = 0.0  # the longest estimate between moves so far (host time)
         self.move_first = 0  # the first sample of the running move
         self.home: float | None = None  # where the pilot started: the moves out and back rest there and a move out
         self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")  # the test speed, its cap and bound
@@ -267,14 +270,10 @@ class _HostRun:
             self.jogger.keep_alive(lead_s=max(4.0 * self.sampler.interval(), self.guard.gap_s) + lead_s)
 
     def _estimate_between_moves(self, settings: EstimatorSettings) -> InertiaEstimate:
-        """An estimate while the drive holds between moves: the dead-man is fed first for as long as a fit may take
-        (twice the longest so far; the two-mass scan makes one tens of ms, more on a busy host, against DSX7E's
-        500 ms watchdog)."""
-        self._beat(lead_s=max(FIT_LEAD_S, 2.0 * self.fit_s))
-        start = self.timing.now()
-        est = self.estimate(self.sampler.trace, settings)
-        self.fit_s = max(self.fit_s, self.timing.now() - start)
-        return est
+        """An estimate while the drive holds between moves, the dead-man fed throughout (KeepAlive.while_computing:
+        the two-mass scan makes one tens of ms, several hundred on a busy host, against DSX7E's 500 ms watchdog)."""
+        trace = self.sampler.trace
+        return self.jogger.keepalive.while_computing(lambda: self.estimate(trace, settings), self._beat)
 
     def sample(self) -> None:
         try:
@@ -549,7 +548,7 @@ class _HostRun:
             began = s.elapsed()
             if self.plan.adaptive and rep >= 2:
                 due = s.elapsed() + cycle_s > self.plan.time_budget_s
-                if due and (self.plan.needs is None or self.plan.needs.enough):
+                if due and (self.plan.needs is None or self.plan.needs.enough) and not self._host_late():
                     break
                 est = self._estimate_between_moves(settings)
                 if est.ok and est.j_std_kgm2 <= 0.5 * settings.max_rel_uncertainty * est.j_total_kgm2:
@@ -579,20 +578,43 @@ class _HostRun:
         what buys precision, and a travel named before (or by a refusal) gets the time it was named with. Where the
         travel serves every load the budget stands: a longer log makes a rigid load's speed-noise artefact stand
         out in sigmas, and it was then blamed on backlash."""
-        needs = self.plan.needs
-        if needs is None or needs.enough:
+        needs, late = self.plan.needs, self._host_late()
+        if needs is None or (needs.enough and not late):
             return False
         elapsed = self.sampler.elapsed()
         rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 else math.nan
         if not (math.isfinite(rel) and rel > 0 and math.isfinite(est.load_ratio)) or est.n_windows == 0:
-            return False
+            if not late:
+                return False
+            rel = LATE_EXTEND * EXTEND_AIM * settings.max_rel_uncertainty  # refused outright: the time scaled
         projected = elapsed * (rel / (EXTEND_AIM * settings.max_rel_uncertainty)) ** 2
+        if late:  # the host, not the line, took the samples: as long as the longest budget allows
+            projected = min(projected, budget.MAX_TIME_S - cycle_s)
         if projected + cycle_s > budget.MAX_TIME_S or projected <= self.plan.time_budget_s:
             return False
         self.plan = self.plan.budgeted(projected + cycle_s)
         if self.progress:
             self.progress(f"J {100 * rel:.1f} % uncertain after {elapsed:.0f} s: time budget {projected:.0f} s")
         return True
+
+    def _host_late(self) -> bool:
+        """Whether the host took a share of the samples the line gave (LATE_NAMED of them left out of the fit: their
+        exchange overran the line's time) or stalled while the axis moved: time, not travel, then buys them back."""
+        trace = self.sampler.trace
+        if trace.late > LATE_NAMED * len(trace.t):
+            return True
+        t, speed, _torque, _position = trace.fitted()
+        return stall(np.asarray(t), np.asarray(speed))[0] > 0
+
+    def _late_words(self) -> str:
+        """The samples the host's lateness left out, in words for a refusal ("" where few were)."""
+        trace = self.sampler.trace
+        if trace.late <= LATE_NAMED * len(trace.t):
+            return ""
+        return (
+            f" ({trace.late} of {len(trace.t)} samples left out of the fit: their exchanges overran the line's time, "
+            "the host was late, a busy machine?)"
+        )
 
     def _remedy(self, est: InertiaEstimate, cycles: int) -> Remedy | None:
         """A longer travel for a refusal that stronger accelerations cure: the least with which the line's budget
@@ -633,6 +655,8 @@ class _HostRun:
             cure = self._remedy(est, cycles)
             advice = cure.words() if cure is not None else est.advice
             raise IdentificationRefused(
-                f"identification refused: {est.reason}" + (f"; {advice}" if advice else ""), result, cure
+                f"identification refused: {est.reason}{self._late_words()}" + (f"; {advice}" if advice else ""),
+                result,
+                cure,
             )
         return result

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from servotool.sim.virtual import HostStalls
-from servotool.tuning.errors import TravelExceeded
-from servotool.tuning.fit import gaps
+from servotool.tuning.errors import IdentificationFailed, TravelExceeded
+from servotool.tuning.fit.signals import stall
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
@@ -42,7 +42,7 @@ def test_a_host_that_stalls_is_accepted_within_its_3_sigma_or_refused_without_a_
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - 3.0) <= 3 * est.ratio_std
     t, speed, _torque, _position = res.identified.trace.fitted()
-    if gaps.stall(np.asarray(t), np.asarray(speed))[0] > 0:  # accepted on a log with a stall: says so (seeds 1
+    if stall(np.asarray(t), np.asarray(speed))[0] > 0:  # accepted on a log with a stall: says so (seeds 1
         # and 2 were accepted with no note at all)
         assert any("the host stalled" in n for n in est.notes), est.notes
 
@@ -61,7 +61,8 @@ def test_an_arm_on_a_host_that_stalls_is_never_blamed_on_the_sign_convention_or_
     Coulomb friction below zero, noted as "check the torque sign convention" (2-30 ms stalls, seed 3; a sign
     convention would have turned J negative too), and the long stalls were refused as "model does not fit the data:
     backlash, compliance ..." (seeds 1, 2). Accepted or refused, no word blames the sign convention or backlash, and
-    the stall or the load is named."""
+    the stall or the load is named. A late host's run is given more time (identify: LATE_NAMED), in which the 340 ms
+    stalls may come close enough together for DSX7E's watchdog: that stop names the host too."""
     _sim, d, clock = set_up(
         "dsx7e",
         115200,
@@ -78,6 +79,9 @@ def test_an_arm_on_a_host_that_stalls_is_never_blamed_on_the_sign_convention_or_
         said = ""
     except IdentificationRefused as exc:
         est, said = exc.result.estimate, str(exc)
+    except IdentificationFailed as exc:  # a long stall the drive's watchdog caught (the time a late host is given)
+        est, said = None, str(exc)
+        assert "host watchdog" in said, said
     text = " ".join([said, *(est.notes if est else ())])
     assert "sign convention" not in text and "backlash" not in text, text
     assert "the host stalled" in text or "load varies over the travel" in text, text
@@ -94,9 +98,9 @@ def test_the_same_loads_without_stalls_are_accepted_within_their_3_sigma(sim_dir
 def test_a_gap_while_the_axis_moved_is_a_stall_and_one_at_rest_is_not():
     t = np.arange(0.0, 1.0, 0.01)
     rpm = np.where(t < 0.5, 300.0, 0.0)
-    assert gaps.stall(t, rpm) == (0.0, pytest.approx(0.01))
+    assert stall(t, rpm) == (0.0, pytest.approx(0.01))
     moving = np.concatenate([t[:30], t[30:] + 0.2])  # 210 ms between two samples at 300 rpm
-    gap, usual = gaps.stall(moving, rpm)
+    gap, usual = stall(moving, rpm)
     assert gap == pytest.approx(0.21) and usual == pytest.approx(0.01)
     resting = np.concatenate([t[:70], t[70:] + 0.2])  # the same gap with the axis at rest: the fit between moves
-    assert gaps.stall(resting, rpm)[0] == 0.0
+    assert stall(resting, rpm)[0] == 0.0

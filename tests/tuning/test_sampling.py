@@ -93,6 +93,6 @@ def test_the_fits_position_is_set_anew_after_each_gap_by_the_drives_readings():
     cum_w = np.zeros_like(t)  # the speed's integral: nothing outside the gaps
     readings = np.full_like(t, np.nan)
     readings[[5, 120]] = truth[[5, 120]]  # one reading before the stall, one after it; none after the second gap
-    position = anchored(t, cum_w, readings, 6.0)
+    position = anchored(t, cum_w, readings)
     assert position == pytest.approx(truth)
-    assert anchored(t, cum_w, None, 6.0) is cum_w
+    assert anchored(t, cum_w, None) is cum_w

@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from servotool.tuning.fit import gaps
 from servotool.tuning.fit.estimate import EstimatorSettings, FittedWindow, InertiaEstimate, MoveEstimate, Partial
 from servotool.tuning.fit.regression import Regression
+from servotool.tuning.fit.signals import stall_words
 from servotool.tuning.fit.subsets import MIN_SUBSET_SHARE
 from servotool.tuning.fit.verdict import Verdict
 
@@ -31,7 +31,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
         r.notes.append(
             "load torque not fitted (one direction only, or told there is none): 'coulomb' is Coulomb + load torque"
         )
-    stalled = gaps.words(verdict.fit.t, verdict.fit.rpm)
+    stalled = stall_words(verdict.fit.t, verdict.fit.rpm)
     if r.tc < -3 * r.tc_std:
         r.notes.append(negative_coulomb(verdict, stalled))
     r.notes.extend(verdict.notes)

@@ -11,37 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-import numpy as np
-
+from servotool.tuning.fit.signals import stall_words
 from servotool.tuning.fit.verdict import Cause, Verdict
-
-STALL_S = 0.05  # a gap this long ...
-STALL_INTERVALS = 6.0  # ... and this many usual intervals is a stall (the windows never span one: fit.signals)
-MOVING_SHARE = 0.05  # ... where the speed on either side is above this share of the peak
-
-
-def stall(t: np.ndarray, rpm: np.ndarray) -> tuple[float, float]:
-    """(the longest gap between two samples while the axis moved, the median interval) in s; (0, median) where
-    no gap is a stall."""
-    if t.size < 3:
-        return 0.0, 0.0
-    gaps = np.diff(t)
-    usual = float(np.median(gaps))
-    speed = np.abs(rpm)
-    moving = np.maximum(speed[1:], speed[:-1]) > MOVING_SHARE * float(np.max(speed))
-    long = moving & (gaps >= max(STALL_S, STALL_INTERVALS * usual))
-    return (float(np.max(gaps[long])) if np.any(long) else 0.0), usual
-
-
-def words(t: np.ndarray, rpm: np.ndarray) -> str:
-    """The words for the log's longest stall while the axis moved; empty where it has none."""
-    gap, usual = stall(t, rpm)
-    if gap <= 0:
-        return ""
-    return (
-        f"sampling gaps of up to {1000 * gap:.0f} ms while the axis moved (usually {1000 * usual:.2g} ms: the host "
-        "stalled, a busy machine?)"
-    )
 
 
 def name(v: Verdict, rigid: Verdict) -> Verdict:
@@ -49,7 +20,7 @@ def name(v: Verdict, rigid: Verdict) -> Verdict:
     the rigid fit's, whose J stands where a model of mechanics was fitted (its change counted as uncertainty). An
     accepted result on such a log says so in its notes, whatever the checks found."""
     fit = v.fit
-    said = words(fit.t, fit.rpm)
+    said = stall_words(fit.t, fit.rpm)
     if not said:
         return v
     uneven = f"{said} make the moves uneven"
