@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 
@@ -85,7 +86,7 @@ def test_a_computation_beside_a_motion_is_beaten_through_and_its_result_or_error
     assert ka.while_computing(work, feed) == "servotool-compute"
     assert len(fed) >= 3 and {name for _t, name in fed} == {threading.current_thread().name}
     times = [start, *(t for t, _name in fed)]
-    assert max(b - a for a, b in zip(times, times[1:], strict=False)) < 0.3  # never a whole computation apart
+    assert max(b - a for a, b in itertools.pairwise(times)) < 0.3  # never a whole computation apart
 
     def fails() -> None:
         raise ValueError("singular")
