@@ -51,42 +51,16 @@ def test_identification_through_the_cli_at_the_factory_line_speed(cli, profile):
         assert res["travel"]["value"] <= (12.0 if room else 2.0)
 
 
-# At 9600 the travel bounds the moves: a load of 37 with gravity is always too uncertain within 2 rev on SD25
-# (4-7 %), a load of 20 now and then on SDC (1.9-2.3 %).
+# At 9600 the travel bounds the moves: a load of 20 is now and then too uncertain within 2 rev on SDC (1.9-2.3 %).
 AT_9600 = {
-    "sd25": [
-        "--load-ratio",
-        "37",
-        "--friction",
-        "0.1",
-        "--viscous",
-        "0.001",
-        "--load-torque",
-        "0.4",
-        "--brake",
-        "on",
-        "--seed",
-        "8",
-    ],
     "sdc": ["--load-ratio", "20", "--friction", "0.05", "--seed", "5"],
 }
 
 
-@pytest.mark.parametrize(
-    "profile",
-    [
-        pytest.param(
-            "sd25",
-            marks=pytest.mark.xfail(
-                strict=False,
-                reason="issue 31 item 4, open: on SD25 at 9600 baud the travel a refusal names is not yet proven by "
-                "the same check before it is offered; in real time it was refused again at 6.3 % (clean-clone CI run, "
-                "load 0.7-1.6)",
-            ),
-        ),
-        "sdc",
-    ],
-)
+# SDC only: on SD25 at 9600 the travel a refusal names is not yet proven by the same check before it is offered
+# (issue 31 item 4, open); in real time it was refused again at 6.3 %. Its case ran here as a non-strict xfail, which
+# no outcome fails, for about 30-50 s a run: its judgement is on virtual time (test_remedy.py's SD25 at 9600).
+@pytest.mark.parametrize("profile", ["sdc"])
 def test_at_the_factory_9600_baud_a_refusal_names_the_travel_that_then_identifies(cli, profile):
     """What a user at the factory line speed does: run it, and where it names a travel, follow it (issue 16: the
     advice of the old refusals did not help). Real time, judged as a loaded CI holds it (realtime_cli); that the
