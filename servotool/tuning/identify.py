@@ -576,8 +576,9 @@ class _HostRun:
         budget extended (up to budget.MAX_TIME_S) to the time in which this estimate, falling as one over the root
         of the time, is projected to reach EXTEND_AIM of the limit, where it does; False where not. There time is
         what buys precision, and a travel named before (or by a refusal) gets the time it was named with. Where the
-        travel serves every load the budget stands: a longer log makes a rigid load's speed-noise artefact stand
-        out in sigmas, and it was then blamed on backlash."""
+        travel serves every load the budget stands (a longer log makes a rigid load's speed-noise artefact stand
+        out in sigmas, and it was then blamed on backlash), unless the host was late (_host_late): then the line's
+        samples were there but the host lost them, and time buys them back, up to budget.MAX_TIME_S."""
         needs, late = self.plan.needs, self._host_late()
         if needs is None or (needs.enough and not late):
             return False
