@@ -225,6 +225,7 @@ REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) b
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
 LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
 LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
+LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many budgets
 
 
 class _HostRun:
@@ -258,6 +259,7 @@ class _HostRun:
         self.home: float | None = None  # where the pilot started: the moves out and back rest there and a move out
         self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")  # the test speed, its cap and bound
         self.torque_cap_pct = budget.torque_cap_pct(torque_limit)
+        self.planned_s = plan.time_budget_s  # the time budget before _extended (set again once the pilot is done)
 
     def _beat(self, lead_s: float = 0.0) -> None:
         self.jogger.watch_inputs()
@@ -539,6 +541,7 @@ class _HostRun:
         needs set before the motion, or the pilot after it; extended where the travel is short of what the lightest
         load needs: _extended)."""
         s = self.sampler
+        self.planned_s = self.plan.time_budget_s  # as the line's needs or the pilot set it, before any extension
         # The next cycle takes as long as the longest so far (the pilot's before the first: it also holds the set-up).
         cycle_s = s.elapsed() * 1.1
         done, began, rep = 0, 0.0, 0
@@ -578,7 +581,8 @@ class _HostRun:
         what buys precision, and a travel named before (or by a refusal) gets the time it was named with. Where the
         travel serves every load the budget stands (a longer log makes a rigid load's speed-noise artefact stand
         out in sigmas, and it was then blamed on backlash), unless the host was late (_host_late): then the line's
-        samples were there but the host lost them, and time buys them back, up to budget.MAX_TIME_S."""
+        samples were there but the host lost them, and time buys them back, up to LATE_TIME_FACTOR times the budget
+        planned (budget.MAX_TIME_S where the travel does not serve every load)."""
         needs, late = self.plan.needs, self._host_late()
         if needs is None or (needs.enough and not late):
             return False
@@ -589,8 +593,9 @@ class _HostRun:
                 return False
             rel = LATE_EXTEND * EXTEND_AIM * settings.max_rel_uncertainty  # refused outright: the time scaled
         projected = elapsed * (rel / (EXTEND_AIM * settings.max_rel_uncertainty)) ** 2
-        if late:  # the host, not the line, took the samples: as long as the longest budget allows
-            projected = min(projected, budget.MAX_TIME_S - cycle_s)
+        if late:  # the host, not the line, lost the samples: time buys them back, within LATE_TIME_FACTOR of the plan
+            cap = budget.MAX_TIME_S if not needs.enough else min(budget.MAX_TIME_S, LATE_TIME_FACTOR * self.planned_s)
+            projected = min(projected, cap - cycle_s)
         if projected + cycle_s > budget.MAX_TIME_S or projected <= self.plan.time_budget_s:
             return False
         self.plan = self.plan.budgeted(projected + cycle_s)
