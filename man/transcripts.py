@@ -81,7 +81,8 @@ def masked(text: str) -> str:
     text = re.sub(r"[-−+]?\d+(\.\d+)?(e[-+]?\d+)?", "#", text)  # a sign too: a speed reads -1 or 0 rpm at rest
     text = text.replace(", longest gap # ms", "")  # said only when the host left a gap in the sampling
     text = re.sub(r"[ ─━]+", " ", text)
-    return re.sub(r"\n (?=\S)", " ", text)  # a wrapped line joined: where it wraps follows the numbers' widths
+    text = re.sub(r"\n (?=\S)", " ", text)  # a wrapped line joined: where it wraps follows the numbers' widths
+    return re.sub(r"(?m)^sampling gaps of up to # ms while the axis moved .*\n", "", text)  # a stall's note, too
 
 
 def main() -> int:

@@ -21,11 +21,12 @@ from servotool.model.profile import Profile
 from servotool.model.quantity import quantity
 from servotool.motion import deadman, protect, stop
 from servotool.ops import eeprom
-from servotool.tuning import gain_search, identify, planning, preflight, step, tune
+from servotool.tuning import budget, gain_search, identify, planning, preflight, step, tune
 from servotool.tuning.control.friction import friction_report
-from servotool.tuning.errors import TuneDeclined
+from servotool.tuning.errors import TravelNeeded, TuneDeclined
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
+DEFAULT_TRAVEL_REV = 2.0
 
 
 def _clean(value: Any) -> Any:
@@ -102,10 +103,25 @@ def _estimate_json(result: identify.Result) -> dict[str, Any]:
         "residual_rel": _rounded(est.residual_rel, 4) if est else None,
         "notes": list(est.notes) if est else [],
         "samples": len(result.trace.t),
+        "samples_left_out": result.trace.late,  # their exchange overran the line's time: when taken is not known
         "sample_rate": quantity(round(result.samples_per_s, 1), "Hz"),
         "travel": quantity(round(result.travel_used_rev, 3) if result.travel_used_rev is not None else None, "rev"),
         "time": quantity(round(result.time_used_s, 2), "s"),
         "cycles": result.cycles,
+        **_needs_json(result.plan),
+    }
+
+
+def _needs_json(plan: planning.MotionPlan | None) -> dict[str, Any]:
+    """What the line needed, as said before moving (the motor alone), and the time budget the motion had."""
+    needs = plan.needs if plan is not None else None
+    if needs is None:
+        return {}
+    light = needs.lightest
+    return {
+        "needed_travel": quantity(light.travel_rev if light.reachable else None, "rev"),
+        "needed_time": quantity(_rounded(light.time_s, 1) if light.reachable else None, "s"),
+        "time_budget": quantity(_rounded(plan.time_budget_s, 1) if plan is not None else None, "s"),
     }
 
 
@@ -120,10 +136,10 @@ def inertia(
         None, "--accel-time", help="Ramp time of each move in ms (default: from the link's sampling rate, 100..500 ms)."
     ),
     travel: float = typer.Option(
-        2.0,
+        None,
         "--travel",
-        help="Travel limit: range of axis positions in revolutions. More "
-        "travel, stronger accelerations: a refusal on a slow line says how much would do.",
+        help="Travel limit: range of axis positions in revolutions (default 2). More travel, stronger "
+        "accelerations: before moving servotool says what the line needs, and asks for it once in a terminal.",
     ),
     direction: str = typer.Option(
         "both",
@@ -193,6 +209,8 @@ def inertia(
 
     Gains are changed only with --rigidity or --bandwidth.
     """
+    given_travel = travel is not None
+    travel = travel if travel is not None else DEFAULT_TRAVEL_REV
     _check_options(method, rigidity, bandwidth, no_gains, save_trace)
     if report is not None:
         from servotool.report.tune_report import check_folder
@@ -230,6 +248,7 @@ def inertia(
                 approve_motion=ask.approve_motion,
                 on_proposal=ask.show,
                 approve_write=ask.approve_write,
+                choose_travel=None if yes or given_travel or as_json else ask.choose_travel,
             )
         except TuneDeclined:
             raise typer.Exit(1) from None
@@ -237,7 +256,7 @@ def inertia(
             _notes(exc)
             raise
         except ServoError as exc:  # refused, tripped, travel exceeded, link lost
-            _failed(exc, report, d.profile, as_json and ask.moving)
+            _failed(exc, report, d.profile, as_json and (ask.moving or isinstance(exc, TravelNeeded)))
             raise
         profile = d.profile
     if report is not None:
@@ -278,6 +297,8 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
         _report(report, refused, profile, None, str(exc))
     if as_json:
         cure = refusal.remedy if refusal is not None else None
+        needed = exc if isinstance(exc, TravelNeeded) else None
+        suggested = cure.suggested_rev if cure is not None else needed.travel_rev if needed is not None else None
         rolled = exc.facts if isinstance(exc, tune.GainsRolledBack) else {}
         emit_json(
             _clean(
@@ -288,7 +309,10 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
                     # refused: no ratio stands (what was measured is in the report); rolled back: it does
                     "ratio": round(exc.ratio, 4) if isinstance(exc, tune.GainsRolledBack) and exc.ratio else None,
                     "written": bool(rolled.get("kept")),  # a rollback keeps the ratio written before the gains
-                    "suggested_travel": quantity(cure.suggested_rev if cure is not None else None, "rev"),
+                    "suggested_travel": quantity(suggested, "rev"),
+                    "needed_travel": quantity(needed.travel_rev if needed is not None else None, "rev"),
+                    "needed_time": quantity(_rounded(needed.time_s, 1) if needed is not None else None, "s"),
+                    "moved": needed.moved if needed is not None else True,
                     "rolled_back": bool(rolled),
                     "rollback_reason": rolled.get("reason"),
                     "step_check": _step_json(exc.response) if isinstance(exc, tune.GainsRolledBack) else None,
@@ -320,6 +344,8 @@ class _Dialog:
             else "motion: the drive's own identification (its parameters set torque and travel), then host "
             "moves that check its result"
         )
+        if motion is not None and motion.needs is not None:
+            info(f"needs: {motion.needs.words()}")
         if self.method == "host" and motion is not None:
             bound = planning.identification_bound(self.d, motion)
             deadman.check(bound, self.d.dead_man_waived)
@@ -338,6 +364,17 @@ class _Dialog:
                 self._safety(f"step check: {deadman.sentence(check.bound)}")
         self.moving = confirm("Move the axis now?", self.yes)
         return self.moving
+
+    def choose_travel(self, needs: budget.Needs) -> float | None:
+        """Asked once, before moving, where the line needs more travel than the default allows."""
+        light = needs.lightest
+        if not light.reachable or not sys.stdin.isatty():
+            return None
+        info(f"needs: {needs.words()}")
+        if confirm(f"Allow {light.travel_rev:g} rev of travel (the axis must have the room)?", False):
+            self.travel = light.travel_rev
+            return light.travel_rev
+        return None
 
     def _safety(self, line: str) -> None:
         safety(line)

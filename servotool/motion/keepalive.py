@@ -9,7 +9,9 @@ beat comes too late for the relay and on every exit (the OS drops the line when 
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
+from typing import TypeVar
 
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
@@ -21,6 +23,11 @@ HEARTBEAT_BEATS = 4  # beats per relay time at least: a late beat is caught (at 
 # Toggling this long before a motion's first command: the relay closes and, where it switches the drive's main
 # contactor, the drive's DC bus charges before anything moves.
 HEARTBEAT_LEAD_S = 1.0
+# While a computation runs beside a motion (KeepAlive.while_computing), the beat is looked at this many times a beat
+# interval: a beat then comes at most a beat interval and this share of one late, plus the host's wake-up.
+COMPUTING_LOOKS = 2
+
+T = TypeVar("T")
 
 
 class HeartbeatMissed(DeviceError):
@@ -137,6 +144,34 @@ class KeepAlive:
         hb = self.heartbeat
         if hb is not None and (hb.last is None or self.clock.now() - hb.last >= self.interval_s):
             hb.toggle()
+
+    def while_computing(self, work: Callable[[], T], feed: Callable[[float], None]) -> T:
+        """work() (a computation that touches no link: a fit between moves) on a thread of its own while this one
+        keeps the drive alive: feed(lead_s), the motion's own beat (it decides what to write), is called once first and
+        then every 1/COMPUTING_LOOKS of a beat interval until work ends; its result, or its exception, comes back here.
+        One beat before a computation is not enough: on a busy host its time is several times its CPU time, past a
+        drive's watchdog. On a virtual clock no time passes while it computes: work() runs here."""
+        feed(self.interval_s)
+        if not isinstance(self.clock, RealClock):
+            return work()
+        outcome: list[T] = []
+        failed: list[BaseException] = []
+        done = threading.Event()
+
+        def run() -> None:
+            try:
+                outcome.append(work())
+            except BaseException as exc:  # raised again on the motion's thread
+                failed.append(exc)
+            finally:
+                done.set()
+
+        threading.Thread(target=run, name="servotool-compute", daemon=True).start()
+        while not done.wait(self.interval_s / COMPUTING_LOOKS):
+            feed(self.interval_s)
+        if failed:
+            raise failed[0]
+        return outcome[0]
 
     def heartbeat_lead(self, idle: Callable[[float], None]) -> None:
         """Before a motion's first command: toggle for HEARTBEAT_LEAD_S (idle: how to wait between toggles)."""

@@ -16,12 +16,18 @@ from servotool.ops.params import write_changes, write_runs
 # A drive's watchdog is fed once this share of its timeout has passed (less what the caller may take before it looks
 # again): a third of the timeout stays spare. A JOG beats every third of it (keepalive_interval_s).
 WATCHDOG_FEED_SHARE = 2.0 / 3.0
+# A caller that took longer than it said by this share of the timeout (half the spare third) stalled: from then on its
+# longest gap is the lead (a step check, which says none, beat at two thirds and a 170 ms stall tripped DSX7E's 500 ms).
+STALL_SPARE = (1.0 - WATCHDOG_FEED_SHARE) / 2.0
 
 
 class Mover(Jogger):
     """A Jogger whose moves start from rest (start) and whose dead-man is fed by keep_alive."""
 
     _ends_at: float | None = None  # segment route: from then on the running move's own segment brakes it
+    _looked: float | None = None  # when keep_alive was last called
+    _promised_s = 0.0  # ... and the lead_s it was given then
+    _late_s = 0.0  # the longest time between two calls that overran its lead: the host's own stalls, taken as a lead
 
     @property
     def folds(self) -> bool:
@@ -111,12 +117,21 @@ class Mover(Jogger):
 
     def keep_alive(self, lead_s: float = 0.0) -> None:
         """Feed the dead-man with no write the drive does not need. lead_s: how long the caller may take before it
-        calls again. A drive's watchdog (route drive_timeout) gets its beat at the last moment that still leaves a
-        third of its timeout spare (WATCHDOG_FEED_SHARE; a beat every third, as a JOG keeps, wrote 1.6 beats a move
-        on DSX7E at 19200). On the segment route a fresh segment only once the running one would end within a beat
-        (each covers SEGMENT_BEATS beats at speed: re-arming it on every beat cost IS620P two writes a beat); a move's
-        own segment ends within the dead-man's bound by itself (start) and is never re-armed."""
+        calls again, and at least the longest it has taken where it overran that by STALL_SPARE (a busy host stalls
+        between calls, and a beat left to the last moment then comes too late). A drive's watchdog (route
+        drive_timeout) gets its beat at the last moment that still leaves a third of its timeout spare
+        (WATCHDOG_FEED_SHARE; a beat every third, as a JOG keeps, wrote 1.6 beats a move on DSX7E at 19200). On the
+        segment route a fresh segment only once the running one would end within a beat (each covers SEGMENT_BEATS
+        beats at speed: re-arming it on every beat cost IS620P two writes a beat); a move's own segment ends within
+        the dead-man's bound by itself (start) and is never re-armed."""
         ka, segments, timeout = self.keepalive, self.segments, self._timeout_s
+        now = self.clock.now()
+        if self._looked is not None and timeout and now - self._looked > self._promised_s + STALL_SPARE * timeout:
+            # longer than the caller said, by half the spare: the host stalled (a gap over the timeout came before the
+            # motion, or the watchdog has tripped)
+            self._late_s = max(self._late_s, min(now - self._looked, timeout))
+        self._looked, self._promised_s = now, lead_s
+        lead_s = max(lead_s, self._late_s)
         if segments is not None and ka.entry is None:
             if (
                 segments.moving

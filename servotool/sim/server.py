@@ -20,6 +20,7 @@ from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from servotool.clock import RealClock
 from servotool.errors import DeviceError
 from servotool.link.ports import parse_tcp, port_problem
 from servotool.model.profile import LineSettings, Profile
@@ -70,14 +71,31 @@ class _Datastore:
     async def _serve(
         self, drive: SimulatedDrive, fc: int, address: int, count: int, values: list[int] | None
     ) -> list[int] | ExcCodes:
+        arrived = _CLOCK.now()  # the drive's own work (the plant's integration) happens within the wire time
         result, delay = self.line.serve(drive, fc, address, count, values)
         if result is None:  # the drive hears garbage at this speed: no answer, as from a unit nobody serves
             raise NoSuchIdException(f"unit {drive.unit} listens at another speed")
         if isinstance(result, int):
             return ExcCodes(result)
         if delay:
-            await asyncio.sleep(delay)
+            await _wait_until(arrived + delay)
         return result
+
+
+# asyncio's timers wake on the selector's whole milliseconds (epoll rounds a timeout up): a wait on them alone comes
+# up to a millisecond late, as much as a request's whole wire time at 115200 baud. The last of it is slept on this
+# thread instead (the line carries one frame at a time: nothing else is due on it meanwhile).
+COARSE_TIMER_S = 0.0015
+_CLOCK = RealClock()  # a served line runs on real time (the one clock module: tests/test_clock.py)
+
+
+async def _wait_until(end: float) -> None:
+    """Wait until `end` (the real clock's now), to within the OS's sleep precision rather than the event loop's
+    tick."""
+    if (coarse := end - _CLOCK.now() - COARSE_TIMER_S) > 0:
+        await asyncio.sleep(coarse)
+    if (left := end - _CLOCK.now()) > 0:
+        _CLOCK.sleep(left)
 
 
 class _Refusal(ModbusPDU):

@@ -48,11 +48,15 @@ def make_motion_setup(sim: SimulatedDrive) -> None:
 @dataclass(frozen=True)
 class HostStalls:
     """A host that stalls now and then before it sends a request (a loaded laptop, a scheduler tick, a USB
-    adapter's latency timer): each request, with probability `rate`, waits a uniform 10 ms..max_s first; seeded."""
+    adapter's latency timer): each request, with probability `rate`, waits a uniform min_s..max_s first; seeded.
+    With `after_reply`, that share of the stalls comes instead after the drive answered and before the host takes
+    the answer (a client descheduled while its reply waits in the socket): the host then stamps the reading late."""
 
     rate: float
     max_s: float = 0.05
     seed: int = 1
+    min_s: float = 0.01
+    after_reply: float = 0.0
 
 
 class VirtualLink:
@@ -67,9 +71,16 @@ class VirtualLink:
         self.stalls = stalls
         self._stall_rng = random.Random(stalls.seed if stalls else 0)
 
-    def _stall(self) -> None:
-        if self.stalls is not None and self._stall_rng.random() < self.stalls.rate:
-            self.clock.advance(self._stall_rng.uniform(0.01, self.stalls.max_s))
+    def _stall(self) -> float:
+        """Advance the clock by a stall before the request; returns a stall due after the reply instead (0: none)."""
+        st, rng = self.stalls, self._stall_rng
+        if st is None or rng.random() >= st.rate:
+            return 0.0
+        took = rng.uniform(st.min_s, st.max_s)
+        if st.after_reply > 0 and rng.random() < st.after_reply:
+            return took
+        self.clock.advance(took)
+        return 0.0
 
     def _drive(self, unit: int, what: str) -> SimulatedDrive:
         drive = self.drives.get(unit)
@@ -87,12 +98,14 @@ class VirtualLink:
         if fc not in READ_CODES or fc not in self._drive(unit, what).profile.modbus_functions.answered:
             raise ModbusException(1, what)
         self.requests += 1
-        self._stall()
+        late = self._stall()
         self.clock.advance(wire_time(3, count, self.baud) + TURNAROUND_S)
         try:
             return self._drive(unit, what).read(address, count)
         except SimRefusal as exc:
             raise ModbusException(exc.code, what) from None
+        finally:
+            self.clock.advance(late)
 
     def write(
         self,
@@ -109,12 +122,14 @@ class VirtualLink:
         if coils or fc not in self._drive(unit, what).profile.modbus_functions.answered:  # (sim.line.refusal)
             raise ModbusException(1, what)
         self.requests += 1
-        self._stall()
+        late = self._stall()
         self.clock.advance(wire_time(fc, len(values), self.baud) + TURNAROUND_S)
         try:
             self._drive(unit, what).write(address, values)
         except SimRefusal as exc:
             raise ModbusException(exc.code, what) from None
+        finally:
+            self.clock.advance(late)
 
     def close(self) -> None:
         pass

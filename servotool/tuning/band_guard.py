@@ -69,6 +69,13 @@ class BandGuard:
         stop_rev += self.stretch * v_late * v_late * ramp_s / (2 * speed) / 60.0
         return pred + stop_rev > hi if direction > 0 else pred - stop_rev < lo
 
+    def rest_at(self, pred: float, v: float, ramp_s: float, interval_s: float) -> float:
+        """Where the running move would come to rest if stopped at the next sample (pred rev, v rpm now): its ramp's
+        stopping distance, stretched as the pilot showed, plus the travel until a stop command acts and the loop's
+        lag."""
+        stop_rev = v / 60.0 * (interval_s + self.lag_s) + self.stretch * v * v * ramp_s / (2 * self.speed) / 60.0
+        return pred + self.direction * stop_rev
+
     def saw(self, pred: float) -> None:
         """The axis is at pred (the sampler's position, each sample)."""
         self.reach = max(self.reach, self.direction * (pred - self.origin))

@@ -2,28 +2,34 @@
 
 from __future__ import annotations
 
+import itertools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
+from servotool.errors import ServoError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry, Profile
 from servotool.model.roles import status_bit
+from servotool.motion.deadman import drive_timeout_s
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.moves import Mover
 from servotool.motion.stop import MotionStop, StopReport
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
+from servotool.tuning import budget
 from servotool.tuning.band_guard import BandGuard
-from servotool.tuning.errors import IdentificationFailed, TravelExceeded
+from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.fit.signals import stall
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
     MIN_RAMP_S,
     PILOT_SHARE,
-    TIME_BUDGET_S,
-    TORQUE_SHARE,
     MotionPlan,
     Remedy,
     dithered,
@@ -90,7 +96,10 @@ class Identifier:
             d, self.keepalive_s if self.keepalive_s is not None else keepalive_interval_s(d), FEATURE, self.timing
         )
         limit_e = p.role("torque_limit_fwd")
-        torque_limit = _eng(d, limit_e) if limit_e is not None else None
+        if plan.needs is not None:  # read once, before the motion was planned
+            torque_limit = plan.needs.line.torque_limit_pct
+        else:
+            torque_limit = _eng(d, limit_e) if limit_e is not None else None
         old_ratio = self.current_ratio()
         estimate = trace_estimate(p, torque_limit)
         run = _HostRun(mover, self.timing, plan, estimate, torque_limit, old_ratio, progress, rest)
@@ -183,10 +192,12 @@ def trace_estimate(profile: Profile, torque_limit_pct: float | None) -> Estimate
 
     def estimate(trace: Trace, settings: EstimatorSettings) -> InertiaEstimate:
         cfg = replace(settings, max_window_intervals=max(6, int(trace.rate() / 5)), torque_step_pct=step_pct)
+        t, speed, torque, position = trace.fitted()
         return estimate_inertia(
-            trace.t,
-            trace.aligned_speed(),
-            trace.torque,
+            t,
+            speed,
+            torque,
+            position_rev=position,
             rated_torque_nm=motor.rated_torque_nm,
             rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
             torque_limit_pct=torque_limit_pct,
@@ -200,9 +211,21 @@ def _eng(drive: Drive, entry: Entry) -> float:
     return float(raw_to_eng(entry, drive.read_entries([entry])[0].raw))
 
 
-FIT_LEAD_S = 1.0  # the dead-man is fed before an estimate between moves as if it took up to this long
+# The pilot's load for the travel it needs (tuning.budget): a fit of the pilot's weak moves that gives J however
+# uncertain (its lower bound is what counts, and a noisy speed change biases J low, never high).
+ROUGH = {"min_windows": 4, "min_excitation": 2.0, "max_rel_uncertainty": 1.0}
+PILOT_EFFICIENCY_CAP = 4.0  # the most the pilot's own fit may scale the budget by (it is rough)
+STALL_S = 0.05  # a gap between samples this long (and STALL_INTERVALS usual ones) is a host stall, named as one
+STALL_INTERVALS = 4.0
+STARVE_SHARE = 0.5  # a gap this share of a drive's watchdog timeout is named with an alarm the watchdog may have raised
+TARGET_TOLERANCE = 0.1  # a host-timed move rests within this share of its travel of its target (_tolerance)
+EXTEND_AIM = 0.85  # a time budget is extended to reach this share of the uncertainty limit (_extended)
+CATCH_UP_RAMPS = 2.0  # a move short of its target runs on for at most this many ramps more
 REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) between moves
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
+LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
+LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
+LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many budgets
 
 
 class _HostRun:
@@ -232,8 +255,11 @@ class _HostRun:
         self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT
         self.ramp = plan.ramp_s
         self.guard = BandGuard(gap_s=rest.longest_gap_s if rest is not None else 0.0)
-        self.fit_s = 0.0  # the longest estimate between moves so far (host time)
+        self.move_first = 0  # the first sample of the running move
+        self.home: float | None = None  # where the pilot started: the moves out and back rest there and a move out
         self.speed, self.cap = plan.speed_rpm, (plan.speed_limit_rpm, "speed")  # the test speed, its cap and bound
+        self.torque_cap_pct = budget.torque_cap_pct(torque_limit)
+        self.planned_s = plan.time_budget_s  # the time budget before _extended (set again once the pilot is done)
 
     def _beat(self, lead_s: float = 0.0) -> None:
         self.jogger.watch_inputs()
@@ -242,27 +268,49 @@ class _HostRun:
         bound = self.jogger.dead_man
         if bound is None or bound.bounded:
             # Before the next call: a sample, a position read, the alarm check and a move's settings at most.
-            self.jogger.keep_alive(lead_s=4.0 * self.sampler.interval() + lead_s)
+            # ... and a stall as long as the longest seen so far.
+            self.jogger.keep_alive(lead_s=max(4.0 * self.sampler.interval(), self.guard.gap_s) + lead_s)
 
     def _estimate_between_moves(self, settings: EstimatorSettings) -> InertiaEstimate:
-        """An estimate while the drive holds between moves: the dead-man is fed first for as long as a fit may take
-        (twice the longest so far; the two-mass scan makes one tens of ms, more on a busy host, against DSX7E's
-        500 ms watchdog)."""
-        self._beat(lead_s=max(FIT_LEAD_S, 2.0 * self.fit_s))
-        start = self.timing.now()
-        est = self.estimate(self.sampler.trace, settings)
-        self.fit_s = max(self.fit_s, self.timing.now() - start)
-        return est
+        """An estimate while the drive holds between moves, the dead-man fed throughout (KeepAlive.while_computing:
+        the two-mass scan makes one tens of ms, several hundred on a busy host, against DSX7E's 500 ms watchdog)."""
+        trace = self.sampler.trace
+        return self.jogger.keepalive.while_computing(lambda: self.estimate(trace, settings), self._beat)
 
     def sample(self) -> None:
         try:
             self.sampler.sample()
             self.guard.saw(self.sampler.pred)
         except TravelLimitReached:
-            raise TravelExceeded(
-                f"travel limit {self.plan.travel_limit_rev:g} rev reached: motion stopped; the "
-                "loop overshoots (inertia ratio far off?): lower --max-speed or raise --travel"
-            ) from None
+            raise self._exceeded() from None
+
+    def _exceeded(self) -> TravelExceeded:
+        """The travel limit reached, in words that name its cause: a gap between samples (the host stalled) that let
+        a host-timed move run on, where the move had one; else the loop overshooting its moves."""
+        s, limit = self.sampler, self.plan.travel_limit_rev
+        said = f"travel limit {limit:g} rev reached (the axis covered {s.travel_rev:.2f} rev): motion stopped; "
+        gap, usual = self._longest_gap(self.move_first), self._usual_interval()
+        if gap >= max(STALL_S, STALL_INTERVALS * usual):
+            return TravelExceeded(
+                said + f"a {1000 * gap:.0f} ms gap between samples (usually {1000 * usual:.2g} ms: the host stalled, "
+                "a busy machine?) let a move that the host ends run on before it could be stopped, not the loop: run "
+                "it again on a quieter host, or with more --travel"
+            )
+        return TravelExceeded(
+            said + "the axis ran on past its moves: the loop overshoots (inertia ratio far off?): lower --max-speed "
+            f"or allow more than {limit:g} rev with --travel"
+        )
+
+    def _longest_gap(self, first: int) -> float:
+        """The longest time between two samples from sample `first` on (0 with fewer than two)."""
+        t = self.sampler.trace.t[max(0, first - 1) :]
+        return max((b - a for a, b in itertools.pairwise(t)), default=0.0)
+
+    def _usual_interval(self) -> float:
+        """The median time between two samples so far."""
+        t = self.sampler.trace.t
+        gaps = sorted(b - a for a, b in itertools.pairwise(t))
+        return gaps[len(gaps) // 2] if gaps else 0.0
 
     def _sample_timed(self) -> None:
         """A sample inside a move, its gap from the one before kept when it is the longest yet."""
@@ -272,7 +320,7 @@ class _HostRun:
     def move(self, direction: int, speed: float) -> tuple[float, float]:
         """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
         s, jogger, trace, guard = self.sampler, self.jogger, self.sampler.trace, self.guard
-        first = len(trace.t)
+        first = self.move_first = len(trace.t)
         # After the pilot a segment route's move may end by itself (where it stops inside the travel band); the
         # pilot stops by command, as an early stop (BandGuard.must_stop) does.
         jogger.start(
@@ -282,11 +330,18 @@ class _HostRun:
             self.ramp if guard.band is not None else None,
         )
         start = self.timing.now()
-        guard.begin(s.pred, direction, speed, jogger.own_segment_rev())
+        own = jogger.own_segment_rev()
+        guard.begin(s.pred, direction, speed, own)
+        target = self._target(direction, speed) if own is None else None
         self.sample()
-        while self.timing.now() - start < self.ramp:  # the drive's ramp reaches the speed in ramp_s
+        while True:  # the drive's ramp reaches the speed in ramp_s; a host-timed move aims at its target
+            elapsed = self.timing.now() - start
+            if elapsed >= self.ramp and not self._short_of(target, direction, speed, elapsed):
+                break
             self._sample_timed()
             if guard.must_stop(s.pred, abs(trace.speed[-1]), self.ramp, s.interval()):
+                break
+            if self._beyond(target, direction):  # a stall let it run on: it stops where the next one starts from
                 break
         jogger.command(0)
         stop = self.timing.now()
@@ -309,9 +364,58 @@ class _HostRun:
             guard.coasted(abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0, v_stop)
         active = active_alarm(self.drive)
         if active:
-            raise IdentificationFailed(f"the drive stopped the identification with alarm {active}")
+            raise IdentificationFailed(f"the drive stopped the identification with alarm {active}" + self._starved())
         peak = max((abs(q) for q in trace.torque[first:]), default=0.0)
         return s.travel_rev, peak
+
+    def _starved(self) -> str:
+        """Where the drive's own watchdog may have stopped the motion because the host stalled: the words that say
+        so (after an alarm); "" where no gap came near its timeout."""
+        bound = self.jogger.dead_man
+        gap = self._longest_gap(self.move_first)
+        if bound is None or bound.route != "drive_timeout" or gap < STALL_S:
+            return ""
+        try:
+            timeout = drive_timeout_s(self.drive)
+        except ServoError:
+            return ""
+        if timeout is None or gap < STARVE_SHARE * timeout:
+            return ""
+        return (
+            f" (its host watchdog: no request for {1000 * gap:.0f} ms against its {1000 * timeout:.0f} ms timeout; the "
+            "host stalled, a busy machine?)"
+        )
+
+    def _target(self, direction: int, speed: float) -> float | None:
+        """Where a host-timed move out and back should come to rest: the forward move a move's travel (stretched as
+        the pilot showed) beyond where the pilot started, the reverse one there. Ending each move by position, not
+        only by time, keeps a move that a host stall let run on from shifting every later one: the next move ends
+        where it was to end (issue 31: the axis crept 0.2-0.3 rev a cycle until the travel limit). None before the
+        pilot's band and for one direction, whose moves add up."""
+        if self.guard.band is None or self.home is None or len(self.plan.directions) < 2:
+            return None
+        return self.home + (speed / 60.0 * self.ramp * self.guard.stretch if direction > 0 else 0.0)
+
+    def _tolerance(self, speed: float) -> float:
+        """How far from its target a move may rest without being ended early or carried on (a move's travel varies
+        with the loop's lag and the sampling): a tenth of it."""
+        return TARGET_TOLERANCE * speed / 60.0 * self.ramp * self.guard.stretch
+
+    def _beyond(self, target: float | None, direction: int) -> bool:
+        if target is None or not self.sampler.trace.speed:
+            return False
+        v = abs(self.sampler.trace.speed[-1])
+        rest = self.guard.rest_at(self.sampler.pred, v, self.ramp, self.sampler.interval())
+        return direction * (rest - target) > self._tolerance(self.guard.speed)
+
+    def _short_of(self, target: float | None, direction: int, speed: float, elapsed: float) -> bool:
+        """Whether a move whose ramp has ended would rest short of its target (the move before it ran on): it runs
+        on at its speed, for at most CATCH_UP_RAMPS more ramps, until it would rest there."""
+        if target is None or elapsed >= (1.0 + CATCH_UP_RAMPS) * self.ramp or not self.sampler.trace.speed:
+            return False
+        v = abs(self.sampler.trace.speed[-1])
+        rest = self.guard.rest_at(self.sampler.pred, v, self.ramp, self.sampler.interval())
+        return direction * (target - rest) > self._tolerance(speed)
 
     def pilot(self, hold: StableHold, settings: EstimatorSettings) -> float:
         """Pilot cycle at reduced speed: how far the axis really goes per nominal revolution (a badly matched speed
@@ -325,17 +429,80 @@ class _HostRun:
             self.progress(f"pilot move at {pilot:.0f} rpm")
         excursion, peak = 0.0, 0.0
         self.sample()  # the axis's real position: the travel band is around it, not around 0
-        origin = self.sampler.pred
+        origin = self.home = self.sampler.pred
         for direction in plan.directions:
             excursion, pk = self.move(direction, pilot)
             peak = max(peak, pk)
         if hold.active:
             hold.after_pilot(self._estimate_between_moves(pilot_settings(settings)))
+        if self._short():
+            self._check_travel(self._estimate_between_moves(replace(settings, **ROUGH)))
         nominal = pilot / 60.0 * plan.ramp_s * (1 if both else len(plan.directions))
         limit_rev = plan.travel_limit_rev
         lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
         self.guard.band, self.guard.stretch = (lo, lo + 0.9 * limit_rev), max(1.0, excursion / nominal)
         return self._test_speed(pilot, excursion, peak)
+
+    def _short(self) -> bool:
+        """Whether the travel allowed does not serve every load (the plan's needs): the pilot's load decides."""
+        needs = self.plan.needs
+        return needs is not None and not needs.enough
+
+    def _check_travel(self, rough: InertiaEstimate) -> None:
+        """After the pilot: the travel and time the load it showed needs, taken at its ratio less two of its sigmas
+        (a pilot is rough). Where the travel allowed serves that load: the time budget it needs. Else TravelNeeded
+        with the travel that serves it; where none does, the next heavier load is taken (less one sigma, as shown,
+        then the heavier ratios of budget.LOAD_RATIOS): the motion goes on where the travel allowed serves that one
+        (no travel would serve the lighter ones), else its travel is named (a longer travel also gives a stronger
+        pilot, which tells the load better)."""
+        needs = self.plan.needs
+        assert needs is not None
+        ratio, std = rough.load_ratio, rough.ratio_std
+        # A pilot tells the load where J comes out positive and less than 100 % uncertain. Where it cannot (too
+        # weak a pilot on a slow line), the travel the lightest load needs is named where one does; where none
+        # does, the travel allowed serves some loads (else nothing would have moved): the motion goes on with the
+        # longest time budget, and the fit decides.
+        if not (math.isfinite(ratio) and math.isfinite(std) and ratio > -1.0 and std < 1.0 + ratio):
+            light = needs.lightest
+            if light.reachable:
+                raise TravelNeeded(
+                    f"stopped after the pilot: it cannot tell the load; {light.words(needs.target)}, more than the "
+                    f"{needs.allowed_rev:g} rev allowed: where the axis has room, --travel {light.travel_rev:g}",
+                    light.travel_rev,
+                    light.time_s,
+                    moved=True,
+                )
+            self.plan = self.plan.budgeted(budget.MAX_TIME_S)
+            if self.progress:
+                self.progress(f"pilot: it cannot tell the load; time budget {self.plan.time_budget_s:.0f} s")
+            return
+        lows = [max(0.0, ratio - k * std) for k in (2.0, 1.0, 0.0)]
+        line = needs.line
+        # How far this machine's fit stays from the model, as the pilot (a quarter of the speed) showed it.
+        model = budget.predicted(line, ratio, needs.allowed_rev * PILOT_SHARE, 2 * len(self.plan.directions))[0]
+        seen = rough.j_std_kgm2 / rough.j_total_kgm2
+        if math.isfinite(model) and model > 0 and math.isfinite(seen):
+            line = replace(line, efficiency=min(PILOT_EFFICIENCY_CAP, max(1.0, seen / model)))
+        last = None
+        for r in lows + [r for r in budget.LOAD_RATIOS if r > lows[-1]]:
+            fits = budget.within(line, r, needs.allowed_rev, needs.target)
+            if fits.reachable:
+                self.plan = self.plan.budgeted(fits.time_s)
+                if self.progress:
+                    self.progress(f"pilot: {fits.words(needs.target)}; time budget {self.plan.time_budget_s:.0f} s")
+                return
+            last = budget.need(line, r, needs.target)
+            if last.reachable:
+                break
+        assert last is not None
+        raise TravelNeeded(
+            f"stopped after the pilot: it shows a load ratio of {ratio:.2g} ± {std:.2g}; {last.words(needs.target)}, "
+            f"more than the {needs.allowed_rev:g} rev "
+            "allowed" + (f": where the axis has room, --travel {last.travel_rev:g}" if last.reachable else ""),
+            last.travel_rev if last.reachable else math.nan,
+            last.time_s if last.reachable else math.nan,
+            moved=True,
+        )
 
     def _test_speed(self, pilot: float, excursion: float, peak: float) -> float:
         """The planned speed, within the travel band and the torque share the pilot extrapolates to."""
@@ -352,8 +519,8 @@ class _HostRun:
         if excursion > 0:
             room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
             speed = min(speed, pilot * plan.ramp_s / self.ramp * room / (excursion * (plan.repeats if not both else 1)))
-        if self.torque_limit is not None and peak > 0:
-            self.cap = min(self.cap, (pilot * TORQUE_SHARE * self.torque_limit / peak, "torque"))
+        if peak > 0:  # a share of the drive's limit, and what its overload protection carries (budget.Line)
+            self.cap = min(self.cap, (pilot * self.torque_cap_pct / peak, "torque"))
         self.speed = min(speed, self.cap[0])
         return self.speed
 
@@ -370,35 +537,110 @@ class _HostRun:
         return ramp, slower if self.coarse else speed
 
     def cycles(self, speed: float, settings: EstimatorSettings) -> int:
-        """The planned cycles (adaptive: until the estimate is precise enough, within the time budget)."""
-        plan, s = self.plan, self.sampler
+        """The planned cycles (adaptive: until the estimate is precise enough, within the time budget the line's
+        needs set before the motion, or the pilot after it; extended where the travel is short of what the lightest
+        load needs: _extended)."""
+        s = self.sampler
+        self.planned_s = self.plan.time_budget_s  # as the line's needs or the pilot set it, before any extension
         # The next cycle takes as long as the longest so far (the pilot's before the first: it also holds the set-up).
         cycle_s = s.elapsed() * 1.1
-        done, began = 0, 0.0
-        for rep in range(plan.repeats):
+        done, began, rep = 0, 0.0, 0
+        while rep < self.plan.repeats:
             if rep >= 1:
                 cycle_s = max(s.elapsed() - began, cycle_s if rep >= 2 else 0.0) * 1.05
             began = s.elapsed()
-            if plan.adaptive and rep >= 2:
-                if s.elapsed() + cycle_s > TIME_BUDGET_S:
+            if self.plan.adaptive and rep >= 2:
+                due = s.elapsed() + cycle_s > self.plan.time_budget_s
+                if due and (self.plan.needs is None or self.plan.needs.enough) and not self._host_late():
                     break
                 est = self._estimate_between_moves(settings)
                 if est.ok and est.j_std_kgm2 <= 0.5 * settings.max_rel_uncertainty * est.j_total_kgm2:
                     break
+                if due and not self._extended(est, settings, cycle_s):
+                    break
             base = self.ramp
             self.ramp, move_speed = self._dithered(rep, speed)
             try:
-                for direction in plan.directions:
+                for direction in self.plan.directions:
                     if self.progress:
                         self.progress(
-                            f"move {rep + 1}/{plan.repeats} {'forward' if direction > 0 else 'reverse'} "
+                            f"move {rep + 1}/{self.plan.repeats} {'forward' if direction > 0 else 'reverse'} "
                             f"at {move_speed:.0f} rpm"
                         )
                     self.move(direction, move_speed)
             finally:
                 self.ramp = base
             done += 1
+            rep += 1
         return done
+
+    def _extended(self, est: InertiaEstimate, settings: EstimatorSettings, cycle_s: float) -> bool:
+        """At the end of the time budget, on a line whose travel does not serve every load (MotionPlan.needs): a
+        budget extended (up to budget.MAX_TIME_S) to the time in which this estimate, falling as one over the root
+        of the time, is projected to reach EXTEND_AIM of the limit, where it does; False where not. There time is
+        what buys precision, and a travel named before (or by a refusal) gets the time it was named with. Where the
+        travel serves every load the budget stands (a longer log makes a rigid load's speed-noise artefact stand
+        out in sigmas, and it was then blamed on backlash), unless the host was late (_host_late): then the line's
+        samples were there but the host lost them, and time buys them back, up to LATE_TIME_FACTOR times the budget
+        planned (budget.MAX_TIME_S where the travel does not serve every load)."""
+        needs, late = self.plan.needs, self._host_late()
+        if needs is None or (needs.enough and not late):
+            return False
+        elapsed = self.sampler.elapsed()
+        rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 else math.nan
+        if not (math.isfinite(rel) and rel > 0 and math.isfinite(est.load_ratio)) or est.n_windows == 0:
+            if not late:
+                return False
+            rel = LATE_EXTEND * EXTEND_AIM * settings.max_rel_uncertainty  # refused outright: the time scaled
+        projected = elapsed * (rel / (EXTEND_AIM * settings.max_rel_uncertainty)) ** 2
+        if late:  # the host, not the line, lost the samples: time buys them back, within LATE_TIME_FACTOR of the plan
+            cap = budget.MAX_TIME_S if not needs.enough else min(budget.MAX_TIME_S, LATE_TIME_FACTOR * self.planned_s)
+            projected = min(projected, cap - cycle_s)
+        if projected + cycle_s > budget.MAX_TIME_S or projected <= self.plan.time_budget_s:
+            return False
+        self.plan = self.plan.budgeted(projected + cycle_s)
+        if self.progress:
+            self.progress(f"J {100 * rel:.1f} % uncertain after {elapsed:.0f} s: time budget {projected:.0f} s")
+        return True
+
+    def _host_late(self) -> bool:
+        """Whether the host took a share of the samples the line gave (LATE_NAMED of them left out of the fit: their
+        exchange overran the line's time) or stalled while the axis moved: time, not travel, then buys them back."""
+        trace = self.sampler.trace
+        if trace.late > LATE_NAMED * len(trace.t):
+            return True
+        t, speed, _torque, _position = trace.fitted()
+        return stall(np.asarray(t), np.asarray(speed))[0] > 0
+
+    def _late_words(self) -> str:
+        """The samples the host's lateness left out, in words for a refusal ("" where few were)."""
+        trace = self.sampler.trace
+        if trace.late <= LATE_NAMED * len(trace.t):
+            return ""
+        return (
+            f" ({trace.late} of {len(trace.t)} samples left out of the fit: their exchanges overran the line's time, "
+            "the host was late, a busy machine?)"
+        )
+
+    def _remedy(self, est: InertiaEstimate, cycles: int) -> Remedy | None:
+        """A longer travel for a refusal that stronger accelerations cure: the least with which the line's budget
+        (tuning.budget), scaled to what this run showed, reaches the limit within its time; none where no travel
+        does (the speed or the torque the drive may spend bounds the moves, or the line is too slow), so a remedy
+        offered is one that passed the check the motion is planned by. A plan of the user's own ramps, repeats or
+        one direction (no budget): the travel that covers the shortfall (planning.remedy)."""
+        needs = self.plan.needs
+        if needs is None:
+            return remedy(self.plan.travel_limit_rev, est.shortfall, self.speed, *self.cap)
+        if not (math.isfinite(est.shortfall) and math.isfinite(est.load_ratio)):
+            return None
+        rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 else math.nan
+        found = budget.more_travel(
+            needs.line, max(est.load_ratio, 0.0), self.plan.travel_limit_rev, 2 * cycles, rel, needs.target
+        )
+        if found is None:
+            return None
+        travel = self.plan.travel_limit_rev
+        return Remedy(travel, found.travel_rev, found.travel_rev / travel, True, found.bound, found.time_s)
 
     def run(self) -> Result:
         settings = EstimatorSettings(fit_load_torque=len(self.plan.directions) > 1)
@@ -416,9 +658,11 @@ class _HostRun:
             "host", self.old_ratio, est.load_ratio, est, s.trace, self.plan, s.travel_rev, s.elapsed(), rate, cycles
         )
         if not est.ok:
-            cure = remedy(self.plan.travel_limit_rev, est.shortfall, self.speed, *self.cap)
+            cure = self._remedy(est, cycles)
             advice = cure.words() if cure is not None else est.advice
             raise IdentificationRefused(
-                f"identification refused: {est.reason}" + (f"; {advice}" if advice else ""), result, cure
+                f"identification refused: {est.reason}{self._late_words()}" + (f"; {advice}" if advice else ""),
+                result,
+                cure,
             )
         return result

@@ -8,11 +8,15 @@ from dataclasses import dataclass, replace
 from servotool.clock import Clock
 from servotool.drive import Drive
 from servotool.errors import UsageError
+from servotool.model.codec import raw_to_eng
 from servotool.model.profile import Profile
 from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
 from servotool.motion.keepalive import keepalive_interval_s
-from servotool.tuning.preflight import DEFAULT_SAMPLES_PER_S, RestCheck, check_at_rest
+from servotool.tuning import budget
+from servotool.tuning.budget import Needs
+from servotool.tuning.fit import EstimatorSettings
+from servotool.tuning.preflight import DEFAULT_SAMPLES_PER_S, FEATURE, RestCheck, check_at_rest
 
 # Automatic ramps last this many sampling intervals of the rest check (the motion samples about 2/3 as fast:
 # position reads and keep-alives share the link). Fewer leave too few windows between torque steps and let the axis
@@ -25,12 +29,9 @@ MIN_RAMP_S = 0.1  # ... and at least this long (a loop with factory gains on an 
 
 MIN_SPEED_RPM = 30.0  # no identification below this test speed
 
-# Automatic repeats stop before the motion (with its pilot) would take longer than this.
-TIME_BUDGET_S = 8.8
-
-
-# The test acceleration is scaled so the pilot's peak torque, extrapolated, stays below this share of the limit.
-TORQUE_SHARE = 0.6
+# Automatic repeats stop before the motion (with its pilot) would take longer than this, unless the line needs more
+# (budget: MotionPlan.time_budget_s).
+TIME_BUDGET_S = budget.MIN_TIME_S
 
 
 # The pilot moves at this share of the planned speed: a badly matched speed loop can overshoot its travel
@@ -82,8 +83,10 @@ class MotionPlan:
     directions: tuple[int, ...]
     repeats: int  # move cycles; with `adaptive` the most that will run
     travel_limit_rev: float
-    adaptive: bool = False  # stop repeating once the estimate is precise enough (and within TIME_BUDGET_S)
+    adaptive: bool = False  # stop repeating once the estimate is precise enough (and within time_budget_s)
     speed_limit_rpm: float = math.inf  # the motor's rated speed, or --max-speed below it
+    time_budget_s: float = TIME_BUDGET_S  # adaptive repeats stop before the motion would take longer
+    needs: Needs | None = None  # what the line needs for the fit's limit (both directions, automatic ramps)
     run_on_limited: bool = False  # the speed was lowered so that a dead host's run-on stays inside the travel
 
     @property
@@ -102,7 +105,15 @@ class MotionPlan:
     @property
     def duration_s(self) -> float:
         moves = len(self.directions) * (self.repeats + 1)  # + the pilot
-        return min(moves * (2 * self.ramp_s + 0.1), TIME_BUDGET_S if self.adaptive else math.inf)
+        return min(moves * (2 * self.ramp_s + 0.1), self.time_budget_s if self.adaptive else math.inf)
+
+    def budgeted(self, seconds: float) -> MotionPlan:
+        """The adaptive plan with a time budget of `seconds` (at least TIME_BUDGET_S), and the repeats to fill it."""
+        if not self.adaptive:
+            return self
+        budget = max(TIME_BUDGET_S, seconds)
+        cycles = max(self.repeats, math.ceil(budget / (2 * (2 * self.ramp_s + 0.1))))
+        return replace(self, time_budget_s=budget, repeats=cycles)
 
     def describe(self) -> str:
         names = {1: "forward", -1: "reverse"}
@@ -199,7 +210,33 @@ def plan_host_motion(
     }
     plan_motion(drive.profile, **options)
     rest = check_at_rest(drive, timing)
-    return fit_run_on(drive, plan_motion(drive.profile, **options, samples_per_s=rest.samples_per_s)), rest
+    plan = fit_run_on(drive, plan_motion(drive.profile, **options, samples_per_s=rest.samples_per_s))
+    return with_needs(plan, drive, rest), rest
+
+
+def with_needs(plan: MotionPlan, drive: Drive, rest: RestCheck) -> MotionPlan:
+    """The plan with what the line needs for the fit's limit (tuning.budget), said before the first move, and the
+    time the motor alone needs over its travel as its time budget. Automatic plans out and back only: a plan with
+    its own ramps or repeats, or one direction, is the user's."""
+    p = drive.profile
+    if not plan.adaptive or p.motor is None:
+        return plan
+    limit_e = p.role("torque_limit_fwd")
+    limit = float(raw_to_eng(limit_e, drive.read_entries([limit_e])[0].raw)) if limit_e is not None else None
+    line = budget.Line(
+        samples_per_s=rest.samples_per_s,
+        torque_step_pct=p.need_role("torque_feedback", FEATURE).scale,
+        torque_noise_pct=rest.torque_noise_pct,
+        speed_noise_rpm=rest.speed_noise_rpm,
+        rotor_kgm2=p.motor.rotor_inertia_kgcm2 * 1e-4,
+        rated_nm=p.motor.rated_torque_nm,
+        speed_cap_rpm=plan.speed_limit_rpm,
+        torque_limit_pct=limit,
+        ramp_s=plan.ramp_s,
+    )
+    found = budget.needs(line, plan.travel_limit_rev, EstimatorSettings().max_rel_uncertainty)
+    planned = replace(plan, needs=found)
+    return planned.budgeted(found.lightest.time_s) if found.enough else planned
 
 
 def identification_bound(drive: Drive, plan: MotionPlan) -> DeadManBound:
@@ -280,11 +317,14 @@ class Remedy:
     gain: float  # how many times harder the moves would accelerate with it
     enough: bool  # whether that covers the shortfall, with REMEDY_MARGIN
     bound: str  # what bounds the moves beyond it: "torque" or "speed" (rated or --max-speed)
+    time_s: float | None = None  # the time the line's budget (tuning.budget) gives the motion at that travel
 
     def words(self) -> str:
         said = (
             f"its moves were bound by the {self.travel_rev:g} rev travel: where the axis has room, --travel "
-            f"{self.suggested_rev:g} lets them accelerate {self.gain:.1f}x harder"
+            f"{self.suggested_rev:g}"
+            + (f" (about {self.time_s:.0f} s)" if self.time_s is not None else "")
+            + f" lets them accelerate {self.gain:.1f}x harder"
         )
         if self.enough:
             return said + ": the uncertainty usually falls with it"

@@ -89,6 +89,7 @@ class RestCheck:
     mean_speed_rpm: float
     drift_rev: float | None  # position change over the check (None: no position feedback)
     longest_gap_s: float = 0.0  # the longest time between two samples: how long the host or line may stall
+    torque_noise_pct: float = 0.0  # the torque reading's noise at rest (1 sigma, % of rated; 0: it reads steady)
 
 
 def check_at_rest(drive: Drive, timing: Clock | None = None, duration_s: float = 0.3) -> RestCheck:
@@ -103,18 +104,25 @@ def check_at_rest(drive: Drive, timing: Clock | None = None, duration_s: float =
     pos0 = drive.read_entries([pos_e])[0].raw / counts if pos_e else None
     t0 = timing.now()
     speeds: list[float] = []
+    torques: list[float] = []
     gap, last = 0.0, t0
     while timing.now() - t0 < duration_s or len(speeds) < 5:
         readings = drive.read_entries([speed_e, torque_e])
         speeds.append(float(raw_to_eng(speed_e, readings[0].raw)))
+        torques.append(float(raw_to_eng(torque_e, readings[1].raw)))
         gap, last = max(gap, timing.now() - last), timing.now()
     elapsed = timing.now() - t0
     drift = abs(drive.read_entries([pos_e])[0].raw / counts - pos0) if pos_e and pos0 is not None else None
     mean = sum(speeds) / len(speeds)
-    # Speed noise from successive differences: insensitive to a slow drift.
-    diffs = [b - a for a, b in itertools.pairwise(speeds)]
-    noise = math.sqrt(sum(d * d for d in diffs) / (2 * len(diffs))) if diffs else 0.0
-    rest = RestCheck(len(speeds) / elapsed if elapsed > 0 else DEFAULT_SAMPLES_PER_S, noise, mean, drift, gap)
+    noise = _successive_noise(speeds)
+    rest = RestCheck(
+        len(speeds) / elapsed if elapsed > 0 else DEFAULT_SAMPLES_PER_S,
+        noise,
+        mean,
+        drift,
+        gap,
+        _successive_noise(torques),
+    )
     moving = (drift is not None and drift > 0.01) or abs(mean) > max(5.0, 4 * noise / math.sqrt(len(speeds)))
     if moving:
         what = f"{drift:.3f} rev in {elapsed:.1f} s" if drift is not None else f"{mean:.0f} rpm"
@@ -123,3 +131,9 @@ def check_at_rest(drive: Drive, timing: Clock | None = None, duration_s: float =
             "(gravity?) turns it and no brake holds it: secure the axis first"
         )
     return rest
+
+
+def _successive_noise(values: list[float]) -> float:
+    """A reading's noise (1 sigma) from successive differences: insensitive to a slow drift."""
+    diffs = [b - a for a, b in itertools.pairwise(values)]
+    return math.sqrt(sum(d * d for d in diffs) / (2 * len(diffs))) if diffs else 0.0

@@ -7,8 +7,9 @@ The CLI, commissioning plans and the accuracy bench all run `tune_inertia`; they
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from servotool.clock import Clock, RealClock
@@ -20,9 +21,10 @@ from servotool.motion.interrupts import held_interrupts
 from servotool.ops import eeprom
 from servotool.ops.params import write_one
 from servotool.tuning import gain_writes, identify, planning, preflight, step
+from servotool.tuning.budget import Needs
 from servotool.tuning.control.gains import GainSuggestion, rigidity_scale, suggest_gains
 from servotool.tuning.control.margins import Margins
-from servotool.tuning.errors import IdentificationFailed, TuneDeclined
+from servotool.tuning.errors import IdentificationFailed, TravelNeeded, TuneDeclined
 from servotool.tuning.gain_writes import GainChange
 from servotool.tuning.planning import MotionPlan
 from servotool.tuning.preflight import RestCheck
@@ -182,22 +184,27 @@ def tune_inertia(
     approve_motion: Callable[[MotionPlan | None], bool] | None = None,
     on_proposal: Callable[[Proposal], None] | None = None,
     approve_write: Callable[[Proposal], bool] | None = None,
+    choose_travel: Callable[[Needs], float | None] | None = None,
 ) -> TuneResult:
     """Check, identify, then write the ratio and (if asked) the gains through the drive's EEPROM rule.
 
-    approve_motion sees the host motion (None: the drive's own) before anything moves; False raises TuneDeclined.
-    on_proposal sees what was identified and would be written, always; approve_write is asked only where
-    something would be written (never on a dry run): False writes nothing. Unset: approved.
+    choose_travel is asked, once, where the line needs more travel than the request allows (MotionPlan.needs): a
+    travel to use instead, or None to keep it (the pilot then shows whether the load needs more: TravelNeeded). Where
+    the travel allowed serves no load at all, TravelNeeded is raised before anything moves. approve_motion sees the
+    host motion (None: the drive's own) before anything moves; False raises TuneDeclined. on_proposal sees what was
+    identified and would be written, always; approve_write is asked only where something would be written (never on
+    a dry run): False writes nothing. Unset: approved.
     """
     clock = clock or RealClock()
     t0 = clock.now()
     check_request(drive.profile, request)
     preflight.preflight(drive, request.method)
-    step_plan = step.plan_step(drive, request.travel_rev) if request.step_check else None
     ident = identify.Identifier(drive, clock)
     motion, rest = None, None
     if request.method == "host":
         motion, rest = request.host_motion(drive, clock)
+        motion, request = _enough_travel(drive, request, motion, rest, choose_travel)
+    step_plan = step.plan_step(drive, request.travel_rev) if request.step_check else None  # the travel chosen
     if approve_motion is not None and not approve_motion(motion):
         raise TuneDeclined("nothing moved")
     before = _step(drive, step_plan, clock, load_unknown=True)
@@ -255,6 +262,45 @@ def tune_inertia(
         written,
         verified,
     )
+
+
+def _enough_travel(
+    drive: Drive,
+    request: TuneRequest,
+    motion: MotionPlan,
+    rest: RestCheck,
+    choose_travel: Callable[[Needs], float | None] | None,
+) -> tuple[MotionPlan, TuneRequest]:
+    """The motion (and request) with the travel chosen where the line needs more than was allowed; TravelNeeded
+    before anything moves where the travel allowed serves no load."""
+    needs = motion.needs
+    if needs is None or needs.enough:
+        return motion, request
+    chosen = choose_travel(needs) if choose_travel is not None else None
+    if chosen is not None and chosen > request.travel_rev:
+        request = replace(request, travel_rev=chosen)
+        plan = planning.plan_motion(
+            drive.profile,
+            max_speed=request.max_speed,
+            accel_time_ms=request.accel_time_ms,
+            travel_rev=chosen,
+            direction=request.direction,
+            repeats=request.repeats,
+            samples_per_s=rest.samples_per_s,
+        )
+        motion = planning.with_needs(planning.fit_run_on(drive, plan), drive, rest)
+        needs = motion.needs
+        assert needs is not None
+    if needs.from_ratio is None:
+        light = needs.lightest
+        raise TravelNeeded(
+            f"nothing moved: {needs.words()}"
+            + (f": where the axis has room, --travel {light.travel_rev:g}" if light.reachable else ""),
+            light.travel_rev if light.reachable else math.nan,
+            light.time_s if light.reachable else math.nan,
+            moved=False,
+        )
+    return motion, request
 
 
 def verify_gains(drive: Drive, changes: list[GainChange], request: TuneRequest, clock: Clock) -> StepResponse:

@@ -12,6 +12,8 @@ from unittest.mock import ANY
 
 import pytest
 
+from tests.tuning.realtime_cli import LOADED_J_SHARE, near, run_plan
+
 ROOT = Path(__file__).resolve().parents[2]
 
 PLAN = """\
@@ -34,12 +36,13 @@ def test_plan_commissions_two_axes_end_to_end(cli, tmp_path):
     cli("sim", "config", "--unit", "2", "--load-ratio", "6")
     plan = tmp_path / "plan.yaml"
     plan.write_text(PLAN)
-    r = cli("run", str(plan), "--yes", "--json")
+    r = run_plan(cli, str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     report = r.json()
     assert report["ok"] and len(report["steps"]) == 13  # 7 steps x 2 units, one step on unit 2 only
-    tuned = {s["unit"]: s["ratio"] for s in report["steps"] if s["name"] == "tune inertia"}
-    assert tuned[1] == pytest.approx(2.0, abs=0.15) and tuned[2] == pytest.approx(6.0, rel=0.05)
+    tuned = {s["unit"]: s for s in report["steps"] if s["name"] == "tune inertia"}
+    assert tuned[1]["ratio"] == pytest.approx(2.0, abs=0.15) or near(tuned[1], 2.0)
+    assert near(tuned[2], 6.0)
     assert json.loads((tmp_path / "plan.report.json").read_text())["ok"]
     for unit in (1, 2):
         assert (tmp_path / f"axis-{unit}.yaml").exists()
@@ -47,7 +50,7 @@ def test_plan_commissions_two_axes_end_to_end(cli, tmp_path):
     first = report["steps"][0]
     assert first["name"] == "set" and first["written"] == {"Pn101": 25.0, "Pn512": 150}  # numbers, as in param get
     r = cli("--port", "sim", "--unit", "2", "param", "get", "Pn004", "--json")
-    assert r.json()[0]["value"] == pytest.approx(700, rel=0.05)  # (1 + 6) x 100 %
+    assert r.json()[0]["value"] == pytest.approx(700, rel=LOADED_J_SHARE)  # (1 + 6) x 100 %
 
 
 def test_dry_run_touches_nothing(cli, tmp_path):
@@ -182,10 +185,10 @@ def test_a_tune_step_measures_a_drive_without_an_inertia_ratio_parameter_like_th
     )
     r = cli("run", str(plan), "--dry-run")
     assert r.code == 0 and "reported, not written" in r.out, r.err
-    r = cli("run", str(plan), "--yes", "--json")
+    r = run_plan(cli, str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     tuned = r.json()["steps"][1]
-    assert tuned["ok"] and tuned["ratio"] == pytest.approx(5.0, rel=0.05)
+    assert tuned["ok"] and near(tuned, 5.0)
     assert "nothing to write" in tuned["detail"] and tuned["persisted"] is None
 
 
@@ -201,7 +204,7 @@ def test_a_tune_step_writes_by_the_drives_eeprom_rule_like_the_command(cli, tmp_
         "H0C-13: 0}\n"
         "  - tune inertia: {gains: false, max_speed: 600}\n"
     )  # as above: host stalls
-    r = cli("run", str(plan), "--yes", "--json")
+    r = run_plan(cli, str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     tuned = r.json()["steps"][1]
     assert tuned["persisted"] is False and tuned["H08-15"]["value"] != before and tuned["H08-15"]["unit"] == "x"

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from tests.tuning.realtime_cli import run_plan
+
 
 def test_a_tune_step_writes_its_report_beside_the_plan(cli, tmp_path):
     pytest.importorskip("matplotlib")
@@ -13,7 +15,7 @@ def test_a_tune_step_writes_its_report_beside_the_plan(cli, tmp_path):
     )
     r = cli("run", str(plan), "--dry-run")
     assert r.code == 0 and "report to tune-{unit}" in r.out, r.err
-    r = cli("run", str(plan), "--yes", "--json")
+    r = run_plan(cli, str(plan), "--yes", "--json")
     assert r.code == 0, r.err
     step = r.json()["steps"][0]
     folder = tmp_path / "tune-1"

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
+import threading
+import time
+
 import pytest
 
-from servotool.clock import VirtualClock
+from servotool.clock import RealClock, VirtualClock
 from servotool.drive import Drive
 from servotool.errors import UsageError
 from servotool.model.loader import load_profile
@@ -62,3 +66,32 @@ def test_beats_keep_a_jog_running_and_silence_stops_it_with_the_comm_alarm(sim_d
     state = alarms.current(d)
     assert state.active and state.code == d.profile.alarm_of_kind("comm_timeout").code
     assert sim_drive.firmware.mode != "jog"
+
+
+def test_a_computation_beside_a_motion_is_beaten_through_and_its_result_or_error_comes_back(sim_dir):
+    """A fit between moves that takes longer than the watchdog (a busy host): beats go out all through it, from the
+    motion's own thread (the computation touches no link), at the beat interval; on a virtual clock it runs inline."""
+    _sim, d, _clock = _virtual()
+    ka = KeepAlive(d, 0.02, RealClock())
+    fed: list[tuple[float, str]] = []
+
+    def feed(lead_s: float) -> None:
+        fed.append((time.monotonic(), threading.current_thread().name))
+
+    def work() -> str:
+        time.sleep(0.3)
+        return threading.current_thread().name
+
+    start = time.monotonic()
+    assert ka.while_computing(work, feed) == "servotool-compute"
+    assert len(fed) >= 3 and {name for _t, name in fed} == {threading.current_thread().name}
+    times = [start, *(t for t, _name in fed)]
+    assert max(b - a for a, b in itertools.pairwise(times)) < 0.3  # never a whole computation apart
+
+    def fails() -> None:
+        raise ValueError("singular")
+
+    with pytest.raises(ValueError, match="singular"):
+        ka.while_computing(fails, feed)
+    virtual = KeepAlive(d, 0.02, VirtualClock())
+    assert virtual.while_computing(lambda: threading.current_thread().name, feed) == threading.current_thread().name

@@ -81,11 +81,16 @@ def test_a_rigid_load_too_uncertain_anyway_is_not_blamed_on_a_resonance(
     sim_dir, profile_id, baud, ratio, friction, viscous, gravity, noise, seed
 ):
     """Refused 'perhaps a resonance near N Hz (a compliant coupling)' on a rigid plant whose fit was too uncertain
-    before the spring hint (or with the hint below 2 sigma): the refusal now gives the usual remedy instead."""
-    with pytest.raises(IdentificationRefused) as caught:
-        identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
-    reason = str(caught.value)
-    assert "too uncertain" in reason and "resonance" not in reason, reason
+    before the spring hint (or with the hint below 2 sigma): the refusal now gives the usual remedy instead, or (at
+    the travel the line needs, named after the pilot and followed) the result is within its 3 sigma."""
+    try:
+        run = identify_once(ratio, friction, gravity, noise, baud, seed=seed, profile_id=profile_id, viscous=viscous)
+    except IdentificationRefused as caught:
+        reason = str(caught)
+        assert "too uncertain" in reason and "resonance" not in reason, reason
+        return
+    est = run.identified.estimate
+    assert est is not None and abs(run.ratio - ratio) <= 3 * est.ratio_std
 
 
 @pytest.mark.parametrize("seed", [1, 4])

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from servotool.tuning.fit import load_over_travel, lost_motion, quantization, resonance, subsets
+from servotool.tuning.fit import gaps, load_over_travel, lost_motion, quantization, resonance, subsets
 from servotool.tuning.fit.regression import FitData
 from servotool.tuning.fit.verdict import Verdict
 
@@ -29,10 +29,11 @@ CHECKS: tuple[Check, ...] = (
 
 
 def assess(fit: FitData) -> Verdict:
-    """The rigid fit's J, passed through every check in order until one refuses."""
-    verdict = Verdict.of(fit)
+    """The rigid fit's J, passed through every check in order until one refuses; on a log with a host stall the
+    stall is named in place of the mechanics the checks blamed (fit.gaps)."""
+    rigid = verdict = Verdict.of(fit)
     for check in CHECKS:
         if verdict.refuse:
             break
         verdict = check(verdict)
-    return verdict
+    return gaps.name(verdict, rigid)

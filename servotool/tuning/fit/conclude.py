@@ -9,6 +9,7 @@ import numpy as np
 
 from servotool.tuning.fit.estimate import EstimatorSettings, FittedWindow, InertiaEstimate, MoveEstimate, Partial
 from servotool.tuning.fit.regression import Regression
+from servotool.tuning.fit.signals import stall_words
 from servotool.tuning.fit.subsets import MIN_SUBSET_SHARE
 from servotool.tuning.fit.verdict import Verdict
 
@@ -30,13 +31,20 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
         r.notes.append(
             "load torque not fitted (one direction only, or told there is none): 'coulomb' is Coulomb + load torque"
         )
+    stalled = stall_words(verdict.fit.t, verdict.fit.rpm)
     if r.tc < -3 * r.tc_std:
-        r.notes.append("negative Coulomb friction: check the torque sign convention against the speed")
+        r.notes.append(negative_coulomb(verdict, stalled))
     r.notes.extend(verdict.notes)
     r.moves = per_move(verdict, jm)
     r.fitted_windows = fitted_windows(verdict)
     if j <= 0:
         return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")
+    if r.res_rel > cfg.max_rel_residual and stalled:
+        return r.refuse(
+            f"model does not fit the data (relative residual {r.res_rel:.2f} > {cfg.max_rel_residual:g}): {stalled} "
+            "make the moves uneven; run it again on a quieter host (should it recur there, the mechanics do not "
+            "follow the rigid model)"
+        )
     if r.res_rel > cfg.max_rel_residual:
         return r.refuse(
             f"model does not fit the data (relative residual {r.res_rel:.2f} > {cfg.max_rel_residual:g}): "
@@ -66,6 +74,21 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
                 "use stronger accelerations or a faster line",
             )
     return r.result(ok=True, reason="")
+
+
+def negative_coulomb(verdict: Verdict, stalled: str) -> str:
+    """The note for a Coulomb friction that came out negative, naming what the log shows before a sign convention
+    (which would turn J negative too): the host's stalls, or the mechanics the checks fitted, which the rigid model
+    the friction is reported from leaves out."""
+    if stalled:
+        return f"negative Coulomb friction: {stalled} make the moves uneven; the friction figure is not reliable"
+    if verdict.fitted:
+        causes = "; ".join(c.words for c in verdict.fitted)
+        return (
+            f"negative Coulomb friction in the rigid model the friction is reported from: it leaves out what the "
+            f"fit found ({causes}); the inertia is from the model of it"
+        )
+    return "negative Coulomb friction: check the torque sign convention against the speed"
 
 
 MIN_MOVE_WINDOWS = 3  # a move shown on its own needs this many windows (fewer than a subset compared: a picture)

@@ -33,24 +33,29 @@ def estimate_inertia(
     rotor_inertia_kgcm2: float,
     torque_limit_pct: float | None = None,
     settings: EstimatorSettings | None = None,
+    position_rev: np.ndarray | list[float] | None = None,
 ) -> InertiaEstimate:
     """Fit J, Coulomb, viscous and load torque to a logged motion; refuse (ok=False) rather than guess.
 
     t_s: sample times in s (strictly increasing, any spacing); speed_rpm: motor speed; torque_pct: torque in % of
     rated torque (same sign convention as speed). torque_limit_pct: the drive's active torque limit, used to detect
-    saturation (None: not checked). Raises ValueError only for malformed input (shapes, non-finite values,
-    non-increasing time, non-positive motor data).
+    saturation (None: not checked). position_rev: the drive's own position readings in motor rev, NaN where none was
+    read (None: the position is the speed's integral alone; a host stall then leaves it unknown). Raises ValueError
+    only for malformed input (shapes, non-finite values, non-increasing time, non-positive motor data).
     """
     cfg = settings or EstimatorSettings()
     t = np.asarray(t_s, dtype=float)
     rpm = np.asarray(speed_rpm, dtype=float)
     pct = np.asarray(torque_pct, dtype=float)
     validate_log(t, rpm, pct, rated_torque_nm, rotor_inertia_kgcm2, torque_limit_pct)
+    pos = None if position_rev is None else np.asarray(position_rev, dtype=float) * 2.0 * np.pi
+    if pos is not None and pos.shape != t.shape:
+        raise ValueError(f"position must have one entry per sample (got {pos.shape} for {t.shape})")
     jm = rotor_inertia_kgcm2 * KGCM2_TO_KGM2
     r = Partial(n_samples=int(t.size))
     try:
         check_samples(r, pct, torque_limit_pct, cfg)
-        sig = signals(t, rpm, pct, rated_torque_nm, cfg, r)
+        sig = signals(t, rpm, pct, rated_torque_nm, cfg, r, pos)
         reg = regress(sig, choose_windows(sig, cfg, r), cfg, r)
     except Refused as exc:
         return r.refuse(str(exc), exc.advice)

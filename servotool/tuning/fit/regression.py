@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from servotool.tuning.fit.estimate import EstimatorSettings, Partial, Refused
-from servotool.tuning.fit.signals import Signals
+from servotool.tuning.fit.signals import Signals, stall_words
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,28 @@ def regress(sig: Signals, windows: tuple[np.ndarray, np.ndarray], cfg: Estimator
     )
 
 
+MIN_WINDOWS_EACH_WAY = 3  # windows in each direction that separate Coulomb friction from a load torque
+MOVED_SHARE = 0.05  # a direction the speed went in: this share of the samples beyond the zero band that way
+
+
+def one_way(sig: Signals, forward: int, reverse: int) -> str:
+    """Why the windows fall short in one direction: the motion went one way only (the user's --direction), or it went
+    both ways and the windows that way were too few (a host's stalls and late samples cut them: named where the log
+    shows a stall)."""
+    fwd, rev = np.count_nonzero(sig.rpm >= sig.band), np.count_nonzero(sig.rpm <= -sig.band)
+    if min(fwd, rev) < MOVED_SHARE * sig.rpm.size:
+        return (
+            "motion in one direction only: Coulomb friction and load (gravity) torque cannot be separated; run the "
+            "test with --direction both"
+        )
+    stalled = stall_words(sig.t, sig.rpm)
+    return (
+        f"too few usable windows in the {'reverse' if reverse < forward else 'forward'} moves ({forward} forward, "
+        f"{reverse} reverse; {MIN_WINDOWS_EACH_WAY} each way needed) to separate Coulomb friction from load torque"
+        + (f": {stalled} cut them; run it again on a quieter host" if stalled else "; log more moves")
+    )
+
+
 def _least_squares(
     sig: Signals, windows: tuple[np.ndarray, np.ndarray], cfg: EstimatorSettings, r: Partial
 ) -> Regression:
@@ -66,12 +88,9 @@ def _least_squares(
     t, w = sig.t, sig.w
     dw, dt, sgn = w[ends] - w[starts], t[ends] - t[starts], np.sign(w[starts])
     y = sig.cum_t[ends] - sig.cum_t[starts]
-    both = bool(np.count_nonzero(sgn > 0) >= 3 and np.count_nonzero(sgn < 0) >= 3)
-    if cfg.fit_load_torque and not both:
-        raise Refused(
-            "motion in one direction only: Coulomb friction and load (gravity) torque cannot be "
-            "separated; run the test with --direction both"
-        )
+    forward, reverse = int(np.count_nonzero(sgn > 0)), int(np.count_nonzero(sgn < 0))
+    if cfg.fit_load_torque and min(forward, reverse) < MIN_WINDOWS_EACH_WAY:
+        raise Refused(one_way(sig, forward, reverse))
     names, cols = ["J", "Tc"], [dw, sgn * dt]
     if cfg.fit_viscous:
         names.append("B")
@@ -116,7 +135,7 @@ class FitData:
     torque_step_pct: float  # the torque reading's resolution, % of rated (0: finer or unknown)
     w: np.ndarray  # rad/s
     kink: np.ndarray
-    position: np.ndarray  # rad, integral of w at each sample
+    position: np.ndarray  # rad at each sample (fit.signals.anchored)
     starts: np.ndarray
     ends: np.ndarray
     torque: np.ndarray  # N*m
@@ -142,7 +161,7 @@ def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: fl
         torque_step_pct=sig.torque_step_pct,
         w=sig.w,
         kink=sig.kink,
-        position=sig.cum_w,
+        position=sig.position,
         starts=reg.starts,
         ends=reg.ends,
         torque=sig.torque,

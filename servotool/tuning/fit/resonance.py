@@ -26,8 +26,9 @@ MIN_COMPLIANT_RATIO = 0.3  # below this load ratio there is too little load behi
 COMPLIANCE_SIGMA = 4.0  # a spring term counts when beyond this many sigmas ...
 COMPLIANCE_MIN_SHIFT = 0.01  # ... and moves J by more than this fraction (and 2 sigma)
 COMPLIANCE_HINT_SIGMA = 2.0  # beyond this many it widens the uncertainty by what it would change J (one-sided 2 sigma)
-RESOLVABLE_HZ_PER_RATE = 1.0  # ... where the resonance it implies lies below the sampling rate: a spring that rings
-#                               faster than the samples come is not told from the integration's own error
+RESOLVABLE_HZ_PER_RATE = 1.0  # both where the resonance it implies lies below the sampling rate: a spring that rings
+#                               faster than the samples come is not told from the integration's own error (or the
+#                               speed reading's lag), which a long log makes as significant as any spring
 UNRESOLVED_SPRING_SHARE = 1.0  # short of a hint, this share of what a free spring term adds to J's uncertainty counts
 LOAD_HZ_MIN = 1.0  # a two-mass load's own resonance (against a held motor) is searched from here ...
 LOAD_HZ_PER_RATE = 0.2  # ... up to this fraction of the sampling rate and LOAD_HZ_MAX, in steps of LOAD_HZ_STEP
@@ -62,14 +63,15 @@ def check(v: Verdict) -> Verdict:
     if spring is None:
         return v
     with_spring = np.column_stack([x, spring.col])
-    if spring.strong:
+    resolved = spring.hz < RESOLVABLE_HZ_PER_RATE * _rate(fit)
+    if spring.strong and resolved:
         j, j_std, resid = take(fit, with_spring, (v.j, v.j_std, v.resid), 1 / MODEL_ERROR_DIVISOR)
         cause = (
             f"resonance or torque ripple near {spring.hz:.0f} Hz: the load follows the motor through a "
             "compliant coupling (or a long shaft, cogging)"
         )
         return replace(v, j=j, j_std=j_std, resid=resid, fitted=(*v.fitted, Cause(cause, curable=False)))
-    if spring.z < -COMPLIANCE_HINT_SIGMA and spring.hz < RESOLVABLE_HZ_PER_RATE * _rate(fit):
+    if spring.z < -COMPLIANCE_HINT_SIGMA and resolved:
         hinted = take(fit, with_spring, (v.j, v.j_std, v.resid), 0.0)
         widening = v.widening
         if v.j_std <= fit.max_rel * abs(v.j):  # else too uncertain anyway: the hint is not why

@@ -15,7 +15,12 @@ import numpy as np
 from servotool.tuning.fit.estimate import EstimatorSettings, Partial
 
 RPM_TO_RAD_S = math.pi / 30.0
-GAP_INTERVALS = 6.0  # no window spans more median intervals (a stall: a cubic misses a ringing loop's swing)
+GAP_INTERVALS = 6.0  # no window spans more median intervals (a stall: a cubic misses a ringing loop's swing) ...
+# ... nor a gap this long; a shorter one is never a stall: on a fast line (the simulator's unemulated one answers in
+# 0.25 ms) six intervals are 1.5 ms, and a loaded host's usual few-ms hiccups cut every window there (2 of 4 runs with
+# two CPU burners refused "too little acceleration", 1.6x and 7.7x the speed noise, on a load that passes idle); the
+# loop's swing is resolved by the cubic across a gap this long, as at 115200 baud's own six intervals.
+GAP_FLOOR_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -34,21 +39,29 @@ class Signals:
     cum_t: np.ndarray
     cum_w: np.ndarray
     moves: np.ndarray
+    position: np.ndarray  # rad: cum_w, set after each stall by the drive's own position readings where the log has them
 
 
 def signals(
-    t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, rated_torque_nm: float, cfg: EstimatorSettings, r: Partial
+    t: np.ndarray,
+    rpm: np.ndarray,
+    pct: np.ndarray,
+    rated_torque_nm: float,
+    cfg: EstimatorSettings,
+    r: Partial,
+    position_rad: np.ndarray | None = None,
 ) -> Signals:
     """Noise, zero-speed band, the torque reading's step, kinks (torque steps) and the Hermite integrals of torque
-    and speed."""
+    and speed; the position over the log (position_rad: the drive's readings, NaN where none was read)."""
     noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm)
     r.speed_noise_rpm = noise_rpm
     peak = float(np.max(np.abs(rpm)))
     band = cfg.zero_band_rpm if cfg.zero_band_rpm is not None else max(0.02 * peak, 3.0 * noise_rpm)
     w = rpm * RPM_TO_RAD_S
     torque = pct / 100.0 * rated_torque_nm
-    kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct, GAP_INTERVALS)
+    kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct)
     r.n_kinks = int(np.count_nonzero(kink))
+    cum_w = cumulative_hermite(t, w, kink)
     return Signals(
         t=t,
         rpm=rpm,
@@ -60,9 +73,37 @@ def signals(
         band=band,
         kink=kink,
         cum_t=cumulative_hermite(t, torque, kink),
-        cum_w=cumulative_hermite(t, w, kink),
+        cum_w=cum_w,
         moves=move_ids(rpm, band),
+        position=anchored(t, cum_w, position_rad),
     )
+
+
+def gap_after(t: np.ndarray) -> np.ndarray:
+    """For each sampling interval, whether it is a gap no window spans (a host stall): longer than GAP_INTERVALS
+    median intervals and than GAP_FLOOR_S."""
+    gaps = np.diff(t)
+    return gaps > max(GAP_INTERVALS * float(np.median(gaps)), GAP_FLOOR_S) if gaps.size else np.zeros(0, dtype=bool)
+
+
+def anchored(t: np.ndarray, cum_w: np.ndarray, position_rad: np.ndarray | None) -> np.ndarray:
+    """The position at each sample: the integral of the speed, its offset set anew after every gap (gap_after: a
+    host stall, the speed is not known across it, and a move may run through it)
+    from the drive's position readings inside each stretch between gaps; a stretch with none keeps the offset of
+    the one before it (of the first that has one, at the start)."""
+    if position_rad is None or t.size < 2 or not np.any(np.isfinite(position_rad)):
+        return cum_w
+    stretch = np.zeros(t.size, dtype=int)
+    stretch[1:] = np.cumsum(gap_after(t))
+    read = np.isfinite(position_rad)
+    offsets = np.full(int(stretch[-1]) + 1, np.nan)
+    for k in range(offsets.size):
+        here = read & (stretch == k)
+        if np.any(here):
+            offsets[k] = float(np.median(position_rad[here] - cum_w[here]))
+    known = np.flatnonzero(np.isfinite(offsets))
+    filled = offsets[known[np.clip(np.searchsorted(known, np.arange(offsets.size), side="right") - 1, 0, None)]]
+    return cum_w + filled[stretch]
 
 
 def line_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -117,18 +158,15 @@ def kink_mask(
     noise_rpm: float,
     kink_sigma: float,
     torque_noise_floor_pct: float,
-    gap_intervals: float,
 ) -> np.ndarray:
     """Samples at a torque step (torque or speed further than kink_sigma noise sigmas off the line through its
-    neighbours; the torque noise estimated robustly, floored) or ending a gap of more than gap_intervals median
-    sampling intervals (a host stall)."""
+    neighbours; the torque noise estimated robustly, floored) or ending a gap (gap_after: a host stall)."""
     dev, ref = line_deviation(t, pct)
     torque_noise = max(float(1.4826 * np.median(np.abs(dev) / ref)), torque_noise_floor_pct) if dev.size else 0.0
     dev_w, ref_w = line_deviation(t, rpm)
     kink = np.zeros(pct.size, dtype=bool)
     kink[1:-1] = (np.abs(dev) > kink_sigma * torque_noise * ref) | (np.abs(dev_w) > kink_sigma * noise_rpm * ref_w)
-    gaps = np.diff(t)
-    kink[1:] |= gaps > gap_intervals * float(np.median(gaps))
+    kink[1:] |= gap_after(t)
     return kink
 
 
@@ -188,3 +226,33 @@ def torque_step(torque: np.ndarray) -> float:
     step = float(np.min(np.diff(values)))
     grid = (values - values[0]) / step
     return step if float(np.max(np.abs(grid - np.round(grid)))) < 0.01 else 0.0
+
+
+# A stall named as such (fit.gaps, the refusals): a gap between samples while the axis moved ...
+STALL_S = 0.05  # a gap this long ...
+STALL_INTERVALS = 6.0  # ... and this many usual intervals is a stall (the windows never span one: gap_after)
+MOVING_SHARE = 0.05  # ... where the speed on either side is above this share of the peak
+
+
+def stall(t: np.ndarray, rpm: np.ndarray) -> tuple[float, float]:
+    """(the longest gap between two samples while the axis moved, the median interval) in s; (0, median) where
+    no gap is a stall."""
+    if t.size < 3:
+        return 0.0, 0.0
+    gaps = np.diff(t)
+    usual = float(np.median(gaps))
+    speed = np.abs(rpm)
+    moving = np.maximum(speed[1:], speed[:-1]) > MOVING_SHARE * float(np.max(speed))
+    long = moving & (gaps >= max(STALL_S, STALL_INTERVALS * usual))
+    return (float(np.max(gaps[long])) if np.any(long) else 0.0), usual
+
+
+def stall_words(t: np.ndarray, rpm: np.ndarray) -> str:
+    """The words for the log's longest stall while the axis moved; empty where it has none."""
+    gap, usual = stall(t, rpm)
+    if gap <= 0:
+        return ""
+    return (
+        f"sampling gaps of up to {1000 * gap:.0f} ms while the axis moved (usually {1000 * usual:.2g} ms: the host "
+        "stalled, a busy machine?)"
+    )

@@ -323,3 +323,18 @@ def test_a_host_stall_while_the_loop_rings_is_left_out_of_every_window() -> None
     r = estimate((t[keep], rpm[keep], pct[keep]))
     assert r.ok, r.reason
     assert ratio_error(r, 3.0) < 0.005
+
+
+def test_a_motion_both_ways_whose_reverse_windows_a_stalled_host_cut_is_not_called_one_direction() -> None:
+    """A loaded host left the reverse moves' samples 250 ms apart (late exchanges left out of the fit): no window
+    spans those gaps, and the refusal said "motion in one direction only ... run the test with --direction both" of a
+    run that went both ways. It names the windows that way and the host's gaps instead."""
+    t, rpm, pct = simulate(3.0, load=0.1 * RATED_NM, coulomb=0.03 * RATED_NM, **NOISY)
+    reverse = np.flatnonzero(rpm < -5.0)
+    keep = np.ones(t.size, dtype=bool)
+    keep[reverse] = False
+    keep[reverse[::10]] = True
+    r = estimate((t[keep], rpm[keep], pct[keep]))
+    assert not r.ok
+    assert "one direction" not in r.reason and "--direction both" not in r.reason, r.reason
+    assert "too few usable windows in the reverse moves" in r.reason and "the host stalled" in r.reason, r.reason

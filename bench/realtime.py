@@ -1,0 +1,316 @@
+"""`tune inertia` through the CLI in real time, against a simulated drive in a process of its own: what a user runs.
+
+The real-time mode of bench/inertia_accuracy.py (`--realtime`). Per row (a profile at a line speed) one `servotool
+sim serve --port tcp://127.0.0.1:N --baud B` serves the drive with its line emulated (each answer after its wire
+time at B baud); per machine the drive's true properties are set in its state file (as `sim config` does), it is
+set up for host motion and power-cycled (the server takes both over), and then `servotool --port tcp://... tune
+inertia --yes --json --dry-run` runs in a new process, as a user types it. Where servotool refuses before moving and
+names the travel the line needs, the run is repeated once with that `--travel`, as a user following it would; the
+accepted run must then stay within the travel and time it named.
+
+`--burner`: one process spinning a CPU (`python -c 'while 1: pass'`) beside each row. `--embedded`: the CLI's own
+`--port sim` instead of a served drive (the simulator in the CLI's own process).
+
+Prints per row: runs, accepted (within the named travel and time), median and worst |error| of J_total, within the
+stated 3 sigma and within twice it, samples/s against what the line carries, travel and time (median, worst), the
+machine's load before and after, and every refusal's and note's wording that blames a cause the machine does not
+have (these machines are rigid: a resonance, backlash, a sign convention, a loop that overshoots, the zero-speed
+band).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from servotool.model.loader import load_profile
+from servotool.motion.deadman import route_of
+from servotool.sim import state as sim_state
+from servotool.sim.firmware import build_drive
+from servotool.sim.virtual import make_motion_setup
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# What a rigid machine's refusal or note must not blame (issue 31 item 3): the mechanics it does not have, the sign
+# convention, the loop, and the zero-speed band.
+WRONG_CAUSES = re.compile(
+    r"resonance|backlash|lost motion|compliance|sign convention|loop overshoots|zero-speed band|torque ripple",
+    re.IGNORECASE,
+)
+
+
+def load() -> str:
+    one, five, _ = os.getloadavg()
+    return f"load {one:.1f}/{five:.1f}"
+
+
+@dataclass
+class Run:
+    """One machine's outcome through the CLI."""
+
+    ok: bool
+    ratio: float | None = None
+    ratio_std: float | None = None
+    samples_per_s: float | None = None
+    travel_rev: float | None = None
+    time_s: float | None = None
+    wall_s: float = 0.0
+    reason: str = ""
+    notes: list[str] = field(default_factory=list)
+    named_travel_rev: float | None = None  # what servotool named before moving (or after, in a refusal)
+    named_time_s: float | None = None
+    tries: int = 1
+
+
+class Served:
+    """`servotool sim serve` for one profile at one line speed, in its own process, on a loopback TCP port."""
+
+    def __init__(self, profile: str, baud: int, env: dict[str, str], tcp_port: int = 0) -> None:
+        cmd = [sys.executable, "-m", "servotool", "sim", "serve", "-P", profile, "--baud", str(baud)]
+        cmd += ["--port", f"tcp://127.0.0.1:{tcp_port}"]
+        self.proc = subprocess.Popen(
+            cmd, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+        )
+        assert self.proc.stderr is not None
+        banner = self.proc.stderr.readline()
+        if "serving on tcp://" not in banner:
+            self.close()
+            raise RuntimeError(f"sim serve did not start: {banner}")
+        self.port = banner.split("serving on ")[1].split()[0]
+
+    def close(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.communicate()
+
+
+class Burner:
+    """One process spinning a CPU while a row runs."""
+
+    def __init__(self, on: bool) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-c", "while 1: pass"]) if on else None
+
+    def close(self) -> None:
+        if self.proc is not None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def set_machine(profile: str, baud: int, machine: tuple[float, float, float, float, float], seed: int) -> None:
+    """The simulated drive's true properties (as `sim config` sets them), its motion set-up made and a power cycle:
+    a served drive takes the state file over at its next request."""
+    ratio, coulomb, viscous, gravity, noise = machine
+    p = load_profile(profile)
+    sim_state.configure(
+        p,
+        p.default_unit,
+        load_ratio=ratio,
+        friction=coulomb,
+        viscous=viscous,
+        load_torque=gravity,
+        noise=noise,
+        seed=seed,
+        brake=1,
+        line_baud=baud,
+    )
+    make_motion_setup(build_drive(p, p.default_unit))
+
+
+def tune(port: str, profile: str, baud: int, env: dict[str, str], travel: float | None = None) -> tuple[dict, float]:
+    """`servotool tune inertia --yes --json --dry-run` as a new process; (its JSON, wall seconds)."""
+    cmd = [sys.executable, "-m", "servotool", "--port", port, "-P", profile]
+    if port != "sim":
+        cmd += ["--baud", str(baud)]
+    cmd += ["tune", "inertia", "--yes", "--json", "--dry-run"]
+    if route_of(load_profile(profile)).route == "none":
+        cmd.append("--no-dead-man")
+    if travel is not None:
+        cmd += ["--travel", f"{travel:g}"]
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    wall = time.perf_counter() - t0
+    try:
+        return json.loads(r.stdout), wall
+    except json.JSONDecodeError:
+        return {"ok": False, "reason": (r.stderr.strip().splitlines() or ["no output"])[-1]}, wall
+
+
+def _value(field: dict | None) -> float | None:
+    """A JSON quantity's number ({"value": ..., "unit": ...}), None for null."""
+    return field.get("value") if isinstance(field, dict) else None
+
+
+def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
+    """One machine as a user runs it: once, and where servotool names a travel before moving, once more with it."""
+    out, wall = tune(port, profile, baud, env)
+    tries = 1
+    named = _value(out.get("needed_travel"))
+    if not out.get("ok") and named is not None:  # named before moving, or after the pilot: followed once
+        out, more = tune(port, profile, baud, env, float(named))
+        wall += more
+        tries = 2
+    return Run(
+        ok=bool(out.get("ok")),
+        ratio=out.get("ratio"),
+        ratio_std=out.get("ratio_std"),
+        samples_per_s=_value(out.get("sample_rate")),
+        travel_rev=_value(out.get("travel")),
+        time_s=_value(out.get("time")),
+        wall_s=wall,
+        reason=out.get("reason") or "",
+        notes=list(out.get("notes") or []),
+        named_travel_rev=_value(out.get("needed_travel")) or named,
+        named_time_s=_value(out.get("needed_time")),
+        tries=tries,
+    )
+
+
+@dataclass
+class Row:
+    """The runs of one profile at one line speed."""
+
+    profile: str
+    baud: int
+    line_per_s: float
+    truths: list[float] = field(default_factory=list)
+    runs: list[Run] = field(default_factory=list)
+    load_before: str = ""
+    load_after: str = ""
+
+    def accepted(self) -> list[tuple[float, Run]]:
+        return [(t, r) for t, r in zip(self.truths, self.runs, strict=True) if r.ok and r.ratio is not None]
+
+    def within_named(self, r: Run) -> bool:
+        travel = r.named_travel_rev if r.named_travel_rev is not None else 2.0
+        time_s = r.named_time_s if r.named_time_s is not None else 10.0
+        return (r.travel_rev or 0.0) <= travel + 1e-9 and (r.time_s or 0.0) <= time_s
+
+    def wrong_causes(self) -> Counter[str]:
+        found: Counter[str] = Counter()
+        for r in self.runs:
+            for text in [r.reason, *r.notes]:
+                if (m := WRONG_CAUSES.search(text)) is not None:
+                    found[m.group(0).lower()] += 1
+        return found
+
+    def line(self) -> str:
+        acc = self.accepted()
+        n = len(self.runs)
+        good = [(t, r) for t, r in acc if self.within_named(r)]
+        errors = [abs(r.ratio - t) / (1.0 + t) * 100 for t, r in acc]  # type: ignore[operator]
+        sig3 = [abs(r.ratio - t) <= 3 * (r.ratio_std or 0.0) + 1e-9 for t, r in acc]  # type: ignore[operator]
+        sig6 = [abs(r.ratio - t) <= 6 * (r.ratio_std or 0.0) + 1e-9 for t, r in acc]  # type: ignore[operator]
+        rates = [r.samples_per_s for _t, r in acc if r.samples_per_s]
+        travels = [r.travel_rev or 0.0 for _t, r in acc]
+        times = [r.time_s or 0.0 for _t, r in acc]
+        named = [r.named_travel_rev for r in self.runs if r.named_travel_rev is not None]
+        rate = statistics.median(rates) if rates else 0.0
+
+        def med(xs: list[float]) -> str:
+            return f"{statistics.median(xs):.2f}" if xs else "-"
+
+        def worst(xs: list[float]) -> str:
+            return f"{max(xs):.2f}" if xs else "-"
+
+        return (
+            f"{self.profile:>7} {self.baud:>6} {n:>4} {len(good):>4} {len(good) / n if n else 0:>4.0%} "
+            f"{med(errors):>7} {worst(errors):>7} {sum(sig3):>3}/{len(acc):<3} {sum(sig6):>3}/{len(acc):<3} "
+            f"{rate:>6.0f} {self.line_per_s:>6.0f} {rate / self.line_per_s:>5.2f} "
+            f"{med(travels):>5}/{worst(travels):<5} {med(times):>5}/{worst(times):<5} "
+            f"{(f'{min(named):g}-{max(named):g}' if named else '-'):>9}  {self.load_before} -> {self.load_after}"
+        )
+
+
+HEADER = (
+    f"{'profile':>7} {'baud':>6} {'runs':>4} {'acc':>4} {'acc%':>4} {'median%':>7} {'worst%':>7} {'in3sig':>7} "
+    f"{'in6sig':>7} {'samp/s':>6} {'line/s':>6} {'share':>5} {'travel med/max':>11} {'time med/max':>11} "
+    f"{'named rev':>9}  load before -> after"
+)
+
+
+def realtime_table(
+    rows: list[tuple[str, int]],
+    machines: list[tuple[float, float, float, float, float]],
+    line_rate,
+    *,
+    burner: bool = False,
+    embedded: bool = False,
+    tcp_port: int = 0,
+    verbose: bool = False,
+) -> list[Row]:
+    """Every row through the CLI in real time; prints as it goes and returns the rows."""
+    tmp = Path(tempfile.mkdtemp(prefix="servotool-bench-"))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SERVOTOOL_")}
+    env.update(
+        SERVOTOOL_SIM_DIR=str(tmp / "sim"),
+        SERVOTOOL_BACKUP_DIR=str(tmp / "backups"),
+        SERVOTOOL_CACHE_DIR=str(tmp / "cache"),
+        SERVOTOOL_CONFIG=str(tmp / "none.yaml"),
+        COLUMNS="200",
+    )
+    os.environ.update({k: v for k, v in env.items() if k.startswith("SERVOTOOL_")})
+    where = "--port sim, the simulator in the CLI's process" if embedded else "sim serve in a process of its own"
+    print(
+        f"real time through the CLI ({where}{', one CPU burner beside it' if burner else ''}); "
+        f"{len(machines)} machines per row, {os.cpu_count()} cores"
+    )
+    print(HEADER, flush=True)
+    done: list[Row] = []
+    try:
+        for profile, baud in rows:
+            row = Row(profile, baud, line_rate(profile, baud), load_before=load())
+            served = None if embedded else Served(profile, baud, env, tcp_port)
+            hot = Burner(burner)
+            try:
+                for n, machine in enumerate(machines):
+                    set_machine(profile, baud, machine, seed=n + 1)
+                    run = run_machine(served.port if served else "sim", profile, baud, env)
+                    row.truths.append(machine[0])
+                    row.runs.append(run)
+                    if verbose:
+                        print(f"    {machine} -> {_said(run, machine[0])}", flush=True)
+            finally:
+                hot.close()
+                if served is not None:
+                    served.close()
+            row.load_after = load()
+            print(row.line(), flush=True)
+            done.append(row)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print("\nrefusals, and wording that blames a cause these rigid machines do not have:")
+    for row in done:
+        reasons = Counter(_grouped(r.reason) for r in row.runs if not r.ok)
+        for reason, count in reasons.most_common():
+            print(f"  {row.profile:>7} {row.baud:>6} {count:>3} x {reason}")
+        for cause, count in row.wrong_causes().most_common():
+            print(f"  {row.profile:>7} {row.baud:>6} {count:>3} x WRONG CAUSE named: {cause}")
+    return done
+
+
+def _grouped(reason: str) -> str:
+    text = reason.removeprefix("identification refused: ")
+    return re.sub(r"[-+]?\d+(\.\d+)?", "N", text.split(";")[0])[:100]
+
+
+def _said(run: Run, truth: float) -> str:
+    if not run.ok:
+        return f"REFUSED ({run.tries} tries, {run.wall_s:.1f} s): {run.reason[:160]}"
+    err = (run.ratio - truth) / (1 + truth) * 100  # type: ignore[operator]
+    return (
+        f"{run.ratio:.3f} ± {run.ratio_std:.3f} ({err:+.2f} %), {run.samples_per_s} /s, {run.travel_rev} rev, "
+        f"{run.time_s} s ({run.tries} tries, {run.wall_s:.1f} s wall)"
+    )

@@ -1,0 +1,250 @@
+"""What a host identification needs of the line before it moves: the travel and the time in which the inertia fit
+can reach its uncertainty limit, from what the rest check measured (the sampling rate, the speed and torque
+readings' noise), the torque reading's step, the motor and the torque the drive allows.
+
+J is seen through the acceleration torque J*a against the torque reading's error. The planned moves accelerate and
+brake along ramps of a fixed time (planning: a number of samples each); a longer travel lets them reach a higher
+speed in the same ramp, so the acceleration and its torque grow in proportion to the travel, up to the motor's speed
+and the torque the drive may spend (a share of its limit, and an r.m.s. over the motion that its I^2t overload
+protection carries indefinitely). Every sample inside a ramp, less the one at each end (a torque step, which the fit
+leaves out), carries J*a / sigma_T of information, so
+
+    sigma(J)/J ~= EFFICIENCY * sigma_T / (tau_a * sqrt(N))
+
+sigma_T: the torque reading's noise and its step (q/sqrt 12); tau_a: the acceleration torque, % of rated; N: the
+samples inside ramps within the time. EFFICIENCY is how far `tune inertia`'s fit (friction, gravity and viscous
+terms fitted beside J, windows clear of the steps, the jackknife's honesty) stays from that ideal, measured on the
+bench's machines (bench/inertia_accuracy.py). The lightest load (the motor alone) needs the most: the travel and
+time named before moving are its, and a heavier load, once the pilot has shown it, needs less.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+# The fit's uncertainty against the ideal one, measured (bench/inertia_accuracy.py): 1.2-2.7 where the acceleration
+# torque is weak (the loads that need travel), more where it is strong (friction and gravity then weigh as much as J,
+# but the uncertainty is far below the limit anyway).
+EFFICIENCY = 3.5
+TARGET_SHARE = 0.7  # the prediction aims this far below the limit: a few moves' jackknife misjudges by a third
+MOTION_SHARE = 0.85  # of the rest check's sampling rate, what the motion keeps (position reads, commands)
+RMS_TORQUE_PCT = 80.0  # an r.m.s. torque, % of rated, that an overload protection carries indefinitely (not a cap)
+TORQUE_SHARE = 0.6  # of the drive's torque limit, what an acceleration may take
+DEFAULT_LIMIT_PCT = 300.0  # a drive whose limit servotool cannot read: the usual servo motor's peak
+MIN_EXCITATION = 10.0 * math.sqrt(2.0) * 1.3  # the speed change a window needs against the speed noise, with margin
+MAX_TRAVEL_REV = 100.0  # beyond this no travel is named: the line cannot do it
+MIN_TIME_S = 8.8  # an identification's time budget where the line needs no more
+MAX_TIME_S = 30.0  # ... nor a time longer than this
+TIME_TIERS_S = (10.0, MAX_TIME_S)  # a usual identification's time, and the longest
+TRAVEL_FOR_TIME = 1.5  # a usual time is worth up to this many times the least travel
+MOVE_REQUESTS = 3  # requests a move spends outside its ramps: the start, the stop, the alarm check
+TIME_OVERHEAD_S = 1.0  # the pilot's fit and the hold's set-up
+LOAD_RATIOS = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 50.0, 100.0, 200.0)
+
+
+@dataclass(frozen=True)
+class Line:
+    """What the rest check measured and the drive states, that the budget depends on."""
+
+    samples_per_s: float
+    torque_step_pct: float  # the torque reading's resolution, % of rated
+    torque_noise_pct: float  # 1 sigma, % of rated
+    speed_noise_rpm: float
+    rotor_kgm2: float
+    rated_nm: float
+    speed_cap_rpm: float  # rated, or --max-speed below it
+    torque_limit_pct: float | None  # the drive's torque limit, % of rated (None: unknown)
+    ramp_s: float  # the planned ramps' time
+    efficiency: float = 1.0  # this machine's fit against the model's (>= 1: as a pilot or a run showed it)
+
+    @property
+    def sigma_torque_pct(self) -> float:
+        return math.hypot(self.torque_noise_pct, self.torque_step_pct / math.sqrt(12.0))
+
+    @property
+    def torque_cap_pct(self) -> float:
+        return torque_cap_pct(self.torque_limit_pct)
+
+
+def torque_cap_pct(limit_pct: float | None) -> float:
+    """The acceleration torque a move may take (% of rated): a share of the drive's limit (the rest: friction and
+    gravity). An r.m.s. cap of RMS_TORQUE_PCT (what the overload protection carries indefinitely) was tried: it cut a
+    bare motor's moves at 57600 baud and 12 rev of travel below the 2 % limit (test_dither); the drive's own I^2t
+    protection stops a motion that overloads it, with an alarm the identification names."""
+    return TORQUE_SHARE * (limit_pct or DEFAULT_LIMIT_PCT)
+
+
+@dataclass(frozen=True)
+class Need:
+    """The travel and time a load needs on this line; `reachable` False: none within MAX_TRAVEL_REV and MAX_TIME_S
+    (travel and time then say what came closest)."""
+
+    load_ratio: float
+    travel_rev: float
+    time_s: float
+    sigma_rel: float  # the uncertainty predicted with them
+    speed_rpm: float
+    reachable: bool
+    bound: str  # what bounds the moves at that travel: "travel", "speed" or "torque"
+
+    def words(self, target: float) -> str:
+        what = "the motor alone" if self.load_ratio <= 0 else f"a load ratio of {self.load_ratio:.2g}"
+        if not self.reachable:
+            return (
+                f"this line cannot reach {100 * target:g} % for {what} within {MAX_TRAVEL_REV:g} rev and "
+                f"{MAX_TIME_S:g} s (at best {100 * self.sigma_rel:.1f} %, the moves bound by the {self.bound})"
+            )
+        return f"{what} needs {self.travel_rev:g} rev of travel and about {self.time_s:.0f} s for {100 * target:g} %"
+
+
+def move_s(line: Line) -> float:
+    """A move's time: its two ramps and the requests around them."""
+    return 2.0 * line.ramp_s + MOVE_REQUESTS / (line.samples_per_s * MOTION_SHARE)
+
+
+def moves_in(line: Line, time_s: float) -> int:
+    """Moves (out or back) that fit in time_s after the set-up and the pilot (one cycle)."""
+    return max(0, int((time_s - TIME_OVERHEAD_S) / move_s(line)) - 2)
+
+
+def time_for(line: Line, moves: int) -> float:
+    """The time budget for `moves` moves, the pilot and the set-up included: no less than a usual identification's
+    (MIN_TIME_S), which the adaptive repeats end early once the estimate is precise."""
+    return max(MIN_TIME_S, TIME_OVERHEAD_S + (moves + 2) * move_s(line))
+
+
+def predicted(line: Line, load_ratio: float, travel_rev: float, moves: int) -> tuple[float, float, str]:
+    """(sigma(J)/J, test speed rpm, what bounds it) of `moves` moves (out and back) within travel_rev."""
+    j = line.rotor_kgm2 * (1.0 + max(load_ratio, 0.0))
+    speed, bound = 0.9 * travel_rev / line.ramp_s * 60.0, "travel"
+    if speed > line.speed_cap_rpm:
+        speed, bound = line.speed_cap_rpm, "speed"
+    accel = speed * math.pi / 30.0 / line.ramp_s
+    tau = j * accel / line.rated_nm * 100.0
+    if tau > line.torque_cap_pct:
+        speed *= line.torque_cap_pct / tau
+        tau, bound = line.torque_cap_pct, "torque"
+    rate = line.samples_per_s * MOTION_SHARE
+    inside = max(0.0, rate * line.ramp_s - 2.0)  # a ramp's samples clear of its ends
+    n = 2.0 * moves * inside
+    if n <= 0 or tau <= 0:
+        return math.inf, speed, bound
+    # Each window's speed change against the speed noise (fit.windows): too little and the fit refuses outright.
+    if speed * inside / (rate * line.ramp_s) < MIN_EXCITATION * line.speed_noise_rpm:
+        return math.inf, speed, bound
+    return line.efficiency * EFFICIENCY * line.sigma_torque_pct / (tau * math.sqrt(n)), speed, bound
+
+
+def within(line: Line, load_ratio: float, travel_rev: float, target: float, time_cap_s: float = MAX_TIME_S) -> Need:
+    """The least time in which moves over travel_rev are predicted to reach TARGET_SHARE of `target` for this load
+    (`reachable` False: not within time_cap_s)."""
+    aim = TARGET_SHARE * target
+    most = moves_in(line, time_cap_s)
+    sigma, speed, bound = predicted(line, load_ratio, travel_rev, most)
+    if sigma > aim:
+        return Need(load_ratio, travel_rev, time_cap_s, sigma, speed, False, bound)
+    moves = _fewest_moves(line, load_ratio, travel_rev, aim, most)
+    return Need(load_ratio, travel_rev, time_for(line, moves), sigma, speed, True, bound)
+
+
+def need(line: Line, load_ratio: float, target: float) -> Need:
+    """The least travel (in steps of half a revolution) with which the fit is predicted to reach TARGET_SHARE of
+    `target` for this load within MAX_TIME_S, and the least time with it; or, where at most TRAVEL_FOR_TIME times that
+    travel does it within a usual time (TIME_TIERS_S[0]), that travel and time: travel is what an axis lacks, time
+    only costs time. Not reachable: what came closest."""
+    found = [_least_travel(line, load_ratio, target, time_s) for time_s in TIME_TIERS_S]
+    quick, least = found[0], found[-1]
+    if quick.reachable and least.reachable and quick.travel_rev <= TRAVEL_FOR_TIME * least.travel_rev:
+        return quick
+    return least if least.reachable or not quick.reachable else quick
+
+
+def _least_travel(line: Line, load_ratio: float, target: float, time_s: float) -> Need:
+    best: Need | None = None
+    travel = 0.5
+    while travel <= MAX_TRAVEL_REV + 1e-9:
+        found = within(line, load_ratio, travel, target, time_s)
+        if found.reachable:
+            return found
+        if best is None or found.sigma_rel < best.sigma_rel:
+            best = found
+        if found.bound != "travel":  # the speed or the torque bounds the moves: more travel changes nothing
+            break
+        travel += 0.5
+    assert best is not None
+    return best
+
+
+def _fewest_moves(line: Line, load_ratio: float, travel: float, aim: float, most: int) -> int:
+    lo, hi = 2, max(2, most)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if predicted(line, load_ratio, travel, mid)[0] <= aim:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@dataclass(frozen=True)
+class Needs:
+    """What the line needs for the target, said before the first move: the lightest load's travel and time, and the
+    lightest load that the travel allowed serves."""
+
+    line: Line
+    target: float
+    allowed_rev: float
+    lightest: Need  # the motor alone
+    from_ratio: float | None  # the lightest load (of LOAD_RATIOS) the allowed travel serves; None: none of them
+
+    @property
+    def enough(self) -> bool:
+        """Whether the allowed travel serves every load."""
+        return self.lightest.reachable and self.lightest.travel_rev <= self.allowed_rev
+
+    def words(self) -> str:
+        line = self.line
+        said = (
+            f"for {100 * self.target:g} % at {line.samples_per_s:.0f} samples/s (torque in {line.torque_step_pct:g} % "
+            f"steps, noise {line.torque_noise_pct:.2g} %): {self.lightest.words(self.target)}"
+        )
+        if self.enough:
+            return said
+        if self.from_ratio is None:
+            return said + f"; {self.allowed_rev:g} rev serve none of the loads up to a ratio of {LOAD_RATIOS[-1]:g}"
+        return said + f"; {self.allowed_rev:g} rev serve load ratios from {self.from_ratio:g}"
+
+
+def needs(line: Line, allowed_rev: float, target: float) -> Needs:
+    """What this line needs for `target`: the motor alone over the travel allowed (the moves always use all of it),
+    else the travel it needs; and then the lightest load the travel allowed serves."""
+    lightest = within(line, 0.0, allowed_rev, target)
+    if lightest.reachable:
+        return Needs(line, target, allowed_rev, lightest, 0.0)
+    served = next((r for r in LOAD_RATIOS if within(line, r, allowed_rev, target).reachable), None)
+    return Needs(line, target, allowed_rev, need(line, 0.0, target), served)
+
+
+def more_travel(
+    line: Line, load_ratio: float, travel_rev: float, moves: int, sigma_rel: float, target: float
+) -> Need | None:
+    """The least travel beyond travel_rev with which a run that came out sigma_rel uncertain after `moves` moves
+    would reach TARGET_SHARE of `target` within MAX_TIME_S, the model scaled to what this run showed; None where no
+    travel up to MAX_TRAVEL_REV does (the speed or the torque bounds the moves, or the line is too slow)."""
+    now = predicted(line, load_ratio, travel_rev, max(moves, 2))[0]
+    if not (math.isfinite(now) and now > 0 and math.isfinite(sigma_rel)):
+        return None
+    scale = max(1.0, sigma_rel / now)  # this machine's fit against the model's
+    aim = TARGET_SHARE * target
+    most = moves_in(line, MAX_TIME_S)
+    travel = math.floor(travel_rev * 2.0) / 2.0 + 0.5
+    while travel <= MAX_TRAVEL_REV + 1e-9:
+        sigma, speed, bound = predicted(line, load_ratio, travel, most)
+        if scale * sigma <= aim:
+            moves = _fewest_moves(line, load_ratio, travel, aim / scale, most)
+            return Need(load_ratio, travel, time_for(line, moves), scale * sigma, speed, True, bound)
+        if bound != "travel":
+            return None
+        travel += 0.5
+    return None

@@ -1,0 +1,85 @@
+"""What the line needs, said before the first move (issue 31 item 4): the travel and time for the 2 % target from the
+measured sample rate, the torque limits and the travel allowed."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from servotool.tuning import budget
+from servotool.tuning.errors import TuneDeclined
+from servotool.tuning.tune import TuneRequest, tune_inertia
+from tests.tuning.test_tune_robustness import set_up
+
+# A small servo motor's figures (DSX7E's rotor and rated torque) read in 0.1 % steps, 120 ms ramps.
+LINE = budget.Line(
+    samples_per_s=300.0,
+    torque_step_pct=0.1,
+    torque_noise_pct=0.2,
+    speed_noise_rpm=0.5,
+    rotor_kgm2=1.7e-5,
+    rated_nm=0.64,
+    speed_cap_rpm=3000.0,
+    torque_limit_pct=300.0,
+    ramp_s=0.12,
+)
+SLOW = replace(LINE, samples_per_s=60.0, torque_step_pct=1.0, ramp_s=0.2)  # 7.5 rev and about 29 s for the motor
+
+
+def test_a_slower_line_needs_more_travel_and_a_heavier_load_less():
+    fast = budget.need(LINE, 0.0, 0.02)
+    slow = budget.need(SLOW, 0.0, 0.02)
+    assert fast.reachable and slow.reachable and slow.travel_rev > fast.travel_rev
+    heavy = budget.need(LINE, 10.0, 0.02)
+    assert heavy.reachable and heavy.travel_rev <= fast.travel_rev
+    assert budget.MIN_TIME_S <= fast.time_s <= budget.MAX_TIME_S
+
+
+def test_the_travel_allowed_is_said_with_the_loads_it_serves():
+    needs = budget.needs(SLOW, 1.0, 0.02)
+    assert not needs.enough and needs.lightest.travel_rev > 1.0
+    said = needs.words()
+    assert f"needs {needs.lightest.travel_rev:g} rev of travel and about" in said and "60 samples/s" in said
+    if needs.from_ratio is not None:
+        assert f"1 rev serve load ratios from {needs.from_ratio:g}" in said
+    assert budget.needs(LINE, needs.lightest.travel_rev + 1.0, 0.02).enough
+
+
+def test_a_line_that_cannot_reach_the_target_says_so_with_what_came_closest():
+    hopeless = replace(LINE, samples_per_s=5.0, torque_step_pct=1.0, torque_noise_pct=2.0, ramp_s=0.5)
+    found = budget.need(hopeless, 0.0, 0.02)
+    assert not found.reachable and found.sigma_rel > 0.02
+    assert "cannot reach 2 %" in found.words(0.02)
+
+
+def test_the_acceleration_torque_is_a_share_of_the_drives_limit():
+    assert budget.torque_cap_pct(300.0) == budget.TORQUE_SHARE * 300.0
+    assert budget.torque_cap_pct(None) == budget.torque_cap_pct(budget.DEFAULT_LIMIT_PCT)
+
+
+def test_the_needs_are_said_before_anything_moves_and_a_travel_is_asked_for_once(sim_dir):
+    """SDC at its factory 9600 baud (24 samples/s), a light load: the line's needs (the motor alone: 13 rev, about
+    29 s) reach the caller before the motion, the axis still where it was; the caller is asked once for a travel,
+    and the one it gives is the travel the motion is planned with."""
+    sim, d, clock = set_up("sdc", 9600, load_ratio=1.0, friction=0.02, noise=0.002, seed=2)
+    start = sim.firmware.plant.theta
+    asked, approved = [], []
+
+    def choose(needs: budget.Needs) -> float | None:
+        asked.append((needs, sim.firmware.plant.theta))
+        return needs.lightest.travel_rev if needs.lightest.reachable else None
+
+    def approve(motion) -> bool:
+        approved.append((motion, sim.firmware.plant.theta))
+        return False  # nothing moves: the needs and the travel are what is tested
+
+    with pytest.raises(TuneDeclined):
+        tune_inertia(d, TuneRequest(dry_run=True), clock=clock, choose_travel=choose, approve_motion=approve)
+    assert len(asked) == 1 and asked[0][1] == start
+    needs = asked[0][0]
+    assert not needs.enough and needs.lightest.reachable and needs.line.samples_per_s < 30.0
+    assert needs.lightest.travel_rev <= 20.0 and needs.lightest.time_s <= 30.0  # issue 31 item 5's SDC 9600 row
+    motion, theta = approved[0]
+    assert theta == start and motion.travel_limit_rev == needs.lightest.travel_rev
+    assert motion.needs is not None and motion.needs.enough
