@@ -75,14 +75,16 @@ def _path_with_servotool(tmp: Path) -> str:
 def masked(text: str) -> str:
     """Numbers as #, runs of table padding as one space, wrapped lines joined, a frame's bytes as #, an
     identification's move lines left out (it stops once its estimate is tight: a move more or less), a sampling
-    gap's mention dropped: what may differ from run to run."""
+    gap's mention and a widened uncertainty's note dropped: what may differ from run to run."""
     text = re.sub(r"(?m)^move \d+/\d+ (forward|reverse) at .*\n", "", text)
     text = re.sub(r"(?m)^(<<|>>)( [0-9a-f]{2})+", r"\1 #", text)
     text = re.sub(r"[-−+]?\d+(\.\d+)?(e[-+]?\d+)?", "#", text)  # a sign too: a speed reads -1 or 0 rpm at rest
     text = text.replace(", longest gap # ms", "")  # said only when the host left a gap in the sampling
     text = re.sub(r"[ ─━]+", " ", text)
     text = re.sub(r"\n (?=\S)", " ", text)  # a wrapped line joined: where it wraps follows the numbers' widths
-    return re.sub(r"(?m)^sampling gaps of up to # ms while the axis moved .*\n", "", text)  # a stall's note, too
+    text = re.sub(r"(?m)^sampling gaps of up to # ms while the axis moved .*\n", "", text)  # a stall's note, too
+    # the subsets' note: whether the accelerations' spread of J exceeds what the speed noise makes is the noise's
+    return re.sub(r"(?m)^uncertainty widened #x: .*\n", "", text)
 
 
 def main() -> int:
