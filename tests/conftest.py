@@ -21,6 +21,15 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """SIGINT handled in the test process, so that every servotool child it starts has the default again: a suite
+    started in the background of a non-interactive shell (`nohup pytest &`) inherits SIGINT ignored and passes that
+    on, and then the Ctrl-C tests' signal is lost and each served drive's stop waits out its 30 s (seen: a run stuck
+    in sim_serve's teardown, its children with SigIgn bit 2 set)."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def _children_keep_their_bytecode() -> None:
     """Where the runner sets PYTHONDONTWRITEBYTECODE, every `python -m servotool` the tests start (about a
     thousand) would compile servotool's modules from source again: a quarter of a `param get`'s CPU time, which
