@@ -109,48 +109,33 @@ def identify_once(
     """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine; a drive
     without a dead-man route is moved as the CLI moves it with --no-dead-man. follow: where it names the travel the
     line needs (TravelNeeded: before moving, or after the pilot), it runs once more with it, as a user does."""
+    profile = load_profile(profile_id)
+
+    def attempt(travel: float) -> TuneResult:
+        clock = VirtualClock(1000.0)
+        sim = build_drive(profile, 1, clock, persist=False)
+        sim.settings.update(
+            load_ratio=ratio,
+            friction=friction,
+            viscous=viscous,
+            load_torque=gravity,
+            noise=noise,
+            seed=seed,
+            brake=1 if brake else 0,
+        )
+        sim.firmware.reconfigure()
+        make_motion_setup(sim)
+        drive = Drive(VirtualLink([sim], clock, baud, stalls), profile, 1)
+        drive.dead_man_waived = True
+        return tune_inertia(drive, TuneRequest(travel_rev=travel, dry_run=True), clock=clock)
+
+    used = travel_rev if travel_rev is not None else bench_travel(profile_id)
     try:
-        return _identify(ratio, friction, gravity, noise, baud, seed, brake, profile_id, viscous, travel_rev, stalls)
+        return attempt(used)
     except TravelNeeded as exc:
-        used = travel_rev if travel_rev is not None else bench_travel(profile_id)
         if not follow or not math.isfinite(exc.travel_rev) or exc.travel_rev <= used:
             raise
-        return _identify(
-            ratio, friction, gravity, noise, baud, seed, brake, profile_id, viscous, exc.travel_rev, stalls
-        )
-
-
-def _identify(
-    ratio: float,
-    friction: float,
-    gravity: float,
-    noise: float,
-    baud: int,
-    seed: int,
-    brake: bool,
-    profile_id: str,
-    viscous: float,
-    travel_rev: float | None,
-    stalls: HostStalls | None = None,
-) -> TuneResult:
-    profile = load_profile(profile_id)
-    clock = VirtualClock(1000.0)
-    sim = build_drive(profile, 1, clock, persist=False)
-    sim.settings.update(
-        load_ratio=ratio,
-        friction=friction,
-        viscous=viscous,
-        load_torque=gravity,
-        noise=noise,
-        seed=seed,
-        brake=1 if brake else 0,
-    )
-    sim.firmware.reconfigure()
-    make_motion_setup(sim)
-    drive = Drive(VirtualLink([sim], clock, baud, stalls), profile, 1)
-    drive.dead_man_waived = True
-    travel = travel_rev if travel_rev is not None else bench_travel(profile_id)
-    return tune_inertia(drive, TuneRequest(travel_rev=travel, dry_run=True), clock=clock)
+        return attempt(exc.travel_rev)
 
 
 def line_rate(profile_id: str, baud: int) -> float:
