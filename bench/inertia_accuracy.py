@@ -341,9 +341,9 @@ def profiles_table(
     return met
 
 
-# Real time (--realtime): each profile at the line it is used at. SD25's factory 9600 baud is boosted for the
-# identification (issue 31 item 1): 57600 stands for it.
-REALTIME_ROWS = [("sd25", 57600), ("sdc", 9600), ("is620p", 57600), ("dsx7e", 115200)]
+# Real time (--realtime): each profile at its factory line, as shipped; servotool raises SD25's 9600 baud for the
+# identification itself (issue 31 item 1: Po504, `sim serve` follows it as the manual has it).
+REALTIME_ROWS = [("sd25", 9600), ("sdc", 9600), ("is620p", 57600), ("dsx7e", 115200)]
 
 
 def parse_rows(text: str) -> list[tuple[str, int]]:

@@ -4,14 +4,16 @@ The real-time mode of bench/inertia_accuracy.py (`--realtime`). Per row (a profi
 sim serve --port tcp://127.0.0.1:N --baud B` serves the drive with its line emulated (each answer after its wire
 time at B baud); per machine the drive's true properties are set in its state file (as `sim config` does), it is
 set up for host motion and power-cycled (the server takes both over), and then `servotool --port tcp://... tune
-inertia --yes --json --dry-run` runs in a new process, as a user types it. Where servotool refuses before moving and
-names the travel the line needs, the run is repeated once with that `--travel`, as a user following it would; the
-accepted run must then stay within the travel and time it named.
+inertia --yes --json --dry-run` runs in a new process, as a user types it. Where servotool names the travel the line
+needs (before moving, after the pilot, or in a refusal after the motion), the run is repeated once with that
+`--travel`, as a user following it would; the accepted run must then stay within the travel and time it named.
 
 `--burner`: one process spinning a CPU (`python -c 'while 1: pass'`) beside each row. `--embedded`: the CLI's own
 `--port sim` instead of a served drive (the simulator in the CLI's own process).
 
-Prints per row: runs, accepted (within the named travel and time), median and worst |error| of J_total, within the
+Prints per row: the line the identifications ran at (a boost raises SD25's 9600), runs, accepted (within the named
+travel and time), how many of those followed a travel only a refusal after the motion named ('after'), median and
+worst |error| of J_total, within the
 stated 3 sigma and within twice it, samples/s against what the line carries, travel and time (median, worst), the
 machine's load before and after, and every refusal's and note's wording that blames a cause the machine does not
 have (these machines are rigid: a resonance, backlash, a sign convention, a loop that overshoots, the zero-speed
@@ -30,6 +32,7 @@ import sys
 import tempfile
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,6 +73,8 @@ class Run:
     named_travel_rev: float | None = None  # what servotool named before moving (or after, in a refusal)
     named_time_s: float | None = None
     tries: int = 1
+    named_after: bool = False  # the travel followed was named by a refusal after the motion, not before
+    baud: int | None = None  # the line's speed during the identification (a boost raises it)
 
 
 class Served:
@@ -154,14 +159,18 @@ def _value(field: dict | None) -> float | None:
 
 
 def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
-    """One machine as a user runs it: once, and where servotool names a travel before moving, once more with it."""
+    """One machine as a user runs it: once, and where servotool names a travel (before moving, after the pilot, or
+    in a refusal after the motion), once more with it."""
     out, wall = tune(port, profile, baud, env)
-    tries = 1
+    tries, after = 1, False
     named = _value(out.get("needed_travel"))
-    if not out.get("ok") and named is not None:  # named before moving, or after the pilot: followed once
+    if not out.get("ok") and named is None and (named := _value(out.get("suggested_travel"))) is not None:
+        after = True  # named only by a refusal, after the whole motion
+    if not out.get("ok") and named is not None:  # followed once
         out, more = tune(port, profile, baud, env, float(named))
         wall += more
         tries = 2
+    line = out.get("line") or {}
     return Run(
         ok=bool(out.get("ok")),
         ratio=out.get("ratio"),
@@ -175,6 +184,8 @@ def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
         named_travel_rev=_value(out.get("needed_travel")) or named,
         named_time_s=_value(out.get("needed_time")),
         tries=tries,
+        named_after=after,
+        baud=line.get("baud"),
     )
 
 
@@ -184,7 +195,7 @@ class Row:
 
     profile: str
     baud: int
-    line_per_s: float
+    line_rate: Callable[[str, int], float]  # samples/s a line at this baud carries (bench/inertia_accuracy.py)
     truths: list[float] = field(default_factory=list)
     runs: list[Run] = field(default_factory=list)
     load_before: str = ""
@@ -217,7 +228,12 @@ class Row:
         travels = [r.travel_rev or 0.0 for _t, r in acc]
         times = [r.time_s or 0.0 for _t, r in acc]
         named = [r.named_travel_rev for r in self.runs if r.named_travel_rev is not None]
+        after = sum(r.named_after for _t, r in good)
         rate = statistics.median(rates) if rates else 0.0
+        # the line the identifications ran at: the row's, or the one a boost raised it to
+        ran_at = Counter(r.baud for r in self.runs if r.baud).most_common(1)
+        baud = ran_at[0][0] if ran_at else self.baud
+        line_per_s = self.line_rate(self.profile, baud)
 
         def med(xs: list[float]) -> str:
             return f"{statistics.median(xs):.2f}" if xs else "-"
@@ -226,16 +242,17 @@ class Row:
             return f"{max(xs):.2f}" if xs else "-"
 
         return (
-            f"{self.profile:>7} {self.baud:>6} {n:>4} {len(good):>4} {len(good) / n if n else 0:>4.0%} "
-            f"{med(errors):>7} {worst(errors):>7} {sum(sig3):>3}/{len(acc):<3} {sum(sig6):>3}/{len(acc):<3} "
-            f"{rate:>6.0f} {self.line_per_s:>6.0f} {rate / self.line_per_s:>5.2f} "
+            f"{self.profile:>7} {self.baud:>6} {baud:>6} {n:>4} {len(good):>4} {len(good) / n if n else 0:>4.0%} "
+            f"{after:>5} {med(errors):>7} {worst(errors):>7} {sum(sig3):>3}/{len(acc):<3} {sum(sig6):>3}/{len(acc):<3} "
+            f"{rate:>6.0f} {line_per_s:>6.0f} {rate / line_per_s:>5.2f} "
             f"{med(travels):>5}/{worst(travels):<5} {med(times):>5}/{worst(times):<5} "
             f"{(f'{min(named):g}-{max(named):g}' if named else '-'):>9}  {self.load_before} -> {self.load_after}"
         )
 
 
 HEADER = (
-    f"{'profile':>7} {'baud':>6} {'runs':>4} {'acc':>4} {'acc%':>4} {'median%':>7} {'worst%':>7} {'in3sig':>7} "
+    f"{'profile':>7} {'baud':>6} {'ran at':>6} {'runs':>4} {'acc':>4} {'acc%':>4} {'after':>5} {'median%':>7} "
+    f"{'worst%':>7} {'in3sig':>7} "
     f"{'in6sig':>7} {'samp/s':>6} {'line/s':>6} {'share':>5} {'travel med/max':>11} {'time med/max':>11} "
     f"{'named rev':>9}  load before -> after"
 )
@@ -244,7 +261,7 @@ HEADER = (
 def realtime_table(
     rows: list[tuple[str, int]],
     machines: list[tuple[float, float, float, float, float]],
-    line_rate,
+    line_rate: Callable[[str, int], float],
     *,
     burner: bool = False,
     embedded: bool = False,
@@ -271,7 +288,7 @@ def realtime_table(
     done: list[Row] = []
     try:
         for profile, baud in rows:
-            row = Row(profile, baud, line_rate(profile, baud), load_before=load())
+            row = Row(profile, baud, line_rate, load_before=load())
             served = None if embedded else Served(profile, baud, env, tcp_port)
             hot = Burner(burner)
             try:

@@ -6,7 +6,7 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -24,6 +24,9 @@ from servotool.ops import eeprom
 from servotool.tuning import budget, gain_search, identify, planning, preflight, step, tune
 from servotool.tuning.control.friction import friction_report
 from servotool.tuning.errors import TravelNeeded, TuneDeclined
+
+if TYPE_CHECKING:
+    from servotool.ops.boost import BoostFacts
 
 app = typer.Typer(no_args_is_help=True, help="Identify load inertia and set gains.")
 DEFAULT_TRAVEL_REV = 2.0
@@ -237,7 +240,7 @@ def inertia(
     tune.check_request(resolved(ctx).profile, request)  # refused before the drive is opened (or its line raised)
 
     # An interrupt before the first motion, between motions or at a prompt ends with the drive read back.
-    with drive(ctx) as d, stop.proven_on_interrupt(d), boosted(ctx, [d], "the identification"):
+    with drive(ctx) as d, stop.proven_on_interrupt(d), boosted(ctx, [d], "the identification") as line:
         d.dead_man_waived = no_dead_man
         ask = _Dialog(ctx, d, yes=yes, method=method, step_check=step_check, travel=travel, as_json=as_json)
         try:
@@ -256,12 +259,12 @@ def inertia(
             _notes(exc)
             raise
         except ServoError as exc:  # refused, tripped, travel exceeded, link lost
-            _failed(exc, report, d.profile, as_json and (ask.moving or isinstance(exc, TravelNeeded)))
+            _failed(exc, report, d.profile, as_json and (ask.moving or isinstance(exc, TravelNeeded)), line)
             raise
         profile = d.profile
     if report is not None:
         _report(report, res.identified, profile, res)
-    _render(res, profile, as_json, ask.dead_man, ask.safety + ask.cautions)
+    _render(res, profile, as_json, ask.dead_man, ask.safety + ask.cautions, line)
 
 
 def _notes(interrupt: KeyboardInterrupt) -> None:
@@ -288,7 +291,9 @@ def _step_check_choice(ctx: typer.Context, check: bool | None, writes_gains: boo
     return typer.confirm(f"Step-check the gains ({CHECK_WHAT})?", default=True, err=True)
 
 
-def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: bool) -> None:
+def _failed(
+    exc: ServoError, report: Path | None, profile: Profile, as_json: bool, line: BoostFacts | None = None
+) -> None:
     """What a failed identification leaves: the report of a refused one, and the JSON of any (the reason, the
     estimate so far, the travel a refusal suggests)."""
     refusal = exc if isinstance(exc, identify.IdentificationRefused) else None
@@ -316,6 +321,7 @@ def _failed(exc: ServoError, report: Path | None, profile: Profile, as_json: boo
                     "rolled_back": bool(rolled),
                     "rollback_reason": rolled.get("reason"),
                     "step_check": _step_json(exc.response) if isinstance(exc, tune.GainsRolledBack) else None,
+                    "line": line.as_json() if line is not None else None,
                 }
             )
         )
@@ -438,8 +444,10 @@ def _render(
     as_json: bool,
     dead_man: deadman.DeadManBound | None = None,
     cautions: list[str] | None = None,
+    line: BoostFacts | None = None,
 ) -> None:
-    """The outcome, after the writes (cautions: the safety lines and cautions given before moving)."""
+    """The outcome, after the writes (cautions: the safety lines and cautions given before moving; line: the speed
+    the identification ran at, where a boost raised it)."""
     proposal, sugg = res.proposal, res.proposal.suggestion
     entry, changes = proposal.parameter, proposal.gain_changes
     if as_json:
@@ -462,6 +470,7 @@ def _render(
                     "persisted": res.persisted,
                     "gains": _gains_json(changes, profile),
                     "gains_written": res.gains_written,
+                    "line": line.as_json() if line is not None else None,
                     "bandwidth": quantity(_rounded(sugg.bandwidth_hz, 2), "Hz") if sugg else None,
                     "rigidity": sugg.rigidity if sugg else None,
                     "phase_margin": quantity(_rounded(proposal.margins.phase_deg, 1), "°")

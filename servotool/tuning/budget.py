@@ -21,7 +21,7 @@ time named before moving are its, and a heavier load, once the pilot has shown i
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 # The fit's uncertainty against the ideal one, measured (bench/inertia_accuracy.py): 1.2-2.7 where the acceleration
 # torque is weak (the loads that need travel), more where it is strong (friction and gravity then weigh as much as J,
@@ -33,6 +33,7 @@ RMS_TORQUE_PCT = 80.0  # an r.m.s. torque, % of rated, that an overload protecti
 TORQUE_SHARE = 0.6  # of the drive's torque limit, what an acceleration may take
 DEFAULT_LIMIT_PCT = 300.0  # a drive whose limit servotool cannot read: the usual servo motor's peak
 MIN_EXCITATION = 10.0 * math.sqrt(2.0) * 1.3  # the speed change a window needs against the speed noise, with margin
+ZERO_BAND_SIGMAS = 3.0  # the fit's zero-speed band, in speed noises (fit.signals), which no window enters
 MAX_TRAVEL_REV = 100.0  # beyond this no travel is named: the line cannot do it
 MIN_TIME_S = 8.8  # an identification's time budget where the line needs no more
 MAX_TIME_S = 30.0  # ... nor a time longer than this
@@ -57,6 +58,11 @@ class Line:
     torque_limit_pct: float | None  # the drive's torque limit, % of rated (None: unknown)
     ramp_s: float  # the planned ramps' time
     efficiency: float = 1.0  # this machine's fit against the model's (>= 1: as a pilot or a run showed it)
+    # Of the speed the travel allows, what a dead host's run-on leaves (planning.fit_run_on): the run-on and the move
+    # both grow in proportion to the speed at the planned ramps, so one share holds at every travel.
+    speed_share: float = 1.0
+    # Of the model's speed change per window, what the fit's windows see (< 1: as a run showed it).
+    excitation_share: float = 1.0
 
     @property
     def sigma_torque_pct(self) -> float:
@@ -117,7 +123,7 @@ def time_for(line: Line, moves: int) -> float:
 def predicted(line: Line, load_ratio: float, travel_rev: float, moves: int) -> tuple[float, float, str]:
     """(sigma(J)/J, test speed rpm, what bounds it) of `moves` moves (out and back) within travel_rev."""
     j = line.rotor_kgm2 * (1.0 + max(load_ratio, 0.0))
-    speed, bound = 0.9 * travel_rev / line.ramp_s * 60.0, "travel"
+    speed, bound = line.speed_share * 0.9 * travel_rev / line.ramp_s * 60.0, "travel"
     if speed > line.speed_cap_rpm:
         speed, bound = line.speed_cap_rpm, "speed"
     accel = speed * math.pi / 30.0 / line.ramp_s
@@ -131,9 +137,20 @@ def predicted(line: Line, load_ratio: float, travel_rev: float, moves: int) -> t
     if n <= 0 or tau <= 0:
         return math.inf, speed, bound
     # Each window's speed change against the speed noise (fit.windows): too little and the fit refuses outright.
-    if speed * inside / (rate * line.ramp_s) < MIN_EXCITATION * line.speed_noise_rpm:
+    if excitation(line, speed) < MIN_EXCITATION:
         return math.inf, speed, bound
     return line.efficiency * EFFICIENCY * line.sigma_torque_pct / (tau * math.sqrt(n)), speed, bound
+
+
+def excitation(line: Line, speed_rpm: float) -> float:
+    """A ramp's speed change clear of its ends and of the fit's zero-speed band (fit.signals: ZERO_BAND_SIGMAS of
+    the speed noise), in speed noises, as the fit's windows see it (Line.excitation_share); inf without noise."""
+    if line.speed_noise_rpm <= 0:
+        return math.inf
+    rate = line.samples_per_s * MOTION_SHARE
+    inside = max(0.0, rate * line.ramp_s - 2.0)
+    change = speed_rpm * inside / (rate * line.ramp_s) - ZERO_BAND_SIGMAS * line.speed_noise_rpm
+    return line.excitation_share * change / line.speed_noise_rpm
 
 
 def within(line: Line, load_ratio: float, travel_rev: float, target: float, time_cap_s: float = MAX_TIME_S) -> Need:
@@ -227,15 +244,29 @@ def needs(line: Line, allowed_rev: float, target: float) -> Needs:
 
 
 def more_travel(
-    line: Line, load_ratio: float, travel_rev: float, moves: int, sigma_rel: float, target: float
+    line: Line,
+    load_ratio: float,
+    travel_rev: float,
+    moves: int,
+    sigma_rel: float,
+    target: float,
+    excitation_seen: float = math.nan,
 ) -> Need | None:
     """The least travel beyond travel_rev with which a run that came out sigma_rel uncertain after `moves` moves
-    would reach TARGET_SHARE of `target` within MAX_TIME_S, the model scaled to what this run showed; None where no
-    travel up to MAX_TRAVEL_REV does (the speed or the torque bounds the moves, or the line is too slow)."""
-    now = predicted(line, load_ratio, travel_rev, max(moves, 2))[0]
-    if not (math.isfinite(now) and now > 0 and math.isfinite(sigma_rel)):
+    would reach TARGET_SHARE of `target` within MAX_TIME_S, the model scaled to what this run showed (its
+    uncertainty, and excitation_seen: the fit's speed change per window against sqrt(2) speed noises, where it was
+    refused for too little of it); None where no travel up to MAX_TRAVEL_REV does (the speed or the torque bounds
+    the moves, or the line is too slow)."""
+    if not (math.isfinite(sigma_rel) or math.isfinite(excitation_seen)):
         return None
-    scale = max(1.0, sigma_rel / now)  # this machine's fit against the model's
+    speed_now = predicted(line, load_ratio, travel_rev, max(moves, 2))[1]
+    model = excitation(line, speed_now)
+    if math.isfinite(excitation_seen) and excitation_seen > 0 and 0 < model < math.inf:
+        seen = line.excitation_share * math.sqrt(2.0) * excitation_seen / model  # the fit's unit: sqrt(2) noises
+        line = replace(line, excitation_share=min(line.excitation_share, seen))
+    now = predicted(line, load_ratio, travel_rev, max(moves, 2))[0]
+    # this machine's fit against the model's, where both stand (a refusal for too little excitation has no fit)
+    scale = max(1.0, sigma_rel / now) if math.isfinite(sigma_rel) and 0 < now < math.inf else 1.0
     aim = TARGET_SHARE * target
     most = moves_in(line, MAX_TIME_S)
     travel = math.floor(travel_rev * 2.0) / 2.0 + 0.5

@@ -25,7 +25,7 @@ from servotool.tuning import budget
 from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
-from servotool.tuning.fit.signals import stall
+from servotool.tuning.fit.signals import speed_noise_rpm, stall
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
     MIN_RAMP_S,
@@ -223,6 +223,8 @@ EXTEND_AIM = 0.85  # a time budget is extended to reach this share of the uncert
 CATCH_UP_RAMPS = 2.0  # a move short of its target runs on for at most this many ramps more
 REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) between moves
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
+STOP_BAND_SIGMAS = 4.0  # the motion's rest band, in speed noises (_noise_band)
+MIN_NOISE_SAMPLES = 20  # the log's own noise estimate counts from this many samples
 LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
 LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
 LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many budgets
@@ -249,7 +251,7 @@ class _HostRun:
         jogger.protect_for(plan.speed_rpm, plan.travel_limit_rev)  # the drive's own, set with the settings
         self.jog_accel = p.need_role("jog_accel", FEATURE)
         self.ramp_rpm = p.ramp_rpm()  # the speed the drive's ramp time runs up to
-        self.stop_band = max(3.0, 4.0 * (rest.speed_noise_rpm if rest is not None else 0.0))
+        self.stop_band = max(3.0, STOP_BAND_SIGMAS * (rest.speed_noise_rpm if rest is not None else 0.0))
         self.sampler = Sampler(d, self.timing, plan.travel_limit_rev, self._beat)
         # A torque read in whole percent: its step error would repeat in every move of the same acceleration.
         self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT
@@ -622,6 +624,15 @@ class _HostRun:
             "the host was late, a busy machine?)"
         )
 
+    def _noise_band(self) -> float:
+        """The motion's rest band: STOP_BAND_SIGMAS of the speed noise, as the rest check measured it or, where more
+        readings show more, as the log so far does. A rest check on a slow line takes a handful of readings (8 at
+        9600 baud), and its estimate can fall far below the noise: the stop then reads a motor at rest as turning."""
+        t, speed, _torque, _position = self.sampler.trace.fitted()
+        if len(t) < MIN_NOISE_SAMPLES:
+            return self.stop_band
+        return max(self.stop_band, STOP_BAND_SIGMAS * speed_noise_rpm(np.asarray(t), np.asarray(speed)))
+
     def _remedy(self, est: InertiaEstimate, cycles: int) -> Remedy | None:
         """A longer travel for a refusal that stronger accelerations cure: the least with which the line's budget
         (tuning.budget), scaled to what this run showed, reaches the limit within its time; none where no travel
@@ -631,15 +642,24 @@ class _HostRun:
         needs = self.plan.needs
         if needs is None:
             return remedy(self.plan.travel_limit_rev, est.shortfall, self.speed, *self.cap)
-        if not (math.isfinite(est.shortfall) and math.isfinite(est.load_ratio)):
+        if not math.isfinite(est.shortfall):
             return None
         rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 else math.nan
-        found = budget.more_travel(
-            needs.line, max(est.load_ratio, 0.0), self.plan.travel_limit_rev, 2 * cycles, rel, needs.target
+        low = est.excitation if est.excitation < EstimatorSettings().min_excitation else math.nan
+        # No fit stood (too little excitation): the load is not known, and the travel named is the least with which
+        # the lightest load this line can serve at all would reach the limit.
+        ratios = [max(est.load_ratio, 0.0)] if math.isfinite(est.load_ratio) else budget.LOAD_RATIOS
+        travel = self.plan.travel_limit_rev
+        found = next(
+            (
+                need
+                for r in ratios
+                if (need := budget.more_travel(needs.line, r, travel, 2 * cycles, rel, needs.target, low)) is not None
+            ),
+            None,
         )
         if found is None:
             return None
-        travel = self.plan.travel_limit_rev
         return Remedy(travel, found.travel_rev, found.travel_rev / travel, True, found.bound, found.time_s)
 
     def run(self) -> Result:
@@ -648,9 +668,15 @@ class _HostRun:
         # However the motion ends, the stop sequence waits (bounded) for the axis to rest inside this motion's speed
         # band before the servo goes off (a ringing loop swings through zero), and proves it; the drive's protections
         # (protect_for, above) are set inside it before the first move and put back with the motion's settings.
-        with jogger.stopping(band_rpm=self.stop_band, need_ramp=True) as saved:
-            hold = StableHold(self.drive, jogger.route.kind, saved)
-            cycles = self.cycles(self.pilot(hold, settings), settings)
+        stopper = jogger.stopping(band_rpm=self.stop_band, need_ramp=True)
+        with stopper as saved:
+            try:
+                hold = StableHold(self.drive, jogger.route.kind, saved)
+                speed = self.pilot(hold, settings)
+                self.stop_band = self._noise_band()
+                cycles = self.cycles(speed, settings)
+            finally:  # the stop proves rest within the noise the whole log showed, not only the rest check's
+                stopper.band_rpm = self._noise_band()
         s = self.sampler
         rate = s.rate()
         est = self.estimate(s.trace, settings)

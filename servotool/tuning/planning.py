@@ -233,6 +233,7 @@ def with_needs(plan: MotionPlan, drive: Drive, rest: RestCheck) -> MotionPlan:
         speed_cap_rpm=plan.speed_limit_rpm,
         torque_limit_pct=limit,
         ramp_s=plan.ramp_s,
+        speed_share=plan.speed_rpm / (0.9 * plan.travel_limit_rev / plan.ramp_s * 60.0) if plan.run_on_limited else 1.0,
     )
     found = budget.needs(line, plan.travel_limit_rev, EstimatorSettings().max_rel_uncertainty)
     planned = replace(plan, needs=found)

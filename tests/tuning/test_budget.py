@@ -8,7 +8,7 @@ from dataclasses import replace
 import pytest
 
 from servotool.tuning import budget
-from servotool.tuning.errors import TuneDeclined
+from servotool.tuning.errors import TravelNeeded, TuneDeclined
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
 
@@ -83,3 +83,58 @@ def test_the_needs_are_said_before_anything_moves_and_a_travel_is_asked_for_once
     motion, theta = approved[0]
     assert theta == start and motion.travel_limit_rev == needs.lightest.travel_rev
     assert motion.needs is not None and motion.needs.enough
+
+
+def test_a_run_on_that_lowers_the_speed_needs_more_travel():
+    """A dead host's run-on bounds the speed in proportion to the travel (planning.fit_run_on): the budget plans with
+    the speed the motion will have, not the one the travel alone would allow (DSX7E at 2 rev moved at about 180 rpm
+    where the budget assumed 1080, and every noisy machine was refused after the motion with no travel named)."""
+    noisy = replace(LINE, speed_noise_rpm=10.0)
+    free = budget.need(noisy, 0.0, 0.02)
+    bound = budget.need(replace(noisy, speed_share=0.17), 0.0, 0.02)
+    assert free.reachable and bound.reachable
+    assert bound.travel_rev >= 2 * free.travel_rev
+    # the speed at a travel is the share of what the travel alone allows
+    assert budget.predicted(replace(noisy, speed_share=0.5), 0.0, 2.0, 10)[1] == pytest.approx(
+        0.5 * budget.predicted(noisy, 0.0, 2.0, 10)[1]
+    )
+
+
+def test_the_excitation_counts_only_what_clears_the_zero_speed_band():
+    """The fit's windows stay out of a zero-speed band of three speed noises: a ramp's speed change below it is no
+    excitation, so a noisier reading needs a faster move."""
+    quiet, noisy = replace(LINE, speed_noise_rpm=1.0), replace(LINE, speed_noise_rpm=10.0)
+    assert budget.excitation(quiet, 300.0) > 10 * budget.excitation(noisy, 300.0)
+    assert budget.excitation(noisy, 3 * 10.0 * 1.0001 / (1 - 2 / (300.0 * budget.MOTION_SHARE * 0.12))) > 0
+    assert budget.excitation(replace(LINE, speed_noise_rpm=0.0), 300.0) == float("inf")
+
+
+def test_a_refusal_for_too_little_excitation_names_the_travel_that_clears_it():
+    """No fit stood (speed changes 7x the noise, 10x needed): the travel named is the least whose moves, scaled to the
+    excitation this run showed, clear the limit; a run that showed more needs less."""
+    noisy = replace(LINE, speed_noise_rpm=10.0, speed_share=0.17)
+    nan = float("nan")
+    weak = budget.more_travel(noisy, 0.0, 2.0, 10, nan, 0.02, excitation_seen=3.0)
+    better = budget.more_travel(noisy, 0.0, 2.0, 10, nan, 0.02, excitation_seen=7.0)
+    assert weak is not None and better is not None
+    assert weak.travel_rev > better.travel_rev > 2.0
+    assert budget.more_travel(noisy, 0.0, 2.0, 10, nan, 0.02) is None  # nothing seen: nothing to scale
+
+
+def test_a_noisy_drive_at_its_default_travel_is_told_the_travel_before_moving_and_identifies_with_it(sim_dir):
+    """DSX7E at 115200 and its 2 rev default, 1 % speed noise (10 rpm): the watchdog's run-on keeps the moves near
+    180 rpm, too little against the noise; the travel the line needs is named before anything moves, and followed,
+    the result is within its 3 sigma and that travel."""
+    machine = {"load_ratio": 10.0, "friction": 0.3, "viscous": 0.0005, "load_torque": -0.2, "noise": 0.01, "seed": 2}
+    sim, d, clock = set_up("dsx7e", 115200, **machine)
+    start = sim.firmware.plant.theta
+    with pytest.raises(TravelNeeded) as named:
+        tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    assert not named.value.moved and sim.firmware.plant.theta == start
+    travel = named.value.travel_rev
+    assert 2.0 < travel <= 20.0 and f"--travel {travel:g}" in str(named.value)
+    _sim, d, clock = set_up("dsx7e", 115200, **machine)
+    res = tune_inertia(d, TuneRequest(dry_run=True, travel_rev=travel), clock=clock)
+    est = res.identified.estimate
+    assert est is not None and abs(res.ratio - 10.0) <= 3 * est.ratio_std
+    assert res.identified.travel_used_rev <= travel

@@ -88,3 +88,23 @@ def test_a_speed_bound_remedy_names_the_speed_limit():
     cure = remedy(2.0, 5.0, 300.0, 900.0, "speed")  # 3x at most: rated speed or --max-speed
     assert cure is not None and not cure.enough and cure.suggested_rev == 6.0
     assert "the speed limit (rated or --max-speed)" in cure.words()
+
+
+def test_a_refusal_for_too_little_excitation_names_a_travel_that_then_identifies(sim_dir):
+    """SDC at 9600 (24 samples/s), 1 % speed noise (10 rpm): at 2 rev the speed changes were 6.6x the noise, 10x
+    needed, and the refusal said only "use faster accelerations" (no fit stood, so no uncertainty to scale). It now
+    names the travel whose moves clear the limit, scaled to the excitation the run showed; followed, the result is
+    within its 3 sigma, that travel and issue 31's 20 rev."""
+    machine = {"load_ratio": 10.0, "friction": 0.3, "viscous": 0.0005, "load_torque": -0.2, "noise": 0.01, "seed": 1}
+    _sim, d, clock = set_up("sdc", 9600, brake=1, **machine)
+    with pytest.raises(IdentificationRefused) as refused:
+        tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    assert "too little acceleration" in str(refused.value)
+    cure = refused.value.remedy
+    assert cure is not None and 2.0 < cure.suggested_rev <= 20.0, str(refused.value)
+    assert re.search(rf"--travel {cure.suggested_rev:g}\b", str(refused.value))
+    _sim, d, clock = set_up("sdc", 9600, brake=1, **machine)
+    res = tune_inertia(d, TuneRequest(dry_run=True, travel_rev=cure.suggested_rev), clock=clock)
+    est = res.identified.estimate
+    assert est is not None and abs(res.ratio - 10.0) <= 3 * est.ratio_std
+    assert res.identified.travel_used_rev <= cure.suggested_rev

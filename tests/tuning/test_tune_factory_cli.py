@@ -46,6 +46,14 @@ def test_identification_through_the_cli_at_the_factory_line_speed(cli, profile):
     # DSX7E's 500 ms watchdog lets a dead host's motor run on 1.7 rev at 200 rpm: 2 rev leave no useful speed
     room = ["--travel", "12"] if route_of(p).route == "drive_timeout" else []
     r, res = tune_json(cli, "--port", "sim", "--profile", profile, "tune", "inertia", "--yes", "--dry-run", *ack, *room)
+    # the line the identification ran at, in the JSON whatever the outcome: SD25's factory 9600 raised (Po504)
+    raised = p.boost.available
+    assert res["line"] == {
+        "baud": p.boost.to_baud if raised else p.line.baud,
+        "factory_baud": p.line.baud,
+        "raised": raised,
+        "why": None,
+    }, res["line"]
     if r.code == 0:
         assert near(res, 20.0), res
         assert res["travel"]["value"] <= (12.0 if room else 2.0)
