@@ -120,10 +120,10 @@ def _needs_json(plan: planning.MotionPlan | None) -> dict[str, Any]:
     needs = plan.needs if plan is not None else None
     if needs is None:
         return {}
-    light = needs.lightest
+    light = needs.named
     return {
-        "needed_travel": quantity(light.travel_rev if light.reachable else None, "rev"),
-        "needed_time": quantity(_rounded(light.time_s, 1) if light.reachable else None, "s"),
+        "needed_travel": quantity(light.travel_rev if light is not None else None, "rev"),
+        "needed_time": quantity(_rounded(light.time_s, 1) if light is not None else None, "s"),
         "time_budget": quantity(_rounded(plan.time_budget_s, 1) if plan is not None else None, "s"),
     }
 
@@ -373,8 +373,8 @@ class _Dialog:
 
     def choose_travel(self, needs: budget.Needs) -> float | None:
         """Asked once, before moving, where the line needs more travel than the default allows."""
-        light = needs.lightest
-        if not light.reachable or not sys.stdin.isatty():
+        light = needs.named
+        if light is None or not sys.stdin.isatty():
             return None
         info(f"needs: {needs.words()}")
         if confirm(f"Allow {light.travel_rev:g} rev of travel (the axis must have the room)?", False):

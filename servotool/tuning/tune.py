@@ -292,12 +292,12 @@ def _enough_travel(
         needs = motion.needs
         assert needs is not None
     if needs.from_ratio is None:
-        light = needs.lightest
+        light = needs.named
         raise TravelNeeded(
             f"nothing moved: {needs.words()}"
-            + (f": where the axis has room, --travel {light.travel_rev:g}" if light.reachable else ""),
-            light.travel_rev if light.reachable else math.nan,
-            light.time_s if light.reachable else math.nan,
+            + (f": where the axis has room, --travel {light.travel_rev:g}" if light is not None else ""),
+            light.travel_rev if light is not None else math.nan,
+            light.time_s if light is not None else math.nan,
             moved=False,
         )
     return motion, request

@@ -138,3 +138,25 @@ def test_a_noisy_drive_at_its_default_travel_is_told_the_travel_before_moving_an
     est = res.identified.estimate
     assert est is not None and abs(res.ratio - 10.0) <= 3 * est.ratio_std
     assert res.identified.travel_used_rev <= travel
+
+
+def test_where_no_travel_serves_the_motor_alone_the_lightest_load_one_serves_is_named():
+    """SDC at 9600 with 1 % noise: no travel serves the motor alone (3.9 % at best, the moves bound by the rated
+    speed), and a run whose 2 rev served no load was refused before moving naming no travel at all, although heavier
+    loads identify at 15 rev. The needs name the lightest load some travel serves, and its travel."""
+    sdc = budget.Line(
+        samples_per_s=24.0,
+        torque_step_pct=1.0,
+        torque_noise_pct=1.0,
+        speed_noise_rpm=10.0,
+        rotor_kgm2=1.2e-4,
+        rated_nm=2.39,
+        speed_cap_rpm=3000.0,
+        torque_limit_pct=None,
+        ramp_s=0.29,
+    )
+    needs = budget.needs(sdc, 2.0, 0.02)
+    assert not needs.lightest.reachable and not needs.enough
+    named = needs.named
+    assert named is not None and named.reachable and named.load_ratio > 0 and 2.0 < named.travel_rev <= 20.0
+    assert f"a load ratio of {named.load_ratio:.2g} needs {named.travel_rev:g} rev" in needs.words()
