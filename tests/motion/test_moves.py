@@ -18,7 +18,7 @@ from servotool.ops import alarms
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import VirtualLink, make_motion_setup
 
-# How often the caller looks when it is on time (an identification's sampling loop: 4-10 ms on --port sim).
+# How often the caller looks when it is on time (an identification looks once a sample: 10 ms is a slow line's).
 STEP_S = 0.01
 # A beat's own write on the line, and the caller's look that finds it due: how late a beat may go out after the
 # moment it became due.
