@@ -1,6 +1,7 @@
 """Mover.keep_alive on a drive's own watchdog (DSX7E, Pn620 500 ms): the beat at two thirds of the timeout from a
 caller on time, brought forward by the longest stall of a caller that overran the lead it gave, never more often
-than the keep-alive interval; judged by when the beats reach the drive and whether its watchdog trips."""
+than the keep-alive interval; judged by when the beats reach the drive and whether its watchdog trips. Where the host
+starved the watchdog, the words an alarm then gets (Mover.starved) name the stall."""
 
 from __future__ import annotations
 
@@ -129,3 +130,23 @@ def test_a_host_that_stalled_once_keeps_the_watchdog_fed_through_its_next_stalls
         machine.stall(0.2)
     assert not machine.tripped(), alarms.current(machine.drive)
     assert machine.sim.firmware.mode == "jog"
+
+
+def test_a_watchdog_the_host_starved_is_named_as_the_host_stalling(machine):
+    """A 400 ms stall when the beat was left to 333 ms: the drive's 500 ms watchdog trips (E25), and the words a
+    procedure adds to that alarm (Mover.starved: identification, step check) name the stall and its length."""
+    machine.on_time(0.32)
+    assert machine.mover.starved() == ""  # on time: nothing to say
+    machine.stall(0.4)
+    assert machine.tripped()
+    said = machine.mover.starved()
+    assert "the host stalled" in said and "no request for 400 ms against its 500 ms timeout" in said, said
+
+
+def test_a_stall_inside_the_spare_third_is_not_named_for_an_alarm(machine):
+    """A 120 ms stall, and a 150 ms gap between a caller's own samples, fit in the third of the timeout a beat
+    leaves spare: no alarm it comes with is put on the host (a 200 ms gap is)."""
+    machine.on_time(0.5)
+    machine.stall(0.12)
+    assert machine.mover.starved() == "" and machine.mover.starved(0.15) == ""
+    assert "no request for 200 ms" in machine.mover.starved(0.2)
