@@ -11,6 +11,7 @@ import pytest
 
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
+from servotool.errors import DeviceError
 from servotool.model.loader import load_profile
 from servotool.motion import deadman
 from servotool.motion.keepalive import keepalive_interval_s
@@ -29,7 +30,7 @@ SLACK_S = STEP_S + 0.005
 class _Machine:
     """A DSX7E on virtual time with a move running, and the moments its keep-alive writes reached the drive."""
 
-    def __init__(self) -> None:
+    def __init__(self, start: bool = True) -> None:
         profile = load_profile("dsx7e")
         self.clock = VirtualClock(100.0)
         self.sim = build_drive(profile, 1, self.clock, persist=False)
@@ -48,6 +49,10 @@ class _Machine:
             return write(unit, address, values, **kw)
 
         self.drive.link.write = seen_write
+        if start:
+            self.start()
+
+    def start(self) -> None:
         self.mover.start(1, 300.0, 100)
         assert self.mover.dead_man is not None and self.mover.dead_man.route == "drive_timeout"
 
@@ -150,3 +155,15 @@ def test_a_stall_inside_the_spare_third_is_not_named_for_an_alarm(machine):
     machine.stall(0.12)
     assert machine.mover.starved() == "" and machine.mover.starved(0.15) == ""
     assert "no request for 200 ms" in machine.mover.starved(0.2)
+
+
+def test_a_motion_whose_watchdog_the_host_starved_ends_naming_the_stall(sim_dir):
+    """The same stall inside a motion's stop scope: the stop finds E25 latched, and the failure says the host stalled
+    (where no procedure looked for the alarm itself: a tune ended "the drive latched alarm E25 ... during the
+    motion" on a loaded host)."""
+    machine = _Machine(start=False)
+    with pytest.raises(DeviceError, match=r"E25 .* \(its host watchdog: no request for 400 ms .* the host stalled"):
+        with machine.mover.stopping():
+            machine.start()
+            machine.on_time(0.32)
+            machine.stall(0.4)
