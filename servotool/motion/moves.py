@@ -126,8 +126,12 @@ class Mover(Jogger):
             return ""
         if gap < (1.0 - WATCHDOG_FEED_SHARE) * timeout:
             return ""
+        # A look's gap counts up to the timeout (keep_alive): one that reached it was that long or longer.
+        length = (
+            f"{1000 * gap:.0f} ms" if gap > self._late_s or self._late_s < timeout else f"{1000 * gap:.0f} ms or more"
+        )
         return (
-            f" (its host watchdog: no request for {1000 * gap:.0f} ms against its {1000 * timeout:.0f} ms timeout; the "
+            f" (its host watchdog: no request for {length} against its {1000 * timeout:.0f} ms timeout; the "
             "host stalled, a busy machine?)"
         )
 

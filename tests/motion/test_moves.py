@@ -146,6 +146,8 @@ def test_a_watchdog_the_host_starved_is_named_as_the_host_stalling(machine):
     assert machine.tripped()
     said = machine.mover.starved()
     assert "the host stalled" in said and "no request for 400 ms against its 500 ms timeout" in said, said
+    machine.stall(0.7)  # longer than the timeout: as long as the timeout at least
+    assert "no request for 500 ms or more against its 500 ms timeout" in machine.mover.starved()
 
 
 def test_a_stall_inside_the_spare_third_is_not_named_for_an_alarm(machine):

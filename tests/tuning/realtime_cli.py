@@ -1,6 +1,6 @@
 """`tune inertia` through the CLI in real time, judged with margins a loaded 2-core CI holds (issue 31 item 8).
 
-On a busy host the client stalls for 0.1-0.9 s now and then: a host-timed move runs on, the sampling rate falls to a
+On a busy host the client stalls for 0.1-2 s now and then: a host-timed move runs on, the sampling rate falls to a
 sixth, and an identification that passes on an idle machine is refused, stopped at the travel limit, or accepted a
 few % off with too tight an uncertainty (bench/inertia_accuracy.py --realtime measures how often). What a real-time
 CLI test can hold under any load is the contract: the outcome is one of those, said in words that name their cause,
@@ -8,14 +8,16 @@ in JSON that agrees with the exit code; an accepted result is near the truth. Wh
 is judged on virtual time, where the same code runs without the host's luck (each test names its virtual twin).
 
 A test that needs the run accepted to judge what follows (what is written, shown, kept) asserts that it was, after
-running it again as its words ask: its machine and travel are ones a loaded host still identifies (with two CPU
-burners beside two test workers, load 5-7: none of 11 such tests and 5 plans needed a second run in 4 rounds).
+running it again as its words ask (NEEDED_ATTEMPTS): its machine and travel are ones a loaded host still identifies.
 Nothing here skips: a run a loaded host left refused is a failure, said with its words.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
+
+import yaml
 
 # A stall the product names asks the user to run it again: so does the test, this many times in all.
 ATTEMPTS = 2
@@ -27,6 +29,10 @@ STALL_WORDS = ("the host stalled", "the host was late")
 # What a loaded host alone makes of a run that passes on an idle one: a stall named, or the slower sampling's
 # uncertainty. A run that ends with these is run again (as a user would), up to ATTEMPTS times in all.
 LOADED_WORDS = (*STALL_WORDS, "sampling gaps", "too uncertain", "too little acceleration", "inertia differs")
+# How the stop's last line says that the drive latched an alarm (its watchdog's, after a stall): a run again needs
+# it cleared first, on every axis (a run stopped at the travel limit by a stall that also starved the watchdog named
+# no alarm in its reason and left E25 latched: the next run refused to move; a plan's unit 2 kept its E25).
+LATCHED = "latched (see 'servotool alarm')"
 # The causes an honest refusal or stop may name on a loaded host (the host's stalls, what the slower sampling left
 # too uncertain, mechanics the checks saw, the travel the line needs).
 HONEST_WORDS = (
@@ -57,7 +63,7 @@ def tune_json(
         data = assert_said(r, honest)
         if r.code == 0 or not any(w in data["reason"] for w in (*LOADED_WORDS, *honest)):
             break
-        if "alarm" in data["reason"]:  # the drive's watchdog stopped it: cleared first, as the user would
+        if LATCHED in r.err:  # the drive's watchdog stopped it: cleared first, as the user would
             assert cli(*args[: args.index("tune")], "alarm", "clear").code == 0
     return r, data
 
@@ -78,7 +84,7 @@ def cli_ok(cli: Any, *args: str) -> Any:
         assert "Traceback" not in r.err, r.err
         if r.code == 0 or not any(w in r.err for w in LOADED_WORDS):
             break
-        if "alarm" in r.err:  # the drive's watchdog stopped it: cleared first, as the user would
+        if LATCHED in r.err:  # the drive's watchdog stopped it: cleared first, as the user would
             assert cli(*args[: args.index("tune")], "alarm", "clear").code == 0
     assert r.code == 0, r.err
     return r
@@ -119,6 +125,9 @@ def run_plan(cli: Any, *args: str) -> Any:
         assert "Traceback" not in r.err, r.err
         if r.code == 0 or not any(w in r.out + r.err for w in LOADED_WORDS):
             break
-        if "alarm" in r.out + r.err:  # a drive's watchdog stopped a step: cleared first, as the user would
-            assert cli("--port", "sim", "alarm", "clear").code == 0
+        if LATCHED in r.err:  # a drive's watchdog stopped a step: cleared on every axis first, as the user would
+            plan = yaml.safe_load(Path(args[0]).read_text(encoding="utf-8"))
+            for unit in plan.get("units", [1]):
+                clear = ("--port", "sim", "-P", plan.get("profile", "dsx7e"), "--unit", str(unit), "alarm", "clear")
+                assert cli(*clear).code == 0
     return r
