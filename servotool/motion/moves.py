@@ -115,6 +115,26 @@ class Mover(Jogger):
             return None
         return abs(raw) / segments.units_per_rev()
 
+    def starved(self, gap_s: float = 0.0) -> str:
+        """Words for an alarm the drive's own watchdog (route drive_timeout) may have raised because the host stalled:
+        where the longest gap between the caller's looks that overran its lead (keep_alive), or gap_s (one the
+        caller saw itself, between its samples), outlasted the spare third of the timeout, which a beat left to the
+        last moment then misses; "" otherwise."""
+        timeout = self._timeout_s
+        gap = max(gap_s, self._late_s)
+        if self.dead_man is None or self.dead_man.route != "drive_timeout" or timeout is None or timeout <= 0:
+            return ""
+        if gap < (1.0 - WATCHDOG_FEED_SHARE) * timeout:
+            return ""
+        # A look's gap counts up to the timeout (keep_alive): one that reached it was that long or longer.
+        length = (
+            f"{1000 * gap:.0f} ms" if gap > self._late_s or self._late_s < timeout else f"{1000 * gap:.0f} ms or more"
+        )
+        return (
+            f" (its host watchdog: no request for {length} against its {1000 * timeout:.0f} ms timeout; the "
+            "host stalled, a busy machine?)"
+        )
+
     def keep_alive(self, lead_s: float = 0.0) -> None:
         """Feed the dead-man with no write the drive does not need. lead_s: how long the caller may take before it
         calls again, and at least the longest it has taken where it overran that by STALL_SPARE (a busy host stalls

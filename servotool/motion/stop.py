@@ -530,7 +530,11 @@ class MotionStop:
         if not report.confirmed:
             raise StopUnconfirmed(report.describe(), report)
         if report.alarm:  # a motion starts only without one (preflight): the drive tripped during it
-            tripped = DeviceError(f"the drive latched alarm {report.alarm} during the motion (see 'servotool alarm')")
+            starved = getattr(motion, "starved", None)  # a Mover's words for a watchdog the host starved
+            why = starved() if callable(starved) else ""
+            tripped = DeviceError(
+                f"the drive latched alarm {report.alarm} during the motion{why} (see 'servotool alarm')"
+            )
             tripped.stop_report = report  # type: ignore[attr-defined]
             raise tripped
 

@@ -11,11 +11,9 @@ import numpy as np
 
 from servotool.clock import Clock, RealClock
 from servotool.drive import Drive
-from servotool.errors import ServoError
 from servotool.model.codec import eng_to_raw, raw_to_eng
 from servotool.model.profile import Entry, Profile
 from servotool.model.roles import status_bit
-from servotool.motion.deadman import drive_timeout_s
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.moves import Mover
 from servotool.motion.stop import MotionStop, StopReport
@@ -217,7 +215,6 @@ ROUGH = {"min_windows": 4, "min_excitation": 2.0, "max_rel_uncertainty": 1.0}
 PILOT_EFFICIENCY_CAP = 4.0  # the most the pilot's own fit may scale the budget by (it is rough)
 STALL_S = 0.05  # a gap between samples this long (and STALL_INTERVALS usual ones) is a host stall, named as one
 STALL_INTERVALS = 4.0
-STARVE_SHARE = 0.5  # a gap this share of a drive's watchdog timeout is named with an alarm the watchdog may have raised
 TARGET_TOLERANCE = 0.1  # a host-timed move rests within this share of its travel of its target (_tolerance)
 EXTEND_AIM = 0.85  # a time budget is extended to reach this share of the uncertainty limit (_extended)
 CATCH_UP_RAMPS = 2.0  # a move short of its target runs on for at most this many ramps more
@@ -372,21 +369,8 @@ class _HostRun:
 
     def _starved(self) -> str:
         """Where the drive's own watchdog may have stopped the motion because the host stalled: the words that say
-        so (after an alarm); "" where no gap came near its timeout."""
-        bound = self.jogger.dead_man
-        gap = self._longest_gap(self.move_first)
-        if bound is None or bound.route != "drive_timeout" or gap < STALL_S:
-            return ""
-        try:
-            timeout = drive_timeout_s(self.drive)
-        except ServoError:
-            return ""
-        if timeout is None or gap < STARVE_SHARE * timeout:
-            return ""
-        return (
-            f" (its host watchdog: no request for {1000 * gap:.0f} ms against its {1000 * timeout:.0f} ms timeout; the "
-            "host stalled, a busy machine?)"
-        )
+        so (after an alarm; Mover.starved, from its looks and the samples' longest gap); "" otherwise."""
+        return self.jogger.starved(self._longest_gap(self.move_first))
 
     def _target(self, direction: int, speed: float) -> float | None:
         """Where a host-timed move out and back should come to rest: the forward move a move's travel (stretched as

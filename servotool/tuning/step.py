@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -290,7 +291,8 @@ def step_legs(
             legs.append(Leg(direction, ramp_ms, tuple(t), tuple(v), torques, command_s * 1000.0))
         active = active_alarm(drive)
         if active:
-            raise IdentificationFailed(f"the drive stopped the step check with alarm {active}")
+            gap = max((b - a for leg in legs for a, b in itertools.pairwise(leg.t)), default=0.0)
+            raise IdentificationFailed(f"the drive stopped the step check with alarm {active}" + jogger.starved(gap))
     return legs, loop_hz
 
 

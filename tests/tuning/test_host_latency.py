@@ -98,6 +98,25 @@ def test_the_same_loads_without_stalls_are_accepted_within_their_3_sigma(sim_dir
         assert est is not None and abs(res.ratio - 3.0) <= 3 * est.ratio_std
 
 
+@pytest.mark.parametrize("stalls", [None, HostStalls(0.02, 0.3, 1, 0.1), HostStalls(0.02, 0.3, 2, 0.1)])
+def test_backlash_is_fitted_clear_of_its_lost_motion_and_a_host_that_stalls_is_named(sim_dir, stalls):
+    """The machine of test_off_model's backlash test through the CLI (DSX7E, backlash 0.1 rad at ratio 2), on virtual
+    time: the judgement that run cannot make on a loaded host. Without stalls accepted, flagged as lost motion, the
+    truth within its 3 sigma; with 100-300 ms stalls before 2 % of the requests (as a loaded 2-core CI's) accepted
+    within 3 sigma and saying why it was fitted that way (the lost motion or the stalls' gaps left out), or refused
+    naming the stalls (seed 1: 2.9 % uncertain), never as a model that does not fit."""
+    _sim, d, clock = set_up("dsx7e", 115200, stalls=stalls, load_ratio=2.0, backlash_rad=0.1, friction=0.02)
+    try:
+        res = tune_inertia(d, TuneRequest(dry_run=True, travel_rev=12), clock=clock)
+    except IdentificationRefused as exc:
+        assert stalls is not None and "the host stalled" in str(exc) and "does not fit" not in str(exc), str(exc)
+        return
+    est = res.identified.estimate
+    assert est is not None and abs(res.ratio - 2.0) <= 3 * est.ratio_std, (res.ratio, est.ratio_std)
+    flagged = any(n.startswith("off-model: lost motion") for n in est.notes)
+    assert flagged or (stalls is not None and any("the host stalled" in n for n in est.notes)), est.notes
+
+
 def test_a_gap_while_the_axis_moved_is_a_stall_and_one_at_rest_is_not():
     t = np.arange(0.0, 1.0, 0.01)
     rpm = np.where(t < 0.5, 300.0, 0.0)

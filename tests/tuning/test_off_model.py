@@ -115,18 +115,24 @@ def test_through_the_cli_an_arm_load_is_flagged_or_refused_with_its_reason(cli):
 def test_through_the_cli_backlash_is_identified_clear_of_its_lost_motion_and_flagged(cli):
     """--port sim (about 2000 samples/s idle), backlash 0.1 rad at ratio 2: refused as "model does not fit the data"
     with J 35 % low (1.30-1.36) until the windows where the motor may turn alone were left out; now J comes within
-    1 % and the result says why it was fitted that way. Real time, judged as a loaded CI holds it (realtime_cli);
-    on virtual time: test_an_off_model_load_is_refused_or_flagged_in_words_never_wrong_and_tight (backlash 0.1)."""
+    1 % and the result says why it was fitted that way. Real time, judged as a loaded CI holds it (realtime_cli): a
+    loaded host samples at 165-380 samples/s (two CPU burners beside two test workers), where the crossings weigh
+    too little to flag (accepted 1.3 % low, no note) or its stalls' gaps are what the fit left out (named); the flag
+    is asked for where the run sampled as an idle host does, without a stall; a refusal as not fitting only where
+    the host starved the sampling. The judgement a loaded host cannot make here is made on virtual time, with and
+    without seeded stalls: test_host_latency's test_backlash_is_fitted_clear_of_its_lost_motion_..."""
     assert cli("sim", "config", "--load-ratio", "2", "--backlash-rad", "0.1", "--friction", "0.02").code == 0
     args = ("--port", "sim", "tune", "inertia", "--yes", "--dry-run", "--travel", "12")
     r, data = tune_json(cli, *args, honest=NOT_FITTED)
-    if r.code == 1 and NOT_FITTED[0] in data["reason"]:  # the old failure, unless the host starved the sampling
-        rate = data["sample_rate"]["value"]
-        assert rate < STARVED_HZ, f"{data['reason']} at {rate} samples/s"
-        pytest.skip(f"the host is too loaded for this real-time run ({rate} samples/s): {data['reason'][:120]}")
-    if r.code == 0:
-        assert near(data, 2.0), data
-        assert any(n.startswith("off-model: lost motion") for n in data["notes"]), data["notes"]
+    rate = (data.get("sample_rate") or {}).get("value")
+    if r.code == 1:  # refused in words that name their cause (assert_said); as not fitting only on a starved host
+        if NOT_FITTED[0] in data["reason"]:  # (the old failure, on an idle one)
+            assert rate is not None and rate < STARVED_HZ, f"{data['reason']} at {rate} samples/s"
+        return
+    assert near(data, 2.0), data
+    stalled = any(w in n for n in data["notes"] for w in STALL_WORDS)
+    if rate is not None and rate >= STARVED_HZ and not stalled:
+        assert any(n.startswith("off-model: lost motion") for n in data["notes"]), (rate, data["notes"])
 
 
 def test_a_torque_read_in_whole_percent_does_not_pass_for_backlash(sim_dir):
