@@ -411,6 +411,11 @@ class Jogger:
         ramp_ms = float(raw_to_eng(entry, ramp_raw)) if entry is not None and ramp_raw is not None else None
         return 1.0 + 2.0 * deadman.stop_time_s(speed, ramp_ms, self.profile.ramp_rpm())
 
+    def starved(self, gap_s: float = 0.0) -> str:
+        """Words for a drive watchdog alarm the host's stalls may have raised ("" here: a Mover, which learns its
+        caller's stalls, says more; gap_s: a gap the caller saw itself)."""
+        return ""
+
     def stopped(self, report: StopReport) -> None:
         """The stop sequence ran: what this jogger knew of the drive's state is gone; proven, the journal's record of
         the motion goes (its settings, dead processes' included, are back, and the servo is off)."""

@@ -433,6 +433,7 @@ class Motion(Protocol):
     def start_protection(self, saved: dict[str, int]) -> None: ...
     def snapshot(self, need_ramp: bool) -> dict[str, int]: ...
     def stop_wait_s(self) -> float: ...
+    def starved(self) -> str: ...
     def stopped(self, report: StopReport) -> None: ...
 
 
@@ -530,10 +531,8 @@ class MotionStop:
         if not report.confirmed:
             raise StopUnconfirmed(report.describe(), report)
         if report.alarm:  # a motion starts only without one (preflight): the drive tripped during it
-            starved = getattr(motion, "starved", None)  # a Mover's words for a watchdog the host starved
-            why = starved() if callable(starved) else ""
             tripped = DeviceError(
-                f"the drive latched alarm {report.alarm} during the motion{why} (see 'servotool alarm')"
+                f"the drive latched alarm {report.alarm} during the motion{motion.starved()} (see 'servotool alarm')"
             )
             tripped.stop_report = report  # type: ignore[attr-defined]
             raise tripped
