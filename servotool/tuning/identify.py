@@ -635,7 +635,7 @@ class _HostRun:
             return None
         rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 else math.nan
         found = budget.more_travel(
-            needs.line, max(est.load_ratio, 0.0), self.plan.travel_limit_rev, 2 * cycles, rel, needs.target
+            needs.line, max(est.load_ratio, 0.0), self.plan.travel_limit_rev, 2 * cycles, rel, needs.target, self.speed
         )
         if found is None:
             return None
