@@ -86,8 +86,8 @@ MECHANICS_WORDS = ("backlash", "lost motion", "resonance", "coupling", "off-mode
     "baud,ratio,noise,seed",
     [
         # 115200 baud, 0.2 % noise: "off-model: ... backlash or a compliant coupling" (16 of 24 rigid runs), then
-        # widened "as much as the speed noise alone can make it differ" (12-13 of 24); now 6 of 24 are widened, by
-        # what their weakest accelerations show (1.5-3 %), and none blames the mechanics
+        # widened "as much as the speed noise alone can make it differ" (23 of 24 at 12 rev); now 6 of 24 are
+        # widened, by what their weakest accelerations show (1.5-3 %), and none blames the mechanics
         (115200, 1.0, 0.002, 2),
         (115200, 5.0, 0.002, 3),
         (115200, 5.0, 0.002, 9),
