@@ -124,10 +124,15 @@ def time_for(line: Line, moves: int) -> float:
     return max(MIN_TIME_S, TIME_OVERHEAD_S + (moves + 2) * move_s(line))
 
 
-def predicted(line: Line, load_ratio: float, travel_rev: float, moves: int) -> tuple[float, float, str]:
-    """(sigma(J)/J, test speed rpm, what bounds it) of `moves` moves (out and back) within travel_rev."""
+def predicted(
+    line: Line, load_ratio: float, travel_rev: float, moves: int, rpm_per_rev: float | None = None
+) -> tuple[float, float, str]:
+    """(sigma(J)/J, test speed rpm, what bounds it) of `moves` moves (out and back) within travel_rev; rpm_per_rev:
+    the test speed a revolution of travel gives, as a run showed it (None: the planned ramps' own, with room for
+    the move's swing, less what a dead host's run-on takes: Line.speed_share)."""
     j = line.rotor_kgm2 * (1.0 + max(load_ratio, 0.0))
-    speed, bound = line.speed_share * 0.9 * travel_rev / line.ramp_s * 60.0, "travel"
+    per_rev = line.speed_share * 0.9 / line.ramp_s * 60.0 if rpm_per_rev is None else rpm_per_rev
+    speed, bound = per_rev * travel_rev, "travel"
     if speed > line.speed_cap_rpm:
         speed, bound = line.speed_cap_rpm, "speed"
     accel = speed * math.pi / 30.0 / line.ramp_s
@@ -205,11 +210,13 @@ def _least_travel(line: Line, load_ratio: float, target: float, time_s: float) -
     return best
 
 
-def _fewest_moves(line: Line, load_ratio: float, travel: float, aim: float, most: int) -> int:
+def _fewest_moves(
+    line: Line, load_ratio: float, travel: float, aim: float, most: int, rpm_per_rev: float | None = None
+) -> int:
     lo, hi = 2, max(2, most)
     while lo < hi:
         mid = (lo + hi) // 2
-        if predicted(line, load_ratio, travel, mid)[0] <= aim:
+        if predicted(line, load_ratio, travel, mid, rpm_per_rev)[0] <= aim:
             hi = mid
         else:
             lo = mid + 1
@@ -268,6 +275,16 @@ def needs(line: Line, allowed_rev: float, target: float) -> Needs:
     return Needs(line, target, allowed_rev, lightest, served, next((n for n in heavier if n.reachable), None))
 
 
+def given_s(line: Line, load_ratio: float, travel_rev: float, target: float) -> float:
+    """The time a run over travel_rev is given for this load (tuning.identify's cycles): where the travel serves the
+    motor alone, the budget the load's own need sets (the pilot's, no longer: a run that falls short there ends
+    refused, since the time named before moving is what it may take); else up to MAX_TIME_S (the budget is extended
+    towards the precision where travel is what the line lacks)."""
+    if not within(line, 0.0, travel_rev, target).reachable:
+        return MAX_TIME_S
+    return within(line, load_ratio, travel_rev, target).time_s
+
+
 def more_travel(
     line: Line,
     load_ratio: float,
@@ -276,30 +293,35 @@ def more_travel(
     sigma_rel: float,
     target: float,
     excitation_seen: float = math.nan,
+    speed_rpm: float | None = None,
 ) -> Need | None:
     """The least travel beyond travel_rev with which a run that came out sigma_rel uncertain after `moves` moves
-    would reach TARGET_SHARE of `target` within MAX_TIME_S, the model scaled to what this run showed (its
-    uncertainty, and excitation_seen: the fit's speed change per window against sqrt(2) speed noises, where it was
-    refused for too little of it); None where no travel up to MAX_TRAVEL_REV does (the speed or the torque bounds
-    the moves, or the line is too slow)."""
+    would reach TARGET_SHARE of `target` within the time such a run is given (given_s), the model scaled to what
+    this run showed (its uncertainty, and excitation_seen: the fit's speed change per window against sqrt(2) speed
+    noises, where it was refused for too little of it); None where no travel up to MAX_TRAVEL_REV does (the speed
+    or the torque bounds the moves, or the line is too slow). A longer travel's time is the one its own run will
+    plan, not MAX_TIME_S: a remedy counted on 30 s that its run, served at 8.8 s, never took (lost motion at 4 rev:
+    --travel 4.5 'about 23 s', refused again at 8 s). speed_rpm: the run's test speed, which a longer travel raises
+    in proportion (at the same ramps) up to the speed and torque caps (None: the planned one)."""
     if not (math.isfinite(sigma_rel) or math.isfinite(excitation_seen)):
         return None
-    speed_now = predicted(line, load_ratio, travel_rev, max(moves, 2))[1]
+    per_rev = speed_rpm / travel_rev if speed_rpm is not None and speed_rpm > 0 else None
+    speed_now = predicted(line, load_ratio, travel_rev, max(moves, 2), per_rev)[1]
     model = excitation(line, speed_now)
     if math.isfinite(excitation_seen) and excitation_seen > 0 and 0 < model < math.inf:
         seen = line.excitation_share * math.sqrt(2.0) * excitation_seen / model  # the fit's unit: sqrt(2) noises
         line = replace(line, excitation_share=min(line.excitation_share, seen))
-    now = predicted(line, load_ratio, travel_rev, max(moves, 2))[0]
+    now = predicted(line, load_ratio, travel_rev, max(moves, 2), per_rev)[0]
     # this machine's fit against the model's, where both stand (a refusal for too little excitation has no fit)
     scale = max(1.0, sigma_rel / now) if math.isfinite(sigma_rel) and 0 < now < math.inf else 1.0
     aim = TARGET_SHARE * target
-    most = moves_in(line, MAX_TIME_S)
     line = named(line)
     travel = math.floor(travel_rev * 2.0) / 2.0 + 0.5
     while travel <= MAX_TRAVEL_REV + 1e-9:
-        sigma, speed, bound = predicted(line, load_ratio, travel, most)
+        most = moves_in(line, given_s(line, load_ratio, travel, target))
+        sigma, speed, bound = predicted(line, load_ratio, travel, most, per_rev)
         if scale * sigma <= aim:
-            moves = _fewest_moves(line, load_ratio, travel, aim / scale, most)
+            moves = _fewest_moves(line, load_ratio, travel, aim / scale, most, per_rev)
             return Need(load_ratio, travel, time_for(line, moves), scale * sigma, speed, True, bound)
         if bound != "travel":
             return None

@@ -637,11 +637,12 @@ class _HostRun:
         # the lightest load this line can serve at all would reach the limit.
         ratios = [max(est.load_ratio, 0.0)] if math.isfinite(est.load_ratio) else budget.LOAD_RATIOS
         travel = self.plan.travel_limit_rev
+        line, target = needs.line, needs.target
         found = next(
             (
                 need
                 for r in ratios
-                if (need := budget.more_travel(needs.line, r, travel, 2 * cycles, rel, needs.target, low)) is not None
+                if (need := budget.more_travel(line, r, travel, 2 * cycles, rel, target, low, self.speed)) is not None
             ),
             None,
         )

@@ -25,6 +25,7 @@ MARGIN_INTERVALS = 1  # sampling intervals kept clear on both sides of a marked 
 STEP_S = 1e-3  # the observer's integration step (a crossing lasts tens of ms)
 LOST_MOTION_SIGMA = 3.0  # the windows clear of possible lost motion count where their J is this many sigmas apart
 MIN_WINDOWS = 12  # ... and they are at least this many
+WORDS = "lost motion (backlash?)"  # how its cause begins
 
 
 @dataclass(frozen=True)
@@ -89,10 +90,10 @@ def clear_windows(
 
 
 def check(v: Verdict) -> Verdict:
-    """The verdict on the windows clear of lost motion where their J stands apart (clear_of_lost_motion); a cause that
-    stronger accelerations cure, since lost motion weighs less in a stronger motion."""
-    fit, words = clear_of_lost_motion(v.fit)
-    if not words:
+    """The verdict on the windows clear of lost motion where their J stands apart (clear_of_lost_motion), with its
+    cause (curable where a stronger motion shrinks it)."""
+    fit, cause = clear_of_lost_motion(v.fit)
+    if cause is None:
         return v
     return replace(
         v,
@@ -101,31 +102,61 @@ def check(v: Verdict) -> Verdict:
         j=float(fit.theta[0]),
         j_std=fit.j_std,
         resid=fit.y - fit.x @ fit.theta,
-        fitted=(*v.fitted, Cause(words, curable=True)),
+        fitted=(*v.fitted, cause),
     )
 
 
-def clear_of_lost_motion(fit: FitData) -> tuple[FitData, str]:
-    """The fit over the windows clear of where the motor may have turned without its load, with the words for it,
-    where their J stands LOST_MOTION_SIGMA of its uncertainty apart from the whole fit's (lost motion reads J low
-    where the motor crosses the gap alone, high where a window ends as the flank takes the load up); else the fit
-    as it is, and no words. Where the load rests in the gap is unknown, so the first motion counts as a crossing: a
-    breakaway there on a rigid load is left out too, hence the question mark in the words."""
+def clear_of_lost_motion(fit: FitData) -> tuple[FitData, Cause | None]:
+    """The fit over the windows clear of where the motor may have turned without its load, with its cause, where
+    their J stands LOST_MOTION_SIGMA of its uncertainty apart from the whole fit's; else the fit as it is, and none.
+
+    Where they read J higher, the windows left out read it low: the motor crossed the gap alone, which a stronger
+    motion does faster (curable: backlash 0.1 rad at ratio 2 and 4 rev). Where they read it lower, the windows left
+    out read it high: the flank taking the load up (the same backlash at 7 rev), or a compliant coupling's
+    deflection rate, whose torque changes the observer marks too (15-20 Hz couplings at 4 rev: -9..-17 %, named
+    lost motion alone and, once a travel was named for it, followed to 20-30 rev and refused again). Both are named
+    there, and a stronger motion cures neither. Where the load rests in the gap is unknown, so the first motion
+    counts as a crossing: a breakaway there on a rigid load is left out too, hence the question mark."""
+    found = clear(fit)
+    if found is None or not abs(found.near.theta[0] - fit.theta[0]) > LOST_MOTION_SIGMA * found.near.j_std:
+        return fit, None
+    if found.near.theta[0] > fit.theta[0]:
+        return found.fit, Cause(found.words, curable=True)
+    return found.fit, Cause(found.words.replace(WORDS, f"{WORDS} or a compliant coupling", 1), curable=False)
+
+
+@dataclass(frozen=True)
+class Clear:
+    """The fit over the windows clear of possible lost motion (fit: its J's uncertainty includes `left`, what a
+    wider margin still changes) with its windows (keep, over the whole fit's), and the one at the narrower margin."""
+
+    fit: FitData
+    keep: np.ndarray
+    left: float
+    near: FitData
+    words: str
+
+
+def clear(fit: FitData) -> Clear | None:
+    """The fits over the windows clear of where the motor may have turned without its load (the observer following
+    the load with the rigid fit's inertia and friction), whether or not their J stands apart; None where that leaves
+    too few windows, or all of them. How far J moves again when the windows keep twice as clear is what the
+    narrower margin may have left in; with too few windows for that, the whole change counts instead."""
     est = dict(zip(fit.names, (float(v) for v in fit.theta), strict=True))
     load = LoadSide(est["J"] - fit.jm, est["Tc"], est.get("B", 0.0), est.get("Tg", 0.0))
     coupled = coupled_intervals(fit.t, fit.w, load)
     near = _clear_fit(fit, coupled, MARGIN_INTERVALS)
-    if near is None or not abs(near.theta[0] - fit.theta[0]) > LOST_MOTION_SIGMA * near.j_std:
-        return fit, ""
-    # How far J moves again when the windows keep twice as clear is what the narrower margin may have left in; with
-    # too few windows for that, the whole change counts instead.
+    if near is None:
+        return None
     wide = _clear_fit(fit, coupled, 2 * MARGIN_INTERVALS)
     answer = near if wide is None else wide
     left = float(answer.theta[0] - (fit.theta[0] if wide is None else near.theta[0]))
-    return replace(answer, j_std=math.hypot(answer.j_std, left)), (
-        f"lost motion (backlash?) where the torque reverses or the axis first moves: J from the "
+    words = (
+        f"{WORDS} where the torque reverses or the axis first moves: J from the "
         f"{answer.starts.size} of {fit.starts.size} windows clear of it"
     )
+    keep = clear_windows(fit.starts, fit.ends, coupled, MARGIN_INTERVALS * (1 if wide is None else 2))
+    return Clear(replace(answer, j_std=math.hypot(answer.j_std, left)), keep, left, near, words)
 
 
 def _clear_fit(fit: FitData, coupled: np.ndarray, margin: int) -> FitData | None:
