@@ -97,6 +97,9 @@ MECHANICS_WORDS = ("backlash", "lost motion", "resonance", "coupling", "off-mode
         # 7-8 % (3.1-3.3x its uncertainty) ... backlash" (seeds 2 and 11 of 1-12, and widened in 5 more)
         (19200, 5.0, 0.01, 2),
         (19200, 5.0, 0.01, 11),
+        # seed 4 was refused too uncertain (2.8 %) at 6 rev and named 11; since a pilot that cannot tell the load
+        # lets the motion go on with the longest budget, it identifies at 6 rev (seeds 1-8: all within 2 sigma)
+        (19200, 5.0, 0.01, 4),
     ],
 )
 def test_speed_noise_is_not_sorted_with_the_acceleration_into_backlash_on_a_rigid_load(
@@ -171,19 +174,6 @@ def test_the_torque_step_is_found_from_readings_on_a_grid():
     assert torque_step(np.array([3.0, -1.0, 0.0, 7.0, 3.0]) * 0.0127) == pytest.approx(0.0127)
     assert torque_step(np.array([0.1, 0.27, 0.7, 1.31])) == 0.0  # not on one grid
     assert torque_step(np.array([0.5, 0.5])) == 0.0
-
-
-def test_a_rigid_load_refused_as_too_uncertain_names_a_travel_that_then_identifies(sim_dir):
-    """1 % speed noise on a rigid load at 6 rev: refused as too uncertain (2.8 %), naming no mechanics, and naming a
-    travel that the line's budget, scaled to this run, passes within the time that travel's own run is given (it
-    used to be counted on 30 s, and at DSX7E's speed, which the watchdog's run-on keeps at a fifth of the planned
-    one: --travel 6.5). Followed (11 rev), within its 3 sigma. (Seeds 1-12: 10 accepted outright within 2 sigma,
-    this one refused and cured, one refused for a hinted resonance; this machine's seed 1 was refused "inertia
-    differs with the acceleration" with no travel named, before the accelerations were sorted clear of the noise.)"""
-    refusal = _refused_then_followed(
-        {"load_ratio": 5.0, "friction": 0.05, "noise": 0.01, "seed": 4}, "too uncertain", 6.0
-    )
-    assert not any(w in refusal for w in MECHANICS_WORDS), refusal
 
 
 def _refused_then_followed(machine: dict[str, float], words: str, travel_rev: float) -> str:
