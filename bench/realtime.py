@@ -179,7 +179,7 @@ def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
         travel_rev=_value(out.get("travel")),
         time_s=_value(out.get("time")),
         wall_s=wall,
-        reason=out.get("reason") or "",
+        reason=out.get("reason") or (out.get("error") or {}).get("message") or "",  # a tune's JSON, or any error's
         notes=list(out.get("notes") or []),
         named_travel_rev=_value(out.get("needed_travel")) or named,
         named_time_s=_value(out.get("needed_time")),

@@ -614,6 +614,17 @@ class _HostRun:
             return self.stop_band
         return max(self.stop_band, STOP_BAND_SIGMAS * speed_noise_rpm(np.asarray(t), np.asarray(speed)))
 
+    def _no_cure(self, est: InertiaEstimate) -> str:
+        """Where the line's budget found no travel that cures a refusal more excitation would: so said, instead of
+        advice (stronger accelerations, more moves) that the motion planned within the line's limits already tried."""
+        needs = self.plan.needs
+        if needs is None or not math.isfinite(est.shortfall):
+            return ""
+        return (
+            f"no travel up to {budget.MAX_TRAVEL_REV:g} rev brings it to {100 * needs.target:g} % within "
+            f"{budget.MAX_TIME_S:g} s on this line (the speed or the torque the drive allows bounds the moves)"
+        )
+
     def _remedy(self, est: InertiaEstimate, cycles: int) -> Remedy | None:
         """A longer travel for a refusal that stronger accelerations cure: the least with which the line's budget
         (tuning.budget), scaled to what this run showed, reaches the limit within its time; none where no travel
@@ -667,7 +678,7 @@ class _HostRun:
         )
         if not est.ok:
             cure = self._remedy(est, cycles)
-            advice = cure.words() if cure is not None else est.advice
+            advice = cure.words() if cure is not None else self._no_cure(est) or est.advice
             raise IdentificationRefused(
                 f"identification refused: {est.reason}{self._late_words()}" + (f"; {advice}" if advice else ""),
                 result,
