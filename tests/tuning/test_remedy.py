@@ -110,16 +110,3 @@ def test_a_refusal_for_too_little_excitation_names_a_travel_that_then_identifies
     # loads on SDC read J high, see bench/inertia_accuracy.py's SDC rows for how often the 3 sigma holds)
     assert est is not None and abs(res.ratio - 10.0) <= 6 * est.ratio_std
     assert res.identified.travel_used_rev <= cure.suggested_rev
-
-
-def test_a_refusal_no_travel_cures_says_so_instead_of_asking_for_more_moves(sim_dir):
-    """SDC at 9600, a load of 37 with 1 % noise (bench/inertia_accuracy.py's machine 5, seed 1): 14 % uncertain after
-    the longest budget, and the refusal said "use stronger accelerations or more moves", which the motion planned
-    within the line's limits had already done. No travel cures it on this line, and the refusal says that."""
-    from bench.inertia_accuracy import identify_once
-
-    with pytest.raises(IdentificationRefused) as refused:
-        identify_once(37.0, 0.2, -0.2, 0.01, 9600, seed=1, profile_id="sdc", viscous=0.0005, follow=False)
-    said = str(refused.value)
-    assert refused.value.remedy is None and "too uncertain" in said, said
-    assert "no travel up to 100 rev brings it to 2 % within 30 s on this line" in said and "more moves" not in said
