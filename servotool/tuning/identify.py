@@ -23,7 +23,7 @@ from servotool.tuning import budget
 from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
-from servotool.tuning.fit.signals import speed_noise_rpm, stall
+from servotool.tuning.fit.signals import stall
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
     MIN_RAMP_S,
@@ -224,7 +224,6 @@ CATCH_UP_RAMPS = 2.0  # a move short of its target runs on for at most this many
 REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) between moves
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
 STOP_BAND_SIGMAS = 4.0  # the motion's rest band, in speed noises (_noise_band)
-MIN_NOISE_SAMPLES = 20  # the log's own noise estimate counts from this many samples
 LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
 LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
 LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many budgets
@@ -465,9 +464,7 @@ class _HostRun:
         model = budget.predicted(line, ratio, needs.allowed_rev * PILOT_SHARE, 2 * len(self.plan.directions))[0]
         seen = rough.j_std_kgm2 / rough.j_total_kgm2
         if math.isfinite(model) and model > 0 and math.isfinite(seen):
-            # scaled as a remedy scales it (budget.more_travel): down to the best efficiency measured, at most
-            floor = budget.BEST_EFFICIENCY / budget.EFFICIENCY
-            line = replace(line, efficiency=min(PILOT_EFFICIENCY_CAP, max(floor, seen / model)))
+            line = replace(line, efficiency=min(PILOT_EFFICIENCY_CAP, max(1.0, seen / model)))
         last = None
         for r in lows + [r for r in budget.LOAD_RATIOS if r > lows[-1]]:
             fits = budget.within(line, r, needs.allowed_rev, needs.target)
@@ -607,15 +604,6 @@ class _HostRun:
             "the host was late, a busy machine?)"
         )
 
-    def _noise_band(self) -> float:
-        """The motion's rest band: STOP_BAND_SIGMAS of the speed noise, as the rest check measured it or, where more
-        readings show more, as the log so far does. A rest check on a slow line takes a handful of readings (8 at
-        9600 baud), and its estimate can fall far below the noise: the stop then reads a motor at rest as turning."""
-        t, speed, _torque, _position = self.sampler.trace.fitted()
-        if len(t) < MIN_NOISE_SAMPLES:
-            return self.stop_band
-        return max(self.stop_band, STOP_BAND_SIGMAS * speed_noise_rpm(np.asarray(t), np.asarray(speed)))
-
     def _no_cure(self, est: InertiaEstimate) -> str:
         """Where the line's budget found no travel that cures a refusal more excitation would: so said, instead of
         advice (stronger accelerations, more moves) that the motion planned within the line's limits already tried."""
@@ -663,15 +651,9 @@ class _HostRun:
         # However the motion ends, the stop sequence waits (bounded) for the axis to rest inside this motion's speed
         # band before the servo goes off (a ringing loop swings through zero), and proves it; the drive's protections
         # (protect_for, above) are set inside it before the first move and put back with the motion's settings.
-        stopper = jogger.stopping(band_rpm=self.stop_band, need_ramp=True)
-        with stopper as saved:
-            try:
-                hold = StableHold(self.drive, jogger.route.kind, saved)
-                speed = self.pilot(hold, settings)
-                self.stop_band = self._noise_band()
-                cycles = self.cycles(speed, settings)
-            finally:  # the stop proves rest within the noise the whole log showed, not only the rest check's
-                stopper.band_rpm = self._noise_band()
+        with jogger.stopping(band_rpm=self.stop_band, need_ramp=True) as saved:
+            hold = StableHold(self.drive, jogger.route.kind, saved)
+            cycles = self.cycles(self.pilot(hold, settings), settings)
         s = self.sampler
         rate = s.rate()
         est = self.estimate(s.trace, settings)
