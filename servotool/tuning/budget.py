@@ -140,8 +140,7 @@ def predicted(
     if tau > line.torque_cap_pct:
         speed *= line.torque_cap_pct / tau
         tau, bound = line.torque_cap_pct, "torque"
-    rate = line.samples_per_s * MOTION_SHARE
-    inside = max(0.0, rate * line.ramp_s - 2.0)  # a ramp's samples clear of its ends
+    inside = _ramp_samples(line)[1]
     n = 2.0 * moves * inside
     if n <= 0 or tau <= 0:
         return math.inf, speed, bound
@@ -151,14 +150,19 @@ def predicted(
     return line.efficiency * EFFICIENCY * line.sigma_torque_pct / (tau * math.sqrt(n)), speed, bound
 
 
+def _ramp_samples(line: Line) -> tuple[float, float]:
+    """(samples in a ramp as the motion samples, those clear of its two ends: a torque step each)."""
+    in_ramp = line.samples_per_s * MOTION_SHARE * line.ramp_s
+    return in_ramp, max(0.0, in_ramp - 2.0)
+
+
 def excitation(line: Line, speed_rpm: float) -> float:
     """A ramp's speed change clear of its ends and of the fit's zero-speed band (fit.signals: ZERO_BAND_SIGMAS of
     the speed noise), in speed noises, as the fit's windows see it (Line.excitation_share); inf without noise."""
     if line.speed_noise_rpm <= 0:
         return math.inf
-    rate = line.samples_per_s * MOTION_SHARE
-    inside = max(0.0, rate * line.ramp_s - 2.0)
-    change = speed_rpm * inside / (rate * line.ramp_s) - ZERO_BAND_SIGMAS * line.speed_noise_rpm
+    in_ramp, inside = _ramp_samples(line)
+    change = speed_rpm * inside / in_ramp - ZERO_BAND_SIGMAS * line.speed_noise_rpm
     return line.excitation_share * change / line.speed_noise_rpm
 
 
@@ -174,7 +178,7 @@ def within(line: Line, load_ratio: float, travel_rev: float, target: float, time
     return Need(load_ratio, travel_rev, time_for(line, moves), sigma, speed, True, bound)
 
 
-def named(line: Line) -> Line:
+def naming_line(line: Line) -> Line:
     """The line a travel is named for: its speed noise NAMING_MARGIN larger than measured (the excitation's limit is
     a hard one; the uncertainty's aim has its own margin, TARGET_SHARE)."""
     return replace(line, speed_noise_rpm=NAMING_MARGIN * line.speed_noise_rpm)
@@ -186,7 +190,7 @@ def need(line: Line, load_ratio: float, target: float) -> Need:
     travel does it within a usual time (TIME_TIERS_S[0]), that travel and time: travel is what an axis lacks, time
     only costs time. Not reachable: what came closest. The travel named is planned for a speed reading NAMING_MARGIN
     noisier than this rest check measured: the run that follows it measures it again, and must find it enough."""
-    line = named(line)
+    line = naming_line(line)
     found = [_least_travel(line, load_ratio, target, time_s) for time_s in TIME_TIERS_S]
     quick, least = found[0], found[-1]
     if quick.reachable and least.reachable and quick.travel_rev <= TRAVEL_FOR_TIME * least.travel_rev:
@@ -254,7 +258,7 @@ class Needs:
         )
         if self.enough:
             return said
-        if self.lightest_served is not None and self.lightest_served is not self.lightest:
+        if self.lightest_served is not None:
             said += f"; {self.lightest_served.words(self.target)}"
         if self.from_ratio is None:
             return said + f"; {self.allowed_rev:g} rev serve none of the loads up to a ratio of {LOAD_RATIOS[-1]:g}"
@@ -270,7 +274,7 @@ def needs(line: Line, allowed_rev: float, target: float) -> Needs:
     served = next((r for r in LOAD_RATIOS if within(line, r, allowed_rev, target).reachable), None)
     lightest = need(line, 0.0, target)
     if lightest.reachable:
-        return Needs(line, target, allowed_rev, lightest, served, lightest)
+        return Needs(line, target, allowed_rev, lightest, served)
     heavier = (need(line, r, target) for r in LOAD_RATIOS[1:])
     return Needs(line, target, allowed_rev, lightest, served, next((n for n in heavier if n.reachable), None))
 
@@ -315,7 +319,7 @@ def more_travel(
     # this machine's fit against the model's, where both stand (a refusal for too little excitation has no fit)
     scale = max(1.0, sigma_rel / now) if math.isfinite(sigma_rel) and 0 < now < math.inf else 1.0
     aim = TARGET_SHARE * target
-    line = named(line)
+    line = naming_line(line)
     travel = math.floor(travel_rev * 2.0) / 2.0 + 0.5
     while travel <= MAX_TRAVEL_REV + 1e-9:
         most = moves_in(line, given_s(line, load_ratio, travel, target))
