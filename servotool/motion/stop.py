@@ -14,6 +14,7 @@ Interrupts are held while it runs (motion/interrupts.py).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
@@ -31,7 +32,7 @@ from servotool.motion.rest import SETTLE_S, STOPPED_RPM, RestWatch
 from servotool.ops import alarms
 from servotool.ops.status import servo_is_on
 
-PROOF_BAND_RPM = 10.0  # proven at rest: |speed| under this on two readings SETTLE_S apart (above the drives' noise)
+PROOF_BAND_RPM = 10.0  # proven at rest: each speed reading under this at least (a noisy one's band is wider), RestWatch
 DEFAULT_WAIT_S = 3.0  # the stop's wait for rest where the motion's own cannot be worked out
 # A read's failure that shows the line answering (replies that did not agree with their confirming read: a live
 # value, or stray replies), as opposed to a silent or lost line: a stop waits on through it.
@@ -47,7 +48,7 @@ class StopReport:
     """What the stop sequence read back from the drive (facts; `describe` words them)."""
 
     speed_rpm: float | None  # the last speed read; None: no speed monitor, or no answer
-    at_rest: bool | None  # the speed stayed inside PROOF_BAND_RPM over two readings; None: no speed monitor
+    at_rest: bool | None  # the speed stayed inside the band, its mean near zero (RestWatch); None: no speed monitor
     servo_on: bool | None  # read back; None: the drive shows no servo state
     servo_found_on: bool  # before the motion (servotool moves only a drive whose servo is off)
     servo_entry: str  # what the servo state was read from
@@ -281,22 +282,48 @@ class _Read:
     forcing_on: bool | None = None
     forcing: str = ""
     alarm: str = ""
+    judged_rpm: float = 0.0  # the band the speed was judged against (a reading's, or the mean's) ...
+    on_mean: bool = False  # ... and whether it was the mean's (speed_rpm then the mean of `readings`)
+    readings: int = 0  # how many speed readings the judgement took
 
 
-def _read_drive(drive: Drive, read: _Read, band: float, idle: Callable[[float], None]) -> None:
-    """Servo state, forced inputs, alarm and the speed twice SETTLE_S apart (no swing through zero), into `read`."""
+PROOF_SPARE_READINGS = 3  # the proof reads the speed at most this many times the readings its mean needs (and 4 more)
+
+
+def _read_drive(
+    drive: Drive,
+    read: _Read,
+    band: float,
+    idle: Callable[[float], None],
+    clock: Clock,
+    servo_found_on: bool,
+    servo_wait_s: float = 0.0,
+) -> None:
+    """The speed at rest (RestWatch over several readings, bounded), then the servo state, forced inputs and alarm,
+    into `read`. A servo not yet as found is read again for up to servo_wait_s: a drive may switch it off only once
+    at rest (SD25's JOG, released) or after its brake's delay."""
+    speed_e = drive.profile.role("speed_feedback")
+    if speed_e is not None:
+        watch = RestWatch(band)
+        last, read.at_rest = 0.0, False
+        for count in range(1, PROOF_SPARE_READINGS * watch.readings_needed + 5):
+            if count > 1:
+                idle(SETTLE_S / 2)
+            last, read.readings = float(_speed(drive) or 0.0), count
+            if watch.at_rest(clock.now(), last):
+                read.at_rest = True
+                break
+        read.on_mean = abs(last) < band and not math.isnan(watch.mean_rpm)
+        read.speed_rpm = round(watch.mean_rpm, 1) if read.on_mean else last
+        read.judged_rpm = watch.mean_band_rpm if read.on_mean else band
+    end = clock.now() + servo_wait_s
     read.servo_on, read.servo_code = servo_state(drive)
+    while read.servo_on is not None and read.servo_on != servo_found_on and clock.now() < end:
+        idle(SETTLE_S)
+        read.servo_on, read.servo_code = servo_state(drive)
     read.forcing_on, read.forcing = forcing_state(drive)
     state = alarms.confirmed(drive)
     read.alarm = f"{state.display} {state.name}" if state is not None else ""
-    first = _speed(drive)
-    if first is None:
-        return
-    idle(SETTLE_S)
-    speed = _speed(drive)
-    assert speed is not None
-    read.speed_rpm = speed
-    read.at_rest = abs(first) < band and abs(speed) < band
 
 
 def _report(
@@ -313,7 +340,9 @@ def _report(
     """The facts, with what the drive read that proves no stop (since: when the speed should have been at rest)
     and the sequence's `more` problems."""
     if read.at_rest is False and read.speed_rpm is not None:
-        steps.problems.append(f"the speed reads {read.speed_rpm:g} rpm (not under {band:g} rpm{since})")
+        over = f"mean of {read.readings} readings, " if read.on_mean else ""
+        under = f"not under {read.judged_rpm:g} rpm{since}"
+        steps.problems.append(f"the speed reads {read.speed_rpm:g} rpm ({over}{under})")
     if read.servo_on is not None and read.servo_on != servo_found_on:
         steps.problems.append(f"{read.servo_code} reads the servo {'on' if read.servo_on else 'off'}")
     steps.problems += more or []
@@ -340,7 +369,9 @@ def read_back(drive: Drive, *, moved: bool, clock: Clock | None = None) -> StopR
     moved: a motion of the command ran (and its stop) before the interrupt."""
     clock = clock or RealClock()
     steps, read = _Steps(), _Read()
-    steps.run("reading the drive back", lambda: _read_drive(drive, read, PROOF_BAND_RPM, clock.sleep), tries=2)
+    steps.run(
+        "reading the drive back", lambda: _read_drive(drive, read, PROOF_BAND_RPM, clock.sleep, clock, False), tries=2
+    )
     return _report(steps, read, PROOF_BAND_RPM, False, "", moved=moved)
 
 
@@ -407,7 +438,11 @@ def stop_sequence(
     if entries:
         steps.run(f"putting back {len(entries)} setting(s)", put_back_settings)
     read = _Read(speed, at_rest)
-    steps.run("reading the drive back", lambda: _read_drive(drive, read, band, idle), tries=2)
+    steps.run(
+        "reading the drive back",
+        lambda: _read_drive(drive, read, band, idle, clock, servo_found_on, wait_s),
+        tries=2,
+    )
     more = []
     if released[0] and read.forcing_on:
         more.append(f"{read.forcing} (the release did not take)")

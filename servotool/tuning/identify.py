@@ -16,6 +16,7 @@ from servotool.model.profile import Entry, Profile
 from servotool.model.roles import status_bit
 from servotool.motion.keepalive import KeepAlive, keepalive_interval_s
 from servotool.motion.moves import Mover
+from servotool.motion.rest import band_of as rest_band
 from servotool.motion.stop import MotionStop, StopReport
 from servotool.ops.eeprom import ram_writes
 from servotool.ops.params import write_one
@@ -223,7 +224,6 @@ EXTEND_AIM = 0.85  # a time budget is extended to reach this share of the uncert
 CATCH_UP_RAMPS = 2.0  # a move short of its target runs on for at most this many ramps more
 REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) between moves
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
-STOP_BAND_SIGMAS = 4.0  # the motion's rest band, in the speed noises the rest check measured
 LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
 LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
 LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many budgets
@@ -250,7 +250,7 @@ class _HostRun:
         jogger.protect_for(plan.speed_rpm, plan.travel_limit_rev)  # the drive's own, set with the settings
         self.jog_accel = p.need_role("jog_accel", FEATURE)
         self.ramp_rpm = p.ramp_rpm()  # the speed the drive's ramp time runs up to
-        self.stop_band = max(3.0, STOP_BAND_SIGMAS * (rest.speed_noise_rpm if rest is not None else 0.0))
+        self.stop_band = rest_band(rest.speed_noise_rpm if rest is not None else 0.0)  # noise the rest check measured
         self.sampler = Sampler(d, self.timing, plan.travel_limit_rev, self._beat)
         # A torque read in whole percent: its step error would repeat in every move of the same acceleration.
         self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT

@@ -22,12 +22,12 @@ from servotool.sim.virtual import VirtualLink, make_motion_setup
 PROFILES = ("dsx7e", "is620p", "sd25", "sdc")
 
 
-def _jogger(profile_id: str) -> tuple[object, Jogger, VirtualClock]:
+def _jogger(profile_id: str, baud: int | None = None) -> tuple[object, Jogger, VirtualClock]:
     profile = load_profile(profile_id)
     clock = VirtualClock(10.0)
     sim = build_drive(profile, 1, clock, persist=False)
     make_motion_setup(sim)
-    d = Drive(VirtualLink([sim], clock, profile.line.baud), profile, 1)
+    d = Drive(VirtualLink([sim], clock, baud or profile.line.baud), profile, 1)
     d.dead_man_waived = True
     return sim, Jogger(d, 0.1, "test", clock), clock
 
@@ -272,3 +272,20 @@ def test_a_step_that_fails_with_an_internal_error_does_not_keep_the_servo_off_fr
         jogger.run(plan)
     assert "feeding the drive's watchdog failed (internal error: RuntimeError: a bug)" in str(raised.value)
     assert not sim.firmware.plant.servo_on
+
+
+@pytest.mark.parametrize("seed", [2, 4, 5])
+def test_a_servo_the_drive_switches_off_only_at_rest_is_waited_for_not_reported_on(sim_dir, seed):
+    """SD25 has no servo-off to send: released, its JOG switches the servo off once the motor is under 1 rpm. A
+    heavy load (50) rings a few rpm after the stop; the proof read L944 while it did and said COULD NOT CONFIRM
+    (2-3 of 6 real-time identifications). It now reads the servo again, within the stop's wait, until as found."""
+    sim, jogger, _clock = _jogger("sd25", baud=57600)  # the line an identification raises it to
+    sim.settings.update(load_ratio=50.0, friction=0.01, viscous=0.0005, noise=0.002, seed=seed)
+    sim.firmware.reconfigure()
+    plan = jogger.plan(500, 0.5)
+    since = len(stop.reports())
+    with jogger.stopping(band_rpm=8.0) as _saved:
+        jogger._run(plan)
+    report = stop.final(stop.reports()[since:])
+    assert report.confirmed and report.servo_on is False, report.describe()
+    assert not sim.firmware.plant.servo_on and abs(sim.firmware.plant.true_speed_rpm) < 1.0

@@ -90,13 +90,6 @@ def test_a_speed_bound_remedy_names_the_speed_limit():
     assert "the speed limit (rated or --max-speed)" in cure.words()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 31 open: on this noisy SDC 9600 line the stop after the motion reads a stopped motor as turning "
-    "('-12 rpm, not under 10 rpm'): the rest band comes from a rest check of 8 readings, which measured 1.6 rpm for "
-    "a 10 rpm noise; widening the band from the log's noise, or a 20-reading rest check, let SD25's servo-off go out "
-    "early enough that L944 still read the servo on (2-3 of 6 real-time runs) and were taken back",
-)
 def test_a_refusal_for_too_little_excitation_names_a_travel_that_then_identifies(sim_dir):
     """SDC at 9600 (24 samples/s), 1 % speed noise (10 rpm): at 2 rev the speed changes were 6.6x the noise, 10x
     needed, and the refusal said only "use faster accelerations" (no fit stood, so no uncertainty to scale). It now
