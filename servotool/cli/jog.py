@@ -236,13 +236,14 @@ class _Speeds:
         self.sampler: Sampler | None = None  # the speed read between the beats
 
     def measured_peak(self) -> tuple[float, float | None]:
-        """The peak speed over every reading (the beats' and the sampler's between them), and how many readings a
-        second the sampler made (None without one)."""
+        """The peak speed over the sampler's readings (the JOG's --trace: its peak is the trace's; the beats'
+        readings between them would add noise draws the trace does not show), else over the beats', and how many
+        readings a second the sampler made (None without one)."""
         if self.sampler is None or len(self.sampler.samples) < 2:
             return self.peak, None
         code = self.sampler.entries[0].code
         samples = self.sampler.samples
-        peak = max([self.peak, *(abs(s.values[code]) for s in samples)])
+        peak = max(abs(s.values[code]) for s in samples)
         span = samples[-1].t - samples[0].t
         return peak, (len(samples) - 1) / span if span > 0 else None
 
