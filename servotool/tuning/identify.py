@@ -464,7 +464,9 @@ class _HostRun:
         model = budget.predicted(line, ratio, needs.allowed_rev * PILOT_SHARE, 2 * len(self.plan.directions))[0]
         seen = rough.j_std_kgm2 / rough.j_total_kgm2
         if math.isfinite(model) and model > 0 and math.isfinite(seen):
-            line = replace(line, efficiency=min(PILOT_EFFICIENCY_CAP, max(1.0, seen / model)))
+            # scaled as a remedy scales it (budget.more_travel): down to the best efficiency measured, at most
+            floor = budget.BEST_EFFICIENCY / budget.EFFICIENCY
+            line = replace(line, efficiency=min(PILOT_EFFICIENCY_CAP, max(floor, seen / model)))
         last = None
         for r in lows + [r for r in budget.LOAD_RATIOS if r > lows[-1]]:
             fits = budget.within(line, r, needs.allowed_rev, needs.target)
