@@ -217,6 +217,10 @@ def _eng(drive: Drive, entry: Entry) -> float:
 # uncertain (its lower bound is what counts, and a noisy speed change biases J low, never high).
 ROUGH = {"min_windows": 4, "min_excitation": 2.0, "max_rel_uncertainty": 1.0}
 PILOT_EFFICIENCY_CAP = 4.0  # the most the pilot's own fit may scale the budget by (it is rough)
+# A pilot names a travel only beyond this many times the travel allowed; closer, the motion goes on with the longest
+# time budget and the fit decides: a rough pilot's need is no better than the one a whole run's refusal named (SDC
+# 9600 draw seed 31, the motor alone: a refusal named 8 rev, and followed, the pilot stopped naming 10).
+PILOT_SLACK = 1.5
 STALL_S = 0.05  # a gap between samples this long (and STALL_INTERVALS usual ones) is a host stall, named as one
 STALL_INTERVALS = 4.0
 TARGET_TOLERANCE = 0.1  # a host-timed move rests within this share of its travel of its target (_tolerance)
@@ -442,7 +446,8 @@ class _HostRun:
         with the travel that serves it; where none does, the next heavier load is taken (less one sigma, as shown,
         then the heavier ratios of budget.LOAD_RATIOS): the motion goes on where the travel allowed serves that one
         (no travel would serve the lighter ones), else its travel is named (a longer travel also gives a stronger
-        pilot, which tells the load better)."""
+        pilot, which tells the load better) where it is beyond PILOT_SLACK of the travel allowed; closer, the motion
+        goes on with the longest time budget."""
         needs = self.plan.needs
         assert needs is not None
         ratio, std = rough.load_ratio, rough.ratio_std
@@ -479,6 +484,14 @@ class _HostRun:
             if last.reachable:
                 break
         assert last is not None
+        if last.reachable and last.travel_rev <= PILOT_SLACK * needs.allowed_rev:
+            self.plan = self.plan.budgeted(budget.MAX_TIME_S)
+            if self.progress:
+                self.progress(
+                    f"pilot: {last.words(needs.target)}, near the {needs.allowed_rev:g} rev allowed; "
+                    f"time budget {self.plan.time_budget_s:.0f} s"
+                )
+            return
         raise TravelNeeded(
             f"stopped after the pilot: it shows a load ratio of {ratio:.2g} ± {std:.2g}; {last.words(needs.target)}, "
             f"more than the {needs.allowed_rev:g} rev "
