@@ -108,10 +108,11 @@ def identify_once(
 ) -> TuneResult:
     """`tune inertia` with the CLI's defaults (identify and report: a dry run) on one simulated machine; a drive
     without a dead-man route is moved as the CLI moves it with --no-dead-man. follow: where it names the travel the
-    line needs (TravelNeeded: before moving, or after the pilot), it runs once more with it, as a user does."""
+    line needs (TravelNeeded: before moving, or after the pilot), it runs once more with it, as a user does. A
+    travel_rev given (and a travel followed) is the user's --travel; None: the bench's default, as if not given."""
     profile = load_profile(profile_id)
 
-    def attempt(travel: float) -> TuneResult:
+    def attempt(travel: float, given: bool) -> TuneResult:
         clock = VirtualClock(1000.0)
         sim = build_drive(profile, 1, clock, persist=False)
         sim.settings.update(
@@ -127,15 +128,16 @@ def identify_once(
         make_motion_setup(sim)
         drive = Drive(VirtualLink([sim], clock, baud, stalls), profile, 1)
         drive.dead_man_waived = True
-        return tune_inertia(drive, TuneRequest(travel_rev=travel, dry_run=True), clock=clock)
+        request = TuneRequest(travel_rev=travel, travel_given=given, dry_run=True)
+        return tune_inertia(drive, request, clock=clock)
 
     used = travel_rev if travel_rev is not None else bench_travel(profile_id)
     try:
-        return attempt(used)
+        return attempt(used, travel_rev is not None)
     except TravelNeeded as exc:
         if not follow or not math.isfinite(exc.travel_rev) or exc.travel_rev <= used:
             raise
-        return attempt(exc.travel_rev)
+        return attempt(exc.travel_rev, True)
 
 
 def line_rate(profile_id: str, baud: int) -> float:

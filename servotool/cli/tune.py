@@ -227,6 +227,7 @@ def inertia(
         max_speed=max_speed,
         accel_time_ms=accel_time,
         travel_rev=travel,
+        travel_given=given_travel,
         direction=direction,
         repeats=repeats,
         gains=rigidity is not None or bandwidth is not None,

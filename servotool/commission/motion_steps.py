@@ -121,6 +121,7 @@ class TuneInertiaStep(StepType):
             if "accel_time" in opts
             else None,
             travel_rev=number_in(opts.get("travel", 2.0), "tune inertia travel", 0, 10_000),
+            travel_given="travel" in opts,
             direction=direction,
             repeats=None if repeats is None else int(repeats),
             gains=gains,

@@ -446,8 +446,9 @@ class _HostRun:
         with the travel that serves it; where none does, the next heavier load is taken (less one sigma, as shown,
         then the heavier ratios of budget.LOAD_RATIOS): the motion goes on where the travel allowed serves that one
         (no travel would serve the lighter ones), else its travel is named (a longer travel also gives a stronger
-        pilot, which tells the load better) where it is beyond PILOT_SLACK of the travel allowed; closer, the motion
-        goes on with the longest time budget."""
+        pilot, which tells the load better) where it is beyond PILOT_SLACK of the travel allowed and the user did
+        not give the travel (a travel named and followed is not asked again); else the motion goes on with the
+        longest time budget and the fit decides."""
         needs = self.plan.needs
         assert needs is not None
         ratio, std = rough.load_ratio, rough.ratio_std
@@ -484,11 +485,12 @@ class _HostRun:
             if last.reachable:
                 break
         assert last is not None
-        if last.reachable and last.travel_rev <= PILOT_SLACK * needs.allowed_rev:
+        if self.plan.travel_given or (last.reachable and last.travel_rev <= PILOT_SLACK * needs.allowed_rev):
             self.plan = self.plan.budgeted(budget.MAX_TIME_S)
             if self.progress:
+                allowed = "given" if self.plan.travel_given else "allowed, near it"
                 self.progress(
-                    f"pilot: {last.words(needs.target)}, near the {needs.allowed_rev:g} rev allowed; "
+                    f"pilot: {last.words(needs.target)}, with {needs.allowed_rev:g} rev {allowed}: the fit decides; "
                     f"time budget {self.plan.time_budget_s:.0f} s"
                 )
             return

@@ -88,6 +88,7 @@ class MotionPlan:
     time_budget_s: float = TIME_BUDGET_S  # adaptive repeats stop before the motion would take longer
     needs: Needs | None = None  # what the line needs for the fit's limit (both directions, automatic ramps)
     run_on_limited: bool = False  # the speed was lowered so that a dead host's run-on stays inside the travel
+    travel_given: bool = False  # the user gave the travel (or chose the one named): the fit decides, not the pilot
 
     @property
     def move_travel_rev(self) -> float:

@@ -39,6 +39,7 @@ class TuneRequest:
     max_speed: float | None = None  # rpm; None: from the travel
     accel_time_ms: float | None = None  # None: ramps from the link's sampling rate
     travel_rev: float = 2.0
+    travel_given: bool = False  # the user gave (or chose) the travel: the pilot does not stop to name another
     direction: str = "both"
     repeats: int | None = None  # None: repeat until the estimate is precise enough
     gains: bool = False  # set matching gains (at rigidity/bandwidth, else the drive's rigidity)
@@ -204,6 +205,7 @@ def tune_inertia(
     if request.method == "host":
         motion, rest = request.host_motion(drive, clock)
         motion, request = _enough_travel(drive, request, motion, rest, choose_travel)
+        motion = replace(motion, travel_given=request.travel_given)
     step_plan = step.plan_step(drive, request.travel_rev) if request.step_check else None  # the travel chosen
     if approve_motion is not None and not approve_motion(motion):
         raise TuneDeclined("nothing moved")
@@ -278,7 +280,7 @@ def _enough_travel(
         return motion, request
     chosen = choose_travel(needs) if choose_travel is not None else None
     if chosen is not None and chosen > request.travel_rev:
-        request = replace(request, travel_rev=chosen)
+        request = replace(request, travel_rev=chosen, travel_given=True)
         plan = planning.plan_motion(
             drive.profile,
             max_speed=request.max_speed,

@@ -110,3 +110,19 @@ def test_a_refusal_for_too_little_excitation_names_a_travel_that_then_identifies
     # loads on SDC read J high, see bench/inertia_accuracy.py's SDC rows for how often the 3 sigma holds)
     assert est is not None and abs(res.ratio - 10.0) <= 6 * est.ratio_std
     assert res.identified.travel_used_rev <= cure.suggested_rev
+
+
+def test_a_travel_the_user_gave_is_run_not_asked_again_after_the_pilot(sim_dir, monkeypatch):
+    """SDC at 9600, a load of 1 (Coulomb 10 %), 4 rev: the pilot (a quarter of the speed) shows 0.6 +- 0.46 and,
+    taking the load two sigmas lighter, names the motor alone's 11 rev. Where servotool chose the travel that stop
+    saves a run; where the user gave it (following a travel a refusal named, in the real-time bench: 'named 4 rev,
+    then the pilot 11'), it asks a second time. Given, the motion runs and the fit decides: accepted within 3 sigma."""
+    from bench import inertia_accuracy as bench
+
+    with monkeypatch.context() as chosen, pytest.raises(TravelNeeded) as named:
+        chosen.setattr(bench, "bench_travel", lambda _profile: 4.0)  # servotool's travel, not the user's
+        bench.identify_once(1.0, 0.1, 0.0, 0.0, 9600, seed=1, profile_id="sdc", follow=False)
+    assert named.value.moved and named.value.travel_rev > 1.5 * 4.0
+    given = bench.identify_once(1.0, 0.1, 0.0, 0.0, 9600, seed=1, profile_id="sdc", travel_rev=4.0, follow=False)
+    est = given.identified.estimate
+    assert abs(est.load_ratio - 1.0) <= 3 * est.ratio_std and given.identified.travel_used_rev <= 4.0
