@@ -185,14 +185,20 @@ Estimate = Callable[[Trace, EstimatorSettings], InertiaEstimate]
 
 def trace_estimate(profile: Profile, torque_limit_pct: float | None) -> Estimate:
     """How this drive's traces are fitted: windows up to about a fifth of a second at the trace's sampling rate (a
-    fast link gives many samples a ramp), the torque reading's step as its register states it, saturation at the
-    drive's torque limit."""
+    fast link gives many samples a ramp), the torque and speed readings' steps as their registers state them,
+    saturation at the drive's torque limit."""
     motor = profile.motor
     assert motor is not None
     step_pct = profile.need_role("torque_feedback", FEATURE).scale
+    step_rpm = profile.need_role("speed_feedback", FEATURE).scale
 
     def estimate(trace: Trace, settings: EstimatorSettings) -> InertiaEstimate:
-        cfg = replace(settings, max_window_intervals=max(6, int(trace.rate() / 5)), torque_step_pct=step_pct)
+        cfg = replace(
+            settings,
+            max_window_intervals=max(6, int(trace.rate() / 5)),
+            torque_step_pct=step_pct,
+            speed_step_rpm=step_rpm,
+        )
         t, speed, torque, position = trace.fitted()
         return estimate_inertia(
             t,
