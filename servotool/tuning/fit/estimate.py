@@ -46,6 +46,11 @@ class EstimatorSettings:
     torque noise."""
     torque_noise_floor_pct: float = 0.05
     """Floor of the estimated torque noise (% of rated) used for the kink test, so clean data is not all kinks."""
+    torque_noise_pct: float | None = None
+    """The torque reading's noise (1 sigma, % of rated) apart from its steps, as read with the axis at rest. None:
+    estimated from the log (signals.torque_noise_pct), which at a slow line takes the loop's swing between samples
+    for noise too. The spring term of the model checks (fit.resonance) shares torque samples with the torque
+    integrals: this noise alone gives it a spring's sign."""
     zero_band_rpm: float | None = None
     """Samples with |speed| below this are left out. None: max(2 % of the peak speed, 3 * speed noise)."""
     speed_noise_rpm: float | None = None

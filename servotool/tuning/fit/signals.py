@@ -33,6 +33,7 @@ class Signals:
     pct: np.ndarray  # the torque reading, % of rated
     torque: np.ndarray  # N*m
     torque_step_pct: float  # the torque reading's resolution, % of rated (0: finer than the log shows, or unknown)
+    torque_noise_pct: float  # the torque reading's error per sample (1 sigma, % of rated), its steps' rounding included
     noise_w: float
     band: float
     kink: np.ndarray
@@ -63,13 +64,16 @@ def signals(
     kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct)
     r.n_kinks = int(np.count_nonzero(kink))
     cum_w = cumulative_hermite(t, w, kink)
+    torque_step_pct = cfg.torque_step_pct if cfg.torque_step_pct is not None else reading_step(pct)
+    measured = cfg.torque_noise_pct if cfg.torque_noise_pct is not None else torque_noise_pct(t, pct)
     return Signals(
         t=t,
         rpm=rpm,
         w=w,
         pct=pct,
         torque=torque,
-        torque_step_pct=cfg.torque_step_pct if cfg.torque_step_pct is not None else reading_step(pct),
+        torque_step_pct=torque_step_pct,
+        torque_noise_pct=math.hypot(measured, torque_step_pct / math.sqrt(12.0)),
         noise_w=noise_rpm * RPM_TO_RAD_S,
         band=band,
         kink=kink,
@@ -167,12 +171,20 @@ def kink_mask(
     """Samples at a torque step (torque or speed further than kink_sigma noise sigmas off the line through its
     neighbours; the torque noise estimated robustly, floored) or ending a gap (gap_after: a host stall)."""
     dev, ref = line_deviation(t, pct)
-    torque_noise = max(float(1.4826 * np.median(np.abs(dev) / ref)), torque_noise_floor_pct) if dev.size else 0.0
+    torque_noise = max(torque_noise_pct(t, pct), torque_noise_floor_pct)
     dev_w, ref_w = line_deviation(t, rpm)
     kink = np.zeros(pct.size, dtype=bool)
     kink[1:-1] = (np.abs(dev) > kink_sigma * torque_noise * ref) | (np.abs(dev_w) > kink_sigma * noise_rpm * ref_w)
     kink[1:] |= gap_after(t)
     return kink
+
+
+def torque_noise_pct(t: np.ndarray, pct: np.ndarray) -> float:
+    """Robust torque-noise estimate from the log (% of rated): the median deviation from the line through each
+    sample's neighbours. At a slow line the loop's swing between samples counts as noise too (an overestimate);
+    the rest check measures the reading without motion (tuning.preflight)."""
+    dev, ref = line_deviation(t, pct)
+    return float(1.4826 * np.median(np.abs(dev) / ref)) if dev.size else 0.0
 
 
 def move_ids(rpm: np.ndarray, band: float) -> np.ndarray:
