@@ -59,19 +59,20 @@ def check(v: Verdict) -> Verdict:
     uncertainty, no evidence adds the spring's share. A resonance is named by its frequency only below the Nyquist
     limit of the log's own sampling rate."""
     fit, x = v.fit, v.x
+    rate = _rate(fit)
     mass = _two_mass(fit, x)
     if mass is not None:
         # The load's speed is the motor's low-passed, its noise mostly filtered out: no errors-in-variables correction.
         j, j_std, resid = take(
             replace(fit, y=mass.y, eiv=np.zeros_like(fit.eiv)), mass.x, (v.j, v.j_std, v.resid), 1 / MODEL_ERROR_DIVISOR
         )
-        cause = f"resonance near {mass.hz:.0f} Hz: the load follows the motor through a compliant coupling"
-        return replace(v, j=j, j_std=j_std, resid=resid, fitted=(*v.fitted, Cause(cause, curable=False)))
+        return replace(
+            v, j=j, j_std=j_std, resid=resid, fitted=(*v.fitted, Cause(_mass_words(mass, rate), curable=False))
+        )
     spring = _compliance_model(fit, x, v.j, v.j_std)
     if spring is None:
         return v
     with_spring = np.column_stack([x, spring.col])
-    rate = _rate(fit)
     resolved = spring.hz < RESOLVABLE_HZ_PER_RATE * rate
     if spring.strong and resolved:
         j, j_std, resid = take(fit, with_spring, (v.j, v.j_std, v.resid), 1 / MODEL_ERROR_DIVISOR, spring.shared)
@@ -88,6 +89,18 @@ def check(v: Verdict) -> Verdict:
         hinted = take(fit, with_spring, (v.j, v.j_std, v.resid), 0.0, spring.shared)
         return replace(v, j_std=math.hypot(v.j_std, hinted[0] - v.j))
     return replace(v, j_std=math.hypot(v.j_std, UNRESOLVED_SPRING_SHARE * spring.unresolved))
+
+
+def _mass_words(mass: _TwoMass, rate: float) -> str:
+    """The words for a two-mass load: the motor side's resonance where the sampling resolves it (below the Nyquist
+    limit), else the load's own, which the scan found below it."""
+    coupling = "the load follows the motor through a compliant coupling"
+    if mass.hz < NYQUIST_SHARE * rate:
+        return f"resonance near {mass.hz:.0f} Hz: {coupling}"
+    return (
+        f"{coupling}, the load's own resonance near {mass.load_hz:.0f} Hz (the motor side's lies above the "
+        f"{NYQUIST_SHARE * rate:.0f} Hz that {rate:.0f} samples/s resolve)"
+    )
 
 
 def _spring_words(hz: float, rate: float) -> str:
@@ -184,6 +197,7 @@ def _lost_motion_reading(v: Verdict, j_spring: float) -> tuple[float, str] | Non
 @dataclass(frozen=True)
 class _TwoMass:
     hz: float  # the motor-side resonance (torque to motor speed)
+    load_hz: float  # the load's own resonance against a held motor (what the scan resolves)
     x: np.ndarray  # the regression with the load's speed change in place of the motor's
     y: np.ndarray  # the torque integrals less what turns the motor alone (Jm times the deflection's rate)
 
@@ -232,7 +246,7 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
         return None
     dwl = _window_changes(fit, np.array(best[:1]), np.array(best[1:2]))[:, 0]
     y = fit.y - fit.jm * (fit.x[:, 0] - dwl)
-    return _TwoMass(best[0] * math.sqrt(best[2] / fit.jm), np.column_stack([dwl, x[:, 1:]]), y)
+    return _TwoMass(best[0] * math.sqrt(best[2] / fit.jm), best[0], np.column_stack([dwl, x[:, 1:]]), y)
 
 
 def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
