@@ -330,4 +330,5 @@ def _said(run: Run, truth: float) -> str:
     return (
         f"{run.ratio:.3f} ± {run.ratio_std:.3f} ({err:+.2f} %), {run.samples_per_s} /s, {run.travel_rev} rev, "
         f"{run.time_s} s ({run.tries} tries, {run.wall_s:.1f} s wall)"
+        + "".join(f"\n        note: {note[:160]}" for note in run.notes)
     )

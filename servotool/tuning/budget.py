@@ -70,10 +70,16 @@ class Line:
     speed_share: float = 1.0
     # Of the model's speed change per window, what the fit's windows see (< 1: as a run showed it).
     excitation_share: float = 1.0
+    speed_step_rpm: float = 0.0  # the speed reading's resolution, rpm
 
     @property
     def sigma_torque_pct(self) -> float:
         return math.hypot(self.torque_noise_pct, self.torque_step_pct / math.sqrt(12.0))
+
+    @property
+    def sigma_speed_rpm(self) -> float:
+        """The speed noise the fit counts (fit.signals.speed_noise_rpm): the measured, at least the step's rounding."""
+        return max(self.speed_noise_rpm, self.speed_step_rpm / math.sqrt(12.0))
 
     @property
     def torque_cap_pct(self) -> float:
@@ -161,12 +167,14 @@ def _ramp_samples(line: Line) -> tuple[float, float]:
 
 def excitation(line: Line, speed_rpm: float) -> float:
     """A ramp's speed change clear of its ends and of the fit's zero-speed band (fit.signals: ZERO_BAND_SIGMAS of
-    the speed noise), in speed noises, as the fit's windows see it (Line.excitation_share); inf without noise."""
-    if line.speed_noise_rpm <= 0:
+    the speed noise), in speed noises, as the fit's windows see it (Line.excitation_share); inf where the speed reads
+    exactly (no noise, no step)."""
+    noise = line.sigma_speed_rpm
+    if noise <= 0:
         return math.inf
     in_ramp, inside = _ramp_samples(line)
-    change = speed_rpm * inside / in_ramp - ZERO_BAND_SIGMAS * line.speed_noise_rpm
-    return line.excitation_share * change / line.speed_noise_rpm
+    change = speed_rpm * inside / in_ramp - ZERO_BAND_SIGMAS * noise
+    return line.excitation_share * change / noise
 
 
 def within(line: Line, load_ratio: float, travel_rev: float, target: float, time_cap_s: float = MAX_TIME_S) -> Need:

@@ -100,7 +100,7 @@ class Identifier:
         else:
             torque_limit = _eng(d, limit_e) if limit_e is not None else None
         old_ratio = self.current_ratio()
-        estimate = trace_estimate(p, torque_limit)
+        estimate = trace_estimate(p, torque_limit, rest.torque_noise_pct if rest is not None else None)
         run = _HostRun(mover, self.timing, plan, estimate, torque_limit, old_ratio, progress, rest)
         self.trace = run.sampler.trace
         return run.run()
@@ -184,16 +184,24 @@ Estimate = Callable[[Trace, EstimatorSettings], InertiaEstimate]
 """A trace fitted as its drive's identification fits it, with the settings asked for (the pilot's or the final)."""
 
 
-def trace_estimate(profile: Profile, torque_limit_pct: float | None) -> Estimate:
+def trace_estimate(profile: Profile, torque_limit_pct: float | None, torque_noise_pct: float | None = None) -> Estimate:
     """How this drive's traces are fitted: windows up to about a fifth of a second at the trace's sampling rate (a
-    fast link gives many samples a ramp), the torque reading's step as its register states it, saturation at the
-    drive's torque limit."""
+    fast link gives many samples a ramp), the torque and speed readings' steps as their registers state them, the
+    torque reading's noise as the rest check read it (None: from the trace), saturation at the drive's torque
+    limit."""
     motor = profile.motor
     assert motor is not None
     step_pct = profile.need_role("torque_feedback", FEATURE).scale
+    step_rpm = profile.need_role("speed_feedback", FEATURE).scale
 
     def estimate(trace: Trace, settings: EstimatorSettings) -> InertiaEstimate:
-        cfg = replace(settings, max_window_intervals=max(6, int(trace.rate() / 5)), torque_step_pct=step_pct)
+        cfg = replace(
+            settings,
+            max_window_intervals=max(6, int(trace.rate() / 5)),
+            torque_step_pct=step_pct,
+            speed_step_rpm=step_rpm,
+            torque_noise_pct=torque_noise_pct,
+        )
         t, speed, torque, position = trace.fitted()
         return estimate_inertia(
             t,

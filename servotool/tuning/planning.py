@@ -229,6 +229,7 @@ def with_needs(plan: MotionPlan, drive: Drive, rest: RestCheck) -> MotionPlan:
         torque_step_pct=p.need_role("torque_feedback", FEATURE).scale,
         torque_noise_pct=rest.torque_noise_pct,
         speed_noise_rpm=rest.speed_noise_rpm,
+        speed_step_rpm=p.need_role("speed_feedback", FEATURE).scale,
         rotor_kgm2=p.motor.rotor_inertia_kgcm2 * 1e-4,
         rated_nm=p.motor.rated_torque_nm,
         speed_cap_rpm=plan.speed_limit_rpm,

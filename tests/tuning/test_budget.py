@@ -109,6 +109,18 @@ def test_the_excitation_counts_only_what_clears_the_zero_speed_band():
     assert budget.excitation(replace(LINE, speed_noise_rpm=0.0), 300.0) == float("inf")
 
 
+def test_a_speed_read_in_steps_is_as_noisy_as_the_fit_counts_it():
+    """A noise-free speed read in whole rpm reads steady at rest, yet its rounding is noise in every speed change the
+    fit sees (step / sqrt 12): the excitation the budget predicts counts it as the fit does."""
+    steady = replace(LINE, speed_noise_rpm=0.0, speed_step_rpm=1.0)
+    assert budget.excitation(steady, 300.0) == pytest.approx(
+        budget.excitation(replace(LINE, speed_noise_rpm=12**-0.5), 300.0)
+    )
+    assert budget.excitation(replace(steady, speed_noise_rpm=2.0), 300.0) == budget.excitation(
+        replace(LINE, speed_noise_rpm=2.0), 300.0
+    )
+
+
 def test_a_refusal_for_too_little_excitation_names_the_travel_that_clears_it():
     """No fit stood (speed changes 7x the noise, 10x needed): the travel named is the least whose moves, scaled to the
     excitation this run showed, clear the limit; a run that showed more needs less."""

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bench.inertia_accuracy import bench_travel
-from servotool.tuning.fit.signals import torque_step
+from servotool.tuning.fit.signals import reading_step
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.realtime_cli import STALL_WORDS, near, tune_json
@@ -171,9 +171,9 @@ def test_a_torque_read_in_whole_percent_does_not_pass_for_backlash(sim_dir):
 
 
 def test_the_torque_step_is_found_from_readings_on_a_grid():
-    assert torque_step(np.array([3.0, -1.0, 0.0, 7.0, 3.0]) * 0.0127) == pytest.approx(0.0127)
-    assert torque_step(np.array([0.1, 0.27, 0.7, 1.31])) == 0.0  # not on one grid
-    assert torque_step(np.array([0.5, 0.5])) == 0.0
+    assert reading_step(np.array([3.0, -1.0, 0.0, 7.0, 3.0]) * 0.0127) == pytest.approx(0.0127)
+    assert reading_step(np.array([0.1, 0.27, 0.7, 1.31])) == 0.0  # not on one grid
+    assert reading_step(np.array([0.5, 0.5])) == 0.0
 
 
 def _refused_then_followed(machine: dict[str, float], words: str, travel_rev: float) -> str:

@@ -259,8 +259,8 @@ def test_a_slow_fit_between_moves_does_not_starve_the_drives_watchdog(sim_dir, m
     d.dead_man_waived = False
     made, silent = identify.trace_estimate, []
 
-    def slow_estimate(profile, torque_limit):
-        fit = made(profile, torque_limit)
+    def slow_estimate(*made_with):
+        fit = made(*made_with)
 
         def slow_fit(trace, settings):
             silent.append(clock.now() - sim.firmware.last_host)

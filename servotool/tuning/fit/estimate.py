@@ -46,13 +46,23 @@ class EstimatorSettings:
     torque noise."""
     torque_noise_floor_pct: float = 0.05
     """Floor of the estimated torque noise (% of rated) used for the kink test, so clean data is not all kinks."""
+    torque_noise_pct: float | None = None
+    """The torque reading's noise (1 sigma, % of rated) apart from its steps, as read with the axis at rest. None:
+    estimated from the log (signals.torque_noise_pct), which at a slow line takes the loop's swing between samples
+    for noise too. The spring term of the model checks (fit.resonance) shares torque samples with the torque
+    integrals: this noise alone gives it a spring's sign."""
     zero_band_rpm: float | None = None
     """Samples with |speed| below this are left out. None: max(2 % of the peak speed, 3 * speed noise)."""
     speed_noise_rpm: float | None = None
-    """Speed measurement noise (1 sigma). None: estimated from the log (floored at 0.1 rpm)."""
+    """Speed measurement noise (1 sigma). None: estimated from the log (floored at 0.1 rpm, and at the speed
+    reading's own step: speed_step_rpm)."""
+    speed_step_rpm: float | None = None
+    """The speed reading's resolution (rpm), as the drive's register states it. None: found from the log (the grid
+    its readings lie on, 0 if none). Its rounding is noise in every speed change, which a log that moves between
+    steps slowly hides from the noise estimate (signals.speed_noise_rpm)."""
     torque_step_pct: float | None = None
     """The torque reading's resolution (% of rated), as the drive's register states it. None: found from the log
-    (signals.torque_step: the grid its readings lie on, 0 if none)."""
+    (signals.reading_step: the grid its readings lie on, 0 if none)."""
     fit_viscous: bool = True
     """Fit B; with False, B is held at 0."""
     fit_load_torque: bool = True

@@ -133,6 +133,7 @@ class FitData:
     rpm: np.ndarray  # the speed as logged
     pct: np.ndarray  # the torque as logged, % of rated
     torque_step_pct: float  # the torque reading's resolution, % of rated (0: finer or unknown)
+    torque_noise_pct: float  # the torque reading's error per sample (1 sigma, % of rated), its steps' included
     w: np.ndarray  # rad/s
     kink: np.ndarray
     position: np.ndarray  # rad at each sample (fit.signals.anchored)
@@ -159,6 +160,7 @@ def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: fl
         rpm=sig.rpm,
         pct=sig.pct,
         torque_step_pct=sig.torque_step_pct,
+        torque_noise_pct=sig.torque_noise_pct,
         w=sig.w,
         kink=sig.kink,
         position=sig.position,
@@ -179,27 +181,34 @@ def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: fl
     )
 
 
-def refit(fit: FitData, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """(parameters, their sigmas, residual) of the fit with extra columns after the estimator's; None if singular."""
+def refit(
+    fit: FitData, x: np.ndarray, shared: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(parameters, their sigmas, residual) of the fit with extra columns after the estimator's; None if singular.
+    shared: per window (rows) and column of x, the expected product of that regressor's noise with the noise of the
+    torque integral (a column computed from the same torque samples), taken out of X'y as eiv is out of X'X."""
     scale = np.linalg.norm(x, axis=0)
     scale[scale == 0] = 1.0
     xs = x / scale
     eiv = np.concatenate([fit.eiv, np.zeros(x.shape[1] - fit.eiv.size)])
+    cross = None if shared is None else shared / scale
     try:
-        theta = corrected_lstsq(xs, fit.y, eiv) / scale
+        theta = corrected_lstsq(xs, fit.y, eiv, cross) / scale
         resid = fit.y - x @ theta
         dof = max(1, x.shape[0] - x.shape[1])
         cov = float(resid @ resid) / dof * np.linalg.inv(xs.T @ xs - xs.shape[0] * np.diag(eiv))
     except np.linalg.LinAlgError:
         return None
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None)) / scale
-    std = np.maximum(std, jackknife_std(xs, fit.y, eiv, fit.groups, fit.min_jackknife_moves) / scale)
+    std = np.maximum(std, jackknife_std(xs, fit.y, eiv, fit.groups, fit.min_jackknife_moves, cross) / scale)
     return theta, std, resid
 
 
-def corrected_lstsq(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray) -> np.ndarray:
-    """Least squares with the expected regressor-noise variance per row (eiv) taken out of X'X."""
-    return np.linalg.solve(xs.T @ xs - xs.shape[0] * np.diag(eiv), xs.T @ y)
+def corrected_lstsq(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, cross: np.ndarray | None = None) -> np.ndarray:
+    """Least squares with the expected regressor-noise variance per row (eiv) taken out of X'X, and (cross: per row
+    and column) the expected product of a regressor's noise with y's out of X'y."""
+    xty = xs.T @ y if cross is None else xs.T @ y - np.sum(cross, axis=0)
+    return np.linalg.solve(xs.T @ xs - xs.shape[0] * np.diag(eiv), xty)
 
 
 def ma1_std(
@@ -219,7 +228,14 @@ def ma1_std(
     return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
-def jackknife_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, groups: np.ndarray, min_groups: int) -> np.ndarray:
+def jackknife_std(
+    xs: np.ndarray,
+    y: np.ndarray,
+    eiv: np.ndarray,
+    groups: np.ndarray,
+    min_groups: int,
+    cross: np.ndarray | None = None,
+) -> np.ndarray:
     """Delete-one-group jackknife standard deviation of the (column-scaled) least-squares parameters."""
     labels = np.unique(groups)
     g = labels.size
@@ -231,7 +247,7 @@ def jackknife_std(xs: np.ndarray, y: np.ndarray, eiv: np.ndarray, groups: np.nda
         if np.count_nonzero(keep) <= xs.shape[1]:
             return np.zeros(xs.shape[1])
         try:
-            thetas.append(corrected_lstsq(xs[keep], y[keep], eiv))
+            thetas.append(corrected_lstsq(xs[keep], y[keep], eiv, None if cross is None else cross[keep]))
         except np.linalg.LinAlgError:  # the rest cannot determine the parameters: no honest bound
             return np.full(xs.shape[1], np.inf)
     th = np.asarray(thetas)

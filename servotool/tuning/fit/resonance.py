@@ -5,9 +5,11 @@ Where the sampling resolves the load's own resonance, the two-mass model (the lo
 spring and a damper, the motor's inertia known) is fitted over a grid of resonance and damping; it counts where a
 lightly damped coupling explains the data far better than the rigid load and a heavily damped one (a lag, which
 rigid loads show too). Otherwise a quasi-static spring term (the deflection's rate follows the torque's rate of
-change) is tried: strong, J is taken from it; a hint of it (beyond two sigmas, a resonance below the sampling rate)
-keeps the rigid J and widens its uncertainty by what the term would change; short of that it cannot tell a stiff
-coupling from the integration's own error near torque steps, so its share of J's uncertainty counts, unnamed.
+change) is tried, with what the torque reading's noise alone gives it taken out (the term reads the torque samples
+its window's integral holds): strong, J is taken from it; a hint of it (beyond two sigmas, a resonance below the
+sampling rate) keeps the rigid J and widens its uncertainty by what the term would change, unnamed; short of that
+it cannot tell a stiff coupling from the integration's own error near torque steps, so its share of J's
+uncertainty counts, unnamed. A resonance is named by its frequency only below the log's Nyquist limit.
 A fitted model's correction is uncertain by a third of its size: the models are approximate.
 """
 
@@ -20,6 +22,7 @@ import numpy as np
 
 from servotool.tuning.fit import lost_motion
 from servotool.tuning.fit.regression import FitData, projected_fits, refit
+from servotool.tuning.fit.signals import cumulative_hermite
 from servotool.tuning.fit.verdict import Cause, Verdict, take
 
 MODEL_ERROR_DIVISOR = 3.0  # a correction by a fitted coupling model counts as uncertain by a third of its size
@@ -31,6 +34,8 @@ COMPLIANCE_HINT_SIGMA = 2.0  # beyond this many it widens the uncertainty by wha
 RESOLVABLE_HZ_PER_RATE = 1.0  # both where the resonance it implies lies below the sampling rate: a spring that rings
 #                               faster than the samples come is not told from the integration's own error (or the
 #                               speed reading's lag), which a long log makes as significant as any spring
+NYQUIST_SHARE = 0.5  # a resonance is named by its frequency only below this share of the sampling rate
+STENCIL_REACH = 6  # a window's torque integral and slopes reach at most this many samples beyond its span
 UNRESOLVED_SPRING_SHARE = 1.0  # short of a hint, this share of what a free spring term adds to J's uncertainty counts
 LOAD_HZ_MIN = 1.0  # a two-mass load's own resonance (against a held motor) is searched from here ...
 LOAD_HZ_PER_RATE = 0.2  # ... up to this fraction of the sampling rate and LOAD_HZ_MAX, in steps of LOAD_HZ_STEP
@@ -51,27 +56,27 @@ FOLLOWER_BLOCK_DECAY = 30.0  # follower_speed's blocks: the heaviest-damped mode
 
 def check(v: Verdict) -> Verdict:
     """J from the two-mass model where it counts, else from a strong spring term; a hint of a spring widens the
-    uncertainty (named where that alone could take it over the limit), no evidence adds the spring's share."""
+    uncertainty, no evidence adds the spring's share. A resonance is named by its frequency only below the Nyquist
+    limit of the log's own sampling rate."""
     fit, x = v.fit, v.x
+    rate = _rate(fit)
     mass = _two_mass(fit, x)
     if mass is not None:
         # The load's speed is the motor's low-passed, its noise mostly filtered out: no errors-in-variables correction.
         j, j_std, resid = take(
             replace(fit, y=mass.y, eiv=np.zeros_like(fit.eiv)), mass.x, (v.j, v.j_std, v.resid), 1 / MODEL_ERROR_DIVISOR
         )
-        cause = f"resonance near {mass.hz:.0f} Hz: the load follows the motor through a compliant coupling"
-        return replace(v, j=j, j_std=j_std, resid=resid, fitted=(*v.fitted, Cause(cause, curable=False)))
+        return replace(
+            v, j=j, j_std=j_std, resid=resid, fitted=(*v.fitted, Cause(_mass_words(mass, rate), curable=False))
+        )
     spring = _compliance_model(fit, x, v.j, v.j_std)
     if spring is None:
         return v
     with_spring = np.column_stack([x, spring.col])
-    resolved = spring.hz < RESOLVABLE_HZ_PER_RATE * _rate(fit)
+    resolved = spring.hz < RESOLVABLE_HZ_PER_RATE * rate
     if spring.strong and resolved:
-        j, j_std, resid = take(fit, with_spring, (v.j, v.j_std, v.resid), 1 / MODEL_ERROR_DIVISOR)
-        cause = (
-            f"resonance or torque ripple near {spring.hz:.0f} Hz: the load follows the motor through a "
-            "compliant coupling (or a long shaft, cogging)"
-        )
+        j, j_std, resid = take(fit, with_spring, (v.j, v.j_std, v.resid), 1 / MODEL_ERROR_DIVISOR, spring.shared)
+        cause = _spring_words(spring.hz, rate)
         lost = _lost_motion_reading(v, j)
         if lost is None:
             return replace(v, j=j, j_std=j_std, resid=resid, fitted=(*v.fitted, Cause(cause, curable=False)))
@@ -80,19 +85,39 @@ def check(v: Verdict) -> Verdict:
         j_std = math.hypot(j_std, abs(lost[0] - j) / COVERED_SIGMA)
         return replace(v, j=j, j_std=j_std, resid=resid, fitted=(*v.fitted, Cause(f"{cause}, {lost[1]}", curable=True)))
     if spring.z < -COMPLIANCE_HINT_SIGMA and resolved:
-        hinted = take(fit, with_spring, (v.j, v.j_std, v.resid), 0.0)
-        widening = v.widening
-        if v.j_std <= fit.max_rel * abs(v.j):  # else too uncertain anyway: the hint is not why
-            widening = Cause(f"perhaps a resonance near {spring.hz:.0f} Hz (a compliant coupling)", curable=False)
-        return replace(v, j_std=math.hypot(v.j_std, hinted[0] - v.j), widening=widening)
+        # Unnamed: a hint is what a rigid load's noise shows now and then; a longer log tells them apart.
+        hinted = take(fit, with_spring, (v.j, v.j_std, v.resid), 0.0, spring.shared)
+        return replace(v, j_std=math.hypot(v.j_std, hinted[0] - v.j))
     return replace(v, j_std=math.hypot(v.j_std, UNRESOLVED_SPRING_SHARE * spring.unresolved))
+
+
+def _mass_words(mass: _TwoMass, rate: float) -> str:
+    """The words for a two-mass load: the motor side's resonance where the sampling resolves it (below the Nyquist
+    limit), else the load's own, which the scan found below it."""
+    coupling = "the load follows the motor through a compliant coupling"
+    if mass.hz < NYQUIST_SHARE * rate:
+        return f"resonance near {mass.hz:.0f} Hz: {coupling}"
+    return (
+        f"{coupling}, the load's own resonance near {mass.load_hz:.0f} Hz (the motor side's lies above the "
+        f"{NYQUIST_SHARE * rate:.0f} Hz that {rate:.0f} samples/s resolve)"
+    )
+
+
+def _spring_words(hz: float, rate: float) -> str:
+    """The words for a spring term that counts: its resonance named where the sampling resolves it (below the
+    Nyquist limit, half the sampling rate), else only that it lies beyond."""
+    coupling = "the load follows the motor through a compliant coupling (or a long shaft, cogging)"
+    if hz < NYQUIST_SHARE * rate:
+        return f"resonance or torque ripple near {hz:.0f} Hz: {coupling}"
+    return f"{coupling}, its resonance above the {NYQUIST_SHARE * rate:.0f} Hz that {rate:.0f} samples/s resolve"
 
 
 @dataclass(frozen=True)
 class _Spring:
     col: np.ndarray  # the compliance column (one per window)
+    shared: np.ndarray  # per window and column of the regression with it: its noise times the torque integral's
     hz: float  # the resonance it implies
-    z: float  # its coefficient in sigmas (negative: the sign a spring gives)
+    z: float  # its coefficient in sigmas (negative: the sign a spring gives), clear of what the shared noise gives
     strong: bool  # significant and moving J
     unresolved: float  # how much a free spring term adds to J's uncertainty (in quadrature)
 
@@ -103,10 +128,15 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
 
     Through a spring k the load's speed differs from the motor's by the deflection's rate, about
     (J_load / J) * T' / k while the motion is slow against the resonance; the momentum balance over a window
-    then gains the term -J_load^2 / (J k) * (T'(end) - T'(start)) = -(ratio / omega_r^2) * delta T'."""
-    slope = _torque_slope(fit)
+    then gains the term -J_load^2 / (J k) * (T'(end) - T'(start)) = -(ratio / omega_r^2) * delta T'.
+    The torque's slope at a window's ends is read from the samples next to them, which the window's torque integral
+    holds too: their noise alone gives the term a spring's sign (a rigid load at 1 % noise named a 17 Hz
+    resonance at 6 sigma), and its expected share is taken out of the fit (_shared_noise)."""
+    slope = _torque_slope(fit.t, fit.torque)
     col = slope[fit.ends] - slope[fit.starts]
-    found = refit(fit, np.column_stack([x, col]))
+    shared = np.zeros((col.size, x.shape[1] + 1))
+    shared[:, -1] = _shared_noise(fit)
+    found = refit(fit, np.column_stack([x, col]), shared)
     if found is None:
         return None
     theta, std, _resid = found
@@ -118,7 +148,24 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     base = refit(fit, x)
     unresolved = math.sqrt(max(0.0, float(std[0]) ** 2 - float(base[1][0]) ** 2)) if base is not None else 0.0
     strong = z < -COMPLIANCE_SIGMA and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
-    return _Spring(col[:, None], math.sqrt(ratio / -b) / (2 * math.pi), z, strong, unresolved)
+    return _Spring(col[:, None], shared, math.sqrt(ratio / -b) / (2 * math.pi), z, strong, unresolved)
+
+
+def _shared_noise(fit: FitData) -> np.ndarray:
+    """Per window, the expected product of the spring column's noise with its torque integral's, for a torque
+    reading with white noise of fit.torque_noise_pct: both are linear in the torque samples, and a comb of unit
+    impulses further apart than a window and its stencils reach hits each window's samples at most once, so the
+    products of the two responses, summed over the combs, are the sums over each window's samples exactly."""
+    n = fit.t.size
+    spacing = int(np.max(fit.ends - fit.starts)) + STENCIL_REACH
+    total = np.zeros(fit.starts.size)
+    for first in range(min(spacing, n)):
+        probe = np.zeros(n)
+        probe[first::spacing] = 1.0
+        integral = cumulative_hermite(fit.t, probe, fit.kink)
+        slope = _torque_slope(fit.t, probe)
+        total += (integral[fit.ends] - integral[fit.starts]) * (slope[fit.ends] - slope[fit.starts])
+    return (fit.torque_noise_pct / 100.0 * fit.rated_nm) ** 2 * total
 
 
 def _lost_motion_reading(v: Verdict, j_spring: float) -> tuple[float, str] | None:
@@ -150,6 +197,7 @@ def _lost_motion_reading(v: Verdict, j_spring: float) -> tuple[float, str] | Non
 @dataclass(frozen=True)
 class _TwoMass:
     hz: float  # the motor-side resonance (torque to motor speed)
+    load_hz: float  # the load's own resonance against a held motor (what the scan resolves)
     x: np.ndarray  # the regression with the load's speed change in place of the motor's
     y: np.ndarray  # the torque integrals less what turns the motor alone (Jm times the deflection's rate)
 
@@ -198,7 +246,7 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
         return None
     dwl = _window_changes(fit, np.array(best[:1]), np.array(best[1:2]))[:, 0]
     y = fit.y - fit.jm * (fit.x[:, 0] - dwl)
-    return _TwoMass(best[0] * math.sqrt(best[2] / fit.jm), np.column_stack([dwl, x[:, 1:]]), y)
+    return _TwoMass(best[0] * math.sqrt(best[2] / fit.jm), best[0], np.column_stack([dwl, x[:, 1:]]), y)
 
 
 def _follower_fits(fit: FitData, x: np.ndarray, hz: np.ndarray, damping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -219,12 +267,12 @@ def _rate(fit: FitData) -> float:
     return float(1.0 / np.median(np.diff(fit.t))) if fit.t.size > 1 else 0.0
 
 
-def _torque_slope(fit: FitData) -> np.ndarray:
+def _torque_slope(t: np.ndarray, torque: np.ndarray) -> np.ndarray:
     """dT/dt at each sample (central differences on the uneven times). Across a torque step too: the slope there
     is what the coupling's deflection follows."""
-    if fit.torque.size < 3:
-        return np.zeros_like(fit.torque)
-    return np.gradient(fit.torque, fit.t)
+    if torque.size < 3:
+        return np.zeros_like(torque)
+    return np.gradient(torque, t)
 
 
 def follower_speed(t: np.ndarray, w: np.ndarray, hz: np.ndarray, damping: np.ndarray) -> np.ndarray:

@@ -33,6 +33,7 @@ class Signals:
     pct: np.ndarray  # the torque reading, % of rated
     torque: np.ndarray  # N*m
     torque_step_pct: float  # the torque reading's resolution, % of rated (0: finer than the log shows, or unknown)
+    torque_noise_pct: float  # the torque reading's error per sample (1 sigma, % of rated), its steps' rounding included
     noise_w: float
     band: float
     kink: np.ndarray
@@ -53,7 +54,8 @@ def signals(
 ) -> Signals:
     """Noise, zero-speed band, the torque reading's step, kinks (torque steps) and the Hermite integrals of torque
     and speed; the position over the log (position_rad: the drive's readings, NaN where none was read)."""
-    noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm)
+    speed_step = cfg.speed_step_rpm if cfg.speed_step_rpm is not None else reading_step(rpm)
+    noise_rpm = cfg.speed_noise_rpm if cfg.speed_noise_rpm is not None else speed_noise_rpm(t, rpm, speed_step)
     r.speed_noise_rpm = noise_rpm
     peak = float(np.max(np.abs(rpm)))
     band = cfg.zero_band_rpm if cfg.zero_band_rpm is not None else max(0.02 * peak, 3.0 * noise_rpm)
@@ -62,13 +64,16 @@ def signals(
     kink = kink_mask(t, rpm, pct, noise_rpm, cfg.kink_sigma, cfg.torque_noise_floor_pct)
     r.n_kinks = int(np.count_nonzero(kink))
     cum_w = cumulative_hermite(t, w, kink)
+    torque_step_pct = cfg.torque_step_pct if cfg.torque_step_pct is not None else reading_step(pct)
+    measured = cfg.torque_noise_pct if cfg.torque_noise_pct is not None else torque_noise_pct(t, pct)
     return Signals(
         t=t,
         rpm=rpm,
         w=w,
         pct=pct,
         torque=torque,
-        torque_step_pct=cfg.torque_step_pct if cfg.torque_step_pct is not None else torque_step(pct),
+        torque_step_pct=torque_step_pct,
+        torque_noise_pct=math.hypot(measured, torque_step_pct / math.sqrt(12.0)),
         noise_w=noise_rpm * RPM_TO_RAD_S,
         band=band,
         kink=kink,
@@ -117,20 +122,24 @@ def line_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return v[1:-1] - (a * v[:-2] + b * v[2:]), np.sqrt(1.0 + a**2 + b**2)
 
 
-def speed_noise_rpm(t: np.ndarray, rpm: np.ndarray) -> float:
-    """Robust speed-noise estimate (floored at 0.1 rpm): the smaller of the median deviations from the line through
-    each sample's two neighbours and from the cubic through its four.
+def speed_noise_rpm(t: np.ndarray, rpm: np.ndarray, step_rpm: float = 0.0) -> float:
+    """Robust speed-noise estimate (floored at 0.1 rpm and at the rounding of a reading in steps of step_rpm): the
+    smaller of the median deviations from the line through each sample's two neighbours and from the cubic through
+    its four.
 
     Motion adds to both deviations, so each overestimates the noise: the line where the speed curves between
     samples (a ringing loop), the cubic where its wider stencil spans a corner of a short ramp. The median ignores
-    the few samples that disagree with both.
+    the few samples that disagree with both. A reading in steps errs by up to half a step, uniformly over a speed
+    that moves through them (step / sqrt 12 r.m.s.), yet a speed that moves through them slower than a step per
+    sample reads on the line through its neighbours most of the time: the median misses that error, which is as
+    much noise in each window's speed change as any (1 rpm at 50 rpm peaks: J 6 % low and a spring blamed).
     """
     estimates = [
         float(1.4826 * np.median(np.abs(dev) / ref))
         for dev, ref in (line_deviation(t, rpm), cubic_deviation(t, rpm))
         if dev.size
     ]
-    return max(min(estimates, default=0.1), 0.1)
+    return max(min(estimates, default=0.1), 0.1, step_rpm / math.sqrt(12.0))
 
 
 def cubic_deviation(t: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -162,12 +171,20 @@ def kink_mask(
     """Samples at a torque step (torque or speed further than kink_sigma noise sigmas off the line through its
     neighbours; the torque noise estimated robustly, floored) or ending a gap (gap_after: a host stall)."""
     dev, ref = line_deviation(t, pct)
-    torque_noise = max(float(1.4826 * np.median(np.abs(dev) / ref)), torque_noise_floor_pct) if dev.size else 0.0
+    torque_noise = max(torque_noise_pct(t, pct), torque_noise_floor_pct)
     dev_w, ref_w = line_deviation(t, rpm)
     kink = np.zeros(pct.size, dtype=bool)
     kink[1:-1] = (np.abs(dev) > kink_sigma * torque_noise * ref) | (np.abs(dev_w) > kink_sigma * noise_rpm * ref_w)
     kink[1:] |= gap_after(t)
     return kink
+
+
+def torque_noise_pct(t: np.ndarray, pct: np.ndarray) -> float:
+    """Robust torque-noise estimate from the log (% of rated): the median deviation from the line through each
+    sample's neighbours. At a slow line the loop's swing between samples counts as noise too (an overestimate);
+    the rest check measures the reading without motion (tuning.preflight)."""
+    dev, ref = line_deviation(t, pct)
+    return float(1.4826 * np.median(np.abs(dev) / ref)) if dev.size else 0.0
 
 
 def move_ids(rpm: np.ndarray, band: float) -> np.ndarray:
@@ -218,9 +235,9 @@ def cumulative_hermite(t: np.ndarray, v: np.ndarray, kink: np.ndarray) -> np.nda
     return out
 
 
-def torque_step(torque: np.ndarray) -> float:
+def reading_step(values: np.ndarray) -> float:
     """The step of a reading where every value lies on one grid (a torque read in whole percent), else 0."""
-    values = np.unique(torque)
+    values = np.unique(values)
     if values.size < 3:
         return 0.0
     step = float(np.min(np.diff(values)))

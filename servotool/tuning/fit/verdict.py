@@ -80,11 +80,15 @@ class Verdict:
 
 
 def take(
-    fit: FitData, x: np.ndarray, before: tuple[float, float, np.ndarray], model_error: float
+    fit: FitData,
+    x: np.ndarray,
+    before: tuple[float, float, np.ndarray],
+    model_error: float,
+    shared: np.ndarray | None = None,
 ) -> tuple[float, float, np.ndarray]:
-    """(J, sigma, residual) of the fit over regressors x; sigma grows by model_error times the correction to J.
-    `before` where that fit is singular."""
-    found = refit(fit, x)
+    """(J, sigma, residual) of the fit over regressors x (shared: as regression.refit has it); sigma grows by
+    model_error times the correction to J. `before` where that fit is singular."""
+    found = refit(fit, x, shared)
     if found is None:
         return before
     j = float(found[0][0])
