@@ -58,6 +58,10 @@ class RestWatch:
             and abs(self.mean_rpm) < self.mean_band_rpm
         )
 
+    def __len__(self) -> int:
+        """How many readings the mean takes now (the last ones inside the band)."""
+        return len(self._last)
+
     @property
     def mean_rpm(self) -> float:
         """The mean of the last readings inside the band (nan before the first)."""

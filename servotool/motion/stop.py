@@ -14,7 +14,6 @@ Interrupts are held while it runs (motion/interrupts.py).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
@@ -282,8 +281,7 @@ class _Read:
     forcing_on: bool | None = None
     forcing: str = ""
     alarm: str = ""
-    judged_rpm: float = 0.0  # the band the speed was judged against (a reading's, or the mean's) ...
-    on_mean: bool = False  # ... and whether it was the mean's (speed_rpm then the mean of `readings`)
+    judgement: str = ""  # how the speed read fails rest: "not under 10 rpm", "mean of its last 10 readings, ..."
     readings: int = 0  # how many speed readings the judgement took
 
 
@@ -305,17 +303,23 @@ def _read_drive(
     speed_e = drive.profile.role("speed_feedback")
     if speed_e is not None:
         watch = RestWatch(band)
-        last, read.at_rest = 0.0, False
+        last, peak, read.at_rest = 0.0, 0.0, False
         for count in range(1, PROOF_SPARE_READINGS * watch.readings_needed + 5):
             if count > 1:
                 idle(SETTLE_S / 2)
             last, read.readings = float(_speed(drive) or 0.0), count
+            peak = max(peak, abs(last))
             if watch.at_rest(clock.now(), last):
                 read.at_rest = True
                 break
-        read.on_mean = abs(last) < band and not math.isnan(watch.mean_rpm)
-        read.speed_rpm = round(watch.mean_rpm, 1) if read.on_mean else last
-        read.judged_rpm = watch.mean_band_rpm if read.on_mean else band
+        read.speed_rpm, read.judgement = last, f"not under {band:g} rpm"
+        if read.at_rest:
+            read.speed_rpm = round(watch.mean_rpm, 1)
+        elif abs(last) < band <= peak:  # the last reading inside the band the others kept leaving
+            read.judgement = f"readings up to {peak:g} rpm among {read.readings}, not staying under {band:g} rpm"
+        elif abs(last) < band:  # every reading in the band: the mean was not near zero
+            read.speed_rpm = round(watch.mean_rpm, 1)
+            read.judgement = f"mean of its last {len(watch)} readings, not under {watch.mean_band_rpm:g} rpm"
     end = clock.now() + servo_wait_s
     read.servo_on, read.servo_code = servo_state(drive)
     while read.servo_on is not None and read.servo_on != servo_found_on and clock.now() < end:
@@ -340,9 +344,8 @@ def _report(
     """The facts, with what the drive read that proves no stop (since: when the speed should have been at rest)
     and the sequence's `more` problems."""
     if read.at_rest is False and read.speed_rpm is not None:
-        over = f"mean of {read.readings} readings, " if read.on_mean else ""
-        under = f"not under {read.judged_rpm:g} rpm{since}"
-        steps.problems.append(f"the speed reads {read.speed_rpm:g} rpm ({over}{under})")
+        judged = read.judgement or f"not under {band:g} rpm"
+        steps.problems.append(f"the speed reads {read.speed_rpm:g} rpm ({judged}{since})")
     if read.servo_on is not None and read.servo_on != servo_found_on:
         steps.problems.append(f"{read.servo_code} reads the servo {'on' if read.servo_on else 'off'}")
     steps.problems += more or []

@@ -289,3 +289,27 @@ def test_a_servo_the_drive_switches_off_only_at_rest_is_waited_for_not_reported_
     report = stop.final(stop.reports()[since:])
     assert report.confirmed and report.servo_on is False, report.describe()
     assert not sim.firmware.plant.servo_on and abs(sim.firmware.plant.true_speed_rpm) < 1.0
+
+
+@pytest.mark.parametrize(
+    ("readings", "said"),
+    [
+        ([30.0], "the speed reads 30 rpm (mean of its last 10 readings, not under 10 rpm"),
+        ([50.0] + [0.0] * 8, "rpm (readings up to 50 rpm among 34, not staying under 41 rpm"),
+    ],
+)
+def test_a_stop_not_proven_says_how_the_speed_failed_rest_without_contradiction(sim_dir, readings, said):
+    """A noisy reading's band is four noises wide (41 rpm for 10 rpm of noise): a steady 30 rpm inside it fails on
+    its mean, a speed that keeps leaving it on the readings outside; before, a last reading of -2 rpm was said 'not
+    under 10 rpm'."""
+    _sim, jogger, _clock = _jogger("dsx7e")
+    plan = jogger.plan(300, 0.3)
+    sequence = iter(readings * 1000)
+    original = stop._speed
+    stop._speed = lambda drive: next(sequence)
+    try:
+        with pytest.raises(StopUnconfirmed) as raised, jogger.stopping(band_rpm=41.0):
+            jogger._run(plan)
+    finally:
+        stop._speed = original
+    assert said in str(raised.value), str(raised.value)
