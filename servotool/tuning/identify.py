@@ -299,10 +299,11 @@ class _HostRun:
 
     def _exceeded(self) -> TravelExceeded:
         """The travel limit reached, in words that name its cause: a gap between samples (the host stalled) that let
-        a host-timed move run on, where the move had one; else the loop overshooting its moves."""
+        a host-timed move run on, where the motion had one (a stall in an earlier move leaves the axis that much
+        further on: the creep adds up); else the loop overshooting its moves."""
         s, limit = self.sampler, self.plan.travel_limit_rev
         said = f"travel limit {limit:g} rev reached (the axis covered {s.travel_rev:.2f} rev): motion stopped; "
-        gap, usual = self._longest_gap(self.move_first), self._usual_interval()
+        gap, usual = self._longest_gap(0), self._usual_interval()
         if gap >= max(STALL_S, STALL_INTERVALS * usual):
             return TravelExceeded(
                 said + f"a {1000 * gap:.0f} ms gap between samples (usually {1000 * usual:.2g} ms: the host stalled, "
