@@ -75,7 +75,8 @@ def _path_with_servotool(tmp: Path) -> str:
 def masked(text: str) -> str:
     """Numbers as #, runs of table padding as one space, wrapped lines joined, a frame's bytes as #, an
     identification's move lines left out (it stops once its estimate is tight: a move more or less), a sampling
-    gap's mention and a widened uncertainty's note dropped: what may differ from run to run."""
+    gap's mention and the subsets' notes (a widened uncertainty, an off-model spread) dropped: what may differ from
+    run to run."""
     text = re.sub(r"(?m)^move \d+/\d+ (forward|reverse) at .*\n", "", text)
     text = re.sub(r"(?m)^(<<|>>)( [0-9a-f]{2})+", r"\1 #", text)
     text = re.sub(r"[-−+]?\d+(\.\d+)?(e[-+]?\d+)?", "#", text)  # a sign too: a speed reads -1 or 0 rpm at rest
@@ -83,8 +84,11 @@ def masked(text: str) -> str:
     text = re.sub(r"[ ─━]+", " ", text)
     text = re.sub(r"\n (?=\S)", " ", text)  # a wrapped line joined: where it wraps follows the numbers' widths
     text = re.sub(r"(?m)^sampling gaps of up to # ms while the axis moved .*\n", "", text)  # a stall's note, too
-    # the subsets' note: whether the accelerations' spread of J exceeds what the speed noise makes is the noise's
-    return re.sub(r"(?m)^uncertainty widened #x: .*\n", "", text)
+    # the subsets' notes: whether the spread of J over the accelerations, the phases or the travel exceeds what the
+    # speed noise makes is the noise's (a rigid load's thirds of the travel disagree 1.5x their uncertainty and 3 %
+    # now and then: the README's own run said "off-model: inertia differs over the travel" once in CI)
+    text = re.sub(r"(?m)^uncertainty widened #x: .*\n", "", text)
+    return re.sub(r"(?m)^off-model: inertia differs .*; uncertainty widened to the spread .*\n", "", text)
 
 
 def main() -> int:
