@@ -27,8 +27,8 @@ BIRGE_REFUSE = 3.0  # ... refuse where they disagree this many times beyond thei
 GROSS_SPREAD = 0.08  # ... and their spread exceeds this fraction of J
 ACCEL_SNR = 10.0  # windows sorted by acceleration: their speed change this many times its noise or more,
 ACCEL_STEPS = 10.0  # ... and their acceleration torque this many steps of the torque reading or more
-ACCEL_BLAME_BIRGE = 3.0  # ... and they disagree this many times their uncertainties before backlash is blamed
-#                          (by chance over three unbiased subsets: p ~ 1e-4, however long the log),
+ACCEL_BLAME_BIRGE = 3.0  # ... and they disagree this many times their uncertainties before backlash (or, in any
+#                          grouping, a mechanism) is blamed (by chance over three unbiased subsets: p ~ 1e-4),
 ACCEL_BLAME_SPREAD = 0.05  # ... and by more than this fraction of J (points_off_model)
 BLAME_SPREAD = 0.03  # subsets of any grouping that differ by less than this fraction of J blame nothing
 
@@ -83,13 +83,15 @@ def cause(name: str) -> str:
 def points_off_model(name: str, birge: float, spread: float) -> bool:
     """Whether subsets that disagree this much (Birge ratio, relative spread of J) point to mechanics outside the
     rigid model. No grouping blames them for a spread within BLAME_SPREAD, a difference no setting depends on (a
-    rigid load's loop transients make its travel or phases differ that much). An acceleration grouping blames them
-    only beyond both ACCEL_BLAME_BIRGE and ACCEL_BLAME_SPREAD: a rigid load's weakest accelerations (where a ramp
-    starts and ends) read J up to 3 % apart from its strong ones, a bias that a long log makes stand out in sigmas
-    (115200 baud, 0.2 % noise: 1.5-3x) though its spread stays small."""
-    if spread <= BLAME_SPREAD:
+    rigid load's loop transients make its travel or phases differ that much), nor within ACCEL_BLAME_BIRGE of their
+    uncertainties: three subsets of a rigid load disagree beyond 1.5x by chance about one run in ten (the README's
+    own tune run once said "off-model: inertia differs over the travel"). An acceleration grouping also needs
+    ACCEL_BLAME_SPREAD: a rigid load's weakest accelerations (where a ramp starts and ends) read J up to 3 % apart
+    from its strong ones, a bias that a long log makes stand out in sigmas (115200 baud, 0.2 % noise: 1.5-3x)
+    though its spread stays small."""
+    if spread <= BLAME_SPREAD or birge <= ACCEL_BLAME_BIRGE:
         return False
-    return (birge > ACCEL_BLAME_BIRGE and spread > ACCEL_BLAME_SPREAD) or "acceleration" not in name
+    return spread > ACCEL_BLAME_SPREAD or "acceleration" not in name
 
 
 def unblamed(name: str) -> tuple[str, str]:
