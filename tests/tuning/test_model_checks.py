@@ -118,7 +118,7 @@ def test_a_rigid_load_whose_travel_differs_by_1_percent_at_a_fast_line_is_not_ca
     assert abs(run.ratio - 5.0) <= 3 * est.ratio_std
     # The note's words for such a grouping (the machine showed them at 2 rev and 1080 rpm; at the 12 rev DSX7E's
     # watchdog run-on now needs for that speed, its travel subsets agree).
-    assert unblamed("over the travel (start, middle, end)") == ("too little to point to the mechanics", "")
+    assert unblamed("over the travel (start, middle, end)") == "too little to point to the mechanics"
 
 
 # Words that blame a coupling the plant does not have.

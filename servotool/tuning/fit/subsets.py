@@ -45,9 +45,8 @@ def check(v: Verdict) -> Verdict:
     if birge > BIRGE_REFUSE and spread > GROSS_SPREAD:
         return replace(v, j_std=j_std, refuse="; ".join([*(c.words for c in v.fitted), f"{text}: {cause(name)}"]))
     if not points_off_model(name, birge, spread):
-        words, causes = unblamed(name)
-        note = f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, {words}"
-        widening = Cause(f"{text}: {causes}" if causes else text, curable=True)
+        note = f"uncertainty widened {birge:.1f}x: J differs {name} by {100 * spread:.0f} %, {unblamed(name)}"
+        widening = Cause(text, curable=True)
     else:
         note = f"off-model: {text}; uncertainty widened to the spread ({cause(name)})"
         widening = Cause(f"{text}; {cause(name)}", curable=False)
@@ -94,12 +93,13 @@ def points_off_model(name: str, birge: float, spread: float) -> bool:
     return spread > ACCEL_BLAME_SPREAD or "acceleration" not in name
 
 
-def unblamed(name: str) -> tuple[str, str]:
-    """(the note's words, the causes a refusal names) for the named grouping's disagreement that points to no
-    mechanics (points_off_model False); the causes are empty where it names none."""
+def unblamed(name: str) -> str:
+    """The note's words for the named grouping's disagreement that points to no mechanics (points_off_model False).
+    A refusal for it names no mechanism either: one that listed "backlash or a compliant coupling, or neither" for a
+    disagreement a rigid load shows by chance sent the engineer to look for play that is not there."""
     if "acceleration" in name:
-        return "within what a rigid load's weakest accelerations show", "backlash or a compliant coupling, or neither"
-    return "too little to point to the mechanics", ""
+        return "within what a rigid load's weakest accelerations show"
+    return "too little to point to the mechanics"
 
 
 def _groupings(fit: FitData, dw: np.ndarray, j: float) -> dict[str, np.ndarray]:
