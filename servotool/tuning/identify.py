@@ -361,6 +361,10 @@ class _HostRun:
         stop = self.timing.now()
         at_stop, v_stop = s.pred, abs(trace.speed[-1]) if trace.speed else 0.0
         self.sample()  # after the stop's own writes: no stall
+        # Between moves the next one may start once a reading falls inside the stop's band: no claim rests on it (the
+        # fit takes whatever motion the log shows, a target ends the next move by position). What the user is told
+        # rests on the stop's proof (motion.rest.RestWatch: band and mean), whose readings here would cost SDC at 1 %
+        # noise nine readings a move, 7 s of a 30 s budget.
         while self.timing.now() - stop < 3 * self.ramp + 0.5:
             self._sample_timed()
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
