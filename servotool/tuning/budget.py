@@ -344,3 +344,24 @@ def more_travel(
             return None
         travel += 0.5
     return None
+
+
+def strongest_travel(
+    line: Line, load_ratio: float, travel_rev: float, target: float, speed_rpm: float | None = None
+) -> Need | None:
+    """The least travel beyond travel_rev (in steps of half a revolution, up to MAX_TRAVEL_REV) at which the moves
+    reach the speed or the torque the drive allows, so that no longer one accelerates them harder, with the time its
+    run is given; None where they reach it already. What a refusal names where the fit's uncertainty was widened by
+    a check the line's model does not predict (tuning.identify): the strongest motion, which no model says is
+    enough. speed_rpm: as more_travel has it."""
+    per_rev = speed_rpm / travel_rev if speed_rpm is not None and speed_rpm > 0 else None
+    if predicted(line, load_ratio, travel_rev, 2, per_rev)[2] != "travel":
+        return None
+    travel = math.floor(travel_rev * 2.0) / 2.0 + 0.5
+    while travel <= MAX_TRAVEL_REV + 1e-9:
+        time_s = given_s(line, load_ratio, travel, target)
+        sigma, speed, bound = predicted(line, load_ratio, travel, moves_in(line, time_s), per_rev)
+        if bound != "travel" or travel + 0.5 > MAX_TRAVEL_REV + 1e-9:
+            return Need(load_ratio, travel, time_s, sigma, speed, False, bound)
+        travel += 0.5
+    return None

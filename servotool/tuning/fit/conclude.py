@@ -19,7 +19,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     est = dict(zip(fit.names, fit.theta, strict=True))
     err = dict(zip(fit.names, fit.std, strict=True))
     j = float(verdict.j)
-    r.j, r.j_std = j, float(verdict.j_std)
+    r.j, r.j_std, r.fit_std = j, float(verdict.j_std), float(fit.std[0])
     r.ratio, r.ratio_std = j / jm - 1.0, r.j_std / jm
     r.tc, r.tc_std = float(est["Tc"]), float(err["Tc"])
     r.b, r.b_std = float(est.get("B", 0.0)), float(err.get("B", 0.0))
@@ -59,6 +59,14 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
         said = f"inertia too uncertain ({100 * rel:.1f} % of J_total > {100 * cfg.max_rel_uncertainty:g} %)"
         if verdict.widened:
             return r.refuse(f"{said}: {verdict.widened}")
+        own = r.fit_std / j
+        if own <= cfg.max_rel_uncertainty < rel:
+            # a check widened it without words (fit.resonance: a stiffer coupling than the log resolves, not ruled
+            # out); the refusal says so, or it reads as a fit that lacked data
+            said += (
+                f": {100 * own:.1f} % from the fit itself, the rest what the model checks cannot rule out at this "
+                "sampling"
+            )
         return r.refuse(said, "use stronger accelerations or more moves")
     floor = verdict.floor
     if floor is not None:

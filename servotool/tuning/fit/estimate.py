@@ -148,6 +148,9 @@ class InertiaEstimate:
     """Each move's own ratio, in the order run (none where the fit stopped before its checks)."""
     fitted_windows: tuple[FittedWindow, ...] = ()
     """The windows of the model the estimate stands on (none where the fit stopped before its checks)."""
+    fit_std_kgm2: float = math.nan
+    """J's uncertainty from the rigid fit alone (least squares, MA(1), jackknife), before the model checks widened
+    it: what the line's budget (tuning.budget) models; NaN where the fit stopped before it."""
 
 
 class Refused(Exception):
@@ -186,6 +189,7 @@ class Partial:
     shortfall: float = math.nan
     moves: tuple[MoveEstimate, ...] = ()
     fitted_windows: tuple[FittedWindow, ...] = ()
+    fit_std: float = math.nan
 
     def refuse(self, reason: str, advice: str = "") -> InertiaEstimate:
         return self.result(ok=False, reason=reason, advice=advice)
@@ -219,4 +223,5 @@ class Partial:
             shortfall=self.shortfall,
             moves=self.moves,
             fitted_windows=self.fitted_windows,
+            fit_std_kgm2=self.fit_std,
         )
