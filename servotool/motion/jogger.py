@@ -402,10 +402,15 @@ class Jogger:
                 self.inputs.release()  # where command_zero could not (a no-op once released)
         return forced
 
+    def moving_rpm(self) -> float:
+        """The fastest speed this jogger armed (its speed or its dead-man's): a swing after the stop within it is a
+        loop ringing, not a runaway (motion.stop)."""
+        return max(self.speed_rpm, self.dead_man.speed_rpm if self.dead_man is not None else 0.0)
+
     def stop_wait_s(self) -> float:
         """How long the stop waits for rest: twice the drive's ramp down from the fastest speed armed, and a second
         (the ramp as this jogger last read or wrote it: nothing is read here, the line may be gone)."""
-        speed = max(self.speed_rpm, self.dead_man.speed_rpm if self.dead_man is not None else 0.0)
+        speed = self.moving_rpm()
         ramp_raw = self._ramp_raw if self._ramp_raw is not None else self._planned_ramp_raw
         entry = self.profile.role("jog_accel")
         ramp_ms = float(raw_to_eng(entry, ramp_raw)) if entry is not None and ramp_raw is not None else None

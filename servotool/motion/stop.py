@@ -36,7 +36,8 @@ DEFAULT_WAIT_S = 3.0  # the stop's wait for rest where the motion's own cannot b
 # A read's failure that shows the line answering (replies that did not agree with their confirming read: a live
 # value, or stray replies), as opposed to a silent or lost line: a stop waits on through it.
 LINE_ANSWERS = ("unsettled", "disagree")
-RUNAWAY_SHARE = 1.2  # waiting for rest, a speed this much above the first one read means the drive is not stopping it
+RUNAWAY_SHARE = 1.2  # waiting for rest, a speed this much above the first one read, and above the motion's own speed
+#                       where known, means the drive is not stopping it
 
 
 # ----- the facts ----------------------------------------------------------------------------------------------
@@ -228,10 +229,14 @@ def _wait_for_rest(
     clock: Clock,
     idle: Callable[[float], None],
     poll_s: float,
+    moving_rpm: float | None = None,
 ) -> tuple[bool | None, float | None]:
     """Wait (bounded) until the speed stays inside the band (RestWatch): (at rest, the last speed); at rest None
     where the drive shows no speed. A motor that speeds up instead (a load the drive cannot hold) ends the wait at
-    once: the servo-off comes next."""
+    once: the servo-off comes next. Speeding up is judged against the first speed read and the motion's own
+    (moving_rpm, where known): a loop that rings after the stop swings within the speed it moved at, and the first
+    reading may catch it near zero (a load of 50 on a gravity axis, read at 62 rpm, then 89 on its swing: called a
+    runaway, the servo went off at 104 rpm and the load fell 3.6 rev before its brake closed)."""
     watch, speed, end = RestWatch(band_rpm), None, clock.now() + wait_s
     first: float | None = None
     while not steps.line_dead:
@@ -257,7 +262,7 @@ def _wait_for_rest(
         if speed is None or watch.at_rest(clock.now(), speed):
             return (None if speed is None else True), speed
         first = abs(speed) if first is None else first
-        if clock.now() >= end or abs(speed) > RUNAWAY_SHARE * first + PROOF_BAND_RPM:
+        if clock.now() >= end or abs(speed) > RUNAWAY_SHARE * max(first, moving_rpm or 0.0) + PROOF_BAND_RPM:
             return False, speed
         steps.run("feeding the drive's watchdog", halt.keep_alive)
         if not steps.run("waiting", lambda: idle(poll_s)):  # a JOG's trace samples while it waits
@@ -389,6 +394,7 @@ def stop_sequence(
     clock: Clock | None = None,
     idle: Callable[[float], None] | None = None,
     poll_s: float = 0.02,
+    moving_rpm: float | None = None,
 ) -> StopReport:
     """Zero speed, rest, servo as found, heartbeat stopped and forced inputs released, the motion's settings back,
     then the drive read back.
@@ -396,7 +402,8 @@ def stop_sequence(
     saved: code -> raw of every parameter the motion wrote (written back where it differs, then all read back);
     wait_s: how long the drive may take to come to rest (its ramp from the motion's speed, with margin);
     band_rpm: the speed band of rest the servo-off waits for (the motion's: a ringing loop swings through zero);
-    the proof takes PROOF_BAND_RPM at least. Each step
+    the proof takes PROOF_BAND_RPM at least; moving_rpm: the fastest the motion moved (None: unknown), within which
+    a swing after the stop is no runaway (_wait_for_rest). Each step
     runs even when one before it failed (a servo-off stops a motor whose zero command was lost); once the line stops
     answering, each is tried once."""
     GUARD.armed = False
@@ -411,7 +418,7 @@ def stop_sequence(
 
     steps.run("commanding zero speed", zero, tries=2)
     first_wait = wait_s if ramp_s[0] is None else min(wait_s, ramp_s[0])
-    at_rest, speed = _wait_for_rest(drive, halt, steps, first_wait, band_rpm, clock, idle, poll_s)
+    at_rest, speed = _wait_for_rest(drive, halt, steps, first_wait, band_rpm, clock, idle, poll_s, moving_rpm)
     steps.run("switching the servo off", halt.leave)
     if at_rest is False:  # the servo-off stops it (the drive's own servo-off stop), or it coasts
         at_rest, speed = _wait_for_rest(drive, halt, steps, wait_s, band_rpm, clock, idle, poll_s)
@@ -471,6 +478,7 @@ class Motion(Protocol):
     def start_protection(self, saved: dict[str, int]) -> None: ...
     def snapshot(self, need_ramp: bool) -> dict[str, int]: ...
     def stop_wait_s(self) -> float: ...
+    def moving_rpm(self) -> float | None: ...
     def starved(self) -> str: ...
     def stopped(self, report: StopReport) -> None: ...
 
@@ -541,6 +549,7 @@ class MotionStop:
                 band_rpm=self.band_rpm,
                 clock=motion.clock,
                 idle=getattr(motion, "idle", None),  # a JOG's trace keeps sampling while it stops
+                moving_rpm=motion.moving_rpm(),
             )
         finally:
             try:

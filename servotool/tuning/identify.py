@@ -173,6 +173,9 @@ class _OwnIdentification:
     def stop_wait_s(self) -> float:
         return 3.0
 
+    def moving_rpm(self) -> float | None:
+        return None  # the drive's own motion: its speed is not servotool's
+
     def starved(self) -> str:
         return ""  # the drive's own function runs the motion: no host-timed beat to miss
 

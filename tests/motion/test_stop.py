@@ -313,3 +313,45 @@ def test_a_stop_not_proven_says_how_the_speed_failed_rest_without_contradiction(
     finally:
         stop._speed = original
     assert said in str(raised.value), str(raised.value)
+
+
+def _servo_off_after(readings: list[float], speed: float) -> int:
+    """How many speed readings the stop took before it switched the servo off, a JOG at `speed` rpm stopped while
+    the speed reads `readings` (then 0 rpm)."""
+    _sim, jogger, _clock = _jogger("dsx7e")
+    plan = jogger.plan(speed, 0.3)
+    taken: list[int] = []
+    sequence = iter(readings)
+    count = [0]
+
+    def read(_drive: object) -> float:
+        count[0] += 1
+        return next(sequence, 0.0)
+
+    leave = jogger.leave
+    jogger.leave = lambda: (taken.append(count[0]), leave())  # type: ignore[method-assign]
+    original = stop._speed
+    stop._speed = read
+    try:
+        with jogger.stopping(band_rpm=12.0):
+            jogger._run(plan)
+    except StopUnconfirmed:
+        pass
+    finally:
+        stop._speed = original
+    return taken[0]
+
+
+def test_a_loop_that_rings_after_the_stop_is_held_until_it_rests_not_called_a_runaway(sim_dir):
+    """A load of 50 on a gravity axis rang after the identification's stop: the first reading caught it near zero
+    (62 rpm), the next on its swing (89): 'speeding up', so the servo went off at 104 rpm and the load fell 3.6 rev
+    before its brake closed (DSX7E 115200 and IS620P 57600, bench machines, virtual time: COULD NOT CONFIRM). A swing
+    within the speed the motion ran at is the loop ringing: the servo stays on until the axis rests."""
+    swing = [62.0, 89.0, 150.0, 240.0, 120.0, -60.0, -150.0, -40.0, 20.0, 5.0]
+    assert _servo_off_after(swing, 424.0) > len(swing)
+
+
+def test_a_motor_that_speeds_up_past_its_motion_after_the_stop_is_switched_off_at_once(sim_dir):
+    """A load the drive cannot hold speeds up after the zero command: the servo-off comes as soon as the speed passes
+    the motion's own (and the first reading) by a fifth, not after the whole wait."""
+    assert _servo_off_after([300.0, 340.0, 380.0, 420.0, 460.0] + [500.0] * 200, 300.0) <= 5
