@@ -364,10 +364,12 @@ class _HostRun:
         stop = self.timing.now()
         at_stop, v_stop = s.pred, abs(trace.speed[-1]) if trace.speed else 0.0
         self.sample()  # after the stop's own writes: no stall
-        # Between moves the next one may start once a reading falls inside the stop's band: no claim rests on it (the
-        # fit takes whatever motion the log shows, a target ends the next move by position). What the user is told
-        # rests on the stop's proof (motion.rest.RestWatch: band and mean), whose readings here would cost SDC at 1 %
-        # noise nine readings a move, 7 s of a 30 s budget.
+        # Between moves the next one may start once a reading falls inside the stop's band: no claim to the user rests
+        # on it (the stop's proof is RestWatch's band and mean). Known cost: a heavy load's ringing loop shows such a
+        # reading on its way through zero, and the next move starts mid-swing (IS620P 57600, loads of 37-50 with 1 %
+        # noise: at -123..+329 rpm; the swings add up to the travel limit). RestWatch here (two readings over
+        # SETTLE_S) cured those two and cost SDC 9600 acceptance and DSX7E 19200's noise-free fits their 3 sigma on
+        # the bench: not landed.
         while self.timing.now() - stop < 3 * self.ramp + 0.5:
             self._sample_timed()
             if self.timing.now() - stop >= self.ramp and abs(trace.speed[-1]) < self.stop_band:
