@@ -681,9 +681,9 @@ class _HostRun:
         return Remedy(travel, found.travel_rev, found.travel_rev / travel, True, found.bound, found.time_s)
 
     def _strongest(self, est: InertiaEstimate) -> Remedy | None:
-        """Where the rigid fit alone was within the limit and a model check's widening (a coupling stiffer than the
-        log resolves, not ruled out) took it over: the strongest motion the drive allows, as one that may not be
-        enough. The line's model scaled to the widened uncertainty said no travel would do (DSX7E 115200, load 37,
+        """Where the rigid fit alone was within the limit and what was added to it took it over (a model check's
+        widening, such as a coupling stiffer than the log resolves, not ruled out; the torque reading's floor): the
+        strongest motion the drive allows, as one that may not be enough. The line's model scaled to the widened uncertainty said no travel would do (DSX7E 115200, load 37,
         1 % noise: the fit alone 1.3 %, widened to 3.6 %), where 16 rev identified it within 3 sigma in 5 of 5 seeds:
         the widening falls with stronger moves far faster than the model's noise does."""
         needs = self.plan.needs
