@@ -71,8 +71,9 @@ class SegmentMoves:
         to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.ramp_rpm
         # up for own_s, down as long (a ramp of 0: at speed for own_s)
         own = abs(speed_rpm) / 60.0 * own_s * (min(1.0, own_s / to_speed_s) if to_speed_s > 0 else 1.0)
-        if within_rev is not None:
-            own = max(0.0, min(own, within_rev))
+        if within_rev is not None and within_rev < own:
+            # short of it by half a displacement unit: rounded, the segment still ends within it
+            own = max(0.0, within_rev - 0.5 / self.units_per_rev())
         return (own, True) if own <= bounded or self.single else (bounded, False)
 
     def distance_raw(
