@@ -28,6 +28,7 @@ class Mover(Jogger):
     _looked: float | None = None  # when keep_alive was last called
     _promised_s = 0.0  # ... and the lead_s it was given then
     _late_s = 0.0  # the longest time between two calls that overran its lead: the host's own stalls, taken as a lead
+    ended_itself = False  # the last command(0) found the move's own segment braking it: no stop command acted
 
     @property
     def folds(self) -> bool:
@@ -116,7 +117,9 @@ class Mover(Jogger):
             and self.clock.now() >= self._ends_at
         ):
             segments.moving = 0  # the move's own segment is braking it now: nothing to write
+            self.ended_itself = True
             return
+        self.ended_itself = False
         own = segments.own_s if self.direction else None
         super()._segment_command()
         segments.own_s = None

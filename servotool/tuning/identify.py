@@ -378,7 +378,9 @@ class _HostRun:
         while self.timing.now() < rest:
             self.sample()
         guard.ended()
-        if v_stop > self.stop_band:
+        # The coast after a stop command; a move whose own segment braked it ran past that, not past a command
+        # (BandGuard.ended: taken as a lag, it was read at the low speed the host saw after its ramp, up to 1.2 s).
+        if v_stop > self.stop_band and not jogger.ended_itself:
             guard.coasted(abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0, v_stop)
         active = active_alarm(self.drive)
         if active:

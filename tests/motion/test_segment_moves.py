@@ -95,7 +95,7 @@ def test_a_move_bounded_by_the_room_left_stops_there_by_itself_however_late_the_
     clock.advance(0.3)
     jogger.keep_alive()
     jogger.command(0)
-    assert writes == []
+    assert writes == [] and jogger.ended_itself
     clock.advance(0.5)
     assert _position_rev(jogger) - start == pytest.approx(0.4, abs=0.02)
     assert stop_sequence(jogger.drive, jogger, saved, wait_s=1.0, clock=clock).confirmed
