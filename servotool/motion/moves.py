@@ -122,7 +122,7 @@ class Mover(Jogger):
         self.ended_itself = False
         own = segments.own_s if self.direction else None
         super()._segment_command()
-        segments.own_s = None
+        segments.own_s = segments.own_within = None
         self._ends_at = self.clock.now() + own if own is not None and segments.ends_itself else None
 
     def own_segment_rev(self) -> float | None:
