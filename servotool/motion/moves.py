@@ -28,6 +28,7 @@ class Mover(Jogger):
     _looked: float | None = None  # when keep_alive was last called
     _promised_s = 0.0  # ... and the lead_s it was given then
     _late_s = 0.0  # the longest time between two calls that overran its lead: the host's own stalls, taken as a lead
+    ended_itself = False  # the last command(0) found the move's own segment braking it: no stop command acted
 
     @property
     def folds(self) -> bool:
@@ -35,13 +36,22 @@ class Mover(Jogger):
         and segment routes, whose speed is a parameter)."""
         return self.route.kind in ("trigger", "segment")
 
-    def start(self, direction: int, speed_rpm: float, ramp_raw: int, stop_after_s: float | None = None) -> None:
+    def start(
+        self,
+        direction: int,
+        speed_rpm: float,
+        ramp_raw: int,
+        stop_after_s: float | None = None,
+        within_rev: float | None = None,
+    ) -> None:
         """A move from rest: set_speed, set_ramp and command(direction) in the fewest requests. What changed goes in
         one verified write where the entries are adjacent (on the segment route with the move's displacement:
         IS620P's H11-12..H11-15; DSX7E's Pn512-513), and what this jogger wrote itself is not read again (IS620P
         spent six requests a move on them, DSX7E five). stop_after_s: the move accelerates that long and then stops
         (command(0)); on the segment route one segment of its own then carries it where that is within the
-        dead-man's segment (SegmentMoves.length_rev), and a command(0) from then on writes nothing."""
+        dead-man's segment (SegmentMoves.length_rev), and a command(0) from then on writes nothing. within_rev: that
+        segment no longer than this (the room left in the caller's travel band), so that the drive brakes the move
+        inside it by itself, whenever the host looks again."""
         if not self.folds or self.direction:
             self.set_speed(speed_rpm)
             self.set_ramp(ramp_raw)
@@ -65,7 +75,7 @@ class Mover(Jogger):
             # H11-15: a dithered cycle) goes along, so that the three go in one request instead of three.
             speed = self.speed_param()
             bridged = changes if changes[0][0] is self.speed_entry else [(self.speed_entry, speed, speed), *changes]
-            fold = self._folded_distance(bridged, direction, ramp_ms, stop_after_s)
+            fold = self._folded_distance(bridged, direction, ramp_ms, stop_after_s, within_rev)
             changes = bridged + fold if fold else changes
         for result in write_changes(self.drive, changes):
             if result.entry is self.speed_entry:
@@ -75,16 +85,23 @@ class Mover(Jogger):
             elif self.segments is not None:
                 self.segments.distance_written(result.new)
         if self.segments is not None:
-            self.segments.own_s = stop_after_s
+            self.segments.own_s, self.segments.own_within = stop_after_s, within_rev
         self.command(direction)
 
     def _folded_distance(
-        self, changes: list[tuple[Entry, int, int]], direction: int, ramp_ms: float, stop_after_s: float | None
+        self,
+        changes: list[tuple[Entry, int, int]],
+        direction: int,
+        ramp_ms: float,
+        stop_after_s: float | None,
+        within_rev: float | None,
     ) -> list[tuple[Entry, int, int]]:
         """The move's displacement as a change to write with `changes`, where it is adjacent to one of them."""
         assert self.segments is not None
         distance = self.route.entries["segment_distance"]
-        raw = self.segments.distance_raw(direction, self.speed_rpm, self.keepalive.interval_s, ramp_ms, stop_after_s)
+        raw = self.segments.distance_raw(
+            direction, self.speed_rpm, self.keepalive.interval_s, ramp_ms, stop_after_s, within_rev
+        )
         written = self.segments.written_distance()
         fold = (distance, raw if written is None else written, raw)
         runs = write_runs(self.drive, sorted([*changes, fold], key=lambda c: c[0].address))
@@ -100,10 +117,12 @@ class Mover(Jogger):
             and self.clock.now() >= self._ends_at
         ):
             segments.moving = 0  # the move's own segment is braking it now: nothing to write
+            self.ended_itself = True
             return
+        self.ended_itself = False
         own = segments.own_s if self.direction else None
         super()._segment_command()
-        segments.own_s = None
+        segments.own_s = segments.own_within = None
         self._ends_at = self.clock.now() + own if own is not None and segments.ends_itself else None
 
     def own_segment_rev(self) -> float | None:

@@ -26,16 +26,17 @@ class SegmentMoves:
         self._per_rev: float | None = None
         self.start_high = True  # the start bits may be on: a move needs them off first
         self.ends_itself = False  # the running move's own segment stops it (see length_rev)
-        self.own_s: float | None = None  # the next fresh move accelerates this long, then stops (once)
+        self.own_s: float | None = None  # the next fresh move accelerates this long, then stops (once) ...
+        self.own_within: float | None = None  # ... its own segment no longer than this (rev; None: unbounded)
         self.single = False  # own moves of any length (the caller's bound is the move: the step check's)
 
     def move(self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None) -> bool:
         """A fresh move: in `direction`, long enough to run SEGMENT_BEATS beats then stop (or the move's own where
         own_s is set, see length_rev); direction 0 stops a running move at the drive's ramp.
         False when there was nothing to do."""
-        own_s, self.own_s = self.own_s, None
+        own_s, within, self.own_s, self.own_within = self.own_s, self.own_within, None, None
         if direction:
-            rev, self.ends_itself = self.length_rev(speed_rpm, beat_s, ramp_ms, own_s)
+            rev, self.ends_itself = self.length_rev(speed_rpm, beat_s, ramp_ms, own_s, within)
             rev *= direction
         elif self.moving:
             # A stop: the start edges with the shortest displacement the drive takes. On one reading of the firmware
@@ -48,28 +49,44 @@ class SegmentMoves:
         else:
             return False
         self.moving = direction
-        self._start(rev)
+        self._start(rev, direction)
         return True
 
     def length_rev(
-        self, speed_rpm: float, beat_s: float, ramp_ms: float | None, own_s: float | None
+        self,
+        speed_rpm: float,
+        beat_s: float,
+        ramp_ms: float | None,
+        own_s: float | None,
+        within_rev: float | None = None,
     ) -> tuple[float, bool]:
         """The length of a fresh move, and whether it is the move's own. A move that accelerates for own_s and then
         stops (identification) is one segment of its own where that is no longer than the dead-man's: the drive
-        brakes it at its end by itself, with no re-arm and no stop command (three writes a move on IS620P)."""
+        brakes it at its end by itself, with no re-arm and no stop command (three writes a move on IS620P).
+        within_rev: the own segment no longer than this (the room the caller's travel band leaves: the drive then
+        brakes it short of the band's edge however late the host looks again), down to nothing."""
         bounded = deadman.segment_rev(speed_rpm, beat_s, ramp_ms, self.ramp_rpm)
         if own_s is None or ramp_ms is None or ramp_ms < 0:
             return bounded, False
         to_speed_s = ramp_ms / 1000.0 * abs(speed_rpm) / self.ramp_rpm
         # up for own_s, down as long (a ramp of 0: at speed for own_s)
         own = abs(speed_rpm) / 60.0 * own_s * (min(1.0, own_s / to_speed_s) if to_speed_s > 0 else 1.0)
+        if within_rev is not None and within_rev < own:
+            # short of it by half a displacement unit: rounded, the segment still ends within it
+            own = max(0.0, within_rev - 0.5 / self.units_per_rev())
         return (own, True) if own <= bounded or self.single else (bounded, False)
 
     def distance_raw(
-        self, direction: int, speed_rpm: float, beat_s: float, ramp_ms: float | None, own_s: float | None = None
+        self,
+        direction: int,
+        speed_rpm: float,
+        beat_s: float,
+        ramp_ms: float | None,
+        own_s: float | None = None,
+        within_rev: float | None = None,
     ) -> int:
         """The displacement (raw) a fresh move in `direction` writes (see move)."""
-        return self._raw_of(direction * self.length_rev(speed_rpm, beat_s, ramp_ms, own_s)[0])
+        return self._raw_of(direction * self.length_rev(speed_rpm, beat_s, ramp_ms, own_s, within_rev)[0], direction)
 
     def distance_written(self, raw: int) -> None:
         """The displacement was written with other settings (Jogger.start): the move need not write it again."""
@@ -79,13 +96,15 @@ class SegmentMoves:
         """The displacement last written (None: unknown)."""
         return self._raw
 
-    def _raw_of(self, rev: float) -> int:
+    def _raw_of(self, rev: float, direction: int = 0) -> int:
+        """rev in displacement units, at least one (in direction where rev rounds to nothing)."""
         distance = self.route.entries["segment_distance"]
-        return max(distance.min, min(distance.max, round(rev * self.units_per_rev()))) or (1 if rev > 0 else -1)
+        raw = max(distance.min, min(distance.max, round(rev * self.units_per_rev())))
+        return raw or (1 if (rev or direction) > 0 else -1)
 
-    def _start(self, rev: float) -> None:
+    def _start(self, rev: float, direction: int) -> None:
         distance = self.route.entries["segment_distance"]
-        raw = self._raw_of(rev)
+        raw = self._raw_of(rev, direction)
         if raw != self._raw:
             self.drive.write_raw(distance, raw)
             self._raw = raw

@@ -8,6 +8,7 @@ sampler enforces, and the guard learns from the pilot and each move how far the 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 OWN_MARGIN = 2.0  # an own segment's end is predicted this many times its longest lag yet beyond it
@@ -31,25 +32,56 @@ class BandGuard:
     # How long (s, at speed) the moves that their own segment ended ran past it, the longest yet (None: none yet).
     own_lag_s: float | None = None
     # The running move: where it started (rev), its direction, speed (rpm) and own segment (rev, None: the host stops
-    # it), where that segment will stop it, and the furthest it went.
+    # it) with the speed it peaks at (rpm: a segment shorter than its ramps turns back before the speed), where that
+    # segment will stop it, and the furthest it went.
     origin: float = 0.0
     direction: int = 0
     speed: float = 0.0
     own_rev: float | None = None
+    own_peak: float = 0.0
     own_end: float | None = None
     reach: float = 0.0
 
-    def begin(self, pred: float, direction: int, speed: float, own_rev: float | None) -> None:
+    def begin(
+        self, pred: float, direction: int, speed: float, own_rev: float | None, full_rev: float | None = None
+    ) -> None:
         """A move starts from pred (rev) in direction to `speed`; own_rev: its own segment, which the drive brakes
-        by itself at its end. It stops as far past it as the own segments so far ran, twice over, else stretched
-        as the pilot's stopped move."""
+        by itself at its end (full_rev: the segment's length had it reached the speed, None: as long). It stops as
+        far past it as the own segments so far ran at its peak speed, twice over, else stretched as the pilot's
+        stopped move."""
         self.origin, self.direction, self.speed, self.own_rev, self.reach = pred, direction, speed, own_rev, 0.0
         if own_rev is None:
             self.own_end = None
-        elif self.own_lag_s is None:
-            self.own_end = pred + direction * own_rev * self.stretch
-        else:
-            self.own_end = pred + direction * (own_rev + OWN_MARGIN * self.own_lag_s * speed / 60.0)
+            return
+        reach, self.own_peak = self._own_reach(own_rev, full_rev or own_rev, speed)
+        self.own_end = pred + direction * reach
+
+    def _own_reach(self, own_rev: float, full_rev: float, speed: float) -> tuple[float, float]:
+        """How far from its start an own segment of own_rev (full_rev had it reached `speed`) is predicted to stop,
+        and the speed it peaks at (up and down the same ramps, a shorter one turns back at the root of its share)."""
+        peak = speed * math.sqrt(min(1.0, own_rev / full_rev)) if full_rev > 0 else speed
+        if self.own_lag_s is None:
+            return own_rev * self.stretch, peak
+        return own_rev + OWN_MARGIN * self.own_lag_s * peak / 60.0, peak
+
+    def own_room(self, pred: float, direction: int, speed: float, full_rev: float) -> float | None:
+        """The longest own segment (at most full_rev, its length at `speed`) that a move from pred in direction may
+        have for its stop, as begin predicts it, to stay inside the band (the drive then brakes it there by itself,
+        however late the host looks again: a stall cannot carry it out); None before the band is set."""
+        if self.band is None:
+            return None
+        edge = self.band[1] if direction > 0 else self.band[0]
+        room = direction * (edge - pred)
+        if room <= 0 or full_rev <= 0:
+            return 0.0
+        if self._own_reach(full_rev, full_rev, speed)[0] <= room:
+            return full_rev
+        if self.own_lag_s is None:
+            return room / self.stretch
+        # own + k sqrt(own) = room (k: the run-past at the peak speed of a segment of sqrt(own / full_rev))
+        k = OWN_MARGIN * self.own_lag_s * speed / 60.0 / math.sqrt(full_rev)
+        root = (-k + math.sqrt(k * k + 4.0 * room)) / 2.0
+        return min(full_rev, root * root)
 
     def must_stop(self, pred: float, v: float, ramp_s: float, interval_s: float) -> bool:
         """Whether stopping the running move now still keeps the axis (at pred rev, v rpm, its ramp ramp_s, sampled
@@ -82,8 +114,8 @@ class BandGuard:
 
     def ended(self) -> None:
         """The running move has ended at rest: where its own segment carried it, how far it ran past it."""
-        if self.own_rev is not None:
-            self.own_lag_s = max(self.own_lag_s or 0.0, (self.reach - self.own_rev) / (self.speed / 60.0))
+        if self.own_rev is not None and self.own_peak > 0:
+            self.own_lag_s = max(self.own_lag_s or 0.0, (self.reach - self.own_rev) / (self.own_peak / 60.0))
 
     def coasted(self, coast_rev: float, v_stop: float) -> None:
         """After a stop command at v_stop rpm the axis went coast_rev further than its ramp."""

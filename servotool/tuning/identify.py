@@ -338,17 +338,21 @@ class _HostRun:
         """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
         s, jogger, trace, guard = self.sampler, self.jogger, self.sampler.trace, self.guard
         first = self.move_first = len(trace.t)
-        # After the pilot a segment route's move may end by itself (where it stops inside the travel band); the
-        # pilot stops by command, as an early stop (BandGuard.must_stop) does.
+        # After the pilot a segment route's move ends by itself, its own segment no longer than the travel band
+        # leaves room for (BandGuard.own_room): the drive brakes it inside the band however late a stalled host
+        # looks again (a 65-140 ms stall hid the ramp of a move whose segment ran past the band, and the stop came
+        # too late: IS620P, load 37). The pilot stops by command, as an early stop (BandGuard.must_stop) does.
+        full = speed / 60.0 * self.ramp  # the own segment that reaches the speed: up one ramp, down another
         jogger.start(
             direction,
             speed,
             eng_to_raw(self.jog_accel, self.ramp * 1000.0 * self.ramp_rpm / speed),
             self.ramp if guard.band is not None else None,
+            guard.own_room(s.pred, direction, speed, full),
         )
         start = self.timing.now()
         own = jogger.own_segment_rev()
-        guard.begin(s.pred, direction, speed, own)
+        guard.begin(s.pred, direction, speed, own, full)
         target = self._target(direction, speed) if own is None else None
         self.sample()
         while True:  # the drive's ramp reaches the speed in ramp_s; a host-timed move aims at its target
@@ -383,7 +387,9 @@ class _HostRun:
         while self.timing.now() < rest:
             self.sample()
         guard.ended()
-        if v_stop > self.stop_band:
+        # The coast after a stop command; a move whose own segment braked it ran past that, not past a command
+        # (BandGuard.ended: taken as a lag, it was read at the low speed the host saw after its ramp, up to 1.2 s).
+        if v_stop > self.stop_band and not jogger.ended_itself:
             guard.coasted(abs(s.pred - at_stop) - v_stop * v_stop * self.ramp / (2 * speed) / 60.0, v_stop)
         active = active_alarm(self.drive)
         if active:

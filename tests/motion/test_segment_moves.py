@@ -82,3 +82,38 @@ def test_an_early_stop_brakes_and_a_long_move_keeps_the_beat_sized_segment(sim_d
     assert len(writes) == 2  # two beats: re-armed (the start edge)
     jogger.command(0)
     assert stop_sequence(jogger.drive, jogger, saved, wait_s=1.0, clock=clock).confirmed
+
+
+def test_a_move_bounded_by_the_room_left_stops_there_by_itself_however_late_the_host_looks(sim_dir):
+    """within_rev (the room a travel band leaves): the move's own segment no longer than that, and the drive stops the
+    axis there with no write from the host, which here looks again only after 300 ms (a stalled host)."""
+    _sim, jogger, clock, writes, saved = _jogger(sim_dir)
+    start = _position_rev(jogger)
+    jogger.start(1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=0.1, within_rev=0.4)  # 1 rev unbounded
+    assert jogger.own_segment_rev() == pytest.approx(0.4, abs=1e-4)
+    writes.clear()
+    clock.advance(0.3)
+    jogger.keep_alive()
+    jogger.command(0)
+    assert writes == [] and jogger.ended_itself
+    clock.advance(0.5)
+    assert _position_rev(jogger) - start == pytest.approx(0.4, abs=0.02)
+    assert stop_sequence(jogger.drive, jogger, saved, wait_s=1.0, clock=clock).confirmed
+    # A move longer than the dead-man's segment, cut to the room left, is one of its own too; no room: one unit on.
+    jogger.start(-1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=2.0, within_rev=0.5)
+    assert jogger.own_segment_rev() == pytest.approx(0.5, abs=1e-4) and jogger.segments.ends_itself
+    clock.advance(2.5)
+    jogger.command(0)
+    jogger.start(1, 600.0, _ramp_raw(jogger, 0.1, 600.0), stop_after_s=0.1, within_rev=0.0)
+    assert jogger.segments.written_distance() == 1
+    clock.advance(0.5)
+    jogger.command(0)
+    assert stop_sequence(jogger.drive, jogger, saved, wait_s=1.0, clock=clock).confirmed
+
+
+def _position_rev(jogger: Mover) -> float:
+    """The motor's position (rev) as the drive reports it."""
+    p = jogger.profile
+    entry = p.need_role("position_feedback", "test")
+    assert p.motor is not None
+    return jogger.drive.read_entries([entry])[0].raw / p.motor.counts_per_rev

@@ -4,6 +4,9 @@ refusal, never blamed on the loop, a resonance, backlash or a sign convention.""
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -13,6 +16,9 @@ from servotool.tuning.fit.signals import stall
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
+from inertia_accuracy import identify_once
 
 # DSX7E at 19200 (about 65 samples/s), a load of 3, moves at 300 rpm; before 2 % of its requests the host stalls
 # 60-120 ms (a loaded laptop's scheduler), seeded.
@@ -48,6 +54,21 @@ def test_a_host_that_stalls_is_accepted_within_its_3_sigma_or_refused_without_a_
     if stall(np.asarray(t), np.asarray(speed))[0] > 0:  # accepted on a log with a stall: says so (seeds 1
         # and 2 were accepted with no note at all)
         assert any("the host stalled" in n for n in est.notes), est.notes
+
+
+@pytest.mark.parametrize("seed", [2, 3, 4, 5, 11, 14])
+def test_a_stall_does_not_carry_a_segment_move_past_the_travel_limit(sim_dir, seed):
+    """IS620P at 57600 (the segment route), the bench's under-damped machine 5 (load 37, friction 0.2, gravity -0.2,
+    noise 1 %; its moves' own segments ran 0.4 rev past their end), before 2 % of the requests a 50-100 ms stall: a
+    stall hid a move's ramp, or delayed the stop that was to cut its segment short of the band, and the segment ran
+    on past the 2 rev travel limit (these six seeds; two of six runs in real time with one CPU burner). The segment
+    no longer than the band leaves room for, the drive brakes it inside the band itself: each run accepted within
+    the stated 3 sigma and the travel."""
+    stalls = HostStalls(rate=0.02, max_s=0.1, seed=seed, min_s=0.05)
+    run = identify_once(37.0, 0.2, -0.2, 0.01, 57600, seed=5, profile_id="is620p", viscous=0.0005, stalls=stalls)
+    est = run.identified.estimate
+    assert est is not None and abs(run.ratio - 37.0) <= 3 * est.ratio_std, (run.ratio, est.ratio_std)
+    assert run.identified.travel_used_rev is not None and run.identified.travel_used_rev <= 2.0
 
 
 @pytest.mark.parametrize(
