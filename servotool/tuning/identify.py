@@ -689,9 +689,10 @@ class _HostRun:
     def _strongest(self, est: InertiaEstimate) -> Remedy | None:
         """Where the rigid fit alone was within the limit and what was added to it took it over (a model check's
         widening, such as a coupling stiffer than the log resolves, not ruled out; the torque reading's floor): the
-        strongest motion the drive allows, as one that may not be enough. The line's model scaled to the widened uncertainty said no travel would do (DSX7E 115200, load 37,
-        1 % noise: the fit alone 1.3 %, widened to 3.6 %), where 16 rev identified it within 3 sigma in 5 of 5 seeds:
-        the widening falls with stronger moves far faster than the model's noise does."""
+        strongest motion the drive allows, as one that may not be enough. The line's model scaled to the widened
+        uncertainty said no travel would do (DSX7E 115200, load 37, 1 % noise: the fit alone 1.3 %, widened to
+        3.6 %), where 16 rev identified it within 3 sigma in 5 of 5 seeds: the widening falls with stronger moves
+        far faster than the model's noise does."""
         needs = self.plan.needs
         limit = EstimatorSettings().max_rel_uncertainty
         if needs is None or not est.j_total_kgm2 > 0 or not est.fit_std_kgm2 <= limit * est.j_total_kgm2:
