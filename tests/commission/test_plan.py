@@ -47,8 +47,10 @@ def test_plan_commissions_two_axes_end_to_end(cli, tmp_path):
     for unit in (1, 2):
         assert (tmp_path / f"axis-{unit}.yaml").exists()
     assert [s["unit"] for s in report["steps"] if s["line"] == 7] == [2]  # `unit: 2` step
-    first = report["steps"][0]
-    assert first["name"] == "set" and first["written"] == {"Pn101": 25.0, "Pn512": 150}  # numbers, as in param get
+    first, wanted = report["steps"][0], {"Pn101": 25.0, "Pn512": 150}  # numbers, as in param get
+    # a plan run again (a tune step failed on a loaded host: run_plan) finds what its first run set already set
+    assert first["name"] == "set" and (first["written"] == wanted or r.attempts > 1), (r.attempts, first)
+    assert first["written"].items() <= wanted.items(), first
     r = cli("--port", "sim", "--unit", "2", "param", "get", "Pn004", "--json")
     assert r.json()[0]["value"] == pytest.approx(700, rel=LOADED_J_SHARE)  # (1 + 6) x 100 %
 
