@@ -23,6 +23,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from servotool.tuning.fit import quantization
+
 # The fit's uncertainty against the ideal one, measured (bench/inertia_accuracy.py): 1.2-2.7 where the acceleration
 # torque is weak (the loads that need travel), more where it is strong (friction and gravity then weigh as much as J,
 # but the uncertainty is far below the limit anyway).
@@ -48,6 +50,7 @@ TIME_OVERHEAD_S = 1.0  # the pilot's fit and the hold's set-up
 # measures it again (DSX7E 115200, 1 % noise: named 6 rev before moving, the run at 6 rev measured 7 % more speed
 # noise and stopped after its pilot naming 6.5).
 NAMING_MARGIN = 1.2
+DITHER_MIN = 0.4  # an identification on a coarse torque reading spreads its accelerations over [this, 1] (planning)
 LOAD_RATIOS = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 50.0, 100.0, 200.0)
 
 
@@ -134,11 +137,19 @@ def time_for(line: Line, moves: int) -> float:
 
 
 def predicted(
-    line: Line, load_ratio: float, travel_rev: float, moves: int, rpm_per_rev: float | None = None
+    line: Line,
+    load_ratio: float,
+    travel_rev: float,
+    moves: int,
+    rpm_per_rev: float | None = None,
+    scale: float = 1.0,
+    floor: bool = True,
 ) -> tuple[float, float, str]:
     """(sigma(J)/J, test speed rpm, what bounds it) of `moves` moves (out and back) within travel_rev; rpm_per_rev:
     the test speed a revolution of travel gives, as a run showed it (None: the planned ramps' own, with room for
-    the move's swing, less what a dead host's run-on takes: Line.speed_share)."""
+    the move's swing, less what a dead host's run-on takes: Line.speed_share). scale: the statistical part's, as a
+    run showed it (the torque reading's step floor is the reading's, not the machine's); floor False: that part
+    alone."""
     j = line.rotor_kgm2 * (1.0 + max(load_ratio, 0.0))
     per_rev = line.speed_share * 0.9 / line.ramp_s * 60.0 if rpm_per_rev is None else rpm_per_rev
     speed, bound = per_rev * travel_rev, "travel"
@@ -156,7 +167,23 @@ def predicted(
     # Each window's speed change against the speed noise (fit.windows): too little and the fit refuses outright.
     if excitation(line, speed) < MIN_EXCITATION:
         return math.inf, speed, bound
-    return line.efficiency * EFFICIENCY * line.sigma_torque_pct / (tau * math.sqrt(n)), speed, bound
+    statistical = scale * line.efficiency * EFFICIENCY * line.sigma_torque_pct / (tau * math.sqrt(n))
+    return math.hypot(statistical, step_floor(line, tau, moves) if floor else 0.0), speed, bound
+
+
+def step_floor(line: Line, tau_pct: float, moves: int) -> float:
+    """The floor a torque read in coarse steps sets on sigma(J)/J (fit.quantization, which the fit adds last), for
+    moves whose acceleration torque is tau_pct, dithered over [DITHER_MIN, 1] of it (tuning.identify): no number of
+    samples averages away a reading that stays on one step through an acceleration. A reading whose noise moves it
+    between steps (half a step or more) leaves none. Without it the budget named SDC 9600's motor alone with 30 %
+    friction and 40 % gravity 7 rev, then 23, then 26: each run refused for the floor ("the torque reads in 1 %
+    steps against an acceleration torque of 1.8 %")."""
+    q = line.torque_step_pct
+    if q <= 0 or tau_pct <= 0:
+        return 0.0
+    stuck = max(0.0, 1.0 - 2.0 * line.torque_noise_pct / q)
+    share = quantization.repeated_share((1.0 - DITHER_MIN) * tau_pct / q)
+    return quantization.relative_floor(q, stuck, tau_pct, share, moves)
 
 
 def _ramp_samples(line: Line) -> tuple[float, float]:
@@ -226,12 +253,18 @@ def _least_travel(line: Line, load_ratio: float, target: float, time_s: float) -
 
 
 def _fewest_moves(
-    line: Line, load_ratio: float, travel: float, aim: float, most: int, rpm_per_rev: float | None = None
+    line: Line,
+    load_ratio: float,
+    travel: float,
+    aim: float,
+    most: int,
+    rpm_per_rev: float | None = None,
+    scale: float = 1.0,
 ) -> int:
     lo, hi = 2, max(2, most)
     while lo < hi:
         mid = (lo + hi) // 2
-        if predicted(line, load_ratio, travel, mid, rpm_per_rev)[0] <= aim:
+        if predicted(line, load_ratio, travel, mid, rpm_per_rev, scale)[0] <= aim:
             hi = mid
         else:
             lo = mid + 1
@@ -310,7 +343,8 @@ def more_travel(
     excitation_seen: float = math.nan,
     speed_rpm: float | None = None,
 ) -> Need | None:
-    """The least travel beyond travel_rev with which a run that came out sigma_rel uncertain after `moves` moves
+    """The least travel beyond travel_rev with which a run that came out sigma_rel uncertain (the torque reading's
+    step floor taken out) after `moves` moves
     would reach TARGET_SHARE of `target` within the time such a run is given (given_s), the model scaled to what
     this run showed (its uncertainty, and excitation_seen: the fit's speed change per window against sqrt(2) speed
     noises, where it was refused for too little of it); None where no travel up to MAX_TRAVEL_REV does (the speed
@@ -326,8 +360,9 @@ def more_travel(
     if math.isfinite(excitation_seen) and excitation_seen > 0 and 0 < model < math.inf:
         seen = line.excitation_share * math.sqrt(2.0) * excitation_seen / model  # the fit's unit: sqrt(2) noises
         line = replace(line, excitation_share=min(line.excitation_share, seen))
-    now = predicted(line, load_ratio, travel_rev, max(moves, 2), per_rev)[0]
-    # this machine's fit against the model's, where both stand (a refusal for too little excitation has no fit)
+    now = predicted(line, load_ratio, travel_rev, max(moves, 2), per_rev, floor=False)[0]
+    # this machine's fit against the model's, where both stand (a refusal for too little excitation has no fit); the
+    # torque reading's floor (sigma_rel has it taken out) stays the model's at every travel
     scale = (
         max(BEST_EFFICIENCY / EFFICIENCY, sigma_rel / now) if math.isfinite(sigma_rel) and 0 < now < math.inf else 1.0
     )
@@ -336,10 +371,10 @@ def more_travel(
     travel = math.floor(travel_rev * 2.0) / 2.0 + 0.5
     while travel <= MAX_TRAVEL_REV + 1e-9:
         most = moves_in(line, given_s(line, load_ratio, travel, target))
-        sigma, speed, bound = predicted(line, load_ratio, travel, most, per_rev)
-        if scale * sigma <= aim:
-            moves = _fewest_moves(line, load_ratio, travel, aim / scale, most, per_rev)
-            return Need(load_ratio, travel, time_for(line, moves), scale * sigma, speed, True, bound)
+        sigma, speed, bound = predicted(line, load_ratio, travel, most, per_rev, scale)
+        if sigma <= aim:
+            moves = _fewest_moves(line, load_ratio, travel, aim, most, per_rev, scale)
+            return Need(load_ratio, travel, time_for(line, moves), sigma, speed, True, bound)
         if bound != "travel":
             return None
         travel += 0.5

@@ -491,7 +491,9 @@ class _HostRun:
         lows = [max(0.0, ratio - k * std) for k in (2.0, 1.0, 0.0)]
         line = needs.line
         # How far this machine's fit stays from the model, as the pilot (a quarter of the speed) showed it.
-        model = budget.predicted(line, ratio, needs.allowed_rev * PILOT_SHARE, 2 * len(self.plan.directions))[0]
+        model = budget.predicted(
+            line, ratio, needs.allowed_rev * PILOT_SHARE, 2 * len(self.plan.directions), floor=False
+        )[0]
         seen = rough.j_std_kgm2 / rough.j_total_kgm2
         if math.isfinite(model) and model > 0 and math.isfinite(seen):
             # scaled as a remedy scales it (budget.more_travel): down to the best efficiency measured, at most
@@ -668,6 +670,7 @@ class _HostRun:
         if not math.isfinite(est.shortfall):
             return None
         rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 else math.nan
+        rel = math.sqrt(max(0.0, rel**2 - est.floor_rel**2)) if math.isfinite(est.floor_rel) else rel
         low = est.excitation if est.excitation < EstimatorSettings().min_excitation else math.nan
         # No fit stood (too little excitation): the load is not known, and the travel named is the least with which
         # the lightest load this line can serve at all would reach the limit.

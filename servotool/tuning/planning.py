@@ -14,7 +14,7 @@ from servotool.motion import deadman
 from servotool.motion.deadman import DeadManBound
 from servotool.motion.keepalive import keepalive_interval_s
 from servotool.tuning import budget
-from servotool.tuning.budget import Needs
+from servotool.tuning.budget import DITHER_MIN, Needs
 from servotool.tuning.fit import EstimatorSettings
 from servotool.tuning.preflight import DEFAULT_SAMPLES_PER_S, FEATURE, RestCheck, check_at_rest
 
@@ -44,7 +44,6 @@ PILOT_SHARE = 0.25
 # misreads the acceleration torque by a different fraction of its step in every cycle instead of by the same
 # amount: the step error averages out over the cycles and the move jackknife sees it, where with one acceleration
 # it repeats identically and only a fixed floor (fit.quantization) can cover it.
-DITHER_MIN = 0.4
 COARSE_TORQUE_STEP_PCT = 0.5  # readings in steps this coarse (% of rated) are dithered
 MIN_SAMPLES_PER_RAMP = 5.0  # a dithered ramp keeps this many sampling intervals (else the speed is lowered)
 # ... and at least this long: below the planned ramps' floor, since on a fast line that floor, not the samples,

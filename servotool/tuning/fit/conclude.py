@@ -71,7 +71,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     floor = verdict.floor
     if floor is not None:
         rel = math.hypot(r.j_std / j, floor.rel)
-        r.j_std = rel * j
+        r.j_std, r.floor_rel = rel * j, floor.rel
         r.ratio_std = r.j_std / j * (1.0 + r.ratio)
         if rel > cfg.max_rel_uncertainty:
             r.shortfall = rel / cfg.max_rel_uncertainty

@@ -148,6 +148,8 @@ class InertiaEstimate:
     """Each move's own ratio, in the order run (none where the fit stopped before its checks)."""
     fitted_windows: tuple[FittedWindow, ...] = ()
     """The windows of the model the estimate stands on (none where the fit stopped before its checks)."""
+    floor_rel: float = math.nan
+    """The torque reading's step floor (fit.quantization) in j_std_kgm2, relative to J; NaN where none was added."""
     fit_std_kgm2: float = math.nan
     """J's uncertainty from the rigid fit alone (least squares, MA(1), jackknife), before the model checks widened
     it: what the line's budget (tuning.budget) models; NaN where the fit stopped before it."""
@@ -190,6 +192,7 @@ class Partial:
     moves: tuple[MoveEstimate, ...] = ()
     fitted_windows: tuple[FittedWindow, ...] = ()
     fit_std: float = math.nan
+    floor_rel: float = math.nan
 
     def refuse(self, reason: str, advice: str = "") -> InertiaEstimate:
         return self.result(ok=False, reason=reason, advice=advice)
@@ -224,4 +227,5 @@ class Partial:
             moves=self.moves,
             fitted_windows=self.fitted_windows,
             fit_std_kgm2=self.fit_std,
+            floor_rel=self.floor_rel,
         )

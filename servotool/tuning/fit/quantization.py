@@ -42,9 +42,22 @@ def floor(t: np.ndarray, rpm: np.ndarray, pct: np.ndarray, j: float, step_pct: f
     signal_pct = j * float(np.sqrt(np.mean(accel**2))) / rated_nm * 100.0
     stuck = float(np.mean(np.diff(pct)[pair] == 0.0))
     share, moves = _repeated_share(moving, pair, accel, j / rated_nm * 100.0, step_pct)
-    misread = step_pct / 12**0.5 * stuck / max(signal_pct, 1e-9)  # one reading's, relative to the signal
-    rel_q = math.hypot(misread / 2.0 * share, misread / 2**0.5 / max(moves, 1) ** 0.5)
+    rel_q = relative_floor(step_pct, stuck, signal_pct, share, moves)
     return Floor(rel_q, step_pct, signal_pct) if rel_q > 0 else None
+
+
+def relative_floor(step_pct: float, stuck: float, signal_pct: float, share: float, moves: int) -> float:
+    """The floor (relative to J) of a torque read in steps of step_pct against an RMS acceleration torque of
+    signal_pct, where `stuck` of the moving samples read as their neighbour, `share` of one move's misreading repeats
+    in every move, over `moves` moves (tuning.budget plans with the same)."""
+    misread = step_pct / 12**0.5 * stuck / max(signal_pct, 1e-9)  # one reading's, relative to the signal
+    return math.hypot(misread / 2.0 * share, misread / 2**0.5 / max(moves, 1) ** 0.5)
+
+
+def repeated_share(spread_steps: float) -> float:
+    """The share of one move's misreading that every move repeats, for moves whose acceleration torques spread
+    evenly over spread_steps steps of the reading (see _repeated_share)."""
+    return max(1.0 - spread_steps, 0.3 / max(spread_steps, 1.0))
 
 
 def _repeated_share(
@@ -65,5 +78,4 @@ def _repeated_share(
     strong = [v for v in levels if v >= 0.5 * max(levels, default=0.0)]
     if len(strong) < 4:
         return 1.0, len(strong)
-    spread = (max(strong) - min(strong)) / step_pct
-    return max(1.0 - spread, 0.3 / max(spread, 1.0)), len(strong)
+    return repeated_share((max(strong) - min(strong)) / step_pct), len(strong)
