@@ -13,10 +13,11 @@ leaves out), carries J*a / sigma_T of information, so
 
 sigma_T: the torque reading's noise and its step (q/sqrt 12); tau_a: the acceleration torque, % of rated; N: the
 samples inside ramps within the time. A reading whose steps stay put through an acceleration adds a floor no N
-averages away (step_floor, as the fit adds it: fit.quantization). EFFICIENCY is how far `tune inertia`'s fit (friction, gravity and viscous
-terms fitted beside J, windows clear of the steps, the jackknife's honesty) stays from that ideal, measured on the
-bench's machines (bench/inertia_accuracy.py). The lightest load (the motor alone) needs the most: the travel and
-time named before moving are its, and a heavier load, once the pilot has shown it, needs less.
+averages away (step_floor, as the fit adds it: fit.quantization). EFFICIENCY is how far `tune inertia`'s fit
+(friction, gravity and viscous terms fitted beside J, windows clear of the steps, the jackknife's honesty) stays
+from that ideal, measured on the bench's machines (bench/inertia_accuracy.py). The lightest load (the motor alone)
+needs the most: the travel and time named before moving are its, and a heavier load, once the pilot has shown it,
+needs less.
 """
 
 from __future__ import annotations
