@@ -23,6 +23,7 @@ needs less.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 from servotool.tuning.fit import quantization
@@ -370,16 +371,12 @@ def more_travel(
     )
     aim = TARGET_SHARE * target
     line = naming_line(line)
-    travel = math.floor(travel_rev * 2.0) / 2.0 + 0.5
-    while travel <= MAX_TRAVEL_REV + 1e-9:
-        most = moves_in(line, given_s(line, load_ratio, travel, target))
-        sigma, speed, bound = predicted(line, load_ratio, travel, most, per_rev, scale)
+    for travel, _time_s, most, sigma, speed, bound in _longer(line, load_ratio, travel_rev, target, per_rev, scale):
         if sigma <= aim:
             moves = _fewest_moves(line, load_ratio, travel, aim, most, per_rev, scale)
             return Need(load_ratio, travel, time_for(line, moves), sigma, speed, True, bound)
         if bound != "travel":
             return None
-        travel += 0.5
     return None
 
 
@@ -394,11 +391,22 @@ def strongest_travel(
     per_rev = speed_rpm / travel_rev if speed_rpm is not None and speed_rpm > 0 else None
     if predicted(line, load_ratio, travel_rev, 2, per_rev)[2] != "travel":
         return None
+    last = None
+    for travel, time_s, _most, sigma, speed, bound in _longer(line, load_ratio, travel_rev, target, per_rev):
+        last = Need(load_ratio, travel, time_s, sigma, speed, False, bound)
+        if bound != "travel":
+            break
+    return last
+
+
+def _longer(
+    line: Line, load_ratio: float, travel_rev: float, target: float, per_rev: float | None, scale: float = 1.0
+) -> Iterator[tuple[float, float, int, float, float, str]]:
+    """Each travel beyond travel_rev, in steps of half a revolution up to MAX_TRAVEL_REV: (travel, the time its run
+    is given, the moves that time holds, and predicted's sigma, speed and bound for them)."""
     travel = math.floor(travel_rev * 2.0) / 2.0 + 0.5
     while travel <= MAX_TRAVEL_REV + 1e-9:
         time_s = given_s(line, load_ratio, travel, target)
-        sigma, speed, bound = predicted(line, load_ratio, travel, moves_in(line, time_s), per_rev)
-        if bound != "travel" or travel + 0.5 > MAX_TRAVEL_REV + 1e-9:
-            return Need(load_ratio, travel, time_s, sigma, speed, False, bound)
+        most = moves_in(line, time_s)
+        yield travel, time_s, most, *predicted(line, load_ratio, travel, most, per_rev, scale)
         travel += 0.5
-    return None
