@@ -147,20 +147,21 @@ def test_a_pilot_need_within_its_slack_of_the_travel_servotool_chose_goes_on(sim
 
 def test_a_refusal_that_a_check_widened_names_the_strongest_motion_and_it_then_identifies(sim_dir):
     """DSX7E 115200, a load of 37 with 20 % Coulomb and 20 % gravity, 1 % noise, servotool's 12 rev: the fit alone
-    was 1.3 % uncertain, and the spring check, which cannot rule out a coupling stiffer than 335 samples/s resolve,
-    widened it to 3.6 %. The line's model scaled to 3.6 % said "no travel up to 100 rev brings it to 2 %", where 16
+    was 1.3-1.5 % uncertain, and the spring check, which cannot rule out a coupling stiffer than 335 samples/s
+    resolve, widened it to 3.6-5.2 % (seed 3 then; since the share counts only couplings the two-mass scan leaves
+    unsearched, seed 32). The line's model scaled to that said "no travel up to 100 rev brings it to 2 %", where 16
     rev identified it in 5 of 5 seeds. The refusal says where the uncertainty came from and names the strongest
     motion the drive allows as one that may not be enough; followed, it identifies within 3 sigma."""
     from bench import inertia_accuracy as bench
 
     with pytest.raises(IdentificationRefused) as refused:
-        bench.identify_once(37.0, 0.2, 0.2, 0.01, 115200, seed=3, profile_id="dsx7e", viscous=0.0005)
+        bench.identify_once(37.0, 0.2, 0.2, 0.01, 115200, seed=32, profile_id="dsx7e", viscous=0.0005)
     words, cure = str(refused.value), refused.value.remedy
     assert "no travel" not in words and "from the fit itself" in words, words
     assert not any(w in words for w in ("backlash", "resonance", "coupling")), words
     assert cure is not None and not cure.enough and cure.suggested_rev > 12.0, words
     run = bench.identify_once(
-        37.0, 0.2, 0.2, 0.01, 115200, seed=3, profile_id="dsx7e", viscous=0.0005, travel_rev=cure.suggested_rev
+        37.0, 0.2, 0.2, 0.01, 115200, seed=32, profile_id="dsx7e", viscous=0.0005, travel_rev=cure.suggested_rev
     )
     est = run.identified.estimate
     assert abs(run.ratio - 37.0) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev

@@ -9,7 +9,8 @@ change) is tried, with what the torque reading's noise alone gives it taken out 
 its window's integral holds): strong, J is taken from it; a hint of it (beyond two sigmas, a resonance below the
 sampling rate) keeps the rigid J and widens its uncertainty by what the term would change, unnamed; short of that
 it cannot tell a stiff coupling from the integration's own error near torque steps, so its share of J's
-uncertainty counts, unnamed. A resonance is named by its frequency only below the log's Nyquist limit.
+uncertainty counts, unnamed, for couplings up to the softest one the two-mass scan leaves unsearched. A resonance
+is named by its frequency only below the log's Nyquist limit.
 A fitted model's correction is uncertain by a third of its size: the models are approximate.
 """
 
@@ -37,6 +38,7 @@ RESOLVABLE_HZ_PER_RATE = 1.0  # both where the resonance it implies lies below t
 NYQUIST_SHARE = 0.5  # a resonance is named by its frequency only below this share of the sampling rate
 STENCIL_REACH = 6  # a window's torque integral and slopes reach at most this many samples beyond its span
 UNRESOLVED_SPRING_SHARE = 1.0  # short of a hint, this share of what a free spring term adds to J's uncertainty counts
+#                                (its 1-sigma range cut at the softest coupling the two-mass scan does not search)
 LOAD_HZ_MIN = 1.0  # a two-mass load's own resonance (against a held motor) is searched from here ...
 LOAD_HZ_PER_RATE = 0.2  # ... up to this fraction of the sampling rate and LOAD_HZ_MAX, in steps of LOAD_HZ_STEP
 LOAD_HZ_MAX = 60.0  # (stiffer couplings move J by less than the other checks' uncertainty)
@@ -147,8 +149,27 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     z = b / float(std[-1])
     base = refit(fit, x)
     unresolved = math.sqrt(max(0.0, float(std[0]) ** 2 - float(base[1][0]) ** 2)) if base is not None else 0.0
+    softest = _softest_unscanned(fit, ratio)
+    if softest < float(std[-1]):
+        unresolved *= softest / float(std[-1])
     strong = z < -COMPLIANCE_SIGMA and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
     return _Spring(col[:, None], shared, math.sqrt(ratio / -b) / (2 * math.pi), z, strong, unresolved)
+
+
+def _softest_unscanned(fit: FitData, ratio: float) -> float:
+    """The largest spring coefficient (-b) of a coupling the two-mass scan would not have searched: one whose load
+    resonates above the scan's top (b = -ratio / omega_r^2, omega_r^2 = omega_load^2 (1 + ratio)); infinite where
+    the scan does not run. A free spring term's share of J's uncertainty counts only up to it: its 1-sigma range
+    can reach couplings so soft that the whole load would swing at a few Hz, which the scan sees."""
+    top = _scan_top(_rate(fit))
+    if top <= LOAD_HZ_MIN * LOAD_HZ_STEP:
+        return math.inf
+    return ratio / ((2 * math.pi * top) ** 2 * (1.0 + ratio))
+
+
+def _scan_top(rate: float) -> float:
+    """The highest load resonance the two-mass scan searches at this sampling rate."""
+    return min(LOAD_HZ_PER_RATE * rate, LOAD_HZ_MAX)
 
 
 def _shared_noise(fit: FitData) -> np.ndarray:
@@ -211,7 +232,7 @@ def _two_mass(fit: FitData, x: np.ndarray) -> _TwoMass | None:
     as inertia.
     fa and the damping are searched on a grid; heavily damped 'couplings' (a lag) are the reference it must beat."""
     rate, ratio = _rate(fit), float(fit.theta[0]) / fit.jm - 1.0
-    top = min(LOAD_HZ_PER_RATE * rate, LOAD_HZ_MAX)
+    top = _scan_top(rate)
     if ratio <= MIN_COMPLIANT_RATIO or top <= LOAD_HZ_MIN * LOAD_HZ_STEP:
         return None
     hz = np.exp(np.arange(math.log(LOAD_HZ_MIN), math.log(top), math.log(LOAD_HZ_STEP)))
