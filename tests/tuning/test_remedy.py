@@ -184,3 +184,23 @@ def test_a_travel_named_where_the_torque_steps_bound_the_fit_identifies_when_fol
     )
     est = run.identified.estimate
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
+
+
+def test_a_torque_reading_whose_steps_hide_the_acceleration_is_not_blamed_on_the_sign_convention(sim_dir):
+    """SDC's motor alone with 30 % Coulomb friction and 40 % gravity, sampled at the 20 readings/s that real time
+    reaches on its 9600 baud line (8400 baud on virtual time): its acceleration torque, 0.3 % of rated, reads in 1 %
+    steps that never move, J came out 0 with no residual, and the refusal said "non-physical result: check that
+    torque and speed share a sign convention" with no remedy. It is too uncertain at the rotor's own inertia: said
+    so, with the reading's steps, and a travel that identifies it within 3 sigma when followed."""
+    from bench import inertia_accuracy as bench
+
+    with pytest.raises(IdentificationRefused) as refused:
+        bench.identify_once(0.0, 0.3, 0.4, 0.0, 8400, seed=1, profile_id="sdc", viscous=0.0)
+    words, cure = str(refused.value), refused.value.remedy
+    assert "sign convention" not in words and "too uncertain" in words and "1 % steps" in words, words
+    assert cure is not None and cure.enough, words
+    run = bench.identify_once(
+        0.0, 0.3, 0.4, 0.0, 8400, seed=1, profile_id="sdc", viscous=0.0, travel_rev=cure.suggested_rev
+    )
+    est = run.identified.estimate
+    assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev

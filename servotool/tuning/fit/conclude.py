@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 
+from servotool.tuning.fit import quantization
 from servotool.tuning.fit.estimate import EstimatorSettings, FittedWindow, InertiaEstimate, MoveEstimate, Partial
 from servotool.tuning.fit.regression import Regression
 from servotool.tuning.fit.signals import stall_words
@@ -38,7 +39,9 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     r.moves = per_move(verdict, jm)
     r.fitted_windows = fitted_windows(verdict)
     if j <= 0:
-        return r.refuse("non-physical result (inertia <= 0): check that torque and speed share a sign convention")
+        return _unresolved_from_the_rotor(r, verdict, jm, cfg) or r.refuse(
+            "non-physical result (inertia <= 0): check that torque and speed share a sign convention"
+        )
     if r.res_rel > cfg.max_rel_residual and stalled:
         return r.refuse(
             f"model does not fit the data (relative residual {r.res_rel:.2f} > {cfg.max_rel_residual:g}): {stalled} "
@@ -82,6 +85,37 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
                 "use stronger accelerations or a faster line",
             )
     return r.result(ok=True, reason="")
+
+
+ROTOR_SIGMAS = 3.0  # a J at or below zero within this many sigmas of the rotor's own inertia is only uncertain
+
+
+def _unresolved_from_the_rotor(
+    r: Partial, verdict: Verdict, jm: float, cfg: EstimatorSettings
+) -> InertiaEstimate | None:
+    """A J at or below zero that its uncertainty, with the torque reading's floor at the rotor's own inertia (the
+    least J any load gives), does not tell from the rotor's inertia within ROTOR_SIGMAS: refused as too uncertain,
+    naming the reading's steps where they hide the acceleration, with how far short it fell at that least J (the
+    remedy's scale). None where J lies further below: a sign convention, as said then. SDC at 20 samples/s, the motor
+    alone with 30 % friction and 40 % gravity: its acceleration torque of 0.4 % read in 1 % steps that never moved,
+    J came out 0 with no residual, and was blamed on the sign convention."""
+    fit = verdict.fit
+    found = quantization.floor(fit.t, fit.rpm, fit.pct, jm, fit.torque_step_pct, fit.rated_nm)
+    floor_rel = found.rel if found is not None else 0.0
+    rel = math.hypot(r.j_std / jm, floor_rel)
+    if jm - r.j > ROTOR_SIGMAS * rel * jm:
+        return None
+    r.shortfall, r.floor_rel = rel / cfg.max_rel_uncertainty, floor_rel
+    said = (
+        f"inertia too uncertain: J came out at or below zero, {100 * rel:.0f} % uncertain at the rotor's own inertia "
+        f"(> {100 * cfg.max_rel_uncertainty:g} %)"
+    )
+    if found is not None and floor_rel >= r.j_std / jm:
+        said += (
+            f": the torque reads in {found.step_pct:g} % steps against an acceleration torque of "
+            f"{found.signal_pct:.1f} % at the rotor's inertia"
+        )
+    return r.refuse(said, "use stronger accelerations or a faster line")
 
 
 def negative_coulomb(verdict: Verdict, stalled: str) -> str:
