@@ -325,7 +325,8 @@ def _grouped(reason: str) -> str:
 
 def _said(run: Run, truth: float) -> str:
     if not run.ok:
-        return f"REFUSED ({run.tries} tries, {run.wall_s:.1f} s): {run.reason[:160]}"
+        named = f", followed {run.named_travel_rev:g} rev" if run.tries > 1 and run.named_travel_rev is not None else ""
+        return f"REFUSED ({run.tries} tries{named}, {run.wall_s:.1f} s): {run.reason[:300]}"
     err = (run.ratio - truth) / (1 + truth) * 100  # type: ignore[operator]
     return (
         f"{run.ratio:.3f} ± {run.ratio_std:.3f} ({err:+.2f} %), {run.samples_per_s} /s, {run.travel_rev} rev, "
