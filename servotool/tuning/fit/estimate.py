@@ -60,6 +60,11 @@ class EstimatorSettings:
     """The speed reading's resolution (rpm), as the drive's register states it. None: found from the log (the grid
     its readings lie on, 0 if none). Its rounding is noise in every speed change, which a log that moves between
     steps slowly hides from the noise estimate (signals.speed_noise_rpm)."""
+    speed_between_reads: bool = False
+    """The speed was read apart from the torque and interpolated onto the torque's times (SD25): its noise is then
+    shared between neighbouring samples, which the errors-in-variables correction does not model. The fit keeps
+    what it was measured with for such logs (bench/inertia_accuracy.py, SD25 9600): the noise from every sample
+    and kinks at speed samples off the line, however slow (signals.CORNERS_BETWEEN_S: SD25's errors went low)."""
     torque_step_pct: float | None = None
     """The torque reading's resolution (% of rated), as the drive's register states it. None: found from the log
     (signals.reading_step: the grid its readings lie on, 0 if none)."""
