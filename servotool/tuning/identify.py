@@ -204,6 +204,7 @@ def trace_estimate(profile: Profile, torque_limit_pct: float | None, torque_nois
             torque_step_pct=step_pct,
             speed_step_rpm=step_rpm,
             torque_noise_pct=torque_noise_pct,
+            speed_between_reads=trace.speed_between_reads,
         )
         t, speed, torque, position = trace.fitted()
         return estimate_inertia(

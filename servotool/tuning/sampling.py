@@ -63,13 +63,18 @@ class Trace:
         """Samples left out of the fit because their exchange overran the line's time."""
         return self.on_time.count(False)
 
+    @property
+    def speed_between_reads(self) -> bool:
+        """Whether the speed was read apart from the torque, so that aligned_speed interpolates it."""
+        return len(self.speed_t) == len(self.t) >= 2
+
     def aligned_speed(self) -> list[float]:
         """Speed at the torque's sample times; the speed itself if read together.
 
         Cubic (Hermite, slopes from the neighbours) between speed reads, held after the last: a straight line
         between reads half an interval away misplaces a curving speed (a sluggish loop rings through its ramps) and
         biases J."""
-        if len(self.speed_t) != len(self.t) or len(self.t) < 2:
+        if not self.speed_between_reads:
             return list(self.speed)
         ts, v, t = np.asarray(self.speed_t), np.asarray(self.speed), np.asarray(self.t)
         slope = np.gradient(v, ts)

@@ -39,11 +39,12 @@ class EstimatorSettings:
     max_saturated_samples: int = 0
     """Refuse when more samples than this are saturated (a saturated drive no longer follows the test motion)."""
     kink_sigma: float = 5.0
-    """A torque or speed sample further than this many noise sigmas off the line through its neighbours marks a
-    torque step (start/end of an acceleration: a kink in speed); the intervals on both sides are left out. No
-    interpolant can integrate a step that falls somewhere between two slow samples, and its error is correlated
-    with the window's speed change, which biases J low. Speed shows the kink even when the torque step is buried in
-    torque noise."""
+    """A torque sample further than this many noise sigmas off the line through its neighbours marks a torque step
+    (start/end of an acceleration: a kink in speed), and the intervals on both sides are left out; so is a speed
+    sample this far off, or at a slow line (signals.CORNERS_BETWEEN_S) an interval across which the speed's slope
+    changes this far (signals.corner_cuts). No interpolant can integrate a step that falls somewhere between two
+    slow samples, and its error is correlated with the window's speed change, which biases J low. Speed shows the
+    kink even when the torque step is buried in torque noise."""
     torque_noise_floor_pct: float = 0.05
     """Floor of the estimated torque noise (% of rated) used for the kink test, so clean data is not all kinks."""
     torque_noise_pct: float | None = None
@@ -60,6 +61,11 @@ class EstimatorSettings:
     """The speed reading's resolution (rpm), as the drive's register states it. None: found from the log (the grid
     its readings lie on, 0 if none). Its rounding is noise in every speed change, which a log that moves between
     steps slowly hides from the noise estimate (signals.speed_noise_rpm)."""
+    speed_between_reads: bool = False
+    """The speed was read apart from the torque and interpolated onto the torque's times (SD25): its noise is then
+    shared between neighbouring samples, which the errors-in-variables correction does not model. The fit keeps
+    what it was measured with for such logs (bench/inertia_accuracy.py, SD25 9600): the noise from every sample
+    and kinks at speed samples off the line, however slow (signals.CORNERS_BETWEEN_S: SD25's errors went low)."""
     torque_step_pct: float | None = None
     """The torque reading's resolution (% of rated), as the drive's register states it. None: found from the log
     (signals.reading_step: the grid its readings lie on, 0 if none)."""
@@ -137,7 +143,8 @@ class InertiaEstimate:
     window_intervals: int
     """Sampling intervals per window actually used (0 if no windows were formed)."""
     n_kinks: int
-    """Samples recognised as torque steps (kinks) and left out with their neighbouring intervals."""
+    """Samples recognised as torque steps (kinks) and left out with their neighbouring intervals, and intervals
+    holding a speed corner (left out alone)."""
     condition: float
     notes: tuple[str, ...] = field(default_factory=tuple)
     advice: str = ""

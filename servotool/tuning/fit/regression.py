@@ -151,6 +151,7 @@ class FitData:
     rated_nm: float
     jm: float  # the motor's inertia, kg*m^2
     max_rel: float = 0.02  # the estimator's limit on sigma / J (a widening names its cause only if it crosses it)
+    cut: np.ndarray | None = None  # per sampling interval: a speed corner lies in it (signals.corner_cuts)
 
 
 def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: float, jm: float) -> FitData:
@@ -178,6 +179,7 @@ def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: fl
         rated_nm=rated_nm,
         jm=jm,
         max_rel=cfg.max_rel_uncertainty,
+        cut=sig.cut,
     )
 
 

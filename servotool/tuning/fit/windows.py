@@ -21,7 +21,7 @@ def choose_windows(sig: Signals, cfg: EstimatorSettings, r: Partial) -> tuple[np
     ks = [cfg.window_intervals] if cfg.window_intervals is not None else list(range(1, cfg.max_window_intervals + 1))
     best = (np.zeros(0, dtype=int), np.zeros(0, dtype=int))
     for k in ks:
-        starts, ends = sign_windows(sig.rpm, sig.band, sig.kink, max(1, k))
+        starts, ends = sign_windows(sig.rpm, sig.band, sig.kink, max(1, k), sig.cut)
         r.n_windows = int(starts.size)
         if r.n_windows < cfg.min_windows:
             break
@@ -40,8 +40,11 @@ def choose_windows(sig: Signals, cfg: EstimatorSettings, r: Partial) -> tuple[np
     return best
 
 
-def sign_windows(rpm: np.ndarray, band: float, kink: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Disjoint windows of k sampling intervals whose samples all lie outside the zero band with one sign.
+def sign_windows(
+    rpm: np.ndarray, band: float, kink: np.ndarray, k: int, cut: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Disjoint windows of k sampling intervals whose samples all lie outside the zero band with one sign, and
+    that span no cut interval (a speed corner: its two samples may end the windows on either side).
 
     A torque kink sample gets sign 0 too, which cuts the intervals on both sides of it out of every window.
     """
@@ -49,12 +52,13 @@ def sign_windows(rpm: np.ndarray, band: float, kink: np.ndarray, k: int) -> tupl
     sign[kink] = 0
     starts: list[int] = []
     i, n = 0, rpm.size
+    cut = np.zeros(max(n - 1, 0), dtype=bool) if cut is None else cut
     while i < n - 1:
         if sign[i] == 0:
             i += 1
             continue
         j = i
-        while j + 1 < n and sign[j + 1] == sign[i]:
+        while j + 1 < n and sign[j + 1] == sign[i] and not cut[j]:
             j += 1
         # samples i..j form one run of constant sign
         for s in range(i, j - k + 1, k):
