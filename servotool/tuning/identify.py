@@ -613,9 +613,10 @@ class _HostRun:
         if needs is None or (needs.enough and not late):
             return False
         elapsed = self.sampler.elapsed()
-        # A J at or below zero is uncertain at the least J a load gives, the rotor's (fit.conclude): so scaled.
+        # A J below the rotor's that fit.conclude judged at the least J a load gives, the rotor's: so scaled.
+        at_rotor = est.load_ratio < 0 and math.isfinite(est.floor_rel)
         limit = EstimatorSettings().max_rel_uncertainty
-        rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 else est.shortfall * limit
+        rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 and not at_rotor else est.shortfall * limit
         if not (math.isfinite(rel) and rel > 0 and math.isfinite(est.load_ratio)) or est.n_windows == 0:
             if not late:
                 return False
@@ -672,9 +673,10 @@ class _HostRun:
             return remedy(self.plan.travel_limit_rev, est.shortfall, self.speed, *self.cap)
         if not math.isfinite(est.shortfall):
             return None
-        # A J at or below zero is uncertain at the least J a load gives, the rotor's (fit.conclude): so scaled.
+        # A J below the rotor's that fit.conclude judged at the least J a load gives, the rotor's: so scaled.
+        at_rotor = est.load_ratio < 0 and math.isfinite(est.floor_rel)
         limit = EstimatorSettings().max_rel_uncertainty
-        rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 else est.shortfall * limit
+        rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 and not at_rotor else est.shortfall * limit
         rel = math.sqrt(max(0.0, rel**2 - est.floor_rel**2)) if math.isfinite(est.floor_rel) else rel
         low = est.excitation if est.excitation < EstimatorSettings().min_excitation else math.nan
         # No fit stood (too little excitation): the load is not known, and the travel named is the least with which

@@ -56,6 +56,9 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     if verdict.refuse:
         return r.refuse(verdict.refuse)
     rel = r.j_std / j
+    hidden = j < jm and rel > cfg.max_rel_uncertainty
+    if hidden and (rotor := _unresolved_from_the_rotor(r, verdict, jm, cfg, steps_only=True)):
+        return rotor
     if rel > cfg.max_rel_uncertainty:
         # noise sorting and backlash weigh less in a stronger motion: a longer travel may cure the refusal
         r.shortfall = rel / cfg.max_rel_uncertainty if not verdict.widened or verdict.curable else math.nan
@@ -91,23 +94,26 @@ ROTOR_SIGMAS = 3.0  # a J at or below zero within this many sigmas of the rotor'
 
 
 def _unresolved_from_the_rotor(
-    r: Partial, verdict: Verdict, jm: float, cfg: EstimatorSettings
+    r: Partial, verdict: Verdict, jm: float, cfg: EstimatorSettings, steps_only: bool = False
 ) -> InertiaEstimate | None:
-    """A J at or below zero that its uncertainty, with the torque reading's floor at the rotor's own inertia (the
-    least J any load gives), does not tell from the rotor's inertia within ROTOR_SIGMAS: refused as too uncertain,
-    naming the reading's steps where they hide the acceleration, with how far short it fell at that least J (the
-    remedy's scale). None where J lies further below: a sign convention, as said then. SDC at 20 samples/s, the motor
-    alone with 30 % friction and 40 % gravity: its acceleration torque of 0.4 % read in 1 % steps that never moved,
-    J came out 0 with no residual, and was blamed on the sign convention."""
+    """A J below the rotor's own inertia (the least J any load gives) that its uncertainty, with the torque reading's
+    floor at that inertia, does not tell from it within ROTOR_SIGMAS: refused as too uncertain there, naming the
+    reading's steps where they hide the acceleration, with how far short it fell at the rotor's J (the remedy's
+    scale; relative to a J near zero it reads as if no travel could help). None where J lies further below (at or
+    below zero: a sign convention). SDC at 20 samples/s, the motor alone with 30 % friction and 40 % gravity: its
+    acceleration torque of 0.3 % read in 1 % steps that never moved, and J came out 0 with no residual (blamed on
+    the sign convention) or just above it ("80 % uncertain", no travel named). steps_only: None too where the
+    reading's steps are not what hides it (a J above zero keeps the fit's own words)."""
     fit = verdict.fit
     found = quantization.floor(fit.t, fit.rpm, fit.pct, jm, fit.torque_step_pct, fit.rated_nm)
     floor_rel = found.rel if found is not None else 0.0
     rel = math.hypot(r.j_std / jm, floor_rel)
-    if jm - r.j > ROTOR_SIGMAS * rel * jm:
+    if jm - r.j > ROTOR_SIGMAS * rel * jm or (steps_only and floor_rel < r.j_std / jm):
         return None
     r.shortfall, r.floor_rel = rel / cfg.max_rel_uncertainty, floor_rel
     said = (
-        f"inertia too uncertain: J came out at or below zero, {100 * rel:.0f} % uncertain at the rotor's own inertia "
+        f"inertia too uncertain: J came out {'at or below zero' if r.j <= 0 else 'below the rotor'}, "
+        f"{100 * rel:.0f} % uncertain at the rotor's own inertia "
         f"(> {100 * cfg.max_rel_uncertainty:g} %)"
     )
     if found is not None and floor_rel >= r.j_std / jm:

@@ -66,7 +66,7 @@ def _position_columns(fit: FitData) -> list[np.ndarray]:
     u = (pos - 0.5 * (lo + hi)) / (0.5 * (hi - lo)) if hi > lo else np.zeros_like(pos)
     cols = []
     for p in (u, u * u):
-        cum = cumulative_hermite(fit.t, p, fit.kink)
+        cum = cumulative_hermite(fit.t, p, fit.kink, fit.cut)
         cols.append(cum[fit.ends] - cum[fit.starts])
     return cols
 

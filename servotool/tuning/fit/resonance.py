@@ -183,7 +183,7 @@ def _shared_noise(fit: FitData) -> np.ndarray:
     for first in range(min(spacing, n)):
         probe = np.zeros(n)
         probe[first::spacing] = 1.0
-        integral = cumulative_hermite(fit.t, probe, fit.kink)
+        integral = cumulative_hermite(fit.t, probe, fit.kink, fit.cut)
         slope = _torque_slope(fit.t, probe)
         total += (integral[fit.ends] - integral[fit.starts]) * (slope[fit.ends] - slope[fit.starts])
     return (fit.torque_noise_pct / 100.0 * fit.rated_nm) ** 2 * total
