@@ -21,7 +21,6 @@ GAP_INTERVALS = 6.0  # no window spans more median intervals (a stall: a cubic m
 # two CPU burners refused "too little acceleration", 1.6x and 7.7x the speed noise, on a load that passes idle); the
 # loop's swing is resolved by the cubic across a gap this long, as at 115200 baud's own six intervals.
 GAP_FLOOR_S = 0.01
-TORQUE_STEP_SHARE = 0.25  # a torque step whatever the noise: the reading moves by this share of its peak in an interval
 
 
 @dataclass(frozen=True)
@@ -170,22 +169,12 @@ def kink_mask(
     torque_noise_floor_pct: float,
 ) -> np.ndarray:
     """Samples at a torque step (torque or speed further than kink_sigma noise sigmas off the line through its
-    neighbours, the torque noise estimated robustly, floored; or either end of an interval over which the torque
-    moves by TORQUE_STEP_SHARE of its peak) or ending a gap (gap_after: a host stall).
-
-    The share catches the steps the noise test misses where the log's own swing is counted as torque noise: a heavy
-    load ringing behind a stiff coupling raised that estimate to 3.2-3.9 % (0.6 % true), so that at 24 samples/s a
-    27 % torque reversal, spread over two intervals, was no kink; the integrals of the windows through it read J
-    10-30 % high (SDC 9600, 40 Hz coupling, load ratio 37, 0.5 % noise: accepted 8-10 % high, 3 sigma 3.2 %)."""
+    neighbours; the torque noise estimated robustly, floored) or ending a gap (gap_after: a host stall)."""
     dev, ref = line_deviation(t, pct)
     torque_noise = max(torque_noise_pct(t, pct), torque_noise_floor_pct)
     dev_w, ref_w = line_deviation(t, rpm)
     kink = np.zeros(pct.size, dtype=bool)
     kink[1:-1] = (np.abs(dev) > kink_sigma * torque_noise * ref) | (np.abs(dev_w) > kink_sigma * noise_rpm * ref_w)
-    if pct.size > 1:
-        step = np.abs(np.diff(pct)) >= TORQUE_STEP_SHARE * float(np.max(np.abs(pct)))
-        kink[:-1] |= step
-        kink[1:] |= step
     kink[1:] |= gap_after(t)
     return kink
 
