@@ -56,12 +56,24 @@ LOADS_MORE: list[tuple[str, dict[str, float]]] = [
 ]
 
 
-def identify(ratio: float, machine: dict[str, float], baud: int, seed: int, profile_id: str = "dsx7e"):
-    """(outcome, estimate or None, reason) of `tune inertia --dry-run` on one off-model machine."""
+# A heavy load behind a stiff coupling, with noisier readings (label, sim settings, ratio, noise): SDC at 9600 baud
+# (24 samples/s) accepted the 40 Hz one 8-10 % high with a stated 3 sigma of 3.2 %, since windows at torque steps,
+# where the load does not follow the motor, read J 10-30 % high (the full run only; a few s each)
+HEAVY: list[tuple[str, dict[str, float], float, float]] = [
+    ("two-mass 40 Hz n0.5%", {"resonance_hz": 40.0, "resonance_damping": 0.05}, 37.0, 0.005),
+    ("two-mass 60 Hz n0.5%", {"resonance_hz": 60.0, "resonance_damping": 0.05}, 37.0, 0.005),
+]
+
+
+def identify(
+    ratio: float, machine: dict[str, float], baud: int, seed: int, profile_id: str = "dsx7e", noise: float = 0.002
+):
+    """(outcome, estimate or None, reason) of `tune inertia --dry-run` on one off-model machine (noise: the
+    readings', relative)."""
     profile = load_profile(profile_id)
     clock = VirtualClock(1000.0)
     sim = build_drive(profile, 1, clock, persist=False)
-    sim.settings.update(load_ratio=ratio, friction=0.02, noise=0.002, seed=seed, **machine)
+    sim.settings.update(load_ratio=ratio, friction=0.02, noise=noise, seed=seed, **machine)
     sim.firmware.reconfigure()
     make_motion_setup(sim)
     fit_brake(sim.firmware.plant)
@@ -79,10 +91,10 @@ def identify(ratio: float, machine: dict[str, float], baud: int, seed: int, prof
 
 
 def outcome_of(
-    ratio: float, machine: dict[str, float], baud: int, seed: int, profile_id: str
+    ratio: float, machine: dict[str, float], baud: int, seed: int, profile_id: str, noise: float = 0.002
 ) -> tuple[str, float, float, str]:
     """(outcome, error % of J_total, stated 3 sigma %, reason or flags) of one run."""
-    outcome, est, why = identify(ratio, machine, baud, seed=seed, profile_id=profile_id)
+    outcome, est, why = identify(ratio, machine, baud, seed=seed, profile_id=profile_id, noise=noise)
     err = sig3 = float("nan")
     if est is not None and est.j_total_kgm2 == est.j_total_kgm2:
         err = (est.load_ratio - ratio) / (1.0 + ratio) * 100
@@ -117,38 +129,40 @@ def main() -> None:
         print(f"{'load':<22} {'ratio':>5} {'baud':>6} {'outcome':<9} {'err%':>7} {'3sig%':>6}  reason / flags")
     violations = counted = runs = n = 0
     outcomes: dict[str, int] = {}
+    rows = [(label, machine, ratio, 0.002) for label, machine in loads for ratio in ratios]
+    heavy = [] if args.quick else HEAVY
     for baud in bauds:
-        for label, machine in loads:
-            for ratio in ratios:
-                n += 1
-                row: dict[str, int] = {}
-                worst, row_violations = 0.0, 0
-                for k in range(args.seeds):
-                    runs += 1
-                    outcome, err, sig3, why = outcome_of(ratio, machine, baud, n + 1000 * k, args.profile)
-                    outcomes[outcome] = outcomes.get(outcome, 0) + 1
-                    row[outcome] = row.get(outcome, 0) + 1
-                    bad = ""
-                    if outcome in ("accepted", "flagged"):
-                        counted += 1
-                        worst = max(worst, abs(err) / sig3 if sig3 > 0 else float("inf"))
-                        if abs(err) > sig3:
-                            row_violations += 1
-                            bad = "  <-- outside 3 sigma"
-                    if args.seeds == 1:
-                        print(
-                            f"{label:<22} {ratio:>5.1f} {baud:>6} {outcome:<9} {err:>7.2f} {sig3:>6.2f}  "
-                            f"{why[:110]}{bad}",
-                            flush=True,
-                        )
-                violations += row_violations
-                if args.seeds > 1:
+        for h, (label, machine, ratio, noise) in enumerate(rows + heavy):
+            if h < len(rows):
+                n += 1  # the rows' seeds as before the heavy ones came
+            seed = n if h < len(rows) else 500 + h
+            row: dict[str, int] = {}
+            worst, row_violations = 0.0, 0
+            for k in range(args.seeds):
+                runs += 1
+                outcome, err, sig3, why = outcome_of(ratio, machine, baud, seed + 1000 * k, args.profile, noise)
+                outcomes[outcome] = outcomes.get(outcome, 0) + 1
+                row[outcome] = row.get(outcome, 0) + 1
+                bad = ""
+                if outcome in ("accepted", "flagged"):
+                    counted += 1
+                    worst = max(worst, abs(err) / sig3 if sig3 > 0 else float("inf"))
+                    if abs(err) > sig3:
+                        row_violations += 1
+                        bad = "  <-- outside 3 sigma"
+                if args.seeds == 1:
                     print(
-                        f"{label:<22} {ratio:>5.1f} {baud:>6} {row.get('accepted', 0):>4} {row.get('flagged', 0):>4} "
-                        f"{row.get('refused', 0) + row.get('failed', 0):>4} {row_violations:>4}  {worst:.2f}"
-                        f"{'  <-- outside 3 sigma' if row_violations else ''}",
+                        f"{label:<22} {ratio:>5.1f} {baud:>6} {outcome:<9} {err:>7.2f} {sig3:>6.2f}  {why[:110]}{bad}",
                         flush=True,
                     )
+            violations += row_violations
+            if args.seeds > 1:
+                print(
+                    f"{label:<22} {ratio:>5.1f} {baud:>6} {row.get('accepted', 0):>4} {row.get('flagged', 0):>4} "
+                    f"{row.get('refused', 0) + row.get('failed', 0):>4} {row_violations:>4}  {worst:.2f}"
+                    f"{'  <-- outside 3 sigma' if row_violations else ''}",
+                    flush=True,
+                )
     print("\n" + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
     print(
         f"no accepted result off by more than its stated 3 sigma: {violations} violation(s) in {counted} "

@@ -220,3 +220,26 @@ def test_a_refusal_for_lost_motion_names_a_travel_that_then_identifies(sim_dir):
         4.0,
     )
     assert "too uncertain" in refusal, refusal
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 31 item 5, open: SDC 9600, 40 Hz coupling, ratio 37, 0.5 % noise accepted 8-10 % high, 3 sigma 3.2 %",
+)
+@pytest.mark.parametrize("seed", [2, 3])
+def test_a_heavy_load_behind_a_stiff_coupling_at_a_slow_line_is_covered_or_refused(sim_dir, seed):
+    """SDC at 9600 baud (24 samples/s), a 40 Hz coupling under a load 37 times the motor's, readings noisy by 0.5 %
+    (bench/off_model.py's heavy rows): accepted 8.2 and 9.6 % high with a stated 3 sigma of 3.2 %, 2.6x and 3.0x
+    beyond it. The windows through a torque step read J 16-20 % high, those beside one 6-7 %, the rest -1..+3 %:
+    the load's ringing raised the torque noise estimate the kinks are judged by (3.2-3.9 %, 0.6 % true) and the
+    reversals were no kinks. Wanted: the truth within the stated 3 sigma, or a refusal that blames no arm or load
+    that varies. Strict: it fails the suite once fixed, to be made a plain test."""
+    from bench.off_model import identify
+
+    machine = {"resonance_hz": 40.0, "resonance_damping": 0.05}
+    outcome, est, why = identify(37.0, machine, 9600, seed, "sdc", noise=0.005)
+    if outcome == "refused":
+        assert "load varies" not in why and "arm" not in why, why
+    else:
+        assert outcome in ("accepted", "flagged"), (outcome, why)
+        assert abs(est.load_ratio - 37.0) <= 3 * est.ratio_std, (est.load_ratio, est.ratio_std)
