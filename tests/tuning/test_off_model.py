@@ -222,24 +222,48 @@ def test_a_refusal_for_lost_motion_names_a_travel_that_then_identifies(sim_dir):
     assert "too uncertain" in refusal, refusal
 
 
-@pytest.mark.xfail(
+AT_ONE_PERCENT = pytest.mark.xfail(
     strict=True,
-    reason="issue 31 item 5, open: SDC 9600, 40 Hz coupling, ratio 37, 0.5 % noise accepted 8-10 % high, 3 sigma 3.2 %",
+    reason="issue 31 item 5, open: at 1 % noise SDC 9600's 40 Hz coupling under ratio 37 is accepted 8.5 % high, "
+    "3 sigma 4.6 % (1.8x): the windows through torque steps, whose reversals the ringing hides from the kinks",
 )
-@pytest.mark.parametrize("seed", [2, 3])
-def test_a_heavy_load_behind_a_stiff_coupling_at_a_slow_line_is_covered_or_refused(sim_dir, seed):
-    """SDC at 9600 baud (24 samples/s), a 40 Hz coupling under a load 37 times the motor's, readings noisy by 0.5 %
-    (bench/off_model.py's heavy rows): accepted 8.2 and 9.6 % high with a stated 3 sigma of 3.2 %, 2.6x and 3.0x
-    beyond it. The windows through a torque step read J 16-20 % high, those beside one 6-7 %, the rest -1..+3 %:
-    the load's ringing raised the torque noise estimate the kinks are judged by (3.2-3.9 %, 0.6 % true) and the
-    reversals were no kinks. Wanted: the truth within the stated 3 sigma, or a refusal that blames no arm or load
-    that varies. Strict: it fails the suite once fixed, to be made a plain test."""
+
+
+@pytest.mark.parametrize(
+    "noise,seed",
+    [(0.005, 2), (0.005, 3), pytest.param(0.01, 2, marks=AT_ONE_PERCENT), pytest.param(0.01, 4, marks=AT_ONE_PERCENT)],
+)
+def test_a_heavy_load_behind_a_stiff_coupling_at_a_slow_line_is_covered_or_refused(sim_dir, noise, seed):
+    """SDC at 9600 baud (24 samples/s), a 40 Hz coupling under a load 37 times the motor's (bench/off_model.py's
+    heavy rows): at 0.5 % noise it was accepted 8.2 and 9.6 % high with a stated 3 sigma of 3.2 %, 2.6x and 3.0x
+    beyond it. The windows through a torque step read J 16-20 % high, those beside one 6-7 %, the rest -1..+3 %: the
+    load's ringing raised the torque noise estimate the kinks are judged by (3.2-3.9 %, 0.6 % true) and the
+    reversals were no kinks. The spring term saw it (strong, its resonance above the 24 samples/s) and now widens
+    it by what it would change: refused, "what the model checks cannot rule out at this sampling". At 1 % noise the
+    term is too weak to: strict, it fails the suite once fixed, to be made plain. Wanted: the truth within the
+    stated 3 sigma, or a refusal that blames no arm or load that varies."""
     from bench.off_model import identify
 
     machine = {"resonance_hz": 40.0, "resonance_damping": 0.05}
-    outcome, est, why = identify(37.0, machine, 9600, seed, "sdc", noise=0.005)
+    outcome, est, why = identify(37.0, machine, 9600, seed, "sdc", noise=noise)
     if outcome == "refused":
         assert "load varies" not in why and "arm" not in why, why
     else:
         assert outcome in ("accepted", "flagged"), (outcome, why)
+        assert abs(est.load_ratio - 37.0) <= 3 * est.ratio_std, (est.load_ratio, est.ratio_std)
+
+
+def test_a_heavy_load_behind_a_coupling_the_sampling_does_not_resolve_is_not_accepted_outside_its_3_sigma(sim_dir):
+    """DSX7E at 19200 baud (65 samples/s), a 60 Hz coupling under a load 37 times the motor's, readings noisy by
+    0.5 % (bench/off_model.py's heavy row, its third seed): the spring term was strong (z -7) but put the resonance
+    near 68 Hz, above what 65 samples/s resolve, so only its unresolved share (0.6 % of J) counted, and J was
+    accepted 6.3 % high with a stated 3 sigma of 2.6 %. What the term would change now widens it, unnamed: the
+    truth lies within the stated 3 sigma, or it is refused."""
+    from bench.off_model import identify
+
+    machine = {"resonance_hz": 60.0, "resonance_damping": 0.05}
+    outcome, est, why = identify(37.0, machine, 19200, 2533, "dsx7e", noise=0.005)
+    if outcome == "refused":
+        assert "too uncertain" in why, why
+    else:
         assert abs(est.load_ratio - 37.0) <= 3 * est.ratio_std, (est.load_ratio, est.ratio_std)
