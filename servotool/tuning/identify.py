@@ -245,6 +245,16 @@ LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grow
 LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many budgets
 
 
+def _relative_std(est: InertiaEstimate) -> float:
+    """sigma(J) / J of an estimate; for a J below the rotor's that fit.conclude judged at the rotor's inertia (the
+    least J a load gives: the torque reading's steps hid the acceleration), that judgement's; NaN for a J at or below
+    zero otherwise. The scale a time extension and a remedy project from."""
+    at_rotor = est.load_ratio < 0 and math.isfinite(est.floor_rel)
+    if est.j_total_kgm2 > 0 and not at_rotor:
+        return est.j_std_kgm2 / est.j_total_kgm2
+    return est.shortfall * EstimatorSettings().max_rel_uncertainty
+
+
 class _HostRun:
     """One host identification: the pilot, the planned cycles and the fit, on one Jogger and one Sampler."""
 
@@ -613,10 +623,7 @@ class _HostRun:
         if needs is None or (needs.enough and not late):
             return False
         elapsed = self.sampler.elapsed()
-        # A J below the rotor's that fit.conclude judged at the least J a load gives, the rotor's: so scaled.
-        at_rotor = est.load_ratio < 0 and math.isfinite(est.floor_rel)
-        limit = EstimatorSettings().max_rel_uncertainty
-        rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 and not at_rotor else est.shortfall * limit
+        rel = _relative_std(est)
         if not (math.isfinite(rel) and rel > 0 and math.isfinite(est.load_ratio)) or est.n_windows == 0:
             if not late:
                 return False
@@ -673,10 +680,7 @@ class _HostRun:
             return remedy(self.plan.travel_limit_rev, est.shortfall, self.speed, *self.cap)
         if not math.isfinite(est.shortfall):
             return None
-        # A J below the rotor's that fit.conclude judged at the least J a load gives, the rotor's: so scaled.
-        at_rotor = est.load_ratio < 0 and math.isfinite(est.floor_rel)
-        limit = EstimatorSettings().max_rel_uncertainty
-        rel = est.j_std_kgm2 / est.j_total_kgm2 if est.j_total_kgm2 > 0 and not at_rotor else est.shortfall * limit
+        rel = _relative_std(est)
         rel = math.sqrt(max(0.0, rel**2 - est.floor_rel**2)) if math.isfinite(est.floor_rel) else rel
         low = est.excitation if est.excitation < EstimatorSettings().min_excitation else math.nan
         # No fit stood (too little excitation): the load is not known, and the travel named is the least with which
