@@ -90,7 +90,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     return r.result(ok=True, reason="")
 
 
-ROTOR_SIGMAS = 3.0  # a J at or below zero within this many sigmas of the rotor's own inertia is only uncertain
+ROTOR_SIGMAS = 3.0  # a J below the rotor's within this many sigmas of the rotor's own inertia is only uncertain
 
 
 def _unresolved_from_the_rotor(
@@ -108,7 +108,8 @@ def _unresolved_from_the_rotor(
     found = quantization.floor(fit.t, fit.rpm, fit.pct, jm, fit.torque_step_pct, fit.rated_nm)
     floor_rel = found.rel if found is not None else 0.0
     rel = math.hypot(r.j_std / jm, floor_rel)
-    if jm - r.j > ROTOR_SIGMAS * rel * jm or (steps_only and floor_rel < r.j_std / jm):
+    steps_hide = found is not None and floor_rel >= r.j_std / jm
+    if jm - r.j > ROTOR_SIGMAS * rel * jm or (steps_only and not steps_hide):
         return None
     r.shortfall, r.floor_rel = rel / cfg.max_rel_uncertainty, floor_rel
     said = (
@@ -116,7 +117,7 @@ def _unresolved_from_the_rotor(
         f"{100 * rel:.0f} % uncertain at the rotor's own inertia "
         f"(> {100 * cfg.max_rel_uncertainty:g} %)"
     )
-    if found is not None and floor_rel >= r.j_std / jm:
+    if steps_hide:
         said += (
             f": the torque reads in {found.step_pct:g} % steps against an acceleration torque of "
             f"{found.signal_pct:.1f} % at the rotor's inertia"
