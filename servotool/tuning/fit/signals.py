@@ -129,14 +129,18 @@ def signals(
 def gap_after(t: np.ndarray) -> np.ndarray:
     """For each sampling interval, whether it is a gap no window spans (a host stall): longer than GAP_INTERVALS
     median intervals and than GAP_FLOOR_S."""
-    gaps = np.diff(t)
-    return gaps > max(GAP_INTERVALS * float(np.median(gaps)), GAP_FLOOR_S) if gaps.size else np.zeros(0, dtype=bool)
+    return longer_than(t, GAP_INTERVALS)
 
 
 def late_intervals(t: np.ndarray) -> np.ndarray:
     """For each sampling interval, whether it is longer than LATE_INTERVALS median intervals and GAP_FLOOR_S."""
+    return longer_than(t, LATE_INTERVALS)
+
+
+def longer_than(t: np.ndarray, intervals: float) -> np.ndarray:
+    """For each sampling interval, whether it is longer than `intervals` median intervals and than GAP_FLOOR_S."""
     gaps = np.diff(t)
-    return gaps > max(LATE_INTERVALS * float(np.median(gaps)), GAP_FLOOR_S) if gaps.size else np.zeros(0, dtype=bool)
+    return gaps > max(intervals * float(np.median(gaps)), GAP_FLOOR_S) if gaps.size else np.zeros(0, dtype=bool)
 
 
 def anchored(t: np.ndarray, cum_w: np.ndarray, position_rad: np.ndarray | None) -> np.ndarray:
@@ -268,20 +272,18 @@ def kink_mask(t: np.ndarray, pct: np.ndarray, kink_sigma: float, torque_noise_fl
     """Samples at a torque step (torque further than kink_sigma noise sigmas off the line through its neighbours;
     the torque noise estimated robustly, floored) or ending a gap (gap_after: a host stall). The torque's noise is
     not the speed's: a kink found here selects no window end on its speed noise (corner_cuts finds the rest)."""
-    dev, ref = line_deviation(t, pct)
-    torque_noise = max(torque_noise_pct(t, pct), torque_noise_floor_pct)
-    kink = np.zeros(pct.size, dtype=bool)
-    kink[1:-1] = np.abs(dev) > kink_sigma * torque_noise * ref
+    kink = off_line(t, pct, kink_sigma * max(torque_noise_pct(t, pct), torque_noise_floor_pct))
     kink[1:] |= gap_after(t)
     return kink
 
 
-def off_line(t: np.ndarray, rpm: np.ndarray, limit_rpm: float) -> np.ndarray:
-    """Samples further than limit_rpm (times their noise factor) off the line through their neighbours: a speed
-    kink judged on the sample's own noise (a fast log's, or speed read apart: CORNERS_BETWEEN_S)."""
-    dev, ref = line_deviation(t, rpm)
-    out = np.zeros(rpm.size, dtype=bool)
-    out[1:-1] = np.abs(dev) > limit_rpm * ref
+def off_line(t: np.ndarray, v: np.ndarray, limit: float) -> np.ndarray:
+    """Samples further than limit (times their noise factor) off the line through their neighbours: a torque step
+    (kink_mask), or a speed kink judged on the sample's own noise (a fast log's, or speed read apart:
+    CORNERS_BETWEEN_S)."""
+    dev, ref = line_deviation(t, v)
+    out = np.zeros(v.size, dtype=bool)
+    out[1:-1] = np.abs(dev) > limit * ref
     return out
 
 
@@ -323,17 +325,20 @@ def bent_beside(t: np.ndarray, pct: np.ndarray, cut: np.ndarray, limit_pct: floa
     out = np.zeros_like(cut)
     if t.size < 4:
         return out
-    h = np.diff(t)
-    before = np.zeros(t.size, dtype=bool)  # sample i off the line through i-2, i-1
-    ratio = h[1:] / h[:-1]
-    off = pct[2:] - (pct[1:-1] + (pct[1:-1] - pct[:-2]) * ratio)
-    before[2:] = np.abs(off) > limit_pct * np.sqrt(1.0 + (1.0 + ratio) ** 2 + ratio**2)
-    after = np.zeros(t.size, dtype=bool)  # sample i off the line through i+1, i+2
-    ratio = h[:-1] / h[1:]
-    off = pct[:-2] - (pct[1:-1] + (pct[1:-1] - pct[2:]) * ratio)
-    after[:-2] = np.abs(off) > limit_pct * np.sqrt(1.0 + (1.0 + ratio) ** 2 + ratio**2)
+    before = _off_extrapolated(t, pct, limit_pct)  # sample i off the line through i-2, i-1
+    after = _off_extrapolated(-t[::-1], pct[::-1], limit_pct)[::-1]  # ... through i+1, i+2: the same, time reversed
     out[:-1] |= cut[1:] & before[1:-1]  # interval (i-1, i) before a cut (i, i+1), torque bent at i
     out[1:] |= cut[:-1] & after[1:-1]  # interval (i+1, i+2) after a cut (i, i+1), torque bent at i+1
+    return out
+
+
+def _off_extrapolated(t: np.ndarray, v: np.ndarray, limit: float) -> np.ndarray:
+    """Samples further than limit (times their noise factor) off the line through the two samples before them."""
+    h = np.diff(t)
+    ratio = h[1:] / h[:-1]
+    off = v[2:] - (v[1:-1] + (v[1:-1] - v[:-2]) * ratio)
+    out = np.zeros(v.size, dtype=bool)
+    out[2:] = np.abs(off) > limit * np.sqrt(1.0 + (1.0 + ratio) ** 2 + ratio**2)
     return out
 
 
