@@ -180,8 +180,8 @@ class Cell:
         self.errors.append(err)
         self.within += abs(run.ratio - ratio) <= 3 * est.ratio_std + 1e-9
         self.within2 += abs(run.ratio - ratio) <= 6 * est.ratio_std + 1e-9
-        plan = run.identified.plan  # the travel it was given, the time said before moving (or after the pilot)
-        travel, named_s = (plan.travel_limit_rev, plan.time_budget_s) if plan is not None else (TRAVEL_REV, 10.0)
+        plan = run.identified.plan  # the travel it was given, the most time it was to take as said before moving
+        travel, named_s = (plan.travel_limit_rev, plan.time_limit_s) if plan is not None else (TRAVEL_REV, 10.0)
         if travel > TRAVEL_REV:
             self.named.append(travel)
         self.over += (run.identified.travel_used_rev or 0.0) > travel or run.identified.time_used_s > named_s + 0.5

@@ -71,7 +71,7 @@ class Run:
     reason: str = ""
     notes: list[str] = field(default_factory=list)
     named_travel_rev: float | None = None  # what servotool named before moving (or after, in a refusal)
-    named_time_s: float | None = None
+    named_time_s: float | None = None  # the most the run was to take, as said before moving
     tries: int = 1
     named_after: bool = False  # the travel followed was named by a refusal after the motion, not before
     baud: int | None = None  # the line's speed during the identification (a boost raises it)
@@ -182,7 +182,7 @@ def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
         reason=out.get("reason") or (out.get("error") or {}).get("message") or "",  # a tune's JSON, or any error's
         notes=list(out.get("notes") or []),
         named_travel_rev=_value(out.get("needed_travel")) or named,
-        named_time_s=_value(out.get("needed_time")),
+        named_time_s=_value(out.get("time_limit")) or _value(out.get("needed_time")),
         tries=tries,
         named_after=after,
         baud=line.get("baud"),

@@ -116,7 +116,8 @@ def _estimate_json(result: identify.Result) -> dict[str, Any]:
 
 
 def _needs_json(plan: planning.MotionPlan | None) -> dict[str, Any]:
-    """What the line needed, as said before moving (the motor alone), and the time budget the motion had."""
+    """What the line needed, as said before moving (the motor alone), the most the run was to take (said then too),
+    and the time budget the motion had."""
     needs = plan.needs if plan is not None else None
     if needs is None:
         return {}
@@ -124,6 +125,7 @@ def _needs_json(plan: planning.MotionPlan | None) -> dict[str, Any]:
     return {
         "needed_travel": quantity(light.travel_rev if light is not None else None, "rev"),
         "needed_time": quantity(_rounded(light.time_s, 1) if light is not None else None, "s"),
+        "time_limit": quantity(_rounded(plan.time_limit_s, 1) if plan is not None else None, "s"),
         "time_budget": quantity(_rounded(plan.time_budget_s, 1) if plan is not None else None, "s"),
     }
 

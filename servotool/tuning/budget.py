@@ -45,6 +45,7 @@ ZERO_BAND_SIGMAS = 3.0  # the fit's zero-speed band, in speed noises (fit.signal
 MAX_TRAVEL_REV = 100.0  # beyond this no travel is named: the line cannot do it
 MIN_TIME_S = 8.8  # an identification's time budget where the line needs no more
 MAX_TIME_S = 30.0  # ... nor a time longer than this
+LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many of its time
 TIME_TIERS_S = (10.0, MAX_TIME_S)  # a usual identification's time, and the longest
 TRAVEL_FOR_TIME = 1.5  # a usual time is worth up to this many times the least travel
 MOVE_REQUESTS = 3  # requests a move spends outside its ramps: the start, the stop, the alarm check
@@ -297,19 +298,32 @@ class Needs:
         """Whether the allowed travel serves every load."""
         return self.lightest.reachable and self.lightest.travel_rev <= self.allowed_rev
 
+    @property
+    def most_s(self) -> float:
+        """The longest a run over the travel allowed takes, said before moving and held to (MotionPlan.time_limit_s):
+        where that travel serves every load, the time the line needs, LATE_TIME_FACTOR times it for a host that turns
+        out late (time buys back the samples it lost: tuning.identify); else MAX_TIME_S, since there time is what buys
+        the precision a short travel lacks, and the pilot or the fit may take all of it."""
+        if not self.enough:
+            return MAX_TIME_S
+        return min(MAX_TIME_S, LATE_TIME_FACTOR * max(MIN_TIME_S, self.lightest.time_s))
+
     def words(self) -> str:
         line = self.line
         said = (
             f"for {100 * self.target:g} % at {line.samples_per_s:.0f} samples/s (torque in {line.torque_step_pct:g} % "
             f"steps, noise {line.torque_noise_pct:.2g} %): {self.lightest.words(self.target)}"
         )
+        limit = f"; the run takes at most {self.most_s:.0f} s"
         if self.enough:
-            return said
+            return said + limit + " (twice the time named, where the host turns out late)"
         if self.lightest_served is not None:
             said += f"; {self.lightest_served.words(self.target)}"
         if self.from_ratio is None:
-            return said + f"; {self.allowed_rev:g} rev serve none of the loads up to a ratio of {LOAD_RATIOS[-1]:g}"
-        return said + f"; {self.allowed_rev:g} rev serve load ratios from {self.from_ratio:g}"
+            said += f"; {self.allowed_rev:g} rev serve none of the loads up to a ratio of {LOAD_RATIOS[-1]:g}"
+        else:
+            said += f"; {self.allowed_rev:g} rev serve load ratios from {self.from_ratio:g}"
+        return said + limit + " (time buys the precision the travel lacks)"
 
 
 def needs(line: Line, allowed_rev: float, target: float) -> Needs:

@@ -242,7 +242,6 @@ REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) b
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
 LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
 LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
-LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many budgets
 
 
 def _relative_std(est: InertiaEstimate) -> float:
@@ -612,13 +611,13 @@ class _HostRun:
 
     def _extended(self, est: InertiaEstimate, settings: EstimatorSettings, cycle_s: float) -> bool:
         """At the end of the time budget, on a line whose travel does not serve every load (MotionPlan.needs): a
-        budget extended (up to budget.MAX_TIME_S) to the time in which this estimate, falling as one over the root
-        of the time, is projected to reach EXTEND_AIM of the limit, where it does; False where not. There time is
-        what buys precision, and a travel named before (or by a refusal) gets the time it was named with. Where the
-        travel serves every load the budget stands (a longer log makes a rigid load's speed-noise artefact stand
-        out in sigmas, and it was then blamed on backlash), unless the host was late (_host_late): then the line's
-        samples were there but the host lost them, and time buys them back, up to LATE_TIME_FACTOR times the budget
-        planned (budget.MAX_TIME_S where the travel does not serve every load)."""
+        budget extended (up to the time limit said before moving, MotionPlan.time_limit_s) to the time in which this
+        estimate, falling as one over the root of the time, is projected to reach EXTEND_AIM of the limit, where it
+        does; False where not. There time is what buys precision, and a travel named before (or by a refusal) gets
+        the time it was named with. Where the travel serves every load the budget stands (a longer log makes a rigid
+        load's speed-noise artefact stand out in sigmas, and it was then blamed on backlash), unless the host was
+        late (_host_late): then the line's samples were there but the host lost them, and time buys them back, up to
+        budget.LATE_TIME_FACTOR times the budget planned (and the time limit)."""
         needs, late = self.plan.needs, self._host_late()
         if needs is None or (needs.enough and not late):
             return False
@@ -630,9 +629,9 @@ class _HostRun:
             rel = LATE_EXTEND * EXTEND_AIM * settings.max_rel_uncertainty  # refused outright: the time scaled
         projected = elapsed * (rel / (EXTEND_AIM * settings.max_rel_uncertainty)) ** 2
         if late:  # the host, not the line, lost the samples: time buys them back, within LATE_TIME_FACTOR of the plan
-            cap = budget.MAX_TIME_S if not needs.enough else min(budget.MAX_TIME_S, LATE_TIME_FACTOR * self.planned_s)
-            projected = min(projected, cap - cycle_s)
-        if projected + cycle_s > budget.MAX_TIME_S or projected <= self.plan.time_budget_s:
+            cap = self.plan.time_limit_s if not needs.enough else budget.LATE_TIME_FACTOR * self.planned_s
+            projected = min(projected, min(cap, self.plan.time_limit_s) - cycle_s)
+        if projected + cycle_s > self.plan.time_limit_s or projected <= self.plan.time_budget_s:
             return False
         self.plan = self.plan.budgeted(projected + cycle_s)
         if self.progress:

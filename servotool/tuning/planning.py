@@ -85,6 +85,7 @@ class MotionPlan:
     adaptive: bool = False  # stop repeating once the estimate is precise enough (and within time_budget_s)
     speed_limit_rpm: float = math.inf  # the motor's rated speed, or --max-speed below it
     time_budget_s: float = TIME_BUDGET_S  # adaptive repeats stop before the motion would take longer
+    time_limit_s: float = budget.MAX_TIME_S  # said before moving (budget.Needs.most_s): no budget grows beyond it
     needs: Needs | None = None  # what the line needs for the fit's limit (both directions, automatic ramps)
     run_on_limited: bool = False  # the speed was lowered so that a dead host's run-on stays inside the travel
     travel_given: bool = False  # the user gave the travel (or chose the one named): the fit decides, not the pilot
@@ -108,12 +109,13 @@ class MotionPlan:
         return min(moves * (2 * self.ramp_s + 0.1), self.time_budget_s if self.adaptive else math.inf)
 
     def budgeted(self, seconds: float) -> MotionPlan:
-        """The adaptive plan with a time budget of `seconds` (at least TIME_BUDGET_S), and the repeats to fill it."""
+        """The adaptive plan with a time budget of `seconds` (at least TIME_BUDGET_S, at most the time limit said
+        before moving), and the repeats to fill it."""
         if not self.adaptive:
             return self
-        budget = max(TIME_BUDGET_S, seconds)
-        cycles = max(self.repeats, math.ceil(budget / (2 * (2 * self.ramp_s + 0.1))))
-        return replace(self, time_budget_s=budget, repeats=cycles)
+        budget_s = min(self.time_limit_s, max(TIME_BUDGET_S, seconds))
+        cycles = max(self.repeats, math.ceil(budget_s / (2 * (2 * self.ramp_s + 0.1))))
+        return replace(self, time_budget_s=budget_s, repeats=cycles)
 
     def describe(self) -> str:
         names = {1: "forward", -1: "reverse"}
@@ -237,7 +239,7 @@ def with_needs(plan: MotionPlan, drive: Drive, rest: RestCheck) -> MotionPlan:
         speed_share=plan.speed_rpm / (0.9 * plan.travel_limit_rev / plan.ramp_s * 60.0) if plan.run_on_limited else 1.0,
     )
     found = budget.needs(line, plan.travel_limit_rev, EstimatorSettings().max_rel_uncertainty)
-    planned = replace(plan, needs=found)
+    planned = replace(plan, needs=found, time_limit_s=found.most_s)
     return planned.budgeted(found.lightest.time_s) if found.enough else planned
 
 

@@ -7,8 +7,9 @@ from dataclasses import replace
 
 import pytest
 
-from servotool.tuning import budget
+from servotool.tuning import budget, planning
 from servotool.tuning.errors import TravelNeeded, TuneDeclined
+from servotool.tuning.planning import MotionPlan
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
 
@@ -83,6 +84,24 @@ def test_the_needs_are_said_before_anything_moves_and_a_travel_is_asked_for_once
     motion, theta = approved[0]
     assert theta == start and motion.travel_limit_rev == needs.lightest.travel_rev
     assert motion.needs is not None and motion.needs.enough
+    assert motion.time_limit_s == motion.needs.most_s  # said before moving, and held to
+
+
+def test_the_most_a_run_takes_is_said_before_moving_and_no_budget_grows_past_it():
+    """The needs line said "the motor alone needs 3.5 rev and about 9 s" and the run went on over the 2 rev allowed
+    for 13.6 s (IS620P 57600, real time; SDC 13.4 s, DSX7E 26.8 s): that was the motor alone's time at the travel
+    it needs, not the run's. A short travel's run may take MAX_TIME_S (time buys the precision); one whose travel
+    serves every load twice the time named (a late host's lost samples): said before moving, and the plan's budget,
+    the pilot's or an extension's, stops there."""
+    short = budget.needs(SLOW, 1.0, 0.02)
+    assert not short.enough and short.most_s == budget.MAX_TIME_S
+    assert f"the run takes at most {budget.MAX_TIME_S:.0f} s" in short.words()
+    served = budget.needs(LINE, 12.0, 0.02)
+    assert served.enough and served.most_s == budget.LATE_TIME_FACTOR * max(budget.MIN_TIME_S, served.lightest.time_s)
+    assert served.most_s < budget.MAX_TIME_S and f"the run takes at most {served.most_s:.0f} s" in served.words()
+    plan = MotionPlan(1000.0, 0.12, (1, -1), 20, 12.0, adaptive=True, needs=served, time_limit_s=served.most_s)
+    assert plan.budgeted(budget.MAX_TIME_S).time_budget_s == served.most_s
+    assert plan.budgeted(0.0).time_budget_s == planning.TIME_BUDGET_S
 
 
 def test_a_run_on_that_lowers_the_speed_needs_more_travel():
