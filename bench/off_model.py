@@ -10,6 +10,11 @@ Target: no accepted (or flagged) result off by more than its stated 3 sigma.
 Run: python bench/off_model.py [--quick] [--baud 19200] [--profile is620p --baud 57600] [--seeds N]
 --seeds N: each machine N times with its own noise (one seed hid a backlash load accepted outside its
 3 sigma in 7 of 14 runs).
+     python bench/off_model.py --realtime [--quick] [--rows sdc:9600,...] [--seeds N] [--burner] [-v]
+--realtime: the same loads through the CLI in real time against `sim serve` in its own process, at each profile's
+factory line (bench/realtime.py: a travel servotool names is followed once, as a user would); per row the accepted,
+flagged and refused, the truth within 3 sigma and twice it, and the arms' mean signed error (issue 31 item 5:
+within 1 %).
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from inertia_accuracy import bench_travel, fit_brake
+from inertia_accuracy import REALTIME_ROWS, bench_travel, fit_brake, parse_rows
 
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
@@ -118,10 +123,28 @@ def main() -> None:
         help="runs of each machine, each with its own noise (default 1: "
         "one row per run; more: one row per machine with its counts and worst error against 3 sigma)",
     )
+    ap.add_argument("--realtime", action="store_true", help="through the CLI in real time (bench/realtime.py)")
+    ap.add_argument(
+        "--rows",
+        type=parse_rows,
+        default=None,
+        help="with --realtime: PROFILE:BAUD,... (default: " + ",".join(f"{p}:{b}" for p, b in REALTIME_ROWS) + ")",
+    )
+    ap.add_argument("--burner", action="store_true", help="with --realtime: one CPU-burning process beside it")
+    ap.add_argument("--tcp-port", type=int, default=0, help="with --realtime: sim serve's port (0: any free one)")
+    ap.add_argument("-v", "--verbose", action="store_true", help="with --realtime: each run's outcome")
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     loads = LOADS_QUICK if args.quick else LOADS_QUICK + LOADS_MORE
     ratios = [5.0] if args.quick else [2.0, 10.0]
+    if args.realtime:
+        from realtime import off_model_table
+
+        rows = args.rows or REALTIME_ROWS
+        off_model_table(
+            rows, loads, ratios, args.seeds, burner=args.burner, tcp_port=args.tcp_port, verbose=args.verbose
+        )
+        return
     bauds = args.baud or ([19200] if args.quick else [19200, 115200])
     if args.seeds > 1:
         print(f"{'load':<22} {'ratio':>5} {'baud':>6} {'acc':>4} {'flag':>4} {'ref':>4} {'viol':>4}  worst err/3sig")

@@ -23,6 +23,7 @@ band).
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -39,6 +40,7 @@ from pathlib import Path
 from servotool.model.loader import load_profile
 from servotool.motion.deadman import route_of
 from servotool.sim import state as sim_state
+from servotool.sim.device import SIM_SETTINGS
 from servotool.sim.firmware import build_drive
 from servotool.sim.virtual import make_motion_setup
 
@@ -114,11 +116,32 @@ class Burner:
             self.proc.wait()
 
 
-def set_machine(profile: str, baud: int, machine: tuple[float, float, float, float, float], seed: int) -> None:
+# The settings an off-model machine sets (bench/off_model.py's loads); every other machine has them at their defaults.
+OFF_MODEL_KEYS = (
+    "resonance_hz",
+    "resonance_damping",
+    "backlash_rad",
+    "arm_gravity",
+    "arm_angle",
+    "gear",
+    "cogging",
+    "cogging_periods",
+)
+
+
+def set_machine(
+    profile: str,
+    baud: int,
+    machine: tuple[float, float, float, float, float],
+    seed: int,
+    mechanics: dict[str, float] | None = None,
+) -> None:
     """The simulated drive's true properties (as `sim config` sets them), its motion set-up made and a power cycle:
-    a served drive takes the state file over at its next request."""
+    a served drive takes the state file over at its next request. mechanics: an off-model load's settings (the rest
+    of OFF_MODEL_KEYS at their defaults: the previous machine's do not carry over)."""
     ratio, coulomb, viscous, gravity, noise = machine
     p = load_profile(profile)
+    off_model = {key: SIM_SETTINGS[key][1] for key in OFF_MODEL_KEYS} | (mechanics or {})
     sim_state.configure(
         p,
         p.default_unit,
@@ -130,6 +153,7 @@ def set_machine(profile: str, baud: int, machine: tuple[float, float, float, flo
         seed=seed,
         brake=1,
         line_baud=baud,
+        **off_model,
     )
     make_motion_setup(build_drive(p, p.default_unit))
 
@@ -189,6 +213,14 @@ def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
     )
 
 
+def within_named(r: Run) -> bool:
+    """Whether a run stayed within the travel and time servotool named before moving (2 rev and 10 s where it named
+    none: the issue's default)."""
+    travel = r.named_travel_rev if r.named_travel_rev is not None else 2.0
+    time_s = r.named_time_s if r.named_time_s is not None else 10.0
+    return (r.travel_rev or 0.0) <= travel + 1e-9 and (r.time_s or 0.0) <= time_s
+
+
 @dataclass
 class Row:
     """The runs of one profile at one line speed."""
@@ -204,11 +236,6 @@ class Row:
     def accepted(self) -> list[tuple[float, Run]]:
         return [(t, r) for t, r in zip(self.truths, self.runs, strict=True) if r.ok and r.ratio is not None]
 
-    def within_named(self, r: Run) -> bool:
-        travel = r.named_travel_rev if r.named_travel_rev is not None else 2.0
-        time_s = r.named_time_s if r.named_time_s is not None else 10.0
-        return (r.travel_rev or 0.0) <= travel + 1e-9 and (r.time_s or 0.0) <= time_s
-
     def wrong_causes(self) -> Counter[str]:
         found: Counter[str] = Counter()
         for r in self.runs:
@@ -220,7 +247,7 @@ class Row:
     def line(self) -> str:
         acc = self.accepted()
         n = len(self.runs)
-        good = [(t, r) for t, r in acc if self.within_named(r)]
+        good = [(t, r) for t, r in acc if within_named(r)]
         errors = [abs(r.ratio - t) / (1.0 + t) * 100 for t, r in acc]  # type: ignore[operator]
         sig3 = [abs(r.ratio - t) <= 3 * (r.ratio_std or 0.0) + 1e-9 for t, r in acc]  # type: ignore[operator]
         sig6 = [abs(r.ratio - t) <= 6 * (r.ratio_std or 0.0) + 1e-9 for t, r in acc]  # type: ignore[operator]
@@ -258,6 +285,21 @@ HEADER = (
 )
 
 
+def _isolated() -> tuple[Path, dict[str, str]]:
+    """A state directory of the bench's own (sim, backups, cache, no config) for the CLI's processes and this one."""
+    tmp = Path(tempfile.mkdtemp(prefix="servotool-bench-"))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SERVOTOOL_")}
+    env.update(
+        SERVOTOOL_SIM_DIR=str(tmp / "sim"),
+        SERVOTOOL_BACKUP_DIR=str(tmp / "backups"),
+        SERVOTOOL_CACHE_DIR=str(tmp / "cache"),
+        SERVOTOOL_CONFIG=str(tmp / "none.yaml"),
+        COLUMNS="200",
+    )
+    os.environ.update({k: v for k, v in env.items() if k.startswith("SERVOTOOL_")})
+    return tmp, env
+
+
 def realtime_table(
     rows: list[tuple[str, int]],
     machines: list[tuple[float, float, float, float, float]],
@@ -269,16 +311,7 @@ def realtime_table(
     verbose: bool = False,
 ) -> list[Row]:
     """Every row through the CLI in real time; prints as it goes and returns the rows."""
-    tmp = Path(tempfile.mkdtemp(prefix="servotool-bench-"))
-    env = {k: v for k, v in os.environ.items() if not k.startswith("SERVOTOOL_")}
-    env.update(
-        SERVOTOOL_SIM_DIR=str(tmp / "sim"),
-        SERVOTOOL_BACKUP_DIR=str(tmp / "backups"),
-        SERVOTOOL_CACHE_DIR=str(tmp / "cache"),
-        SERVOTOOL_CONFIG=str(tmp / "none.yaml"),
-        COLUMNS="200",
-    )
-    os.environ.update({k: v for k, v in env.items() if k.startswith("SERVOTOOL_")})
+    tmp, env = _isolated()
     where = "--port sim, the simulator in the CLI's process" if embedded else "sim serve in a process of its own"
     print(
         f"real time through the CLI ({where}{', one CPU burner beside it' if burner else ''}); "
@@ -315,6 +348,79 @@ def realtime_table(
             print(f"  {row.profile:>7} {row.baud:>6} {count:>3} x {reason}")
         for cause, count in row.wrong_causes().most_common():
             print(f"  {row.profile:>7} {row.baud:>6} {count:>3} x WRONG CAUSE named: {cause}")
+    return done
+
+
+@dataclass
+class OffModelRow:
+    """One profile's runs on loads outside the rigid model, at one line speed."""
+
+    profile: str
+    baud: int
+    runs: list[tuple[str, float, Run]] = field(default_factory=list)  # (load, true ratio, outcome)
+
+    def line(self) -> str:
+        acc = [(label, t, r) for label, t, r in self.runs if r.ok and r.ratio is not None and r.ratio_std]
+        flagged = sum(any(n.startswith("off-model:") for n in r.notes) for _l, _t, r in acc)
+        z = [abs(r.ratio - t) / r.ratio_std for _l, t, r in acc]  # type: ignore[operator]
+        arms = [(r.ratio - t) / (1.0 + t) * 100 for label, t, r in acc if label.startswith("arm")]  # type: ignore
+        named = sum(within_named(r) for _l, _t, r in acc)
+        n = len(self.runs)
+        return (
+            f"{self.profile:>7} {self.baud:>6} {n:>4} {len(acc):>4} {flagged:>4} {n - len(acc):>4} "
+            f"{sum(v <= 3 for v in z):>3}/{len(acc):<3} {sum(v <= 6 for v in z):>3}/{len(acc):<3} "
+            f"{max(z) / 3 if z else math.nan:>6.2f} {named:>3}/{len(acc):<3} "
+            f"{(f'{statistics.mean(arms):+.2f} ({len(arms)})' if arms else '-'):>12}"
+        )
+
+
+OFF_MODEL_HEADER = (
+    f"{'profile':>7} {'baud':>6} {'runs':>4} {'acc':>4} {'flag':>4} {'ref':>4} {'in3sig':>7} {'in6sig':>7} "
+    f"{'worst':>6} {'named':>7} {'arms mean%':>12}"
+)
+
+
+def off_model_table(
+    rows: list[tuple[str, int]],
+    loads: list[tuple[str, dict[str, float]]],
+    ratios: list[float],
+    seeds: int,
+    *,
+    burner: bool = False,
+    tcp_port: int = 0,
+    verbose: bool = False,
+) -> list[OffModelRow]:
+    """bench/off_model.py's loads through the CLI in real time (each with Coulomb friction 2 % and 0.2 % noise, as
+    there), `seeds` runs each; prints as it goes: accepted (as is or flagged), refused, the truth within the stated
+    3 sigma and twice it, the worst error in 3 sigmas, accepted within the travel and time named, the arms' mean
+    signed error of J_total."""
+    tmp, env = _isolated()
+    print(
+        f"off-model loads in real time through the CLI (sim serve in a process of its own"
+        f"{', one CPU burner beside it' if burner else ''}); ratios {', '.join(f'{r:g}' for r in ratios)}, "
+        f"{seeds} seed(s), {os.cpu_count()} cores, {load()}"
+    )
+    done: list[OffModelRow] = []
+    try:
+        for profile, baud in rows:
+            row = OffModelRow(profile, baud)
+            served, hot = Served(profile, baud, env, tcp_port), Burner(burner)
+            try:
+                for label, mechanics in loads:
+                    for ratio in ratios:
+                        for k in range(seeds):
+                            set_machine(profile, baud, (ratio, 0.02, 0.0, 0.0, 0.002), k + 1, mechanics)
+                            run = run_machine(served.port, profile, baud, env)
+                            row.runs.append((label, ratio, run))
+                            if verbose:
+                                print(f"    {label:<22} {ratio:>4g} seed {k + 1}: {_said(run, ratio)}", flush=True)
+            finally:
+                hot.close()
+                served.close()
+            print(OFF_MODEL_HEADER + "\n" + row.line() + f"  {load()}", flush=True)
+            done.append(row)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     return done
 
 
