@@ -629,7 +629,7 @@ class _HostRun:
             rel = LATE_EXTEND * EXTEND_AIM * settings.max_rel_uncertainty  # refused outright: the time scaled
         projected = elapsed * (rel / (EXTEND_AIM * settings.max_rel_uncertainty)) ** 2
         if late:  # the host, not the line, lost the samples: time buys them back, within LATE_TIME_FACTOR of the plan
-            cap = self.plan.time_limit_s if not needs.enough else budget.LATE_TIME_FACTOR * self.planned_s
+            cap = budget.LATE_TIME_FACTOR * self.planned_s if needs.enough else math.inf
             projected = min(projected, min(cap, self.plan.time_limit_s) - cycle_s)
         if projected + cycle_s > self.plan.time_limit_s or projected <= self.plan.time_budget_s:
             return False
