@@ -231,7 +231,7 @@ AT_ONE_PERCENT = pytest.mark.xfail(
 
 @pytest.mark.parametrize(
     "noise,seed",
-    [(0.005, 2), (0.005, 3), pytest.param(0.01, 2, marks=AT_ONE_PERCENT), pytest.param(0.01, 4, marks=AT_ONE_PERCENT)],
+    [(0.005, 2), (0.005, 3), (0.01, 2), pytest.param(0.01, 4, marks=AT_ONE_PERCENT)],
 )
 def test_a_heavy_load_behind_a_stiff_coupling_at_a_slow_line_is_covered_or_refused(sim_dir, noise, seed):
     """SDC at 9600 baud (24 samples/s), a 40 Hz coupling under a load 37 times the motor's (bench/off_model.py's
@@ -240,8 +240,9 @@ def test_a_heavy_load_behind_a_stiff_coupling_at_a_slow_line_is_covered_or_refus
     load's ringing raised the torque noise estimate the kinks are judged by (3.2-3.9 %, 0.6 % true) and the
     reversals were no kinks. The spring term saw it (strong, its resonance above the 24 samples/s) and now widens
     it by what it would change: refused, "what the model checks cannot rule out at this sampling". At 1 % noise the
-    term is too weak to: strict, it fails the suite once fixed, to be made plain. Wanted: the truth within the
-    stated 3 sigma, or a refusal that blames no arm or load that varies."""
+    term is too weak to; seed 2's came out of the other sign within a sigma, which now counts the share a spring
+    leaves plausible too. Seed 4 strict: it fails the suite once fixed, to be made plain. Wanted: the truth within
+    the stated 3 sigma, or a refusal that blames no arm or load that varies."""
     from bench.off_model import identify
 
     machine = {"resonance_hz": 40.0, "resonance_damping": 0.05}

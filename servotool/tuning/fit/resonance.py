@@ -39,6 +39,8 @@ NYQUIST_SHARE = 0.5  # a resonance is named by its frequency only below this sha
 STENCIL_REACH = 6  # a window's torque integral and slopes reach at most this many samples beyond its span
 UNRESOLVED_SPRING_SHARE = 1.0  # short of a hint, this share of what a free spring term adds to J's uncertainty counts
 #                                (its 1-sigma range cut at the softest coupling the two-mass scan does not search)
+SPRING_WITHIN_SIGMAS = 1.0  # a term of the other sign leaves a spring plausible up to this many sigmas: its share
+#                             tapers to none there, so that an insignificant term's sign does not decide alone
 LOAD_HZ_MIN = 1.0  # a two-mass load's own resonance (against a held motor) is searched from here ...
 LOAD_HZ_PER_RATE = 0.2  # ... up to this fraction of the sampling rate and LOAD_HZ_MAX, in steps of LOAD_HZ_STEP
 LOAD_HZ_MAX = 60.0  # (stiffer couplings move J by less than the other checks' uncertainty)
@@ -129,8 +131,9 @@ class _Spring:
 
 
 def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float) -> _Spring | None:
-    """The spring term when the motor runs ahead of or behind its load as through a spring (the coefficient has
-    a spring's sign at all), else None. Strong: beyond COMPLIANCE_SIGMA and moving J.
+    """The spring term when the motor may run ahead of or behind its load as through a spring (the coefficient has
+    a spring's sign, or the other within SPRING_WITHIN_SIGMAS: its resonance then infinite), else None. Strong:
+    beyond COMPLIANCE_SIGMA and moving J.
 
     Through a spring k the load's speed differs from the motor's by the deflection's rate, about
     (J_load / J) * T' / k while the motion is slow against the resonance; the momentum balance over a window
@@ -148,16 +151,20 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     theta, std, _resid = found
     b, j = float(theta[-1]), float(theta[0])
     ratio = j / fit.jm - 1.0
-    if not (b < 0 and std[-1] > 0 and ratio > MIN_COMPLIANT_RATIO and math.isfinite(std[0])):
+    if not (std[-1] > 0 and ratio > MIN_COMPLIANT_RATIO and math.isfinite(std[0])):
         return None
     z = b / float(std[-1])
+    if z >= SPRING_WITHIN_SIGMAS:
+        return None
     base = refit(fit, x)
     unresolved = math.sqrt(max(0.0, float(std[0]) ** 2 - float(base[1][0]) ** 2)) if base is not None else 0.0
     softest = _softest_unscanned(fit, ratio)
     if softest < float(std[-1]):
         unresolved *= softest / float(std[-1])
+    unresolved *= min(1.0, 1.0 - z / SPRING_WITHIN_SIGMAS)
     strong = z < -COMPLIANCE_SIGMA and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
-    return _Spring(col[:, None], shared, math.sqrt(ratio / -b) / (2 * math.pi), z, strong, unresolved)
+    hz = math.sqrt(ratio / -b) / (2 * math.pi) if b < 0 else math.inf
+    return _Spring(col[:, None], shared, hz, z, strong, unresolved)
 
 
 def _softest_unscanned(fit: FitData, ratio: float) -> float:
