@@ -100,6 +100,25 @@ def torque_cap_pct(limit_pct: float | None) -> float:
     return TORQUE_SHARE * (limit_pct or DEFAULT_LIMIT_PCT)
 
 
+def torque_speed_cap(speed_rpm: float, peak_pct: float, swing_pct: float, limit_pct: float | None) -> float:
+    """The test speed (rpm) at which moves like one at speed_rpm (the same ramps), whose |torque| peaked at peak_pct
+    of which swing_pct was the acceleration's (half the step between accelerating and braking torque), take the
+    acceleration torque torque_cap_pct allows, the rest (friction and gravity, which do not grow with the speed)
+    within the drive's limit: the cap `predicted` plans by. Never below the speed at which the whole peak, scaled,
+    would reach torque_cap_pct; inf where the move took no torque. Scaling the whole peak capped a bare motor with
+    30 % friction and 40 % gravity at 1900 rpm where the budget planned 3000: a travel named past that ran weaker
+    than planned and was refused for the torque reading's floor (SDC 7600, 26 rev named: 2.3 %)."""
+    if peak_pct <= 0:
+        return math.inf
+    cap = torque_cap_pct(limit_pct)
+    whole = speed_rpm * cap / peak_pct
+    swing = min(swing_pct, peak_pct)
+    if swing <= 0:
+        return math.inf
+    room = min(cap, (limit_pct or DEFAULT_LIMIT_PCT) - (peak_pct - swing))
+    return max(whole, speed_rpm * room / swing)
+
+
 @dataclass(frozen=True)
 class Need:
     """The travel and time a load needs on this line; `reachable` False: none within MAX_TRAVEL_REV and MAX_TIME_S

@@ -245,6 +245,15 @@ LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grow
 LATE_TIME_FACTOR = 2.0  # where the travel serves every load, a late host's run takes at most this many budgets
 
 
+def torque_swing(speed: list[float], torque: list[float], step_pct: float) -> float:
+    """A move's acceleration torque (% of rated): half the spread of its torque while it moves (above a fifth of its
+    peak speed), where accelerating and braking torque differ by twice it and friction and gravity not at all; at
+    least half the reading's step (a spread the reading does not show may be up to a step)."""
+    moving = [q for v, q in zip(speed, torque, strict=False) if abs(v) > 0.2 * max(map(abs, speed), default=0.0)]
+    spread = max(moving) - min(moving) if moving else 0.0
+    return max(spread / 2.0, step_pct / 2.0)
+
+
 def _relative_std(est: InertiaEstimate) -> float:
     """sigma(J) / J of an estimate; for a J below the rotor's that fit.conclude judged at the rotor's inertia (the
     least J a load gives: the torque reading's steps hid the acceleration), that judgement's; NaN for a J at or below
@@ -279,7 +288,8 @@ class _HostRun:
         self.stop_band = rest_band(rest.speed_noise_rpm if rest is not None else 0.0)  # noise the rest check measured
         self.sampler = Sampler(d, self.timing, plan.travel_limit_rev, self._beat)
         # A torque read in whole percent: its step error would repeat in every move of the same acceleration.
-        self.coarse = p.need_role("torque_feedback", FEATURE).scale >= COARSE_TORQUE_STEP_PCT
+        self.torque_step_pct = p.need_role("torque_feedback", FEATURE).scale
+        self.coarse = self.torque_step_pct >= COARSE_TORQUE_STEP_PCT
         self.ramp = plan.ramp_s
         self.guard = BandGuard(gap_s=rest.longest_gap_s if rest is not None else 0.0)
         self.move_first = 0  # the first sample of the running move
@@ -345,8 +355,9 @@ class _HostRun:
         self.sample()
         self.guard.gap_s = max(self.guard.gap_s, self.sampler.interval())
 
-    def move(self, direction: int, speed: float) -> tuple[float, float]:
-        """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %)."""
+    def move(self, direction: int, speed: float) -> tuple[float, float, float]:
+        """One accelerate-then-stop move; returns (excursion so far in rev, peak |torque| in %, its acceleration's
+        part in %: torque_swing)."""
         s, jogger, trace, guard = self.sampler, self.jogger, self.sampler.trace, self.guard
         first = self.move_first = len(trace.t)
         # After the pilot a segment route's move ends by itself, its own segment no longer than the travel band
@@ -406,7 +417,7 @@ class _HostRun:
         if active:
             raise IdentificationFailed(f"the drive stopped the identification with alarm {active}" + self._starved())
         peak = max((abs(q) for q in trace.torque[first:]), default=0.0)
-        return s.travel_rev, peak
+        return s.travel_rev, peak, torque_swing(trace.speed[first:], trace.torque[first:], self.torque_step_pct)
 
     def _starved(self) -> str:
         """Where the drive's own watchdog may have stopped the motion because the host stalled: the words that say
@@ -454,12 +465,12 @@ class _HostRun:
         hold.before_pilot()
         if self.progress:
             self.progress(f"pilot move at {pilot:.0f} rpm")
-        excursion, peak = 0.0, 0.0
+        excursion, peak, swing = 0.0, 0.0, 0.0
         self.sample()  # the axis's real position: the travel band is around it, not around 0
         origin = self.home = self.sampler.pred
         for direction in plan.directions:
-            excursion, pk = self.move(direction, pilot)
-            peak = max(peak, pk)
+            excursion, pk, sw = self.move(direction, pilot)
+            peak, swing = max(peak, pk), max(swing, sw)
         if hold.active:
             hold.after_pilot(self._estimate_between_moves(pilot_settings(settings)))
         if self._short():
@@ -468,7 +479,7 @@ class _HostRun:
         limit_rev = plan.travel_limit_rev
         lo = origin - 0.05 * limit_rev if both or plan.directions[0] > 0 else origin - 0.9 * limit_rev
         self.guard.band, self.guard.stretch = (lo, lo + 0.9 * limit_rev), max(1.0, excursion / nominal)
-        return self._test_speed(pilot, excursion, peak)
+        return self._test_speed(pilot, excursion, peak, swing)
 
     def _short(self) -> bool:
         """Whether the travel allowed does not serve every load (the plan's needs): the pilot's load decides."""
@@ -540,8 +551,9 @@ class _HostRun:
             moved=True,
         )
 
-    def _test_speed(self, pilot: float, excursion: float, peak: float) -> float:
-        """The planned speed, within the travel band and the torque share the pilot extrapolates to."""
+    def _test_speed(self, pilot: float, excursion: float, peak: float, swing: float) -> float:
+        """The planned speed, within the travel band and the torque the pilot extrapolates to (its acceleration's
+        part, swing, grows with the speed and falls with slower ramps; budget.torque_speed_cap)."""
         plan = self.plan
         both = len(plan.directions) > 1
         speed = plan.speed_rpm  # excursion and torque grow in proportion to the speed at a fixed ramp time
@@ -555,8 +567,9 @@ class _HostRun:
         if excursion > 0:
             room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
             speed = min(speed, pilot * plan.ramp_s / self.ramp * room / (excursion * (plan.repeats if not both else 1)))
-        if peak > 0:  # a share of the drive's limit, and what its overload protection carries (budget.Line)
-            self.cap = min(self.cap, (pilot * self.torque_cap_pct / peak, "torque"))
+        if peak > 0:  # a share of the drive's limit for the acceleration, the rest within it (budget.Line)
+            swing *= plan.ramp_s / self.ramp
+            self.cap = min(self.cap, (budget.torque_speed_cap(pilot, peak, swing, self.torque_limit), "torque"))
         self.speed = min(speed, self.cap[0])
         return self.speed
 
