@@ -686,8 +686,10 @@ class _HostRun:
         """A longer travel for a refusal that stronger accelerations cure: the least with which the line's budget
         (tuning.budget), scaled to what this run showed, reaches the limit within its time; none where no travel
         does (the speed or the torque the drive may spend bounds the moves, or the line is too slow), so a remedy
-        offered is one that passed the check the motion is planned by. A plan of the user's own ramps, repeats or
-        one direction (no budget): the travel that covers the shortfall (planning.remedy)."""
+        offered is one that passed the check the motion is planned by; where only that check's margin fails, the
+        strongest motion the drive allows, as one that may not be enough, where it is predicted within the limit. A
+        plan of the user's own ramps, repeats or one direction (no budget): the travel that covers the shortfall
+        (planning.remedy)."""
         needs = self.plan.needs
         if needs is None:
             return remedy(self.plan.travel_limit_rev, est.shortfall, self.speed, *self.cap)
@@ -701,17 +703,20 @@ class _HostRun:
         ratios = [max(est.load_ratio, 0.0)] if math.isfinite(est.load_ratio) else budget.LOAD_RATIOS
         travel = self.plan.travel_limit_rev
         line, target = needs.line, needs.target
-        found = next(
-            (
-                need
-                for r in ratios
-                if (need := budget.more_travel(line, r, travel, 2 * cycles, rel, target, low, self.speed)) is not None
-            ),
-            None,
-        )
-        if found is None:
-            return self._strongest(est)
-        return Remedy(travel, found.travel_rev, found.travel_rev / travel, True, found.bound, found.time_s)
+        for closest in (False, True):
+            found = next(
+                (
+                    need
+                    for r in ratios
+                    if (need := budget.more_travel(line, r, travel, 2 * cycles, rel, target, low, self.speed, closest))
+                    is not None
+                ),
+                None,
+            )
+            if found is not None:
+                gain = found.travel_rev / travel
+                return Remedy(travel, found.travel_rev, gain, not closest, found.bound, found.time_s)
+        return self._strongest(est)
 
     def _strongest(self, est: InertiaEstimate) -> Remedy | None:
         """Where the rigid fit alone was within the limit and what was added to it took it over (a model check's

@@ -8,6 +8,7 @@ import re
 
 import pytest
 
+from servotool.sim.virtual import HostStalls
 from servotool.tuning.errors import IdentificationFailed, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings
 from servotool.tuning.identify import IdentificationRefused
@@ -199,5 +200,29 @@ def test_a_torque_reading_whose_steps_hide_the_acceleration_names_a_travel_that_
     run = bench.identify_once(
         0.0, 0.3, 0.4, 0.0, 7600, seed=1, profile_id="sdc", viscous=0.0, travel_rev=cure.suggested_rev
     )
+    est = run.identified.estimate
+    assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
+
+
+def test_where_only_the_budgets_margin_fails_the_strongest_motion_is_named_and_identifies(sim_dir):
+    """The same motor on a 9600 baud line whose host answers every request 10 ms late (19 samples/s): the refusal
+    said "no travel up to 100 rev brings it to 2 %" (the budget's best, 1.47 % at the rated speed, misses the 1.4 %
+    it aims at), where 20-30 rev given are accepted at 1.7-2.0 %. It names the strongest motion the drive allows,
+    as one that may not be enough; followed, it identifies within 3 sigma."""
+    from bench import inertia_accuracy as bench
+
+    def late() -> dict:
+        return {
+            "seed": 1,
+            "profile_id": "sdc",
+            "viscous": 0.0,
+            "stalls": HostStalls(rate=1.0, min_s=0.01, max_s=0.01, seed=1),
+        }
+
+    with pytest.raises(IdentificationRefused) as refused:
+        bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, **late())
+    words, cure = str(refused.value), refused.value.remedy
+    assert cure is not None and not cure.enough and "may not be enough" in words, words
+    run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=cure.suggested_rev, **late())
     est = run.identified.estimate
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
