@@ -132,8 +132,19 @@ class Need:
     reachable: bool
     bound: str  # what bounds the moves at that travel: "travel", "speed" or "torque"
 
+    def nameable(self, target: float) -> bool:
+        """Whether its travel may be named: reachable, or (what came closest) predicted within `target` itself, as
+        one that may not be enough (more_travel's closest)."""
+        return self.reachable or self.sigma_rel <= target
+
     def words(self, target: float) -> str:
         what = "the motor alone" if self.load_ratio <= 0 else f"a load ratio of {self.load_ratio:.2g}"
+        if not self.reachable and self.nameable(target):
+            return (
+                f"{what} needs {self.travel_rev:g} rev of travel and about {self.time_s:.0f} s at best "
+                f"({100 * self.sigma_rel:.1f} % predicted, the moves bound by the {self.bound}), within "
+                f"{100 * target:g} % but short of the margin planned: that may not be enough"
+            )
         if not self.reachable:
             return (
                 f"this line cannot reach {100 * target:g} % for {what} within {MAX_TRAVEL_REV:g} rev and "

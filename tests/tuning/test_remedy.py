@@ -226,3 +226,30 @@ def test_where_only_the_budgets_margin_fails_the_strongest_motion_is_named_and_i
     run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=cure.suggested_rev, **late())
     est = run.identified.estimate
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
+
+
+def test_after_the_pilot_the_closest_travel_for_the_lightest_load_not_ruled_out_is_named(sim_dir, monkeypatch):
+    """The same late line, servotool's travel 9 rev: the pilot showed 0.055 +- 0.28, no travel reaches the budget's
+    margin for the motor alone, and the pilot named 14.5 rev for a load of 0.5, refused when followed (2.1 %, the
+    torque reading's floor). It names the motor alone's closest, as one that may not be enough, and that identifies
+    within 3 sigma."""
+    from bench import inertia_accuracy as bench
+
+    monkeypatch.setattr(bench, "bench_travel", lambda _profile: 9.0)
+
+    def late() -> dict:
+        return {
+            "seed": 1,
+            "profile_id": "sdc",
+            "viscous": 0.0,
+            "stalls": HostStalls(rate=1.0, min_s=0.01, max_s=0.01, seed=1),
+            "follow": False,
+        }
+
+    with pytest.raises(TravelNeeded) as named:
+        bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, **late())
+    words = str(named.value)
+    assert named.value.moved and "the motor alone" in words and "may not be enough" in words, words
+    run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=named.value.travel_rev, **late())
+    est = run.identified.estimate
+    assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= named.value.travel_rev
