@@ -513,13 +513,15 @@ class _HostRun:
         lows = [max(0.0, ratio - k * std) for k in (2.0, 1.0, 0.0)]
         line = needs.line
         # How far this machine's fit stays from the model, as the pilot (a quarter of the speed) showed it.
-        model = budget.predicted(
+        model, pilot_rpm, _bound = budget.predicted(
             line, ratio, needs.allowed_rev * PILOT_SHARE, 2 * len(self.plan.directions), floor=False
-        )[0]
+        )
         seen = rough.j_std_kgm2 / rough.j_total_kgm2
         if math.isfinite(model) and model > 0 and math.isfinite(seen):
-            # scaled as a remedy scales it (budget.more_travel): down to the best efficiency measured, at most
-            floor = budget.BEST_EFFICIENCY / budget.EFFICIENCY
+            # scaled as a remedy scales it (budget.more_travel): down to the best efficiency measured, at most, and
+            # not below the model's where the reading's steps hid the pilot's acceleration (budget.steps_hide)
+            hidden = budget.steps_hide(line, budget.accel_torque_pct(line, ratio, pilot_rpm))
+            floor = 1.0 if hidden else budget.BEST_EFFICIENCY / budget.EFFICIENCY
             line = replace(line, efficiency=min(PILOT_EFFICIENCY_CAP, max(floor, seen / model)))
         last = None
         for r in lows + [r for r in budget.LOAD_RATIOS if r > lows[-1]]:
