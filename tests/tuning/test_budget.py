@@ -3,6 +3,7 @@ measured sample rate, the torque limits and the travel allowed."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import pytest
@@ -206,3 +207,24 @@ def test_a_run_that_did_better_than_the_model_is_named_a_shorter_travel_but_no_l
     assert as_model is not None and better is not None and best is not None and beyond is not None
     assert best.travel_rev <= better.travel_rev < as_model.travel_rev
     assert beyond.travel_rev == best.travel_rev  # no further than the best measured
+
+
+def test_the_torque_cap_grows_the_acceleration_alone_with_the_speed() -> None:
+    """A pilot at 750 rpm peaking at 72 % of rated, 2 % of it the acceleration's (the rest friction and gravity):
+    scaled whole, 180 % of a 300 % limit allows 1875 rpm; the acceleration alone reaches it far beyond, and the
+    friction and gravity leave the acceleration no more than the limit's rest."""
+    whole = 750.0 * budget.torque_cap_pct(300.0) / 72.0
+    assert budget.torque_speed_cap(750.0, 72.0, 2.0, 300.0) == pytest.approx(750.0 * budget.torque_cap_pct(300.0) / 2.0)
+    assert budget.torque_speed_cap(750.0, 250.0, 2.0, 300.0) == pytest.approx(750.0 * 52.0 / 2.0)
+    assert budget.torque_speed_cap(750.0, 72.0, 72.0, 300.0) == pytest.approx(whole)  # all of it the acceleration's
+    assert budget.torque_speed_cap(750.0, 299.0, 2.0, 300.0) >= 750.0 * budget.torque_cap_pct(300.0) / 299.0
+    assert budget.torque_speed_cap(750.0, 0.0, 0.0, 300.0) == math.inf
+
+
+def test_the_strongest_travel_is_the_least_at_which_the_drive_bounds_the_moves() -> None:
+    """What a refusal names where a model check widened the fit (tuning.identify): the least travel at which the
+    torque or the speed the drive allows bounds the moves, and none where they bound them already."""
+    strongest = budget.strongest_travel(LINE, 37.0, 2.0, 0.02)
+    assert strongest is not None and strongest.bound == "torque" and not strongest.reachable
+    assert budget.predicted(LINE, 37.0, strongest.travel_rev - 0.5, 20)[2] == "travel"
+    assert budget.strongest_travel(LINE, 37.0, strongest.travel_rev, 0.02) is None

@@ -8,7 +8,9 @@ import re
 
 import pytest
 
+from servotool.sim.virtual import HostStalls
 from servotool.tuning.errors import IdentificationFailed, TravelNeeded
+from servotool.tuning.fit import EstimatorSettings
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.planning import MIN_REMEDY_GAIN, REMEDY_MARGIN, remedy
 from servotool.tuning.tune import TuneRequest, tune_inertia
@@ -145,26 +147,19 @@ def test_a_pilot_need_within_its_slack_of_the_travel_servotool_chose_goes_on(sim
     assert named.value.moved and named.value.travel_rev > 1.5 * 6.0
 
 
-def test_a_refusal_that_a_check_widened_names_the_strongest_motion_and_it_then_identifies(sim_dir):
+def test_a_heavy_load_whose_widened_fit_was_refused_identifies_at_servotools_own_travel(sim_dir):
     """DSX7E 115200, a load of 37 with 20 % Coulomb and 20 % gravity, 1 % noise, servotool's 12 rev: the fit alone
     was 1.3-1.5 % uncertain, and the spring check, which cannot rule out a coupling stiffer than 335 samples/s
-    resolve, widened it to 3.6-5.2 % (seed 3 then; since the share counts only couplings the two-mass scan leaves
-    unsearched, seed 32). The line's model scaled to that said "no travel up to 100 rev brings it to 2 %", where 16
-    rev identified it in 5 of 5 seeds. The refusal says where the uncertainty came from and names the strongest
-    motion the drive allows as one that may not be enough; followed, it identifies within 3 sigma."""
+    resolve, widened it to 3.6-5.2 %; the refusal named the strongest motion, 21.5 rev, as one that may not be
+    enough. Its pilot's peak torque (friction and gravity with it) had capped the test speed as if all of it grew
+    with the speed; the acceleration's part alone now does (budget.torque_speed_cap), and the stronger moves
+    identify it at 12 rev within 3 sigma (seeds 1-30 and 32 on the bench's machine)."""
     from bench import inertia_accuracy as bench
 
-    with pytest.raises(IdentificationRefused) as refused:
-        bench.identify_once(37.0, 0.2, 0.2, 0.01, 115200, seed=32, profile_id="dsx7e", viscous=0.0005)
-    words, cure = str(refused.value), refused.value.remedy
-    assert "no travel" not in words and "from the fit itself" in words, words
-    assert not any(w in words for w in ("backlash", "resonance", "coupling")), words
-    assert cure is not None and not cure.enough and cure.suggested_rev > 12.0, words
-    run = bench.identify_once(
-        37.0, 0.2, 0.2, 0.01, 115200, seed=32, profile_id="dsx7e", viscous=0.0005, travel_rev=cure.suggested_rev
-    )
+    run = bench.identify_once(37.0, 0.2, 0.2, 0.01, 115200, seed=32, profile_id="dsx7e", viscous=0.0005)
     est = run.identified.estimate
-    assert abs(run.ratio - 37.0) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
+    assert est.ok and abs(run.ratio - 37.0) <= 3 * est.ratio_std
+    assert est.j_std_kgm2 <= 0.75 * EstimatorSettings().max_rel_uncertainty * est.j_total_kgm2
 
 
 def test_a_travel_named_where_the_torque_steps_bound_the_fit_identifies_when_followed(sim_dir):
@@ -186,21 +181,75 @@ def test_a_travel_named_where_the_torque_steps_bound_the_fit_identifies_when_fol
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
 
 
-def test_a_torque_reading_whose_steps_hide_the_acceleration_is_not_blamed_on_the_sign_convention(sim_dir):
-    """SDC's motor alone with 30 % Coulomb friction and 40 % gravity, sampled at the 20 readings/s that real time
-    reaches on its 9600 baud line (8400 baud on virtual time): its acceleration torque, 0.3 % of rated, reads in 1 %
-    steps that never move, J came out 0 with no residual, and the refusal said "non-physical result: check that
-    torque and speed share a sign convention" with no remedy. It is too uncertain at the rotor's own inertia: said
-    so, with the reading's steps, and a travel that identifies it within 3 sigma when followed."""
+def test_a_torque_reading_whose_steps_hide_the_acceleration_names_a_travel_that_identifies(sim_dir):
+    """SDC's motor alone with 30 % Coulomb friction and 40 % gravity, sampled at the 19-20 readings/s that real time
+    reaches on its 9600 baud line (7600 baud on virtual time): its acceleration torque, 0.4 % of rated, reads in 1 %
+    steps that hardly move. The refusal once said "non-physical result: check that torque and speed share a sign
+    convention" with no remedy; it is too uncertain at the rotor's own inertia, and says so with the reading's
+    steps. The travel it named, 26 rev, was refused again when followed, for the steps' floor (2.3 %): the run
+    capped its speed at 1900 rpm, scaling the pilot's whole peak torque (friction and gravity with it) as if it all
+    grew with the speed, where the budget planned 3000 and predicted the floor with them. The acceleration's part
+    alone now grows with the speed (budget.torque_speed_cap): the travel named identifies within 3 sigma."""
     from bench import inertia_accuracy as bench
 
     with pytest.raises(IdentificationRefused) as refused:
-        bench.identify_once(0.0, 0.3, 0.4, 0.0, 8400, seed=1, profile_id="sdc", viscous=0.0)
+        bench.identify_once(0.0, 0.3, 0.4, 0.0, 7600, seed=1, profile_id="sdc", viscous=0.0)
     words, cure = str(refused.value), refused.value.remedy
     assert "sign convention" not in words and "too uncertain" in words and "1 % steps" in words, words
-    assert cure is not None and cure.enough, words
+    assert cure is not None and cure.suggested_rev <= 21.0, words
     run = bench.identify_once(
-        0.0, 0.3, 0.4, 0.0, 8400, seed=1, profile_id="sdc", viscous=0.0, travel_rev=cure.suggested_rev
+        0.0, 0.3, 0.4, 0.0, 7600, seed=1, profile_id="sdc", viscous=0.0, travel_rev=cure.suggested_rev
     )
     est = run.identified.estimate
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
+
+
+def test_where_only_the_budgets_margin_fails_the_strongest_motion_is_named_and_identifies(sim_dir):
+    """The same motor on a 9600 baud line whose host answers every request 10 ms late (19 samples/s): the refusal
+    said "no travel up to 100 rev brings it to 2 %" (the budget's best, 1.47 % at the rated speed, misses the 1.4 %
+    it aims at), where 20-30 rev given are accepted at 1.7-2.0 %. It names the strongest motion the drive allows,
+    as one that may not be enough; followed, it identifies within 3 sigma."""
+    from bench import inertia_accuracy as bench
+
+    def late() -> dict:
+        return {
+            "seed": 1,
+            "profile_id": "sdc",
+            "viscous": 0.0,
+            "stalls": HostStalls(rate=1.0, min_s=0.01, max_s=0.01, seed=1),
+        }
+
+    with pytest.raises(IdentificationRefused) as refused:
+        bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, **late())
+    words, cure = str(refused.value), refused.value.remedy
+    assert cure is not None and not cure.enough and "may not be enough" in words, words
+    run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=cure.suggested_rev, **late())
+    est = run.identified.estimate
+    assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
+
+
+def test_after_the_pilot_the_closest_travel_for_the_lightest_load_not_ruled_out_is_named(sim_dir, monkeypatch):
+    """The same late line, servotool's travel 9 rev: the pilot showed 0.055 +- 0.28, no travel reaches the budget's
+    margin for the motor alone, and the pilot named 14.5 rev for a load of 0.5, refused when followed (2.1 %, the
+    torque reading's floor). It names the motor alone's closest, as one that may not be enough, and that identifies
+    within 3 sigma."""
+    from bench import inertia_accuracy as bench
+
+    monkeypatch.setattr(bench, "bench_travel", lambda _profile: 9.0)
+
+    def late() -> dict:
+        return {
+            "seed": 1,
+            "profile_id": "sdc",
+            "viscous": 0.0,
+            "stalls": HostStalls(rate=1.0, min_s=0.01, max_s=0.01, seed=1),
+            "follow": False,
+        }
+
+    with pytest.raises(TravelNeeded) as named:
+        bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, **late())
+    words = str(named.value)
+    assert named.value.moved and "the motor alone" in words and "may not be enough" in words, words
+    run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=named.value.travel_rev, **late())
+    est = run.identified.estimate
+    assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= named.value.travel_rev
