@@ -240,6 +240,7 @@ EXTEND_AIM = 0.85  # a time budget is extended to reach this share of the uncert
 CATCH_UP_RAMPS = 2.0  # a move short of its target runs on for at most this many ramps more
 REST_RAMPS = 0.5  # the axis rests this many ramp times (at least two samples) between moves
 STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gaps between samples
+STEP_FLOOR_SHARE = 0.25  # a torque-step floor beyond this share of the limit lets the test speed use the drive's limit
 LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
 LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
 
@@ -572,11 +573,28 @@ class _HostRun:
         if excursion > 0:
             room = 0.85 * plan.travel_limit_rev - (excursion if not both else 0.0)
             speed = min(speed, pilot * plan.ramp_s / self.ramp * room / (excursion * (plan.repeats if not both else 1)))
-        if peak > 0:  # a share of the drive's limit for the acceleration, the rest within it (budget.Line)
+        if peak > 0:
+            # The whole peak scaled to a share of the drive's limit: headroom for a loop that does not know the load
+            # yet. Where the torque reading's steps would then floor the fit, the acceleration's part alone, the rest
+            # within the limit, as the budget plans (budget.torque_speed_cap); elsewhere that speed buys nothing and
+            # a detuned loop overshoots more (IS620P, load 20 with 30 % friction: 1069 rpm for 666 ran 0.28 rev
+            # past its band, where 666 was accepted).
             swing *= plan.ramp_s / self.ramp
-            self.cap = min(self.cap, (budget.torque_speed_cap(pilot, peak, swing, self.torque_limit), "torque"))
+            cap = pilot * self.torque_cap_pct / peak
+            if self._steps_floor(swing * cap / pilot):
+                cap = budget.torque_speed_cap(pilot, peak, swing, self.torque_limit)
+            self.cap = min(self.cap, (cap, "torque"))
         self.speed = min(speed, self.cap[0])
         return self.speed
+
+    def _steps_floor(self, tau_pct: float) -> bool:
+        """Whether moves with this acceleration torque would leave a floor from the torque reading's steps beyond
+        STEP_FLOOR_SHARE of the fit's limit (budget.step_floor, over the most moves the plan runs)."""
+        needs = self.plan.needs
+        if needs is None:
+            return False
+        moves = len(self.plan.directions) * self.plan.repeats
+        return budget.step_floor(needs.line, tau_pct, moves) > STEP_FLOOR_SHARE * needs.target
 
     def _dithered(self, cycle: int, speed: float) -> tuple[float, float]:
         """Ramp and speed of a cycle: a torque read in coarse steps gets a different acceleration in every cycle
