@@ -53,7 +53,8 @@ def test_an_arm_whose_gravity_changes_little_over_a_short_travel_is_not_accepted
     rev): an arm of 10 % through a gear of 10 turns 13 degrees, and where its load's change came out under 2 % of
     rated torque the rigid fit stood: accepted 6.8 and 5.7 % low against a stated 3 sigma of 2.9 and 4.2 %, with no
     note (seeds 3 and 6; the bench's own runs use 12 rev, and real time through the CLI found it: -6.55 %, 7.4
-    sigma). A significant load term too small to name now widens J by what it would change: refused, or the truth within 3 sigma."""
+    sigma). A significant load term too small to name now widens J by what it would change: refused, or the truth
+    within 3 sigma."""
     import bench.off_model as off_model
 
     monkeypatch.setattr(off_model, "bench_travel", lambda _profile: 2.0)
