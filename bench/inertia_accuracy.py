@@ -357,6 +357,19 @@ def parse_rows(text: str) -> list[tuple[str, int]]:
     return rows
 
 
+def add_realtime_options(ap: argparse.ArgumentParser) -> None:
+    """The options every real-time bench shares (--rows, --burner, --tcp-port, -v)."""
+    ap.add_argument(
+        "--rows",
+        type=parse_rows,
+        default=None,
+        help="with --realtime: PROFILE:BAUD,... (default: " + ",".join(f"{p}:{b}" for p, b in REALTIME_ROWS) + ")",
+    )
+    ap.add_argument("--burner", action="store_true", help="with --realtime: one CPU-burning process beside it")
+    ap.add_argument("--tcp-port", type=int, default=0, help="with --realtime: sim serve's port (0: any free one)")
+    ap.add_argument("-v", "--verbose", action="store_true", help="with --realtime: each run's outcome")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="a smaller grid")
@@ -365,14 +378,8 @@ def main() -> None:
         action="store_true",
         help="through the CLI in real time against `sim serve` in its own process (bench/realtime.py)",
     )
-    ap.add_argument("--burner", action="store_true", help="with --realtime: one CPU-burning process beside it")
+    add_realtime_options(ap)
     ap.add_argument("--embedded", action="store_true", help="with --realtime: --port sim (the simulator in-process)")
-    ap.add_argument(
-        "--rows",
-        type=parse_rows,
-        default=None,
-        help="with --realtime: PROFILE:BAUD,... (default: " + ",".join(f"{p}:{b}" for p, b in REALTIME_ROWS) + ")",
-    )
     ap.add_argument(
         "--machines", type=int, default=None, help="with --realtime: machines per row (default 14, 60 without --quick)"
     )
@@ -382,8 +389,6 @@ def main() -> None:
         default=16,
         help="seed of the machines drawn (16: the bench's own; another: a set it has never used)",
     )
-    ap.add_argument("--tcp-port", type=int, default=0, help="with --realtime: sim serve's port (0: any free one)")
-    ap.add_argument("-v", "--verbose", action="store_true", help="with --realtime: each run's outcome")
     ap.add_argument("--profiles", action="store_true", help="every profile at its factory line speed and 19200")
     ap.add_argument(
         "--remedies",

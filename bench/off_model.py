@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from inertia_accuracy import REALTIME_ROWS, bench_travel, fit_brake, parse_rows
+from inertia_accuracy import REALTIME_ROWS, add_realtime_options, bench_travel, fit_brake
 
 from servotool.clock import VirtualClock
 from servotool.drive import Drive
@@ -124,15 +124,7 @@ def main() -> None:
         "one row per run; more: one row per machine with its counts and worst error against 3 sigma)",
     )
     ap.add_argument("--realtime", action="store_true", help="through the CLI in real time (bench/realtime.py)")
-    ap.add_argument(
-        "--rows",
-        type=parse_rows,
-        default=None,
-        help="with --realtime: PROFILE:BAUD,... (default: " + ",".join(f"{p}:{b}" for p, b in REALTIME_ROWS) + ")",
-    )
-    ap.add_argument("--burner", action="store_true", help="with --realtime: one CPU-burning process beside it")
-    ap.add_argument("--tcp-port", type=int, default=0, help="with --realtime: sim serve's port (0: any free one)")
-    ap.add_argument("-v", "--verbose", action="store_true", help="with --realtime: each run's outcome")
+    add_realtime_options(ap)
     args = ap.parse_args()
     os.environ.setdefault("SERVOTOOL_SIM_DIR", tempfile.mkdtemp())
     loads = LOADS_QUICK if args.quick else LOADS_QUICK + LOADS_MORE

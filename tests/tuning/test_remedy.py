@@ -224,6 +224,12 @@ def test_a_torque_reading_whose_steps_hide_the_acceleration_names_a_travel_that_
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
 
 
+def _late_sdc(**more: object) -> dict:
+    """SDC's bare motor on a 9600 baud line whose host answers every request 10 ms late (19 samples/s)."""
+    stalls = HostStalls(rate=1.0, min_s=0.01, max_s=0.01, seed=1)
+    return {"seed": 1, "profile_id": "sdc", "viscous": 0.0, "stalls": stalls, **more}
+
+
 def test_where_only_the_budgets_margin_fails_the_strongest_motion_is_named_and_identifies(sim_dir):
     """The same motor on a 9600 baud line whose host answers every request 10 ms late (19 samples/s): the refusal
     said "no travel up to 100 rev brings it to 2 %" (the budget's best, 1.47 % at the rated speed, misses the 1.4 %
@@ -231,19 +237,11 @@ def test_where_only_the_budgets_margin_fails_the_strongest_motion_is_named_and_i
     as one that may not be enough; followed, it identifies within 3 sigma."""
     from bench import inertia_accuracy as bench
 
-    def late() -> dict:
-        return {
-            "seed": 1,
-            "profile_id": "sdc",
-            "viscous": 0.0,
-            "stalls": HostStalls(rate=1.0, min_s=0.01, max_s=0.01, seed=1),
-        }
-
     with pytest.raises(IdentificationRefused) as refused:
-        bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, **late())
+        bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, **_late_sdc())
     words, cure = str(refused.value), refused.value.remedy
     assert cure is not None and not cure.enough and "may not be enough" in words, words
-    run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=cure.suggested_rev, **late())
+    run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=cure.suggested_rev, **_late_sdc())
     est = run.identified.estimate
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
 
@@ -257,19 +255,10 @@ def test_after_the_pilot_the_closest_travel_for_the_lightest_load_not_ruled_out_
 
     monkeypatch.setattr(bench, "bench_travel", lambda _profile: 9.0)
 
-    def late() -> dict:
-        return {
-            "seed": 1,
-            "profile_id": "sdc",
-            "viscous": 0.0,
-            "stalls": HostStalls(rate=1.0, min_s=0.01, max_s=0.01, seed=1),
-            "follow": False,
-        }
-
     with pytest.raises(TravelNeeded) as named:
-        bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, **late())
+        bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, **_late_sdc(follow=False))
     words = str(named.value)
     assert named.value.moved and "the motor alone" in words and "may not be enough" in words, words
-    run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=named.value.travel_rev, **late())
+    run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=named.value.travel_rev, **_late_sdc(follow=False))
     est = run.identified.estimate
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= named.value.travel_rev
