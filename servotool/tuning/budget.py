@@ -351,7 +351,7 @@ class Needs:
         the precision a short travel lacks, and the pilot or the fit may take all of it."""
         if not self.enough:
             return MAX_TIME_S
-        return min(MAX_TIME_S, LATE_TIME_FACTOR * max(MIN_TIME_S, self.lightest.time_s))
+        return min(MAX_TIME_S, LATE_TIME_FACTOR * self.lightest.time_s)  # time_for: at least MIN_TIME_S
 
     def words(self) -> str:
         line = self.line
