@@ -35,10 +35,15 @@ class RealClock:
 
 
 class VirtualClock:
-    """A clock that moves only when told: deterministic tests and fast benchmarks."""
+    """A clock that moves only when told: deterministic tests and fast benchmarks.
 
-    def __init__(self, start: float = 0.0) -> None:
+    computing_s: how long a computation beside a motion (KeepAlive.while_computing: a fit between moves) takes on this
+    host; 0 (the default) as if instant. On a real host such a fit takes tens of ms, about 100 ms for the two-mass scan
+    of a long log, and the samples pause meanwhile: a test or bench sets it to see that pause."""
+
+    def __init__(self, start: float = 0.0, computing_s: float = 0.0) -> None:
         self.t = start
+        self.computing_s = computing_s
 
     def now(self) -> float:
         return self.t

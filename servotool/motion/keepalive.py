@@ -13,7 +13,7 @@ import threading
 from collections.abc import Callable
 from typing import TypeVar
 
-from servotool.clock import Clock, RealClock
+from servotool.clock import Clock, RealClock, VirtualClock
 from servotool.drive import Drive
 from servotool.errors import DeviceError, UsageError
 from servotool.link.ports import ControlLine
@@ -150,10 +150,16 @@ class KeepAlive:
         keeps the drive alive: feed(lead_s), the motion's own beat (it decides what to write), is called once first and
         then every 1/COMPUTING_LOOKS of a beat interval until work ends; its result, or its exception, comes back here.
         One beat before a computation is not enough: on a busy host its time is several times its CPU time, past a
-        drive's watchdog. On a virtual clock no time passes while it computes: work() runs here."""
+        drive's watchdog. On a virtual clock work() runs here, and then the clock's computing_s passes, fed as on a
+        real host."""
         feed(self.interval_s)
         if not isinstance(self.clock, RealClock):
-            return work()
+            result = work()
+            end = self.clock.now() + (self.clock.computing_s if isinstance(self.clock, VirtualClock) else 0.0)
+            while self.clock.now() < end:
+                self.clock.sleep(min(self.interval_s / COMPUTING_LOOKS, end - self.clock.now()))
+                feed(self.interval_s)
+            return result
         outcome: list[T] = []
         failed: list[BaseException] = []
         done = threading.Event()

@@ -24,7 +24,7 @@ from servotool.tuning import budget
 from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
-from servotool.tuning.fit.signals import stall
+from servotool.tuning.fit.signals import paused_within, stall
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
     MIN_RAMP_S,
@@ -212,6 +212,7 @@ def trace_estimate(profile: Profile, torque_limit_pct: float | None, torque_nois
             speed,
             torque,
             position_rev=position,
+            paused=trace.paused,
             rated_torque_nm=motor.rated_torque_nm,
             rotor_inertia_kgcm2=motor.rotor_inertia_kgcm2,
             torque_limit_pct=torque_limit_pct,
@@ -312,7 +313,8 @@ class _HostRun:
         """An estimate while the drive holds between moves, the dead-man fed throughout (KeepAlive.while_computing:
         the two-mass scan makes one tens of ms, several hundred on a busy host, against DSX7E's 500 ms watchdog)."""
         trace = self.sampler.trace
-        return self.jogger.keepalive.while_computing(lambda: self.estimate(trace, settings), self._beat)
+        with self.sampler.paused():
+            return self.jogger.keepalive.while_computing(lambda: self.estimate(trace, settings), self._beat)
 
     def sample(self) -> None:
         try:
@@ -340,9 +342,11 @@ class _HostRun:
         )
 
     def _longest_gap(self, first: int) -> float:
-        """The longest time between two samples from sample `first` on (0 with fewer than two)."""
-        t = self.sampler.trace.t[max(0, first - 1) :]
-        return max((b - a for a, b in itertools.pairwise(t)), default=0.0)
+        """The longest time between two samples from sample `first` on, less the sampler's own pauses in it (a fit
+        between moves: no stall of the host's); 0 with fewer than two."""
+        trace = self.sampler.trace
+        t = np.asarray(trace.t[max(0, first - 1) :])
+        return float(np.max(np.diff(t) - paused_within(t, trace.paused))) if t.size > 1 else 0.0
 
     def _usual_interval(self) -> float:
         """The median time between two samples so far."""
@@ -682,7 +686,7 @@ class _HostRun:
         if trace.late > LATE_NAMED * len(trace.t):
             return True
         t, speed, _torque, _position = trace.fitted()
-        return stall(np.asarray(t), np.asarray(speed))[0] > 0
+        return stall(np.asarray(t), np.asarray(speed), paused_within(np.asarray(t), trace.paused))[0] > 0
 
     def _late_words(self) -> str:
         """The samples the host's lateness left out, in words for a refusal ("" where few were)."""

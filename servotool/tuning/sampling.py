@@ -6,7 +6,8 @@ from __future__ import annotations
 import csv
 import math
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,6 +49,9 @@ class Trace:
     speed_t: list[float] = field(default_factory=list)
     # False where the sample's exchange overran the line's own time (LATE_S): its time is not known, no fit uses it.
     on_time: list[bool] = field(default_factory=list)
+    # (from, to), s from the start: where the sampling paused by the identification's own choice (a fit between moves,
+    # the drive holding). The gap it leaves is no host stall, though a ringing load may still move in it.
+    paused: list[tuple[float, float]] = field(default_factory=list)
 
     def fitted(self) -> tuple[list[float], list[float], list[float], list[float]]:
         """(times, speed at those times, torque, position or NaN where none was read) of the samples whose time is
@@ -140,6 +144,16 @@ class Sampler:
 
     def elapsed(self) -> float:
         return self.timing.now() - self.t0
+
+    @contextmanager
+    def paused(self) -> Iterator[None]:
+        """No samples inside, by the caller's own choice (a fit while the drive holds): the time is kept in
+        Trace.paused, so that the gap it leaves is not named a host stall."""
+        began = self.elapsed()
+        try:
+            yield
+        finally:
+            self.trace.paused.append((began, self.elapsed()))
 
     def rate(self) -> float:
         """Samples per second so far, first to last (the motion's own set-up and put-back writes left out)."""

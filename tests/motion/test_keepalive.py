@@ -95,3 +95,14 @@ def test_a_computation_beside_a_motion_is_beaten_through_and_its_result_or_error
         ka.while_computing(fails, feed)
     virtual = KeepAlive(d, 0.02, VirtualClock())
     assert virtual.while_computing(lambda: threading.current_thread().name, feed) == threading.current_thread().name
+
+
+def test_a_computation_on_a_virtual_host_that_takes_time_is_fed_through_it(sim_dir):
+    """VirtualClock(computing_s): the time a fit between moves takes on the host it stands for passes after the
+    work, fed every half beat interval as a real host's is (a bench or test sees the pause the samples take)."""
+    _sim, d, _clock = _virtual()
+    clock = VirtualClock(10.0, computing_s=0.1)
+    fed: list[float] = []
+    assert KeepAlive(d, 0.02, clock).while_computing(lambda: "done", lambda _lead: fed.append(clock.now())) == "done"
+    assert clock.now() == pytest.approx(10.1)
+    assert fed[0] == 10.0 and max(b - a for a, b in itertools.pairwise(fed)) <= 0.01 + 1e-9 and fed[-1] >= 10.1 - 1e-9

@@ -12,7 +12,7 @@ import pytest
 
 from servotool.sim.virtual import HostStalls
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded
-from servotool.tuning.fit.signals import stall
+from servotool.tuning.fit.signals import paused_within, stall
 from servotool.tuning.identify import IdentificationRefused
 from servotool.tuning.tune import TuneRequest, tune_inertia
 from tests.tuning.test_tune_robustness import set_up
@@ -147,3 +147,21 @@ def test_a_gap_while_the_axis_moved_is_a_stall_and_one_at_rest_is_not():
     assert gap == pytest.approx(0.21) and usual == pytest.approx(0.01)
     resting = np.concatenate([t[:70], t[70:] + 0.2])  # the same gap with the axis at rest: the fit between moves
     assert stall(resting, rpm)[0] == 0.0
+    # The sampler's own pause (a fit between moves) in the gap while the axis moved: only the rest is the host's.
+    assert stall(moving, rpm, paused_within(moving, [(0.30, 0.48)]))[0] == 0.0
+    assert stall(moving, rpm, paused_within(moving, [(0.30, 0.40)]))[0] == pytest.approx(0.11)
+
+
+def test_the_fit_between_moves_is_no_host_stall_though_a_ringing_load_moves_in_it(sim_dir):
+    """DSX7E 115200, a two-mass load at 20 Hz (bench/off_model.py's), no host stall, each fit between moves taking
+    the 100 ms it took on an idle machine through the CLI: the load still rang (38 rpm) when the fit began and paused
+    the samples, and the refusal said "sampling gaps of up to 116 ms while the axis moved (… the host stalled, a busy
+    machine?)". The pause is servotool's own: the refusal names the resonance instead."""
+    _sim, d, clock = set_up(
+        "dsx7e", 115200, load_ratio=5.0, friction=0.02, noise=0.002, seed=1, resonance_hz=20.0, resonance_damping=0.05
+    )
+    clock.computing_s = 0.1
+    with pytest.raises(IdentificationRefused) as refused:
+        tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    said = str(refused.value)
+    assert "the host stalled" not in said and "resonance near 2" in said, said

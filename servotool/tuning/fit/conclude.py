@@ -32,7 +32,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
         r.notes.append(
             "load torque not fitted (one direction only, or told there is none): 'coulomb' is Coulomb + load torque"
         )
-    stalled = stall_words(verdict.fit.t, verdict.fit.rpm)
+    stalled = stall_words(verdict.fit.t, verdict.fit.rpm, verdict.fit.own)
     if r.tc < -3 * r.tc_std:
         r.notes.append(negative_coulomb(verdict, stalled))
     r.notes.extend(verdict.notes)

@@ -20,7 +20,7 @@ def name(v: Verdict, rigid: Verdict) -> Verdict:
     the rigid fit's, whose J stands where a model of mechanics was fitted (its change counted as uncertainty). An
     accepted result on such a log says so in its notes, whatever the checks found."""
     fit = v.fit
-    said = stall_words(fit.t, fit.rpm)
+    said = stall_words(fit.t, fit.rpm, fit.own)
     if not said:
         return v
     uneven = f"{said} make the moves uneven"

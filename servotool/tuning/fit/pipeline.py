@@ -11,6 +11,8 @@ model is right for this load.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from servotool.tuning.fit.checks import assess
@@ -34,14 +36,17 @@ def estimate_inertia(
     torque_limit_pct: float | None = None,
     settings: EstimatorSettings | None = None,
     position_rev: np.ndarray | list[float] | None = None,
+    paused: Sequence[tuple[float, float]] = (),
 ) -> InertiaEstimate:
     """Fit J, Coulomb, viscous and load torque to a logged motion; refuse (ok=False) rather than guess.
 
     t_s: sample times in s (strictly increasing, any spacing); speed_rpm: motor speed; torque_pct: torque in % of
     rated torque (same sign convention as speed). torque_limit_pct: the drive's active torque limit, used to detect
     saturation (None: not checked). position_rev: the drive's own position readings in motor rev, NaN where none was
-    read (None: the position is the speed's integral alone; a host stall then leaves it unknown). Raises ValueError
-    only for malformed input (shapes, non-finite values, non-increasing time, non-positive motor data).
+    read (None: the position is the speed's integral alone; a host stall then leaves it unknown). paused: (from, to)
+    times on t_s's clock where the caller paused its sampling by its own choice (a fit between moves while the drive
+    held): a gap there is not named a host stall. Raises ValueError only for malformed input (shapes, non-finite
+    values, non-increasing time, non-positive motor data).
     """
     cfg = settings or EstimatorSettings()
     t = np.asarray(t_s, dtype=float)
@@ -55,7 +60,7 @@ def estimate_inertia(
     r = Partial(n_samples=int(t.size))
     try:
         check_samples(r, pct, torque_limit_pct, cfg)
-        sig = signals(t, rpm, pct, rated_torque_nm, cfg, r, pos)
+        sig = signals(t, rpm, pct, rated_torque_nm, cfg, r, pos, paused)
         reg = regress(sig, choose_windows(sig, cfg, r), cfg, r)
     except Refused as exc:
         return r.refuse(str(exc), exc.advice)

@@ -72,7 +72,7 @@ def one_way(sig: Signals, forward: int, reverse: int) -> str:
             "motion in one direction only: Coulomb friction and load (gravity) torque cannot be separated; run the "
             "test with --direction both"
         )
-    stalled = stall_words(sig.t, sig.rpm)
+    stalled = stall_words(sig.t, sig.rpm, sig.own)
     return (
         f"too few usable windows in the {'reverse' if reverse < forward else 'forward'} moves ({forward} forward, "
         f"{reverse} reverse; {MIN_WINDOWS_EACH_WAY} each way needed) to separate Coulomb friction from load torque"
@@ -152,6 +152,7 @@ class FitData:
     jm: float  # the motor's inertia, kg*m^2
     max_rel: float = 0.02  # the estimator's limit on sigma / J (a widening names its cause only if it crosses it)
     cut: np.ndarray | None = None  # per sampling interval: a speed corner lies in it (signals.corner_cuts)
+    own: np.ndarray | None = None  # per sampling interval: the sampler's own pause in it, s (signals.paused_within)
 
 
 def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: float, jm: float) -> FitData:
@@ -180,6 +181,7 @@ def fit_data(sig: Signals, reg: Regression, cfg: EstimatorSettings, rated_nm: fl
         jm=jm,
         max_rel=cfg.max_rel_uncertainty,
         cut=sig.cut,
+        own=sig.own,
     )
 
 

@@ -13,6 +13,7 @@ end kept because its noise hid a corner carries that noise's sign into the windo
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +69,7 @@ class Signals:
     cum_w: np.ndarray
     moves: np.ndarray
     position: np.ndarray  # rad: cum_w, set after each stall by the drive's own position readings where the log has them
+    own: np.ndarray  # per sampling interval: the time (s) the sampler paused in it by its own choice (paused_within)
 
 
 def signals(
@@ -78,10 +80,11 @@ def signals(
     cfg: EstimatorSettings,
     r: Partial,
     position_rad: np.ndarray | None = None,
+    paused: Sequence[tuple[float, float]] = (),
 ) -> Signals:
     """Noise, zero-speed band, the torque reading's step, kinks (torque steps), the speed's corners and the Hermite
     integrals of torque and speed; the position over the log (position_rad: the drive's readings, NaN where none
-    was read)."""
+    was read); the sampler's own pauses (paused: from, to) per interval."""
     speed_step = cfg.speed_step_rpm if cfg.speed_step_rpm is not None else reading_step(rpm)
     kink = kink_mask(t, pct, cfg.kink_sigma, cfg.torque_noise_floor_pct)
     between = not cfg.speed_between_reads and t.size > 1 and float(np.median(np.diff(t))) >= CORNERS_BETWEEN_S
@@ -123,6 +126,7 @@ def signals(
         cum_w=cum_w,
         moves=move_ids(rpm, band),
         position=anchored(t, cum_w, position_rad),
+        own=paused_within(t, paused),
     )
 
 
@@ -417,22 +421,36 @@ STALL_INTERVALS = 6.0  # ... and this many usual intervals is a stall (the windo
 MOVING_SHARE = 0.05  # ... where the speed on either side is above this share of the peak
 
 
-def stall(t: np.ndarray, rpm: np.ndarray) -> tuple[float, float]:
+def paused_within(t: np.ndarray, paused: Sequence[tuple[float, float]]) -> np.ndarray:
+    """Per interval between the samples at times `t`: how much of it (s) lies in the sampler's own pauses
+    (from, to), on t's clock."""
+    t = np.asarray(t, dtype=float)
+    own = np.zeros(max(0, t.size - 1))
+    for began, ended in paused:
+        own += np.clip(np.minimum(ended, t[1:]) - np.maximum(began, t[:-1]), 0.0, None)
+    return own
+
+
+def stall(t: np.ndarray, rpm: np.ndarray, own: np.ndarray | None = None) -> tuple[float, float]:
     """(the longest gap between two samples while the axis moved, the median interval) in s; (0, median) where
-    no gap is a stall."""
+    no gap is a stall. own: per interval, the time the sampler paused by its own choice (paused_within: a fit between
+    moves while the drive held): the host's stall is the rest of the gap. A ringing load still moves in such a pause,
+    and blaming the host for it named a stall on an idle machine (DSX7E, two-mass 20 Hz: 100 ms fits)."""
     if t.size < 3:
         return 0.0, 0.0
     gaps = np.diff(t)
     usual = float(np.median(gaps))
+    if own is not None:
+        gaps = gaps - own
     speed = np.abs(rpm)
     moving = np.maximum(speed[1:], speed[:-1]) > MOVING_SHARE * float(np.max(speed))
     long = moving & (gaps >= max(STALL_S, STALL_INTERVALS * usual))
     return (float(np.max(gaps[long])) if np.any(long) else 0.0), usual
 
 
-def stall_words(t: np.ndarray, rpm: np.ndarray) -> str:
-    """The words for the log's longest stall while the axis moved; empty where it has none."""
-    gap, usual = stall(t, rpm)
+def stall_words(t: np.ndarray, rpm: np.ndarray, own: np.ndarray | None = None) -> str:
+    """The words for the log's longest stall while the axis moved (own: as stall's); empty where it has none."""
+    gap, usual = stall(t, rpm, own)
     if gap <= 0:
         return ""
     return (
