@@ -40,7 +40,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     r.fitted_windows = fitted_windows(verdict)
     if j <= 0:
         return _unresolved_from_the_rotor(r, verdict, jm, cfg) or r.refuse(
-            "non-physical result (inertia <= 0): check that torque and speed share a sign convention"
+            non_physical(verdict, stalled, r.res_rel, cfg.max_rel_residual)
         )
     if r.res_rel > cfg.max_rel_residual and stalled:
         return r.refuse(
@@ -123,6 +123,23 @@ def _unresolved_from_the_rotor(
             f"{found.signal_pct:.1f} % at the rotor's inertia"
         )
     return r.refuse(said, "use stronger accelerations or a faster line")
+
+
+def non_physical(verdict: Verdict, stalled: str, res_rel: float, max_rel_residual: float) -> str:
+    """The refusal for a J at or below zero, naming what the log shows before a sign convention (which turns J
+    negative in a log the rigid model fits): the host's stalls, the mechanics the checks found, a model that does not
+    fit. IS620P 57600, a two-mass load at 10 Hz (ratio 5, real time) was told to check its sign convention."""
+    said = "non-physical result (inertia <= 0)"
+    if stalled:
+        return f"{said}: {stalled} make the moves uneven; run it again on a quieter host"
+    if verdict.causes:
+        return f"{said}: the load does not follow the rigid model: {verdict.widened}"
+    if res_rel > max_rel_residual:
+        return (
+            f"{said}: the model does not fit the data (relative residual {res_rel:.2f} > {max_rel_residual:g}): "
+            "backlash, compliance or a torque reading that is not shaft torque"
+        )
+    return f"{said}: check that torque and speed share a sign convention"
 
 
 def negative_coulomb(verdict: Verdict, stalled: str) -> str:
