@@ -300,3 +300,18 @@ def test_a_negative_inertia_on_a_load_the_checks_find_off_model_blames_no_sign_c
     said = str(refused.value)
     assert "inertia <= 0" in said and "sign convention" not in said, said
     assert "does not follow the rigid model" in said and any(w in said for w in OFF_MODEL_WORDS), said
+
+
+def test_a_j_below_the_rotor_on_a_load_the_checks_find_off_model_names_it_and_no_travel(sim_dir):
+    """DSX7E 115200 over the CLI's 2 rev, a two-mass load at 10 Hz (ratio 5): J came out at or below zero, and the
+    refusal said only "no travel up to 100 rev brings it to 2 % ... (the speed or the torque the drive allows bounds
+    the moves)", the mechanics the checks found left to the notes. It now names them and seeks no travel: a stronger
+    motion leaves them as they are."""
+    _sim, d, clock = set_up(
+        "dsx7e", 115200, load_ratio=5.0, friction=0.02, noise=0.002, seed=1, resonance_hz=10.0, resonance_damping=0.05
+    )
+    with pytest.raises(IdentificationRefused) as refused:
+        tune_inertia(d, TuneRequest(dry_run=True), clock=clock)
+    said = str(refused.value)
+    assert "at the rotor's own inertia" in said and any(w in said for w in OFF_MODEL_WORDS), said
+    assert "no travel" not in said and refused.value.remedy is None, said
