@@ -705,6 +705,22 @@ class _HostRun:
             f"{budget.MAX_TIME_S:g} s on this line (the speed or the torque the drive allows bounds the moves)"
         )
 
+    def _remedy_line(self) -> budget.Line:
+        """The line a remedy is planned on: the needs' own, its speed held to what a longer travel's pilot would
+        allow where this run's moves stopped at the torque its pilot allowed (_test_speed), not at the travel. That
+        cap grows at most as the pilot's speed does, which a longer travel raises only up to the speed limit: at the
+        limit, a longer travel runs the same moves (SDC 19200, a load of 50 with 3 % noise: refused at 20 rev, its
+        moves capped at 672 rpm by the pilot's torque, named 28 rev and then 39.5, each refused with the same
+        figures, the moves at 672 rpm again)."""
+        needs, plan = self.plan.needs, self.plan
+        assert needs is not None
+        line = needs.line
+        cap, what = self.cap
+        if what != "torque" or self.speed < cap or plan.speed_rpm <= 0:
+            return line
+        longest = cap * max(1.0, plan.speed_limit_rpm / plan.speed_rpm)
+        return replace(line, speed_cap_rpm=min(line.speed_cap_rpm, longest))
+
     def _remedy(self, est: InertiaEstimate, cycles: int) -> Remedy | None:
         """A longer travel for a refusal that stronger accelerations cure: the least with which the line's budget
         (tuning.budget), scaled to what this run showed, reaches the limit within its time; none where no travel
@@ -725,7 +741,7 @@ class _HostRun:
         # the lightest load this line can serve at all would reach the limit.
         ratios = [max(est.load_ratio, 0.0)] if math.isfinite(est.load_ratio) else budget.LOAD_RATIOS
         travel = self.plan.travel_limit_rev
-        line, target = needs.line, needs.target
+        line, target = self._remedy_line(), needs.target
         for closest in (False, True):
             found = next(
                 (
@@ -754,7 +770,7 @@ class _HostRun:
             return None
         ratio = max(est.load_ratio, 0.0) if math.isfinite(est.load_ratio) else 0.0
         travel = self.plan.travel_limit_rev
-        found = budget.strongest_travel(needs.line, ratio, travel, needs.target, self.speed)
+        found = budget.strongest_travel(self._remedy_line(), ratio, travel, needs.target, self.speed)
         if found is None:
             return None
         return Remedy(travel, found.travel_rev, found.travel_rev / travel, False, found.bound, found.time_s)

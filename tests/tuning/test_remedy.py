@@ -262,3 +262,21 @@ def test_after_the_pilot_the_closest_travel_for_the_lightest_load_not_ruled_out_
     run = bench.identify_once(0.0, 0.3, 0.4, 0.0, 9600, travel_rev=named.value.travel_rev, **_late_sdc(follow=False))
     est = run.identified.estimate
     assert abs(run.ratio) <= 3 * est.ratio_std and run.identified.travel_used_rev <= named.value.travel_rev
+
+
+def test_moves_the_pilots_torque_capped_name_no_travel_that_would_run_them_again(sim_dir):
+    """SDC at 19200, a load of 50 with 10 % Coulomb, 40 % gravity and 3 % noise, 8 rev given: the pilot's torque caps
+    the moves at about 670 rpm (2.6 of the 8 rev used), and the fit is refused for too little acceleration. The line's
+    budget took the speed to grow with the travel and named 32.5 rev as enough; its pilot runs at the rated speed's
+    quarter as this one's did, and caps the moves at the same speed: refused again. A remedy is planned at the cap
+    the pilot set, which a longer travel raises only as far as its pilot's speed grows: no travel is named."""
+    from bench import inertia_accuracy as bench
+
+    machine = {"seed": 4, "profile_id": "sdc", "viscous": 0.0}
+    with pytest.raises(IdentificationRefused) as refused:
+        bench.identify_once(50.0, 0.1, -0.4, 0.03, 19200, travel_rev=8.0, **machine)
+    words = str(refused.value)
+    assert "too little acceleration" in words and refused.value.remedy is None and "--travel" not in words, words
+    with pytest.raises(IdentificationRefused) as again:
+        bench.identify_once(50.0, 0.1, -0.4, 0.03, 19200, travel_rev=32.5, **machine)
+    assert again.value.result.travel_used_rev < 8.0, str(again.value)
