@@ -24,6 +24,7 @@ from servotool.tuning import budget
 from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.fit.estimate import RateBound
 from servotool.tuning.fit.signals import stall
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
@@ -694,16 +695,57 @@ class _HostRun:
             "the host was late, a busy machine?)"
         )
 
-    def _no_cure(self, est: InertiaEstimate) -> str:
+    def _no_cure(self, est: InertiaEstimate, bound: RateBound | None = None) -> str:
         """Where the line's budget found no travel that cures a refusal more excitation would: so said, instead of
-        advice (stronger accelerations, more moves) that the motion planned within the line's limits already tried."""
+        advice (stronger accelerations, more moves) that the motion planned within the line's limits already tried;
+        where the sampling rate bounds it (_rate_bound), that, and what would help on this drive."""
         needs = self.plan.needs
+        if bound is not None:
+            return (
+                f"no travel cures it: {100 * bound.rel:.1f} % of it is what a coupling stiffer than the "
+                f"{bound.top_hz:.1f} Hz the resonance scan searches at {bound.rate:.0f} samples/s could add, and "
+                f"stronger or longer moves within what the drive allows keep it; {self._faster()}"
+            )
         if needs is None or not math.isfinite(est.shortfall):
             return ""
         return (
             f"no travel up to {budget.MAX_TRAVEL_REV:g} rev brings it to {100 * needs.target:g} % within "
             f"{budget.MAX_TIME_S:g} s on this line (the speed or the torque the drive allows bounds the moves)"
         )
+
+    def _faster(self) -> str:
+        """What lowers a share the sampling rate bounds on this drive: a faster line where its profile can raise it,
+        the drive's own identification where it has one, else nothing."""
+        p = self.drive.profile
+        if p.boost.available:
+            return "a faster line lowers it (this drive's is raised for the identification unless --no-boost)"
+        said = "a faster line would lower it, and this drive's profile raises none (serial.boost)"
+        if p.role("inertia_id") is not None:
+            return said + ": the drive's own identification (--method drive) does not sample over the line"
+        return said + ": nothing on this drive does"
+
+    def _rate_bound(self, est: InertiaEstimate, cycles: int) -> RateBound | None:
+        """The refusal's share that the sampling rate bounds (fit.estimate.RateBound) where no motion the drive allows
+        brings it and the fit's own part within the limit: the strongest moves (up to the speed or the torque the
+        drive allows, over the most travel and time named) in windows no shorter than this run's (the speed change a
+        window needs comes no sooner), their information short of what releases the share. None elsewhere, and where
+        the windows would shorten: the share of other windows sets no scale for them (a weak 2 rev run, its windows
+        stretched to reach the speed change, is cured by the travel its refusal names)."""
+        needs, bound = self.plan.needs, est.rate_bound
+        if needs is None or bound is None or not (est.j_total_kgm2 > 0 and est.excitation > 0 and self.speed > 0):
+            return None
+        line, travel = self._remedy_line(), self.plan.travel_limit_rev
+        ratio = max(est.load_ratio, 0.0) if math.isfinite(est.load_ratio) else 0.0
+        per_rev, moves, most = self.speed / travel, max(2 * cycles, 2), budget.moves_in(line, budget.MAX_TIME_S)
+        speed = budget.predicted(line, ratio, budget.MAX_TRAVEL_REV, most, per_rev)[1]
+        stronger = speed / self.speed  # the acceleration at the same ramps, and the speed change a window sees
+        if math.ceil(est.window_intervals * EstimatorSettings().min_excitation / (est.excitation * stronger)) < (
+            est.window_intervals
+        ):
+            return None
+        gain = stronger * math.sqrt(max(most, moves) / moves)  # the information: acceleration x root of the samples
+        own = est.fit_std_kgm2 / est.j_total_kgm2
+        return bound if math.hypot(own / gain, bound.at(gain)) > EstimatorSettings().max_rel_uncertainty else None
 
     def _remedy_line(self) -> budget.Line:
         """The line a remedy is planned on: the needs' own, its speed held to what a longer travel's pilot would
@@ -791,8 +833,9 @@ class _HostRun:
             "host", self.old_ratio, est.load_ratio, est, s.trace, self.plan, s.travel_rev, s.elapsed(), rate, cycles
         )
         if not est.ok:
-            cure = self._remedy(est, cycles)
-            advice = cure.words() if cure is not None else self._no_cure(est) or est.advice
+            bound = self._rate_bound(est, cycles)
+            cure = self._remedy(est, cycles) if bound is None else None
+            advice = cure.words() if cure is not None else self._no_cure(est, bound) or est.advice
             raise IdentificationRefused(
                 f"identification refused: {est.reason}{self._late_words()}" + (f"; {advice}" if advice else ""),
                 result,
