@@ -244,6 +244,7 @@ STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gap
 STEP_FLOOR_SHARE = 0.25  # a torque-step floor beyond this share of the limit lets the test speed use the drive's limit
 LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
 LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
+SAME_PILOT = 1.05  # a plan's speed within this factor of its limit: a longer travel runs the same pilot (_remedy_line)
 
 
 def torque_swing(speed: list[float], torque: list[float], step_pct: float) -> float:
@@ -726,7 +727,7 @@ class _HostRun:
 
     def _rate_bound(self, est: InertiaEstimate, cycles: int) -> RateBound | None:
         """The refusal's share that the sampling rate bounds (fit.estimate.RateBound) where no motion the drive allows
-        brings it and the fit's own part within the limit: the strongest moves (up to the speed or the torque the
+        brings it and the fit's own part near the limit: the strongest moves (up to the speed or the torque the
         drive allows, over the most travel and time named) in windows no shorter than this run's (the speed change a
         window needs comes no sooner), their information short of what releases the share. None elsewhere, and where
         the windows would shorten: the share of other windows sets no scale for them (a weak 2 rev run, its windows
@@ -744,24 +745,25 @@ class _HostRun:
         ):
             return None
         gain = stronger * math.sqrt(max(most, moves) / moves)  # the information: acceleration x root of the samples
+        # over the limit by more than a run's figure may misjudge it (the margin a remedy aims inside, the other way)
+        beyond = EstimatorSettings().max_rel_uncertainty / budget.TARGET_SHARE
         own = est.fit_std_kgm2 / est.j_total_kgm2
-        return bound if math.hypot(own / gain, bound.at(gain)) > EstimatorSettings().max_rel_uncertainty else None
+        return bound if math.hypot(own / gain, bound.at(gain)) > beyond else None
 
     def _remedy_line(self) -> budget.Line:
-        """The line a remedy is planned on: the needs' own, its speed held to what a longer travel's pilot would
-        allow where this run's moves stopped at the torque its pilot allowed (_test_speed), not at the travel. That
-        cap grows at most as the pilot's speed does, which a longer travel raises only up to the speed limit: at the
-        limit, a longer travel runs the same moves (SDC 19200, a load of 50 with 3 % noise: refused at 20 rev, its
-        moves capped at 672 rpm by the pilot's torque, named 28 rev and then 39.5, each refused with the same
-        figures, the moves at 672 rpm again)."""
+        """The line a remedy is planned on: the needs' own, its speed held to the torque cap this run's pilot set
+        (_test_speed) where the moves stopped at it, not at the travel, and the plan's speed is at its limit already
+        (within SAME_PILOT): a longer travel then runs the same pilot, which sets the same cap, and the same moves.
+        Where the plan's speed can still grow, a longer travel's faster pilot sets a cap this one does not tell (a
+        slow pilot's torque spread is friction and gravity as much as acceleration: SD25's load of 1 with 30 %
+        friction and 40 % gravity was capped at 175 rpm at 2 rev and ran at 3000 at the 34.5 rev named)."""
         needs, plan = self.plan.needs, self.plan
         assert needs is not None
         line = needs.line
         cap, what = self.cap
-        if what != "torque" or self.speed < cap or plan.speed_rpm <= 0:
+        if what != "torque" or self.speed < cap or not plan.speed_rpm * SAME_PILOT >= plan.speed_limit_rpm:
             return line
-        longest = cap * max(1.0, plan.speed_limit_rpm / plan.speed_rpm)
-        return replace(line, speed_cap_rpm=min(line.speed_cap_rpm, longest))
+        return replace(line, speed_cap_rpm=min(line.speed_cap_rpm, cap * plan.speed_limit_rpm / plan.speed_rpm))
 
     def _remedy(self, est: InertiaEstimate, cycles: int) -> Remedy | None:
         """A longer travel for a refusal that stronger accelerations cure: the least with which the line's budget

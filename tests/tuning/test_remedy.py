@@ -267,9 +267,9 @@ def test_after_the_pilot_the_closest_travel_for_the_lightest_load_not_ruled_out_
 def test_moves_the_pilots_torque_capped_name_no_travel_that_would_run_them_again(sim_dir):
     """SDC at 19200, a load of 50 with 10 % Coulomb, 40 % gravity and 3 % noise, 8 rev given: the pilot's torque caps
     the moves at about 670 rpm (2.6 of the 8 rev used), and the fit is refused for too little acceleration. The line's
-    budget took the speed to grow with the travel and named 32.5 rev as enough; its pilot runs at the rated speed's
-    quarter as this one's did, and caps the moves at the same speed: refused again. A remedy is planned at the cap
-    the pilot set, which a longer travel raises only as far as its pilot's speed grows: no travel is named."""
+    budget took the speed to grow with the travel and named 32.5 rev as enough; but the plan's speed is at its limit
+    already (2921 of 3000 rpm), so a longer travel's pilot is this one's and caps the moves at the same speed: refused
+    again. A remedy is planned at the cap the pilot set where a longer travel runs the same pilot: none is named."""
     from bench import inertia_accuracy as bench
 
     machine = {"seed": 4, "profile_id": "sdc", "viscous": 0.0}
