@@ -187,7 +187,7 @@ def predicted(
     alone."""
     per_rev = line.speed_share * 0.9 / line.ramp_s * 60.0 if rpm_per_rev is None else rpm_per_rev
     speed, bound = per_rev * travel_rev, "travel"
-    if speed > line.speed_cap_rpm:
+    if speed >= line.speed_cap_rpm:
         speed, bound = line.speed_cap_rpm, "speed"
     tau = accel_torque_pct(line, load_ratio, speed)
     if tau > line.torque_cap_pct:

@@ -24,6 +24,7 @@ from servotool.tuning import budget
 from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.fit.estimate import RateBound
 from servotool.tuning.fit.signals import paused_within, stall
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
@@ -244,6 +245,7 @@ STALL_RAMPS = 2.0  # a dithered ramp lasts at least this many of the longest gap
 STEP_FLOOR_SHARE = 0.25  # a torque-step floor beyond this share of the limit lets the test speed use the drive's limit
 LATE_NAMED = 0.05  # samples left out of the fit beyond this share: the host was late, named and given more time
 LATE_EXTEND = 1.5  # a fit refused outright on a late host: its time budget grows by this factor squared at a time
+SAME_PILOT = 1.05  # a plan's speed within this factor of its limit: a longer travel runs the same pilot (_remedy_line)
 
 
 def torque_swing(speed: list[float], torque: list[float], step_pct: float) -> float:
@@ -698,16 +700,74 @@ class _HostRun:
             "the host was late, a busy machine?)"
         )
 
-    def _no_cure(self, est: InertiaEstimate) -> str:
+    def _no_cure(self, est: InertiaEstimate, bound: RateBound | None = None) -> str:
         """Where the line's budget found no travel that cures a refusal more excitation would: so said, instead of
-        advice (stronger accelerations, more moves) that the motion planned within the line's limits already tried."""
+        advice (stronger accelerations, more moves) that the motion planned within the line's limits already tried;
+        where the sampling rate bounds it (_rate_bound), that, and what would help on this drive."""
         needs = self.plan.needs
+        if bound is not None:
+            return (
+                f"no travel cures it: {100 * bound.rel:.1f} % of it is what a coupling stiffer than the "
+                f"{bound.top_hz:.1f} Hz the resonance scan searches at {bound.rate:.0f} samples/s could add, and "
+                f"stronger or longer moves within what the drive allows keep it; {self._faster()}"
+            )
         if needs is None or not math.isfinite(est.shortfall):
             return ""
         return (
             f"no travel up to {budget.MAX_TRAVEL_REV:g} rev brings it to {100 * needs.target:g} % within "
             f"{budget.MAX_TIME_S:g} s on this line (the speed or the torque the drive allows bounds the moves)"
         )
+
+    def _faster(self) -> str:
+        """What lowers a share the sampling rate bounds on this drive: a faster line where its profile can raise it,
+        the drive's own identification where it has one, else nothing."""
+        p = self.drive.profile
+        if p.boost.available:
+            return "a faster line lowers it (this drive's is raised for the identification unless --no-boost)"
+        said = "a faster line would lower it, and this drive's profile raises none (serial.boost)"
+        if p.role("inertia_id") is not None:
+            return said + ": the drive's own identification (--method drive) does not sample over the line"
+        return said + ": nothing on this drive does"
+
+    def _rate_bound(self, est: InertiaEstimate, cycles: int) -> RateBound | None:
+        """The refusal's share that the sampling rate bounds (fit.estimate.RateBound) where no motion the drive allows
+        brings it and the fit's own part near the limit: the strongest moves (up to the speed or the torque the
+        drive allows, over the most travel and time named) in windows no shorter than this run's (the speed change a
+        window needs comes no sooner), their information short of what releases the share. None elsewhere, and where
+        the windows would shorten: the share of other windows sets no scale for them (a weak 2 rev run, its windows
+        stretched to reach the speed change, is cured by the travel its refusal names)."""
+        needs, bound = self.plan.needs, est.rate_bound
+        if needs is None or bound is None or not (est.j_total_kgm2 > 0 and est.excitation > 0 and self.speed > 0):
+            return None
+        line, travel = self._remedy_line(), self.plan.travel_limit_rev
+        ratio = max(est.load_ratio, 0.0) if math.isfinite(est.load_ratio) else 0.0
+        per_rev, moves, most = self.speed / travel, max(2 * cycles, 2), budget.moves_in(line, budget.MAX_TIME_S)
+        speed = budget.predicted(line, ratio, budget.MAX_TRAVEL_REV, most, per_rev)[1]
+        stronger = speed / self.speed  # the acceleration at the same ramps, and the speed change a window sees
+        if math.ceil(est.window_intervals * EstimatorSettings().min_excitation / (est.excitation * stronger)) < (
+            est.window_intervals
+        ):
+            return None
+        gain = stronger * math.sqrt(max(most, moves) / moves)  # the information: acceleration x root of the samples
+        # over the limit by more than a run's figure may misjudge it (the margin a remedy aims inside, the other way)
+        beyond = EstimatorSettings().max_rel_uncertainty / budget.TARGET_SHARE
+        own = est.fit_std_kgm2 / est.j_total_kgm2
+        return bound if math.hypot(own / gain, bound.at(gain)) > beyond else None
+
+    def _remedy_line(self) -> budget.Line:
+        """The line a remedy is planned on: the needs' own, its speed held to the torque cap this run's pilot set
+        (_test_speed) where the moves stopped at it, not at the travel, and the plan's speed is at its limit already
+        (within SAME_PILOT): a longer travel then runs the same pilot, which sets the same cap, and the same moves.
+        Where the plan's speed can still grow, a longer travel's faster pilot sets a cap this one does not tell (a
+        slow pilot's torque spread is friction and gravity as much as acceleration: SD25's load of 1 with 30 %
+        friction and 40 % gravity was capped at 175 rpm at 2 rev and ran at 3000 at the 34.5 rev named)."""
+        needs, plan = self.plan.needs, self.plan
+        assert needs is not None
+        line = needs.line
+        cap, what = self.cap
+        if what != "torque" or self.speed < cap or not plan.speed_rpm * SAME_PILOT >= plan.speed_limit_rpm:
+            return line
+        return replace(line, speed_cap_rpm=min(line.speed_cap_rpm, cap * plan.speed_limit_rpm / plan.speed_rpm))
 
     def _remedy(self, est: InertiaEstimate, cycles: int) -> Remedy | None:
         """A longer travel for a refusal that stronger accelerations cure: the least with which the line's budget
@@ -729,7 +789,7 @@ class _HostRun:
         # the lightest load this line can serve at all would reach the limit.
         ratios = [max(est.load_ratio, 0.0)] if math.isfinite(est.load_ratio) else budget.LOAD_RATIOS
         travel = self.plan.travel_limit_rev
-        line, target = needs.line, needs.target
+        line, target = self._remedy_line(), needs.target
         for closest in (False, True):
             found = next(
                 (
@@ -758,7 +818,7 @@ class _HostRun:
             return None
         ratio = max(est.load_ratio, 0.0) if math.isfinite(est.load_ratio) else 0.0
         travel = self.plan.travel_limit_rev
-        found = budget.strongest_travel(needs.line, ratio, travel, needs.target, self.speed)
+        found = budget.strongest_travel(self._remedy_line(), ratio, travel, needs.target, self.speed)
         if found is None:
             return None
         return Remedy(travel, found.travel_rev, found.travel_rev / travel, False, found.bound, found.time_s)
@@ -779,8 +839,9 @@ class _HostRun:
             "host", self.old_ratio, est.load_ratio, est, s.trace, self.plan, s.travel_rev, s.elapsed(), rate, cycles
         )
         if not est.ok:
-            cure = self._remedy(est, cycles)
-            advice = cure.words() if cure is not None else self._no_cure(est) or est.advice
+            bound = self._rate_bound(est, cycles)
+            cure = self._remedy(est, cycles) if bound is None else None
+            advice = cure.words() if cure is not None else self._no_cure(est, bound) or est.advice
             raise IdentificationRefused(
                 f"identification refused: {est.reason}{self._late_words()}" + (f"; {advice}" if advice else ""),
                 result,

@@ -22,6 +22,7 @@ def conclude(r: Partial, fit: Regression, verdict: Verdict, jm: float, cfg: Esti
     j = float(verdict.j)
     r.j, r.j_std, r.fit_std = j, float(verdict.j_std), float(fit.std[0])
     r.ratio, r.ratio_std = j / jm - 1.0, r.j_std / jm
+    r.rate_bound = verdict.rate_bound
     r.tc, r.tc_std = float(est["Tc"]), float(err["Tc"])
     r.b, r.b_std = float(est.get("B", 0.0)), float(err.get("B", 0.0))
     r.tg, r.tg_std = float(est.get("Tg", 0.0)), float(err.get("Tg", 0.0))

@@ -111,6 +111,25 @@ class FittedWindow:
 
 
 @dataclass(frozen=True)
+class RateBound:
+    """A share of J's uncertainty that a model check adds, unnamed, for what the log's sampling rate leaves open
+    (fit.resonance: a coupling stiffer than the two-mass scan searches, a top the rate sets). In windows of the same
+    length it is what J would move by for the softest such coupling, a ratio of the regressors that no amplitude and
+    no number of moves changes, until the information grows `release` times; then it falls with it. So a refusal for
+    it names no travel that leaves the windows as they are: only a faster line lowers it."""
+
+    rel: float  # relative to J, added in quadrature
+    release: float  # > 1: how many times the information must grow before it falls
+    top_hz: float  # the stiffest load resonance the scan searches
+    rate: float  # the log's samples/s
+
+    def at(self, gain: float) -> float:
+        """The share where moves in windows of the same length carry `gain` times this log's information (their
+        acceleration times the root of their samples): as it is up to `release`, then falling with the gain."""
+        return self.rel * min(1.0, self.release / gain) if gain > 0 else self.rel
+
+
+@dataclass(frozen=True)
 class InertiaEstimate:
     """Result of `estimate_inertia`. Values are NaN where the fit did not get far enough to compute them."""
 
@@ -160,6 +179,8 @@ class InertiaEstimate:
     fit_std_kgm2: float = math.nan
     """J's uncertainty from the rigid fit alone (least squares, MA(1), jackknife), before the model checks widened
     it: what the line's budget (tuning.budget) models; NaN where the fit stopped before it."""
+    rate_bound: RateBound | None = None
+    """The share of j_std_kgm2 that the sampling rate, not the excitation, bounds (None: none)."""
 
 
 class Refused(Exception):
@@ -200,6 +221,7 @@ class Partial:
     fitted_windows: tuple[FittedWindow, ...] = ()
     fit_std: float = math.nan
     floor_rel: float = math.nan
+    rate_bound: RateBound | None = None
 
     def refuse(self, reason: str, advice: str = "") -> InertiaEstimate:
         return self.result(ok=False, reason=reason, advice=advice)
@@ -235,4 +257,5 @@ class Partial:
             fitted_windows=self.fitted_windows,
             fit_std_kgm2=self.fit_std,
             floor_rel=self.floor_rel,
+            rate_bound=self.rate_bound,
         )

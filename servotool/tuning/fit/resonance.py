@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from servotool.tuning.fit import lost_motion
+from servotool.tuning.fit.estimate import RateBound
 from servotool.tuning.fit.regression import FitData, projected_fits, refit
 from servotool.tuning.fit.signals import cumulative_hermite
 from servotool.tuning.fit.verdict import Cause, Verdict, take
@@ -96,7 +97,10 @@ def check(v: Verdict) -> Verdict:
         # not (a rigid SD25 load at 35 samples/s shows z -3 'near 55 Hz' run after run).
         hinted = take(fit, with_spring, (v.j, v.j_std, v.resid), 0.0, spring.shared)
         return replace(v, j_std=math.hypot(v.j_std, hinted[0] - v.j))
-    return replace(v, j_std=math.hypot(v.j_std, UNRESOLVED_SPRING_SHARE * spring.unresolved))
+    share = UNRESOLVED_SPRING_SHARE * spring.unresolved
+    # cut at the softest unscanned coupling, the share is a ratio of the regressors that stronger moves keep (RateBound)
+    bound = RateBound(share / v.j, spring.release, _scan_top(rate), rate) if spring.release > 1 and v.j > 0 else None
+    return replace(v, j_std=math.hypot(v.j_std, share), rate_bound=bound)
 
 
 def _mass_words(mass: _TwoMass, rate: float) -> str:
@@ -128,6 +132,7 @@ class _Spring:
     z: float  # its coefficient in sigmas (negative: the sign a spring gives), clear of what the shared noise gives
     strong: bool  # significant and moving J
     unresolved: float  # how much a free spring term adds to J's uncertainty (in quadrature)
+    release: float  # how many times the information must grow before the cut at the softest unscanned coupling goes
 
 
 def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float) -> _Spring | None:
@@ -159,12 +164,12 @@ def _compliance_model(fit: FitData, x: np.ndarray, j_before: float, j_std: float
     base = refit(fit, x)
     unresolved = math.sqrt(max(0.0, float(std[0]) ** 2 - float(base[1][0]) ** 2)) if base is not None else 0.0
     softest = _softest_unscanned(fit, ratio)
-    if softest < float(std[-1]):
-        unresolved *= softest / float(std[-1])
+    release = float(std[-1]) / softest if softest < float(std[-1]) else 1.0
+    unresolved /= release
     unresolved *= min(1.0, 1.0 - z / SPRING_WITHIN_SIGMAS)
     strong = z < -COMPLIANCE_SIGMA and abs(j - j_before) >= max(2 * j_std, COMPLIANCE_MIN_SHIFT * abs(j))
     hz = math.sqrt(ratio / -b) / (2 * math.pi) if b < 0 else math.inf
-    return _Spring(col[:, None], shared, hz, z, strong, unresolved)
+    return _Spring(col[:, None], shared, hz, z, strong, unresolved, release)
 
 
 def _softest_unscanned(fit: FitData, ratio: float) -> float:

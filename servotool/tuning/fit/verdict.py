@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from servotool.tuning.fit.estimate import RateBound
 from servotool.tuning.fit.regression import FitData, refit
 
 
@@ -47,6 +48,7 @@ class Verdict:
     remarks: tuple[str, ...] = ()
     refuse: str = ""  # empty: usable (perhaps with a widened uncertainty)
     floor: Floor | None = None
+    rate_bound: RateBound | None = None  # a share of j_std the sampling rate bounds, not the excitation
 
     @classmethod
     def of(cls, fit: FitData) -> Verdict:

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
+from servotool.tuning.fit.estimate import RateBound
 
 RATED_NM = 1.27
 ROTOR_KGCM2 = 0.29
@@ -339,3 +340,11 @@ def test_a_motion_both_ways_whose_reverse_windows_a_stalled_host_cut_is_not_call
     assert not r.ok
     assert "one direction" not in r.reason and "--direction both" not in r.reason, r.reason
     assert "too few usable windows in the reverse moves" in r.reason and "the host stalled" in r.reason, r.reason
+
+
+def test_a_share_the_sampling_rate_bounds_stays_until_the_information_releases_it():
+    """fit.estimate.RateBound: cut at the softest coupling the scan leaves unsearched, the share is a ratio of the
+    regressors, the same in stronger moves and more of them, until the information grows `release` times."""
+    bound = RateBound(rel=0.06, release=4.0, top_hz=9.5, rate=47.0)
+    assert bound.at(1.0) == bound.at(3.9) == 0.06
+    assert bound.at(8.0) == pytest.approx(0.03)
