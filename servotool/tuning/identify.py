@@ -750,7 +750,7 @@ class _HostRun:
             return None
         gain = stronger * math.sqrt(max(most, moves) / moves)  # the information: acceleration x root of the samples
         # over the limit by more than a run's figure may misjudge it (the margin a remedy aims inside, the other way)
-        beyond = EstimatorSettings().max_rel_uncertainty / budget.TARGET_SHARE
+        beyond = needs.target / budget.TARGET_SHARE
         own = est.fit_std_kgm2 / est.j_total_kgm2
         return bound if math.hypot(own / gain, bound.at(gain)) > beyond else None
 
