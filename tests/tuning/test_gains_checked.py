@@ -26,8 +26,11 @@ GAINS = ("Pn101", "Pn102", "Pn100", "Pn128", "Pn003")
 def test_a_plan_step_that_writes_gains_checks_them_and_a_failed_check_rolls_back_and_fails_the_plan(virtual_plan):
     """A 70 Hz two-mass load at rigidity 20 overshoots ~70 %: the plan used to report success. The plan runs
     in-process on virtual time (the runner's clock is the step's), so its premise, a gain write whose step check
-    fails, does not hang on an identification in real time on a busy host."""
-    plan = virtual_plan("  - tune inertia: {rigidity: 20}\n", load_ratio=5.0, resonance_hz=70.0, resonance_damping=0.02)
+    fails, does not hang on an identification in real time on a busy host. 4 rev of travel: at 2 the identification
+    is refused (2.5 %: the resonance and a load term over the travel not ruled out) before any gain is written."""
+    plan = virtual_plan(
+        "  - tune inertia: {rigidity: 20, travel: 4}\n", load_ratio=5.0, resonance_hz=70.0, resonance_damping=0.02
+    )
     sim, runner = plan.sim, plan.runner
     before = _held_gains(sim)
     assert runner.run() is False

@@ -309,12 +309,13 @@ def test_where_the_sampling_rate_bounds_what_the_checks_leave_open_no_travel_is_
 
 def test_where_stronger_moves_shorten_the_windows_the_same_share_still_names_a_travel_that_cures(sim_dir):
     """SDC at 9600, a load of 50 with 10 % Coulomb, 40 % gravity and 1 % noise (issue 31's machine), 2 rev: refused at
-    5.9 %, most of it the same share, cut at the 4.8 Hz the scan searches at 24 samples/s. But its windows are 4
-    sampling intervals long, stretched for the speed change a window needs; a longer travel's stronger moves
-    shorten them, and the share of other windows is another: the travel named (3 rev) identifies within 3 sigma."""
+    4.5 % (seed 3: 5.9 %), most of it the same share, cut at the 4.8 Hz the scan searches at 24 samples/s. But its
+    windows are 5 sampling intervals long, stretched for the speed change a window needs; a longer travel's stronger
+    moves shorten them, and the share of other windows is another: the travel named (3 rev) identifies within 3
+    sigma. (Seed 3 is now refused at 2.5 % for a load term over the travel it cannot rule out, with no such share.)"""
     from bench import inertia_accuracy as bench
 
-    machine = {"seed": 3, "profile_id": "sdc", "viscous": 0.0}
+    machine = {"seed": 1, "profile_id": "sdc", "viscous": 0.0}
     with pytest.raises(IdentificationRefused) as refused:
         bench.identify_once(50.0, 0.1, -0.4, 0.01, 9600, **machine)
     cure, est = refused.value.remedy, refused.value.result.estimate

@@ -3,6 +3,7 @@ and a test can act on the machine mid-motion."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import pytest
@@ -54,6 +55,11 @@ def test_alarm_in_the_middle_of_the_motion_stops_it_and_refuses(sim_dir):
     p = d.profile
     jog_params = d.read_entries([p.role("jog_speed"), p.role("jog_accel")])
     tripped = _after_motion_reads(sim_drive, 150, lambda plant: plant.raise_alarm("overload"))
+    plant, late = sim_drive.firmware.plant, []
+    # the plant's own speed, not the drive's readings (which jitter by a few rpm at rest)
+    sim_drive.on_read.append(
+        lambda _d: late.append(abs(plant.true_speed_rpm)) if plant.time > tripped.get("t", math.inf) + 0.2 else None
+    )
     ident = identify.Identifier(d, timing)
     with pytest.raises(IdentificationFailed, match="alarm E09"):
         _run_host(ident, timing)
@@ -61,8 +67,7 @@ def test_alarm_in_the_middle_of_the_motion_stops_it_and_refuses(sim_dir):
     trace_t0 = timing.now() - ident.trace.t[-1]
     # the identification gave up within the move the alarm ended (no further moves were started) ...
     assert ident.trace.t[-1] + trace_t0 - tripped["t"] < 1.0
-    late = [abs(v) for t, v in zip(ident.trace.t, ident.trace.speed, strict=True) if t + trace_t0 > tripped["t"] + 0.2]
-    assert max(late, default=0.0) < 5.0  # ... and nothing moved once the drive had stopped
+    assert max(late, default=0.0) < 1.0  # ... and nothing moved once the drive had stopped
     # the servo is off and the JOG parameters are back as they were
     assert sim_drive.firmware.mode == "off" and not sim_drive.firmware.plant.servo_on
     assert [r.raw for r in d.read_entries([p.role("jog_speed"), p.role("jog_accel")])] == [r.raw for r in jog_params]

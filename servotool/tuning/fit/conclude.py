@@ -139,8 +139,9 @@ def non_physical(verdict: Verdict, stalled: str, res_rel: float, max_rel_residua
     said = "non-physical result (inertia <= 0)"
     if stalled:
         return f"{said}: {stalled} make the moves uneven; run it again on a quieter host"
-    if verdict.causes:
-        return f"{said}: the load does not follow the rigid model: {verdict.widened}"
+    found = [c.words for c in verdict.causes if c.found]
+    if found:
+        return f"{said}: the load does not follow the rigid model: {'; '.join(found)}"
     if res_rel > max_rel_residual:
         return (
             f"{said}: the model does not fit the data (relative residual {res_rel:.2f} > {max_rel_residual:g}): "

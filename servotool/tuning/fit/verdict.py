@@ -20,6 +20,7 @@ class Cause:
 
     words: str
     curable: bool  # stronger accelerations shrink what it adds to the uncertainty (a longer travel may cure it)
+    found: bool = True  # the log shows it; False: it is only not ruled out (no cause of a J at or below zero)
 
 
 @dataclass(frozen=True)
