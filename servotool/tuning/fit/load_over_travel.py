@@ -45,28 +45,30 @@ def check(v: Verdict) -> Verdict:
     position = _position_model(v.fit)
     if position is None:
         return v
-    cols, change_pct, one_way, z = position
-    x = np.column_stack([v.x, cols])
+    cols, change_pct, z = position
+    significant = z > POSITION_SIGMA
+    if not significant and np.unique(v.fit.groups).size < POSITION_TAKEN_MOVES:
+        return v
+    x = np.column_stack([v.x, *cols])
+    one_way = _one_way(v.fit, cols)
     j, j_std, resid = take(v.fit, x, (v.j, v.j_std, v.resid), POSITION_MODEL_ERROR if one_way else 0.0)
     taken = replace(v, x=x, j=j, j_std=j_std, resid=resid)
-    if z > POSITION_SIGMA and change_pct >= POSITION_MIN_PCT:
+    if significant and change_pct >= POSITION_MIN_PCT:
         cause = (
             f"load varies over the travel (load torque changes by {change_pct:.0f} % of rated torque: an arm or a "
             "gravity axis on a gear?)"
         )
         return replace(taken, fitted=(*v.fitted, Cause(cause, curable=False)))
-    if z <= POSITION_SIGMA and np.unique(v.fit.groups).size < POSITION_TAKEN_MOVES:
-        return v
     if j_std <= v.j_std or v.widening is not None:
         return taken
-    hint = f"a load that varies over the travel is not ruled out (its term at {z:.1f} sigma)"
+    said = "varies a little" if significant else "may vary"
+    hint = f"the load {said} over the travel (its term at {z:.1f} sigma, {change_pct:.1f} % of rated torque)"
     return replace(taken, widening=Cause(hint, curable=True, found=False))
 
 
-def _position_model(fit: FitData) -> tuple[np.ndarray, float, bool, float] | None:
-    """(the two position columns, the load's change over the travel in % of rated, whether it differs between the
-    directions, the term's significance in sigmas) when the load torque's variation with position is not ruled out
-    (POSITION_TAKEN_SIGMA), else None."""
+def _position_model(fit: FitData) -> tuple[list[np.ndarray], float, float] | None:
+    """(the two position columns, the load's change over the travel in % of rated, the term's significance in
+    sigmas) when the load torque's variation with position is not ruled out (POSITION_TAKEN_SIGMA), else None."""
     cols = _position_columns(fit)
     if not np.any(cols[0]):
         return None
@@ -80,7 +82,7 @@ def _position_model(fit: FitData) -> tuple[np.ndarray, float, bool, float] | Non
     change_pct = float(np.ptp(a1 * grid + a2 * grid * grid)) / fit.rated_nm * 100
     if not z > POSITION_TAKEN_SIGMA or not math.isfinite(std[0]):
         return None
-    return np.column_stack(cols), change_pct, _one_way(fit, cols), z
+    return cols, change_pct, z
 
 
 def _position_columns(fit: FitData) -> list[np.ndarray]:

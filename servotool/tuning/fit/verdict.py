@@ -20,7 +20,8 @@ class Cause:
 
     words: str
     curable: bool  # stronger accelerations shrink what it adds to the uncertainty (a longer travel may cure it)
-    found: bool = True  # the log shows it; False: it is only not ruled out (no cause of a J at or below zero)
+    found: bool = True  # named as the load's mechanics; False: a term too weak or too small to name (no cause of a
+    #                     J at or below zero)
 
 
 @dataclass(frozen=True)
