@@ -25,7 +25,7 @@ from servotool.tuning.band_guard import BandGuard
 from servotool.tuning.errors import IdentificationFailed, TravelExceeded, TravelNeeded
 from servotool.tuning.fit import EstimatorSettings, InertiaEstimate, estimate_inertia
 from servotool.tuning.fit.estimate import RateBound
-from servotool.tuning.fit.signals import paused_within, stall
+from servotool.tuning.fit.signals import STALL_S, host_gaps, paused_within, stall
 from servotool.tuning.planning import (
     COARSE_TORQUE_STEP_PCT,
     MIN_RAMP_S,
@@ -235,7 +235,9 @@ PILOT_EFFICIENCY_CAP = 4.0  # the most the pilot's own fit may scale the budget 
 # time budget and the fit decides: a rough pilot's need is no better than the one a whole run's refusal named (SDC
 # 9600 draw seed 31, the motor alone: a refusal named 8 rev, and followed, the pilot stopped naming 10).
 PILOT_SLACK = 1.5
-STALL_S = 0.05  # a gap between samples this long (and STALL_INTERVALS usual ones) is a host stall, named as one
+# A travel limit reached after a gap between samples this many usual ones long (and STALL_S) is named as the host's
+# stall: fewer than a fit's stall (fit.signals: 6, where the windows stop spanning it), since one gap late in a
+# host-timed move's ramp is enough to let it run on.
 STALL_INTERVALS = 4.0
 TARGET_TOLERANCE = 0.1  # a host-timed move rests within this share of its travel of its target (_tolerance)
 EXTEND_AIM = 0.85  # a time budget is extended to reach this share of the uncertainty limit (_extended)
@@ -255,6 +257,12 @@ def torque_swing(speed: list[float], torque: list[float], step_pct: float) -> fl
     moving = [q for v, q in zip(speed, torque, strict=False) if abs(v) > 0.2 * max(map(abs, speed), default=0.0)]
     spread = max(moving) - min(moving) if moving else 0.0
     return max(spread / 2.0, step_pct / 2.0)
+
+
+def _load_shown(est: InertiaEstimate) -> float:
+    """The load ratio a refused estimate shows, for planning the strongest motion a remedy may name: none below the
+    motor alone, and the motor alone where it shows none."""
+    return max(est.load_ratio, 0.0) if math.isfinite(est.load_ratio) else 0.0
 
 
 def _relative_std(est: InertiaEstimate) -> float:
@@ -348,7 +356,7 @@ class _HostRun:
         between moves: no stall of the host's); 0 with fewer than two."""
         trace = self.sampler.trace
         t = np.asarray(trace.t[max(0, first - 1) :])
-        return float(np.max(np.diff(t) - paused_within(t, trace.paused))) if t.size > 1 else 0.0
+        return float(np.max(host_gaps(t, paused_within(t, trace.paused)))) if t.size > 1 else 0.0
 
     def _usual_interval(self) -> float:
         """The median time between two samples so far."""
@@ -740,7 +748,7 @@ class _HostRun:
         if needs is None or bound is None or not (est.j_total_kgm2 > 0 and est.excitation > 0 and self.speed > 0):
             return None
         line, travel = self._remedy_line(), self.plan.travel_limit_rev
-        ratio = max(est.load_ratio, 0.0) if math.isfinite(est.load_ratio) else 0.0
+        ratio = _load_shown(est)
         per_rev, moves, most = self.speed / travel, max(2 * cycles, 2), budget.moves_in(line, budget.MAX_TIME_S)
         speed = budget.predicted(line, ratio, budget.MAX_TRAVEL_REV, most, per_rev)[1]
         stronger = speed / self.speed  # the acceleration at the same ramps, and the speed change a window sees
@@ -816,7 +824,7 @@ class _HostRun:
         limit = EstimatorSettings().max_rel_uncertainty
         if needs is None or not est.j_total_kgm2 > 0 or not est.fit_std_kgm2 <= limit * est.j_total_kgm2:
             return None
-        ratio = max(est.load_ratio, 0.0) if math.isfinite(est.load_ratio) else 0.0
+        ratio = _load_shown(est)
         travel = self.plan.travel_limit_rev
         found = budget.strongest_travel(self._remedy_line(), ratio, travel, needs.target, self.speed)
         if found is None:

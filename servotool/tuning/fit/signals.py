@@ -431,6 +431,13 @@ def paused_within(t: np.ndarray, paused: Sequence[tuple[float, float]]) -> np.nd
     return own
 
 
+def host_gaps(t: np.ndarray, own: np.ndarray | None = None) -> np.ndarray:
+    """The time between each two samples that the host took (s): the gap less the sampler's own pause in it (own, per
+    interval: paused_within), so that a fit between moves is no stall of the host's."""
+    gaps = np.diff(t)
+    return gaps - own if own is not None else gaps
+
+
 def stall(t: np.ndarray, rpm: np.ndarray, own: np.ndarray | None = None) -> tuple[float, float]:
     """(the longest gap between two samples while the axis moved, the median interval) in s; (0, median) where
     no gap is a stall. own: per interval, the time the sampler paused by its own choice (paused_within: a fit between
@@ -438,10 +445,8 @@ def stall(t: np.ndarray, rpm: np.ndarray, own: np.ndarray | None = None) -> tupl
     and blaming the host for it named a stall on an idle machine (DSX7E, two-mass 20 Hz: 100 ms fits)."""
     if t.size < 3:
         return 0.0, 0.0
-    gaps = np.diff(t)
-    usual = float(np.median(gaps))
-    if own is not None:
-        gaps = gaps - own
+    usual = float(np.median(np.diff(t)))
+    gaps = host_gaps(t, own)
     speed = np.abs(rpm)
     moving = np.maximum(speed[1:], speed[:-1]) > MOVING_SHARE * float(np.max(speed))
     long = moving & (gaps >= max(STALL_S, STALL_INTERVALS * usual))
