@@ -24,8 +24,9 @@ POSITION_MIN_PCT = 2.0  # ... where it changes the load by at least this % of ra
 # larger). A rest-to-rest move accelerates forward in the near part of its travel and backward in the far part, so
 # the term shares much of J's signal (J's sigma 1.5-2x the rigid fit's over a whole run), and a term the fit could
 # not call significant still moved J by several of the rigid fit's sigmas: DSX7E at 115200 baud and the CLI's 2 rev,
-# an arm of 10 % through a gear of 10 at a load ratio of 20, was accepted 3-4.4 % low at 2.9-5.6 sigma with no note
-# in 9 of 10 seeds (real time through the CLI -3.56 %, 5.4 sigma).
+# an arm of 10 % through a gear of 10 at a load ratio of 20, was accepted 2.9-4.4 % low at 3.1-5.6 sigma with no note
+# in 8 of 10 seeds (real time through the CLI -3.56 %, 5.4 sigma); taken beyond 2 sigma, 3 of 12 (their term
+# stays under 2 sigma: real time, -4.0 %, 4.5 sigma in a 3.3 s run).
 POSITION_TAKEN_SIGMA = 2.0
 # ... in a log of at least this many moves: a pilot's one move out and back cannot tell the term from J (J's sigma
 # 2.8x the rigid fit's, J moved by 3.7 of its sigmas: SDC's motor alone on a late 9600 baud line was taken for a load
