@@ -32,6 +32,9 @@ POSITION_TAKEN_SIGMA = 2.0
 # 2.8x the rigid fit's, J moved by 3.7 of its sigmas: SDC's motor alone on a late 9600 baud line was taken for a load
 # of 1). A cap on that spread instead cost the arms above two seeds (spreads up to 2.5x between moves).
 POSITION_TAKEN_MOVES = 4
+# ... and a load that changes over the travel by at least the torque reading's step: the reading's steps repeat at the
+# same positions in every cycle, and a term under one step is theirs as much as the load's (SD25 at 9600 baud, a rigid
+# load of 20 read in 1 % steps, no noise: a term of 0.7 % at 2.5 sigma refused the 3.5 rev its remedy named).
 POSITION_MODEL_ERROR = 0.5  # half the model's correction counts as uncertain where its load differs between the
 #                             directions (backlash looks like a load that varies over the travel) ...
 ONE_WAY_SIGMA = 2.0  # ... by more than this many sigmas
@@ -48,7 +51,7 @@ def check(v: Verdict) -> Verdict:
         return v
     cols, change_pct, z = position
     significant = z > POSITION_SIGMA
-    if not significant and np.unique(v.fit.groups).size < POSITION_TAKEN_MOVES:
+    if not significant and (np.unique(v.fit.groups).size < POSITION_TAKEN_MOVES or change_pct < v.fit.torque_step_pct):
         return v
     x = np.column_stack([v.x, *cols])
     one_way = _one_way(v.fit, cols)
