@@ -324,3 +324,20 @@ def test_where_stronger_moves_shorten_the_windows_the_same_share_still_names_a_t
     run = bench.identify_once(50.0, 0.1, -0.4, 0.01, 9600, travel_rev=cure.suggested_rev, **machine)
     est = run.identified.estimate
     assert abs(run.ratio - 50.0) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
+
+
+def test_a_load_term_under_one_step_of_the_torque_reading_does_not_refuse_the_travel_named(sim_dir):
+    """SD25 at 9600 (torque read in 1 % steps), a rigid load of 20 with 5 % Coulomb and no noise (the bench's draw
+    seed 16, machine 28): its refusal named 3.5 rev, and followed, that run was refused at 2.6 % for "the load may vary
+    over the travel (its term at 2.5 sigma, 0.7 % of rated torque)": a term under one step of the reading, whose steps
+    fall at the same positions in every cycle. Not taken, the travel named identifies within 3 sigma."""
+    from bench import inertia_accuracy as bench
+
+    machine = {"seed": 29, "profile_id": "sd25", "viscous": 0.0}
+    with pytest.raises(IdentificationRefused) as refused:
+        bench.identify_once(20.0, 0.05, 0.0, 0.0, 9600, **machine)
+    cure = refused.value.remedy
+    assert cure is not None and cure.enough, str(refused.value)
+    run = bench.identify_once(20.0, 0.05, 0.0, 0.0, 9600, travel_rev=cure.suggested_rev, **machine)
+    est = run.identified.estimate
+    assert abs(run.ratio - 20.0) <= 3 * est.ratio_std and run.identified.travel_used_rev <= cure.suggested_rev
