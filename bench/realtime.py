@@ -77,6 +77,7 @@ class Run:
     tries: int = 1
     named_after: bool = False  # the travel followed was named by a refusal after the motion, not before
     baud: int | None = None  # the line's speed during the identification (a boost raises it)
+    trace: Path | None = None  # the last try's samples (tune inertia --save-trace), in the bench's own directory
 
 
 class Served:
@@ -158,8 +159,11 @@ def set_machine(
     make_motion_setup(build_drive(p, p.default_unit))
 
 
-def tune(port: str, profile: str, baud: int, env: dict[str, str], travel: float | None = None) -> tuple[dict, float]:
-    """`servotool tune inertia --yes --json --dry-run` as a new process; (its JSON, wall seconds)."""
+def tune(
+    port: str, profile: str, baud: int, env: dict[str, str], travel: float | None = None, trace: Path | None = None
+) -> tuple[dict, float]:
+    """`servotool tune inertia --yes --json --dry-run` as a new process; (its JSON, wall seconds). trace: where it
+    saves its samples."""
     cmd = [sys.executable, "-m", "servotool", "--port", port, "-P", profile]
     if port != "sim":
         cmd += ["--baud", str(baud)]
@@ -168,6 +172,8 @@ def tune(port: str, profile: str, baud: int, env: dict[str, str], travel: float 
         cmd.append("--no-dead-man")
     if travel is not None:
         cmd += ["--travel", f"{travel:g}"]
+    if trace is not None:
+        cmd += ["--save-trace", str(trace)]
     t0 = time.perf_counter()
     r = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=300)
     wall = time.perf_counter() - t0
@@ -184,14 +190,18 @@ def _value(field: dict | None) -> float | None:
 
 def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
     """One machine as a user runs it: once, and where servotool names a travel (before moving, after the pilot, or
-    in a refusal after the motion), once more with it."""
-    out, wall = tune(port, profile, baud, env)
+    in a refusal after the motion), once more with it. Its last try's samples are saved in the bench's directory
+    (Run.trace), for keep_if_outside."""
+    trace = Path(env["SERVOTOOL_SIM_DIR"]).parent / "last-trace.csv"
+    trace.unlink(missing_ok=True)
+    out, wall = tune(port, profile, baud, env, trace=trace)
     tries, after = 1, False
     named = _value(out.get("needed_travel"))
     if not out.get("ok") and named is None and (named := _value(out.get("suggested_travel"))) is not None:
         after = True  # named only by a refusal, after the whole motion
     if not out.get("ok") and named is not None:  # followed once
-        out, more = tune(port, profile, baud, env, float(named))
+        trace.unlink(missing_ok=True)
+        out, more = tune(port, profile, baud, env, float(named), trace)
         wall += more
         tries = 2
     line = out.get("line") or {}
@@ -210,7 +220,26 @@ def run_machine(port: str, profile: str, baud: int, env: dict[str, str]) -> Run:
         tries=tries,
         named_after=after,
         baud=line.get("baud"),
+        trace=trace if trace.exists() else None,
     )
+
+
+# Where an accepted result outside its stated 3 sigma keeps its samples: a real-time run is not repeatable, and SDC
+# 9600's load 37 was once accepted at -6.3 sigma with nothing left to refit (issue 31).
+KEPT = Path(tempfile.gettempdir()) / "servotool-bench-kept"
+
+
+def keep_if_outside(run: Run, truth: float, name: str) -> str:
+    """The words for an accepted run whose truth lies outside its stated 3 sigma, its samples copied to KEPT/name.csv
+    (refit them with servotool.tuning.identify.trace_estimate); "" for any other run."""
+    if not (run.ok and run.ratio is not None and run.ratio_std and abs(run.ratio - truth) > 3 * run.ratio_std):
+        return ""
+    if run.trace is None:
+        return "\n        OUTSIDE 3 SIGMA: no trace was saved"
+    KEPT.mkdir(parents=True, exist_ok=True)
+    kept = KEPT / f"{name}.csv"
+    shutil.copyfile(run.trace, kept)
+    return f"\n        OUTSIDE 3 SIGMA: its samples kept in {kept}"
 
 
 def within_named(r: Run) -> bool:
@@ -330,8 +359,11 @@ def realtime_table(
                     run = run_machine(served.port if served else "sim", profile, baud, env)
                     row.truths.append(machine[0])
                     row.runs.append(run)
-                    if verbose:
-                        print(f"    {machine} -> {_said(run, machine[0])}", flush=True)
+                    kept = keep_if_outside(
+                        run, machine[0], f"{profile}-{baud}-machine{n + 1}-{time.strftime('%H%M%S')}"
+                    )
+                    if verbose or kept:
+                        print(f"    {machine} -> {_said(run, machine[0])}{kept}", flush=True)
             finally:
                 hot.close()
                 if served is not None:
@@ -412,8 +444,12 @@ def off_model_table(
                             set_machine(profile, baud, (ratio, 0.02, 0.0, 0.0, 0.002), k + 1, mechanics)
                             run = run_machine(served.port, profile, baud, env)
                             row.runs.append((label, ratio, run))
-                            if verbose:
-                                print(f"    {label:<22} {ratio:>4g} seed {k + 1}: {_said(run, ratio)}", flush=True)
+                            name = f"{profile}-{baud}-{label}-{ratio:g}-seed{k + 1}-{time.strftime('%H%M%S')}"
+                            kept = keep_if_outside(run, ratio, name.replace(" ", "").replace("%", "pct"))
+                            if verbose or kept:
+                                print(
+                                    f"    {label:<22} {ratio:>4g} seed {k + 1}: {_said(run, ratio)}{kept}", flush=True
+                                )
             finally:
                 hot.close()
                 served.close()
