@@ -695,8 +695,9 @@ class _HostRun:
         trace = self.sampler.trace
         if trace.late > LATE_NAMED * len(trace.t):
             return True
-        t, speed, _torque, _position = trace.fitted()
-        return stall(np.asarray(t), np.asarray(speed), paused_within(np.asarray(t), trace.paused))[0] > 0
+        fitted_t, speed, _torque, _position = trace.fitted()
+        t = np.asarray(fitted_t)
+        return stall(t, np.asarray(speed), paused_within(t, trace.paused))[0] > 0
 
     def _late_words(self) -> str:
         """The samples the host's lateness left out, in words for a refusal ("" where few were)."""
